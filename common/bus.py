@@ -1,0 +1,388 @@
+"""Zenoh, typed: sessions from `deploy/zenoh/*.json5`, publishers, subscribers, queries.
+
+- `open_session(config, role)` reads the role's JSON5 file and sets the router's port
+  from the config (`DUME_ZENOH_PORT`), so stacks run side by side on one machine.
+- `Bus` wraps a session. Publishers are declared once and say their traffic class:
+  `control` (state, commands, acks, clock, cmd_vel: real-time priority, never dropped,
+  express), `data` (everything else small) and `bulk` (camera frames: lower priority so
+  they cannot stall control traffic). Nothing is dropped: lockstep counts every message.
+- Subscribers decode in Zenoh's callback (no Zenoh calls, no blocking there) into a
+  buffer that the service's own loop reads: `Latest` keeps the newest few samples and
+  can pick the newest one at or before a sim time; `Fifo` keeps every sample in order.
+  Payloads that fail to decode are counted and kept as `last_error`, never raised into
+  Zenoh's thread.
+- `serve` answers queries on a worker thread; a handler raises `RequestError` to reply
+  with a typed `ErrorReply`. `query` waits with a timeout and raises typed errors.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+from abc import ABC, abstractmethod
+from collections import deque
+from collections.abc import Callable, Iterator
+from typing import Any, Generic, Literal, TypeVar
+
+import zenoh
+
+from common.config import Config, resolve
+from common.messages import ErrorReply, PayloadError, decode, encode
+from common.messages.errors import ErrorCode
+
+log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+R = TypeVar("R")
+Role = Literal["client", "router", "peer"]
+Traffic = Literal["control", "data", "bulk"]
+
+
+class BusError(RuntimeError):
+    """Base of the bus's typed errors."""
+
+
+class WaitTimeout(BusError):
+    """Something waited on did not arrive in time: what, and how long we waited."""
+
+
+class NoReply(BusError):
+    """A query reached no queryable, or every reply was lost."""
+
+
+class RemoteError(BusError):
+    """The queryable refused the request with a typed `ErrorReply`."""
+
+    def __init__(self, key: str, error: ErrorReply) -> None:
+        self.key = key
+        self.error = error
+        super().__init__(f"{key}: {error.code}: {error.message}")
+
+
+class RequestError(Exception):
+    """Raised by a `serve` handler to refuse a request with a reason."""
+
+    def __init__(self, code: ErrorCode, message: str) -> None:
+        self.code = code
+        self.message = message
+        super().__init__(f"{code}: {message}")
+
+
+def session_config(config: Config, role: Role) -> zenoh.Config:
+    """The Zenoh config for a role, with the stack's endpoint from `config.zenoh`."""
+    z = config.zenoh
+    endpoint = f"tcp/{z.host}:{z.port}"
+    if role == "router":
+        conf = zenoh.Config.from_file(str(resolve(z.router_config)))
+        conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    else:
+        conf = zenoh.Config.from_file(str(resolve(z.client_config)))
+        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        if role == "peer":
+            conf.insert_json5("mode", json.dumps("peer"))
+    return conf
+
+
+def open_session(config: Config, role: Role = "client") -> zenoh.Session:
+    """Open a session; a client waits for the router (`connect/timeout_ms: -1`)."""
+    return zenoh.open(session_config(config, role))
+
+
+_TRAFFIC: dict[str, dict[str, Any]] = {
+    "control": dict(
+        priority=zenoh.Priority.REAL_TIME,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        express=True,
+    ),
+    "data": dict(priority=zenoh.Priority.DATA, congestion_control=zenoh.CongestionControl.BLOCK),
+    "bulk": dict(
+        priority=zenoh.Priority.DATA_LOW, congestion_control=zenoh.CongestionControl.BLOCK
+    ),
+}
+
+
+class Publisher(Generic[T]):
+    """A declared publisher of one message type."""
+
+    def __init__(self, session: zenoh.Session, key: str, traffic: Traffic) -> None:
+        self.key = key
+        self._pub = session.declare_publisher(key, **_TRAFFIC[traffic])
+
+    def put(self, msg: T) -> None:
+        self._pub.put(encode(msg))
+
+    def put_raw(self, payload: bytes) -> None:
+        self._pub.put(payload)
+
+    def undeclare(self) -> None:
+        self._pub.undeclare()
+
+
+class _Subscription(ABC, Generic[T]):
+    def __init__(self, session: zenoh.Session, key: str, type_: type[T]) -> None:
+        self.key = key
+        self.type = type_
+        self.received = 0
+        self.rejected = 0
+        self.last_error: PayloadError | None = None
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            msg = decode(sample.payload.to_bytes(), self.type, key=str(sample.key_expr))
+        except PayloadError as exc:
+            with self._cond:
+                self.rejected += 1
+                self.last_error = exc
+            log.warning("%s", exc)
+            return
+        with self._cond:
+            self.received += 1
+            self._store(msg, str(sample.key_expr))
+            self._cond.notify_all()
+
+    @abstractmethod
+    def _store(self, msg: T, key: str) -> None:
+        """Keep a decoded sample (called with the condition held)."""
+
+    def undeclare(self) -> None:
+        self._sub.undeclare()
+
+
+class Latest(_Subscription[T]):
+    """The newest `history` samples. `get()` is the newest; `at(stamp_ns)` the newest at or
+    before a sim time (what a lockstep participant must use for its tick)."""
+
+    def __init__(self, session: zenoh.Session, key: str, type_: type[T], history: int) -> None:
+        self._buf: deque[T] = deque(maxlen=max(1, history))
+        self.last_key = ""
+        super().__init__(session, key, type_)
+
+    def _store(self, msg: T, key: str) -> None:
+        self._buf.append(msg)
+        self.last_key = key
+
+    def get(self) -> T | None:
+        with self._cond:
+            return self._buf[-1] if self._buf else None
+
+    def at(self, stamp_ns: int) -> T | None:
+        """The newest sample whose `stamp_ns` is at or before `stamp_ns`."""
+        with self._cond:
+            for msg in reversed(self._buf):
+                if msg.stamp_ns <= stamp_ns:  # type: ignore[attr-defined]
+                    return msg
+            return None
+
+    def wait(self, predicate: Callable[[T], bool], timeout_s: float) -> T:
+        """Block until the newest sample satisfies `predicate`; `WaitTimeout` otherwise."""
+        with self._cond:
+            ok = self._cond.wait_for(
+                lambda: bool(self._buf) and predicate(self._buf[-1]), timeout_s
+            )
+            if not ok:
+                raise WaitTimeout(f"nothing suitable on {self.key} within {timeout_s:.3g} s")
+            return self._buf[-1]
+
+    def wait_stamp(self, stamp_ns: int, timeout_s: float) -> T:
+        """Block until a sample stamped at or after `stamp_ns` arrived; return it."""
+        return self.wait(lambda m: m.stamp_ns >= stamp_ns, timeout_s)  # type: ignore[attr-defined]
+
+
+class Fifo(_Subscription[T]):
+    """Every sample in arrival order (commands, requests, events), up to `maxlen`."""
+
+    def __init__(self, session: zenoh.Session, key: str, type_: type[T], maxlen: int) -> None:
+        self._q: deque[tuple[str, T]] = deque(maxlen=maxlen)
+        self.overflowed = 0
+        super().__init__(session, key, type_)
+
+    def _store(self, msg: T, key: str) -> None:
+        if len(self._q) == self._q.maxlen:
+            self.overflowed += 1
+        self._q.append((key, msg))
+
+    def pop(self, timeout_s: float = 0.0) -> T | None:
+        item = self.pop_keyed(timeout_s)
+        return None if item is None else item[1]
+
+    def pop_keyed(self, timeout_s: float = 0.0) -> tuple[str, T] | None:
+        with self._cond:
+            if not self._q and timeout_s > 0:
+                self._cond.wait_for(lambda: bool(self._q), timeout_s)
+            return self._q.popleft() if self._q else None
+
+    def drain(self) -> Iterator[T]:
+        while (msg := self.pop()) is not None:
+            yield msg
+
+
+class Server(Generic[T]):
+    """A queryable served on its own thread by `handler(request) -> reply`."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        request_type: type[T] | None,
+        handler: Callable[[T | None, str], Any],
+    ) -> None:
+        self.key = key
+        self._type = request_type
+        self._handler = handler
+        self._q: queue.Queue[zenoh.Query | None] = queue.Queue(maxsize=256)
+        self._queryable = session.declare_queryable(key, self._on_query)
+        self._thread = threading.Thread(target=self._serve, name=f"serve {key}", daemon=True)
+        self._thread.start()
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            self._q.put_nowait(query)
+        except queue.Full:
+            log.warning("%s: dropping a query, %d waiting", self.key, self._q.qsize())
+
+    def _serve(self) -> None:
+        while (query := self._q.get()) is not None:
+            key = str(query.key_expr)
+            try:
+                request: T | None = None
+                if self._type is not None:
+                    if query.payload is None:
+                        raise RequestError("malformed", f"{key} needs a {self._type.__name__}")
+                    try:
+                        request = decode(query.payload.to_bytes(), self._type, key=key)
+                    except PayloadError as exc:
+                        raise RequestError("malformed", str(exc)) from None
+                reply = self._handler(request, str(query.selector))
+                query.reply(key, encode(reply))
+            except RequestError as exc:
+                query.reply_err(encode(ErrorReply(code=exc.code, message=exc.message, key=key)))
+            except Exception as exc:  # a handler bug: say so, keep serving
+                log.exception("%s: handler failed", key)
+                query.reply_err(
+                    encode(
+                        ErrorReply(code="internal", message=f"{type(exc).__name__}: {exc}", key=key)
+                    )
+                )
+            finally:
+                query.drop()
+
+    def close(self) -> None:
+        self._q.put(None)
+        self._queryable.undeclare()
+        self._thread.join(timeout=1.0)
+
+
+class AliveWatch:
+    """Who is alive under a liveliness key expression, kept current by Zenoh."""
+
+    def __init__(self, session: zenoh.Session, key_expr: str) -> None:
+        self._alive: set[str] = set()
+        self._cond = threading.Condition()
+        self._sub = session.liveliness().declare_subscriber(key_expr, self._on_sample, history=True)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        with self._cond:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._alive.add(key)
+            else:
+                self._alive.discard(key)
+            self._cond.notify_all()
+
+    def alive(self) -> set[str]:
+        with self._cond:
+            return set(self._alive)
+
+    def wait_for(self, keys: set[str], timeout_s: float) -> None:
+        with self._cond:
+            if not self._cond.wait_for(lambda: keys <= self._alive, timeout_s):
+                missing = sorted(keys - self._alive)
+                raise WaitTimeout(f"not alive after {timeout_s:.3g} s: {missing}")
+
+    def undeclare(self) -> None:
+        self._sub.undeclare()
+
+
+class Bus:
+    """A Zenoh session with typed helpers. Close it (or use `with`) when done."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.session = session
+        self._servers: list[Server[Any]] = []
+        self._tokens: list[zenoh.LivelinessToken] = []
+
+    @classmethod
+    def open(cls, config: Config, role: Role = "client") -> Bus:
+        return cls(open_session(config, role))
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def publisher(self, key: str, type_: type[T], traffic: Traffic = "data") -> Publisher[T]:
+        del type_  # for the reader and the type checker: what this publisher sends
+        return Publisher(self.session, key, traffic)
+
+    def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
+        return Latest(self.session, key, type_, history)
+
+    def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
+        return Fifo(self.session, key, type_, maxlen)
+
+    def serve(
+        self,
+        key: str,
+        request_type: type[T] | None,
+        handler: Callable[[T | None, str], Any],
+    ) -> Server[T]:
+        server = Server(self.session, key, request_type, handler)
+        self._servers.append(server)
+        return server
+
+    def query(self, key: str, request: Any, reply_type: type[R], timeout_s: float = 5.0) -> R:
+        """One reply of `reply_type`; `RemoteError`, `NoReply` or `PayloadError` otherwise."""
+        replies = self.query_all(key, request, reply_type, timeout_s)
+        if not replies:
+            raise NoReply(f"no queryable answered {key} within {timeout_s:.3g} s")
+        return replies[0]
+
+    def query_all(
+        self, key: str, request: Any, reply_type: type[R], timeout_s: float = 5.0
+    ) -> list[R]:
+        payload = None if request is None else encode(request)
+        out: list[R] = []
+        for reply in self.session.get(key, payload=payload, timeout=timeout_s):
+            if reply.ok is not None:
+                out.append(decode(reply.ok.payload.to_bytes(), reply_type, key=key))
+            elif reply.err is not None:
+                raise RemoteError(key, decode(reply.err.payload.to_bytes(), ErrorReply, key=key))
+        return out
+
+    def declare_alive(self, key: str) -> None:
+        """Declare a liveliness token (kept until the bus closes)."""
+        self._tokens.append(self.session.liveliness().declare_token(key))
+
+    def watch_alive(self, key_expr: str) -> AliveWatch:
+        return AliveWatch(self.session, key_expr)
+
+    def alive_now(self, key_expr: str, timeout_s: float = 2.0) -> set[str]:
+        out = set()
+        for reply in self.session.liveliness().get(key_expr, timeout=timeout_s):
+            if reply.ok is not None:
+                out.add(str(reply.ok.key_expr))
+        return out
+
+    def close(self) -> None:
+        for server in self._servers:
+            server.close()
+        for token in self._tokens:
+            token.undeclare()
+        self._servers.clear()
+        self._tokens.clear()
+        self.session.close()

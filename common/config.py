@@ -1,0 +1,202 @@
+"""Settings: defaults in `deploy/config.toml`, then `DUME_*` environment variables, then flags.
+
+The schema is a tree of msgspec Structs that forbid unknown fields, so a misspelt key in
+the file, the environment or a flag fails at start-up with the key's path. Overrides:
+
+- environment: `DUME_<SECTION>_<KEY>=value`, e.g. `DUME_ZENOH_PORT=7450`,
+  `DUME_SIM_WORLD_SEED=3`, `DUME_TIME_MODE=realtime`; `DUME_CONFIG` names another file.
+- flags: `--set section.key=value` (any depth, e.g. `time.participants.wbc.period_s=0.002`).
+
+Values are parsed as TOML literals (`3`, `0.5`, `true`, `"text"`, `[1, 2]`); anything
+that is not a literal is taken as a string.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import msgspec
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_CONFIG = REPO_ROOT / "deploy" / "config.toml"
+ENV_PREFIX = "DUME_"
+#: Environment variables that are not settings.
+ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG"})
+
+
+class ConfigError(ValueError):
+    """Configuration that cannot be used: which key, what was given, what is valid."""
+
+
+class _Section(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    pass
+
+
+class ZenohSettings(_Section):
+    """The router's address. Services are clients of one router per stack."""
+
+    host: str = "127.0.0.1"
+    port: int = 7447
+    router_config: str = "deploy/zenoh/router.json5"
+    client_config: str = "deploy/zenoh/client.json5"
+
+
+class Participant(_Section):
+    """A lockstep participant.
+
+    role: `command` (answers every state it gets with a command; the sim waits for it
+    before stepping) or `periodic` (ticks on sim time every `period_s`; its outputs take
+    effect `latency_s` after their input, and the sim never steps past that before the
+    participant's ack for the input has arrived).
+    """
+
+    role: Literal["command", "periodic"] = "periodic"
+    period_s: float = 0.1
+    latency_s: float = 0.05
+
+
+class TimeSettings(_Section):
+    mode: Literal["lockstep", "realtime"] = "lockstep"
+    tick_hz: float = 1000.0
+    participants: dict[str, Participant] = msgspec.field(default_factory=dict)
+    #: Wall seconds the sim waits at t = 0 for every participant to be alive.
+    start_timeout_s: float = 120.0
+    #: Wall seconds a live participant may take on one tick before the sim logs it as
+    #: stalled and steps without it (the robot's watchdog then acts, as on hardware).
+    stall_timeout_s: float = 2.0
+
+
+class SimSettings(_Section):
+    world: Literal["hall", "small"] = "hall"
+    world_seed: int = 0
+    walking_people: bool = False
+    locomotion: Literal["dynamic", "kinematic"] = "dynamic"
+    #: Stop after this much sim time (0: run until stopped).
+    duration_s: float = 0.0
+    watchdog_ms: float = 20.0
+    odom_hz: float = 50.0
+    camera_hz: float = 10.0
+    camera_width: int = 320
+    camera_height: int = 240
+    cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
+    segmentation_truth: bool = True
+    #: Which process's commands drive the joints.
+    command_source: str = "wbc"
+
+
+class RecordingSettings(_Section):
+    enabled: bool = True
+    dir: str = "recordings"
+    #: One id shared by every service of a run; `dume up` sets a fresh one.
+    run_id: str = ""
+    #: gRPC address of a live viewer (`rerun+http://127.0.0.1:9876/proxy`), empty for none.
+    viewer: str = ""
+    #: Log every n-th camera frame (images dominate the recording's size).
+    camera_every: int = 1
+
+
+class LogSettings(_Section):
+    level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+
+
+class Config(_Section):
+    robot: str = "b1"
+    zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
+    time: TimeSettings = msgspec.field(default_factory=TimeSettings)
+    sim: SimSettings = msgspec.field(default_factory=SimSettings)
+    recording: RecordingSettings = msgspec.field(default_factory=RecordingSettings)
+    log: LogSettings = msgspec.field(default_factory=LogSettings)
+
+
+def _literal(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _set_path(tree: dict[str, Any], path: Sequence[str], value: Any) -> None:
+    node = tree
+    for part in path[:-1]:
+        child = node.setdefault(part, {})
+        if not isinstance(child, dict):
+            raise ConfigError(f"{'.'.join(path)}: {part!r} is a value, not a section")
+        node = child
+    node[path[-1]] = value
+
+
+def _env_overrides(env: Mapping[str, str]) -> list[tuple[list[str], Any]]:
+    sections = sorted((f for f in Config.__struct_fields__ if f != "robot"), key=len, reverse=True)
+    out: list[tuple[list[str], Any]] = []
+    for name, text in sorted(env.items()):
+        if not name.startswith(ENV_PREFIX) or name in ENV_NOT_SETTINGS:
+            continue
+        rest = name[len(ENV_PREFIX) :].lower()
+        if rest == "robot":
+            out.append((["robot"], text))
+            continue
+        section = next((s for s in sections if rest.startswith(s + "_")), None)
+        if section is None:
+            raise ConfigError(
+                f"environment variable {name}: no section {rest.split('_')[0]!r}; "
+                f"sections are {sorted(sections)} (or DUME_ROBOT)"
+            )
+        out.append(([section, rest[len(section) + 1 :]], _literal(text)))
+    return out
+
+
+def load_config(
+    overrides: Sequence[str] = (),
+    *,
+    path: str | Path | None = None,
+    env: Mapping[str, str] | None = None,
+) -> Config:
+    """Defaults from the file, then the environment, then `key.path=value` overrides."""
+    env = os.environ if env is None else env
+    file = Path(path or env.get("DUME_CONFIG") or DEFAULT_CONFIG)
+    try:
+        tree: dict[str, Any] = tomllib.loads(file.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"config file {file} does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config file {file}: {exc}") from None
+    for keys, value in _env_overrides(env):
+        _set_path(tree, keys, value)
+    for item in overrides:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"override {item!r} is not of the form section.key=value")
+        _set_path(tree, key.strip().split("."), _literal(text.strip()))
+    try:
+        config = msgspec.convert(tree, Config, strict=False)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"configuration ({file} + environment + flags): {exc}") from None
+    _check(config)
+    return config
+
+
+def _check(config: Config) -> None:
+    if not 1 <= config.zenoh.port <= 65535:
+        raise ConfigError(f"zenoh.port {config.zenoh.port} is not a TCP port")
+    if config.time.tick_hz <= 0:
+        raise ConfigError(f"time.tick_hz must be positive, got {config.time.tick_hz}")
+    tick = 1.0 / config.time.tick_hz
+    for name, p in config.time.participants.items():
+        if p.period_s < tick - 1e-12 or p.latency_s < 0:
+            raise ConfigError(
+                f"time.participants.{name}: period_s {p.period_s} must be ≥ one tick ({tick}) "
+                f"and latency_s {p.latency_s} ≥ 0"
+            )
+        ticks = p.period_s * config.time.tick_hz
+        if abs(ticks - round(ticks)) > 1e-6:
+            raise ConfigError(f"time.participants.{name}.period_s must be whole ticks")
+
+
+def resolve(path: str) -> Path:
+    """A path from the config, relative to the repository root unless absolute."""
+    p = Path(path)
+    return p if p.is_absolute() else REPO_ROOT / p

@@ -1,0 +1,167 @@
+"""Every Zenoh key expression dume uses, built from one robot namespace.
+
+Three namespaces: `dume/<robot>/…` for what belongs to one robot, `dume/map/…` for the
+shared semantic map and `dume/world/…` for the simulator's world. Everything under
+`dume/world/` and every `*_truth` key is simulator truth: only the sim, the map's
+`seed-from-world` mode, tests and evaluation may read it.
+
+Nothing else in dume spells a key: services build them here, so a renamed key is one edit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+ROOT = "dume"
+DEFAULT_ROBOT = "b1"
+CAMERAS = ("camera_head", "camera_wrist")
+SERVICES = ("sim", "perception", "semantic_map", "navigation", "wbc", "mission")
+
+# The shared world (sim truth) and the shared map.
+WORLD_CLOCK = f"{ROOT}/world/clock"
+WORLD_DESCRIPTION = f"{ROOT}/world/description"
+WORLD_EVENTS = f"{ROOT}/world/events"
+MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
+MAP_PEOPLE = f"{ROOT}/map/people"
+MAP_OCCUPANCY = f"{ROOT}/map/occupancy"
+ALIVE = f"{ROOT}/alive"
+
+
+def _check_chunk(value: str, what: str) -> str:
+    bad = set("/*$?#") & set(value)
+    if not value or bad:
+        raise ValueError(f"{what} {value!r} must be a non-empty key chunk without {'/*$?#'}")
+    return value
+
+
+def map_artifact(artifact_id: str) -> str:
+    """`dume/map/artifacts/<id>`: one artifact of the semantic map (queryable)."""
+    return f"{MAP_ARTIFACTS}/{_check_chunk(artifact_id, 'artifact id')}"
+
+
+def map_person(person_id: str) -> str:
+    """`dume/map/people/<id>`: one person of the semantic map (queryable)."""
+    return f"{MAP_PEOPLE}/{_check_chunk(person_id, 'person id')}"
+
+
+@dataclass(frozen=True)
+class RobotKeys:
+    """The keys of one robot, `dume/<robot>/…` (see the README's key table)."""
+
+    robot: str = DEFAULT_ROBOT
+
+    def __post_init__(self) -> None:
+        _check_chunk(self.robot, "robot id")
+
+    @property
+    def prefix(self) -> str:
+        return f"{ROOT}/{self.robot}"
+
+    # sim
+    @property
+    def description(self) -> str:
+        return f"{self.prefix}/description"
+
+    @property
+    def state(self) -> str:
+        return f"{self.prefix}/state"
+
+    @property
+    def odom(self) -> str:
+        return f"{self.prefix}/odom"
+
+    @property
+    def command(self) -> str:
+        return f"{self.prefix}/command"
+
+    def camera_rgbd(self, camera: str) -> str:
+        return f"{self.prefix}/camera/{_camera(camera)}/rgbd"
+
+    def camera_segmentation_truth(self, camera: str) -> str:
+        return f"{self.prefix}/camera/{_camera(camera)}/segmentation_truth"
+
+    @property
+    def camera_rgbd_all(self) -> str:
+        return f"{self.prefix}/camera/*/rgbd"
+
+    # perception
+    @property
+    def detections(self) -> str:
+        return f"{self.prefix}/perception/detections"
+
+    @property
+    def locate(self) -> str:
+        return f"{self.prefix}/perception/locate"
+
+    # navigation
+    @property
+    def nav_goal(self) -> str:
+        return f"{self.prefix}/nav/goal"
+
+    @property
+    def nav_cancel(self) -> str:
+        return f"{self.prefix}/nav/cancel"
+
+    @property
+    def nav_status(self) -> str:
+        return f"{self.prefix}/nav/status"
+
+    @property
+    def nav_path(self) -> str:
+        return f"{self.prefix}/nav/path"
+
+    # whole-body controller
+    @property
+    def cmd_vel(self) -> str:
+        return f"{self.prefix}/wbc/cmd_vel"
+
+    @property
+    def arm_goal(self) -> str:
+        return f"{self.prefix}/wbc/arm_goal"
+
+    @property
+    def wbc_mode(self) -> str:
+        return f"{self.prefix}/wbc/mode"
+
+    @property
+    def wbc_status(self) -> str:
+        return f"{self.prefix}/wbc/status"
+
+    # mission (user-facing, JSON)
+    @property
+    def mission_request(self) -> str:
+        return f"{self.prefix}/mission/request"
+
+    @property
+    def mission_cancel(self) -> str:
+        return f"{self.prefix}/mission/cancel"
+
+    @property
+    def mission_status(self) -> str:
+        return f"{self.prefix}/mission/status"
+
+    # lockstep and liveliness
+    def ack(self, service: str) -> str:
+        return f"{self.prefix}/ack/{_check_chunk(service, 'service')}"
+
+    @property
+    def ack_all(self) -> str:
+        return f"{self.prefix}/ack/*"
+
+    def alive(self, service: str) -> str:
+        return f"{ALIVE}/{self.robot}/{_check_chunk(service, 'service')}"
+
+    @property
+    def alive_all(self) -> str:
+        return f"{ALIVE}/{self.robot}/*"
+
+
+def _camera(camera: str) -> str:
+    if camera not in CAMERAS:
+        raise ValueError(f"unknown camera {camera!r}; cameras are {CAMERAS}")
+    return camera
+
+
+def service_of_alive_key(key: str) -> str:
+    """The service name at the end of a liveliness key `dume/alive/<robot>/<service>`."""
+    return key.rsplit("/", 1)[-1]

@@ -1,0 +1,82 @@
+"""Navigation's goal / cancel / status API and its path."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from common.messages.arrays import Array
+from common.messages.base import EntityId, Finite, Message, NonNegative, StampNs, Unit
+
+
+class PoseGoal(Message, frozen=True, tag="pose"):
+    """Walk to (x, y, yaw) in the world; tolerances in m and rad."""
+
+    x: Finite
+    y: Finite
+    yaw: Finite
+    position_tolerance_m: NonNegative = 0.1
+    yaw_tolerance_rad: NonNegative = 0.1
+
+
+class ArtifactStandoff(Message, frozen=True, tag="artifact_standoff"):
+    """Walk to an obstacle-free pose in front of a mapped artifact, facing it."""
+
+    artifact_id: EntityId
+
+
+class PersonHandover(Message, frozen=True, tag="person_handover"):
+    """Walk to a pose facing a mapped person at handover distance."""
+
+    person_id: EntityId
+
+
+NavGoal = PoseGoal | ArtifactStandoff | PersonHandover
+
+
+class NavGoalRequest(Message, frozen=True):
+    """`dume/<r>/nav/goal` (query): a goal; replaced goals are cancelled."""
+
+    goal: NavGoal
+
+
+class NavGoalReply(Message, frozen=True):
+    """Accepted with a goal id, or refused with a reason."""
+
+    accepted: bool
+    goal_id: str = ""
+    reason: str = ""
+
+
+class NavCancel(Message, frozen=True):
+    """`dume/<r>/nav/cancel`: cancel a goal (empty id: whatever is active)."""
+
+    goal_id: str = ""
+    reason: str = ""
+
+
+NavState = Literal["idle", "active", "succeeded", "failed", "cancelled"]
+NavFailure = Literal["", "no_path", "blocked", "timeout", "invalid_goal", "cancelled"]
+
+
+class NavStatus(Message, frozen=True):
+    """`dume/<r>/nav/status`: the current goal's state.
+
+    progress: [0, 1] of the path length. remaining_m: along the path, m.
+    reason: the typed failure (`NavFailure`); detail: a sentence for a person.
+    """
+
+    stamp_ns: StampNs
+    goal_id: str
+    state: NavState
+    reason: NavFailure = ""
+    detail: str = ""
+    progress: Unit = 0.0
+    remaining_m: NonNegative = 0.0
+
+
+class NavPath(Message, frozen=True):
+    """`dume/<r>/nav/path`: the plan, (N, 3) float64 x, y, yaw in the world frame."""
+
+    stamp_ns: StampNs
+    goal_id: str
+    poses: Array

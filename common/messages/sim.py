@@ -1,0 +1,223 @@
+"""What the simulator publishes and what it takes: clock, state, command, cameras, events.
+
+Joint vectors are `Array`s of float64 in `common.robot.JOINT_NAMES` order (pinocchio's
+order: FL, FR, RL, RR legs hip/thigh/calf; arm joint1–6; the gripper jaw), 19 entries.
+The base is reported separately: position in world, orientation x y z w, linear
+velocity in world and angular velocity in the base frame.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from common.messages.arrays import Array
+from common.messages.base import (
+    EntityId,
+    Finite,
+    Mat4,
+    Message,
+    NonNegative,
+    QuatXYZW,
+    StampNs,
+    Vec3,
+)
+
+TimeMode = Literal["lockstep", "realtime"]
+Locomotion = Literal["dynamic", "kinematic"]
+
+
+class Clock(Message, frozen=True):
+    """`dume/world/clock`: sim time, published every tick.
+
+    stamp_ns: sim time of the tick, ns. tick: tick count since start (1 kHz).
+    mode: lockstep or realtime. rtf: real-time factor over the last second of wall time.
+    """
+
+    stamp_ns: StampNs
+    tick: int
+    mode: TimeMode
+    rtf: NonNegative = 0.0
+
+
+class RobotState(Message, frozen=True):
+    """`dume/<r>/state`, 1 kHz: everything the whole-body controller needs.
+
+    q, v, tau: (19,) float64 joint positions (rad), velocities (rad/s) and the torques
+        applied during the last step (N·m, after clipping to the URDF limits).
+    base_position_in_world: (3,) m. base_orientation_xyzw: base frame in world.
+    base_linear_velocity_in_world: (3,) m/s. base_angular_velocity_in_base: (3,) rad/s.
+    foot_contacts: FL, FR, RL, RR touching the ground. foot_forces: (4,) normal force, N.
+    gripper_angle: jaw angle, rad (0 closed, negative open). gripper_effort: jaw torque, N·m.
+    watchdog: the sim's hold is engaged (no command for 20 ms); watchdog_reason says why.
+    locomotion: dynamic (torques move the legs) or kinematic (the base follows cmd_vel).
+    """
+
+    stamp_ns: StampNs
+    tick: int
+    q: Array
+    v: Array
+    tau: Array
+    base_position_in_world: Vec3
+    base_orientation_xyzw: QuatXYZW
+    base_linear_velocity_in_world: Vec3
+    base_angular_velocity_in_base: Vec3
+    foot_contacts: tuple[bool, bool, bool, bool]
+    foot_forces: tuple[Finite, Finite, Finite, Finite]
+    gripper_angle: Finite
+    gripper_effort: Finite
+    watchdog: bool = False
+    watchdog_reason: str = ""
+    locomotion: Locomotion = "dynamic"
+
+
+class Odom(Message, frozen=True):
+    """`dume/<r>/odom`, 50 Hz: the base and gripper for the slower services.
+
+    Fields as in `RobotState`; `base_linear_velocity_in_world` m/s,
+    `base_angular_velocity_in_base` rad/s.
+    """
+
+    stamp_ns: StampNs
+    base_position_in_world: Vec3
+    base_orientation_xyzw: QuatXYZW
+    base_linear_velocity_in_world: Vec3
+    base_angular_velocity_in_base: Vec3
+    gripper_angle: Finite
+    gripper_effort: Finite
+    watchdog: bool = False
+    locomotion: Locomotion = "dynamic"
+
+
+class JointCommand(Message, frozen=True):
+    """`dume/<r>/command`, per tick: τ = τ_ff + kp (q_des − q) + kd (v_des − v), clipped.
+
+    stamp_ns: the stamp of the `RobotState` this command answers (lockstep waits for it).
+    tau_ff: (19,) N·m. q_des: (19,) rad. v_des: (19,) rad/s.
+    kp: (19,) N·m/rad, ≥ 0. kd: (19,) N·m·s/rad, ≥ 0.
+    source: who sent it (`wbc`, a test controller, …).
+    """
+
+    stamp_ns: StampNs
+    tau_ff: Array
+    q_des: Array
+    v_des: Array
+    kp: Array
+    kd: Array
+    source: str = "wbc"
+
+
+class CameraFrame(Message, frozen=True):
+    """`dume/<r>/camera/<cam>/rgbd`, 10 Hz: one RGB-D capture.
+
+    rgb: (H, W, 3) uint8. depth: (H, W) float32, metres along the optical axis, 0 = no return.
+    fx, fy, cx, cy: pinhole intrinsics in pixels (pixel centres at integer coordinates).
+    T_base_camera: camera optical frame (OpenCV: z forward, x right, y down) in the base
+        frame at capture. T_world_base: the base in the world at capture.
+    """
+
+    stamp_ns: StampNs
+    camera: str
+    width: int
+    height: int
+    fx: Finite
+    fy: Finite
+    cx: Finite
+    cy: Finite
+    rgb: Array
+    depth: Array
+    T_base_camera: Mat4
+    T_world_base: Mat4
+
+
+class SegmentationTruth(Message, frozen=True):
+    """`dume/<r>/camera/<cam>/segmentation_truth`: the renderer's instance ids (sim truth).
+
+    labels: (H, W) int32 instance label per pixel, 0 for the background.
+    instances: label → truth instance id (`bottle_1`, `person_2`, …).
+    """
+
+    stamp_ns: StampNs
+    camera: str
+    labels: Array
+    instances: dict[int, str]
+
+
+class HandoverTaken(Message, frozen=True, tag="handover_taken"):
+    """A person gripped the object the robot presented (truth, for evaluation)."""
+
+    stamp_ns: StampNs
+    person_id: EntityId
+    object_id: EntityId
+
+
+class ObjectDropped(Message, frozen=True, tag="object_dropped"):
+    """An artifact fell: its height dropped by more than 10 cm while nobody held it."""
+
+    stamp_ns: StampNs
+    object_id: EntityId
+    position_in_world: Vec3
+
+
+class RobotContact(Message, frozen=True, tag="robot_contact"):
+    """A robot body other than a foot touched something in the world (begins).
+
+    body: the robot body. other: the world object (obstacle id, artifact id, `floor`).
+    """
+
+    stamp_ns: StampNs
+    body: str
+    other: str
+    position_in_world: Vec3
+    force: NonNegative
+
+
+WorldEvent = HandoverTaken | ObjectDropped | RobotContact
+
+
+class WorldEvents(Message, frozen=True):
+    """`dume/world/events`: events of one tick (truth: evaluation and tests only)."""
+
+    stamp_ns: StampNs
+    events: list[WorldEvent]
+
+
+class CameraInfo(Message, frozen=True):
+    """A camera mount: parent frame, `T_parent_camera` (optical), intrinsics and rate."""
+
+    name: str
+    parent_frame: str
+    T_parent_camera: Mat4
+    width: int
+    height: int
+    fx: Finite
+    fy: Finite
+    cx: Finite
+    cy: Finite
+    rate_hz: Finite
+
+
+class RobotDescription(Message, frozen=True):
+    """`dume/<r>/description` (queryable): the robot as the sim runs it.
+
+    joint_names: the 19 joints in order. lower, upper: rad. velocity: rad/s. effort: N·m.
+    frames: named frames (feet, gripper_tcp, cameras). tick_hz: physics and state rate.
+    """
+
+    robot: str
+    joint_names: tuple[str, ...]
+    lower: tuple[Finite, ...]
+    upper: tuple[Finite, ...]
+    velocity: tuple[Finite, ...]
+    effort: tuple[Finite, ...]
+    frames: tuple[str, ...]
+    cameras: tuple[CameraInfo, ...]
+    tick_hz: Finite
+    locomotion: Locomotion
+    mode: TimeMode
+
+
+class Ack(Message, frozen=True):
+    """`dume/<r>/ack/<service>`: `service` has fully processed the tick at `stamp_ns`."""
+
+    service: str
+    stamp_ns: StampNs

@@ -1,0 +1,118 @@
+"""The whole-body controller's inputs (cmd_vel, mode, arm goals) and its status."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from common.messages.base import Finite, Mat4, Message, NonNegative, StampNs, Vec3
+
+WbcModeName = Literal["damp", "stand", "walk", "manipulate"]
+
+
+class CmdVel(Message, frozen=True):
+    """`dume/<r>/wbc/cmd_vel`: base velocity in `base_yaw`.
+
+    vx, vy: m/s forward and left. wz: rad/s counter-clockwise.
+    source: who sends it; the WBC obeys only the source named by `wbc/mode`.
+    """
+
+    stamp_ns: StampNs
+    vx: Finite
+    vy: Finite
+    wz: Finite
+    source: str
+
+
+class WbcMode(Message, frozen=True):
+    """`dume/<r>/wbc/mode`: the mode and which `cmd_vel` source to obey."""
+
+    stamp_ns: StampNs
+    mode: WbcModeName
+    cmd_vel_source: str = "navigation"
+
+
+class Reach(Message, frozen=True, tag="reach"):
+    """Move `gripper_tcp` to H (row-major 4×4) in `frame` (base or world) as of `stamp_ns`.
+
+    A base-frame goal is fixed in the world from the base pose at its stamp.
+    approach_axis: unit vector in H's frame along which the gripper approaches;
+    pregrasp_m: the approach starts this far back along it.
+    """
+
+    H: Mat4
+    frame: Literal["base", "world"]
+    stamp_ns: StampNs
+    approach_axis: Vec3 = (1.0, 0.0, 0.0)
+    pregrasp_m: NonNegative = 0.08
+
+
+class Grasp(Message, frozen=True, tag="grasp"):
+    """Close the gripper with a torque limit until held or fully closed."""
+
+    max_effort: NonNegative = 10.0
+
+
+class Release(Message, frozen=True, tag="release"):
+    """Open the gripper."""
+
+
+class Posture(Message, frozen=True, tag="posture"):
+    """Go to a named arm posture: stow, ready, look, handover."""
+
+    name: Literal["stow", "ready", "look", "handover"]
+
+
+ArmGoal = Reach | Grasp | Release | Posture
+
+
+class ArmGoalRequest(Message, frozen=True):
+    """`dume/<r>/wbc/arm_goal` (query)."""
+
+    goal: ArmGoal
+
+
+class ArmGoalReply(Message, frozen=True):
+    """Accepted with a goal id, or refused with a reason."""
+
+    accepted: bool
+    goal_id: str = ""
+    reason: str = ""
+
+
+GoalState = Literal["active", "succeeded", "failed", "cancelled"]
+
+
+class GoalStatus(Message, frozen=True):
+    """One arm goal: id, kind (reach, grasp, …), state, and the reason when it failed."""
+
+    goal_id: str
+    kind: str
+    state: GoalState
+    reason: str = ""
+
+
+class WbcStatus(Message, frozen=True):
+    """`dume/<r>/wbc/status`: what the controller does and how well.
+
+    base_error_m, gripper_error_m, gripper_error_rad: tracking errors now.
+    qp_time_us: the last tick's build + solve time, µs (wall clock, for monitoring).
+    contacts: FL, FR, RL, RR in stance. held: the grasp detector says an object is held.
+    gripper_wrench: (6,) force N and torque N·m felt at gripper_tcp, in the base frame.
+    reason: the last mode change or failure, for a person.
+    """
+
+    stamp_ns: StampNs
+    mode: WbcModeName
+    cmd_vel_source: str
+    goals: list[GoalStatus]
+    base_error_m: NonNegative
+    gripper_error_m: NonNegative
+    gripper_error_rad: NonNegative
+    qp_time_us: NonNegative
+    qp_failures: int
+    contacts: tuple[bool, bool, bool, bool]
+    gripper_angle: Finite
+    gripper_effort: Finite
+    held: bool
+    gripper_wrench: tuple[Finite, Finite, Finite, Finite, Finite, Finite]
+    reason: str = ""

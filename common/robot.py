@@ -1,0 +1,363 @@
+"""dume's robot: the Unitree B1 with a Z1 arm from example-robot-data — the one place for
+its conventions.
+
+- Joints: `JOINT_NAMES` is pinocchio's model order: legs FL, FR, RL, RR (hip, thigh,
+  calf), arm joint1..joint6, then the jaw `jointGripper` (0 closed, negative open). Every
+  19-vector in dume (q, v, tau, limits, postures) uses it. MuJoCo orders the legs FR, FL,
+  RR, RL: cross with `q_mj_to_pin`, `v_mj_to_pin` (and back), `mj_indices(model).ctrl`.
+- State: pinocchio q (26) = [base position in world, base quaternion xyzw, joints];
+  v (25) = [base linear, angular velocity, both in the base frame, joint velocities].
+- Frames: `base` (= trunk), feet `FL_foot`.. (sphere centres), `gripper_tcp` (x approach,
+  z towards the moving jaw, y along the jaw pivot: see `T_STATOR_TCP`) and the cameras.
+  Camera frames are OpenCV optical frames (z forward, x right, y down); MuJoCo's cameras
+  look down their -z with y up, and `robot_spec()` turns them.
+- Standing, reaching and standoff numbers are computed below from the kinematics, each
+  with how it was derived.
+
+The facts both models share (files, names, gripper boxes, camera mounts) are in
+`robot_description`, the MuJoCo model and its state maps in `robot_mjcf`; this module
+builds the pinocchio model and re-exports the rest, so import from here.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from common.geometry import FloatArray, rot_z
+from common.robot_description import (
+    ARM_JOINTS,
+    BASE_FRAME,
+    CAMERA_MOUNTS,
+    FOOT_FRAMES,
+    GRIPPER_BOXES,
+    GRIPPER_CLOSED,
+    GRIPPER_JOINT,
+    GRIPPER_OPEN,
+    JAW_GEOMS,
+    JOINT_NAMES,
+    LEG_JOINTS,
+    LEG_NAMES,
+    STATOR_LINK,
+    T_STATOR_TCP,
+    TCP_FRAME,
+    CameraMount,
+    joint_armature,
+    srdf_path,
+    urdf_text,
+)
+from common.robot_mjcf import (
+    TIMESTEP_S,
+    MjRobotIndices,
+    mj_indices,
+    mj_joint_names,
+    q_mj_to_pin,
+    q_pin_to_mj,
+    robot_spec,
+    set_sim_options,
+    v_mj_to_pin,
+    v_pin_to_mj,
+)
+
+__all__ = [  # the description's names, re-exported, and this module's
+    "APPROACH_MARGIN_M",
+    "ARM_JOINTS",
+    "ARM_REACH_M",
+    "BASE_FRAME",
+    "CAMERA_MOUNTS",
+    "D_OPT_M",
+    "FOOTPRINT",
+    "FOOTPRINT_BOUNDS",
+    "FOOT_FRAMES",
+    "FOOT_RADIUS_M",
+    "GRASP_HEIGHTS_M",
+    "GRASP_PITCH_RAD",
+    "GRIPPER_CLOSED",
+    "GRIPPER_JOINT",
+    "GRIPPER_OPEN",
+    "HANDOVER_DISTANCE_M",
+    "JAW_GEOMS",
+    "JOINT_NAMES",
+    "LEG_JOINTS",
+    "LEG_NAMES",
+    "PERSON_REACH_M",
+    "POSITION_LOWER",
+    "POSITION_UPPER",
+    "POSTURES",
+    "STANDOFF_DISTANCE_M",
+    "STAND_BASE_HEIGHT_M",
+    "TCP_FRAME",
+    "THETA_OPT_RAD",
+    "TIMESTEP_S",
+    "TORQUE_LIMITS",
+    "T_STATOR_TCP",
+    "VELOCITY_LIMITS",
+    "CameraMount",
+    "MjRobotIndices",
+    "arm_plane",
+    "intrinsics",
+    "load_pinocchio",
+    "mj_indices",
+    "mj_joint_names",
+    "q_mj_to_pin",
+    "q_pin_to_mj",
+    "robot_spec",
+    "set_sim_options",
+    "standing_q",
+    "v_mj_to_pin",
+    "v_pin_to_mj",
+]
+
+
+@functools.cache
+def load_pinocchio() -> tuple[pin.Model, pin.GeometryModel]:
+    """The robot in pinocchio (free-flyer root, nq 26, nv 25) and its collision model.
+
+    Shared and cached: treat both as read-only (`pin.Model(model)` copies). The model has
+    dume's joint armature (as MuJoCo does) and the frames `gripper_tcp`, `camera_head`,
+    `camera_wrist`. The collision model has the gripper boxes MuJoCo uses and the pairs
+    MuJoCo checks: all, minus the SRDF's disabled ones and minus parent-child bodies.
+    """
+    model = pin.buildModelFromXML(urdf_text(), pin.JointModelFreeFlyer())
+    armature = model.armature.copy()
+    armature[6:] = joint_armature()
+    model.armature = armature
+    stator = model.getFrameId(STATOR_LINK, pin.FrameType.BODY)
+    _add_frame(model, TCP_FRAME, stator, T_STATOR_TCP)
+    for mount in CAMERA_MOUNTS.values():
+        parent = model.getFrameId(mount.parent_frame, pin.FrameType.BODY)
+        _add_frame(model, mount.name, parent, mount.T_parent_camera)
+
+    geom = pin.buildGeomFromUrdfString(model, urdf_text(), pin.GeometryType.COLLISION)
+    for box in GRIPPER_BOXES:
+        frame = model.frames[model.getFrameId(box.link, pin.FrameType.BODY)]
+        shape = coal.Box(*(2.0 * np.array(box.half_size)))
+        placement = frame.placement * pin.SE3(np.eye(3), np.array(box.center))
+        geom.addGeometryObject(
+            pin.GeometryObject(
+                box.name,
+                frame.parentJoint,
+                model.getFrameId(box.link, pin.FrameType.BODY),
+                placement,
+                shape,
+            )
+        )
+    geom.addAllCollisionPairs()
+    pin.removeCollisionPairs(model, geom, str(srdf_path()))
+    for pair in list(geom.collisionPairs):
+        j1 = geom.geometryObjects[pair.first].parentJoint
+        j2 = geom.geometryObjects[pair.second].parentJoint
+        if j1 == j2 or model.parents[j1] == j2 or model.parents[j2] == j1:
+            geom.removeCollisionPair(pair)
+    return model, geom
+
+
+def _add_frame(model: pin.Model, name: str, parent_frame: int, T: FloatArray) -> None:
+    parent = model.frames[parent_frame]
+    placement = parent.placement * pin.SE3(T[:3, :3], T[:3, 3])
+    model.addFrame(
+        pin.Frame(name, parent.parentJoint, parent_frame, placement, pin.FrameType.OP_FRAME)
+    )
+
+
+def _readonly(x: FloatArray) -> FloatArray:
+    x = np.array(x, dtype=float)
+    x.setflags(write=False)
+    return x
+
+
+_MODEL = load_pinocchio()[0]
+POSITION_LOWER: FloatArray = _readonly(_MODEL.lowerPositionLimit[7:])  # rad
+POSITION_UPPER: FloatArray = _readonly(_MODEL.upperPositionLimit[7:])  # rad
+VELOCITY_LIMITS: FloatArray = _readonly(_MODEL.velocityLimit[6:])  # rad/s
+TORQUE_LIMITS: FloatArray = _readonly(_MODEL.effortLimit[6:])  # N m, MuJoCo clips to these
+_GEOM = load_pinocchio()[1]
+FOOT_RADIUS_M: float = float(
+    _GEOM.geometryObjects[_GEOM.getGeometryId(f"{FOOT_FRAMES[0]}_0")].geometry.radius
+)
+
+
+def intrinsics(mount: CameraMount) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) in pixels of MuJoCo's rendering of `mount`.
+
+    MuJoCo's fovy is vertical and its frustum symmetric, so fx = fy = (h/2)/tan(fovy/2)
+    and the principal point is the image centre: with pixel centres at integer
+    coordinates (OpenCV), cx = (w-1)/2, cy = (h-1)/2 (the test renders a point to check).
+    """
+    f = 0.5 * mount.height / math.tan(math.radians(mount.fovy_deg) / 2.0)
+    return f, f, (mount.width - 1) / 2.0, (mount.height - 1) / 2.0
+
+
+# --- postures -------------------------------------------------------------------------------
+# Legs as in the SRDF's standing states (hip 0, thigh 0.8, calf -1.6); the arm per posture.
+_LEGS_STAND = np.tile([0.0, 0.8, -1.6], len(LEG_NAMES))
+
+
+def _posture(arm: tuple[float, ...], gripper: float) -> FloatArray:
+    return _readonly(np.concatenate([_LEGS_STAND, arm, [gripper]]))
+
+
+POSTURES: dict[str, FloatArray] = {
+    # The SRDF's `standing_with_arm_home` (upper arm back along the trunk, forearm folded
+    # forward over it) with the wrist lifted 4 cm, gripper level: at exactly 0, link06's
+    # collision cylinder sinks 8 mm into link02's.
+    "stand": _posture((0.0, 0.0, -0.2, 0.2, 0.0, 0.0), GRIPPER_CLOSED),
+    # Carrying: folded as `stand`, jaw pivot vertical so a held bottle stays upright.
+    "stow": _posture((0.0, 0.0, -0.2, 0.2, 0.0, math.pi / 2), GRIPPER_CLOSED),
+    # Pre-grasp: gripper level and open at ~0.95 m, 0.55 m ahead, rolled for a side grasp.
+    "ready": _posture((0.0, 0.46, -0.54, 0.08, 0.0, math.pi / 2), GRIPPER_OPEN),
+    # Wrist camera 1.1 m up over the trunk front, pitched 14 deg down: sees a 0.75-1.1 m
+    # high table top from 0.7 m to 1.3 m ahead (checked in the tests).
+    "look": _posture((0.0, 0.64, -1.94, 1.28, 0.0, 0.0), GRIPPER_CLOSED),
+    # Handover: the held object level, presented at 1.0 m height, 0.85 m ahead.
+    "handover": _posture((0.0, 1.53, -0.96, -0.57, 0.0, math.pi / 2), GRIPPER_CLOSED),
+}
+
+
+def _frame_in_base(q_joints: FloatArray, frame: str) -> pin.SE3:
+    q = pin.neutral(_MODEL)
+    q[7:] = q_joints
+    data = _MODEL.createData()
+    pin.framesForwardKinematics(_MODEL, data, q)
+    return data.oMf[_MODEL.getFrameId(frame)]
+
+
+# Base height with the feet spheres resting on z = 0 in the `stand` legs.
+STAND_BASE_HEIGHT_M: float = FOOT_RADIUS_M - min(
+    float(_frame_in_base(POSTURES["stand"], f).translation[2]) for f in FOOT_FRAMES
+)
+
+
+def standing_q(
+    posture: str = "stand", x: float = 0.0, y: float = 0.0, yaw: float = 0.0
+) -> FloatArray:
+    """Pinocchio q (26,) of the robot standing on z = 0 at (x, y, yaw) in `posture`."""
+    if posture not in POSTURES:
+        raise KeyError(f"unknown posture {posture!r}; postures are {sorted(POSTURES)}")
+    R = rot_z(yaw)
+    quat = pin.Quaternion(R).coeffs()  # xyzw
+    return np.concatenate([[x, y, STAND_BASE_HEIGHT_M], quat, POSTURES[posture]])
+
+
+# --- reach and standoff, from the arm's kinematics ------------------------------------------
+GRASP_HEIGHTS_M = (0.75, 1.10)  # object centres on 0.7-1.0 m tables, held 5-10 cm up
+GRASP_PITCH_RAD = (0.0, 0.5)  # side grasps from level to ~30 deg nose-down
+COMFORT_MARGIN_RAD = 0.1  # a comfortable grasp stays this far inside every joint limit...
+COMFORT_STRETCH = 0.9  # ...with the wrist at most 90 % of its farthest from the shoulder
+APPROACH_MARGIN_M = 0.3  # navigation stops this far short of D_OPT; visual servoing closes it
+PERSON_REACH_M = 0.45  # a person's centre to the hand that takes the object
+
+
+def _planar(theta: FloatArray, v: FloatArray) -> FloatArray:
+    """Vectors v = (x, z) turned by angles theta about y: shape (len(theta), 2)."""
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    return np.hstack([v[0] * c + v[1] * s, -v[0] * s + v[1] * c])
+
+
+@functools.cache
+def arm_plane() -> dict[str, FloatArray]:
+    """The arm at joint1 = joint5 = 0, joint6 = pi/2 (side grasp) in the base's x-z plane.
+
+    joint2..joint4 turn about parallel y axes, so the TCP is shoulder + R(a2) upper +
+    R(a2 + a3) fore + R(a2 + a3 + a4) tool, with these (x, z) vectors read from FK at zero.
+    """
+    ids = [_MODEL.getJointId(n) for n in ARM_JOINTS]
+    if any(_MODEL.joints[ids[k]].shortname() != "JointModelRY" for k in (1, 2, 3)):
+        raise ValueError("joint2..joint4 are no longer parallel y axes: arm_plane() is wrong")
+    q = pin.neutral(_MODEL)
+    q[7 + JOINT_NAMES.index("joint6")] = math.pi / 2
+    data = _MODEL.createData()
+    pin.framesForwardKinematics(_MODEL, data, q)
+    p = [data.oMi[i].translation[[0, 2]] for i in ids[1:4]]
+    tcp = data.oMf[_MODEL.getFrameId(TCP_FRAME)].translation
+    return {"shoulder": p[0], "upper": p[1] - p[0], "fore": p[2] - p[1], "tool": tcp[[0, 2]] - p[2]}
+
+
+def _arm_grid(margin: float, n: int = 241) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(a2, a3, wrist position) over a grid of joint2, joint3 inside the limits - margin."""
+    lo, hi = POSITION_LOWER, POSITION_UPPER
+    k2, k3 = JOINT_NAMES.index("joint2"), JOINT_NAMES.index("joint3")
+    grid2, grid3 = np.meshgrid(
+        np.linspace(lo[k2] + margin, hi[k2] - margin, n),
+        np.linspace(lo[k3] + margin, hi[k3] - margin, n),
+    )
+    a2, a3 = grid2.ravel(), grid3.ravel()
+    plane = arm_plane()
+    wrist = plane["shoulder"] + _planar(a2, plane["upper"]) + _planar(a2 + a3, plane["fore"])
+    return a2, a3, wrist
+
+
+def _tcp_reachable(
+    a2: FloatArray, a3: FloatArray, wrist: FloatArray, pitch: float, margin: float
+) -> tuple[FloatArray, FloatArray]:
+    """TCP (x, z) positions in the base frame with the tool at `pitch`, joint4 in limits."""
+    k4 = JOINT_NAMES.index("joint4")
+    a4 = pitch - a2 - a3
+    ok = (a4 >= POSITION_LOWER[k4] + margin) & (a4 <= POSITION_UPPER[k4] - margin)
+    return wrist + _planar(np.full_like(a2, pitch), arm_plane()["tool"]), ok
+
+
+def _reach_and_standoff() -> tuple[float, float]:
+    """ARM_REACH_M: the farthest the TCP gets horizontally from the shoulder, any pitch.
+
+    D_OPT_M: for every object height in GRASP_HEIGHTS_M, the comfortable grasps (see
+    COMFORT_*) at a pitch in GRASP_PITCH_RAD put the TCP between x_min(h) and x_max(h)
+    ahead of the base; D_OPT_M is the middle of what all heights share.
+    """
+    a2, a3, wrist = _arm_grid(0.0)
+    reach = max(
+        float(np.max(np.abs(tcp[ok, 0] - arm_plane()["shoulder"][0])))
+        for tcp, ok in (_tcp_reachable(a2, a3, wrist, p, 0.0) for p in np.linspace(-1.5, 1.5, 61))
+    )
+    a2, a3, wrist = _arm_grid(COMFORT_MARGIN_RAD)
+    stretch = np.linalg.norm(wrist - arm_plane()["shoulder"], axis=1)
+    comfy = stretch <= COMFORT_STRETCH * stretch.max()
+    lows, highs = [], []
+    for h in np.linspace(*GRASP_HEIGHTS_M, 8):
+        xs = []
+        for pitch in np.linspace(*GRASP_PITCH_RAD, 11):
+            tcp, ok = _tcp_reachable(a2, a3, wrist, pitch, COMFORT_MARGIN_RAD)
+            hit = ok & comfy & (np.abs(tcp[:, 1] + STAND_BASE_HEIGHT_M - h) < 0.005)
+            xs.extend(tcp[hit, 0])
+        if not xs:
+            raise ValueError(f"no comfortable side grasp reaches an object at {h:.2f} m")
+        lows.append(min(xs))
+        highs.append(max(xs))
+    if max(lows) > min(highs):
+        raise ValueError(f"no standoff suits every height: x_min {lows}, x_max {highs}")
+    return reach, 0.5 * (max(lows) + min(highs))
+
+
+def _footprint(posture: str) -> tuple[float, float, float, float]:
+    """(x_min, x_max, y_min, y_max) in `base_yaw` of every collision geometry, standing."""
+    model, geom = load_pinocchio()
+    data, gdata = model.createData(), geom.createData()
+    pin.updateGeometryPlacements(model, data, geom, gdata, standing_q(posture))
+    corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1])).reshape(3, -1).T
+    points = []
+    for obj, placement in zip(geom.geometryObjects, gdata.oMg, strict=True):
+        obj.geometry.computeLocalAABB()
+        box = obj.geometry.aabb_local
+        local = np.asarray(box.min_) + corners * (np.asarray(box.max_) - np.asarray(box.min_))
+        points.append(local @ placement.rotation.T + placement.translation)
+    lo, hi = np.vstack(points).min(axis=0), np.vstack(points).max(axis=0)
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+ARM_REACH_M, D_OPT_M = _reach_and_standoff()
+THETA_OPT_RAD = 0.0  # the object straight ahead: the arm works in the base's x-z plane
+STANDOFF_DISTANCE_M: float = D_OPT_M + APPROACH_MARGIN_M  # base origin to object, nav goal
+# Base origin to the person: the TCP's reach in `handover` plus the person's own reach.
+HANDOVER_DISTANCE_M: float = (
+    float(_frame_in_base(POSTURES["handover"], TCP_FRAME).translation[0]) + PERSON_REACH_M
+)
+FOOTPRINT_BOUNDS: tuple[float, float, float, float] = _footprint("stow")
+# Half-extents (x, y) of a base-centred rectangle holding the robot with the arm stowed.
+FOOTPRINT: tuple[float, float] = (
+    max(-FOOTPRINT_BOUNDS[0], FOOTPRINT_BOUNDS[1]),
+    max(-FOOTPRINT_BOUNDS[2], FOOTPRINT_BOUNDS[3]),
+)
