@@ -5,6 +5,8 @@ the file, the environment or a flag fails at start-up with the key's path. Overr
 
 - environment: `DUME_<SECTION>_<KEY>=value`, e.g. `DUME_ZENOH_PORT=7450`,
   `DUME_SIM_WORLD_SEED=3`, `DUME_TIME_MODE=realtime`; `DUME_CONFIG` names another file.
+- `DUME_SET`: newline-separated `section.key=value` overrides of any depth (what a stack
+  launcher hands to every process), applied after the variables above.
 - flags: `--set section.key=value` (any depth, e.g. `time.participants.wbc.period_s=0.002`).
 
 Values are parsed as TOML literals (`3`, `0.5`, `true`, `"text"`, `[1, 2]`); anything
@@ -25,7 +27,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "config.toml"
 ENV_PREFIX = "DUME_"
 #: Environment variables that are not settings.
-ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG"})
+ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG", "DUME_SET", "DUME_PYTHON", "DUME_RUN_DIR"})
 
 
 class ConfigError(ValueError):
@@ -84,8 +86,6 @@ class SimSettings(_Section):
     camera_height: int = 240
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
     segmentation_truth: bool = True
-    #: Which process's commands drive the joints.
-    command_source: str = "wbc"
 
 
 class RecordingSettings(_Section):
@@ -166,7 +166,8 @@ def load_config(
         raise ConfigError(f"config file {file}: {exc}") from None
     for keys, value in _env_overrides(env):
         _set_path(tree, keys, value)
-    for item in overrides:
+    env_set = [line for line in env.get("DUME_SET", "").splitlines() if line.strip()]
+    for item in [*env_set, *overrides]:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"override {item!r} is not of the form section.key=value")

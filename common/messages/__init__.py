@@ -8,8 +8,8 @@ of the bad field (`Expected float, got str - at $.x`).
 
 from __future__ import annotations
 
-from functools import cache
 from collections.abc import Hashable
+from functools import cache
 from typing import Any, TypeVar, cast
 
 import msgspec

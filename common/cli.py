@@ -1,0 +1,222 @@
+"""`dume`: the command line of a dume stack.
+
+    dume up [--world-seed N] [--world small] [--realtime]   supervisord in the foreground
+    dume status                                             who is alive; the mission's state
+    dume world --seed N [--world small] [--grid]            a generated world as JSON
+    dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
+    dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
+    dume demo [--world-seed N] [--duration S]               run a whole job, print a JSON line
+    dume bench sim|all                                      print figures (JSON last line)
+
+Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's) to talk to the
+stack on that port, and `--set key=value` to override settings.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import uuid
+from collections.abc import Sequence
+
+import msgspec
+
+from common.bus import Bus, WaitTimeout
+from common.config import REPO_ROOT, Config, ConfigError, load_config
+from common.keys import SERVICES, RobotKeys, service_of_alive_key
+from common.messages import encode
+from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+
+
+def _client_config(args: argparse.Namespace) -> Config:
+    return load_config([*args.set, *([f"zenoh.port={args.port}"] if args.port else [])])
+
+
+def cmd_up(args: argparse.Namespace) -> int:
+    from common.recording import new_run_id
+    from common.stack import SUPERVISORD_CONF, stack_env
+
+    settings = [f"sim.world_seed={args.world_seed}", f'sim.world="{args.world}"', *args.set]
+    if args.realtime:
+        settings.append('time.mode="realtime"')
+    if args.port:
+        settings.append(f"zenoh.port={args.port}")
+    config = load_config(settings)
+    run_id = new_run_id()
+    run_dir = REPO_ROOT / "var" / "run" / run_id
+    run_dir.mkdir(parents=True, exist_ok=True)
+    env = stack_env(
+        port=config.zenoh.port,
+        run_id=run_id,
+        run_dir=run_dir,
+        settings={"DUME_SET": "\n".join(settings)},
+    )
+    exe = os.path.join(os.path.dirname(sys.executable), "supervisord")
+    print(
+        f"dume up: run {run_id}, zenoh port {config.zenoh.port}, {config.sim.world} world "
+        f"seed {config.sim.world_seed}, {config.time.mode}; logs in {run_dir}",
+        file=sys.stderr,
+    )
+    os.execve(exe, [exe, "-c", str(SUPERVISORD_CONF)], env)
+    return 0  # not reached
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    config = _client_config(args)
+    keys = RobotKeys(config.robot)
+    with Bus.open(config) as bus:
+        alive = sorted(service_of_alive_key(k) for k in bus.alive_now(keys.alive_all, 2.0))
+        status_sub = bus.latest(keys.mission_status, MissionStatus)
+        try:
+            status: MissionStatus | None = status_sub.wait(lambda _m: True, args.wait)
+        except WaitTimeout:
+            status = None
+    out = {
+        "robot": config.robot,
+        "port": config.zenoh.port,
+        "alive": alive,
+        "missing": [s for s in SERVICES if s not in alive],
+        "mission": None if status is None else msgspec.to_builtins(status),
+    }
+    print(json.dumps(out))
+    return 0 if alive else 1
+
+
+def cmd_world(args: argparse.Namespace) -> int:
+    from services.sim.world import generate_world
+
+    world = generate_world(args.seed, args.world, walking_people=args.walking_people)
+    data = msgspec.to_builtins(world)
+    if not args.grid:
+        data.pop("occupancy", None)
+    print(json.dumps(data, indent=2 if args.pretty else None))
+    return 0
+
+
+def cmd_request(args: argparse.Namespace) -> int:
+    config = _client_config(args)
+    keys = RobotKeys(config.robot)
+    request = MissionRequest(
+        request_id=args.request_id or uuid.uuid4().hex[:12], object=args.object, person=args.to
+    )
+    with Bus.open(config) as bus:
+        statuses = bus.fifo(keys.mission_status, MissionStatus)
+        time.sleep(0.2)  # let the subscription reach the router before the request goes out
+        bus.session.put(keys.mission_request, encode(request))
+        print(json.dumps({"request_id": request.request_id, "sent": msgspec.to_builtins(request)}))
+        if not args.wait:
+            return 0
+        deadline = time.monotonic() + args.timeout
+        while time.monotonic() < deadline:
+            status = statuses.pop(timeout_s=0.2)
+            if status is None or status.request_id != request.request_id:
+                continue
+            print(json.dumps(msgspec.to_builtins(status)), flush=True)
+            if status.state == "succeeded":
+                return 0
+            if status.state in ("failed", "cancelled", "rejected"):
+                return 1
+        alive = {service_of_alive_key(k) for k in bus.alive_now(keys.alive_all, 1.0)}
+        why = (
+            "no mission service is running on this stack"
+            if "mission" not in alive
+            else "the mission did not finish in time"
+        )
+        print(json.dumps({"request_id": request.request_id, "outcome": "timeout", "reason": why}))
+        return 3
+
+
+def cmd_cancel(args: argparse.Namespace) -> int:
+    config = _client_config(args)
+    keys = RobotKeys(config.robot)
+    with Bus.open(config) as bus:
+        bus.session.put(
+            keys.mission_cancel,
+            encode(MissionCancel(request_id=args.request_id, reason=args.reason)),
+        )
+    print(json.dumps({"cancelled": args.request_id}))
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from common.demo import run_demo
+
+    return run_demo(args)
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from bench import run_bench
+
+    return run_bench(args.which, args.set)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="dume", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    def add(name: str, help_: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help_)
+        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+        p.add_argument("--port", type=int, default=None, help="the stack's Zenoh port")
+        return p
+
+    p = add("up", "run the stack under supervisord in the foreground")
+    p.add_argument("--world-seed", type=int, default=0)
+    p.add_argument("--world", choices=["hall", "small"], default="hall")
+    p.add_argument("--realtime", action="store_true", help="pace the sim to the wall clock")
+    p.set_defaults(func=cmd_up)
+
+    p = add("status", "which services are alive and ready; the latest mission status")
+    p.add_argument("--wait", type=float, default=0.5, help="seconds to listen for a status")
+    p.set_defaults(func=cmd_status)
+
+    p = add("world", "print a generated world as JSON")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--world", choices=["hall", "small"], default="hall")
+    p.add_argument("--walking-people", action="store_true")
+    p.add_argument("--grid", action="store_true", help="include the occupancy grid")
+    p.add_argument("--pretty", action="store_true")
+    p.set_defaults(func=cmd_world)
+
+    p = add("request", "ask the robot to bring OBJECT to PERSON")
+    p.add_argument("object", help="a map id (bottle_1) or a class (bottle)")
+    p.add_argument("--to", required=True, help="a person's map id (person_1)")
+    p.add_argument("--request-id", default=None)
+    p.add_argument("--wait", action="store_true", help="follow the status until it ends")
+    p.add_argument("--timeout", type=float, default=600.0)
+    p.set_defaults(func=cmd_request)
+
+    p = add("cancel", "cancel a request")
+    p.add_argument("request_id")
+    p.add_argument("--reason", default="cancelled by the user")
+    p.set_defaults(func=cmd_cancel)
+
+    p = add("demo", "start a stack, run the job, stop it, print a JSON result")
+    p.add_argument("--world-seed", type=int, default=0)
+    p.add_argument("--world", choices=["hall", "small"], default="hall")
+    p.add_argument("--duration", type=float, default=10.0, help="sim seconds to run")
+    p.set_defaults(func=cmd_demo)
+
+    p = add("bench", "benchmarks; each prints JSON on its last line")
+    p.add_argument("which", choices=["sim", "all"])
+    p.set_defaults(func=cmd_bench)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except ConfigError as exc:
+        print(f"dume: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""rerun: one recording per run, shared by every service.
+
+Each service opens a `RecordingStream` with the run's id (`recording.run_id`, set by
+`dume up` for all of them) and saves its own `recordings/<run>/<service>.rrd`;
+`rerun recordings/<run>/*.rrd` opens them as one recording. With `recording.viewer`
+set, the data is also streamed to a live viewer. Everything is stamped on the
+`sim_time` timeline (seconds of sim time), never on wall time.
+
+Entity paths are shared: `world/…` (3D, world frame), `robot/…`, `camera/<cam>/…`,
+`plots/<service>/…` (time series), `log/<service>` (text). The blueprint that lays them
+out is sent by the sim (`default_blueprint`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+import uuid
+from pathlib import Path
+
+import rerun as rr
+import rerun.blueprint as rrb
+
+from common.config import RecordingSettings, resolve
+
+APP_ID = "dume"
+log = logging.getLogger(__name__)
+
+
+def new_run_id() -> str:
+    """A fresh, sortable, human-readable run id: `20261121-101500-1a2b3c`."""
+    return time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:6]
+
+
+def run_dir(settings: RecordingSettings, run_id: str) -> Path:
+    return resolve(settings.dir) / run_id
+
+
+def open_recording(
+    service: str, settings: RecordingSettings, blueprint: rrb.Blueprint | None = None
+) -> rr.RecordingStream:
+    """The service's stream of the run's recording (disabled when recording is off).
+
+    The rerun recording id is derived from the run id, so every service of one run writes
+    to the same recording.
+    """
+    run_id = settings.run_id or os.environ.get("DUME_RECORDING_RUN_ID") or new_run_id()
+    rec_id = uuid.uuid5(uuid.NAMESPACE_URL, f"dume/{run_id}")
+    rec = rr.RecordingStream(APP_ID, recording_id=rec_id, default_enabled=settings.enabled)
+    if not settings.enabled:
+        return rec
+    folder = run_dir(settings, run_id)
+    folder.mkdir(parents=True, exist_ok=True)
+    sinks: list[rr.FileSink | rr.GrpcSink] = [rr.FileSink(str(folder / f"{service}.rrd"))]
+    if settings.viewer:
+        sinks.append(rr.GrpcSink(settings.viewer))
+    rec.set_sinks(*sinks, default_blueprint=blueprint)
+    rec.send_recording_name(f"dume {run_id}")
+    log.info("recording %s to %s", run_id, folder)
+    return rec
+
+
+def stamp(rec: rr.RecordingStream, stamp_ns: int) -> None:
+    """Put what follows on the sim-time timeline."""
+    rec.set_time("sim_time", duration=stamp_ns * 1e-9)
+
+
+class RerunHandler(logging.Handler):
+    """Forwards a service's log records to `log/<service>` in its recording."""
+
+    def __init__(self, rec: rr.RecordingStream, service: str) -> None:
+        super().__init__(level=logging.INFO)
+        self._rec = rec
+        self._path = f"log/{service}"
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            level = {
+                logging.DEBUG: rr.TextLogLevel.DEBUG,
+                logging.INFO: rr.TextLogLevel.INFO,
+                logging.WARNING: rr.TextLogLevel.WARN,
+                logging.ERROR: rr.TextLogLevel.ERROR,
+            }.get(record.levelno, rr.TextLogLevel.CRITICAL)
+            self._rec.log(self._path, rr.TextLog(self.format(record), level=level))
+        except Exception:  # logging must never take a service down
+            self.handleError(record)
+
+
+def default_blueprint(cameras: tuple[str, ...] = ("camera_head", "camera_wrist")) -> rrb.Blueprint:
+    """The layout of a run: the 3D world, both cameras, time series and text logs."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(name="world", origin="world"),
+                rrb.TimeSeriesView(name="plots", origin="plots"),
+                row_shares=[3, 2],
+            ),
+            rrb.Vertical(
+                *[rrb.Spatial2DView(name=cam, origin=f"camera/{cam}") for cam in cameras],
+                rrb.TextLogView(name="log", origin="log"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )

@@ -1,0 +1,125 @@
+"""A service's life: config, logging, Zenoh session, recording, readiness, clean stop.
+
+    def main(svc: Service) -> None:
+        pub = svc.bus.publisher(...)      # declare what it needs
+        svc.ready()                       # liveliness token: now it serves
+        while not svc.stopping:           # loops wait with timeouts, never forever
+            ...
+
+    if __name__ == "__main__":
+        run("perception", main)
+
+`run` parses `--set key=value` flags, loads the config (bad config fails loudly, exit 2),
+opens the session (a client that waits for the router) and the rerun stream, and turns
+SIGINT/SIGTERM into `svc.stop`, so every loop ends within its wait timeout and the
+session closes well inside 2 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from types import FrameType
+
+import rerun as rr
+
+from common.bus import Bus
+from common.config import Config, ConfigError, load_config
+from common.keys import RobotKeys
+from common.recording import RerunHandler, open_recording
+
+log = logging.getLogger(__name__)
+
+
+class Service:
+    """What a running service holds: config, keys, bus, recording and the stop event."""
+
+    def __init__(self, name: str, config: Config, bus: Bus, rec: rr.RecordingStream) -> None:
+        self.name = name
+        self.config = config
+        self.keys = RobotKeys(config.robot)
+        self.bus = bus
+        self.rec = rec
+        self.stop = threading.Event()
+        self.log = logging.getLogger(f"dume.{name}")
+        self.is_ready = False
+
+    @property
+    def stopping(self) -> bool:
+        return self.stop.is_set()
+
+    def ready(self) -> None:
+        """Declare the liveliness token: the service now serves what it declared."""
+        self.bus.declare_alive(self.keys.alive(self.name))
+        self.is_ready = True
+        self.log.info("ready")
+
+
+def parse_args(name: str, argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog=f"python -m services.{name}")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a setting, e.g. --set sim.world=small (repeatable)",
+    )
+    parser.add_argument("--config", help="config file (default deploy/config.toml)")
+    return parser.parse_args(argv)
+
+
+def setup_logging(level: str, name: str) -> None:
+    logging.basicConfig(
+        level=level,
+        format=f"%(asctime)s {name} %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+        force=True,
+    )
+
+
+def _install_signals(stop: threading.Event) -> None:
+    def handler(signum: int, frame: FrameType | None) -> None:
+        del frame
+        log.info("signal %s: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def run(
+    name: str,
+    main: Callable[[Service], None],
+    argv: Sequence[str] | None = None,
+    extra_overrides: Sequence[str] = (),
+) -> int:
+    """Run a service to completion; the process's exit code."""
+    args = parse_args(name, argv)
+    try:
+        config = load_config([*extra_overrides, *args.overrides], path=args.config)
+    except ConfigError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 2
+    setup_logging(config.log.level, name)
+    rec = open_recording(name, config.recording)
+    logging.getLogger("dume").addHandler(RerunHandler(rec, name))
+    bus = Bus.open(config)
+    svc = Service(name, config, bus, rec)
+    _install_signals(svc.stop)
+    try:
+        main(svc)
+    except Exception:
+        log.exception("%s failed", name)
+        return 1
+    finally:
+        svc.stop.set()
+        bus.close()
+        rec.flush()
+        rec.disconnect()
+    log.info("%s stopped", name)
+    return 0

@@ -1,0 +1,251 @@
+"""Start and stop a dume stack: supervisord for users, plain processes for tests.
+
+Both put a run's settings in the environment (`DUME_*`, see `common.config`) so every
+process of the stack reads the same configuration: the Zenoh port, the run id, the
+world, the time mode. `Supervised` runs `supervisord -c deploy/supervisord.conf`, which
+restarts a service that dies; `ProcessStack` starts the router and any subset of services
+as child processes, so a test can kill one and watch what the others do.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from common.bus import Bus
+from common.config import REPO_ROOT, Config, load_config
+from common.keys import RobotKeys, service_of_alive_key
+from common.recording import new_run_id
+
+log = logging.getLogger(__name__)
+
+SUPERVISORD_CONF = REPO_ROOT / "deploy" / "supervisord.conf"
+#: Python modules of the processes a stack can run.
+MODULES = {
+    "router": "services.router",
+    "sim": "services.sim",
+    "hold": "services.sim.hold",
+    "perception": "services.perception",
+    "semantic_map": "services.semantic_map",
+    "navigation": "services.navigation",
+    "wbc": "services.wbc",
+    "mission": "services.mission",
+}
+
+
+def free_port() -> int:
+    """A TCP port on loopback that nothing listens on now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def stack_env(
+    *,
+    port: int,
+    run_id: str,
+    run_dir: Path,
+    settings: Mapping[str, str] | None = None,
+    base: Mapping[str, str] | None = None,
+) -> dict[str, str]:
+    """The environment of every process of one stack."""
+    env = dict(os.environ if base is None else base)
+    env.update(
+        {
+            "DUME_PYTHON": sys.executable,
+            "DUME_ZENOH_PORT": str(port),
+            "DUME_RECORDING_RUN_ID": run_id,
+            "DUME_RUN_DIR": str(run_dir),
+            "MUJOCO_GL": env.get("MUJOCO_GL", "egl"),
+            "PYTHONUNBUFFERED": "1",
+        }
+    )
+    env.update(settings or {})
+    return env
+
+
+def _settings_env(overrides: Sequence[str]) -> dict[str, str]:
+    """`section.key=value` overrides for every process of the stack (`DUME_SET`)."""
+    return {"DUME_SET": "\n".join(overrides)} if overrides else {}
+
+
+class _Stack:
+    """What both kinds of stack share: config, a client bus, readiness."""
+
+    def __init__(self, overrides: Sequence[str], port: int | None, run_id: str | None) -> None:
+        self.port = port or free_port()
+        self.run_id = run_id or new_run_id()
+        self.run_dir = REPO_ROOT / "var" / "run" / f"{self.run_id}-{self.port}"
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.overrides = list(overrides)
+        self.env = stack_env(
+            port=self.port,
+            run_id=self.run_id,
+            run_dir=self.run_dir,
+            settings=_settings_env(self.overrides),
+        )
+        self.config: Config = load_config(env=self.env)
+        self.keys = RobotKeys(self.config.robot)
+        self._bus: Bus | None = None
+
+    @property
+    def bus(self) -> Bus:
+        """A client session on this stack (opened on first use)."""
+        if self._bus is None:
+            self._bus = Bus.open(self.config)
+        return self._bus
+
+    def alive(self) -> set[str]:
+        return {service_of_alive_key(k) for k in self.bus.alive_now(self.keys.alive_all)}
+
+    def wait_ready(self, services: Sequence[str], timeout_s: float = 60.0) -> None:
+        watch = self.bus.watch_alive(self.keys.alive_all)
+        try:
+            watch.wait_for({self.keys.alive(s) for s in services}, timeout_s)
+        finally:
+            watch.undeclare()
+
+    def close_bus(self) -> None:
+        if self._bus is not None:
+            self._bus.close()
+            self._bus = None
+
+
+class ProcessStack(_Stack):
+    """The router and some services as child processes (for tests and benchmarks)."""
+
+    def __init__(
+        self,
+        services: Sequence[str],
+        overrides: Sequence[str] = (),
+        *,
+        port: int | None = None,
+        run_id: str | None = None,
+    ) -> None:
+        super().__init__(overrides, port, run_id)
+        self.services = list(services)
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, timeout_s: float = 60.0) -> ProcessStack:
+        self.spawn("router")
+        for name in self.services:
+            self.spawn(name)
+        self.wait_ready([s for s in self.services if s in MODULES], timeout_s)
+        return self
+
+    def spawn(self, name: str, *args: str) -> subprocess.Popen[bytes]:
+        module = MODULES.get(name, name)
+        logfile = open(self.run_dir / f"{name.replace('.', '_')}.log", "ab")  # noqa: SIM115
+        proc = subprocess.Popen(
+            [sys.executable, "-m", module, *args],
+            cwd=REPO_ROOT,
+            env=self.env,
+            stdout=logfile,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        logfile.close()
+        self.procs[name] = proc
+        return proc
+
+    def kill(self, name: str, sig: int = signal.SIGKILL) -> None:
+        proc = self.procs[name]
+        if proc.poll() is None:
+            os.killpg(proc.pid, sig)
+        proc.wait(timeout=10)
+
+    def log_text(self, name: str) -> str:
+        path = self.run_dir / f"{name.replace('.', '_')}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def stop(self, timeout_s: float = 5.0) -> dict[str, int | None]:
+        """SIGINT everything (services first, the router last); SIGKILL what lingers."""
+        self.close_bus()
+        order = [n for n in self.procs if n != "router"] + (
+            ["router"] if "router" in self.procs else []
+        )
+        codes: dict[str, int | None] = {}
+        for name in order:
+            proc = self.procs[name]
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGINT)
+            try:
+                codes[name] = proc.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %.1f s: killed", name, timeout_s)
+                os.killpg(proc.pid, signal.SIGKILL)
+                codes[name] = proc.wait(timeout=5)
+        return codes
+
+    def __enter__(self) -> ProcessStack:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+class Supervised(_Stack):
+    """`supervisord -c deploy/supervisord.conf` with the run's environment."""
+
+    def __init__(
+        self, overrides: Sequence[str] = (), *, port: int | None = None, run_id: str | None = None
+    ) -> None:
+        super().__init__(overrides, port, run_id)
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def command(self) -> list[str]:
+        exe = Path(sys.executable).with_name("supervisord")
+        return [str(exe), "-c", str(SUPERVISORD_CONF)]
+
+    def ctl(self, *args: str) -> str:
+        exe = Path(sys.executable).with_name("supervisorctl")
+        out = subprocess.run(
+            [str(exe), "-c", str(SUPERVISORD_CONF), *args],
+            env=self.env,
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
+        return out.stdout
+
+    def start(self) -> Supervised:
+        self.proc = subprocess.Popen(
+            self.command(),
+            cwd=REPO_ROOT,
+            env=self.env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        return self
+
+    def stop(self, timeout_s: float = 20.0) -> int | None:
+        self.close_bus()
+        if self.proc is None:
+            return None
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            return self.proc.wait(timeout=5)
+
+
+def wait_until(predicate: object, timeout_s: float, poll_s: float = 0.05) -> bool:
+    """Poll `predicate()` until true or the timeout; True when it became true."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():  # type: ignore[operator]
+            return True
+        time.sleep(poll_s)
+    return False

@@ -1,0 +1,121 @@
+"""What the sim shows in rerun: the world's layout, the robot's state, cameras, events.
+
+Cameras go to `camera/<cam>` (RGB as JPEG to keep recordings small, depth, the truth
+segmentation with instance labels, and the pinhole), plots to `plots/sim/…`, events to
+`log/sim/events` and as points in `world/events`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rerun as rr
+
+from common.messages import as_numpy
+from common.messages.sim import (
+    CameraFrame,
+    HandoverTaken,
+    ObjectDropped,
+    RobotContact,
+    RobotState,
+    SegmentationTruth,
+    WorldEvent,
+)
+from common.messages.world import WorldDescription
+from common.recording import stamp
+
+
+class SimLogger:
+    def __init__(self, rec: rr.RecordingStream, cameras: list[str], camera_every: int) -> None:
+        self.rec = rec
+        self.camera_every = max(1, camera_every)
+        self._frames: dict[str, int] = {c: 0 for c in cameras}
+        self._annotated: set[str] = set()
+
+    def world(self, world: WorldDescription) -> None:
+        lines = [
+            f"# {world.name} world, seed {world.seed}",
+            "",
+            "| id | class | x | y | z |",
+            "|---|---|---|---|---|",
+        ]
+        for a in world.artifacts:
+            x, y, z = a.position
+            lines.append(f"| {a.id} | {a.object_class} | {x:.2f} | {y:.2f} | {z:.2f} |")
+        for p in world.people:
+            x, y = p.position
+            lines.append(f"| {p.id} | person | {x:.2f} | {y:.2f} | 0 |")
+        self.rec.log(
+            "world/description",
+            rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+        self.rec.log(
+            "world/labels",
+            rr.Points3D(
+                [(*a.position[:2], a.position[2] + 0.3) for a in world.artifacts]
+                + [(*p.position, 2.0) for p in world.people],
+                labels=[a.id for a in world.artifacts] + [p.id for p in world.people],
+                radii=0.01,
+            ),
+            static=True,
+        )
+
+    def state(self, t_ns: int, state: RobotState) -> None:
+        stamp(self.rec, t_ns)
+        x, y, z = state.base_position_in_world
+        qx, qy, qz, qw = state.base_orientation_xyzw
+        roll = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
+        pitch = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
+        self.rec.log("plots/sim/base_height_m", rr.Scalars(z))
+        self.rec.log("plots/sim/base_roll_pitch_rad", rr.Scalars([roll, pitch]))
+        self.rec.log("plots/sim/gripper_effort_nm", rr.Scalars(state.gripper_effort))
+        self.rec.log("plots/sim/watchdog", rr.Scalars(float(state.watchdog)))
+        self.rec.log("world/robot_trail", rr.Points3D([(x, y, 0.01)], radii=0.01))
+
+    def rtf(self, t_ns: int, rtf: float) -> None:
+        stamp(self.rec, t_ns)
+        self.rec.log("plots/sim/real_time_factor", rr.Scalars(rtf))
+
+    def camera(self, t_ns: int, frame: CameraFrame, truth: SegmentationTruth) -> None:
+        cam = frame.camera
+        self._frames[cam] = self._frames.get(cam, 0) + 1
+        if (self._frames[cam] - 1) % self.camera_every:
+            return
+        stamp(self.rec, t_ns)
+        path = f"camera/{cam}"
+        self.rec.log(
+            path,
+            rr.Pinhole(
+                focal_length=[frame.fx, frame.fy],
+                principal_point=[frame.cx, frame.cy],
+                resolution=[frame.width, frame.height],
+            ),
+        )
+        self.rec.log(f"{path}/rgb", rr.Image(as_numpy(frame.rgb)).compress(jpeg_quality=80))
+        self.rec.log(f"{path}/depth", rr.DepthImage(as_numpy(frame.depth), meter=1.0))
+        labels = as_numpy(truth.labels)
+        if cam not in self._annotated or len(truth.instances) > 0:
+            self.rec.log(
+                f"{path}/segmentation_truth",
+                rr.AnnotationContext([(int(k), v) for k, v in sorted(truth.instances.items())]),
+            )
+            self._annotated.add(cam)
+        self.rec.log(f"{path}/segmentation_truth", rr.SegmentationImage(labels.astype(np.uint16)))
+
+    def events(self, t_ns: int, events: list[WorldEvent]) -> None:
+        stamp(self.rec, t_ns)
+        for ev in events:
+            if isinstance(ev, HandoverTaken):
+                text = f"handover taken: {ev.person_id} took {ev.object_id}"
+            elif isinstance(ev, ObjectDropped):
+                text = f"object dropped: {ev.object_id} at {np.round(ev.position_in_world, 2)}"
+            elif isinstance(ev, RobotContact):
+                text = f"robot contact: {ev.body} touched {ev.other} ({ev.force:.0f} N)"
+                self.rec.log(
+                    "world/events/contacts", rr.Points3D([ev.position_in_world], radii=0.03)
+                )
+            else:
+                text = str(ev)
+            self.rec.log("log/sim/events", rr.TextLog(text, level=rr.TextLogLevel.WARN))

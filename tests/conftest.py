@@ -1,0 +1,54 @@
+"""Shared fixtures: a real dume stack (router + services as processes) on a free port."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from common.stack import MODULES, ProcessStack
+
+StartStack = Callable[..., ProcessStack]
+
+
+@pytest.fixture
+def stack(tmp_path: Path) -> Iterator[StartStack]:
+    """Start `services` (names or module paths) with `overrides`; torn down after the test.
+
+    Recording goes to the test's temporary folder and is off unless asked for
+    (`record=True`). Each stack gets its own free port, so stacks never meet.
+    """
+    started: list[ProcessStack] = []
+
+    def start(
+        services: list[str],
+        *overrides: str,
+        record: bool = False,
+        timeout_s: float = 90.0,
+        wait_for: list[str] | None = None,
+    ) -> ProcessStack:
+        settings = [
+            f'recording.dir="{tmp_path / "recordings"}"',
+            f"recording.enabled={'true' if record else 'false'}",
+            *overrides,
+        ]
+        s = ProcessStack(services, settings)
+        started.append(s)
+        s.spawn("router")
+        for name in services:
+            s.spawn(name)
+        if wait_for is None:
+            wait_for = [n for n in services if n in MODULES and n != "router"]
+        s.wait_ready(wait_for, timeout_s)
+        return s
+
+    yield start
+    for s in started:
+        codes = s.stop()
+        for name, code in codes.items():
+            if code not in (0, None, -9, -2):
+                print(f"--- {name} exited {code}:\n{s.log_text(name)[-3000:]}")

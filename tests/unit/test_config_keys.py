@@ -1,0 +1,62 @@
+"""Settings load in layers and reject what they do not know; keys come from one place."""
+
+from __future__ import annotations
+
+import pytest
+
+from common.config import ConfigError, load_config
+from common.keys import RobotKeys, map_artifact
+
+
+def test_defaults_load_from_the_deploy_file() -> None:
+    config = load_config(env={})
+    assert config.robot == "b1"
+    assert config.time.mode == "lockstep"
+    assert config.time.tick_hz == 1000.0
+
+
+def test_environment_then_flags_override_the_file() -> None:
+    env = {"DUME_ZENOH_PORT": "7450", "DUME_SIM_WORLD": "small", "DUME_SIM_WORLD_SEED": "4"}
+    config = load_config(["sim.world_seed=5"], env=env)
+    assert config.zenoh.port == 7450
+    assert config.sim.world == "small"
+    assert config.sim.world_seed == 5
+
+
+def test_dume_set_carries_nested_overrides() -> None:
+    env = {"DUME_SET": 'time.participants.nav.role="periodic"\ntime.participants.nav.period_s=0.05'}
+    config = load_config(env=env)
+    assert config.time.participants["nav"].period_s == 0.05
+
+
+@pytest.mark.parametrize(
+    ("overrides", "env", "says"),
+    [
+        (["sim.wrold=small"], {}, "unknown field `wrold`"),
+        (["sim.world=moon"], {}, "$.sim.world"),
+        (["sim.world_seed=abc"], {}, "$.sim.world_seed"),
+        ([], {"DUME_NOPE_X": "1"}, "no section 'nope'"),
+        (["zenoh.port=0"], {}, "not a TCP port"),
+        (["time.participants.p.period_s=0.0015"], {}, "whole ticks"),
+        (["nonsense"], {}, "section.key=value"),
+    ],
+)
+def test_bad_settings_fail_loudly_with_the_key(
+    overrides: list[str], env: dict[str, str], says: str
+) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_config(overrides, env=env)
+    assert says in str(err.value)
+
+
+def test_keys_are_built_from_the_robot_namespace() -> None:
+    keys = RobotKeys("b2")
+    assert keys.state == "dume/b2/state"
+    assert keys.camera_rgbd("camera_wrist") == "dume/b2/camera/camera_wrist/rgbd"
+    assert keys.alive("sim") == "dume/alive/b2/sim"
+    assert keys.ack("perception") == "dume/b2/ack/perception"
+    assert map_artifact("bottle_1") == "dume/map/artifacts/bottle_1"
+    with pytest.raises(ValueError, match="unknown camera"):
+        keys.camera_rgbd("camera_tail")
+    with pytest.raises(ValueError, match="key chunk"):
+        map_artifact("bottle/*")
