@@ -47,6 +47,8 @@ from common.robot_description import (
     TCP_FRAME,
     CameraMount,
     joint_armature,
+    joint_damping,
+    joint_frictionloss,
     srdf_path,
     urdf_text,
 )
@@ -100,6 +102,8 @@ __all__ = [  # the description's names, re-exported, and this module's
     "MjRobotIndices",
     "arm_plane",
     "intrinsics",
+    "joint_damping",
+    "joint_frictionloss",
     "load_pinocchio",
     "mj_indices",
     "mj_joint_names",

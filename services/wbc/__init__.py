@@ -1,0 +1,1 @@
+"""Whole-body control: the robot model per tick, tasks, constraints, the QP, the gait."""

@@ -1,0 +1,195 @@
+"""Trot: schedule, velocity shaping, footholds and swing trajectories.
+
+- `shape_velocity` clamps a (vx, vy, ωz) command to the limits and rate-limits it.
+- `TrotGait` alternates the diagonal pairs (FL+RR, then FR+RL) with half a period each,
+  swing and stance of equal length. It starts on the first nonzero command and stops at
+  the end of a half-cycle once the shaped command is back near zero, so a stop always
+  lands both swing feet before the robot stands.
+- Footholds (Raibert + capture point): the hip's position at touchdown, plus half the
+  stance's travel v_cmd T_st / 2, plus √(z/g) (v − v_cmd), which steps into a push.
+  They are replanned every tick while the foot is in the air.
+- Swing: xy blends from lift-off to the foothold with a quintic s(τ); z rises by
+  `step_height` as 64 τ³(1 − τ)³, zero velocity and acceleration at both ends.
+
+Everything is in world coordinates on the plane z = 0; the gait holds only its phase,
+lift-off points and the shaped command, and takes the time step from its caller.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common import robot
+from common.geometry import FloatArray
+
+GRAVITY = 9.81
+#: Diagonal pairs; pair 0 swings first.
+PAIRS: tuple[tuple[int, ...], tuple[int, ...]] = ((0, 3), (1, 2))
+
+
+@dataclass(frozen=True)
+class GaitParams:
+    """Trot timing, step geometry and command limits (SI units, rad)."""
+
+    period_s: float = 0.5
+    step_height_m: float = 0.08
+    v_max: tuple[float, float, float] = (0.8, 0.4, 1.0)
+    a_max: tuple[float, float, float] = (1.0, 1.0, 2.0)
+    stop_threshold: float = 0.02
+    max_step_m: float = 0.25  # foothold offset from the hip, per axis
+    hip_offsets: FloatArray = field(
+        default_factory=lambda: np.array(
+            [[0.3455, 0.19875], [0.3455, -0.19875], [-0.3455, 0.19875], [-0.3455, -0.19875]]
+        )
+    )
+
+
+def shape_velocity(
+    cmd: FloatArray, previous: FloatArray, dt: float, params: GaitParams
+) -> FloatArray:
+    """The command clamped to ±v_max, moved from `previous` by at most a_max dt per axis."""
+    out = np.empty(3)
+    for i in range(3):
+        vmax, step = params.v_max[i], params.a_max[i] * dt
+        target = min(max(float(cmd[i]), -vmax), vmax)
+        out[i] = previous[i] + min(max(target - previous[i], -step), step)
+    return out
+
+
+def quintic(tau: float) -> tuple[float, float, float]:
+    """s, ds/dτ, d²s/dτ² of the quintic 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1]."""
+    t = min(max(tau, 0.0), 1.0)
+    return (
+        t**3 * (10 - 15 * t + 6 * t * t),
+        30 * t * t * (1 - t) ** 2,
+        60 * t * (1 - t) * (1 - 2 * t),
+    )
+
+
+def bump(tau: float) -> tuple[float, float, float]:
+    """b, db/dτ, d²b/dτ² of 64 τ³ (1 − τ)³ (peak 1 at τ = ½)."""
+    t = min(max(tau, 0.0), 1.0)
+    u = 1.0 - t
+    return (
+        64 * t**3 * u**3,
+        192 * t * t * u * u * (u - t),
+        384 * t * u * (u * u - 3 * t * u + t * t),
+    )
+
+
+@dataclass
+class SwingTarget:
+    """A swing foot's reference: position, velocity, acceleration in world (3,) each."""
+
+    p: FloatArray
+    v: FloatArray
+    a: FloatArray
+
+
+class TrotGait:
+    """The trot's state machine. `update` once per tick; read `stance` and `swing`."""
+
+    def __init__(self, params: GaitParams | None = None) -> None:
+        self.params = params or GaitParams()
+        self.cmd = np.zeros(3)  # shaped (vx, vy, ωz) in base_yaw
+        self.walking = False
+        self.phase = 0.0  # time into the current half-cycle, s
+        self.pair = 0  # the swinging pair
+        self.stance = np.ones(4)
+        self.liftoff = np.zeros((4, 3))
+        self.swing: dict[int, SwingTarget] = {}
+
+    @property
+    def half_period(self) -> float:
+        return 0.5 * self.params.period_s
+
+    def update(
+        self,
+        dt: float,
+        cmd_vel: FloatArray,
+        base_xy: FloatArray,
+        base_yaw: float,
+        com_velocity: FloatArray,
+        com_height: float,
+        feet: FloatArray,
+    ) -> None:
+        """Advance by dt. feet: (4, 3) foot positions now (world); velocities are world."""
+        p = self.params
+        self.cmd = shape_velocity(cmd_vel, self.cmd, dt, p)
+        eps = p.stop_threshold
+        moving = max(abs(cmd_vel[0]), abs(cmd_vel[1]), abs(cmd_vel[2])) > eps
+        moving = moving or max(abs(self.cmd[0]), abs(self.cmd[1]), abs(self.cmd[2])) > eps
+        if not self.walking:
+            if not moving:
+                return
+            self.walking, self.phase, self.pair = True, 0.0, 0
+            self._lift(feet)
+        else:
+            self.phase += dt
+            if self.phase >= self.half_period:
+                self.phase -= self.half_period
+                if not moving:
+                    self.walking, self.stance[:], self.swing = False, 1.0, {}
+                    return
+                self.pair = 1 - self.pair
+                self._lift(feet)
+        self._plan_swing(base_xy, base_yaw, com_velocity, com_height)
+
+    def _lift(self, feet: FloatArray) -> None:
+        self.stance[:] = 1.0
+        for k in PAIRS[self.pair]:
+            self.stance[k] = 0.0
+            self.liftoff[k] = feet[k]
+            self.liftoff[k, 2] = robot.FOOT_RADIUS_M
+
+    def foothold(
+        self,
+        k: int,
+        base_xy: FloatArray,
+        base_yaw: float,
+        com_velocity: FloatArray,
+        com_height: float,
+    ) -> FloatArray:
+        """Touchdown point (3,) of foot k for the current command (Raibert + capture point)."""
+        p = self.params
+        remaining = max(self.half_period - self.phase, 0.0)
+        c, s = math.cos(base_yaw), math.sin(base_yaw)
+        vx = c * self.cmd[0] - s * self.cmd[1]  # the command in world
+        vy = s * self.cmd[0] + c * self.cmd[1]
+        yaw_td = base_yaw + self.cmd[2] * (remaining + 0.5 * self.half_period)
+        c, s = math.cos(yaw_td), math.sin(yaw_td)
+        hx, hy = p.hip_offsets[k]
+        k_cp = math.sqrt(max(com_height, 0.0) / GRAVITY)
+        half_stance = 0.5 * self.half_period
+        lim = p.max_step_m
+        ox = min(max(vx * half_stance + k_cp * (com_velocity[0] - vx), -lim), lim)
+        oy = min(max(vy * half_stance + k_cp * (com_velocity[1] - vy), -lim), lim)
+        return np.array(
+            [
+                base_xy[0] + vx * remaining + c * hx - s * hy + ox,
+                base_xy[1] + vy * remaining + s * hx + c * hy + oy,
+                robot.FOOT_RADIUS_M,
+            ]
+        )
+
+    def _plan_swing(
+        self, base_xy: FloatArray, base_yaw: float, com_velocity: FloatArray, com_height: float
+    ) -> None:
+        T = self.half_period
+        tau = self.phase / T
+        s, ds, dds = quintic(tau)
+        b, db, ddb = bump(tau)
+        h = self.params.step_height_m
+        self.swing = {}
+        for k in PAIRS[self.pair]:  # in floats: this runs every tick for two feet
+            target = self.foothold(k, base_xy, base_yaw, com_velocity, com_height)
+            x0, y0, z0 = self.liftoff[k]
+            dx, dy, dz = target[0] - x0, target[1] - y0, target[2] - z0
+            self.swing[k] = SwingTarget(
+                p=np.array([x0 + dx * s, y0 + dy * s, z0 + dz * s + h * b]),
+                v=np.array([dx * ds, dy * ds, dz * ds + h * db]) / T,
+                a=np.array([dx * dds, dy * dds, dz * dds + h * ddb]) / (T * T),
+            )

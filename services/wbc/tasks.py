@@ -1,0 +1,198 @@
+"""Weighted acceleration-level tasks of the whole-body QP, as in mink and pink.
+
+A task has an error e = target ⊖ current (world-aligned), a Jacobian J = ∂current/∂q in
+the tangent space (so `current(q ⊕ ε dq) − current(q) ≈ ε J dq`, checked against finite
+differences in the tests) and a drift J̇v. It asks for the acceleration
+
+    a* = a_ff + kp ⊙ e + kd ⊙ (v_ref − J v)
+
+and contributes the rows `‖√w ⊙ (J v̇ + J̇v − a*)‖²` to the objective: `compute_rows`
+gives (J, b = a* − J̇v, w), `compute_qp_objective` the equivalent (H, c) over v̇. The QP
+stacks every task's rows and forms H = Jᵀ W J in one product.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from common.geometry import FloatArray
+from services.wbc.model import RobotModel
+
+
+class TaskRows(NamedTuple):
+    """Residual rows `J v̇ − b`, weighted per row by `w` (≥ 0)."""
+
+    J: FloatArray
+    b: FloatArray
+    w: FloatArray
+
+
+class Objective(NamedTuple):
+    """The task's share of the QP objective over v̇: ½ v̇ᵀ H v̇ + cᵀ v̇ (+ const)."""
+
+    H: FloatArray
+    c: FloatArray
+
+
+def _vec(x: float | FloatArray, n: int) -> FloatArray:
+    out = np.empty(n)
+    out[:] = x
+    return out
+
+
+class Task:
+    """Common gains and weights; subclasses define error, Jacobian, drift and velocity."""
+
+    dim: int = 0
+
+    def __init__(self, kp: float | FloatArray, kd: float | FloatArray, weight: float | FloatArray):
+        self.kp = _vec(kp, self.dim)
+        self.kd = _vec(kd, self.dim)
+        self.weight = _vec(weight, self.dim)
+        self.v_ref = np.zeros(self.dim)
+        self.a_ff = np.zeros(self.dim)
+
+    @property
+    def active(self) -> bool:
+        """False when every weight is zero: the QP leaves the task out."""
+        return bool(self.weight.any())
+
+    def compute_error(self, m: RobotModel) -> FloatArray:
+        raise NotImplementedError
+
+    def compute_jacobian(self, m: RobotModel) -> FloatArray:
+        raise NotImplementedError
+
+    def compute_drift(self, m: RobotModel) -> FloatArray:
+        """J̇v (dim,)."""
+        raise NotImplementedError
+
+    def compute_velocity(self, m: RobotModel) -> FloatArray:
+        return self.compute_jacobian(m) @ m.v
+
+    def compute_rows(self, m: RobotModel) -> TaskRows:
+        J = self.compute_jacobian(m)
+        a_star = (
+            self.a_ff
+            + self.kp * self.compute_error(m)
+            + self.kd * (self.v_ref - self.compute_velocity(m))
+        )
+        return TaskRows(J, a_star - self.compute_drift(m), self.weight)
+
+    def compute_qp_objective(self, m: RobotModel) -> Objective:
+        J, b, w = self.compute_rows(m)
+        WJ = J * w[:, None]
+        return Objective(J.T @ WJ, -(WJ.T @ b))
+
+
+class FrameTask(Task):
+    """Pose of a tracked frame in world: rows 0:3 position, 3:6 orientation (rotation vector).
+
+    The orientation error is log3(R_target Rᵀ), the world-axes rotation from the frame to
+    its target; zero weights switch rows off (a swing foot uses position only).
+    """
+
+    dim = 6
+
+    def __init__(
+        self,
+        frame: str,
+        kp: float | FloatArray,
+        kd: float | FloatArray,
+        weight: float | FloatArray,
+    ) -> None:
+        super().__init__(kp, kd, weight)
+        self.frame = frame
+        self.p_ref = np.zeros(3)
+        self.R_ref = np.eye(3)
+
+    def set_target(self, p: FloatArray, R: FloatArray | None = None) -> None:
+        self.p_ref[:] = p
+        if R is not None:
+            self.R_ref[:] = R
+
+    def compute_error(self, m: RobotModel) -> FloatArray:
+        fs = m.frames[self.frame]
+        return np.concatenate([self.p_ref - fs.p, pin.log3(self.R_ref @ fs.R.T)])
+
+    def compute_jacobian(self, m: RobotModel) -> FloatArray:
+        return m.frames[self.frame].J
+
+    def compute_drift(self, m: RobotModel) -> FloatArray:
+        return m.frames[self.frame].dJv
+
+    def compute_velocity(self, m: RobotModel) -> FloatArray:
+        return m.frames[self.frame].twist
+
+    def compute_rows(self, m: RobotModel) -> TaskRows:
+        """As `Task.compute_rows`, with the frame read once and no temporaries to spare."""
+        fs = m.frames[self.frame]
+        b = self.v_ref - fs.twist
+        b *= self.kd
+        e = np.empty(6)
+        np.subtract(self.p_ref, fs.p, out=e[:3])
+        e[3:] = pin.log3(self.R_ref @ fs.R.T)
+        e *= self.kp
+        b += e
+        b += self.a_ff
+        b -= fs.dJv
+        return TaskRows(fs.J, b, self.weight)
+
+
+class ComTask(Task):
+    """Centre of mass position in world."""
+
+    dim = 3
+
+    def __init__(
+        self, kp: float | FloatArray, kd: float | FloatArray, weight: float | FloatArray
+    ) -> None:
+        super().__init__(kp, kd, weight)
+        self.p_ref = np.zeros(3)
+
+    def compute_error(self, m: RobotModel) -> FloatArray:
+        return self.p_ref - m.com
+
+    def compute_jacobian(self, m: RobotModel) -> FloatArray:
+        return m.Jcom
+
+    def compute_drift(self, m: RobotModel) -> FloatArray:
+        return m.dJcom_v
+
+    def compute_velocity(self, m: RobotModel) -> FloatArray:
+        return m.vcom
+
+
+class PostureTask(Task):
+    """Joint positions (all revolute, so the error is a plain difference)."""
+
+    dim = 19
+
+    def __init__(
+        self,
+        q_ref: FloatArray,
+        kp: float | FloatArray,
+        kd: float | FloatArray,
+        weight: float | FloatArray,
+        nv: int = 25,
+    ) -> None:
+        super().__init__(kp, kd, weight)
+        self.q_ref = np.array(q_ref, dtype=float)
+        self._J = np.zeros((self.dim, nv))
+        self._J[:, nv - self.dim :] = np.eye(self.dim)
+        self._drift = np.zeros(self.dim)
+
+    def compute_error(self, m: RobotModel) -> FloatArray:
+        return self.q_ref - m.q[m.nq - self.dim :]
+
+    def compute_jacobian(self, m: RobotModel) -> FloatArray:
+        return self._J
+
+    def compute_drift(self, m: RobotModel) -> FloatArray:
+        return self._drift
+
+    def compute_velocity(self, m: RobotModel) -> FloatArray:
+        return m.v[m.nv - self.dim :]

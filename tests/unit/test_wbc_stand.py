@@ -1,0 +1,73 @@
+"""The whole-body controller keeps the MuJoCo robot standing and trotting, in process."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from bench.spike_wbc import (
+    Figures,
+    floor_spec,
+    run_grasp,
+    set_initial_pose,
+    simulate,
+    summary,
+)
+from common import robot
+from services.wbc.controller import WbcReferences, WbcState
+
+
+def walk(seconds: float, cmd: tuple[float, float, float], payload_kg: float = 0.0) -> Figures:
+    model = floor_spec(payload_kg).compile()
+    data = mujoco.MjData(model)
+    set_initial_pose(model, data, robot.standing_q())
+
+    def refs_at(t: float, state: WbcState) -> WbcReferences:
+        return WbcReferences(cmd_vel=np.array(cmd) if t > 0.5 else np.zeros(3))
+
+    log, controller, wall = simulate(model, data, seconds, refs_at)
+    out = summary(log, wall)
+    out["qp_failures"] = controller.qp_failures
+    return out
+
+
+def test_standing_two_seconds_keeps_base_height_within_a_centimetre() -> None:
+    out = walk(2.0, (0.0, 0.0, 0.0))
+    assert not out["fell"]
+    assert out["height_err_max_m"] < 0.01
+    assert abs(out["distance_m"]) < 0.05 and out["drift_m"] < 0.05
+    assert out["qp_failures"] == 0
+
+
+@pytest.mark.slow
+def test_trotting_forward_with_a_payload_covers_the_commanded_distance() -> None:
+    out = walk(10.5, (0.5, 0.0, 0.0), payload_kg=0.5)
+    assert not out["fell"]
+    assert 4.0 < out["distance_m"] < 5.5  # 0.5 m/s for 10 s, less the acceleration ramp
+    assert out["drift_m"] < 0.2
+    assert out["roll_pitch_max_deg"] < 10.0
+
+
+@pytest.mark.slow
+def test_trotting_in_place_turns_at_the_commanded_rate() -> None:
+    out = walk(4.5, (0.0, 0.0, 0.5))
+    assert not out["fell"]
+    assert 1.6 < out["yaw_rad"] < 2.1  # 0.5 rad/s for 4 s, less the ramp
+    assert abs(out["distance_m"]) < 0.15 and out["drift_m"] < 0.15
+
+
+@pytest.mark.slow
+def test_trotting_sideways_strafes() -> None:
+    out = walk(5.5, (0.0, 0.2, 0.0))
+    assert not out["fell"]
+    assert 0.8 < out["drift_m"] < 1.1 and abs(out["distance_m"]) < 0.15
+
+
+@pytest.mark.slow
+def test_standing_robot_grasps_lifts_and_shakes_the_small_worlds_bottle() -> None:
+    out = run_grasp(seed=0)
+    assert not out["fell"]
+    assert out["held"]
+    assert out["bottle_truth_lift_m"] > 0.05
+    assert out["bottle_slip_in_tcp_m"] < 0.02
