@@ -1,0 +1,32 @@
+"""dume's benchmarks: `dume bench <name>` prints figures, JSON on the last line.
+
+Benchmarks measure; they never assert. Quote medians: these machines are shared.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from typing import Any
+
+
+def _sim(overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.sim import bench_sim
+
+    return bench_sim(overrides)
+
+
+def _wbc(overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.wbc import bench_wbc
+
+    return bench_wbc(overrides)
+
+
+BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {"sim": _sim, "wbc": _wbc}
+
+
+def run_bench(which: str, overrides: Sequence[str] = ()) -> int:
+    names = list(BENCHES) if which == "all" else [which]
+    results = {name: BENCHES[name](overrides) for name in names}
+    print(json.dumps(results if which == "all" else results[which]))
+    return 0

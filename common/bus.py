@@ -70,8 +70,14 @@ class RequestError(Exception):
         super().__init__(f"{code}: {message}")
 
 
-def session_config(config: Config, role: Role) -> zenoh.Config:
-    """The Zenoh config for a role, with the stack's endpoint from `config.zenoh`."""
+def session_config(
+    config: Config, role: Role, connect_timeout_s: float | None = None
+) -> zenoh.Config:
+    """The Zenoh config for a role, with the stack's endpoint from `config.zenoh`.
+
+    A client waits for its router forever unless `connect_timeout_s` is given (the CLI's
+    commands, which should say "no stack here" rather than hang).
+    """
     z = config.zenoh
     endpoint = f"tcp/{z.host}:{z.port}"
     if role == "router":
@@ -82,12 +88,25 @@ def session_config(config: Config, role: Role) -> zenoh.Config:
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         if role == "peer":
             conf.insert_json5("mode", json.dumps("peer"))
+        if connect_timeout_s is not None:
+            conf.insert_json5("connect/timeout_ms", json.dumps(round(connect_timeout_s * 1000)))
+            conf.insert_json5("connect/exit_on_failure", "true")
     return conf
 
 
-def open_session(config: Config, role: Role = "client") -> zenoh.Session:
-    """Open a session; a client waits for the router (`connect/timeout_ms: -1`)."""
-    return zenoh.open(session_config(config, role))
+class NoRouter(BusError):
+    """No router answered on the stack's port within the connect timeout."""
+
+
+def open_session(
+    config: Config, role: Role = "client", connect_timeout_s: float | None = None
+) -> zenoh.Session:
+    """Open a session; a client waits for the router unless given a timeout."""
+    try:
+        return zenoh.open(session_config(config, role, connect_timeout_s))
+    except zenoh.ZError as exc:
+        where = f"tcp/{config.zenoh.host}:{config.zenoh.port}"
+        raise NoRouter(f"no dume stack answers on {where}: {exc}") from None
 
 
 _TRAFFIC: dict[str, dict[str, Any]] = {
@@ -219,6 +238,11 @@ class Fifo(_Subscription[T]):
         while (msg := self.pop()) is not None:
             yield msg
 
+    def wait(self, timeout_s: float) -> bool:
+        """Block until a sample is waiting (without taking it); False on timeout."""
+        with self._cond:
+            return self._cond.wait_for(lambda: bool(self._q), timeout_s)
+
 
 class Server(Generic[T]):
     """A queryable served on its own thread by `handler(request) -> reply`."""
@@ -281,6 +305,8 @@ class AliveWatch:
 
     def __init__(self, session: zenoh.Session, key_expr: str) -> None:
         self._alive: set[str] = set()
+        #: Counts changes, so a hot loop can skip looking when nothing changed.
+        self.version = 0
         self._cond = threading.Condition()
         self._sub = session.liveliness().declare_subscriber(key_expr, self._on_sample, history=True)
 
@@ -291,6 +317,7 @@ class AliveWatch:
                 self._alive.add(key)
             else:
                 self._alive.discard(key)
+            self.version += 1
             self._cond.notify_all()
 
     def alive(self) -> set[str]:
@@ -316,8 +343,10 @@ class Bus:
         self._tokens: list[zenoh.LivelinessToken] = []
 
     @classmethod
-    def open(cls, config: Config, role: Role = "client") -> Bus:
-        return cls(open_session(config, role))
+    def open(
+        cls, config: Config, role: Role = "client", connect_timeout_s: float | None = None
+    ) -> Bus:
+        return cls(open_session(config, role, connect_timeout_s))
 
     def __enter__(self) -> Bus:
         return self

@@ -6,7 +6,8 @@
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
     dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
     dume demo [--world-seed N] [--duration S]               run a whole job, print a JSON line
-    dume bench sim|all                                      print figures (JSON last line)
+    dume bench sim|wbc|all                                  print figures (JSON last line)
+    dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
 
 Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's) to talk to the
 stack on that port, and `--set key=value` to override settings.
@@ -24,11 +25,14 @@ from collections.abc import Sequence
 
 import msgspec
 
-from common.bus import Bus, WaitTimeout
+from common.bus import Bus, NoRouter, WaitTimeout
 from common.config import REPO_ROOT, Config, ConfigError, load_config
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.messages import encode
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+
+#: How long a command waits for the stack's router before saying there is none.
+CONNECT_TIMEOUT_S = 3.0
 
 
 def _client_config(args: argparse.Namespace) -> Config:
@@ -67,7 +71,7 @@ def cmd_up(args: argparse.Namespace) -> int:
 def cmd_status(args: argparse.Namespace) -> int:
     config = _client_config(args)
     keys = RobotKeys(config.robot)
-    with Bus.open(config) as bus:
+    with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         alive = sorted(service_of_alive_key(k) for k in bus.alive_now(keys.alive_all, 2.0))
         status_sub = bus.latest(keys.mission_status, MissionStatus)
         try:
@@ -102,7 +106,7 @@ def cmd_request(args: argparse.Namespace) -> int:
     request = MissionRequest(
         request_id=args.request_id or uuid.uuid4().hex[:12], object=args.object, person=args.to
     )
-    with Bus.open(config) as bus:
+    with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         statuses = bus.fifo(keys.mission_status, MissionStatus)
         time.sleep(0.2)  # let the subscription reach the router before the request goes out
         bus.session.put(keys.mission_request, encode(request))
@@ -132,7 +136,7 @@ def cmd_request(args: argparse.Namespace) -> int:
 def cmd_cancel(args: argparse.Namespace) -> int:
     config = _client_config(args)
     keys = RobotKeys(config.robot)
-    with Bus.open(config) as bus:
+    with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         bus.session.put(
             keys.mission_cancel,
             encode(MissionCancel(request_id=args.request_id, reason=args.reason)),
@@ -151,6 +155,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from bench import run_bench
 
     return run_bench(args.which, args.set)
+
+
+def cmd_trial(args: argparse.Namespace) -> int:
+    from bench.trials import run_trial
+
+    result = run_trial(args.which, args.world_seed, args.wbc_period, args.set)
+    print(json.dumps(result))
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -201,8 +213,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     p = add("bench", "benchmarks; each prints JSON on its last line")
-    p.add_argument("which", choices=["sim", "all"])
+    p.add_argument("which", choices=["sim", "wbc", "all"])
     p.set_defaults(func=cmd_bench)
+
+    p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")
+    p.add_argument("which", choices=["walk", "turn", "strafe", "random", "reach", "pick", "push"])
+    p.add_argument("--world-seed", type=int, default=None, help="default: the trial's own")
+    p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
+    p.set_defaults(func=cmd_trial)
     return parser
 
 
@@ -214,6 +232,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"dume: {exc}", file=sys.stderr)
         return 2
+    except NoRouter as exc:
+        print(f"dume: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 

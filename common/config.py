@@ -88,6 +88,34 @@ class SimSettings(_Section):
     segmentation_truth: bool = True
 
 
+class WbcSettings(_Section):
+    """The whole-body controller service (`services/wbc`).
+
+    Its rate is its lockstep participant's `period_s` (`time.participants.wbc`).
+    """
+
+    #: The mode at start-up: damp, stand, walk or manipulate.
+    initial_mode: Literal["damp", "stand", "walk", "manipulate"] = "stand"
+    #: The `cmd_vel` source obeyed until a `wbc/mode` names another.
+    cmd_vel_source: str = "navigation"
+    #: Who publishes `wbc/mode` (its participant latency applies to modes).
+    mode_source: str = "mission"
+    #: A cmd_vel older than this (sim time) means stop.
+    cmd_vel_timeout_s: float = 0.5
+    #: Base velocity limits (vx m/s, vy m/s, wz rad/s) and acceleration limits (per s).
+    cmd_vel_max: list[float] = msgspec.field(default_factory=lambda: [0.8, 0.4, 1.0])
+    cmd_vel_accel_max: list[float] = msgspec.field(default_factory=lambda: [1.0, 1.0, 2.0])
+    #: A gap in the state's stamps longer than this stops the robot.
+    stale_state_s: float = 0.05
+    #: `wbc/status` rate and rerun time-series rate, Hz of sim time.
+    status_hz: float = 50.0
+    log_hz: float = 25.0
+    #: Torque cap of Grasp goals, N·m (a goal's max_effort is clipped to it).
+    grip_effort_max_nm: float = 5.0
+    #: Good QP solves in a row before leaving the fallback stand hold.
+    recover_ticks: int = 50
+
+
 class RecordingSettings(_Section):
     enabled: bool = True
     dir: str = "recordings"
@@ -108,6 +136,7 @@ class Config(_Section):
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
     time: TimeSettings = msgspec.field(default_factory=TimeSettings)
     sim: SimSettings = msgspec.field(default_factory=SimSettings)
+    wbc: WbcSettings = msgspec.field(default_factory=WbcSettings)
     recording: RecordingSettings = msgspec.field(default_factory=RecordingSettings)
     log: LogSettings = msgspec.field(default_factory=LogSettings)
 
@@ -195,6 +224,10 @@ def _check(config: Config) -> None:
         ticks = p.period_s * config.time.tick_hz
         if abs(ticks - round(ticks)) > 1e-6:
             raise ConfigError(f"time.participants.{name}.period_s must be whole ticks")
+    for key in ("cmd_vel_max", "cmd_vel_accel_max"):
+        limits = getattr(config.wbc, key)
+        if len(limits) != 3 or min(limits) <= 0:
+            raise ConfigError(f"wbc.{key} must be 3 positive numbers (vx, vy, wz), got {limits}")
 
 
 def resolve(path: str) -> Path:

@@ -10,18 +10,29 @@ sample stamped ≤ b), publishes outputs stamped b, then acks b. Its consumers a
 output from b at b + latency. The pipeline's delays are therefore modelled, not left to
 the scheduler: the same seed gives the same run whatever the machine's load.
 
-`AckGate` is the sim's side as plain bookkeeping (unit-tested without Zenoh);
-`PeriodicTicker` is a participant's side.
+Zenoh keeps the order of one key's samples, not across keys: a subscriber's callbacks
+for different keys run concurrently, so a clock can overtake the odom published before
+it, and a producer's ack can overtake its output. Lockstep therefore never relies on
+order across keys: a participant waits for each input stamped with the tick it needs
+(`Latest.wait_stamp`), and a consumer of a periodic producer's output waits, with
+`UpstreamGate`, for that output stamped with the producer's tick that takes effect now
+(producers publish every period, so the sample always comes).
+
+`AckGate` is the bookkeeping (unit-tested without Zenoh), used by the sim and by
+`UpstreamGate`; `PeriodicTicker` is a participant's side.
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
-from collections.abc import Iterator, Mapping
+import time
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
+from typing import Any
 
-from common.bus import Bus, WaitTimeout
-from common.config import Participant
+from common.bus import Bus, Latest, WaitTimeout
+from common.config import Config, Participant
 from common.keys import WORLD_CLOCK, RobotKeys
 from common.messages.sim import Ack, Clock
 
@@ -98,6 +109,10 @@ class AckGate:
         return any(t_ns % s.period_ns == 0 for s in self.schedules.values())
 
 
+def _at_or_after(stamp_ns: int) -> Callable[[Clock], bool]:
+    return lambda c: c.stamp_ns >= stamp_ns
+
+
 class PeriodicTicker:
     """A periodic participant's ticks on sim time.
 
@@ -122,7 +137,7 @@ class PeriodicTicker:
             target = 0 if next_ns is None else next_ns
             if clock is None or clock.stamp_ns < target:
                 try:
-                    clock = self.clock.wait(lambda c, t=target: c.stamp_ns >= t, poll_s)
+                    clock = self.clock.wait(_at_or_after(target), poll_s)
                 except WaitTimeout:
                     continue
             stamp = (clock.stamp_ns // self.period_ns) * self.period_ns
@@ -131,3 +146,65 @@ class PeriodicTicker:
 
     def ack(self, stamp_ns: int) -> None:
         self._ack.put(Ack(service=self._name, stamp_ns=stamp_ns))
+
+
+class UpstreamGate:
+    """A consumer's wait for the outputs of the periodic producers it applies in lockstep.
+
+    `watch(producer, subscription)` names a producer's output (one key, published every
+    period, stamped with the producer's tick). Before acting at sim time t, `wait(t)`
+    blocks until each live producer's newest output is stamped at or after its tick that
+    takes effect by t; then `subscription.at(t − latency_ns(producer))` is that output.
+    A producer that is not alive is not waited for; one that came alive at t owes nothing
+    before t. In realtime mode it never waits.
+    """
+
+    def __init__(self, bus: Bus, keys: RobotKeys, config: Config) -> None:
+        self._participants = config.time.participants
+        self._tick_ns = round(NS_PER_S / config.time.tick_hz)
+        self.gate = AckGate({}, self._tick_ns)
+        self.lockstep = config.time.mode == "lockstep"
+        self._outputs: dict[str, Latest[Any]] = {}
+        self._alive = bus.watch_alive(keys.alive_all)
+        self._alive_key = keys.alive
+        self._version = -1
+
+    def watch(self, producer: str, output: Latest[Any]) -> None:
+        p = self._participants.get(producer)
+        if p is None or p.role != "periodic":
+            return  # not a periodic participant: its outputs apply on arrival
+        self.gate.schedules[producer] = Schedule.of(p)
+        self._outputs[producer] = output
+        self._version = -1
+
+    def latency_ns(self, producer: str) -> int:
+        s = self.gate.schedules.get(producer)
+        return s.latency_ns if s else 0
+
+    def _refresh(self, t_ns: int) -> None:
+        if self._alive.version != self._version:
+            self._version = self._alive.version
+            alive_keys = self._alive.alive()
+            alive = {p for p in self.gate.schedules if self._alive_key(p) in alive_keys}
+            for p in alive - self.gate.alive:
+                self.gate.join(p, t_ns)
+            for p in self.gate.alive - alive:
+                self.gate.leave(p)
+        for p, output in self._outputs.items():
+            newest = output.get()
+            if newest is not None:
+                self.gate.ack(p, newest.stamp_ns)
+
+    def wait(self, t_ns: int, timeout_s: float) -> list[str]:
+        """Wait until the outputs due by t are in; the producers still missing (if any)."""
+        if not self.lockstep or not self._outputs:
+            return []
+        deadline = time.perf_counter() + timeout_s
+        while True:
+            self._refresh(t_ns)
+            missing = self.gate.blocking(t_ns)
+            if not missing or time.perf_counter() > deadline:
+                return missing
+            need = self.gate.schedules[missing[0]].required_ack(t_ns)
+            with contextlib.suppress(WaitTimeout):
+                self._outputs[missing[0]].wait_stamp(need, 0.05)

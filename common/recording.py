@@ -61,9 +61,15 @@ def open_recording(
     return rec
 
 
+def is_recording(rec: rr.RecordingStream) -> bool:
+    """Whether `rec` keeps what is logged (recording off: every log call is skipped)."""
+    return bool(rr.is_enabled(recording=rec))
+
+
 def stamp(rec: rr.RecordingStream, stamp_ns: int) -> None:
     """Put what follows on the sim-time timeline."""
-    rec.set_time("sim_time", duration=stamp_ns * 1e-9)
+    if is_recording(rec):
+        rec.set_time("sim_time", duration=stamp_ns * 1e-9)
 
 
 class RerunHandler(logging.Handler):

@@ -107,7 +107,8 @@ def run(
         return 2
     setup_logging(config.log.level, name)
     rec = open_recording(name, config.recording)
-    logging.getLogger("dume").addHandler(RerunHandler(rec, name))
+    if config.recording.enabled:
+        logging.getLogger("dume").addHandler(RerunHandler(rec, name))
     bus = Bus.open(config)
     svc = Service(name, config, bus, rec)
     _install_signals(svc.stop)
@@ -119,7 +120,8 @@ def run(
     finally:
         svc.stop.set()
         bus.close()
-        rec.flush()
-        rec.disconnect()
+        if config.recording.enabled:
+            rec.flush()
+            rec.disconnect()
     log.info("%s stopped", name)
     return 0

@@ -14,6 +14,8 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
+from common.recording import is_recording
+
 G = mujoco.mjtGeom
 
 
@@ -69,8 +71,8 @@ class SceneLogger:
         self.model = model
         self.paths = [_body_path(model, b) for b in range(model.nbody)]
         self._groups = groups
-        static = []
-        moving = []
+        static: list[int] = []
+        moving: list[int] = []
         for b in range(1, model.nbody):
             root = model.body_rootid[b]
             is_static = model.body_weldid[b] == 0 and model.body_mocapid[root] < 0
@@ -80,6 +82,8 @@ class SceneLogger:
 
     def log_geometry(self, data: mujoco.MjData) -> None:
         """Every visible geom, static, in its body's frame; static bodies' poses."""
+        if not is_recording(self.rec):
+            return
         m = self.model
         for g in range(m.ngeom):
             if m.geom_group[g] not in self._groups or m.geom_rgba[g][3] == 0:
@@ -100,6 +104,8 @@ class SceneLogger:
 
     def log_poses(self, data: mujoco.MjData) -> None:
         """The world pose of every body that can move (robot, artifacts, people)."""
+        if not is_recording(self.rec):
+            return
         for b in self.moving_bodies:
             self.rec.log(self.paths[b], self._pose(data, int(b)))
 
@@ -108,5 +114,5 @@ class SceneLogger:
         return rr.Transform3D(translation=data.xpos[body], quaternion=_xyzw(data.xquat[body]))
 
 
-def _xyzw(wxyz: NDArray[np.float64]) -> list[float]:
-    return [float(wxyz[1]), float(wxyz[2]), float(wxyz[3]), float(wxyz[0])]
+def _xyzw(wxyz: NDArray[np.float64]) -> rr.Quaternion:
+    return rr.Quaternion(xyzw=[float(wxyz[1]), float(wxyz[2]), float(wxyz[3]), float(wxyz[0])])

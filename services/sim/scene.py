@@ -15,9 +15,12 @@ Sleeping islands are on (`SLEEP`): artifacts resting on tables drop out of the s
 wake on any contact, weld or qpos write, which halves a hall's step (about 100 to 50 us
 with the robot standing); the actuated robot never sleeps.
 
-Handover: each person carries a `<id>_grip` body at their hand (site `<id>_hand`, 0.45 m in
+Handover: each person carries a `<id>_grip` body at their hand (site `<id>_hand`, 0.35 m in
 front at 1.0 m height) and one inactive weld per artifact (`grip_weld_name`); the sim
-activates one with `attach_to_grip` when the person takes the object.
+activates one with `attach_to_grip` when the person takes the object. The hand moves on
+three slide joints (`hand_joint_name`, the person's x, y, z) driven by force-limited
+position servos of the same names: the sim reaches with them and pulls with at most
+`HAND_FORCE_N`, so a robot that still grips the object feels a modest pull, not a weld.
 
 Rendering: shadows and multisampling are off (the robot cameras' settings) and the
 offscreen buffer holds 1280 x 960, twice the largest camera image, for the visibility
@@ -45,9 +48,19 @@ OFFSCREEN_SIZE = (1280, 960)
 ARTIFACT_FRICTION = (1.0, 0.01, 0.0001)
 TABLE_TOP_M = 0.04
 TABLE_LEG_M = 0.05
-#: A person's hand (and grip body) in the person frame, m: ahead, left, up. Ahead is where
-#: the robot presents the object from `HANDOVER_DISTANCE_M` (`common.robot.PERSON_REACH_M`).
-HAND_IN_PERSON = (robot.PERSON_REACH_M, 0.0, 1.0)
+#: A person's hand (and grip body) at rest in the person frame, m: ahead, left, up. The
+#: robot presents the object from `HANDOVER_DISTANCE_M`, i.e. `PERSON_REACH_M` (0.45 m)
+#: ahead of the person: 0.1 m beyond the resting hand, well within the handover's reach.
+HAND_IN_PERSON = (0.35, 0.0, 1.0)
+#: The hand's slide joints, each about the rest position along the person's axis: range
+#: (m), and the servo's stiffness (N/m), damping (N s/m) and force limit (N). The force
+#: limit is the most a person pulls with; z carries the heaviest artifact (0.5 kg) easily.
+HAND_AXES = ("x", "y", "z")
+HAND_RANGE_M = ((-0.25, 0.30), (-0.35, 0.35), (-0.45, 0.45))
+HAND_KP = 600.0
+HAND_KV = 25.0
+HAND_FORCE_N = (15.0, 15.0, 25.0)
+HAND_MASS_KG = 0.3
 #: The hand's weld: a 5 ms time constant, so a walking person's object lags 1 cm per m/s
 #: (MuJoCo's default 20 ms lets it trail by 4 cm per m/s).
 GRIP_SOLREF = (0.005, 1.0)
@@ -71,6 +84,11 @@ def _quat_yaw(yaw: float) -> list[float]:
 def grip_weld_name(person_id: str, artifact_id: str) -> str:
     """The name of the weld that holds `artifact_id` in `person_id`'s hand."""
     return f"{person_id}_grip_{artifact_id}"
+
+
+def hand_joint_name(person_id: str, axis: str) -> str:
+    """The slide joint (and its servo) moving `person_id`'s hand along their `axis`."""
+    return f"{person_id}_hand_{axis}"
 
 
 def _material(spec: mujoco.MjSpec, name: str, rgba: Rgba, shininess: float = 0.2) -> str:
@@ -219,7 +237,7 @@ def _person(spec: mujoco.MjSpec, person: Person, artifacts: tuple[Artifact, ...]
         fromto=[0, -0.22, 0.81 * h, hand[0] - 0.04, hand[1] - 0.02, hand[2]],
         **limb,
     )
-    grip = body.add_body(name=f"{person.id}_grip", pos=list(hand))
+    grip = body.add_body(name=f"{person.id}_grip", pos=list(hand), gravcomp=1.0)
     grip.add_geom(
         name=f"{person.id}_hand_geom",
         type=mujoco.mjtGeom.mjGEOM_SPHERE,
@@ -227,8 +245,10 @@ def _person(spec: mujoco.MjSpec, person: Person, artifacts: tuple[Artifact, ...]
         material=skin,
         contype=0,
         conaffinity=0,
+        mass=HAND_MASS_KG,
     )
     grip.add_site(name=f"{person.id}_hand", size=[0.01, 0, 0])
+    _hand_servos(spec, grip, person.id)
     for art in artifacts:
         spec.add_equality(
             name=grip_weld_name(person.id, art.id),
@@ -239,6 +259,36 @@ def _person(spec: mujoco.MjSpec, person: Person, artifacts: tuple[Artifact, ...]
             active=False,
             data=[0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0],
             solref=list(GRIP_SOLREF),
+        )
+
+
+def _hand_servos(spec: mujoco.MjSpec, grip: mujoco.MjsBody, person_id: str) -> None:
+    """Three slide joints under the grip body and a force-limited position servo on each."""
+    for k, (axis, span, force) in enumerate(
+        zip(HAND_AXES, HAND_RANGE_M, HAND_FORCE_N, strict=True)
+    ):
+        name = hand_joint_name(person_id, axis)
+        direction = [0.0, 0.0, 0.0]
+        direction[k] = 1.0
+        grip.add_joint(
+            name=name,
+            type=mujoco.mjtJoint.mjJNT_SLIDE,
+            axis=direction,
+            range=list(span),
+            limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+        )
+        spec.add_actuator(
+            name=name,
+            target=name,
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+            gainprm=[HAND_KP] + [0.0] * 9,
+            biastype=mujoco.mjtBias.mjBIAS_AFFINE,
+            biasprm=[0.0, -HAND_KP, -HAND_KV] + [0.0] * 7,
+            ctrllimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            ctrlrange=list(span),
+            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            forcerange=[-force, force],
         )
 
 
@@ -324,7 +374,7 @@ def segmentation_ids(
     With `world`, labels follow its order (artifacts first, from 1), the same for every
     model of that world; without, the model's order of root bodies.
     """
-    robot_root = model.body(robot.BASE_FRAME).id if model.nu else -1
+    robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.BASE_FRAME)
     if world is not None:
         ids = [a.id for a in world.artifacts] + [p.id for p in world.people]
         ids += [o.id for o in world.obstacles]

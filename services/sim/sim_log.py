@@ -23,17 +23,20 @@ from common.messages.sim import (
     WorldEvent,
 )
 from common.messages.world import WorldDescription
-from common.recording import stamp
+from common.recording import is_recording, stamp
 
 
 class SimLogger:
     def __init__(self, rec: rr.RecordingStream, cameras: list[str], camera_every: int) -> None:
         self.rec = rec
+        self.enabled = is_recording(rec)
         self.camera_every = max(1, camera_every)
         self._frames: dict[str, int] = {c: 0 for c in cameras}
         self._annotated: set[str] = set()
 
     def world(self, world: WorldDescription) -> None:
+        if not self.enabled:
+            return
         lines = [
             f"# {world.name} world, seed {world.seed}",
             "",
@@ -63,6 +66,8 @@ class SimLogger:
         )
 
     def state(self, t_ns: int, state: RobotState) -> None:
+        if not self.enabled:
+            return
         stamp(self.rec, t_ns)
         x, y, z = state.base_position_in_world
         qx, qy, qz, qw = state.base_orientation_xyzw
@@ -75,10 +80,14 @@ class SimLogger:
         self.rec.log("world/robot_trail", rr.Points3D([(x, y, 0.01)], radii=0.01))
 
     def rtf(self, t_ns: int, rtf: float) -> None:
+        if not self.enabled:
+            return
         stamp(self.rec, t_ns)
         self.rec.log("plots/sim/real_time_factor", rr.Scalars(rtf))
 
     def camera(self, t_ns: int, frame: CameraFrame, truth: SegmentationTruth) -> None:
+        if not self.enabled:
+            return
         cam = frame.camera
         self._frames[cam] = self._frames.get(cam, 0) + 1
         if (self._frames[cam] - 1) % self.camera_every:
@@ -94,7 +103,9 @@ class SimLogger:
             ),
         )
         self.rec.log(f"{path}/rgb", rr.Image(as_numpy(frame.rgb)).compress(jpeg_quality=80))
-        self.rec.log(f"{path}/depth", rr.DepthImage(as_numpy(frame.depth), meter=1.0))
+        self.rec.log(
+            f"{path}/depth", rr.DepthImage(as_numpy(frame.depth).astype(np.float32), meter=1.0)
+        )
         labels = as_numpy(truth.labels)
         if cam not in self._annotated or len(truth.instances) > 0:
             self.rec.log(
@@ -105,6 +116,8 @@ class SimLogger:
         self.rec.log(f"{path}/segmentation_truth", rr.SegmentationImage(labels.astype(np.uint16)))
 
     def events(self, t_ns: int, events: list[WorldEvent]) -> None:
+        if not self.enabled:
+            return
         stamp(self.rec, t_ns)
         for ev in events:
             if isinstance(ev, HandoverTaken):

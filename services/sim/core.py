@@ -1,0 +1,248 @@
+"""The simulator's core, with no transport: the world's physics on a 1 kHz tick.
+
+`SimCore(world, ...)` compiles the scene, stands the robot in `stand` at the world's start
+(feet on the floor, no self-contact) and then, each tick, takes the newest joint command,
+steps the physics one millisecond and reports what happened:
+
+    state = core.robot_state(core.tick)          # publish; the controller answers it
+    core.command(tau_ff, q_des, v_des, kp, kd, state.stamp_ns)   # CommandError if bad
+    events = core.step()                          # t -> t + 1 ms; world events of the step
+
+The PD law runs inside MuJoCo at the physics rate (`services.sim.drive`), a command holds
+until the next one, and the watchdog holds the joints when commands stop. People turn
+and walk (`people`), take what is held out to them (`handover`), and contacts become events
+(`events`). With kinematic locomotion the base follows `set_cmd_vel` at the standing
+height, level, while the legs hold `stand` and the arm still obeys commands; the feet are
+made frictionless (condim 1) so they glide instead of dragging the held legs (with
+friction a turn in place bends a hip by 0.17 rad), and foot contacts mean little there.
+Time is exact: `time_ns = tick * 1_000_000`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike
+
+from common import robot
+from common.geometry import FloatArray, make_T, quat_wxyz_to_xyzw, quat_xyzw_to_matrix
+from common.messages import Array
+from common.messages.sim import Locomotion, Odom, RobotState, WorldEvent
+from common.messages.world import WorldDescription
+from services.sim import scene
+from services.sim.drive import JAW, N_JOINTS, CommandError, JointDrive, joint_addresses, validate
+from services.sim.events import ContactMonitor, DropMonitor
+from services.sim.handover import Handover
+from services.sim.people import People
+
+TICK_NS = 1_000_000
+__all__ = ["TICK_NS", "CommandError", "SimCore"]
+
+
+class SimCore:
+    """The world, the robot and its drives; stepped by `step`, read by `robot_state`."""
+
+    def __init__(
+        self,
+        world: WorldDescription,
+        *,
+        locomotion: Locomotion = "dynamic",
+        watchdog_ms: float = 20.0,
+        walking_people: bool = False,
+    ) -> None:
+        if locomotion not in ("dynamic", "kinematic"):
+            raise ValueError(f"locomotion {locomotion!r} is not 'dynamic' or 'kinematic'")
+        if watchdog_ms <= 0:
+            raise ValueError(f"watchdog_ms must be positive, got {watchdog_ms}")
+        self.world = world
+        self.locomotion: Locomotion = locomotion
+        self.model = scene.compile_scene(world)
+        if round(self.model.opt.timestep * 1e9) != TICK_NS:
+            raise ValueError(f"the scene's timestep {self.model.opt.timestep} s is not 1 ms")
+        self.data = mujoco.MjData(self.model)
+        self.dt = self.model.opt.timestep
+        self.tick = 0
+        idx = robot.mj_indices(self.model)
+        self._base_q = np.asarray(idx.qpos[:7], dtype=np.intp)
+        self._base_v = np.asarray(idx.qvel[:6], dtype=np.intp)
+        self._base_xy = slice(int(idx.qpos[0]), int(idx.qpos[0]) + 2)
+        self._q = joint_addresses(idx.qpos)
+        self._v = joint_addresses(idx.qvel)
+        self._robot_qpos = np.asarray(idx.qpos, dtype=np.intp)
+        self._robot_qvel = np.asarray(idx.qvel, dtype=np.intp)
+        self.drive = JointDrive(
+            self.model, idx, round(watchdog_ms * 1e6), legs_held=locomotion == "kinematic"
+        )
+        self.people = People(self.model, world.people, walking_people)
+        self.handover = Handover(self.model, world)
+        self.contacts = ContactMonitor(self.model, world)
+        self.drops = DropMonitor(self.model, self.contacts.artifact_ids)
+        self._artifact_q = [int(self.model.joint(a).qposadr[0]) for a in self.drops.ids]
+        self._cmd_vel = (0.0, 0.0, 0.0)
+        if locomotion == "kinematic":
+            for foot in robot.FOOT_FRAMES:
+                self.model.geom_condim[self.model.geom(f"{foot}_0").id] = 1
+        start = world.robot_start
+        self._pose = (start.x, start.y, start.yaw)  # the kinematic base: x, y, yaw
+        self.reset_robot(start.x, start.y, start.yaw)
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    @property
+    def time_ns(self) -> int:
+        """Sim time of the current state, ns (exact)."""
+        return self.tick * TICK_NS
+
+    def command(
+        self,
+        tau_ff: ArrayLike,
+        q_des: ArrayLike,
+        v_des: ArrayLike,
+        kp: ArrayLike,
+        kd: ArrayLike,
+        stamp_ns: int,
+    ) -> None:
+        """Drive the joints (19-vectors, `JOINT_NAMES` order) by τ = τ_ff + kp (q_des − q) +
+        kd (v_des − v), clipped to the URDF limits, from the next step until replaced.
+
+        Raises CommandError (wrong shape, NaN/inf, negative gain, stamp later than now);
+        the previous command then stays in force.
+        """
+        arrays = {"tau_ff": tau_ff, "q_des": q_des, "v_des": v_des, "kp": kp, "kd": kd}
+        cmd = validate(arrays, stamp_ns, self.time_ns)
+        self.drive.command(cmd, int(stamp_ns), self.time_ns)
+
+    def set_cmd_vel(self, vx: float, vy: float, wz: float) -> None:
+        """The kinematic base's twist in `base_yaw` (m/s, m/s, rad/s), until replaced."""
+        if self.locomotion != "kinematic":
+            raise RuntimeError("set_cmd_vel drives the base only with kinematic locomotion")
+        if not all(math.isfinite(x) for x in (vx, vy, wz)):
+            raise CommandError([f"cmd_vel ({vx}, {vy}, {wz}) is not finite"])
+        self._cmd_vel = (float(vx), float(vy), float(wz))
+
+    def reset_robot(self, x: float, y: float, yaw: float, posture: str = "stand") -> None:
+        """Stand the robot still at (x, y, yaw) in `posture` (start-up and tests only)."""
+        self.data.qpos[self._robot_qpos] = robot.q_pin_to_mj(robot.standing_q(posture, x, y, yaw))
+        self.data.qvel[self._robot_qvel] = 0.0
+        self._pose = (x, y, yaw)
+        mujoco.mj_forward(self.model, self.data)
+        self.contacts.update(self.data, self.time_ns)  # the feet's forces for the first state
+
+    # -- the tick ---------------------------------------------------------------------------
+
+    def step(self) -> list[WorldEvent]:
+        """One 1 ms physics step; the world events it produced (stamped at the new time)."""
+        data = self.data
+        self.drive.before_step(data, self.time_ns)
+        self.drive.write(data)
+        x, y = data.qpos[self._base_xy].tolist()
+        self.people.update(data, (x, y), self.dt)
+        mujoco.mj_step(self.model, data)
+        self.tick += 1
+        if self.locomotion == "kinematic":
+            self._move_base()
+        stamp = self.time_ns
+        events: list[WorldEvent] = []
+        events.extend(self.contacts.update(data, stamp))
+        found = self.contacts.contacts
+        events.extend(self.handover.update(self.model, data, found, self.dt, stamp))
+        events.extend(self.drops.update(data, found, self.handover.held, stamp))
+        return events
+
+    def _move_base(self) -> None:
+        """Advance the kinematic base by one step of cmd_vel; level, at standing height."""
+        vx, vy, wz = self._cmd_vel
+        x, y, yaw = self._pose
+        mid = yaw + 0.5 * wz * self.dt
+        c, s = math.cos(mid), math.sin(mid)
+        x, y, yaw = (
+            x + (c * vx - s * vy) * self.dt,
+            y + (s * vx + c * vy) * self.dt,
+            yaw + wz * self.dt,
+        )
+        self._pose = (x, y, math.remainder(yaw, math.tau))
+        self.data.qpos[self._base_q] = (
+            x,
+            y,
+            robot.STAND_BASE_HEIGHT_M,
+            math.cos(0.5 * yaw),
+            0.0,
+            0.0,
+            math.sin(0.5 * yaw),
+        )
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.data.qvel[self._base_v] = (c * vx - s * vy, s * vx + c * vy, 0.0, 0.0, 0.0, wz)
+
+    # -- outputs ----------------------------------------------------------------------------
+
+    def robot_state(self, tick: int | None = None) -> RobotState:
+        """The state at the current time (tick defaults to the current one)."""
+        if tick is not None and tick != self.tick:
+            raise ValueError(f"state of tick {tick} asked at tick {self.tick}")
+        data = self.data
+        base_q, base_v = data.qpos[self._base_q], data.qvel[self._base_v]
+        q, tau = data.qpos[self._q], self.drive.applied(data)
+        fl, fr, rl, rr = self.contacts.contacts.foot_force.tolist()
+        return RobotState(
+            stamp_ns=self.time_ns,
+            tick=self.tick,
+            q=_joints(q),
+            v=_joints(data.qvel[self._v]),
+            tau=_joints(tau),
+            base_position_in_world=tuple(base_q[:3].tolist()),
+            base_orientation_xyzw=_xyzw(base_q),
+            base_linear_velocity_in_world=tuple(base_v[:3].tolist()),
+            base_angular_velocity_in_base=tuple(base_v[3:].tolist()),
+            foot_contacts=(fl > 0.0, fr > 0.0, rl > 0.0, rr > 0.0),
+            foot_forces=(fl, fr, rl, rr),
+            gripper_angle=float(q[JAW]),
+            gripper_effort=float(tau[JAW]),
+            watchdog=self.drive.watchdog,
+            watchdog_reason=self.drive.reason,
+            locomotion=self.locomotion,
+        )
+
+    def odom(self) -> Odom:
+        """The base and gripper at the current time (the slow consumers' view)."""
+        data = self.data
+        base_q, base_v = data.qpos[self._base_q], data.qvel[self._base_v]
+        return Odom(
+            stamp_ns=self.time_ns,
+            base_position_in_world=tuple(base_q[:3].tolist()),
+            base_orientation_xyzw=_xyzw(base_q),
+            base_linear_velocity_in_world=tuple(base_v[:3].tolist()),
+            base_angular_velocity_in_base=tuple(base_v[3:].tolist()),
+            gripper_angle=float(data.qpos[self._q[JAW]]),
+            gripper_effort=float(self.data.actuator_force[self.drive.act[JAW]]),
+            watchdog=self.drive.watchdog,
+            locomotion=self.locomotion,
+        )
+
+    def T_world_base(self) -> FloatArray:
+        """The base in the world (4x4) at the current time."""
+        base_q = self.data.qpos[self._base_q]
+        return make_T(quat_xyzw_to_matrix(quat_wxyz_to_xyzw(base_q[3:7])), base_q[:3])
+
+    def truth_positions(self) -> dict[str, tuple[float, float, float]]:
+        """Artifact body origins and people's floor points in the world, m (sim truth)."""
+        data = self.data
+        out: dict[str, tuple[float, float, float]] = {}
+        for a, adr in zip(self.drops.ids, self._artifact_q, strict=True):
+            x, y, z = data.qpos[adr : adr + 3].tolist()
+            out[a] = (x, y, z)
+        for pid in self.people.ids:
+            x, y, _ = self.people.pose(pid)
+            out[pid] = (x, y, 0.0)
+        return out
+
+
+def _joints(x: FloatArray) -> Array:
+    """A fresh float64 (19,) vector on the wire (what `to_wire` does, without its checks)."""
+    return Array("float64", (N_JOINTS,), x.astype("<f8", copy=False).tobytes())
+
+
+def _xyzw(base_q: FloatArray) -> tuple[float, float, float, float]:
+    w, x, y, z = base_q[3:7].tolist()
+    return x, y, z, w

@@ -1,0 +1,123 @@
+"""People in the sim: mocap bodies that walk their waypoints and turn to face the robot.
+
+Each person is a small state machine updated every physics step with the robot's base
+position: when the base is within `FACE_RADIUS_M` the person stops and turns towards it
+(a worker waiting for the robot); otherwise a walking person follows the route
+`position -> waypoints[0] -> ... -> waypoints[-1] -> ... -> position -> ...` at their
+speed (at most `MAX_SPEED_MPS`), pausing `PAUSE_S` at each end of a leg and turning in
+place towards the next one before walking on. Turns run at `TURN_RATE_RADPS`. With
+walking off, or no waypoints, a person only turns. The hand and the handover are
+`services.sim.handover`'s; the hand moves with the person's body.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from common.geometry import wrap_angle
+from common.messages.world import Person
+
+FACE_RADIUS_M = 3.0
+MAX_SPEED_MPS = 1.2
+TURN_RATE_RADPS = 2.0
+PAUSE_S = 1.0
+#: Closer than this to the next point counts as there (the last step lands on it).
+ARRIVE_M = 1e-9
+
+
+@dataclass
+class _Walker:
+    """One person's pose and progress along their route."""
+
+    mocap: int
+    x: float
+    y: float
+    yaw: float
+    route: list[tuple[float, float]]
+    speed: float
+    leg: int = 0  # walking from route[leg] towards route[leg + 1] (cyclic, ping-pong)
+    pause_s: float = 0.0
+    dirty: bool = True  # the mocap pose needs writing
+
+
+def _route(person: Person) -> list[tuple[float, float]]:
+    """Out along the waypoints and back, as one closed loop of points."""
+    points = [person.position, *person.waypoints]
+    return points + points[-2:0:-1]
+
+
+class People:
+    """The people of a world, moved each step (`update`) by writing their mocap poses."""
+
+    def __init__(self, model: mujoco.MjModel, people: tuple[Person, ...], walking: bool) -> None:
+        self.ids = tuple(p.id for p in people)
+        self._walkers = [
+            _Walker(
+                mocap=int(model.body(p.id).mocapid[0]),
+                x=p.position[0],
+                y=p.position[1],
+                yaw=p.yaw,
+                route=_route(p) if walking and p.waypoints and p.speed > 0 else [],
+                speed=min(p.speed, MAX_SPEED_MPS),
+            )
+            for p in people
+        ]
+
+    def pose(self, person_id: str) -> tuple[float, float, float]:
+        """(x, y, yaw) of a person on the floor, m and rad."""
+        w = self._walkers[self.ids.index(person_id)]
+        return w.x, w.y, w.yaw
+
+    def update(self, data: mujoco.MjData, base_xy: tuple[float, float], dt: float) -> None:
+        """Advance every person by dt seconds with the robot's base at base_xy; write mocap."""
+        for w in self._walkers:
+            dx, dy = base_xy[0] - w.x, base_xy[1] - w.y
+            if dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M:
+                self._turn_towards(w, math.atan2(dy, dx), dt)
+            elif w.route:
+                self._walk(w, dt)
+            if w.dirty:
+                data.mocap_pos[w.mocap, 0] = w.x
+                data.mocap_pos[w.mocap, 1] = w.y
+                data.mocap_quat[w.mocap] = (math.cos(0.5 * w.yaw), 0.0, 0.0, math.sin(0.5 * w.yaw))
+                w.dirty = False
+
+    @staticmethod
+    def _turn_towards(w: _Walker, heading: float, dt: float) -> bool:
+        """Turn at most TURN_RATE_RADPS * dt towards heading; True once facing it."""
+        error = wrap_angle(heading - w.yaw)
+        if abs(error) < 1e-6:  # facing it: leave the pose (and the mocap write) alone
+            return True
+        step = max(-TURN_RATE_RADPS * dt, min(TURN_RATE_RADPS * dt, error))
+        w.yaw = wrap_angle(w.yaw + step)
+        w.dirty = True
+        return abs(error) <= TURN_RATE_RADPS * dt
+
+    def _walk(self, w: _Walker, dt: float) -> None:
+        if w.pause_s > 0.0:
+            w.pause_s = max(0.0, w.pause_s - dt)
+            return
+        tx, ty = w.route[(w.leg + 1) % len(w.route)]
+        dx, dy = tx - w.x, ty - w.y
+        distance = math.hypot(dx, dy)
+        if distance <= ARRIVE_M:  # there: stand on the point, pause, then the next leg
+            w.x, w.y, w.dirty = tx, ty, True
+            w.leg = (w.leg + 1) % len(w.route)
+            w.pause_s = PAUSE_S
+            return
+        if not self._turn_towards(w, math.atan2(dy, dx), dt):
+            return
+        step = min(distance, w.speed * dt)
+        w.x += step * dx / distance
+        w.y += step * dy / distance
+        w.dirty = True
+
+
+def person_rotation(yaw: float) -> np.ndarray:
+    """The person frame's rotation in the world (z up, x where they face)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
