@@ -125,6 +125,9 @@ class RecordingSettings(_Section):
     viewer: str = ""
     #: Log every n-th camera frame (images dominate the recording's size).
     camera_every: int = 1
+    #: Of the logged frames, log depth and segmentation with every n-th (they do not
+    #: compress like RGB's JPEG).
+    depth_every: int = 10
 
 
 class LogSettings(_Section):

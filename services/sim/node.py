@@ -162,7 +162,9 @@ class SimNode:
         bus.serve(keys.description, None, lambda _req, _sel: self.description)
         bus.serve(K.WORLD_DESCRIPTION, None, lambda _req, _sel: self.world)
         self.scene_log = SceneLogger(svc.rec, self.core.model, groups={0, 1, 2})
-        self.sim_log = SimLogger(svc.rec, cfg.sim.cameras, cfg.recording.camera_every)
+        self.sim_log = SimLogger(
+            svc.rec, cfg.sim.cameras, cfg.recording.camera_every, cfg.recording.depth_every
+        )
 
     # -- participants -------------------------------------------------------------------
 
