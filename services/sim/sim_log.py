@@ -117,7 +117,7 @@ class SimLogger:
         if (self._frames[cam] - 1) % (self.camera_every * self.dense_every):
             return
         # depth in mm and labels in 8 bits where they fit: a recording stays ~1 MB/s
-        depth_mm = np.round(as_numpy(frame.depth) * 1000.0).astype(np.uint16)
+        depth_mm = np.round(as_numpy(frame.depth).astype(np.float32) * 1000.0).astype(np.uint16)
         self.rec.log(f"{path}/depth", rr.DepthImage(depth_mm, meter=1000.0))
         labels = as_numpy(truth.labels)
         small = labels.max(initial=0) < 256

@@ -1,0 +1,105 @@
+"""The controller's slow inputs on sim time: cmd_vel arbitration, modes, base pose history.
+
+- `CmdVelArbiter`: every `cmd_vel` sample is pushed in; only the source that `wbc/mode`
+  names is obeyed (the others are counted and ignored). A sample from a source takes
+  effect at its stamp plus that source's configured latency (0 for a source that is not a
+  lockstep participant, e.g. a user script), so the same run gives the same commands; a
+  command older than `timeout_ns` means stop.
+- `ModeQueue`: `wbc/mode` samples take effect the same way (stamp + the mode source's
+  latency), in order.
+- `PoseHistory`: the base pose at past ticks, so a goal in the base frame as of its
+  stamp is fixed in the world from the pose the base had then.
+
+Pure bookkeeping: the node drains its subscriptions into these each tick.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+
+import numpy as np
+
+from common.geometry import FloatArray
+from common.messages.wbc import CmdVel, WbcMode
+
+ZERO3: FloatArray = np.zeros(3)
+
+
+class CmdVelArbiter:
+    """The obeyed source's newest effective command; stop when it is stale or missing."""
+
+    def __init__(self, latency_ns: Mapping[str, int], timeout_ns: int, history: int = 64) -> None:
+        self.latency_ns = dict(latency_ns)
+        self.timeout_ns = timeout_ns
+        self.source = ""
+        self.ignored: dict[str, int] = {}
+        self._buf: deque[CmdVel] = deque(maxlen=history)
+        self.stale = False
+
+    def select(self, source: str) -> None:
+        """Obey `source` from now on (its earlier samples are kept: they may be due)."""
+        if source != self.source:
+            self.source = source
+            self._buf.clear()
+
+    def push(self, msg: CmdVel) -> None:
+        if msg.source != self.source:
+            self.ignored[msg.source] = self.ignored.get(msg.source, 0) + 1
+            return
+        self._buf.append(msg)
+
+    def command(self, t_ns: int) -> FloatArray:
+        """(vx, vy, ωz) in effect at t; zeros when none is due or the newest is stale."""
+        latency = self.latency_ns.get(self.source, 0)
+        due = None
+        for msg in reversed(self._buf):
+            if msg.stamp_ns + latency <= t_ns:
+                due = msg
+                break
+        if due is None:
+            self.stale = False
+            return ZERO3
+        self.stale = t_ns - due.stamp_ns > self.timeout_ns
+        if self.stale:
+            return ZERO3
+        return np.array([due.vx, due.vy, due.wz])
+
+
+class ModeQueue:
+    """`wbc/mode` samples applied in order at stamp + latency."""
+
+    def __init__(self, latency_ns: int) -> None:
+        self.latency_ns = latency_ns
+        self._pending: deque[WbcMode] = deque()
+
+    def push(self, msg: WbcMode) -> None:
+        self._pending.append(msg)
+
+    def due(self, t_ns: int) -> list[WbcMode]:
+        """Every sample that takes effect at or before t, oldest first."""
+        out = []
+        while self._pending and self._pending[0].stamp_ns + self.latency_ns <= t_ns:
+            out.append(self._pending.popleft())
+        return out
+
+
+class PoseHistory:
+    """T_world_base (4×4) at recent stamps, every `every_ns`, for `span_ns`."""
+
+    def __init__(self, span_ns: int = 2_000_000_000, every_ns: int = 1_000_000) -> None:
+        self.every_ns = every_ns
+        self._buf: deque[tuple[int, FloatArray]] = deque(maxlen=max(2, span_ns // every_ns))
+
+    def add(self, stamp_ns: int, T_world_base: FloatArray) -> None:
+        if self._buf and stamp_ns - self._buf[-1][0] < self.every_ns:
+            return
+        self._buf.append((stamp_ns, np.array(T_world_base, dtype=float)))
+
+    def at(self, stamp_ns: int) -> FloatArray | None:
+        """The newest pose at or before the stamp (the newest one for a future stamp);
+        None when the stamp is older than the history."""
+        for t, T in reversed(self._buf):
+            if t <= stamp_ns:
+                return T
+        return None

@@ -1,0 +1,314 @@
+"""The whole-body controller service: the lockstep command participant around the WBC.
+
+Each state it must answer (stamps on its period, `time.participants.wbc.period_s`) gets
+one `JointCommand` with the state's stamp, and nothing else is waited for in between:
+cmd_vel, modes and arm goals are drained from their buffers without blocking. Per tick:
+
+1. inputs due at t: `wbc/mode` samples and cmd_vel of the obeyed source at stamp +
+   latency (`inputs`), arm goals accepted since the last tick (`arm_actions`);
+2. the command: damping in `damp`; otherwise `WholeBodyController.step` with the gait
+   command (walk only) and the arm references; a failed QP keeps the last torques for
+   one tick, then the stand hold (`safety`) takes over until `recover_ticks` good solves;
+3. publish; then, off the critical path, `wbc/status` at `status_hz` and rerun at `log_hz`.
+
+State estimate: none of its own. The base pose and twist come from the sim's
+`RobotState` (MuJoCo's free joint, i.e. perfect odometry); joints, jaw angle and
+applied torques likewise. A real robot would put a kinematic-inertial estimator here.
+Bad inputs never stop the loop: refused goals get a typed `ErrorReply`, a state with NaN
+is answered with damping, a gap in the states (stale state) stops the robot.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+
+import numpy as np
+
+from common import robot
+from common.bus import RequestError, WaitTimeout
+from common.lockstep import NS_PER_S
+from common.messages import as_numpy, to_wire
+from common.messages.sim import JointCommand, RobotState
+from common.messages.wbc import (
+    ArmGoal,
+    ArmGoalReply,
+    ArmGoalRequest,
+    CmdVel,
+    Reach,
+    WbcMode,
+    WbcModeName,
+    WbcStatus,
+)
+from common.robot_description import joint_damping, joint_frictionloss
+from common.service import Service
+from services.wbc.arm_actions import ArmActions, ArmObservation, ArmParams, GoalRefused, check_reach
+from services.wbc.controller import WbcCommand, WbcReferences, WbcState, WholeBodyController
+from services.wbc.gait import GaitParams
+from services.wbc.inputs import CmdVelArbiter, ModeQueue, PoseHistory
+from services.wbc.safety import StandHold, damp_command
+from services.wbc.telemetry import WbcLogger, tracking_errors
+from services.wbc.values import JAW
+from services.wbc.wrench import WrenchEstimator
+
+NAME = "wbc"
+TCP = robot.TCP_FRAME
+
+
+def wbc_state(msg: RobotState) -> WbcState:
+    return WbcState(
+        q=np.asarray(as_numpy(msg.q), dtype=float),
+        v=np.asarray(as_numpy(msg.v), dtype=float),
+        base_position_in_world=np.array(msg.base_position_in_world),
+        base_orientation_xyzw=np.array(msg.base_orientation_xyzw),
+        base_linear_velocity_in_world=np.array(msg.base_linear_velocity_in_world),
+        base_angular_velocity_in_base=np.array(msg.base_angular_velocity_in_base),
+    )
+
+
+def joint_command(stamp_ns: int, cmd: WbcCommand) -> JointCommand:
+    return JointCommand(
+        stamp_ns=stamp_ns,
+        tau_ff=to_wire(cmd.tau_ff),
+        q_des=to_wire(cmd.q_des),
+        v_des=to_wire(cmd.v_des),
+        kp=to_wire(cmd.kp),
+        kd=to_wire(cmd.kd),
+        source=NAME,
+    )
+
+
+class WbcNode:
+    """The service's loop and its bookkeeping (mode, fallback, goals, status)."""
+
+    def __init__(self, svc: Service) -> None:
+        self.svc, cfg = svc, svc.config
+        w = cfg.wbc
+        me = cfg.time.participants.get(NAME)
+        self.period_ns = round((me.period_s if me else 1.0 / cfg.time.tick_hz) * NS_PER_S)
+        latency = {n: round(p.latency_s * NS_PER_S) for n, p in cfg.time.participants.items()}
+        gait = GaitParams(v_max=tuple(w.cmd_vel_max), a_max=tuple(w.cmd_vel_accel_max))  # type: ignore[arg-type]
+        self.ctrl = WholeBodyController(gait_params=gait, clock=time.perf_counter)
+        self.actions = ArmActions(ArmParams(grip_effort_max_nm=w.grip_effort_max_nm))
+        self.arbiter = CmdVelArbiter(latency, round(w.cmd_vel_timeout_s * NS_PER_S))
+        self.arbiter.select(w.cmd_vel_source)
+        self.modes = ModeQueue(latency.get(w.mode_source, 0))
+        self.poses = PoseHistory()
+        self.hold = StandHold()
+        self.wrench = WrenchEstimator(joint_damping(), joint_frictionloss())
+        self.mode: WbcModeName = w.initial_mode
+        self.reason = f"started in {self.mode}"
+        self.fallback, self.fail_run, self.ok_run, self.qp_failures = False, 0, 0, 0
+        self.last_stamp: int | None = None
+        self.obs: ArmObservation | None = None
+        self.qp_us = self.tick_us = 0.0
+        self.status_every = round(NS_PER_S / w.status_hz)
+        self.log_every = round(NS_PER_S / w.log_hz)
+        self._goal_lock = threading.Lock()
+        self._pending: deque[tuple[str, ArmGoal]] = deque()
+        self._goal_count = 0
+        bus, keys = svc.bus, svc.keys
+        self.states = bus.latest(keys.state, RobotState, history=4)
+        self.cmd_vel = bus.fifo(keys.cmd_vel, CmdVel, maxlen=4096)
+        self.mode_in = bus.fifo(keys.wbc_mode, WbcMode, maxlen=256)
+        self.commands = bus.publisher(keys.command, JointCommand, "control")
+        self.status = bus.publisher(keys.wbc_status, WbcStatus, "data")
+        bus.serve(keys.arm_goal, ArmGoalRequest, self._on_goal)
+        self.logger = WbcLogger(svc.rec)
+
+    # -- arm goals (the server's thread) --------------------------------------------------
+
+    def _on_goal(self, req: ArmGoalRequest | None, _selector: str) -> ArmGoalReply:
+        if req is None:
+            raise RequestError("malformed", "an ArmGoalRequest is needed")
+        goal, mode = req.goal, self.mode
+        if mode == "damp":
+            raise RequestError("unavailable", "mode damp: the arm takes no goals")
+        if isinstance(goal, Reach):
+            if mode != "manipulate":
+                raise RequestError("busy", f"mode {mode}: a reach needs mode manipulate")
+            try:
+                check_reach(goal)
+            except GoalRefused as exc:
+                raise RequestError("invalid", str(exc)) from None
+        with self._goal_lock:
+            self._goal_count += 1
+            goal_id = f"arm_{self._goal_count}"
+            self._pending.append((goal_id, goal))
+        self.svc.log.info("arm goal %s accepted: %s", goal_id, type(goal).__name__)
+        return ArmGoalReply(accepted=True, goal_id=goal_id)
+
+    # -- the loop --------------------------------------------------------------------------
+
+    def run(self) -> None:
+        svc = self.svc
+        svc.ready()
+        last = -1
+
+        def is_new(state: RobotState) -> bool:
+            return state.stamp_ns > last
+
+        while not svc.stopping:
+            try:
+                msg = self.states.wait(is_new, 0.1)
+            except WaitTimeout:
+                continue
+            last = msg.stamp_ns
+            if msg.stamp_ns % self.period_ns:
+                continue  # the sim waits for us only on our period
+            t0 = time.perf_counter()
+            self.tick(msg, t0)
+
+    def tick(self, msg: RobotState, t0: float) -> None:
+        t = msg.stamp_ns
+        state = wbc_state(msg)
+        if not (np.all(np.isfinite(state.q)) and np.all(np.isfinite(state.v))):
+            self.commands.put(joint_command(t, damp_command(np.nan_to_num(state.q))))
+            self._say(f"state at t={t / NS_PER_S:.3f} s has NaN: damping")
+            return
+        stale_ns = self.svc.config.wbc.stale_state_s * NS_PER_S
+        gap = 0 if self.last_stamp is None else t - self.last_stamp
+        if self.obs is None or gap > stale_ns:  # first state, or a gap: hold where it is
+            if self.obs is not None:
+                self._say(f"stale state: no state for {gap / 1e6:.0f} ms of sim time; stopped")
+            self.ctrl.reset(state)
+            self._observe(msg)
+        dt = gap / NS_PER_S if 0 < gap <= stale_ns else self.period_ns / NS_PER_S
+        self.last_stamp = t
+        self._inputs(t, state, msg)
+        cmd = self._command(t, state, msg, dt)
+        self.commands.put(joint_command(t, cmd))
+        self.tick_us = (time.perf_counter() - t0) * 1e6
+        # Off the critical path: the sim is stepping now.
+        self._observe(msg)
+        self.poses.add(t, self.ctrl.model.frames[robot.BASE_FRAME].H)
+        if t % self.status_every == 0:
+            self._publish_status(t, msg)
+        if t % self.log_every == 0:
+            T_goal = self.actions.T_goal
+            self.logger.log(
+                t, self.ctrl, cmd.tau_ff, self._errors(), self.qp_us, self.tick_us, T_goal
+            )
+
+    def _observe(self, msg: RobotState) -> None:
+        m = self.ctrl.model
+        self.obs = ArmObservation(
+            T_world_tcp=m.frames[TCP].H.copy(),
+            q_arm=m.q[19:25].copy(),
+            gripper_angle=msg.gripper_angle,
+            gripper_velocity=float(m.v[24]),
+            gripper_effort=msg.gripper_effort,
+        )
+
+    def _inputs(self, t: int, state: WbcState, msg: RobotState) -> None:
+        for mode_msg in self.mode_in.drain():
+            self.modes.push(mode_msg)
+        for mode_msg in self.modes.due(t):
+            self._set_mode(mode_msg, t, state)
+        for cmd in self.cmd_vel.drain():
+            self.arbiter.push(cmd)
+        with self._goal_lock:
+            pending = list(self._pending)
+            self._pending.clear()
+        assert self.obs is not None  # set on the first tick
+        for goal_id, goal in pending:
+            self.actions.start(goal_id, goal, t, self.obs, self.poses.at)
+
+    def _set_mode(self, msg: WbcMode, t: int, state: WbcState) -> None:
+        self.arbiter.select(msg.cmd_vel_source)
+        old, new = self.mode, msg.mode
+        if new == old:
+            return
+        self.mode = new
+        assert self.obs is not None
+        if new == "damp" or old == "manipulate":
+            self.actions.cancel(f"mode {old} -> {new}", t, self.obs, drop_pose=True)
+        if old == "damp":
+            self.ctrl.reset(state)
+        self._say(f"mode {old} -> {new} (cmd_vel from {msg.cmd_vel_source})")
+
+    def _command(self, t: int, state: WbcState, msg: RobotState, dt: float) -> WbcCommand:
+        assert self.obs is not None
+        arm = self.actions.update(t, self.obs)
+        if self.mode == "damp":
+            cmd = damp_command(state.q)
+            if arm.gripper_effort is not None:
+                cmd.tau_ff[JAW] = arm.gripper_effort
+            return cmd
+        refs = WbcReferences(
+            cmd_vel=self.arbiter.command(t) if self.mode == "walk" else np.zeros(3),
+            T_world_tcp=arm.T_world_tcp,
+            tcp_twist=arm.tcp_twist,
+            tcp_acceleration=arm.tcp_acceleration,
+            arm_posture=arm.arm_posture,
+            gripper_angle=arm.gripper_angle,
+            gripper_effort=arm.gripper_effort,
+        )
+        cmd = self.ctrl.step(state, refs, dt)
+        timing = self.ctrl.last_timing
+        self.qp_us = (timing.get("build", 0.0) + timing.get("solve", 0.0)) * 1e6
+        if cmd.qp_ok:
+            self.fail_run = 0
+            if self.fallback:
+                self.ok_run += 1
+                if self.ok_run >= self.svc.config.wbc.recover_ticks:
+                    self.fallback = False
+                    self.ctrl.reset(state)
+                    self._say("QP solves again: whole-body control resumed")
+        else:
+            self.fail_run += 1
+            self.qp_failures += 1
+            self.ok_run = 0
+            if self.fail_run == 1:
+                self._say(f"QP failed ({cmd.qp_status}): holding the last torques")
+            elif not self.fallback:
+                self.fallback = True
+                self.hold.engage(self.ctrl.model)
+                self._say(f"QP failed {self.fail_run} ticks: stand hold")
+        if self.fallback:
+            return self.hold.command(arm.gripper_effort, arm.gripper_angle)
+        return cmd
+
+    # -- status ----------------------------------------------------------------------------
+
+    def _say(self, reason: str) -> None:
+        self.reason = reason
+        self.svc.log.info("%s", reason)
+
+    def _errors(self) -> tuple[float, float, float]:
+        return tracking_errors(self.ctrl, self.actions.tracking_pose and self.mode != "damp")
+
+    def _publish_status(self, t: int, msg: RobotState) -> None:
+        m = self.ctrl.model
+        wrench = self.wrench.update(
+            m.h,
+            m.v,
+            np.asarray(as_numpy(msg.tau), dtype=float),
+            m.frames[TCP].J,
+            m.frames[robot.BASE_FRAME].R,
+        )
+        base_err, tcp_m, tcp_rad = self._errors()
+        self.status.put(
+            WbcStatus(
+                stamp_ns=t,
+                mode=self.mode,
+                cmd_vel_source=self.arbiter.source,
+                goals=self.actions.statuses(),
+                base_error_m=base_err,
+                gripper_error_m=tcp_m,
+                gripper_error_rad=tcp_rad,
+                qp_time_us=self.qp_us,
+                qp_failures=self.qp_failures,
+                contacts=msg.foot_contacts,
+                gripper_angle=msg.gripper_angle,
+                gripper_effort=msg.gripper_effort,
+                held=self.actions.held,
+                gripper_wrench=tuple(float(x) for x in wrench),  # type: ignore[arg-type]
+                reason=self.reason,
+            )
+        )
+
+
+def main(svc: Service) -> None:
+    WbcNode(svc).run()
