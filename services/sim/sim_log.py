@@ -119,12 +119,9 @@ class SimLogger:
         # depth in mm and labels in 8 bits where they fit: a recording stays ~1 MB/s
         depth_mm = np.round(as_numpy(frame.depth).astype(np.float32) * 1000.0).astype(np.uint16)
         self.rec.log(f"{path}/depth", rr.DepthImage(depth_mm, meter=1000.0))
-        labels = as_numpy(truth.labels)
-        small = labels.max(initial=0) < 256
-        self.rec.log(
-            f"{path}/segmentation_truth",
-            rr.SegmentationImage(labels.astype(np.uint8 if small else np.uint16)),
-        )
+        labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
+        ids = labels.astype(np.uint8) if labels.max(initial=0) < 256 else labels.astype(np.uint16)
+        self.rec.log(f"{path}/segmentation_truth", rr.SegmentationImage(ids))
 
     def events(self, t_ns: int, events: list[WorldEvent]) -> None:
         if not self.enabled:
