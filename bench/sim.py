@@ -88,6 +88,10 @@ def bare_loop(sim_s: float, world_name: str = "small") -> float:
 def lockstep_loop(sim_s: float, overrides: Sequence[str], cameras: bool) -> float:
     """Ticks per wall second of sim + hold over Zenoh, from the clock's arrival times."""
     settings = [
+        "time.participants={}",
+        'time.participants.hold.role="command"',
+        "time.participants.hold.period_s=0.001",
+        "time.participants.hold.latency_s=0.0",
         'sim.world="small"',
         "recording.enabled=false",
         f"sim.duration_s={sim_s + 2.0}",

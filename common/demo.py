@@ -1,7 +1,7 @@
 """`dume demo`: start a stack under supervisord, run the job, stop, print one JSON line.
 
-Until the mission service exists the job is the simulator's: the robot stands in the
-generated world for `--duration` seconds of sim time under the PD stand-hold, every
+Until the mission service exists the job is the simulator's and the whole-body
+controller's: the robot stands in the generated world for `--duration` seconds of sim time, every
 camera and the world go to the run's recording, and the outcome says whether the robot
 stayed up. The last line is JSON:
 `{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording"}`.
@@ -44,7 +44,7 @@ def run_demo(args: argparse.Namespace) -> int:
     outcome, reason, sim_s, lowest = "failed", "", 0.0, float("inf")
     locomotion = stack.config.sim.locomotion
     try:
-        stack.wait_ready(["sim", "hold"], timeout_s=120)
+        stack.wait_ready(["sim", "wbc"], timeout_s=120)
         clock = stack.bus.latest(WORLD_CLOCK, Clock)
         odom = stack.bus.latest(stack.keys.odom, Odom)
         deadline_ns = round(args.duration * 1e9)

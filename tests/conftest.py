@@ -14,6 +14,14 @@ from common.stack import MODULES, ProcessStack
 
 StartStack = Callable[..., ProcessStack]
 
+#: Settings that make the PD stand-hold (`hold`) the joint commander instead of the WBC.
+HOLD_COMMANDER = (
+    "time.participants={}",
+    'time.participants.hold.role="command"',
+    "time.participants.hold.period_s=0.001",
+    "time.participants.hold.latency_s=0.0",
+)
+
 
 @pytest.fixture
 def stack(tmp_path: Path) -> Iterator[StartStack]:

@@ -14,7 +14,7 @@ from common.config import REPO_ROOT
 from common.keys import WORLD_CLOCK
 from common.messages.sim import Clock, Odom
 from common.stack import free_port
-from tests.conftest import StartStack
+from tests.conftest import HOLD_COMMANDER, StartStack
 
 pytestmark = pytest.mark.integration
 
@@ -66,7 +66,13 @@ def test_a_bad_setting_is_refused_with_its_key() -> None:
 
 
 def test_the_realtime_mode_runs_the_robot_on_the_wall_clock(stack: StartStack) -> None:
-    s = stack(["sim", "hold"], 'sim.world="small"', "sim.cameras=[]", 'time.mode="realtime"')
+    s = stack(
+        ["sim", "hold"],
+        *HOLD_COMMANDER,
+        'sim.world="small"',
+        "sim.cameras=[]",
+        'time.mode="realtime"',
+    )
     clock = s.bus.latest(WORLD_CLOCK, Clock)
     odom = s.bus.latest(s.keys.odom, Odom)
     c = clock.wait(lambda c: c.stamp_ns >= 1_500_000_000, 60)
@@ -79,7 +85,9 @@ def test_the_realtime_mode_runs_the_robot_on_the_wall_clock(stack: StartStack) -
 def test_a_run_records_the_world_the_robot_and_both_cameras(
     stack: StartStack, tmp_path: Path
 ) -> None:
-    s = stack(["sim", "hold"], 'sim.world="small"', "sim.duration_s=1.2", record=True)
+    s = stack(
+        ["sim", "hold"], *HOLD_COMMANDER, 'sim.world="small"', "sim.duration_s=1.2", record=True
+    )
     clock = s.bus.latest(WORLD_CLOCK, Clock)
     clock.wait(lambda c: c.stamp_ns >= 1_100_000_000, 120)
     time.sleep(0.5)

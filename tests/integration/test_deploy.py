@@ -80,7 +80,7 @@ def test_dume_up_runs_the_stack_and_restarts_a_killed_sim(tmp_path: Path) -> Non
         match = re.search(r"logs in (\S+)", banner)
         assert match, banner
         run_dir = match.group(1)
-        assert wait_until(lambda: {"sim", "hold"} <= alive(port), 120, poll_s=1.0)
+        assert wait_until(lambda: {"sim", "wbc"} <= alive(port), 120, poll_s=1.0)
         status = json.loads(dume("status", "--port", str(port)).stdout)
         assert "sim" in status["alive"]
         assert "mission" in status["missing"]

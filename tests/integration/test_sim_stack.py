@@ -15,7 +15,7 @@ from common.messages.sim import CameraFrame, Clock, Odom, RobotDescription, Robo
 from common.messages.sim import SegmentationTruth as SegTruth
 from common.messages.world import WorldDescription
 from common.stack import ProcessStack
-from tests.conftest import StartStack
+from tests.conftest import HOLD_COMMANDER, StartStack
 
 pytestmark = pytest.mark.integration
 
@@ -29,7 +29,7 @@ def wait_clock(stack: object, t_s: float, timeout_s: float = 300.0) -> Clock:
 
 
 def test_a_pd_hold_in_another_process_keeps_the_robot_standing(stack: StartStack) -> None:
-    s = stack(["sim", "hold"], *SMALL, *NO_CAMERAS, "sim.duration_s=11")
+    s = stack(["sim", "hold"], *HOLD_COMMANDER, *SMALL, *NO_CAMERAS, "sim.duration_s=11")
     odom = s.bus.fifo(s.keys.odom, Odom, maxlen=100_000)
     wait_clock(s, 10.0)
     heights = np.array([o.base_position_in_world[2] for o in odom.drain()])
@@ -102,7 +102,9 @@ def _ray_box_depth(
 
 
 def test_camera_depth_matches_the_world_geometry(stack: StartStack) -> None:
-    s = stack(["sim", "hold"], *SMALL, "sim.duration_s=3", 'sim.cameras=["camera_head"]')
+    s = stack(
+        ["sim", "hold"], *HOLD_COMMANDER, *SMALL, "sim.duration_s=3", 'sim.cameras=["camera_head"]'
+    )
     frames = s.bus.latest(s.keys.camera_rgbd("camera_head"), CameraFrame, history=8)
     truths = s.bus.latest(s.keys.camera_segmentation_truth("camera_head"), SegTruth, history=8)
     world = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, timeout_s=10)
@@ -151,7 +153,7 @@ def test_camera_depth_matches_the_world_geometry(stack: StartStack) -> None:
 
 
 def test_the_watchdog_holds_the_robot_when_the_controller_dies(stack: StartStack) -> None:
-    s = stack(["sim", "hold"], *SMALL, *NO_CAMERAS, "sim.duration_s=20")
+    s = stack(["sim", "hold"], *HOLD_COMMANDER, *SMALL, *NO_CAMERAS, "sim.duration_s=20")
     odom = s.bus.fifo(s.keys.odom, Odom, maxlen=100_000)
     wait_clock(s, 1.0)
     s.kill("hold")
