@@ -17,7 +17,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from common.bus import Bus
@@ -241,11 +241,11 @@ class Supervised(_Stack):
             return self.proc.wait(timeout=5)
 
 
-def wait_until(predicate: object, timeout_s: float, poll_s: float = 0.05) -> bool:
+def wait_until(predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.05) -> bool:
     """Poll `predicate()` until true or the timeout; True when it became true."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if predicate():  # type: ignore[operator]
+        if predicate():
             return True
         time.sleep(poll_s)
     return False
