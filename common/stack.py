@@ -119,8 +119,32 @@ class _Stack:
             self._bus = None
 
 
+def only_started(services: Sequence[str], overrides: Sequence[str]) -> list[str]:
+    """Overrides that drop the lockstep participants of dume services not started.
+
+    The sim waits at t = 0 for every configured participant; a stack that runs a subset
+    of the services must not list the others. Participants that are not dume services
+    (a test's own) stay as configured.
+    """
+    participants = load_config(overrides).time.participants
+    kept = {n: p for n, p in participants.items() if n in services or n not in MODULES}
+    if kept.keys() == participants.keys():
+        return []
+    out = ["time.participants={}"]
+    for name, p in kept.items():
+        out += [
+            f'time.participants.{name}.role="{p.role}"',
+            f"time.participants.{name}.period_s={p.period_s}",
+            f"time.participants.{name}.latency_s={p.latency_s}",
+        ]
+    return out
+
+
 class ProcessStack(_Stack):
-    """The router and some services as child processes (for tests and benchmarks)."""
+    """The router and some services as child processes (for tests and benchmarks).
+
+    Only the started services are lockstep participants (see `only_started`).
+    """
 
     def __init__(
         self,
@@ -130,7 +154,8 @@ class ProcessStack(_Stack):
         port: int | None = None,
         run_id: str | None = None,
     ) -> None:
-        super().__init__(overrides, port, run_id)
+        names = [n for n in services if n in MODULES]
+        super().__init__([*overrides, *only_started(names, overrides)], port, run_id)
         self.services = list(services)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 

@@ -60,3 +60,20 @@ def test_keys_are_built_from_the_robot_namespace() -> None:
         keys.camera_rgbd("camera_tail")
     with pytest.raises(ValueError, match="key chunk"):
         map_artifact("bottle/*")
+
+
+def test_a_stack_of_some_services_waits_only_for_those() -> None:
+    from common.stack import only_started
+
+    overrides = [
+        "time.participants={}",
+        'time.participants.wbc.role="command"',
+        "time.participants.wbc.period_s=0.002",
+        'time.participants.navigation.role="periodic"',
+        'time.participants.mine.role="periodic"',
+    ]
+    extra = only_started(["sim", "wbc"], overrides)
+    participants = load_config([*overrides, *extra], env={}).time.participants
+    assert set(participants) == {"wbc", "mine"}  # navigation is not started; `mine` is a test's
+    assert participants["wbc"].period_s == 0.002
+    assert only_started(["sim", "wbc", "navigation"], overrides) == []
