@@ -22,7 +22,24 @@ def _wbc(overrides: Sequence[str]) -> dict[str, Any]:
     return bench_wbc(overrides)
 
 
-BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {"sim": _sim, "wbc": _wbc}
+def _perception(overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.perception import bench_perception
+
+    return bench_perception(overrides)
+
+
+def _nav(overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.nav import bench_nav
+
+    return bench_nav(overrides)
+
+
+BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
+    "sim": _sim,
+    "wbc": _wbc,
+    "perception": _perception,
+    "nav": _nav,
+}
 
 
 def run_bench(which: str, overrides: Sequence[str] = ()) -> int:

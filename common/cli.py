@@ -5,9 +5,11 @@
     dume world --seed N [--world small] [--grid]            a generated world as JSON
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
     dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
+    dume map [--patrol | --export FILE | --import FILE]     the semantic map (JSON)
     dume demo [--world-seed N] [--duration S]               run a whole job, print a JSON line
-    dume bench sim|wbc|all                                  print figures (JSON last line)
+    dume bench sim|wbc|nav|all                              print figures (JSON last line)
     dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
+    dume train-segmenter [--seed S]                         render data, train, export ONNX
 
 Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's) to talk to the
 stack on that port, and `--set key=value` to override settings.
@@ -18,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pathlib
 import sys
 import time
 import uuid
@@ -145,6 +148,49 @@ def cmd_cancel(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_map(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from common.keys import MAP_ARTIFACTS, MAP_EXPORT, MAP_IMPORT, MAP_PEOPLE
+    from common.messages.semantic_map import (
+        MapFile,
+        MapListing,
+        MapSummary,
+        PatrolRequest,
+        PatrolStatus,
+    )
+    from services.semantic_map.mapfile import read_map_file, write_map_file
+
+    config = _client_config(args)
+    keys = RobotKeys(config.robot)
+    with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
+        if args.export:
+            mf = bus.query(MAP_EXPORT, None, MapFile, 10.0)
+            write_map_file(Path(args.export), mf)
+            print(json.dumps({"exported": args.export, "entities": len(mf.entities)}))
+            return 0
+        if args.import_:
+            summary = bus.query(MAP_IMPORT, read_map_file(Path(args.import_)), MapSummary, 10.0)
+            print(json.dumps(msgspec.to_builtins(summary)))
+            return 0
+        if args.patrol:
+            req = PatrolRequest(action="start", spacing_m=args.spacing)
+            status = bus.query(keys.map_patrol, req, PatrolStatus, 30.0)
+            deadline = time.monotonic() + args.timeout
+            while status.state == "running" and time.monotonic() < deadline:
+                time.sleep(2.0)
+                status = bus.query(keys.map_patrol, PatrolRequest(action="status"), PatrolStatus)
+                print(json.dumps(msgspec.to_builtins(status)), file=sys.stderr, flush=True)
+            if status.state == "running":
+                bus.query(keys.map_patrol, PatrolRequest(action="stop"), PatrolStatus)
+        listings = {
+            kind: bus.query(key, None, MapListing, 5.0).entities
+            for kind, key in (("artifacts", MAP_ARTIFACTS), ("people", MAP_PEOPLE))
+        }
+    print(json.dumps({k: [msgspec.to_builtins(e) for e in v] for k, v in listings.items()}))
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from common.demo import run_demo
 
@@ -162,6 +208,31 @@ def cmd_trial(args: argparse.Namespace) -> int:
 
     result = run_trial(args.which, args.world_seed, args.wbc_period, args.set)
     print(json.dumps(result))
+    return 0
+
+
+def cmd_train_segmenter(args: argparse.Namespace) -> int:
+    import logging
+
+    from services.perception.segmenter import DEFAULT_MODEL
+    from services.perception.training.train import TrainSettings, train_segmenter
+    from services.sim.dataset import write_dataset
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    shards = REPO_ROOT / "var" / "datasets" / "segmenter"
+    train = list(range(args.train_seeds))
+    val = list(range(10_000, 10_000 + args.val_seeds))  # held out: never trained on
+    for _ in write_dataset([*val, *train], shards):
+        pass
+    settings = TrainSettings(
+        shards=shards,
+        out=args.out or DEFAULT_MODEL,
+        train_seeds=train,
+        val_seeds=val,
+        seed=args.seed,
+        steps=args.steps,
+    )
+    print(json.dumps(train_segmenter(settings)["validation"]))
     return 0
 
 
@@ -206,6 +277,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reason", default="cancelled by the user")
     p.set_defaults(func=cmd_cancel)
 
+    p = add("map", "the semantic map: walk the mapping patrol, export, import; lists it")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--patrol", action="store_true", help="walk a coverage route, map it")
+    what.add_argument("--export", metavar="FILE", help="write the map as JSON")
+    what.add_argument("--import", dest="import_", metavar="FILE", help="replace the map")
+    p.add_argument("--spacing", type=float, default=0.0, help="patrol viewpoint spacing, m")
+    p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds for the patrol")
+    p.set_defaults(func=cmd_map)
+
     p = add("demo", "start a stack, run the job, stop it, print a JSON result")
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
@@ -213,7 +293,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     p = add("bench", "benchmarks; each prints JSON on its last line")
-    p.add_argument("which", choices=["sim", "wbc", "all"])
+    from bench import BENCHES
+
+    p.add_argument("which", choices=[*BENCHES, "all"])
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")
@@ -221,6 +303,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--world-seed", type=int, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)
+
+    p = add("train-segmenter", "render sim data, train the segmenter, export and validate it")
+    p.add_argument("--seed", type=int, default=0, help="seeds torch and the data order")
+    p.add_argument("--train-seeds", type=int, default=180, help="worlds 0..N-1 to train on")
+    p.add_argument("--val-seeds", type=int, default=24, help="held-out worlds from 10000")
+    p.add_argument("--steps", type=int, default=1600)
+    p.add_argument("--out", type=pathlib.Path, default=None, help="default: the shipped model")
+    p.set_defaults(func=cmd_train_segmenter)
     return parser
 
 

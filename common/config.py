@@ -116,6 +116,126 @@ class WbcSettings(_Section):
     recover_ticks: int = 50
 
 
+class PerceptionSettings(_Section):
+    """The perception service (`services/perception`); its rate is its lockstep
+    participant's `period_s` (`time.participants.perception`), a multiple of the cameras'.
+
+    segmenter: `network` (the ONNX instance segmentation network, the default) or `truth`
+    (the sim's `segmentation_truth` labels: ablation and evaluation only, named so in
+    every `Detections`). model: the ONNX file, relative to the repository root.
+    """
+
+    segmenter: Literal["network", "truth"] = "network"
+    model: str = "services/perception/models/segmenter.onnx"
+    #: Instances scored below this are dropped.
+    min_score: float = 0.5
+    #: Cameras processed (those the sim also publishes).
+    cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
+    #: Wall seconds to wait for a camera's frame stamped at a tick before publishing an
+    #: empty `Detections` with the reason.
+    frame_timeout_s: float = 2.0
+    #: Locate by map id: a detection of the entity's class within this distance of its
+    #: mapped position (m, horizontal) is that entity.
+    locate_gate_m: float = 0.5
+
+
+class SemanticMapSettings(_Section):
+    """The semantic map service (`services/semantic_map`).
+
+    start: how an empty database is filled — `prior` (the map file `prior_file`),
+    `seed-from-world` (the sim's truth ids at truth positions plus Gaussian noise of
+    `seed_noise_m`: sim truth, for experiments), `empty` (then `dume map --patrol`). A
+    database that already holds a map is resumed whatever `start` says (ids are stable
+    across restarts) unless `reset` is true.
+    floor_plan: the static occupancy layer when the start mode brings none (`world`: the
+    simulator's grid, the building's floor plan; `none`).
+    """
+
+    start: Literal["prior", "seed-from-world", "empty"] = "empty"
+    name: str = "default"
+    #: Folder of the databases (`<dir>/<name>.sqlite`), relative to the repository root.
+    dir: str = "var/map"
+    reset: bool = False
+    prior_file: str = ""
+    seed_noise_m: float = 0.05
+    seed_noise_seed: int = 0
+    floor_plan: Literal["world", "none"] = "world"
+    #: Cameras whose detections are fused.
+    cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
+    #: Measurement noise of a detection's horizontal position: sigma0 + per_m × range, m.
+    sigma0_m: float = 0.02
+    sigma_per_m: float = 0.02
+    #: Association gate: a detection joins an entity of its class within
+    #: max(gate_min_m, gate_sigmas × combined σ).
+    gate_min_m: float = 0.25
+    gate_sigmas: float = 3.0
+    #: Detections an artifact or person needs before it gets an id.
+    confirm_hits: int = 2
+    #: Below this score a detection is ignored.
+    min_score: float = 0.5
+    #: Frames looking at an artifact's place without seeing it before it is missing.
+    missing_after_frames: int = 5
+    #: Range within which a camera is trusted to see an artifact, m.
+    look_range_m: float = 3.0
+    #: People: acceleration noise of the constant-velocity model, m/s², and the weight of
+    #: the colour-histogram distance in the association cost.
+    person_accel_sigma: float = 1.5
+    appearance_weight: float = 4.0
+    #: Learned obstacles: frames a cell must be seen occupied in, heights counted, m.
+    obstacle_hits: int = 3
+    obstacle_z_m: list[float] = msgspec.field(default_factory=lambda: [0.15, 1.9])
+    #: Grid extent when no floor plan gives one (a square about the origin), m.
+    grid_half_extent_m: float = 15.0
+    grid_resolution_m: float = 0.05
+    #: The patrol: viewpoint spacing, clearance kept from obstacles, speeds, look-around.
+    patrol_spacing_m: float = 2.5
+    patrol_clearance_m: float = 0.7
+    patrol_speed: float = 0.5
+    patrol_turn_rate: float = 0.6
+    patrol_look_around: bool = True
+    #: Sim seconds between rerun logs of the entities and of the grid.
+    log_every_s: float = 1.0
+    grid_log_every_s: float = 5.0
+
+
+class NavigationSettings(_Section):
+    """The navigation service (`services/navigation`); its rate is its lockstep
+    participant's `period_s` (`time.participants.navigation`).
+
+    map_source: `map` (the semantic map's queryables) or `world` (the sim's truth
+    description: occupancy, artifacts, people — for tests and development only).
+    Speeds m/s, distances m (people distances from the footprint), times s of sim time.
+    """
+
+    map_source: Literal["map", "world"] = "map"
+    #: The depth camera of the short-lived obstacle layer ("" for none).
+    obstacle_camera: str = "camera_head"
+    obstacle_ttl_s: float = 3.0
+    #: Base velocity (vx, vy, wz) and acceleration limits of the path follower.
+    v_max: list[float] = msgspec.field(default_factory=lambda: [0.5, 0.3, 0.8])
+    a_max: list[float] = msgspec.field(default_factory=lambda: [0.8, 0.8, 1.5])
+    lookahead_m: float = 0.6
+    #: Tolerances of the standoff and handover goals (a PoseGoal carries its own).
+    goal_tolerance_m: float = 0.08
+    goal_tolerance_rad: float = 0.1
+    #: How far a goal in an obstacle may move to the nearest free pose.
+    goal_search_m: float = 0.5
+    cost_weight: float = 4.0
+    #: People: the speed cap within `slow_radius_m`, the stop distance in the direction
+    #: of travel, the cap near the person handed over to; `people_in_costmap` plans
+    #: around them (off: only the speed rules act).
+    slow_radius_m: float = 2.0
+    slow_speed: float = 0.3
+    stop_distance_m: float = 0.6
+    handover_speed: float = 0.15
+    people_in_costmap: bool = True
+    replan_s: float = 1.0
+    blocked_timeout_s: float = 3.0
+    goal_timeout_s: float = 180.0
+    #: How often the semantic map's occupancy and people are fetched (map source), s.
+    map_refresh_s: float = 1.0
+
+
 class RecordingSettings(_Section):
     enabled: bool = True
     dir: str = "recordings"
@@ -140,6 +260,9 @@ class Config(_Section):
     time: TimeSettings = msgspec.field(default_factory=TimeSettings)
     sim: SimSettings = msgspec.field(default_factory=SimSettings)
     wbc: WbcSettings = msgspec.field(default_factory=WbcSettings)
+    perception: PerceptionSettings = msgspec.field(default_factory=PerceptionSettings)
+    navigation: NavigationSettings = msgspec.field(default_factory=NavigationSettings)
+    semantic_map: SemanticMapSettings = msgspec.field(default_factory=SemanticMapSettings)
     recording: RecordingSettings = msgspec.field(default_factory=RecordingSettings)
     log: LogSettings = msgspec.field(default_factory=LogSettings)
 
@@ -231,6 +354,16 @@ def _check(config: Config) -> None:
         limits = getattr(config.wbc, key)
         if len(limits) != 3 or min(limits) <= 0:
             raise ConfigError(f"wbc.{key} must be 3 positive numbers (vx, vy, wz), got {limits}")
+    _check_navigation(config.navigation)
+
+
+def _check_navigation(nav: NavigationSettings) -> None:
+    for key in ("v_max", "a_max"):
+        limits = getattr(nav, key)
+        if len(limits) != 3 or min(limits) <= 0:
+            raise ConfigError(
+                f"navigation.{key} must be 3 positive numbers (vx, vy, wz), got {limits}"
+            )
 
 
 def resolve(path: str) -> Path:

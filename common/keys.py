@@ -21,9 +21,18 @@ SERVICES = ("sim", "perception", "semantic_map", "navigation", "wbc", "mission")
 WORLD_CLOCK = f"{ROOT}/world/clock"
 WORLD_DESCRIPTION = f"{ROOT}/world/description"
 WORLD_EVENTS = f"{ROOT}/world/events"
+#: A push on the robot's base (`sim.Push`): tests and evaluation publish, the sim applies.
+WORLD_PUSH = f"{ROOT}/world/push"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
 MAP_PEOPLE = f"{ROOT}/map/people"
 MAP_OCCUPANCY = f"{ROOT}/map/occupancy"
+#: Queryables: the whole map as a `MapFile` (export), and a `MapFile` to load (import).
+MAP_EXPORT = f"{ROOT}/map/export"
+MAP_IMPORT = f"{ROOT}/map/import"
+#: The listings `dume/map/artifacts`, `dume/map/people` are the two keys above; one entity
+#: is `dume/map/<kind>/<id>` and the servers answer `dume/map/<kind>/*`.
+MAP_ARTIFACTS_ONE = f"{MAP_ARTIFACTS}/*"
+MAP_PEOPLE_ONE = f"{MAP_PEOPLE}/*"
 ALIVE = f"{ROOT}/alive"
 
 
@@ -92,6 +101,11 @@ class RobotKeys:
     @property
     def locate(self) -> str:
         return f"{self.prefix}/perception/locate"
+
+    # semantic map (the patrol drives this robot)
+    @property
+    def map_patrol(self) -> str:
+        return f"{self.prefix}/map/patrol"
 
     # navigation
     @property

@@ -1,37 +1,55 @@
-"""The semantic map's payloads: artifacts and people with ids, and the occupancy grid."""
+"""The semantic map's payloads: artifacts and people with ids, the occupancy grid, the
+mapping patrol and the map file (JSON export/import).
+
+Positions are in the `world` frame. `source` says where an entity's id came from:
+`prior` (a map file loaded at start), `seed-from-world` (the simulator's truth ids and
+noisy truth positions: sim truth, for experiments only), `perception` (a detection fused
+by this map), `import` (a map file imported while running).
+"""
 
 from __future__ import annotations
 
 from typing import Literal
 
+import msgspec
+
 from common.messages.arrays import Array
 from common.messages.base import ClassName, EntityId, Finite, Message, NonNegative, StampNs, Vec3
 
 Source = Literal["prior", "seed-from-world", "perception", "import"]
+EntityKind = Literal["artifact", "person"]
 
 
 class MapEntity(Message, frozen=True):
     """`dume/map/artifacts/<id>` or `dume/map/people/<id>`: one mapped thing.
 
-    position_in_world: (3,) m, the running estimate (an artifact's centre, a person's
-        feet). uncertainty_m: 1-σ of the horizontal position, m.
+    position_in_world: (3,) m, the running estimate (an artifact's axis point at its
+        visible centroid's height, a person's feet on the floor). uncertainty_m: 1-σ of the
+        horizontal position, m.
     last_seen_ns: sim time of the last detection fused, ns (0: never since start).
     missing_since_ns: looked for at its place and not seen since then (None: not missing).
+    velocity_in_world: (2,) m/s, a person's estimated floor velocity (0 for artifacts).
+    observations: detections fused into it so far.
     """
 
     id: EntityId
     class_name: ClassName
-    kind: Literal["artifact", "person"]
+    kind: EntityKind
     position_in_world: Vec3
     uncertainty_m: NonNegative
     last_seen_ns: StampNs
     source: Source
     missing_since_ns: StampNs | None = None
     yaw: Finite = 0.0
+    velocity_in_world: tuple[Finite, Finite] = (0.0, 0.0)
+    observations: int = 0
 
 
 class MapListing(Message, frozen=True):
-    """Every entity of one kind (reply to `dume/map/artifacts` or `dume/map/people`)."""
+    """Every entity of one kind (reply to `dume/map/artifacts` or `dume/map/people`).
+
+    A query may filter by parameters: `?class=bottle`, `?missing=true`.
+    """
 
     stamp_ns: StampNs
     entities: list[MapEntity]
@@ -43,9 +61,68 @@ class OccupancyGrid(Message, frozen=True):
     cells: (ny, nx) uint8, 0 free, 100 occupied, 255 unknown; cell [iy, ix] has its centre
     at origin + ((ix + 0.5) res, (iy + 0.5) res) in the world frame.
     resolution_m: cell size, m. origin_xy: world position of cell (0, 0)'s corner, m.
+    static_source: where the static layer came from (`world`: the simulator's floor plan,
+    `file`: a map file, `none`). learned_cells: cells occupied by obstacles seen in depth.
     """
 
     stamp_ns: StampNs
     resolution_m: NonNegative
     origin_xy: tuple[Finite, Finite]
     cells: Array
+    static_source: Literal["world", "file", "none"] = "none"
+    learned_cells: int = 0
+
+
+class MapFile(Message, frozen=True):
+    """A whole map as a file (`dume map --export FILE`, `--import FILE`; JSON on disk).
+
+    version: the format's version (1). counters: per class, the last number given
+    (`{"bottle": 3}`), so ids stay unique after an import. occupancy: the merged grid
+    (static + learned), the static layer of a map started from this file.
+    """
+
+    version: Literal[1] = 1
+    stamp_ns: StampNs = 0
+    entities: list[MapEntity] = msgspec.field(default_factory=list)
+    counters: dict[str, int] = msgspec.field(default_factory=dict)
+    occupancy: OccupancyGrid | None = None
+
+
+class MapSummary(Message, frozen=True):
+    """Reply to `dume/map/import`: what the map holds now."""
+
+    stamp_ns: StampNs
+    artifacts: int
+    people: int
+    missing: int
+
+
+PatrolState = Literal["idle", "running", "done", "failed", "stopped"]
+
+
+class PatrolRequest(Message, frozen=True):
+    """`dume/<r>/map/patrol` (query): start or stop the mapping patrol, or ask its state.
+
+    spacing_m: distance between the route's viewpoints (start only; 0: the configured one).
+    """
+
+    action: Literal["start", "stop", "status"]
+    spacing_m: NonNegative = 0.0
+
+
+class PatrolStatus(Message, frozen=True):
+    """The patrol's state (reply to `dume/<r>/map/patrol`).
+
+    waypoint, waypoints: the viewpoint being walked to, of how many. travelled_m: path
+    length walked so far. artifacts, people: entities in the map now. reason: why it
+    failed or stopped, for a person.
+    """
+
+    stamp_ns: StampNs
+    state: PatrolState
+    waypoint: int = 0
+    waypoints: int = 0
+    travelled_m: NonNegative = 0.0
+    artifacts: int = 0
+    people: int = 0
+    reason: str = ""

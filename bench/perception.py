@@ -1,0 +1,310 @@
+"""`dume bench perception`: the pipeline's latency in a live stack, its accuracy on unseen seeds.
+
+Live (a real stack `["sim", "wbc", "perception"]`, lockstep, the hall, the robot standing
+under the whole-body controller, both cameras at 320 × 240): per frame, the wall time
+perception spends from the frame's arrival to its `Detections` (`process_ms`: decode,
+segment, geometry, publish), p50/p95, and the end-to-end latency the bench sees between a
+frame's arrival and its `Detections`' arrival; throughput in frames per wall second; and,
+in the same run while the stack still runs, the raw `cv2.dnn` forward of the network on
+frames of that run, with the ratio pipeline p50 / forward p50.
+
+Accuracy (in process, renders of seeds the network never saw): the robot stands at
+standoff poses in `look` facing each artifact (wrist camera) and 1-3 m away (head camera),
+with the trunk's height and tilt jittered. For every artifact in view within 1.5 m of the
+camera, not cut by the image border: bottle mask IoU (network vs truth), visible-centroid
+error (the detection's centroid vs the mean of the truth mask's back-projected points) and
+axis error (horizontal distance from the detected axis to the artifact's true axis, from
+the world description), for the network and for the truth segmenter (geometry alone).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import statistics
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco
+import numpy as np
+import zenoh
+
+from common import robot
+from common.config import resolve
+from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z
+from common.messages import as_numpy, decode
+from common.messages.perception import Detections
+from common.messages.sim import CameraFrame, SegmentationTruth
+from common.messages.world import WorldDescription
+from common.stack import ProcessStack
+from services.perception import metrics
+from services.perception.geometry import backproject, transform
+from services.perception.pipeline import detect, frame_geometry
+from services.perception.segmenter import Segmenter, TruthSegmenter
+from services.sim import feasibility as fz
+from services.sim import scene
+from services.sim.cameras import CameraRig
+from services.sim.world import generate_world
+
+log = logging.getLogger(__name__)
+
+#: World seeds the network never saw (checked against the model's sidecar).
+EVAL_SEEDS = (9001, 9002, 9003)
+MAX_RANGE_M = 1.5
+MIN_PIXELS = 50
+CLASSES = ("bottle", "can", "box", "person")
+
+
+def _pct(x: Sequence[float], q: float) -> float | None:
+    return round(float(np.percentile(x, q)), 4) if len(x) else None
+
+
+def _stats(name: str, x: Sequence[float], scale: float = 1.0) -> dict[str, Any]:
+    v = [scale * e for e in x]
+    return {f"{name}_p50": _pct(v, 50), f"{name}_p95": _pct(v, 95), f"{name}_max": _pct(v, 100)}
+
+
+# -- accuracy on renders -----------------------------------------------------------------
+
+
+def _shots(world: WorldDescription, rng: np.random.Generator) -> Iterator[tuple[str, Any, str]]:
+    """(camera, base pose, artifact id): wrist in `look` at standoff, head 1-3 m away."""
+    surfaces = {s.id: s for s in world.surfaces}
+    for a in world.artifacts:
+        for _ in range(2):
+            d = float(rng.uniform(robot.D_OPT_M, robot.STANDOFF_DISTANCE_M + 0.15))
+            pose = fz.standoff_pose_for(a, surfaces[a.surface_id], d, float(rng.uniform(-0.3, 0.3)))
+            yield "camera_wrist", pose, a.id
+        pose = fz.standoff_pose_for(a, surfaces[a.surface_id], float(rng.uniform(1.2, 2.0)))
+        yield "camera_head", pose, a.id
+
+
+def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, SegmentationTruth]]:
+    """Frames of the hall of `seed` from the bench's shots (deterministic per seed)."""
+    world = generate_world(seed, "hall")
+    rng = np.random.default_rng([seed, 0xBE7C])
+    model = scene.compile_scene(world)
+    data = mujoco.MjData(model)
+    qpos = robot.mj_indices(model).qpos
+    rig = CameraRig(model, 320, 240, world)
+    try:
+        for camera, pose, _ in _shots(world, rng):
+            posture = "look" if camera == "camera_wrist" else "stand"
+            q = np.array(robot.standing_q(posture, pose.x, pose.y, pose.yaw))
+            q[2] += rng.uniform(-0.03, 0.03)
+            tilt = rot_y(rng.uniform(-0.06, 0.06)) @ rot_x(rng.uniform(-0.03, 0.03))
+            q[3:7] = matrix_to_quat_xyzw(rot_z(pose.yaw) @ tilt)
+            data.qpos[qpos] = robot.q_pin_to_mj(q)
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_camlight(model, data)
+            frame, truth = rig.capture(data, camera, 0)
+            yield world, frame, truth
+    finally:
+        rig.close()
+
+
+def _errors(
+    world: WorldDescription,
+    frame: CameraFrame,
+    truth: SegmentationTruth,
+    predicted: Sequence[Any],
+    out: dict[str, list[float]],
+    prefix: str,
+) -> None:
+    """Per truth artifact in range: matched detection's IoU, centroid and axis errors."""
+    labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
+    depth = np.asarray(as_numpy(frame.depth), dtype=np.float64)
+    truths = TruthSegmenter(CLASSES).segment(labels, truth.instances)
+    matches = metrics.match_instances(predicted, truths, [t.truth_id or "" for t in truths], depth)
+    geo = frame_geometry(frame)
+    T_world_camera = geo.T_world_base_yaw @ geo.T_base_yaw_camera
+    artifacts = {a.id: a for a in world.artifacts}
+    for t, m in zip(truths, matches, strict=True):
+        art = artifacts.get(t.truth_id or "")
+        u0, v0, u1, v1 = t.bbox
+        cut = u0 == 0 or v0 == 0 or u1 == frame.width or v1 == frame.height
+        if art is None or m.pixels < MIN_PIXELS or cut:
+            continue
+        pts_cam = backproject(depth, t.mask, geo.K)
+        visible = transform(T_world_camera, pts_cam).mean(axis=0)
+        if float(np.linalg.norm(pts_cam.mean(axis=0))) > MAX_RANGE_M:
+            continue
+        if art.object_class == "bottle":
+            out[f"{prefix}bottle_iou"].append(m.iou)
+        if m.matched is None:
+            out[f"{prefix}missed"].append(1.0)
+            continue
+        det = detect(frame, [predicted[m.matched]], 0.0)
+        if not det:
+            continue
+        d = det[0].detection
+        out[f"{prefix}centroid_error_m"].append(
+            float(np.linalg.norm(np.array(d.centroid_in_world) - visible))
+        )
+        axis_err = math.hypot(
+            d.axis_in_world[0] - art.position[0], d.axis_in_world[1] - art.position[1]
+        )
+        out[f"{prefix}{art.object_class}_axis_error_m"].append(axis_err)
+
+
+def accuracy(seeds: Sequence[int], net: Segmenter | None) -> dict[str, Any]:
+    """Figures on the renders of `seeds` for the truth segmenter and the network."""
+    out: defaultdict[str, list[float]] = defaultdict(list)
+    frames = 0
+    for seed in seeds:
+        for world, frame, truth in render_seed(seed):
+            frames += 1
+            labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
+            truths = TruthSegmenter(CLASSES).segment(labels, truth.instances)
+            _errors(world, frame, truth, truths, out, "truth_")
+            if net is not None:
+                rgb = np.asarray(as_numpy(frame.rgb), dtype=np.uint8)
+                depth = np.asarray(as_numpy(frame.depth), dtype=np.float32)
+                _errors(world, frame, truth, net.segment(rgb, depth), out, "network_")
+    result: dict[str, Any] = {"eval_seeds": list(seeds), "eval_frames": frames}
+    for key in sorted(out):
+        values = out[key]
+        if key.endswith("missed"):
+            result[key] = len(values)
+        elif key.endswith("iou"):
+            result[f"{key}_mean"] = round(float(np.mean(values)), 4) if values else None
+            result[f"{key}_n"] = len(values)
+        else:
+            result.update(_stats(key.removesuffix("_m") + "_mm", values, 1000.0))
+            result[f"{key.removesuffix('_m')}_n"] = len(values)
+    return result
+
+
+# -- the live stack ----------------------------------------------------------------------
+
+
+class _Arrivals:
+    """Wall arrival times of frames and detections per (camera, stamp), from raw callbacks
+    (no decoding of images beyond the stamp's message)."""
+
+    def __init__(self, session: zenoh.Session, keys: Any, cameras: Sequence[str]) -> None:
+        self.lock = threading.Lock()
+        self.frames: dict[tuple[str, int], float] = {}
+        self.detections: dict[tuple[str, int], tuple[float, Detections]] = {}
+        self.kept: list[CameraFrame] = []
+        self._subs = [
+            session.declare_subscriber(keys.camera_rgbd(c), self._on_frame) for c in cameras
+        ]
+        self._subs.append(session.declare_subscriber(keys.detections, self._on_detections))
+
+    def _on_frame(self, sample: zenoh.Sample) -> None:
+        now = time.perf_counter()
+        frame = decode(sample.payload.to_bytes(), CameraFrame)
+        with self.lock:
+            self.frames[(frame.camera, frame.stamp_ns)] = now
+            if len(self.kept) < 20 and frame.stamp_ns >= 1_000_000_000:
+                self.kept.append(frame)
+
+    def _on_detections(self, sample: zenoh.Sample) -> None:
+        now = time.perf_counter()
+        msg = decode(sample.payload.to_bytes(), Detections)
+        with self.lock:
+            self.detections[(msg.camera, msg.stamp_ns)] = (now, msg)
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+def _forward_ms(net: Segmenter, frames: Sequence[CameraFrame]) -> list[float]:
+    times = []
+    for frame in frames:
+        rgb = np.asarray(as_numpy(frame.rgb), dtype=np.uint8)
+        blob = net.blob(rgb, np.asarray(as_numpy(frame.depth), dtype=np.float32))
+        t0 = time.perf_counter()
+        net.forward(blob)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return times
+
+
+def live(
+    overrides: Sequence[str], segmenter: str, sim_s: float, net: Segmenter | None
+) -> dict[str, Any]:
+    """The pipeline's timing in a running stack (see the module docstring)."""
+    settings = [
+        'sim.world="hall"',
+        "sim.world_seed=0",
+        "time.participants={}",
+        'time.participants.wbc.role="command"',
+        "time.participants.wbc.period_s=0.002",
+        "time.participants.wbc.latency_s=0.0",
+        'time.participants.perception.role="periodic"',
+        "time.participants.perception.period_s=0.1",
+        "time.participants.perception.latency_s=0.1",
+        f'perception.segmenter="{segmenter}"',
+        "recording.enabled=false",
+        f"sim.duration_s={sim_s + 60.0}",
+        *overrides,
+    ]
+    start_ns, end_ns = 1_000_000_000, round((1.0 + sim_s) * 1e9)
+    with ProcessStack(["sim", "wbc", "perception"], settings) as stack:
+        cams = stack.config.perception.cameras
+        arrivals = _Arrivals(stack.bus.session, stack.keys, cams)
+        last = stack.bus.latest(stack.keys.detections, Detections)
+        last.wait(lambda m: m.stamp_ns >= start_ns, 300.0)
+        t0 = time.perf_counter()
+        last.wait(lambda m: m.stamp_ns >= end_ns, 1200.0)
+        wall = time.perf_counter() - t0
+        forward = _forward_ms(net, arrivals.kept) if net is not None else []
+        arrivals.close()
+    process, e2e, reasons = [], [], set()
+    for (cam, stamp), (t_det, msg) in arrivals.detections.items():
+        if not start_ns <= stamp <= end_ns:
+            continue
+        if msg.reason:
+            reasons.add(msg.reason)
+            continue
+        process.append(msg.process_ms)
+        if (cam, stamp) in arrivals.frames:
+            e2e.append((t_det - arrivals.frames[(cam, stamp)]) * 1e3)
+    result: dict[str, Any] = {
+        "live_segmenter": segmenter,
+        "live_frames": len(process),
+        "live_frames_per_wall_s": round(len(process) / wall, 2),
+        "live_sim_rtf": round(sim_s / wall, 3),
+        **_stats("pipeline_ms", process),
+        **_stats("end_to_end_ms", e2e),
+        **_stats("dnn_forward_ms", forward),
+    }
+    if forward and process:
+        result["pipeline_over_forward_p50"] = round(
+            statistics.median(process) / statistics.median(forward), 2
+        )
+    if reasons:
+        result["live_reasons"] = sorted(reasons)
+    return result
+
+
+def _unseen(seeds: Sequence[int], model: Path) -> list[int]:
+    """`seeds` minus any in the model's training or validation ranges (from its sidecar)."""
+    try:
+        meta = json.loads(model.with_suffix(".json").read_text())
+        ranges = [meta[k] for k in ("train_seeds", "val_seeds") if k in meta]
+    except (OSError, ValueError):
+        return list(seeds)
+    return [s for s in seeds if not any(lo <= s <= hi for lo, hi in ranges)]
+
+
+def bench_perception(overrides: Sequence[str] = (), sim_s: float = 8.0) -> dict[str, Any]:
+    model = resolve("services/perception/models/segmenter.onnx")
+    net = Segmenter(model) if model.exists() else None
+    segmenter = "network" if net is not None else "truth"
+    result: dict[str, Any] = {"bench": "perception", "network": net is not None}
+    result.update(live(overrides, segmenter, sim_s, net))
+    result.update(accuracy(_unseen(EVAL_SEEDS, model), net))
+    for key, value in result.items():
+        print(f"{key:40s} {value}")
+    return result

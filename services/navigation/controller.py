@@ -1,0 +1,170 @@
+"""Omnidirectional regulated pure pursuit: a path and the base pose in, cmd_vel out.
+
+Each tick (`Follower.step`): the closest path pose ahead of the last one (the progress
+never goes back), a lookahead point `lookahead_m` further along it, and a velocity in the
+world towards that point whose speed is regulated down by (the minimum of) the limit
+`v_max[0]`, the costmap cost at the robot (`cost_slowdown`: near obstacles it walks
+slower), the path's turn within the lookahead, the remaining distance (it can stop:
+v ≤ √(2 a d)) and the caller's cap (people). The heading follows the path's direction
+(the B1 walks forward faster than sideways) and turns to the goal's yaw over the last
+`heading_blend_m`; a large heading error holds translation back until the robot has
+turned. The velocity goes to `base_yaw` (vx, vy scaled together to their limits, so the
+direction is kept) and through per-axis acceleration limits. Inside the position
+tolerance translation stops and only the heading is aligned; `arrived` once both
+tolerances hold.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from services.navigation.grid import Pose
+
+Vec3 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """v_max, a_max: (vx m/s, vy m/s, ωz rad/s) and per second; the rest in m, rad, 1/s."""
+
+    v_max: tuple[float, float, float] = (0.6, 0.3, 0.8)
+    a_max: tuple[float, float, float] = (0.8, 0.8, 1.5)
+    lookahead_m: float = 0.6
+    k_heading: float = 1.5
+    heading_blend_m: float = 0.8
+    turn_first_rad: float = 1.0
+    cost_slowdown: float = 0.5
+    min_speed: float = 0.05
+    k_position: float = 1.2
+    min_turn_rate: float = 0.0
+
+
+class FollowOutput(NamedTuple):
+    """cmd: (vx, vy, ωz) in base_yaw. arrived: within both tolerances and slow.
+    at_index: progress along the path (pose index). remaining_m: along the path from it."""
+
+    cmd: Vec3
+    arrived: bool
+    at_index: int
+    remaining_m: float
+    lookahead: tuple[float, float]
+    direction: tuple[float, float] | None
+
+
+def limit_accel(prev: Vec3, want: Vec3, a_max: tuple[float, float, float], dt: float) -> Vec3:
+    """`want` moved no further from `prev` than a_max · dt per axis."""
+    step = np.asarray(a_max) * dt
+    out: Vec3 = prev + np.clip(want - prev, -step, step)
+    return out
+
+
+def to_base(v_world: tuple[float, float], yaw: float) -> tuple[float, float]:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return c * v_world[0] + s * v_world[1], -s * v_world[0] + c * v_world[1]
+
+
+def scale_to_limits(vx: float, vy: float, vx_max: float, vy_max: float) -> tuple[float, float]:
+    """(vx, vy) scaled down together so each is within its limit."""
+    k = max(abs(vx) / vx_max, abs(vy) / vy_max, 1.0)
+    return vx / k, vy / k
+
+
+class Follower:
+    """Follows one path; `step` once per tick (see the module docstring)."""
+
+    def __init__(self, poses: NDArray[np.float64], p: ControllerParams) -> None:
+        self.p = p
+        self.set_path(poses)
+        self.cmd: Vec3 = np.zeros(3)
+
+    def set_path(self, poses: NDArray[np.float64]) -> None:
+        self.poses = poses
+        seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
+        self.s = np.concatenate([[0.0], np.cumsum(seg)])
+        self.index = 0
+
+    def remaining(self) -> float:
+        return float(self.s[-1] - self.s[self.index])
+
+    def _progress(self, x: float, y: float) -> int:
+        # Search a window ahead (the robot cannot have skipped far) for the closest pose.
+        end = int(np.searchsorted(self.s, self.s[self.index] + 2.0)) + 1
+        window = self.poses[self.index : end, :2]
+        d = np.hypot(window[:, 0] - x, window[:, 1] - y)
+        return self.index + int(np.argmin(d))
+
+    def step(
+        self,
+        pose: Pose,
+        dt: float,
+        cost_here: float,
+        speed_cap: float,
+        tol_xy: float,
+        tol_yaw: float,
+    ) -> FollowOutput:
+        p = self.p
+        self.index = self._progress(pose.x, pose.y)
+        goal = self.poses[-1]
+        to_goal = math.hypot(goal[0] - pose.x, goal[1] - pose.y)
+        remaining = max(self.remaining(), to_goal if self.index == len(self.poses) - 1 else 0.0)
+        la_s = self.s[self.index] + p.lookahead_m
+        k = min(int(np.searchsorted(self.s, la_s)), len(self.poses) - 1)
+        target = self.poses[k]
+        # The heading: along the path, blending to the goal's yaw near the end.
+        yaw_goal = float(goal[2])
+        path_yaw = float(self.poses[min(self.index + 1, len(self.poses) - 1), 2])
+        if len(self.poses) > 1 and self.index < len(self.poses) - 1:
+            d = self.poses[k, :2] - np.array([pose.x, pose.y])
+            if np.hypot(*d) > 0.1:
+                path_yaw = math.atan2(d[1], d[0])
+        blend = min(1.0, remaining / p.heading_blend_m) if p.heading_blend_m > 0 else 0.0
+        yaw_ref = yaw_goal + blend * math.remainder(path_yaw - yaw_goal, math.tau)
+        yaw_err = math.remainder(yaw_ref - pose.yaw, math.tau)
+        wz = float(np.clip(p.k_heading * yaw_err, -p.v_max[2], p.v_max[2]))
+        inside = to_goal <= tol_xy
+        if inside and abs(yaw_err) > 0.5 * tol_yaw:  # a gait turns poorly at tiny rates
+            wz = math.copysign(max(abs(wz), p.min_turn_rate), yaw_err)
+        direction: tuple[float, float] | None = None
+        vx = vy = 0.0
+        if not inside:
+            ex, ey = float(target[0] - pose.x), float(target[1] - pose.y)
+            norm = math.hypot(ex, ey)
+            if norm > 1e-6:
+                direction = (ex / norm, ey / norm)
+                turn = abs(math.remainder(float(target[2]) - path_yaw, math.tau))
+                speed = min(
+                    p.v_max[0],
+                    p.v_max[0] * (1.0 - p.cost_slowdown * max(cost_here, 0.0)),
+                    p.v_max[0] / (1.0 + 1.5 * turn),
+                    math.sqrt(2.0 * p.a_max[0] * 0.7 * remaining),
+                    p.k_position * to_goal if self.index >= len(self.poses) - 2 else math.inf,
+                    speed_cap,
+                )
+                if abs(yaw_err) > p.turn_first_rad and blend > 0.5:
+                    speed *= max(0.0, 1.0 - (abs(yaw_err) - p.turn_first_rad) / 0.5)
+                if speed_cap > 0:
+                    speed = max(speed, min(p.min_speed, speed_cap))
+                vx, vy = to_base((speed * direction[0], speed * direction[1]), pose.yaw)
+                vx, vy = scale_to_limits(vx, vy, p.v_max[0], p.v_max[1])
+        want = np.array([vx, vy, wz])
+        self.cmd = limit_accel(self.cmd, want, p.a_max, dt)
+        slow = float(np.hypot(self.cmd[0], self.cmd[1])) < 0.05
+        arrived = inside and abs(math.remainder(yaw_goal - pose.yaw, math.tau)) <= tol_yaw and slow
+        return FollowOutput(
+            self.cmd.copy(),
+            arrived,
+            self.index,
+            remaining,
+            (float(target[0]), float(target[1])),
+            direction,
+        )
+
+    def stop(self, dt: float) -> Vec3:
+        """Brake to rest within the acceleration limits."""
+        self.cmd = limit_accel(self.cmd, np.zeros(3), self.p.a_max, dt)
+        return self.cmd.copy()

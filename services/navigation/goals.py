@@ -1,0 +1,102 @@
+"""Goal poses from the map's data: an artifact's standoff pose and a person's handover pose.
+
+Standoff (the paper's "obstacle-free region in front of the object"): the artifact stands
+near the edge of a table or bench, which the occupancy grid holds. Casting rays from the
+artifact every `ray_step_rad`, the ray that leaves the occupied cells soonest crosses the
+nearest edge; the rays within `NORMAL_BAND_M` of the shortest are symmetric about the
+edge's outward normal, so their mean direction is that normal — the direction the world
+generator uses (`services.sim.feasibility.standoff_pose_for`, computed there from the
+surface's rectangle). The pose lies `STANDOFF_DISTANCE_M` out along it, facing the
+artifact; when its footprint is not free, directions further from the normal are tried
+in turn, so a crowded edge still gives a free pose.
+
+Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; in front
+of them when their heading is known, else on the robot's side; when that footprint is not
+free, the nearest free direction (by angle) around them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common import robot
+from services.navigation.costmap import Costmap, Person
+from services.navigation.grid import Footprint, Pose, footprint_free
+from services.navigation.planner import pose_ok
+
+RAY_STEP_RAD = math.radians(1.0)
+#: Rays leaving within this much of the shortest exit are averaged into the normal, m.
+NORMAL_BAND_M = 0.02
+MAX_RAY_M = 1.5
+
+
+class GoalError(ValueError):
+    """No free goal pose: what was tried."""
+
+
+def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> np.ndarray:
+    """Per direction, the distance (m) from (x, y) to the first free cell along the ray."""
+    grid = costmap.grid
+    steps = np.arange(0.0, MAX_RAY_M, 0.2 * grid.resolution)
+    px = x + np.cos(angles)[:, None] * steps[None, :]
+    py = y + np.sin(angles)[:, None] * steps[None, :]
+    iy, ix, inside = grid.cells(np.stack([px.ravel(), py.ravel()], axis=1))
+    occ = (grid.occupied[iy, ix] & inside).reshape(px.shape)
+    free = ~occ
+    first = np.where(free.any(axis=1), free.argmax(axis=1), len(steps) - 1)
+    out: np.ndarray = steps[first]
+    return out
+
+
+def standoff_pose(
+    costmap: Costmap, x: float, y: float, fp: Footprint, margin: float = 0.03
+) -> Pose:
+    """A free pose facing the artifact at (x, y), `STANDOFF_DISTANCE_M` away."""
+    angles = np.arange(0.0, 2 * math.pi, RAY_STEP_RAD)
+    exits = exit_distances(costmap, x, y, angles)
+    near = exits <= exits.min() + NORMAL_BAND_M
+    best = float(np.angle(np.exp(1j * angles[near]).sum()))
+    order = np.argsort(np.abs(np.angle(np.exp(1j * (angles - best)))), kind="stable")
+    d = robot.STANDOFF_DISTANCE_M
+    for k in order:
+        a = float(angles[k])
+        pose = Pose(x + d * math.cos(a), y + d * math.sin(a), math.remainder(a + math.pi, math.tau))
+        if pose_ok(costmap, pose, fp, margin):
+            return pose
+    raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) in any direction")
+
+
+def handover_pose(
+    costmap: Costmap,
+    person: Person,
+    robot_xy: tuple[float, float],
+    fp: Footprint,
+    margin: float = 0.03,
+) -> Pose:
+    """A free pose facing the person at `HANDOVER_DISTANCE_M` (see the module docstring)."""
+    if person.yaw is not None:
+        preferred = person.yaw
+    else:
+        preferred = math.atan2(robot_xy[1] - person.y, robot_xy[0] - person.x)
+    d = robot.HANDOVER_DISTANCE_M
+    # The person's own lethal disc is not an obstacle to the handover pose's footprint.
+    for k in range(0, 181, 5):
+        for sign in (1, -1) if k else (1,):
+            a = preferred + sign * math.radians(k)
+            pose = Pose(
+                person.x + d * math.cos(a),
+                person.y + d * math.sin(a),
+                math.remainder(a + math.pi, math.tau),
+            )
+            cell = costmap.grid.cell(pose.x, pose.y)
+            if cell is None:
+                continue
+            if footprint_free(costmap.occupied, costmap.grid, pose, fp, margin) and (
+                costmap.clearance[cell] > fp.half_width
+            ):
+                return pose
+    raise GoalError(
+        f"no free handover pose {d:.2f} m from {person.id} at ({person.x:.2f}, {person.y:.2f})"
+    )

@@ -1,0 +1,233 @@
+"""One goal's life: plan, follow, replan, recover, succeed or fail — pure, on sim time.
+
+`Navigator.tick(t, pose, world)` runs once per period with the costmap and people of the
+tick and returns the cmd_vel and the status. Per goal:
+- (re)plan at start, every `replan_s`, and when the path ahead (`blocked_lookahead_m`) crosses
+  a lethal cell; a plan that fails while a path is held keeps the old one until
+  `blocked_timeout_s`;
+- follow with `Follower`, capped by `people_limit` (a stop for a person counts as blocked
+  time, so a person who stays leads to a replan around them, then to recovery);
+- when blocked for `blocked_timeout_s` (no plan, or no progress), recoveries in order:
+  clear the short-lived layer, rotate in place (`rotate_s`), back off (`backoff_s`), each
+  followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
+  ever found);
+- `timeout_s` of sim time on one goal: `failed: timeout`.
+`cancel` brings the command to zero at once (the WBC's own acceleration limits shape it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from common.messages.navigation import NavFailure, NavState
+from services.navigation.controller import ControllerParams, Follower
+from services.navigation.costmap import Costmap
+from services.navigation.grid import Footprint, Pose
+from services.navigation.people import NO_LIMIT, PeopleParams, SpeedLimit, people_limit
+from services.navigation.planner import Plan, PlanError, PlanParams, plan
+
+NS = 1_000_000_000
+Recovery = Literal["", "clear", "rotate", "backoff"]
+
+
+@dataclass(frozen=True)
+class NavParams:
+    """Replanning and recovery times in s of sim time, distances in m."""
+
+    replan_s: float = 1.0
+    blocked_lookahead_m: float = 1.5
+    blocked_timeout_s: float = 3.0
+    rotate_s: float = 3.0
+    backoff_s: float = 1.5
+    backoff_speed: float = 0.15
+    timeout_s: float = 180.0
+    controller: ControllerParams = field(default_factory=ControllerParams)
+    planner: PlanParams = field(default_factory=PlanParams)
+    people: PeopleParams = field(default_factory=PeopleParams)
+
+
+@dataclass(frozen=True)
+class GoalSpec:
+    """A resolved goal: id, pose, tolerances, and the person handed over to (if any)."""
+
+    goal_id: str
+    pose: Pose
+    tol_xy: float
+    tol_yaw: float
+    handover_id: str = ""
+
+
+class TickOutput(NamedTuple):
+    cmd: NDArray[np.float64]
+    state: NavState
+    reason: NavFailure
+    detail: str
+    progress: float
+    remaining_m: float
+    new_plan: Plan | None
+    limit: SpeedLimit
+    recovery: Recovery
+
+
+class Navigator:
+    """The active goal's state machine (see the module docstring)."""
+
+    def __init__(self, fp: Footprint, p: NavParams, period_s: float) -> None:
+        self.fp, self.p, self.dt = fp, p, period_s
+        self.goal: GoalSpec | None = None
+        self.state: NavState = "idle"
+        self.reason: NavFailure = ""
+        self.detail = ""
+        self.cmd = np.zeros(3)
+
+    def start(self, goal: GoalSpec, t_ns: int) -> None:
+        self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
+        self.t0 = t_ns
+        self.plan: Plan | None = None
+        self.follower: Follower | None = None
+        self.last_plan_ns = -(10**18)
+        self.blocked_since: int | None = None
+        self.recoveries: list[Recovery] = ["clear", "rotate", "backoff"]
+        self.recovery: Recovery = ""
+        self.recovery_until = 0
+        self.best_remaining = math.inf
+        self.progress_ns = t_ns
+        self.total_m = 0.0
+
+    def cancel(self, reason: str) -> None:
+        if self.state == "active":
+            self.state, self.reason, self.detail = "cancelled", "cancelled", reason
+        self.cmd = np.zeros(3)
+
+    def _finish(self, state: NavState, reason: NavFailure, detail: str) -> None:
+        self.state, self.reason, self.detail = state, reason, detail
+        self.cmd = np.zeros(3)
+
+    def _out(self, limit: SpeedLimit = NO_LIMIT, new_plan: Plan | None = None) -> TickOutput:
+        remaining = self.follower.remaining() if self.follower else 0.0
+        progress = 0.0 if self.total_m <= 0 else min(1.0, max(0.0, 1.0 - remaining / self.total_m))
+        if self.state == "succeeded":
+            progress, remaining = 1.0, 0.0
+        return TickOutput(
+            self.cmd.copy(), self.state, self.reason, self.detail, progress, remaining,
+            new_plan, limit, self.recovery,
+        )  # fmt: skip
+
+    def _replan(self, t_ns: int, pose: Pose, cm: Costmap) -> Plan | None:
+        assert self.goal is not None
+        self.last_plan_ns = t_ns
+        try:
+            new = plan(cm, pose, self.goal.pose, self.fp, self.p.planner)
+        except PlanError as exc:
+            self.detail = str(exc)
+            if exc.reason == "invalid_goal" and self.plan is None:
+                self._finish("failed", "invalid_goal", str(exc))
+            return None
+        self.plan = new
+        if self.follower is None:
+            self.follower = Follower(new.poses, self.p.controller)
+            self.total_m = new.length_m
+        else:
+            self.follower.set_path(new.poses)
+        self.detail = f"following a {new.length_m:.1f} m path"
+        return new
+
+    def _path_blocked(self, cm: Costmap) -> bool:
+        if self.follower is None:
+            return True
+        f = self.follower
+        end = int(np.searchsorted(f.s, f.s[f.index] + self.p.blocked_lookahead_m)) + 1
+        ahead = f.poses[f.index + 1 : end, :2]
+        if not len(ahead):
+            return False
+        iy, ix, inside = cm.grid.cells(ahead)
+        return bool(np.any(cm.cost[iy, ix] < 0) | np.any(~inside))
+
+    def tick(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
+        if self.state != "active" or self.goal is None:
+            self.cmd = np.zeros(3)
+            return self._out()
+        g = self.goal
+        if t_ns - self.t0 > self.p.timeout_s * NS:
+            self._finish("failed", "timeout", f"not there after {self.p.timeout_s:.0f} s")
+            return self._out()
+        new_plan = None
+        if self.recovery:
+            return self._recover(t_ns, pose, cm)
+        blocked_path = self.plan is not None and self._path_blocked(cm)
+        if self.plan is None or blocked_path or t_ns - self.last_plan_ns >= self.p.replan_s * NS:
+            new_plan = self._replan(t_ns, pose, cm)
+            if self.state != "active":
+                return self._out()
+            if new_plan is None and blocked_path:
+                self.plan = None  # the held path runs through an obstacle: do not follow it
+        if self.plan is None or self.follower is None:
+            self.cmd = self.follower.stop(self.dt) if self.follower else np.zeros(3)
+            return self._blocked(t_ns, pose, cm, NO_LIMIT, new_plan)
+        f = self.follower
+        # The people cap needs the direction of travel: take the follower's, uncapped.
+        probe = f.poses[min(f.index + 10, len(f.poses) - 1), :2] - np.array([pose.x, pose.y])
+        norm = float(np.hypot(*probe))
+        direction = (probe[0] / norm, probe[1] / norm) if norm > 1e-3 else None
+        limit = people_limit(pose, direction, cm.people, self.fp, self.p.people, g.handover_id)
+        out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
+                     g.tol_xy, g.tol_yaw)  # fmt: skip
+        self.cmd = out.cmd
+        if limit.rule == "stop":
+            self.cmd = np.array([0.0, 0.0, out.cmd[2]])
+            f.cmd = self.cmd.copy()
+        if out.arrived:
+            self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
+            return self._out(limit, new_plan)
+        if out.remaining_m < self.best_remaining - 0.05 or limit.rule == "":
+            self.best_remaining = min(self.best_remaining, out.remaining_m)
+            self.progress_ns = t_ns
+        if limit.rule == "stop" or t_ns - self.progress_ns > self.p.blocked_timeout_s * NS:
+            return self._blocked(t_ns, pose, cm, limit, new_plan)
+        self.blocked_since = None
+        return self._out(limit, new_plan)
+
+    def _blocked(
+        self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit, new_plan: Plan | None
+    ) -> TickOutput:
+        if self.blocked_since is None:
+            self.blocked_since = t_ns
+        if t_ns - self.blocked_since < self.p.blocked_timeout_s * NS:
+            return self._out(limit, new_plan)
+        if not self.recoveries:
+            reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
+            self._finish("failed", reason, f"{reason}: {self.detail}; recoveries exhausted")
+            return self._out(limit, new_plan)
+        self.recovery = self.recoveries.pop(0)
+        self.blocked_since = None
+        span = {"clear": 0.0, "rotate": self.p.rotate_s, "backoff": self.p.backoff_s}
+        self.recovery_until = t_ns + round(span[self.recovery] * NS)
+        self.detail = f"recovery: {self.recovery}"
+        return self._out(limit, new_plan)
+
+    def _recover(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
+        """Rotate or back off until the recovery's time is up (clear is one tick: the node
+        empties the short-lived layer when it sees `recovery == "clear"`); then replan."""
+        rec = self.recovery
+        if t_ns >= self.recovery_until:
+            self.recovery = ""
+            self.cmd = np.zeros(3)
+            self.last_plan_ns = -(10**18)
+            self.progress_ns = t_ns
+            self.best_remaining = math.inf
+            return self._out()
+        if rec == "rotate":
+            self.cmd = np.array([0.0, 0.0, 0.5])
+        elif rec == "backoff":
+            back = Pose(
+                pose.x - 0.3 * math.cos(pose.yaw), pose.y - 0.3 * math.sin(pose.yaw), pose.yaw
+            )
+            free = cm.cost_at(back.x, back.y) >= 0
+            self.cmd = np.array([-self.p.backoff_speed if free else 0.0, 0.0, 0.0])
+        out = self._out()
+        return out._replace(recovery=rec)

@@ -1,0 +1,316 @@
+"""The navigation service: a 20 Hz lockstep participant around the pure modules.
+
+Start-up: the map source (`navigation.map_source`): the sim's truth description (tests)
+is read before ready; the semantic map is fetched every `map_refresh_s` on a thread of
+its own (grid and people), and until its grid is in, navigation is ready but idle
+("waiting for the map": zero cmd_vel, goals refused as unavailable). Each tick b (multiples of
+`time.participants.navigation.period_s`): the odom stamped b (waited for: odom is on a
+known 50 Hz schedule), the head camera's depth when a frame is due at b (10 Hz; marks
+and clears the short-lived layer), the cancels received; the costmap is rebuilt when a
+layer changed; `Navigator.tick`; then `wbc/cmd_vel` (source `navigation`, zero when
+idle) and `nav/status` stamped b every tick, `nav/path` on every new plan, and the ack.
+Goals arrive on the `nav/goal` queryable's thread: resolved there against the newest
+costmap (a standoff or handover pose from the map's data; refusals with a reason) and
+started by the loop at its next tick. Speed-limit changes and recoveries are logged.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+
+from common.bus import RequestError, WaitTimeout
+from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.lockstep import NS_PER_S, PeriodicTicker
+from common.messages import as_numpy, to_wire
+from common.messages.navigation import (
+    ArtifactStandoff,
+    NavCancel,
+    NavGoalReply,
+    NavGoalRequest,
+    NavPath,
+    NavStatus,
+    PersonHandover,
+    PoseGoal,
+)
+from common.messages.sim import CameraFrame, Odom
+from common.messages.wbc import CmdVel
+from common.service import Service
+from services.navigation import goals
+from services.navigation.controller import ControllerParams
+from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
+from services.navigation.depth import Camera, DepthParams, obstacle_cells, seen_through
+from services.navigation.grid import Footprint, Grid, Pose
+from services.navigation.nav_log import NavLogger
+from services.navigation.navigator import GoalSpec, Navigator, NavParams, TickOutput
+from services.navigation.people import PeopleParams
+from services.navigation.planner import PlanParams
+from services.navigation.sources import MapSource, Source, SourceError, WorldSource
+
+NAME = "navigation"
+INPUT_TIMEOUT_S = 30.0
+
+
+def odom_pose(odom: Odom) -> Pose:
+    R = quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw))
+    p = odom.base_position_in_world
+    return Pose(p[0], p[1], yaw_of(R))
+
+
+class NavNode:
+    """The loop and what it keeps between ticks; see the module docstring."""
+
+    def __init__(self, svc: Service) -> None:
+        self.svc, cfg = svc, svc.config
+        n = cfg.navigation
+        me = cfg.time.participants.get(NAME)
+        self.period_s = me.period_s if me else 0.05
+        self.fp = Footprint.stowed()
+        self.cost_params = CostParams(obstacle_ttl_s=n.obstacle_ttl_s)
+        self.params = NavParams(
+            replan_s=n.replan_s,
+            blocked_timeout_s=n.blocked_timeout_s,
+            timeout_s=n.goal_timeout_s,
+            controller=ControllerParams(
+                v_max=(n.v_max[0], n.v_max[1], n.v_max[2]),
+                a_max=(n.a_max[0], n.a_max[1], n.a_max[2]),
+                lookahead_m=n.lookahead_m,
+            ),
+            planner=PlanParams(cost_weight=n.cost_weight, goal_tolerance_m=n.goal_search_m),
+            people=PeopleParams(
+                slow_radius_m=n.slow_radius_m,
+                slow_speed=n.slow_speed,
+                stop_distance_m=n.stop_distance_m,
+                handover_speed=n.handover_speed,
+            ),
+        )
+        self.depth_params = DepthParams()
+        bus, keys = svc.bus, svc.keys
+        self.source: Source = self._world_source() if n.map_source == "world" else MapSource(bus)
+        self.ttl_ns = round(n.obstacle_ttl_s * NS_PER_S)
+        self.grid: Grid | None = None
+        self.layer = ObstacleLayer((1, 1), self.ttl_ns)
+        self.people: list[Person] = []
+        self.costmap: Costmap | None = None
+        self._fresh: tuple[Grid, list[Person]] | None = None
+        if isinstance(self.source, WorldSource):  # truth: there at once, and static
+            self._adopt(self.source.grid(), self.source.people(), 0)
+        self.nav = Navigator(self.fp, self.params, self.period_s)
+        self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
+        self.camera_period_ns = round(NS_PER_S / cfg.sim.camera_hz)
+        self.odom = bus.latest(keys.odom, Odom, history=16)
+        self.frames = (
+            bus.latest(keys.camera_rgbd(self.camera), CameraFrame, 2) if self.camera else None
+        )
+        self.cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
+        self.cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
+        self.status_pub = bus.publisher(keys.nav_status, NavStatus, "data")
+        self.path_pub = bus.publisher(keys.nav_path, NavPath, "data")
+        self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
+        self.log = NavLogger(svc.rec, svc.log)
+        self._lock = threading.Lock()
+        self._pending: GoalSpec | None = None
+        self._count = 0
+        self._pose: Pose | None = None
+        bus.serve(keys.nav_goal, NavGoalRequest, self._on_goal)
+
+    # -- map ------------------------------------------------------------------------------
+
+    def _world_source(self) -> WorldSource:
+        while True:
+            try:
+                return WorldSource(self.svc.bus, timeout_s=5.0)
+            except SourceError as exc:
+                self.svc.log.info("waiting for the sim: %s", exc)
+                if self.svc.stop.wait(0.5):
+                    raise
+
+    def _fetch_map(self) -> None:
+        """The semantic map's grid and people, every `map_refresh_s` (its own thread:
+        a query may take seconds, which the lockstep loop must not)."""
+        period = self.svc.config.navigation.map_refresh_s
+        said = ""
+        while not self.svc.stopping:
+            try:
+                grid = self.source.grid()
+                people = self.source.people()
+                with self._lock:
+                    self._fresh = (grid, people)
+                said = ""
+            except SourceError as exc:
+                if str(exc) != said:
+                    self.svc.log.warning("map unavailable: %s", exc)
+                    said = str(exc)
+            self.svc.stop.wait(period)
+
+    def _adopt(self, grid: Grid, people: list[Person], t_ns: int) -> None:
+        if self.grid is None or self.grid.shape != grid.shape:
+            self.svc.log.info(
+                "map from %s: %s cells of %.2f m", self.source.name, grid.shape, grid.resolution
+            )
+            self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
+        self.grid, self.people = grid, people
+        self.costmap = self._build(t_ns)
+
+    def _build(self, t_ns: int) -> Costmap:
+        assert self.grid is not None  # called once a grid is in
+        people = self.people if self.svc.config.navigation.people_in_costmap else []
+        cm = build_costmap(self.grid, self.fp, self.cost_params, self.layer.active(t_ns), people)
+        # The speed rules always see every person, whether or not the plan avoids them.
+        return Costmap(cm.grid, cm.cost, cm.occupied, cm.clearance, tuple(self.people))
+
+    # -- goals (the server's thread) ------------------------------------------------------
+
+    def _on_goal(self, req: NavGoalRequest | None, _selector: str) -> NavGoalReply:
+        if req is None:
+            raise RequestError("malformed", "a NavGoalRequest is needed")
+        cm, pose, cfg = self.costmap, self._pose, self.svc.config.navigation
+        if cm is None:
+            raise RequestError("unavailable", f"no map yet from {self.source.name}")
+        g = req.goal
+        try:
+            if isinstance(g, PoseGoal):
+                target, tol, tol_yaw, handover = (
+                    Pose(g.x, g.y, g.yaw),
+                    g.position_tolerance_m,
+                    g.yaw_tolerance_rad,
+                    "",
+                )
+            elif isinstance(g, ArtifactStandoff):
+                x, y = self.source.artifact_xy(g.artifact_id)
+                target = goals.standoff_pose(cm, x, y, self.fp)
+                tol, tol_yaw, handover = cfg.goal_tolerance_m, cfg.goal_tolerance_rad, ""
+            else:
+                assert isinstance(g, PersonHandover)
+                person = self.source.person(g.person_id)
+                here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
+                target = goals.handover_pose(cm, person, here, self.fp)
+                tol, tol_yaw, handover = cfg.goal_tolerance_m, cfg.goal_tolerance_rad, g.person_id
+        except SourceError as exc:
+            return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
+        except goals.GoalError as exc:
+            return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
+        if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
+            return NavGoalReply(accepted=False, reason=f"invalid_goal: {target} is off the map")
+        with self._lock:
+            self._count += 1
+            spec = GoalSpec(f"nav_{self._count}", target, tol, tol_yaw, handover)
+            self._pending = spec
+        self.svc.log.info(
+            "goal %s accepted: %s -> (%.2f, %.2f, %.2f)", spec.goal_id, type(g).__name__, *target
+        )
+        return NavGoalReply(accepted=True, goal_id=spec.goal_id)
+
+    # -- the loop -------------------------------------------------------------------------
+
+    def run(self) -> None:
+        if isinstance(self.source, MapSource):
+            threading.Thread(target=self._fetch_map, name="map", daemon=True).start()
+        self.svc.ready()
+        for b in self.ticker.ticks():
+            try:
+                self.tick(b)
+            finally:
+                self.ticker.ack(b)
+
+    def _camera(self, b: int, pose: Pose) -> bool:
+        if self.frames is None or self.grid is None or b % self.camera_period_ns:
+            return False
+        try:
+            self.frames.wait_stamp(b, INPUT_TIMEOUT_S)
+        except WaitTimeout:
+            self.svc.log.warning("no %s frame for t=%.2f s", self.camera, b / NS_PER_S)
+            return False
+        f = self.frames.at(b)
+        if f is None or f.stamp_ns != b:
+            return False
+        T = np.array(f.T_world_base).reshape(4, 4) @ np.array(f.T_base_camera).reshape(4, 4)
+        cam = Camera(f.fx, f.fy, f.cx, f.cy, T, np.asarray(as_numpy(f.depth), dtype=np.float32))
+        iy, ix = np.nonzero(self.layer.active(b))
+        through = seen_through(cam, self.grid, iy, ix, self.depth_params)
+        self.layer.clear(iy[through], ix[through])
+        my, mx = obstacle_cells(cam, self.grid, pose, self.fp, self.depth_params)
+        self.layer.mark(my, mx, b)
+        return bool(len(my) or through.any() or len(iy))
+
+    def tick(self, b: int) -> None:
+        t0 = time.perf_counter()
+        try:
+            self.odom.wait_stamp(b, INPUT_TIMEOUT_S)
+        except WaitTimeout:
+            self.svc.log.warning("no odom for t=%.2f s: standing still", b / NS_PER_S)
+        odom = self.odom.at(b)
+        if odom is None:
+            self._publish(b, np.zeros(3), None, "no odom")
+            return
+        pose = odom_pose(odom)
+        self._pose = pose
+        changed = self._camera(b, pose)
+        with self._lock:
+            fresh, self._fresh = self._fresh, None
+        if fresh is not None:
+            self._adopt(*fresh, b)
+        if self.costmap is None:
+            self._publish(b, np.zeros(3), None, "waiting for the map")
+            return
+        for c in self.cancels.drain():
+            if self.nav.state == "active" and c.goal_id in (
+                "",
+                self.nav.goal.goal_id if self.nav.goal else "",
+            ):
+                self.nav.cancel(c.reason or "cancelled")
+                self.svc.log.info(
+                    "goal %s cancelled: %s",
+                    self.nav.goal.goal_id if self.nav.goal else "",
+                    c.reason,
+                )
+        with self._lock:
+            pending, self._pending = self._pending, None
+        if pending is not None:
+            if self.nav.state == "active" and self.nav.goal is not None:
+                self.svc.log.info("goal %s replaced by %s", self.nav.goal.goal_id, pending.goal_id)
+            self.nav.start(pending, b)
+        if changed:
+            self.costmap = self._build(b)
+        out = self.nav.tick(b, pose, self.costmap)
+        if out.recovery == "clear" and self.nav.recovery == "clear":
+            self.layer.clear_all()
+            self.costmap = self._build(b)
+        self._publish(b, out.cmd, out)
+        self.log.tick(b, pose, self.nav, out, self.costmap, (time.perf_counter() - t0) * 1e3)
+
+    def _publish(self, b: int, cmd: np.ndarray, out: TickOutput | None, detail: str = "") -> None:
+        self.cmd_pub.put(
+            CmdVel(stamp_ns=b, vx=float(cmd[0]), vy=float(cmd[1]), wz=float(cmd[2]), source=NAME)
+        )
+        goal_id = self.nav.goal.goal_id if self.nav.goal else ""
+        if out is None:
+            state = self.nav.state
+            self.status_pub.put(NavStatus(stamp_ns=b, goal_id=goal_id, state=state, detail=detail))
+            return
+        if out.new_plan is not None:
+            self.path_pub.put(
+                NavPath(
+                    stamp_ns=b,
+                    goal_id=goal_id,
+                    poses=to_wire(np.ascontiguousarray(out.new_plan.poses)),
+                )
+            )
+        self.status_pub.put(
+            NavStatus(
+                stamp_ns=b,
+                goal_id=goal_id,
+                state=out.state,
+                reason=out.reason,
+                detail=out.detail,
+                progress=out.progress,
+                remaining_m=out.remaining_m,
+            )
+        )
+
+
+def main(svc: Service) -> None:
+    NavNode(svc).run()

@@ -1,0 +1,104 @@
+"""Speed and separation monitoring around people (in the spirit of ISO/TS 15066).
+
+Distances are from the robot's footprint (arm stowed) to a person's floor position.
+`people_limit` gives the speed cap of one tick: `stop` when a person is within
+`stop_distance_m` in the direction of travel (ahead of the footprint along the commanded
+velocity, within ±`travel_half_angle_rad`); `handover_speed` within `slow_radius_m` of
+the person being handed over to; `slow_speed` within `slow_radius_m` of anyone else;
+otherwise no cap. The node logs every change of the active rule.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal, NamedTuple
+
+import numpy as np
+
+from services.navigation.costmap import Person
+from services.navigation.grid import Footprint, Pose, distance_to_footprint
+
+Rule = Literal["", "slow", "handover", "stop"]
+
+
+@dataclass(frozen=True)
+class PeopleParams:
+    """Speeds in m/s, distances in m (from the footprint), angle in rad."""
+
+    slow_radius_m: float = 2.0
+    slow_speed: float = 0.3
+    stop_distance_m: float = 0.6
+    handover_speed: float = 0.15
+    travel_half_angle_rad: float = math.radians(60.0)
+
+
+class SpeedLimit(NamedTuple):
+    """speed: cap on the base's translation, m/s (inf: none). rule: which one acts.
+    person_id, distance_m: the person it acts for and their distance from the footprint."""
+
+    speed: float
+    rule: Rule
+    person_id: str = ""
+    distance_m: float = math.inf
+
+
+NO_LIMIT = SpeedLimit(math.inf, "")
+
+
+def people_limit(
+    pose: Pose,
+    direction_world: tuple[float, float] | None,
+    people: tuple[Person, ...] | list[Person],
+    fp: Footprint,
+    p: PeopleParams,
+    handover_id: str = "",
+) -> SpeedLimit:
+    """The tightest cap that people impose now; `direction_world` the intended travel
+    direction (unit, world; None when not translating)."""
+    if not people:
+        return NO_LIMIT
+    pts = np.array([[q.x, q.y] for q in people])
+    dist = distance_to_footprint(pose, fp, pts)
+    best = NO_LIMIT
+    for person, d in zip(people, dist.tolist(), strict=True):
+        if d > p.slow_radius_m:
+            continue
+        if (
+            direction_world is not None
+            and d <= p.stop_distance_m
+            and _ahead(pose, fp, (person.x, person.y), direction_world, p.travel_half_angle_rad)
+        ):
+            return SpeedLimit(0.0, "stop", person.id, d)
+        handing = person.id == handover_id
+        cap = SpeedLimit(
+            p.handover_speed if handing else p.slow_speed,
+            "handover" if handing else "slow",
+            person.id,
+            d,
+        )
+        if cap.speed < best.speed or (cap.speed == best.speed and d < best.distance_m):
+            best = cap
+    return best
+
+
+def _ahead(
+    pose: Pose,
+    fp: Footprint,
+    xy: tuple[float, float],
+    direction: tuple[float, float],
+    half_angle: float,
+) -> bool:
+    """Whether the person lies in the direction of travel, seen from the footprint's
+    nearest point to them."""
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    dx, dy = xy[0] - pose.x, xy[1] - pose.y
+    u, v = c * dx + s * dy, -s * dx + c * dy
+    u = min(max(u, -fp.back), fp.front)
+    v = min(max(v, -fp.half_width), fp.half_width)
+    nx, ny = pose.x + c * u - s * v, pose.y + s * u + c * v
+    ex, ey = xy[0] - nx, xy[1] - ny
+    norm = math.hypot(ex, ey)
+    if norm < 1e-6:
+        return True
+    return (ex * direction[0] + ey * direction[1]) / norm >= math.cos(half_angle)

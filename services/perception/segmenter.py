@@ -1,0 +1,221 @@
+"""Instance segmentation at run time: the shipped ONNX network through OpenCV DNN.
+
+`Segmenter(model).segment(rgb, depth)` → `Instance`s (class, score, full-frame mask, box).
+The network (`services.perception.training.model`) labels every pixel with a class; the
+instances are the connected components of each class's mask after cutting it along depth
+discontinuities (two people one behind the other, two cans side by side at different
+depths), the cut pixels given back to the neighbour nearest in depth. The artifact classes
+(bottle, can, box) are pooled before the split and each component takes the class its
+pixels' probabilities vote for, so an object read partly as one class and partly as another
+stays whole; people are split on their own. A component's score is its class's mean
+probability over it; components under `min_area` pixels or `min_score` are dropped. The
+model's JSON sidecar (same name, `.json`) gives the classes, input size and normalisation;
+frames of another size are resized in and the masks resized back.
+
+`TruthSegmenter` turns the sim's `segmentation_truth` labels into the same `Instance`s: for
+ablation and evaluation only (`--segmenter truth`), never for the robot's own perception.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+BoolArray = NDArray[np.bool_]
+#: The model the repository ships.
+DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "segmenter.onnx"
+#: A depth step between neighbours larger than this (m) plus `DEPTH_JUMP_REL` × depth cuts:
+#: more than a body's own relief (a torso stands ~9 cm in front of the legs), less than the
+#: gap between two objects one behind the other.
+DEPTH_JUMP_M = 0.10
+DEPTH_JUMP_REL = 0.03
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One segmented instance.
+
+    class_name: bottle, can, box, person, …; score: [0, 1]; mask: (H, W) bool, full frame;
+    bbox: (u0, v0, u1, v1) pixels, inclusive-exclusive; truth_id: the sim's id (truth only).
+    """
+
+    class_name: str
+    score: float
+    mask: BoolArray
+    bbox: tuple[int, int, int, int]
+    truth_id: str | None = None
+
+
+class SegmenterError(ValueError):
+    """A model that cannot be used, or a frame that cannot be segmented; says which and why."""
+
+
+def bbox_of(mask: BoolArray) -> tuple[int, int, int, int]:
+    """(u0, v0, u1, v1) of a non-empty mask, inclusive-exclusive."""
+    vs, us = np.nonzero(mask)
+    return int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
+
+
+def depth_cuts(depth: NDArray[np.floating]) -> BoolArray:
+    """Pixels on the far side of a depth discontinuity with a 4-neighbour (no-return is 0
+    and never cuts)."""
+    d = np.asarray(depth, dtype=np.float32)
+    cut = np.zeros(d.shape, dtype=bool)
+    for axis in (0, 1):
+        a = d[:-1, :] if axis == 0 else d[:, :-1]
+        b = d[1:, :] if axis == 0 else d[:, 1:]
+        valid = (a > 0) & (b > 0)
+        jump = valid & (np.abs(a - b) > DEPTH_JUMP_M + DEPTH_JUMP_REL * np.minimum(a, b))
+        far_a, far_b = jump & (a > b), jump & (b > a)
+        if axis == 0:
+            cut[:-1, :] |= far_a
+            cut[1:, :] |= far_b
+        else:
+            cut[:, :-1] |= far_a
+            cut[:, 1:] |= far_b
+    return cut
+
+
+def split_instances(
+    mask: BoolArray, depth: NDArray[np.floating], cuts: BoolArray, min_area: int
+) -> list[BoolArray]:
+    """The components of `mask` separated by `cuts`, cut pixels returned to the
+    4-neighbour component nearest in depth; components under `min_area` dropped."""
+    inner = (mask & ~cuts).astype(np.uint8)
+    n, labels = cv2.connectedComponents(inner, connectivity=4)
+    if n <= 1:
+        return []
+    rest = mask & cuts
+    if rest.any():
+        d = np.asarray(depth, dtype=np.float32)
+        vs, us = np.nonzero(rest)
+        h, w = mask.shape
+        best = np.full(vs.size, np.inf, dtype=np.float32)
+        owner = np.zeros(vs.size, dtype=labels.dtype)
+        for dv, du in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+            nv, nu = np.clip(vs + dv, 0, h - 1), np.clip(us + du, 0, w - 1)
+            lab = labels[nv, nu]
+            gap = np.where(lab > 0, np.abs(d[nv, nu] - d[vs, us]), np.inf)
+            better = gap < best
+            best[better], owner[better] = gap[better], lab[better]
+        labels[vs, us] = owner
+    areas = np.bincount(labels.ravel(), minlength=n)
+    return [labels == k for k in range(1, n) if areas[k] >= min_area]
+
+
+class Segmenter:
+    """The ONNX network through `cv2.dnn` plus instance separation (see the module)."""
+
+    def __init__(
+        self,
+        model: Path | str = DEFAULT_MODEL,
+        min_area: int = 25,
+        min_score: float = 0.5,
+        threads: int | None = None,
+    ) -> None:
+        model = Path(model)
+        meta_path = model.with_suffix(".json")
+        try:
+            self.meta: dict[str, Any] = json.loads(meta_path.read_text())
+            self.classes: tuple[str, ...] = tuple(self.meta["classes"])
+            self.width, self.height = (int(v) for v in self.meta["input_size"])
+            self.mean = np.asarray(self.meta["mean"], dtype=np.float32)
+            self.std = np.asarray(self.meta["std"], dtype=np.float32)
+            self.inv_depth_max = float(self.meta["inv_depth_max"])
+        except (OSError, KeyError, TypeError, ValueError) as exc:
+            raise SegmenterError(f"model sidecar {meta_path} unusable: {exc}") from exc
+        try:
+            self.net = cv2.dnn.readNetFromONNX(str(model))
+        except cv2.error as exc:
+            raise SegmenterError(f"cannot load {model}: {exc}") from exc
+        if threads is not None:
+            cv2.setNumThreads(threads)
+        self.min_area, self.min_score = min_area, min_score
+        # People apart; the artifact classes pooled, so that one object read partly as a can
+        # and partly as a bottle stays one instance (of the class most of it voted for).
+        objects = [c for c, name in enumerate(self.classes) if name not in ("background", "person")]
+        people = [c for c, name in enumerate(self.classes) if name == "person"]
+        self.groups = [g for g in (objects, people) if g]
+
+    def blob(self, rgb: NDArray[np.uint8], depth: NDArray[np.floating]) -> NDArray[np.float32]:
+        """The network's (1, 4, h, w) input for one frame (resized to the model's size)."""
+        image, d = self._check(rgb, depth)
+        size = (self.width, self.height)
+        if image.shape[:2] != (self.height, self.width):
+            image = np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA))
+            d = np.asarray(cv2.resize(d, size, interpolation=cv2.INTER_NEAREST))
+        x = (image.astype(np.float32) * np.float32(1 / 255) - self.mean) / self.std
+        inv = np.where(d > 0, 1.0 / np.maximum(d, 1e-3), 0.0).astype(np.float32)
+        inv = np.minimum(inv, self.inv_depth_max) * np.float32(1.0 / self.inv_depth_max)
+        return np.concatenate([x.transpose(2, 0, 1), inv[None]])[None].astype(np.float32)
+
+    def forward(self, blob: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Raw class logits (C, h, w) of one input blob: the part that `cv2.dnn` runs."""
+        self.net.setInput(blob)
+        out = np.asarray(self.net.forward(), dtype=np.float32)
+        if out.ndim != 4 or out.shape[1] != len(self.classes):
+            raise SegmenterError(f"model output {out.shape} is not (1, {len(self.classes)}, h, w)")
+        return out[0]
+
+    def segment(self, rgb: NDArray[np.uint8], depth: NDArray[np.floating]) -> list[Instance]:
+        """Instances in an (H, W, 3) uint8 RGB frame with its (H, W) depth in m (0 = none)."""
+        rgb, depth = self._check(rgb, depth)
+        logits = self.forward(self.blob(rgb, depth))
+        e = np.exp(logits - logits.max(axis=0, keepdims=True))
+        prob = e / e.sum(axis=0, keepdims=True)
+        cls = prob.argmax(axis=0)
+        h, w = depth.shape
+        if cls.shape != (h, w):
+            cls = cv2.resize(cls.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
+            prob = np.stack([cv2.resize(p, (w, h)) for p in prob])
+        cuts = depth_cuts(depth)
+        found: list[Instance] = []
+        for group in self.groups:
+            mask = np.isin(cls, group)
+            if np.count_nonzero(mask) < self.min_area:
+                continue
+            for part in split_instances(mask, depth, cuts, self.min_area):
+                votes = [float(prob[c][part].sum()) for c in group]
+                c = group[int(np.argmax(votes))]
+                score = float(prob[c][part].mean())
+                if score >= self.min_score:
+                    found.append(Instance(self.classes[c], score, part, bbox_of(part)))
+        return found
+
+    @staticmethod
+    def _check(
+        rgb: NDArray[Any], depth: NDArray[Any]
+    ) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
+        rgb, depth = np.asarray(rgb), np.asarray(depth)
+        if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+            raise SegmenterError(f"rgb must be (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
+        if depth.shape != rgb.shape[:2]:
+            raise SegmenterError(f"depth {depth.shape} does not match rgb {rgb.shape[:2]}")
+        depth = np.nan_to_num(depth.astype(np.float32, copy=False), nan=0.0, posinf=0.0)
+        return rgb, depth
+
+
+class TruthSegmenter:
+    """The sim's instance labels as `Instance`s (sim truth: ablation and evaluation only)."""
+
+    def __init__(self, classes: tuple[str, ...] = ("bottle", "can", "box", "person")) -> None:
+        self.classes = classes
+
+    def segment(self, labels: NDArray[np.integer], instances: dict[int, str]) -> list[Instance]:
+        """One `Instance` (score 1) per labelled id whose class (its prefix) is known."""
+        labels = np.asarray(labels)
+        found: list[Instance] = []
+        present = set(np.unique(labels).tolist())
+        for label, truth_id in sorted(instances.items()):
+            cls = truth_id.rsplit("_", 1)[0]
+            if cls not in self.classes or label not in present:
+                continue
+            mask = labels == label
+            found.append(Instance(cls, 1.0, mask, bbox_of(mask), truth_id))
+        return found

@@ -1,0 +1,1 @@
+"""The semantic map: artifacts and people with ids, fused from detections, persisted."""

@@ -1,0 +1,120 @@
+"""Artifacts: association by class and a gated distance, a per-entity Kalman mean.
+
+An artifact does not move, so its estimate is a static Kalman filter on the horizontal
+position: each detection with noise σ(range) pulls the mean by K = P (P + R)⁻¹ and
+shrinks P. One frame's detections are matched to the artifacts of their class greedily by
+distance, each artifact taking at most one detection, inside a gate of
+max(gate_min, gate_sigmas × √(σ_track² + σ_meas²)). A detection that matches nothing
+starts a tentative track; the second hit gives it the next `<class>_<n>`. Tentative tracks
+not seen again within `tentative_ttl_ns` are dropped (a one-frame false positive never
+gets an id). An artifact moved elsewhere shows up as a new artifact while the old one is
+found missing at its place (`missing`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from services.semantic_map.entities import IdBook, Observation, Track
+
+
+@dataclass(frozen=True)
+class FusionParams:
+    gate_min_m: float = 0.25
+    gate_sigmas: float = 3.0
+    confirm_hits: int = 2
+    tentative_ttl_ns: int = 3_000_000_000
+
+
+class ArtifactTracker:
+    """Every artifact; `update(stamp, observations)` fuses one frame's detections."""
+
+    def __init__(self, ids: IdBook, params: FusionParams) -> None:
+        self.ids = ids
+        self.params = params
+        self.tracks: list[Track] = []
+
+    @property
+    def confirmed(self) -> list[Track]:
+        return [t for t in self.tracks if t.confirmed]
+
+    def by_id(self, entity_id: str) -> Track | None:
+        return next((t for t in self.tracks if t.id == entity_id), None)
+
+    def add(self, track: Track) -> None:
+        """A known artifact (from a prior, a seed, the database)."""
+        if track.id is not None:
+            self.ids.reserve(track.id)
+        self.tracks.append(track)
+
+    def gate(self, track: Track, obs: Observation) -> float:
+        spread = np.sqrt(track.sigma_m**2 + obs.sigma_m**2)
+        return max(self.params.gate_min_m, self.params.gate_sigmas * float(spread))
+
+    def update(
+        self, stamp_ns: int, observations: list[Observation]
+    ) -> tuple[list[Track], set[int]]:
+        """Fuse one frame. Returns the tracks changed (confirmed ones, to store) and the
+        indices (into `self.tracks`, after the update) of the tracks seen in this frame."""
+        pairs: list[tuple[float, int, int]] = []
+        for j, obs in enumerate(observations):
+            for i, tr in enumerate(self.tracks):
+                if tr.class_name != obs.class_name:
+                    continue
+                d = float(np.linalg.norm(tr.xy - obs.xy))
+                if d <= self.gate(tr, obs):
+                    pairs.append((d, i, j))
+        pairs.sort()
+        used_t: set[int] = set()
+        used_o: set[int] = set()
+        changed: list[Track] = []
+        for _d, i, j in pairs:
+            if i in used_t or j in used_o:
+                continue
+            used_t.add(i)
+            used_o.add(j)
+            tr = self.tracks[i]
+            self._fuse(tr, observations[j], stamp_ns)
+            if not tr.confirmed and tr.hits >= self.params.confirm_hits:
+                tr.id = self.ids.next_id(tr.class_name)
+            if tr.confirmed:
+                changed.append(tr)
+        for j, obs in enumerate(observations):
+            if j in used_o:
+                continue
+            tr = Track(
+                class_name=obs.class_name,
+                kind="artifact",
+                xy=obs.xy.astype(float).copy(),
+                cov=np.eye(2) * obs.sigma_m**2,
+                z=obs.z,
+                source="perception",
+                last_seen_ns=stamp_ns,
+                first_seen_ns=stamp_ns,
+                hits=1,
+            )
+            if self.params.confirm_hits <= 1:
+                tr.id = self.ids.next_id(tr.class_name)
+                changed.append(tr)
+            self.tracks.append(tr)
+            used_t.add(len(self.tracks) - 1)
+        self._expire(stamp_ns)
+        seen = {i for i, t in enumerate(self.tracks) if t.last_seen_ns == stamp_ns}
+        return changed, seen
+
+    def _fuse(self, tr: Track, obs: Observation, stamp_ns: int) -> None:
+        R = np.eye(2) * obs.sigma_m**2
+        K = tr.cov @ np.linalg.inv(tr.cov + R)
+        tr.xy = tr.xy + K @ (obs.xy - tr.xy)
+        tr.cov = (np.eye(2) - K) @ tr.cov
+        tr.z += (obs.z - tr.z) / (tr.hits + 1)  # the height: a plain running mean
+        tr.hits += 1
+        tr.last_seen_ns = stamp_ns
+        tr.misses = 0
+        tr.missing_since_ns = None
+
+    def _expire(self, stamp_ns: int) -> None:
+        ttl = self.params.tentative_ttl_ns
+        self.tracks = [t for t in self.tracks if t.confirmed or stamp_ns - t.last_seen_ns <= ttl]

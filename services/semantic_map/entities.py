@@ -1,0 +1,145 @@
+"""The map's in-memory entities and their ids, shared by the artifact and person trackers.
+
+A `Track` is one artifact or person: a horizontal position with a covariance, a height,
+bookkeeping (last seen, missing since, source) and, for people, a velocity and an
+appearance histogram. A track is *tentative* (no id, never listed or stored) until it has
+been seen `confirm_hits` times; then `IdBook` gives it the next `<class>_<n>` of its class.
+Numbers are never reused: the book remembers the last number per class, also across
+restarts (it is stored with the map) and after an import.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common.geometry import FloatArray
+from common.messages.semantic_map import EntityKind, MapEntity, Source
+
+_ID = re.compile(r"^([a-z][a-z0-9]*)_([1-9][0-9]*)$")
+
+
+def split_id(entity_id: str) -> tuple[str, int] | None:
+    """`("bottle", 3)` from `bottle_3`; None for anything that is not an id."""
+    m = _ID.match(entity_id)
+    return (m.group(1), int(m.group(2))) if m else None
+
+
+class IdBook:
+    """The next `<class>_<n>` per class; never gives a number twice."""
+
+    def __init__(self, counters: dict[str, int] | None = None) -> None:
+        self.counters: dict[str, int] = dict(counters or {})
+
+    def next_id(self, class_name: str) -> str:
+        n = self.counters.get(class_name, 0) + 1
+        self.counters[class_name] = n
+        return f"{class_name}_{n}"
+
+    def reserve(self, entity_id: str) -> None:
+        """An id that exists already (a prior, a seed, an import): never give it again."""
+        parsed = split_id(entity_id)
+        if parsed is not None:
+            cls, n = parsed
+            self.counters[cls] = max(self.counters.get(cls, 0), n)
+
+
+@dataclass
+class Track:
+    """One artifact or person, tentative (id None) or confirmed.
+
+    xy: (2,) m, world. cov: (2, 2) m², the horizontal position's covariance. z: m, height
+    of the position (the visible centroid's for artifacts, 0 for people's feet).
+    velocity: (2,) m/s (people). appearance: colour histogram (people), or None.
+    vel_cov: (2, 2) (m/s)², the velocity's covariance.
+    hits: detections fused. misses: consecutive looks at its place without seeing it.
+    """
+
+    class_name: str
+    kind: EntityKind
+    xy: FloatArray
+    cov: FloatArray
+    z: float
+    source: Source
+    id: str | None = None
+    last_seen_ns: int = 0
+    first_seen_ns: int = 0
+    missing_since_ns: int | None = None
+    yaw: float = 0.0
+    velocity: FloatArray = field(default_factory=lambda: np.zeros(2))
+    vel_cov: FloatArray = field(default_factory=lambda: np.eye(2) * 0.25)
+    appearance: FloatArray | None = None
+    hits: int = 0
+    misses: int = 0
+    #: Sim time the state refers to (people are predicted forward), ns.
+    stamp_ns: int = 0
+    #: People: the (4, 4) covariance of (x, y, vx, vy); `cov` is its position block.
+    P: FloatArray | None = None
+
+    @property
+    def confirmed(self) -> bool:
+        return self.id is not None
+
+    @property
+    def sigma_m(self) -> float:
+        """1-σ of the horizontal position: the root of the covariance's largest eigenvalue."""
+        return float(np.sqrt(max(np.linalg.eigvalsh(self.cov)[-1], 0.0)))
+
+    def to_message(self) -> MapEntity:
+        if self.id is None:
+            raise ValueError(f"a tentative {self.class_name} track has no id yet")
+        return MapEntity(
+            id=self.id,
+            class_name=self.class_name,
+            kind=self.kind,
+            position_in_world=(float(self.xy[0]), float(self.xy[1]), float(self.z)),
+            uncertainty_m=self.sigma_m,
+            last_seen_ns=self.last_seen_ns,
+            source=self.source,
+            missing_since_ns=self.missing_since_ns,
+            yaw=self.yaw,
+            velocity_in_world=(float(self.velocity[0]), float(self.velocity[1])),
+            observations=self.hits,
+        )
+
+    @classmethod
+    def from_message(cls, e: MapEntity, appearance: FloatArray | None = None) -> Track:
+        s2 = max(e.uncertainty_m, 1e-3) ** 2
+        return cls(
+            class_name=e.class_name,
+            kind=e.kind,
+            xy=np.array(e.position_in_world[:2], dtype=float),
+            cov=np.eye(2) * s2,
+            z=float(e.position_in_world[2]),
+            source=e.source,
+            id=e.id,
+            last_seen_ns=e.last_seen_ns,
+            missing_since_ns=e.missing_since_ns,
+            yaw=e.yaw,
+            velocity=np.array(e.velocity_in_world, dtype=float),
+            appearance=appearance,
+            hits=e.observations,
+        )
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One detection as the trackers see it.
+
+    xy: (2,) m, world (an artifact's axis point, a person's feet). z: m. sigma_m: 1-σ
+    horizontal noise of this measurement (grows with range). appearance: histogram or None.
+    """
+
+    class_name: str
+    xy: FloatArray
+    z: float
+    sigma_m: float
+    score: float = 1.0
+    appearance: FloatArray | None = None
+
+
+def measurement_sigma(range_m: float, sigma0_m: float, per_m: float) -> float:
+    """A detection's horizontal 1-σ: a floor plus a share of its range."""
+    return sigma0_m + per_m * max(range_m, 0.0)

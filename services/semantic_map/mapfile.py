@@ -1,0 +1,95 @@
+"""Where a map starts from, and the map file: a prior (JSON export of an earlier run), the
+simulator's truth with noise (`seed-from-world`), and export/import.
+
+A map file is a `MapFile` as JSON (arrays base64): the confirmed entities, the id
+counters and the merged occupancy grid, which becomes the static layer of a map started
+from it. Seeding from the world reuses the sim's ids and truth positions plus Gaussian
+noise (named `seed-from-world` in every entity's `source`: it is sim truth).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import msgspec
+import numpy as np
+
+from common.messages import as_numpy
+from common.messages.semantic_map import MapFile, OccupancyGrid, Source
+from common.messages.world import Cuboid, WorldDescription
+from services.semantic_map.entities import Track
+from services.semantic_map.occupancy import Occupancy
+
+
+class MapFileError(ValueError):
+    """A map file that cannot be read: which file and what is wrong."""
+
+
+def read_map_file(path: Path) -> MapFile:
+    try:
+        return msgspec.json.decode(path.read_bytes(), type=MapFile)
+    except FileNotFoundError:
+        raise MapFileError(f"map file {path} does not exist") from None
+    except msgspec.DecodeError as exc:
+        raise MapFileError(f"map file {path} is not a dume map (MapFile JSON): {exc}") from None
+
+
+def write_map_file(path: Path, mf: MapFile) -> None:
+    """Write atomically (a temporary file renamed over the target)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_bytes(msgspec.json.format(msgspec.json.encode(mf), indent=1))
+    tmp.replace(path)
+
+
+def tracks_from_file(mf: MapFile, source: Source) -> list[Track]:
+    """The file's entities as confirmed tracks, renamed to `source` (`prior` or `import`)."""
+    return [Track.from_message(msgspec.structs.replace(e, source=source)) for e in mf.entities]
+
+
+def occupancy_from_grid(grid: OccupancyGrid, **kw: object) -> Occupancy:
+    cells = np.asarray(as_numpy(grid.cells), np.uint8)
+    return Occupancy(cells, grid.resolution_m, grid.origin_xy, **kw)  # type: ignore[arg-type]
+
+
+def occupancy_from_world(world: WorldDescription, **kw: object) -> Occupancy:
+    """The floor plan: the simulator's static grid (walls, furniture; no people)."""
+    g = world.occupancy
+    cells = np.asarray(as_numpy(g.cells), np.uint8)
+    return Occupancy(cells, g.resolution, g.origin, **kw)  # type: ignore[arg-type]
+
+
+def seed_from_world(world: WorldDescription, noise_m: float, seed: int) -> list[Track]:
+    """Every artifact and person of the world, with its truth id, at its truth position plus
+    N(0, noise_m²) horizontally; an artifact's height is its body's mid-height."""
+    rng = np.random.default_rng(seed)
+    sigma = max(noise_m, 0.01)
+    out = []
+    for a in world.artifacts:
+        half = a.shape.half_size[2] if isinstance(a.shape, Cuboid) else a.shape.height / 2
+        out.append(
+            Track(
+                class_name=a.object_class,
+                kind="artifact",
+                xy=np.array(a.position[:2]) + rng.normal(0.0, noise_m, 2),
+                cov=np.eye(2) * sigma**2,
+                z=a.position[2] + half,
+                source="seed-from-world",
+                id=a.id,
+                yaw=a.yaw,
+            )
+        )
+    for p in world.people:
+        out.append(
+            Track(
+                class_name="person",
+                kind="person",
+                xy=np.array(p.position) + rng.normal(0.0, noise_m, 2),
+                cov=np.eye(2) * sigma**2,
+                z=0.0,
+                source="seed-from-world",
+                id=p.id,
+                yaw=p.yaw,
+            )
+        )
+    return out

@@ -1,0 +1,223 @@
+"""The semantic map as a value: detections in, entities, missing flags and occupancy out.
+
+`SemanticMap` holds the artifact and person trackers, one id book and the occupancy layer,
+and no transport: `ingest(detections, frame)` fuses one camera frame's detections (the
+frame, when at hand, gives the people's colour histograms, the frustum and depth of the
+missing test, and the depth points of the learned obstacles). What changed since the last
+`take_changes()` is what the node writes to the database in one transaction.
+Measurement conventions: an artifact is placed at the detection's axis point (about a
+radius behind the visible surface) at the visible centroid's height; a person at the
+axis point's floor projection; the horizontal noise grows with the range d_obj.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from common.geometry import FloatArray
+from common.messages import as_numpy, to_wire
+from common.messages.perception import Detection, Detections
+from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
+from common.messages.sim import CameraFrame
+from services.semantic_map.appearance import colour_histogram
+from services.semantic_map.artifacts import ArtifactTracker, FusionParams
+from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
+from services.semantic_map.looks import View, looks_at
+from services.semantic_map.occupancy import Occupancy, depth_points_world
+from services.semantic_map.people import PeopleParams, PeopleTracker
+
+#: Depth points this close to the base (horizontally) are the robot itself, m.
+SELF_RADIUS_M = 0.7
+
+
+@dataclass(frozen=True)
+class MapParams:
+    sigma0_m: float = 0.02
+    sigma_per_m: float = 0.02
+    min_score: float = 0.5
+    missing_after_frames: int = 5
+    look_range_m: float = 3.0
+    fusion: FusionParams = field(default_factory=FusionParams)
+    people: PeopleParams = field(default_factory=PeopleParams)
+
+
+@dataclass
+class IngestReport:
+    """What one frame did: fused detections, new ids, newly missing ids, learned cells."""
+
+    fused: int = 0
+    ignored: int = 0
+    new_ids: list[str] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    learned_cells: int = 0
+
+
+def _mat(values: tuple[float, ...]) -> FloatArray:
+    return np.asarray(values, dtype=float).reshape(4, 4)
+
+
+class SemanticMap:
+    """Artifacts, people and occupancy; see the module docstring."""
+
+    def __init__(self, params: MapParams, occupancy: Occupancy, counters: dict[str, int]) -> None:
+        self.params = params
+        self.ids = IdBook(counters)
+        self.artifacts = ArtifactTracker(self.ids, params.fusion)
+        self.people = PeopleTracker(self.ids, params.people)
+        self.occupancy = occupancy
+        self.stamp_ns = 0
+        #: Where the static occupancy layer came from: world, file or none.
+        self.static_source: Literal["world", "file", "none"] = "none"
+        self._dirty: dict[str, Track] = {}
+        self._counters_dirty = False
+        self.grid_dirty = False
+
+    # -- contents ------------------------------------------------------------------------
+
+    def add(self, track: Track) -> None:
+        """A known entity (prior, seed, database, import)."""
+        (self.people if track.kind == "person" else self.artifacts).add(track)
+        if track.id is not None:
+            self._dirty[track.id] = track
+        self._counters_dirty = True
+
+    def clear(self) -> None:
+        self.artifacts.tracks.clear()
+        self.people.tracks.clear()
+        self.ids.counters.clear()
+        self._dirty.clear()
+
+    def entities(self, kind: EntityKind) -> list[MapEntity]:
+        tracker = self.people if kind == "person" else self.artifacts
+        return sorted((t.to_message() for t in tracker.confirmed), key=_id_order)
+
+    def entity(self, kind: EntityKind, entity_id: str) -> MapEntity | None:
+        tracker = self.people if kind == "person" else self.artifacts
+        tr = tracker.by_id(entity_id)
+        return None if tr is None else tr.to_message()
+
+    def tracks(self) -> list[Track]:
+        return self.artifacts.confirmed + self.people.confirmed
+
+    def grid(self) -> OccupancyGrid:
+        occ = self.occupancy
+        return OccupancyGrid(
+            stamp_ns=self.stamp_ns,
+            resolution_m=occ.resolution_m,
+            origin_xy=occ.origin_xy,
+            cells=to_wire(occ.cells()),
+            static_source=self.static_source,
+            learned_cells=int(occ.learned_mask().sum()),
+        )
+
+    def take_changes(self) -> tuple[list[Track], dict[str, int] | None]:
+        """The confirmed tracks changed since the last call, and the counters if changed."""
+        changed = [t for t in self._dirty.values() if t.id is not None]
+        counters = dict(self.ids.counters) if self._counters_dirty else None
+        self._dirty.clear()
+        self._counters_dirty = False
+        return changed, counters
+
+    # -- fusion --------------------------------------------------------------------------
+
+    def observation(self, det: Detection, rgb: np.ndarray | None) -> Observation:
+        p = self.params
+        sigma = measurement_sigma(det.d_obj, p.sigma0_m, p.sigma_per_m)
+        axis = np.asarray(det.axis_in_world, float)
+        centroid = np.asarray(det.centroid_in_world, float)
+        xy = axis[:2] if np.all(np.isfinite(axis)) and axis.any() else centroid[:2]
+        if det.class_name == "person":
+            app = None
+            if rgb is not None:
+                mask = np.asarray(as_numpy(det.mask))
+                app = colour_histogram(rgb, det.bbox, mask.astype(np.uint8))
+            return Observation("person", xy.copy(), 0.0, sigma, det.score, app)
+        return Observation(det.class_name, xy.copy(), float(centroid[2]), sigma, det.score)
+
+    def ingest(self, dets: Detections, frame: CameraFrame | None = None) -> IngestReport:
+        """Fuse one camera frame's detections (`frame`: the same camera at the same stamp)."""
+        report = IngestReport()
+        t = dets.stamp_ns
+        self.stamp_ns = max(self.stamp_ns, t)
+        rgb = None if frame is None else np.asarray(as_numpy(frame.rgb))
+        arts: list[Observation] = []
+        people: list[Observation] = []
+        for det in dets.detections:
+            if det.score < self.params.min_score or not _mask_fits(det):
+                report.ignored += 1
+                continue
+            obs = self.observation(det, rgb)
+            (people if obs.class_name == "person" else arts).append(obs)
+        before = {id(tr) for tr in self.tracks()}
+        changed_a, seen = self.artifacts.update(t, arts)
+        changed_p = self.people.update(t, people)
+        for tr in [*changed_a, *changed_p]:
+            assert tr.id is not None
+            self._dirty[tr.id] = tr
+            if id(tr) not in before:
+                report.new_ids.append(tr.id)
+                self._counters_dirty = True
+        report.fused = len(arts) + len(people)
+        if frame is not None and not dets.reason:  # a frame perception did process
+            view = View(
+                _mat(dets.T_world_base) @ _mat(frame.T_base_camera),
+                frame.fx,
+                frame.fy,
+                frame.cx,
+                frame.cy,
+                frame.width,
+                frame.height,
+                np.asarray(as_numpy(frame.depth), np.float32),
+            )
+            report.missing = self._look(t, view, seen)
+            report.learned_cells = self._learn(dets, frame, view)
+        return report
+
+    def _look(self, t: int, view: View, seen: set[int]) -> list[str]:
+        """Count a miss for each artifact this frame looked at and did not see."""
+        newly: list[str] = []
+        for i, tr in enumerate(self.artifacts.tracks):
+            if tr.id is None or i in seen:
+                continue
+            p = np.array([tr.xy[0], tr.xy[1], tr.z])
+            if not looks_at(view, p, self.params.look_range_m):
+                continue
+            tr.misses += 1
+            if tr.misses >= self.params.missing_after_frames and tr.missing_since_ns is None:
+                tr.missing_since_ns = t
+                self._dirty[tr.id] = tr
+                newly.append(tr.id)
+        return newly
+
+    def _learn(self, dets: Detections, frame: CameraFrame, view: View) -> int:
+        """Obstacles seen in this frame's depth, leaving out people and the robot."""
+        assert view.depth is not None
+        exclude = np.zeros(view.depth.shape, bool)
+        for det in dets.detections:
+            if det.class_name == "person" and _mask_fits(det, view.depth.shape):
+                u0, v0, u1, v1 = det.bbox
+                exclude[v0:v1, u0:u1] |= np.asarray(as_numpy(det.mask)) > 0
+        pts = depth_points_world(
+            view.depth, frame.fx, frame.fy, frame.cx, frame.cy, view.T_world_camera, exclude=exclude
+        )
+        base = _mat(dets.T_world_base)[:2, 3]
+        pts = pts[np.linalg.norm(pts[:, :2] - base, axis=1) > SELF_RADIUS_M]
+        learned = self.occupancy.integrate(pts)
+        self.grid_dirty = True
+        return learned
+
+
+def _mask_fits(det: Detection, image: tuple[int, ...] | None = None) -> bool:
+    """The mask is the bbox's crop (and the bbox inside the image, when its size is given)."""
+    u0, v0, u1, v1 = det.bbox
+    if det.mask.shape != (v1 - v0, u1 - u0) or u1 <= u0 or v1 <= v0 or u0 < 0 or v0 < 0:
+        return False
+    return image is None or (v1 <= image[0] and u1 <= image[1])
+
+
+def _id_order(e: MapEntity) -> tuple[str, int]:
+    cls, _, n = e.id.rpartition("_")
+    return cls, int(n)

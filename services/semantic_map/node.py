@@ -1,0 +1,343 @@
+"""The semantic map service: a lockstep participant that fuses detections into the map,
+persists every tick's changes before acknowledging it, serves the map and walks the
+mapping patrol.
+
+Per tick b (period and latency from `time.participants.semantic_map`): wait for
+perception's detections due by b (`UpstreamGate`), fuse every frame's detections whose
+stamp is complete (each configured camera's, or a later stamp, arrived; or two periods
+passed), step the patrol on the odom at b (cmd_vel stamped b, source `semantic_map`),
+commit the changes in one SQLite transaction, then ack b. Queryables run on their own
+threads under the map's lock.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import defaultdict
+
+from common.bus import NoReply, RemoteError, RequestError, WaitTimeout
+from common.config import resolve
+from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.keys import (
+    MAP_ARTIFACTS,
+    MAP_ARTIFACTS_ONE,
+    MAP_EXPORT,
+    MAP_IMPORT,
+    MAP_OCCUPANCY,
+    MAP_PEOPLE,
+    MAP_PEOPLE_ONE,
+    WORLD_DESCRIPTION,
+)
+from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate
+from common.messages import PayloadError
+from common.messages.perception import Detections
+from common.messages.semantic_map import (
+    MapFile,
+    MapSummary,
+    OccupancyGrid,
+    PatrolRequest,
+    PatrolStatus,
+)
+from common.messages.sim import CameraFrame, Odom
+from common.messages.wbc import CmdVel, WbcMode
+from common.messages.world import WorldDescription
+from common.recording import stamp
+from common.service import Service
+from services.semantic_map import queries
+from services.semantic_map.mapfile import occupancy_from_grid, tracks_from_file
+from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.patrol import PatrolFollower, coverage_route
+from services.semantic_map.rerun_log import MapLogger
+from services.semantic_map.startup import open_map, save_all
+from services.semantic_map.store import Grid, MapStore
+
+NAME = "semantic_map"
+log = logging.getLogger(f"dume.{NAME}")
+
+
+class MapNode:
+    def __init__(self, svc: Service) -> None:
+        self.svc = svc
+        self.cfg = svc.config.semantic_map
+        p = svc.config.time.participants.get(NAME)
+        self.period_ns = round((p.period_s if p else 0.1) * NS_PER_S)
+        path = resolve(self.cfg.dir) / f"{self.cfg.name}.sqlite"
+        if self.cfg.reset:
+            for suffix in ("", "-wal", "-shm"):
+                path.with_name(path.name + suffix).unlink(missing_ok=True)
+        self.store = MapStore(path)
+        self.lock = threading.RLock()
+        self.smap: SemanticMap
+        self.smap, how = open_map(self.cfg, self.store, self._world)
+        log.info("%s", how)
+        bus, keys = svc.bus, svc.keys
+        self.det_fifo = bus.fifo(keys.detections, Detections, maxlen=512)
+        self.det_latest = bus.latest(keys.detections, Detections, history=2)
+        self.frames = {
+            cam: bus.latest(keys.camera_rgbd(cam), CameraFrame, history=6)
+            for cam in self.cfg.cameras
+        }
+        self.odom = bus.latest(keys.odom, Odom, history=16)
+        self.cmd_vel = bus.publisher(keys.cmd_vel, CmdVel, "control")
+        self.mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
+        self.pending: dict[int, dict[str, Detections]] = defaultdict(dict)
+        self.newest_det = -1
+        self.patrol: PatrolFollower | None = None
+        self.patrol_state = PatrolStatus(stamp_ns=0, state="idle")
+        self._patrol_cmd: str | None = None  # "start" or "stop", taken by the loop
+        self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
+        self.last_grid_save = 0
+        bus.serve(MAP_ARTIFACTS, None, lambda _r, sel: self._q(queries.listing, "artifact", sel))
+        bus.serve(MAP_PEOPLE, None, lambda _r, sel: self._q(queries.listing, "person", sel))
+        bus.serve(MAP_ARTIFACTS_ONE, None, lambda _r, sel: self._q(queries.one, "artifact", sel))
+        bus.serve(MAP_PEOPLE_ONE, None, lambda _r, sel: self._q(queries.one, "person", sel))
+        bus.serve(MAP_OCCUPANCY, None, self._on_occupancy)
+        bus.serve(MAP_EXPORT, None, self._on_export)
+        bus.serve(MAP_IMPORT, MapFile, self._on_import)
+        bus.serve(keys.map_patrol, PatrolRequest, self._on_patrol)
+
+    # -- start-up ------------------------------------------------------------------------
+
+    def _world(self) -> WorldDescription | None:
+        deadline = time.monotonic() + 30.0
+        while not self.svc.stopping and time.monotonic() < deadline:
+            try:
+                return self.svc.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 5.0)
+            except (NoReply, RemoteError, PayloadError) as exc:
+                log.info("waiting for the world description: %s", exc)
+                time.sleep(0.5)
+        return None
+
+    # -- queries (server threads) -----------------------------------------------------------
+
+    def _q(self, fn, kind, selector):  # type: ignore[no-untyped-def]
+        with self.lock:
+            return fn(self.smap, kind, selector)
+
+    def _on_occupancy(self, _req: None, selector: str) -> OccupancyGrid:
+        _key, params = queries.parse_selector(selector)
+        if params:
+            raise RequestError("invalid", f"dume/map/occupancy takes no parameters: {params}")
+        with self.lock:
+            return self.smap.grid()
+
+    def _on_export(self, _req: None, _selector: str) -> MapFile:
+        with self.lock:
+            s = self.smap
+            entities = s.entities("artifact") + s.entities("person")
+            return MapFile(
+                stamp_ns=s.stamp_ns,
+                entities=entities,
+                counters=dict(s.ids.counters),
+                occupancy=s.grid(),
+            )
+
+    def _on_import(self, mf: MapFile | None, _selector: str) -> MapSummary:
+        assert mf is not None
+        ids = [e.id for e in mf.entities]
+        if len(set(ids)) != len(ids):
+            raise RequestError("invalid", "the map file names an id twice")
+        bad = [e.id for e in mf.entities if (e.kind == "person") != (e.class_name == "person")]
+        if bad:
+            raise RequestError("invalid", f"kind and class disagree for {bad}")
+        with self.lock:
+            s = self.smap
+            s.clear()
+            s.ids.counters.update(mf.counters)
+            if mf.occupancy is not None:
+                occ = s.occupancy
+                s.occupancy = occupancy_from_grid(
+                    mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range
+                )
+                s.static_source = "file"
+            for tr in tracks_from_file(mf, "import"):
+                s.add(tr)
+            save_all(s, self.store, {"static_source": s.static_source})
+            log.info("imported a map: %d entities", len(mf.entities))
+            return self._summary()
+
+    def _summary(self) -> MapSummary:
+        arts = self.smap.entities("artifact")
+        return MapSummary(
+            stamp_ns=self.smap.stamp_ns,
+            artifacts=len(arts),
+            people=len(self.smap.people.confirmed),
+            missing=sum(e.missing_since_ns is not None for e in arts),
+        )
+
+    def _on_patrol(self, req: PatrolRequest | None, _selector: str) -> PatrolStatus:
+        assert req is not None
+        with self.lock:
+            if req.action == "start":
+                if self.patrol is not None and not self.patrol.done:
+                    raise RequestError("busy", "a patrol is running; stop it first")
+                odom = self.odom.get()
+                if odom is None:
+                    raise RequestError("unavailable", "no odometry: is the sim running?")
+                occ = self.smap.occupancy
+                route = coverage_route(
+                    occ.cells(),
+                    occ.resolution_m,
+                    occ.origin_xy,
+                    (odom.base_position_in_world[0], odom.base_position_in_world[1]),
+                    req.spacing_m or self.cfg.patrol_spacing_m,
+                    self.cfg.patrol_clearance_m,
+                )
+                if not route.viewpoints:
+                    raise RequestError("unavailable", "no free space to patrol in the grid")
+                self.patrol = PatrolFollower(
+                    route,
+                    speed=self.cfg.patrol_speed,
+                    turn_rate=self.cfg.patrol_turn_rate,
+                    look_around=self.cfg.patrol_look_around,
+                )
+                self._patrol_cmd = "start"
+                self.patrol_state = self._patrol_status("running")
+                log.info("patrol: %d viewpoints", len(route.viewpoints))
+            elif req.action == "stop" and self.patrol is not None and not self.patrol.done:
+                self._patrol_cmd = "stop"
+            return self.patrol_state
+
+    def _patrol_status(self, state: str, reason: str = "") -> PatrolStatus:
+        f = self.patrol
+        return PatrolStatus(
+            stamp_ns=self.smap.stamp_ns,
+            state=state,  # type: ignore[arg-type]
+            waypoint=0 if f is None else min(f.leg + 1, len(f.route.paths)),
+            waypoints=0 if f is None else len(f.route.paths),
+            travelled_m=0.0 if f is None else f.travelled_m,
+            artifacts=len(self.smap.artifacts.confirmed),
+            people=len(self.smap.people.confirmed),
+            reason=reason,
+        )
+
+    # -- the tick --------------------------------------------------------------------------
+
+    def run(self) -> None:
+        svc = self.svc
+        ticker = PeriodicTicker(svc.bus, svc.keys, NAME, self.period_ns / NS_PER_S, svc.stop)
+        gate = UpstreamGate(svc.bus, svc.keys, svc.config)
+        gate.watch("perception", self.det_latest)
+        stall = svc.config.time.stall_timeout_s
+        svc.ready()
+        for b in ticker.ticks():
+            stamp(svc.rec, b)
+            late = gate.wait(b, stall)
+            if late:
+                log.warning("tick %.1f s: no detections from %s in time", b / NS_PER_S, late)
+            with self.lock:
+                self._fuse_due(b)
+                self._step_patrol(b)
+                self._commit(b)
+                self.logger.log(b, self.smap)
+            ticker.ack(b)
+
+    def _fuse_due(self, b: int) -> None:
+        for dets in self.det_fifo.drain():
+            if dets.camera not in self.cfg.cameras:
+                continue
+            self.pending[dets.stamp_ns][dets.camera] = dets
+            self.newest_det = max(self.newest_det, dets.stamp_ns)
+        wanted = set(self.cfg.cameras)
+        for s in sorted(self.pending):
+            cams = self.pending[s]
+            complete = s < self.newest_det or wanted <= set(cams) or s <= b - 2 * self.period_ns
+            if s > b or not complete:
+                break
+            for cam in self.cfg.cameras:
+                if cam in cams:
+                    self._fuse(cams[cam])
+            del self.pending[s]
+
+    def _frame(self, cam: str, s: int) -> CameraFrame | None:
+        sub = self.frames.get(cam)
+        if sub is None or sub.received == 0:
+            return None
+        frame = sub.at(s)
+        if frame is None or frame.stamp_ns != s:
+            try:
+                sub.wait_stamp(s, 0.5)
+            except WaitTimeout:
+                return None
+            frame = sub.at(s)
+        return frame if frame is not None and frame.stamp_ns == s else None
+
+    def _fuse(self, dets: Detections) -> None:
+        frame = self._frame(dets.camera, dets.stamp_ns)
+        try:
+            report = self.smap.ingest(dets, frame)
+        except (ValueError, PayloadError) as exc:
+            log.warning("detections of %s at %d rejected: %s", dets.camera, dets.stamp_ns, exc)
+            return
+        for entity_id in report.new_ids:
+            tr = self.smap.artifacts.by_id(entity_id) or self.smap.people.by_id(entity_id)
+            if tr is not None:
+                log.info(
+                    "new %s at (%.2f, %.2f) from %s", entity_id, tr.xy[0], tr.xy[1], dets.camera
+                )
+        for entity_id in report.missing:
+            log.info("%s missing: looked at its place from %s, not seen", entity_id, dets.camera)
+
+    def _step_patrol(self, b: int) -> None:
+        f = self.patrol
+        if f is None or self.patrol_state.state != "running":
+            return
+        source = self.svc.config.wbc.cmd_vel_source
+        if self._patrol_cmd == "start":
+            self.mode.put(WbcMode(stamp_ns=b, mode="walk", cmd_vel_source=NAME))
+            self._patrol_cmd = None
+        try:
+            self.odom.wait_stamp(b, 1.0)
+        except WaitTimeout:
+            log.warning("patrol: no odom at %.1f s", b / NS_PER_S)
+        odom = self.odom.at(b)
+        stop = self._patrol_cmd == "stop"
+        if odom is None or f.done or stop:
+            self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=NAME))
+            if f.done or stop:
+                self.mode.put(WbcMode(stamp_ns=b, mode="stand", cmd_vel_source=source))
+                why = f"{f.skipped} viewpoint(s) skipped" if f.skipped else ""
+                self.patrol_state = self._patrol_status("stopped" if stop else "done", why)
+                self._patrol_cmd = None
+                log.info("patrol %s: %.1f m walked", self.patrol_state.state, f.travelled_m)
+            return
+        x, y, _z = odom.base_position_in_world
+        yaw = yaw_of(quat_xyzw_to_matrix(odom.base_orientation_xyzw))
+        vx, vy, wz = f.step(x, y, yaw, b)
+        self.cmd_vel.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=NAME))
+        self.patrol_state = self._patrol_status("running")
+        self.logger.patrol(b, f)
+
+    def _commit(self, b: int) -> None:
+        self.smap.stamp_ns = max(self.smap.stamp_ns, b)
+        changed, counters = self.smap.take_changes()
+        grids = None
+        occ = self.smap.occupancy
+        if self.smap.grid_dirty and b - self.last_grid_save >= 2 * NS_PER_S:
+            grids = {"learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy)}
+            self.smap.grid_dirty = False
+            self.last_grid_save = b
+        if not changed and counters is None and grids is None:
+            return
+        self.store.commit(
+            entities=[(t.to_message(), t.appearance) for t in changed],
+            counters=counters,
+            grids=grids,
+            meta={"stamp_ns": str(b)},
+        )
+
+    def close(self) -> None:
+        with self.lock:
+            occ = self.smap.occupancy
+            self.store.commit(grids={"learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy)})
+            self.store.close()
+
+
+def main(svc: Service) -> None:
+    node = MapNode(svc)
+    try:
+        node.run()
+    finally:
+        node.close()

@@ -1,0 +1,114 @@
+"""The persistent occupancy layer: a static grid plus obstacles seen in depth that stay.
+
+The static layer comes from a map file or the simulator's floor plan (`WorldDescription`'s
+5 cm grid) — or is all unknown. The learned layer counts, per cell, the depth frames in
+which points between `z_range` hit it (each frame counts a cell once); at `hits` frames
+the cell is a learned obstacle for good. Floor points (below 5 cm) make unknown cells
+free. Points on people and near the robot are left out by the caller (people move: they
+are the map's people, not obstacles). Navigation keeps its own short-lived layer.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from common.geometry import FloatArray
+
+FREE, OCCUPIED, UNKNOWN = 0, 100, 255
+FLOOR_Z_M = 0.05
+
+
+class Occupancy:
+    """Static + learned cells on one grid: cell [iy, ix] spans origin + (i, i+1) × res."""
+
+    def __init__(
+        self,
+        static: NDArray[np.uint8],
+        resolution_m: float,
+        origin_xy: tuple[float, float],
+        hits_needed: int = 3,
+        z_range: tuple[float, float] = (0.15, 1.9),
+        hits: NDArray[np.uint16] | None = None,
+    ) -> None:
+        self.static = np.ascontiguousarray(static, dtype=np.uint8)
+        self.resolution_m = float(resolution_m)
+        self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))
+        self.hits_needed = hits_needed
+        self.z_range = z_range
+        shape = self.static.shape
+        self.hits = np.zeros(shape, np.uint16) if hits is None else hits.astype(np.uint16)
+        self.seen_free = np.zeros(shape, bool)
+        if self.hits.shape != shape:
+            raise ValueError(f"learned layer {self.hits.shape} does not match static {shape}")
+
+    @classmethod
+    def unknown(cls, half_extent_m: float, resolution_m: float, **kw: object) -> Occupancy:
+        n = round(2 * half_extent_m / resolution_m)
+        grid = np.full((n, n), UNKNOWN, np.uint8)
+        return cls(grid, resolution_m, (-half_extent_m, -half_extent_m), **kw)  # type: ignore[arg-type]
+
+    def cells_of(
+        self, xy: FloatArray
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+        ix = np.floor((xy[:, 0] - self.origin_xy[0]) / self.resolution_m).astype(np.intp)
+        iy = np.floor((xy[:, 1] - self.origin_xy[1]) / self.resolution_m).astype(np.intp)
+        ny, nx = self.static.shape
+        inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+        return ix, iy, inside
+
+    def integrate(self, points_world: FloatArray) -> int:
+        """Count one depth frame's points (N, 3); the number of cells newly learned."""
+        if len(points_world) == 0:
+            return 0
+        before = self.learned_mask().sum()
+        z = points_world[:, 2]
+        ix, iy, inside = self.cells_of(points_world[:, :2])
+        hit = inside & (z >= self.z_range[0]) & (z <= self.z_range[1])
+        nx = self.static.shape[1]
+        flat = np.unique(iy[hit] * nx + ix[hit])
+        counts = self.hits.reshape(-1)
+        counts[flat] = np.minimum(counts[flat].astype(np.int64) + 1, 60000).astype(np.uint16)
+        floor = inside & (np.abs(z) < FLOOR_Z_M)
+        self.seen_free.reshape(-1)[np.unique(iy[floor] * nx + ix[floor])] = True
+        return int(self.learned_mask().sum() - before)
+
+    def learned_mask(self) -> NDArray[np.bool_]:
+        return (self.hits >= self.hits_needed) & (self.static != OCCUPIED)
+
+    def cells(self) -> NDArray[np.uint8]:
+        """The merged grid: static, unknown cells seen as floor made free, learned obstacles."""
+        out = self.static.copy()
+        out[(out == UNKNOWN) & self.seen_free] = FREE
+        out[self.learned_mask()] = OCCUPIED
+        return out
+
+    def occupied_at(self, xy: FloatArray) -> NDArray[np.bool_]:
+        ix, iy, inside = self.cells_of(np.atleast_2d(xy))
+        grid = self.cells()
+        out = np.ones(len(ix), bool)
+        out[inside] = grid[iy[inside], ix[inside]] == OCCUPIED
+        return out
+
+
+def depth_points_world(
+    depth: NDArray[np.float32],
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    T_world_camera: FloatArray,
+    stride: int = 4,
+    exclude: NDArray[np.bool_] | None = None,
+    max_range_m: float = 6.0,
+) -> FloatArray:
+    """Every `stride`-th pixel's point in the world (eq. 1 with the camera pose), leaving out
+    pixels with no return, beyond `max_range_m`, or set in `exclude` (H, W)."""
+    d = depth[::stride, ::stride].astype(float)
+    v, u = np.mgrid[0 : depth.shape[0] : stride, 0 : depth.shape[1] : stride]
+    keep = (d > 0.05) & (d < max_range_m)
+    if exclude is not None:
+        keep &= ~exclude[::stride, ::stride]
+    d, u, v = d[keep], u[keep], v[keep]
+    pc = np.stack([(u - cx) * d / fx, (v - cy) * d / fy, d, np.ones_like(d)])
+    return (T_world_camera @ pc)[:3].T

@@ -1,0 +1,182 @@
+"""The mapping patrol: a coverage route over the occupancy grid and a follower that walks
+it with `cmd_vel` (until navigation exists), looking around at every viewpoint.
+
+`coverage_route` puts viewpoints on a lattice of `spacing_m` over the free space that
+keeps `clearance_m` from every obstacle and is connected to the start, visits them
+nearest-first, and joins them with shortest 8-connected paths (Dijkstra on a 10 cm grid).
+`PatrolFollower.step(pose, t)` is a pure-pursuit controller along that path (turn in
+place when the heading error is large) and, at each viewpoint, a full turn on the spot so
+the head camera sweeps the surroundings. A viewpoint not reached within `stuck_ns` of
+no progress is skipped and counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from common.geometry import FloatArray, wrap_angle
+from services.semantic_map.occupancy import OCCUPIED
+
+PLAN_RES_M = 0.1
+
+
+@dataclass(frozen=True)
+class Route:
+    """Viewpoints (k, 2) and, per leg, the path to it (m, 2), in the world frame."""
+
+    viewpoints: list[FloatArray]
+    paths: list[FloatArray]
+
+
+def _coarsen(cells: NDArray[np.uint8], factor: int) -> NDArray[np.bool_]:
+    ny, nx = (cells.shape[0] // factor) * factor, (cells.shape[1] // factor) * factor
+    occ = cells[:ny, :nx] == OCCUPIED
+    return occ.reshape(ny // factor, factor, nx // factor, factor).any(axis=(1, 3))
+
+
+def coverage_route(
+    cells: NDArray[np.uint8],
+    resolution_m: float,
+    origin_xy: tuple[float, float],
+    start_xy: tuple[float, float],
+    spacing_m: float,
+    clearance_m: float,
+) -> Route:
+    factor = max(1, round(PLAN_RES_M / resolution_m))
+    res = resolution_m * factor
+    occ = _coarsen(cells, factor)
+    safe = ndimage.distance_transform_edt(~occ) * res > clearance_m
+    ox, oy = origin_xy
+
+    def cell(xy: tuple[float, float] | FloatArray) -> tuple[int, int]:
+        return int((xy[1] - oy) / res), int((xy[0] - ox) / res)
+
+    def centre(iy: int, ix: int) -> FloatArray:
+        return np.array([ox + (ix + 0.5) * res, oy + (iy + 0.5) * res])
+
+    labels, _n = ndimage.label(safe, structure=np.ones((3, 3)))
+    sy, sx = cell(start_xy)
+    iy_all, ix_all = np.nonzero(safe)
+    if len(iy_all) == 0:
+        return Route([], [])
+    if not (0 <= sy < safe.shape[0] and 0 <= sx < safe.shape[1] and safe[sy, sx]):
+        k = int(np.argmin((iy_all - sy) ** 2 + (ix_all - sx) ** 2))
+        sy, sx = int(iy_all[k]), int(ix_all[k])
+    reach = labels == labels[sy, sx]
+    step = max(1, round(spacing_m / res))
+    lattice = np.zeros_like(reach)
+    lattice[step // 2 :: step, step // 2 :: step] = True
+    cand = [(int(a), int(b)) for a, b in zip(*np.nonzero(reach & lattice), strict=True)]
+    # The graph of the reachable cells, 8-connected, edge length in m.
+    index = -np.ones(safe.shape, np.int64)
+    ys, xs = np.nonzero(reach)
+    index[ys, xs] = np.arange(len(ys))
+    rows, cols, w = [], [], []
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        y2, x2 = ys + dy, xs + dx
+        ok = (y2 < safe.shape[0]) & (x2 >= 0) & (x2 < safe.shape[1])
+        ok[ok] &= reach[y2[ok], x2[ok]]
+        rows.append(index[ys[ok], xs[ok]])
+        cols.append(index[y2[ok], x2[ok]])
+        w.append(np.full(int(ok.sum()), res * math.hypot(dy, dx)))
+    n = len(ys)
+    graph = coo_matrix(
+        (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    ).tocsr()
+    viewpoints, paths = [], []
+    here = (sy, sx)
+    todo = set(cand)
+    while todo:
+        dist, pred = dijkstra(graph, directed=False, indices=index[here], return_predecessors=True)
+        nxt = min(todo, key=lambda c: (dist[index[c]], c))
+        todo.discard(nxt)
+        if not np.isfinite(dist[index[nxt]]):
+            continue
+        chain = [int(index[nxt])]
+        while chain[-1] != index[here]:
+            chain.append(int(pred[chain[-1]]))
+        chain.reverse()
+        paths.append(np.array([centre(int(ys[i]), int(xs[i])) for i in chain]))
+        viewpoints.append(centre(*nxt))
+        here = nxt
+    return Route(viewpoints, paths)
+
+
+@dataclass
+class PatrolFollower:
+    """Walk a `Route`: follow each path, then turn once on the spot; see the module doc."""
+
+    route: Route
+    speed: float = 0.5
+    turn_rate: float = 0.6
+    look_around: bool = True
+    lookahead_m: float = 0.6
+    reach_m: float = 0.3
+    stuck_ns: int = 30_000_000_000
+    leg: int = 0
+    phase: str = "walk"
+    skipped: int = 0
+    travelled_m: float = 0.0
+    _turned: float = 0.0
+    _last_yaw: float | None = None
+    _last_xy: FloatArray | None = None
+    _best: float = math.inf
+    _progress_ns: int = 0
+    _i: int = 0
+    log: list[str] = field(default_factory=list)
+
+    @property
+    def done(self) -> bool:
+        return self.leg >= len(self.route.paths)
+
+    def step(self, x: float, y: float, yaw: float, t_ns: int) -> tuple[float, float, float]:
+        """(vx, vy, ωz) in base_yaw for the pose at t; zeros once done."""
+        pos = np.array([x, y])
+        if self._last_xy is not None:
+            self.travelled_m += float(np.linalg.norm(pos - self._last_xy))
+        self._last_xy = pos
+        if self.done:
+            return 0.0, 0.0, 0.0
+        if self.phase == "look":
+            if self._last_yaw is not None:
+                self._turned += abs(wrap_angle(yaw - self._last_yaw))
+            self._last_yaw = yaw
+            if self._turned >= 2 * math.pi:
+                self._next_leg(t_ns)
+                return self.step(x, y, yaw, t_ns)
+            return 0.0, 0.0, self.turn_rate
+        path = self.route.paths[self.leg]
+        goal = path[-1]
+        d_goal = float(np.linalg.norm(goal - pos))
+        if d_goal < self._best - 0.05:
+            self._best, self._progress_ns = d_goal, t_ns
+        if d_goal < self.reach_m:
+            if self.look_around:
+                self.phase, self._turned, self._last_yaw = "look", 0.0, yaw
+                return 0.0, 0.0, self.turn_rate
+            self._next_leg(t_ns)
+            return self.step(x, y, yaw, t_ns)
+        if t_ns - self._progress_ns > self.stuck_ns:
+            self.skipped += 1
+            self.log.append(f"viewpoint {self.leg + 1} not reached: skipped")
+            self._next_leg(t_ns)
+            return self.step(x, y, yaw, t_ns)
+        d = np.linalg.norm(path - pos, axis=1)
+        self._i = max(self._i, int(np.argmin(d[self._i :])) + self._i)
+        ahead = np.nonzero(d[self._i :] >= self.lookahead_m)[0]
+        target = path[self._i + int(ahead[0])] if len(ahead) else goal
+        err = wrap_angle(math.atan2(target[1] - y, target[0] - x) - yaw)
+        wz = float(np.clip(2.0 * err, -self.turn_rate, self.turn_rate))
+        vx = self.speed * max(0.0, math.cos(err)) ** 2 if abs(err) < 0.8 else 0.0
+        return vx, 0.0, wz
+
+    def _next_leg(self, t_ns: int) -> None:
+        self.leg += 1
+        self.phase, self._i, self._best, self._progress_ns = "walk", 0, math.inf, t_ns

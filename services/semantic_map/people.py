@@ -1,0 +1,191 @@
+"""People: a constant-velocity Kalman filter per person and an appearance cue, so ids
+survive walking, passing each other and short occlusions.
+
+Each frame every person is predicted to the frame's stamp (state x, y, vx, vy; white
+acceleration noise σ_a). A person unseen for `coast_ns` stops being extrapolated: the
+velocity is reset to zero with a covariance of (v_max)², so the position's uncertainty
+then grows like a walker's reach instead of drifting along an old heading. Detections are
+assigned to people by the Hungarian method on a cost that adds the Mahalanobis distance
+of the innovation (gated at χ²₂ 99.9 %, or within `gate_min_m`) and the Bhattacharyya
+distance of the colour histograms (gated at `max_appearance`): two people crossing are
+told apart by their clothes where their positions are ambiguous. A detection left over
+starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from common.geometry import FloatArray
+from services.semantic_map.appearance import bhattacharyya, blend
+from services.semantic_map.entities import IdBook, Observation, Track
+
+CHI2_2D_999 = 13.82
+_BIG = 1e6
+
+
+@dataclass(frozen=True)
+class PeopleParams:
+    accel_sigma: float = 1.5
+    appearance_weight: float = 4.0
+    max_appearance: float = 0.6
+    gate_min_m: float = 0.4
+    confirm_hits: int = 2
+    tentative_ttl_ns: int = 2_000_000_000
+    coast_ns: int = 2_000_000_000
+    v_max: float = 1.5
+    #: The position's σ never grows past this, m.
+    max_sigma_m: float = 10.0
+
+
+def _F(dt: float) -> FloatArray:
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = dt
+    return F
+
+
+def _Q(dt: float, sigma_a: float) -> FloatArray:
+    q = sigma_a**2
+    a, b, c = dt**4 / 4.0, dt**3 / 2.0, dt**2
+    return q * np.array([[a, 0, b, 0], [0, a, 0, b], [b, 0, c, 0], [0, b, 0, c]])
+
+
+class PeopleTracker:
+    """Every person; `update(stamp, observations)` predicts, associates and fuses."""
+
+    def __init__(self, ids: IdBook, params: PeopleParams) -> None:
+        self.ids = ids
+        self.params = params
+        self.tracks: list[Track] = []
+
+    @property
+    def confirmed(self) -> list[Track]:
+        return [t for t in self.tracks if t.confirmed]
+
+    def by_id(self, entity_id: str) -> Track | None:
+        return next((t for t in self.tracks if t.id == entity_id), None)
+
+    def add(self, track: Track, stamp_ns: int = 0) -> None:
+        """A known person (from a prior, a seed, the database)."""
+        if track.id is not None:
+            self.ids.reserve(track.id)
+        self._init_P(track)
+        self.tracks.append(track)
+        track.stamp_ns = max(stamp_ns, track.last_seen_ns, track.stamp_ns)
+
+    @staticmethod
+    def _init_P(tr: Track) -> None:
+        if tr.P is None:
+            tr.P = np.zeros((4, 4))
+            tr.P[:2, :2] = tr.cov
+            tr.P[2:, 2:] = tr.vel_cov
+
+    def predict(self, stamp_ns: int) -> None:
+        p = self.params
+        for tr in self.tracks:
+            last = tr.stamp_ns
+            if stamp_ns <= last:
+                continue
+            assert tr.P is not None
+            if tr.last_seen_ns and stamp_ns - tr.last_seen_ns > p.coast_ns and tr.velocity.any():
+                tr.velocity = np.zeros(2)
+                tr.P[2:, :] = 0.0
+                tr.P[:, 2:] = 0.0
+                tr.P[2:, 2:] = np.eye(2) * p.v_max**2
+            dt = (stamp_ns - last) * 1e-9
+            x = np.concatenate([tr.xy, tr.velocity])
+            F = _F(dt)
+            x = F @ x
+            P = F @ tr.P @ F.T + _Q(dt, p.accel_sigma)
+            cap = p.max_sigma_m**2
+            if P[0, 0] > cap or P[1, 1] > cap:
+                P[:2, :2] *= cap / max(P[0, 0], P[1, 1])
+            self._set(tr, x, P)
+            tr.stamp_ns = stamp_ns
+
+    @staticmethod
+    def _set(tr: Track, x: FloatArray, P: FloatArray) -> None:
+        tr.xy, tr.velocity = x[:2].copy(), x[2:].copy()
+        tr.P = 0.5 * (P + P.T)
+        tr.cov = tr.P[:2, :2].copy()
+        tr.vel_cov = tr.P[2:, 2:].copy()
+
+    def cost(self, tr: Track, obs: Observation) -> float:
+        """Association cost, or `_BIG` outside the gates."""
+        p = self.params
+        assert tr.P is not None
+        S = tr.P[:2, :2] + np.eye(2) * obs.sigma_m**2
+        nu = obs.xy - tr.xy
+        d2 = float(nu @ np.linalg.solve(S, nu))
+        near = float(np.linalg.norm(nu)) <= p.gate_min_m
+        if d2 > CHI2_2D_999 and not near:
+            return _BIG
+        app = 0.0
+        if tr.appearance is not None and obs.appearance is not None:
+            app = bhattacharyya(tr.appearance, obs.appearance)
+            if app > p.max_appearance:
+                return _BIG
+        return min(d2, CHI2_2D_999) / CHI2_2D_999 + p.appearance_weight * app
+
+    def update(self, stamp_ns: int, observations: list[Observation]) -> list[Track]:
+        """Fuse one frame's person detections; the confirmed people updated."""
+        self.predict(stamp_ns)
+        changed: list[Track] = []
+        used: set[int] = set()
+        if self.tracks and observations:
+            C = np.array([[self.cost(t, o) for o in observations] for t in self.tracks])
+            rows, cols = linear_sum_assignment(C)
+            for i, j in zip(rows, cols, strict=True):
+                if C[i, j] >= _BIG:
+                    continue
+                tr = self.tracks[i]
+                self._fuse(tr, observations[j], stamp_ns)
+                used.add(int(j))
+                if not tr.confirmed and tr.hits >= self.params.confirm_hits:
+                    tr.id = self.ids.next_id("person")
+                if tr.confirmed:
+                    changed.append(tr)
+        for j, obs in enumerate(observations):
+            if j in used:
+                continue
+            tr = Track(
+                class_name="person",
+                kind="person",
+                xy=obs.xy.astype(float).copy(),
+                cov=np.eye(2) * obs.sigma_m**2,
+                z=0.0,
+                source="perception",
+                last_seen_ns=stamp_ns,
+                first_seen_ns=stamp_ns,
+                appearance=None if obs.appearance is None else obs.appearance.copy(),
+                hits=1,
+            )
+            tr.vel_cov = np.eye(2) * self.params.v_max**2
+            self.add(tr, stamp_ns)
+            if self.params.confirm_hits <= 1:
+                tr.id = self.ids.next_id("person")
+                changed.append(tr)
+        ttl = self.params.tentative_ttl_ns
+        self.tracks = [t for t in self.tracks if t.confirmed or stamp_ns - t.last_seen_ns <= ttl]
+        return changed
+
+    def _fuse(self, tr: Track, obs: Observation, stamp_ns: int) -> None:
+        assert tr.P is not None
+        H = np.zeros((2, 4))
+        H[0, 0] = H[1, 1] = 1.0
+        R = np.eye(2) * obs.sigma_m**2
+        x = np.concatenate([tr.xy, tr.velocity])
+        S = H @ tr.P @ H.T + R
+        K = tr.P @ H.T @ np.linalg.inv(S)
+        x = x + K @ (obs.xy - H @ x)
+        P = (np.eye(4) - K @ H) @ tr.P
+        self._set(tr, x, P)
+        if obs.appearance is not None:
+            tr.appearance = blend(tr.appearance, obs.appearance)
+        tr.hits += 1
+        tr.last_seen_ns = stamp_ns
+        tr.misses = 0
+        tr.missing_since_ns = None

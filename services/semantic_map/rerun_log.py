@@ -1,0 +1,83 @@
+"""What the map shows in rerun: entities as labelled points sized by their uncertainty,
+missing artifacts in red, the occupancy grid's occupied cells (static grey, learned
+orange), and the patrol's route."""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from common.lockstep import NS_PER_S
+from common.recording import is_recording
+from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.occupancy import OCCUPIED
+from services.semantic_map.patrol import PatrolFollower
+
+ARTIFACT = (40, 160, 255)
+PERSON = (60, 200, 90)
+MISSING = (230, 40, 40)
+
+
+class MapLogger:
+    def __init__(self, rec: rr.RecordingStream, every_s: float, grid_every_s: float) -> None:
+        self.rec = rec
+        self.every_ns = round(every_s * NS_PER_S)
+        self.grid_every_ns = round(grid_every_s * NS_PER_S)
+        self._route_logged: int | None = None
+
+    def log(self, t_ns: int, smap: SemanticMap) -> None:
+        if not is_recording(self.rec):
+            return
+        if t_ns % self.every_ns == 0:
+            for kind, path, colour in (
+                ("artifact", "world/map/artifacts", ARTIFACT),
+                ("person", "world/map/people", PERSON),
+            ):
+                es = smap.entities(kind)  # type: ignore[arg-type]
+                self.rec.log(
+                    path,
+                    rr.Points3D(
+                        [e.position_in_world for e in es] or np.zeros((0, 3)),
+                        radii=[max(e.uncertainty_m, 0.03) for e in es],
+                        labels=[e.id for e in es],
+                        colors=[MISSING if e.missing_since_ns is not None else colour for e in es],
+                        show_labels=True,
+                    ),
+                )
+        if t_ns % self.grid_every_ns == 0:
+            occ = smap.occupancy
+            learned = occ.learned_mask()
+            static = occ.static == OCCUPIED
+            for name, mask, colour in (
+                ("static", static, (150, 150, 150)),
+                ("learned", learned, (255, 140, 0)),
+            ):
+                iy, ix = np.nonzero(mask)
+                xyz = np.stack(
+                    [
+                        occ.origin_xy[0] + (ix + 0.5) * occ.resolution_m,
+                        occ.origin_xy[1] + (iy + 0.5) * occ.resolution_m,
+                        np.full(len(ix), 0.01),
+                    ],
+                    axis=1,
+                )
+                self.rec.log(
+                    f"world/map/occupancy/{name}",
+                    rr.Points3D(xyz, radii=occ.resolution_m / 2, colors=colour),
+                )
+
+    def patrol(self, t_ns: int, f: PatrolFollower) -> None:
+        if not is_recording(self.rec) or self._route_logged == id(f):
+            return
+        self._route_logged = id(f)
+        self.rec.log(
+            "world/map/patrol",
+            rr.LineStrips3D(
+                [np.column_stack([p, np.full(len(p), 0.05)]) for p in f.route.paths],
+                colors=(200, 60, 200),
+            ),
+        )
+        self.rec.log(
+            "world/map/patrol/viewpoints",
+            rr.Points3D([(v[0], v[1], 0.05) for v in f.route.viewpoints], radii=0.08),
+        )

@@ -1,0 +1,145 @@
+"""Opening a map: resume the database, or fill an empty one per `semantic_map.start`.
+
+A database that holds a map is resumed (entities with their ids and histograms, the id
+counters, the static and learned occupancy layers) whatever the start mode, unless
+`reset`. An empty one starts from a prior map file, from the sim's truth with noise, or
+empty; the static layer comes from the file, or else from the floor plan (the sim's grid)
+when `floor_plan = "world"`, or is unknown.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Literal
+
+import numpy as np
+
+from common.config import SemanticMapSettings, resolve
+from common.messages.world import WorldDescription
+from services.semantic_map.artifacts import FusionParams
+from services.semantic_map.entities import Track
+from services.semantic_map.mapfile import (
+    occupancy_from_grid,
+    occupancy_from_world,
+    read_map_file,
+    seed_from_world,
+    tracks_from_file,
+)
+from services.semantic_map.mapper import MapParams, SemanticMap
+from services.semantic_map.occupancy import Occupancy
+from services.semantic_map.people import PeopleParams
+from services.semantic_map.store import Grid, MapStore
+
+log = logging.getLogger(__name__)
+
+
+def map_params(s: SemanticMapSettings) -> MapParams:
+    return MapParams(
+        sigma0_m=s.sigma0_m,
+        sigma_per_m=s.sigma_per_m,
+        min_score=s.min_score,
+        missing_after_frames=s.missing_after_frames,
+        look_range_m=s.look_range_m,
+        fusion=FusionParams(
+            gate_min_m=s.gate_min_m, gate_sigmas=s.gate_sigmas, confirm_hits=s.confirm_hits
+        ),
+        people=PeopleParams(
+            accel_sigma=s.person_accel_sigma,
+            appearance_weight=s.appearance_weight,
+            confirm_hits=s.confirm_hits,
+        ),
+    )
+
+
+def open_map(
+    s: SemanticMapSettings,
+    store: MapStore,
+    world: Callable[[], WorldDescription | None],
+) -> tuple[SemanticMap, str]:
+    """The map and a sentence saying where it came from. `world()` fetches the sim's
+    description (None when there is none); it is called only when needed."""
+    params = map_params(s)
+    occ_kw = dict(hits_needed=s.obstacle_hits, z_range=tuple(s.obstacle_z_m))
+    if not store.is_empty():
+        return _resume(s, store, params, occ_kw)
+    tracks: list[Track] = []
+    occ: Occupancy | None = None
+    source: Literal["world", "file", "none"] = "none"
+    counters: dict[str, int] = {}
+    if s.start == "prior":
+        if not s.prior_file:
+            raise ValueError("semantic_map.start = prior needs semantic_map.prior_file")
+        mf = read_map_file(resolve(s.prior_file))
+        tracks = tracks_from_file(mf, "prior")
+        counters = dict(mf.counters)
+        if mf.occupancy is not None:
+            occ, source = occupancy_from_grid(mf.occupancy, **occ_kw), "file"
+    if occ is None and (s.start == "seed-from-world" or s.floor_plan == "world"):
+        w = world()
+        if w is None and s.start == "seed-from-world":
+            raise RuntimeError("seed-from-world: no simulator answers dume/world/description")
+        if w is not None:
+            if s.start == "seed-from-world":
+                tracks = seed_from_world(w, s.seed_noise_m, s.seed_noise_seed)
+            if s.floor_plan == "world":
+                occ, source = occupancy_from_world(w, **occ_kw), "world"
+        else:
+            log.warning("no world description: the static occupancy layer is unknown")
+    if occ is None:
+        occ = Occupancy.unknown(s.grid_half_extent_m, s.grid_resolution_m, **occ_kw)
+    smap = SemanticMap(params, occ, counters)
+    smap.static_source = source
+    for tr in tracks:
+        smap.add(tr)
+    save_all(smap, store, {"start": s.start, "static_source": source})
+    return smap, f"new map {store.path.name} from {s.start}: {len(tracks)} entities"
+
+
+def save_all(smap: SemanticMap, store: MapStore, meta: dict[str, str] | None = None) -> None:
+    """Write the whole map in one transaction (a new map, an import)."""
+    smap.take_changes()
+    occ = smap.occupancy
+    store.commit(
+        entities=[(t.to_message(), t.appearance) for t in smap.tracks()],
+        counters=dict(smap.ids.counters),
+        grids={
+            "static": Grid(occ.static, occ.resolution_m, occ.origin_xy),
+            "learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy),
+        },
+        meta={"stamp_ns": str(smap.stamp_ns), **(meta or {})},
+        replace=True,
+    )
+
+
+def _static_source(text: str) -> Literal["world", "file", "none"]:
+    return "world" if text == "world" else "file" if text == "file" else "none"
+
+
+def _resume(
+    s: SemanticMapSettings, store: MapStore, params: MapParams, occ_kw: dict[str, object]
+) -> tuple[SemanticMap, str]:
+    snap = store.load()
+    g = snap.grids.get("static")
+    if g is None:
+        occ = Occupancy.unknown(s.grid_half_extent_m, s.grid_resolution_m, **occ_kw)
+    else:
+        hits = snap.grids.get("learned")
+        occ = Occupancy(
+            g.cells.astype(np.uint8),
+            g.resolution_m,
+            g.origin_xy,
+            hits=None if hits is None else hits.cells.astype(np.uint16),
+            **occ_kw,  # type: ignore[arg-type]
+        )
+    smap = SemanticMap(params, occ, snap.counters)
+    for entity, app in snap.entities:
+        smap.add(Track.from_message(entity, app))
+    smap.take_changes()
+    smap.stamp_ns = int(snap.meta.get("stamp_ns", "0"))
+    smap.static_source = _static_source(snap.meta.get("static_source", "none"))
+    n = len(snap.entities)
+    return (
+        smap,
+        f"resumed {store.path.name}: {n} entities, started as {snap.meta.get('start', '?')}",
+    )

@@ -1,0 +1,113 @@
+"""Navigation over a real lockstep stack with the whole-body controller (dynamic gait).
+
+The map is the sim's truth (`navigation.map_source="world"`): the semantic map is not
+part of these stacks. The WBC starts in `walk` obeying navigation's cmd_vel.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.keys import WORLD_EVENTS
+from common.messages.navigation import (
+    NavCancel,
+    NavGoalReply,
+    NavGoalRequest,
+    NavStatus,
+    PoseGoal,
+)
+from common.messages.sim import Odom, RobotContact, WorldEvents
+from common.stack import ProcessStack
+from tests.conftest import StartStack
+
+pytestmark = pytest.mark.integration
+
+NAV = (
+    'sim.world="small"',
+    "sim.world_seed=1",
+    'sim.cameras=["camera_head"]',
+    "time.participants={}",
+    'time.participants.wbc.role="command"',
+    "time.participants.wbc.period_s=0.002",
+    "time.participants.wbc.latency_s=0.0",
+    'time.participants.navigation.role="periodic"',
+    "time.participants.navigation.period_s=0.05",
+    "time.participants.navigation.latency_s=0.05",
+    'navigation.map_source="world"',
+    'wbc.initial_mode="walk"',
+)
+
+
+def _send(s: ProcessStack, goal: PoseGoal) -> str:
+    reply = s.bus.query(s.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, 10.0)
+    assert reply.accepted, reply.reason
+    return reply.goal_id
+
+
+def _wait_done(status: object, goal_id: str, timeout_s: float) -> NavStatus:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        st = status.get()  # type: ignore[attr-defined]
+        if st is not None and st.goal_id == goal_id and st.state not in ("active", "idle"):
+            return st  # type: ignore[no-any-return]
+        time.sleep(0.2)
+    raise AssertionError(f"goal {goal_id} not done within {timeout_s} s: {status.get()}")  # type: ignore[attr-defined]
+
+
+def _pose(odom: Odom) -> tuple[float, float, float]:
+    p = odom.base_position_in_world
+    return p[0], p[1], yaw_of(quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw)))
+
+
+def test_three_goals_in_the_small_world_are_reached_without_touching_obstacles(
+    stack: StartStack,
+) -> None:
+    s = stack(["sim", "wbc", "navigation"], *NAV)
+    status = s.bus.latest(s.keys.nav_status, NavStatus)
+    odom = s.bus.latest(s.keys.odom, Odom)
+    events = s.bus.fifo(WORLD_EVENTS, WorldEvents)
+    goals = [PoseGoal(x=0.3, y=1.8, yaw=0.0), PoseGoal(x=-2.0, y=-2.0, yaw=math.pi / 2),
+             PoseGoal(x=0.6, y=-0.6, yaw=0.0)]  # fmt: skip
+    for goal in goals:
+        goal_id = _send(s, goal)
+        done = _wait_done(status, goal_id, 900.0)
+        assert done.state == "succeeded", done
+        x, y, yaw = _pose(odom.get())  # type: ignore[arg-type]
+        assert math.hypot(x - goal.x, y - goal.y) <= goal.position_tolerance_m + 0.05
+        assert abs(math.remainder(yaw - goal.yaw, math.tau)) <= goal.yaw_tolerance_rad + 0.05
+    contacts = [
+        e for w in events.drain() for e in w.events
+        if isinstance(e, RobotContact) and e.other != "floor"
+    ]  # fmt: skip
+    assert contacts == []
+
+
+def test_a_cancel_brings_the_base_to_rest_within_half_a_second(stack: StartStack) -> None:
+    s = stack(["sim", "wbc", "navigation"], *NAV)
+    status = s.bus.latest(s.keys.nav_status, NavStatus)
+    odom = s.bus.fifo(s.keys.odom, Odom, maxlen=100_000)
+    cancel = s.bus.publisher(s.keys.nav_cancel, NavCancel)
+    goal_id = _send(s, PoseGoal(x=0.5, y=2.3, yaw=0.0))
+    samples: list[Odom] = []
+    deadline = time.monotonic() + 600.0
+    while time.monotonic() < deadline:  # walking at speed
+        msg = odom.pop(timeout_s=1.0)
+        if msg is not None:
+            samples.append(msg)
+            if math.hypot(*msg.base_linear_velocity_in_world[:2]) > 0.3:
+                break
+    cancel.put(NavCancel(goal_id=goal_id, reason="test"))
+    done = _wait_done(status, goal_id, 120.0)
+    assert done.state == "cancelled"
+    after = [m for m in (odom.pop(timeout_s=5.0) for _ in range(200)) if m is not None]
+    cancelled_at = done.stamp_ns
+    rest = next(
+        m.stamp_ns for m in after
+        if m.stamp_ns >= cancelled_at and math.hypot(*m.base_linear_velocity_in_world[:2]) < 0.05
+    )  # fmt: skip
+    assert (rest - cancelled_at) / 1e9 <= 0.5

@@ -1,0 +1,106 @@
+"""Artifact fusion, the missing test, the database, the map file and the patrol route."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from common.geometry import make_T
+from common.messages import as_numpy
+from services.semantic_map.artifacts import ArtifactTracker, FusionParams
+from services.semantic_map.entities import IdBook, Observation
+from services.semantic_map.looks import View, looks_at
+from services.semantic_map.mapfile import seed_from_world
+from services.semantic_map.occupancy import OCCUPIED, Occupancy
+from services.semantic_map.patrol import PatrolFollower, coverage_route
+from services.semantic_map.store import Grid, MapStore
+from services.sim.world import generate_world
+
+S = 100_000_000
+
+
+def test_repeated_noisy_detections_converge_and_noise_grows_with_range() -> None:
+    rng = np.random.default_rng(0)
+    tracker = ArtifactTracker(IdBook(), FusionParams())
+    truth = np.array([2.0, 1.0])
+    for k in range(30):
+        sigma = 0.02 + 0.02 * 3.0
+        xy = truth + rng.normal(0.0, sigma, 2)
+        tracker.update(k * S, [Observation("bottle", xy, 0.8, sigma)])
+    (tr,) = tracker.confirmed
+    assert tr.id == "bottle_1"
+    assert np.linalg.norm(tr.xy - truth) < 0.04
+    assert tr.sigma_m < 0.08 / np.sqrt(30) * 1.01
+
+
+def test_a_detection_outside_the_gate_or_of_another_class_is_a_new_artifact() -> None:
+    tracker = ArtifactTracker(IdBook({"bottle": 4}), FusionParams())
+    for k in range(2):
+        tracker.update(
+            k * S,
+            [
+                Observation("bottle", np.array([0.0, 0.0]), 0.8, 0.03),
+                Observation("bottle", np.array([0.6, 0.0]), 0.8, 0.03),
+                Observation("can", np.array([0.0, 0.0]), 0.8, 0.03),
+            ],
+        )
+    assert sorted(t.id or "" for t in tracker.confirmed) == ["bottle_5", "bottle_6", "can_1"]
+
+
+def test_the_missing_test_sees_in_front_within_range_and_not_behind_an_occluder() -> None:
+    # Camera at the origin looking along world +x (optical z = world x).
+    R = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    depth = np.full((240, 320), 5.0, np.float32)
+    view = View(make_T(R, [0, 0, 0]), 200.0, 200.0, 159.5, 119.5, 320, 240, depth)
+    assert looks_at(view, np.array([2.0, 0.0, 0.0]), 3.0)
+    assert not looks_at(view, np.array([4.0, 0.0, 0.0]), 3.0)  # beyond range
+    assert not looks_at(view, np.array([-2.0, 0.0, 0.0]), 3.0)  # behind
+    assert not looks_at(view, np.array([1.0, 3.0, 0.0]), 3.0)  # outside the image
+    depth[:, :] = 1.0  # a wall 1 m ahead hides what is at 2 m
+    assert not looks_at(view, np.array([2.0, 0.0, 0.0]), 3.0)
+
+
+def test_learned_obstacles_need_several_frames_and_leave_the_floor_out() -> None:
+    occ = Occupancy(np.zeros((20, 20), np.uint8), 0.1, (0.0, 0.0), hits_needed=3)
+    pts = np.array([[0.55, 0.55, 0.5], [1.05, 1.05, 0.01]])
+    for _ in range(2):
+        occ.integrate(pts)
+    assert occ.cells()[5, 5] == 0
+    occ.integrate(pts)
+    assert occ.cells()[5, 5] == OCCUPIED and occ.cells()[10, 10] == 0
+
+
+def test_the_store_keeps_what_was_committed(tmp_path: Path) -> None:
+    world = generate_world(0, "small")
+    tracks = seed_from_world(world, 0.05, 0)
+    store = MapStore(tmp_path / "m.sqlite")
+    grid = Grid(np.eye(3, dtype=np.uint16), 0.05, (1.0, 2.0))
+    store.commit(
+        [(t.to_message(), None) for t in tracks], {"bottle": 1, "person": 1}, {"learned": grid}
+    )
+    store.close()
+    snap = MapStore(tmp_path / "m.sqlite").load()
+    assert [e.id for e, _ in snap.entities] == ["bottle_1", "person_1"]
+    assert snap.entities[0][0].source == "seed-from-world"
+    assert snap.counters == {"bottle": 1, "person": 1}
+    assert np.array_equal(snap.grids["learned"].cells, np.eye(3))
+
+
+def test_the_patrol_route_reaches_viewpoints_over_the_small_world() -> None:
+    w = generate_world(0, "small")
+    g = w.occupancy
+    cells = np.asarray(as_numpy(g.cells), np.uint8)
+    route = coverage_route(
+        cells, g.resolution, g.origin, (w.robot_start.x, w.robot_start.y), 2.5, 0.7
+    )
+    assert len(route.viewpoints) >= 3
+    occ = Occupancy(cells, g.resolution, g.origin)
+    for path in route.paths:  # every path point keeps off the obstacles
+        assert not occ.occupied_at(path).any()
+    f = PatrolFollower(route)
+    x, y, yaw, t = w.robot_start.x, w.robot_start.y, w.robot_start.yaw, 0
+    while not f.done and t < 600 * 10**9:
+        vx, _vy, wz = f.step(x, y, yaw, t)
+        x, y, yaw, t = x + 0.1 * vx * np.cos(yaw), y + 0.1 * vx * np.sin(yaw), yaw + 0.1 * wz, t + S
+    assert f.done and f.skipped == 0

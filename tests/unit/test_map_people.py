@@ -1,0 +1,109 @@
+"""The person tracker keeps ids through walking, passing and short occlusions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.semantic_map.appearance import SIZE, bhattacharyya, colour_histogram
+from services.semantic_map.entities import IdBook, Observation
+from services.semantic_map.people import PeopleParams, PeopleTracker
+
+DT_NS = 100_000_000  # 10 Hz frames
+
+
+def _hist(peak: int, rng: np.random.Generator) -> np.ndarray:
+    h = rng.uniform(0.0, 0.05, SIZE)
+    h[peak] += 1.0
+    h[peak + 1] += 0.5
+    return h / h.sum()
+
+
+def _walk(start: tuple[float, float], velocity: tuple[float, float], t: float) -> np.ndarray:
+    return np.array(start) + np.array(velocity) * t
+
+
+def _run_crossing(lateral_m: float, occlude: bool, seed: int = 0) -> dict[str, list[str]]:
+    """Two people walk towards each other 1 m/s each, `lateral_m` apart sideways; returns
+    the ids given to each one's detections, frame by frame."""
+    rng = np.random.default_rng(seed)
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    looks = {"red": _hist(2, rng), "blue": _hist(30, rng)}
+    paths = {
+        "red": ((-5.0, 0.0), (1.0, 0.0)),
+        "blue": ((5.0, lateral_m), (-1.0, 0.0)),
+    }
+    seen: dict[str, list[str]] = {"red": [], "blue": []}
+    for k in range(100):
+        t = k * 0.1
+        obs, who = [], []
+        for name, (start, vel) in paths.items():
+            xy = _walk(start, vel, t) + rng.normal(0.0, 0.03, 2)
+            # While they overlap in the camera's view, the farther one (blue) is hidden.
+            if occlude and name == "blue" and 4.4 <= t <= 5.6:
+                continue
+            app = looks[name] + rng.uniform(0.0, 0.02, SIZE)
+            obs.append(Observation("person", xy, 0.0, 0.05, appearance=app / app.sum()))
+            who.append(name)
+        order = rng.permutation(len(obs))  # detections come in any order
+        tracker.update(k * DT_NS, [obs[i] for i in order])
+        for name in who:
+            if not tracker.confirmed:
+                continue
+            truth = _walk(*paths[name], t)
+            best = min(tracker.confirmed, key=lambda tr: np.linalg.norm(tr.xy - truth))
+            if np.linalg.norm(best.xy - truth) < 0.3 and best.id is not None:
+                seen[name].append(best.id)
+    return seen
+
+
+def test_two_people_passing_each_other_keep_their_ids() -> None:
+    seen = _run_crossing(lateral_m=0.4, occlude=False)
+    assert len(set(seen["red"])) == 1 and len(set(seen["blue"])) == 1
+    assert set(seen["red"]) | set(seen["blue"]) == {"person_1", "person_2"}
+    assert len(seen["red"]) > 95 and len(seen["blue"]) > 95
+
+
+def test_ids_survive_one_person_hidden_behind_the_other_while_they_cross() -> None:
+    seen = _run_crossing(lateral_m=0.3, occlude=True, seed=1)
+    assert len(set(seen["red"])) == 1 and len(set(seen["blue"])) == 1
+    assert set(seen["red"]) | set(seen["blue"]) == {"person_1", "person_2"}
+
+
+def test_a_person_walking_out_of_view_and_back_keeps_the_id() -> None:
+    rng = np.random.default_rng(2)
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    look = _hist(10, rng)
+    for k in range(30):
+        if 10 <= k < 20:  # not seen for a second while walking on
+            tracker.update(k * DT_NS, [])
+            continue
+        xy = np.array([0.8 * k * 0.1, 0.0]) + rng.normal(0.0, 0.03, 2)
+        tracker.update(k * DT_NS, [Observation("person", xy, 0.0, 0.05, appearance=look)])
+    assert [t.id for t in tracker.confirmed] == ["person_1"]
+    assert abs(tracker.confirmed[0].velocity[0] - 0.8) < 0.2
+
+
+def test_a_one_frame_false_positive_never_gets_an_id() -> None:
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker.update(0, [Observation("person", np.array([1.0, 1.0]), 0.0, 0.05)])
+    for k in range(1, 40):
+        tracker.update(k * DT_NS, [])
+    assert tracker.confirmed == []
+    assert tracker.tracks == []
+
+
+def test_the_colour_histogram_tells_two_shirts_apart_and_matches_one_shirt() -> None:
+    rng = np.random.default_rng(3)
+    img = np.zeros((60, 80, 3), np.uint8)
+    img[:, :40] = (200, 30, 30)  # red
+    img[:, 40:] = (30, 30, 200)  # blue
+    noise = rng.integers(0, 20, img.shape, dtype=np.uint8)
+    img = np.clip(img.astype(int) + noise, 0, 255).astype(np.uint8)
+    mask = np.ones((60, 40), np.uint8)
+    red = colour_histogram(img, (0, 0, 40, 60), mask)
+    red2 = colour_histogram(img, (0, 0, 40, 60), mask[:, ::-1].copy())
+    blue = colour_histogram(img, (40, 0, 80, 60), mask)
+    assert red is not None and blue is not None and red2 is not None
+    assert bhattacharyya(red, red2) < 0.1
+    assert bhattacharyya(red, blue) > 0.9
+    assert colour_histogram(img, (70, 0, 90, 60), np.ones((60, 20), np.uint8)) is None

@@ -1,0 +1,118 @@
+"""Navigation's pure planning: A* against Dijkstra, failures with reasons, goal poses."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.sparse.csgraph import dijkstra
+
+from services.navigation import native
+from services.navigation.costmap import CostParams, Person, build_costmap
+from services.navigation.goals import handover_pose, standoff_pose
+from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint, footprint_free
+from services.navigation.people import PeopleParams, people_limit
+from services.navigation.planner import PlanError, PlanParams, plan
+from services.sim import feasibility as fz
+from services.sim.world import generate_world
+
+FP = Footprint.stowed()
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_astar_cost_equals_dijkstra_on_random_grids(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    ny, nx = rng.integers(10, 60, 2)
+    cost = rng.uniform(0.0, 1.0, (ny, nx)).astype(np.float32)
+    cost[rng.random((ny, nx)) < 0.2] = -1.0
+    cost[0, 0] = cost[-1, -1] = 0.0
+    found = native.search(cost, (0, 0), (int(ny) - 1, int(nx) - 1), 4.0)
+    reference = dijkstra(native.grid_graph(cost, 4.0), indices=0)[-1]
+    if math.isinf(reference):
+        assert len(found.cells) == 0
+    else:
+        assert found.cost == pytest.approx(reference, rel=1e-9)
+        steps = np.abs(np.diff(found.cells, axis=0)).max(axis=1)
+        assert np.all(steps == 1) and np.all(cost[found.cells[:, 0], found.cells[:, 1]] >= 0)
+
+
+def _room(walls: list[tuple[slice, slice]]) -> Grid:
+    occ = np.zeros((120, 160), dtype=bool)
+    occ[[0, -1], :] = occ[:, [0, -1]] = True
+    for ys, xs in walls:
+        occ[ys, xs] = True
+    return Grid(occ, 0.05, (0.0, 0.0))
+
+
+def test_a_goal_behind_a_closed_wall_is_refused_with_no_path() -> None:
+    cm = build_costmap(_room([(slice(None), slice(78, 82))]), FP, CostParams())
+    with pytest.raises(PlanError) as err:
+        plan(cm, Pose(1.5, 3.0, 0.0), Pose(6.5, 3.0, 0.0), FP, PlanParams())
+    assert err.value.reason == "no_path"
+
+
+def test_a_plan_goes_around_a_wall_through_its_gap() -> None:
+    cm = build_costmap(_room([(slice(0, 80), slice(78, 82))]), FP, CostParams())
+    result = plan(cm, Pose(1.5, 1.5, 0.0), Pose(6.5, 1.5, 0.0), FP, PlanParams())
+    assert result.poses[:, 1].max() > 4.0  # through the gap at y > 4 m
+    iy, ix, _ = cm.grid.cells(result.poses[:, :2])
+    assert np.all(cm.cost[iy, ix] >= 0)
+
+
+def test_a_goal_in_an_obstacle_moves_to_the_nearest_free_pose() -> None:
+    cm = build_costmap(_room([(slice(50, 70), slice(70, 90))]), FP, CostParams())
+    goal = Pose(4.0, 3.0, 0.0)  # the block's centre
+    result = plan(cm, Pose(1.5, 3.0, 0.0), goal, FP, PlanParams(goal_tolerance_m=1.5))
+    moved = math.hypot(result.goal.x - goal.x, result.goal.y - goal.y)
+    assert 0.0 < moved <= 1.5
+    assert footprint_free(cm.occupied, cm.grid, result.goal, FP, 0.03)
+    with pytest.raises(PlanError) as err:
+        plan(cm, Pose(1.5, 3.0, 0.0), goal, FP, PlanParams(goal_tolerance_m=0.2))
+    assert err.value.reason == "invalid_goal"
+
+
+def _world_costmap(name: str, seed: int):  # type: ignore[no-untyped-def]
+    world = generate_world(seed, name)
+    people = [Person(p.id, p.position[0], p.position[1], p.yaw) for p in world.people]
+    return world, build_costmap(Grid.from_world(world.occupancy), FP, CostParams(), people=people)
+
+
+@pytest.mark.parametrize(("name", "seed"), [("small", 1), ("hall", 3), ("hall", 5)])
+def test_standoff_poses_are_free_and_face_their_artifact(name: str, seed: int) -> None:
+    world, cm = _world_costmap(name, seed)
+    for a in world.artifacts:
+        pose = standoff_pose(cm, a.position[0], a.position[1], FP)
+        assert footprint_free(cm.occupied, cm.grid, pose, FP, 0.03)
+        bearing = math.atan2(a.position[1] - pose.y, a.position[0] - pose.x)
+        assert abs(math.remainder(bearing - pose.yaw, math.tau)) < 1e-6
+        truth = fz.standoff_pose(world, a.id)  # what the world generator aims for
+        assert abs(math.remainder(pose.yaw - truth.yaw, math.tau)) < 0.35
+
+
+@pytest.mark.parametrize(("name", "seed"), [("small", 1), ("hall", 3)])
+def test_handover_poses_are_free_and_face_their_person(name: str, seed: int) -> None:
+    _, cm = _world_costmap(name, seed)
+    for person in cm.people:
+        pose = handover_pose(cm, person, (0.0, 0.0), FP)
+        assert footprint_free(cm.occupied, cm.grid, pose, FP, 0.03)
+        bearing = math.atan2(person.y - pose.y, person.x - pose.x)
+        assert abs(math.remainder(bearing - pose.yaw, math.tau)) < 1e-6
+        assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(1.3, abs=0.01)
+
+
+def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
+    p = PeopleParams()
+    pose = Pose(0.0, 0.0, 0.0)
+    ahead = lambda x: [Person("person_1", x, 0.0)]  # noqa: E731
+    assert people_limit(pose, (1.0, 0.0), ahead(5.0), FP, p).rule == ""
+    slow = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.5), FP, p)
+    assert slow.rule == "slow" and slow.speed == p.slow_speed
+    stop = people_limit(pose, (1.0, 0.0), ahead(FP.front + 0.5), FP, p)
+    assert stop.rule == "stop" and stop.speed == 0.0
+    leaving = people_limit(pose, (-1.0, 0.0), ahead(FP.front + 0.5), FP, p)
+    assert leaving.rule == "slow"
+    handing = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.0), FP, p, "person_1")
+    assert handing.rule == "handover" and handing.speed == p.handover_speed
+    d = distance_to_footprint(pose, FP, np.array([[FP.front + 0.5, 0.0]]))
+    assert d[0] == pytest.approx(0.5)
