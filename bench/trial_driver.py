@@ -5,8 +5,11 @@ locomotion, cameras off, with the driver registered as the periodic participant 
 (every 20 ms, its outputs taking effect 20 ms later), so a trial is as repeatable as
 the stack. `Driver.run(script)` steps a generator script once per driver tick: before
 each step the driver has the tick's odom and `wbc/status` (`odom`, `status`), and the
-script publishes through `cmd`, `mode` and `goal`, then yields; the driver acks the
-tick. It keeps the fall figures (lowest base, largest roll/pitch) for every trial.
+script publishes through `cmd`, `mode`, `goal` and `push`, then yields; the driver acks
+the tick. A push is stamped two driver periods ahead: the sim reaches that time only
+after the driver's next ack, by when the push has long arrived, so it lands on its stamp.
+The driver keeps the fall figures (lowest base, largest roll/pitch) and what the robot
+touched in the world (truth contact events, the floor aside) for every trial.
 """
 
 from __future__ import annotations
@@ -20,8 +23,9 @@ import numpy as np
 
 from common.bus import Bus
 from common.geometry import FloatArray, quat_xyzw_to_matrix
+from common.keys import WORLD_EVENTS, WORLD_PUSH
 from common.lockstep import NS_PER_S, PeriodicTicker
-from common.messages.sim import Odom
+from common.messages.sim import Odom, Push, RobotContact, WorldEvents
 from common.messages.wbc import ArmGoal, ArmGoalReply, ArmGoalRequest, CmdVel, WbcMode, WbcStatus
 from common.messages.wbc import GoalStatus as GoalState
 from common.stack import ProcessStack
@@ -83,6 +87,9 @@ class Driver:
         self._status = bus.latest(keys.wbc_status, WbcStatus, history=16)
         self._cmd = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self._mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
+        self._push = bus.publisher(WORLD_PUSH, Push, "control")
+        self._events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
+        self.contacts: dict[str, int] = {}  # what the robot touched (truth): other → count
         self.ticker = PeriodicTicker(bus, keys, NAME, PERIOD_S, self.stop)
         self.t_ns = 0
         self.odom: Odom | None = None
@@ -104,6 +111,13 @@ class Driver:
 
     def mode(self, mode: Any) -> None:
         self._mode.put(WbcMode(stamp_ns=self.t_ns, mode=mode, cmd_vel_source=NAME))
+
+    def push(self, force_in_world: Sequence[float], duration_s: float) -> int:
+        """Push the base (truth-side test hook); the sim time it lands, ns."""
+        stamp = self.t_ns + 2 * round(PERIOD_S * NS_PER_S)
+        fx, fy, fz = (float(f) for f in force_in_world)
+        self._push.put(Push(stamp_ns=stamp, force_in_world=(fx, fy, fz), duration_s=duration_s))
+        return stamp
 
     def goal(self, goal: ArmGoal) -> str:
         reply = self.bus.query(self.keys.arm_goal, ArmGoalRequest(goal=goal), ArmGoalReply, 5.0)
@@ -141,6 +155,10 @@ class Driver:
             self.odom = self._odom.wait_stamp(stamp, timeout_s)
             self.status = self._status.wait_stamp(stamp, timeout_s)
             self._check_fall(self.odom)
+            for events in self._events.drain():
+                for e in events.events:
+                    if isinstance(e, RobotContact) and e.other != "floor":
+                        self.contacts[e.other] = self.contacts.get(e.other, 0) + 1
             vx, vy, wz = self.velocity
             self._cmd.put(CmdVel(stamp_ns=stamp, vx=vx, vy=vy, wz=wz, source=NAME))
             try:
@@ -172,4 +190,5 @@ class Driver:
             "min_base_height_m": round(self.min_height_m, 4),
             "max_roll_pitch_deg": round(self.max_tilt_deg, 2),
             "qp_failures": 0 if self.status is None else self.status.qp_failures,
+            "robot_contacts": dict(sorted(self.contacts.items())),
         }

@@ -7,35 +7,35 @@ on its last line.
 - walk: 5 m at 0.5 m/s; final error to the point 5 m ahead, lateral drift.
 - strafe: 2 m to the left at 0.3 m/s; final error, forward drift.
 - turn: 360° in place at 0.5 rad/s; yaw turned, how far the base wandered.
-- random: 120 s of random velocity commands within the limits, changed every 2 s (and
-  back towards the middle of a free area when 1.2 m out); never falls.
+- random: 120 s of random velocity commands within the limits, changed every 2 s, inside
+  a disc of free floor near the start (back towards its centre whenever out of it);
+  never falls, never touches anything (`bench.trial_random`).
 - reach: in manipulate, 20 `gripper_tcp` goals in the base frame, each the forward
   kinematics of a random collision-free arm configuration near `ready`; every goal's
   outcome and time.
-- pick: the truth pose of the small world's bottle (`dume/world/description`, truth:
-  perception comes later) → walk to the stance across the table edge → ready → Reach
-  with a pre-grasp approach → Grasp → lift 10 cm → stow → turn away from the table →
-  walk 20 s at 0.3 m/s on a 1 m circle (clear of the table); held by the grasp detector
-  and never dropped (the sim's drop events).
-- push: needs a push hook in the sim, which it does not have yet: says so.
+- pick: the truth pose of the small world's bottle → walk to the stance across the table
+  edge (round the table when it is in the way) → ready → Reach with a pre-grasp approach
+  → Grasp → lift 10 cm → stow → walk 20 s at 0.3 m/s holding it (`bench.trial_pick`).
+- push: 20 N·s lateral pushes on the base (200 N for 0.1 s, `dume/world/push`): standing,
+  then trotting at 0.5 m/s, to the left and to the right; after each, the lowest base,
+  the largest roll/pitch and how far the base was thrown sideways; never falls.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Generator
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from bench.spike_wbc import grasp_plan
-from bench.trial_driver import Driver, Script, start_stack
+from bench.trial_driver import Driver, Script, rpy, start_stack
+from bench.trial_pick import pick
+from bench.trial_random import random_walk
 from common import robot
 from common.geometry import wrap_angle
-from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
-from common.messages.sim import ObjectDropped, WorldEvents
-from common.messages.wbc import Grasp, Posture, Reach
-from common.messages.world import WorldDescription
+from common.messages.wbc import Posture, Reach
 
 TRIALS = ("walk", "turn", "strafe", "random", "reach", "pick", "push")
 Figures = dict[str, Any]
@@ -97,29 +97,54 @@ def turn(d: Driver, out: Figures) -> Script:
     out["position_drift_m"] = round(float(np.linalg.norm(d.base()[0] - p0)), 3)
 
 
-def random_walk(d: Driver, out: Figures, seconds: float = 120.0, seed: int = 0) -> Script:
-    """Random (vx, vy, wz) within the limits every 2 s, heading back when 1.2 m out."""
-    rng = np.random.default_rng(seed)
-    p0, yaw0 = d.base()
-    centre = p0 + 2.0 * np.array([math.cos(yaw0), math.sin(yaw0)])  # 6 m free ahead
+def _after_push(d: Driver, seconds: float, lateral: np.ndarray) -> Generator[None, None, Figures]:
+    """Watch the base for `seconds`: lowest height, largest tilt, largest sideways excursion."""
+    p0, _ = d.base()
+    low, tilt, side = math.inf, 0.0, 0.0
+    end = d.t + seconds
+    while d.t < end and not d.fell:
+        assert d.odom is not None
+        low = min(low, d.odom.base_position_in_world[2])
+        tilt = max(tilt, float(np.degrees(np.max(np.abs(rpy(d.odom.base_orientation_xyzw)[:2])))))
+        side = max(side, abs(float((d.base()[0] - p0) @ lateral)))
+        yield
+    return {
+        "min_base_height_m": round(low, 4),
+        "max_roll_pitch_deg": round(tilt, 2),
+        "max_sideways_m": round(side, 3),
+        "fell": d.fell,
+    }
+
+
+def push(d: Driver, out: Figures, impulse_ns: float = 20.0, duration_s: float = 0.1) -> Script:
+    """Lateral pushes of `impulse_ns` standing, then trotting at 0.5 m/s (left, right)."""
+    force = impulse_ns / duration_s
     d.mode("walk")
-    yield from d.wait(0.5)
-    end, segments, returns = d.t + seconds, 0, 0
-    while d.t < end:
-        p, yaw = d.base()
-        e = centre - p
-        if np.linalg.norm(e) > 1.2:
-            c, s = math.cos(yaw), math.sin(yaw)
-            back = 0.5 * np.array([c * e[0] + s * e[1], -s * e[0] + c * e[1]]) / np.linalg.norm(e)
-            d.cmd(float(back[0]), float(back[1]), 0.0)
-            returns += 1
-        else:
-            d.cmd(*(float(x) for x in rng.uniform(-1.0, 1.0, 3) * [0.8, 0.4, 1.0]))
-            segments += 1
-        yield from d.wait(2.0)
+    yield from d.wait(1.0)
+    pushes = (("stand_left", 0.0, 1.0), ("trot_left", 0.5, 1.0), ("trot_right", 0.5, -1.0))
+    for name, vx, side in pushes:
+        if vx and d.velocity[0] != vx:
+            d.cmd(vx)
+            yield from d.wait(3.0)  # steady trot first
+        _, yaw = d.base()
+        lateral = np.array([-math.sin(yaw), math.cos(yaw)])  # base_yaw's +y in world
+        f = side * force * lateral
+        d.push((f[0], f[1], 0.0), duration_s)
+        out[name] = yield from _after_push(d, 3.0, side * lateral)
+        if d.fell:
+            break
     d.cmd(0.0)
     yield from d.wait(2.0)
-    out |= {"random_segments": segments, "return_segments": returns}
+    out["impulse_ns"] = impulse_ns
+    out["survived"] = (
+        not d.fell
+        and all(
+            out[n]["min_base_height_m"] > 0.3 and out[n]["max_roll_pitch_deg"] < 30.0
+            for n, _, _ in pushes
+            if n in out
+        )
+        and all(n in out for n, _, _ in pushes)
+    )
 
 
 def random_arm_targets(n: int, seed: int) -> list[np.ndarray]:
@@ -167,77 +192,6 @@ def reach(d: Driver, out: Figures, n: int = 20, seed: int = 0) -> Script:
     }
 
 
-def _go_to(d: Driver, xy: np.ndarray, yaw: float, timeout_s: float) -> Script:
-    """Trot to (x, y, yaw) on proportional commands (no planner: a free straight line)."""
-    d.mode("walk")
-    end = d.t + timeout_s
-    while d.t < end:
-        p, now = d.base()
-        e, e_yaw = xy - p, wrap_angle(yaw - now)
-        if np.linalg.norm(e) < 0.03 and abs(e_yaw) < 0.03:
-            break
-        c, s = math.cos(now), math.sin(now)
-        ex, ey = c * e[0] + s * e[1], -s * e[0] + c * e[1]
-        d.cmd(
-            float(np.clip(1.0 * ex, -0.4, 0.4)),
-            float(np.clip(1.0 * ey, -0.2, 0.2)),
-            float(np.clip(1.5 * e_yaw, -0.5, 0.5)),
-        )
-        yield
-    d.cmd(0.0)
-    yield from d.wait(1.0)
-
-
-def pick(d: Driver, out: Figures, walk_s: float = 20.0) -> Script:
-    world = d.bus.query(WORLD_DESCRIPTION, None, WorldDescription, timeout_s=10.0)
-    plan = grasp_plan(world)  # truth: the bottle's pose from the sim's world description
-    events = d.bus.fifo(WORLD_EVENTS, WorldEvents)
-    q0 = plan.q0
-    yield from _go_to(d, q0[:2], 2 * math.atan2(q0[5], q0[6]), 30.0)
-    p, _ = d.base()
-    out["stance_error_m"] = round(float(np.linalg.norm(p - q0[:2])), 3)
-    d.mode("manipulate")
-    yield from d.wait(0.5)
-    steps: list[tuple[str, Any, float]] = [
-        ("ready", Posture(name="ready"), 5.0),
-        ("reach", Reach(H=_mat4(plan.T_grasp), frame="world", stamp_ns=0,
-                        pregrasp_m=0.12), 8.0),
-        ("grasp", Grasp(max_effort=4.0), 4.0),
-    ]  # fmt: skip
-    T_lift = plan.T_grasp.copy()
-    T_lift[2, 3] += 0.10
-    steps += [
-        ("lift", Reach(H=_mat4(T_lift), frame="world", stamp_ns=0, pregrasp_m=0.0), 5.0),
-        ("stow", Posture(name="stow"), 5.0),
-    ]
-    for name, goal, timeout in steps:
-        g = yield from d.finish(d.goal(goal), timeout)
-        out[name] = "timeout" if g is None else g.state
-        if g is None or g.state != "succeeded":
-            out["failed_at"] = name if g is None else f"{name}: {g.reason}"
-            break
-    else:
-        d.mode("walk")
-        yield from d.wait(0.5)
-        d.cmd(0.0, 0.0, -0.5)  # turn away from the table, then circle clear of it
-        yield from d.wait(math.pi / 0.5)
-        p0, _ = d.base()
-        d.cmd(0.3, 0.0, -0.3)
-        yield from d.wait(walk_s)
-        d.cmd(0.0)
-        yield from d.wait(1.5)
-        out["walked_s"], out["end_from_walk_start_m"] = (
-            walk_s,
-            round(float(np.linalg.norm(d.base()[0] - p0)), 3),
-        )
-    dropped = [e for w in events.drain() for e in w.events if isinstance(e, ObjectDropped)]
-    assert d.status is not None
-    out["held"] = bool(d.status.held and not dropped and "failed_at" not in out)
-    out["dropped"] = len(dropped)
-    out["gripper_angle_rad"] = round(d.status.gripper_angle, 3)
-    out["gripper_wrench_base"] = [round(x, 2) for x in d.status.gripper_wrench]
-
-
 SCRIPTS = {
     "walk": walk,
     "turn": turn,
@@ -245,12 +199,19 @@ SCRIPTS = {
     "random": random_walk,
     "reach": reach,
     "pick": pick,
+    "push": push,
 }
 
 
 #: Where each trial runs by default: the hall's seed 3 has 6 m free ahead of the start
 #: and 3 m to its left; the small world has a bottle on a table in front of the robot.
-WORLDS = {"walk": ("hall", 3), "strafe": ("hall", 3), "turn": ("hall", 3), "random": ("hall", 3)}
+WORLDS = {
+    "walk": ("hall", 3),
+    "strafe": ("hall", 3),
+    "turn": ("hall", 3),
+    "random": ("hall", 3),
+    "push": ("hall", 3),
+}
 DEFAULT_WORLD = ("small", 1)
 
 
@@ -265,9 +226,6 @@ def run_trial(
     seed = seed if world_seed is None else world_seed
     out: Figures = {"trial": name, "world": world, "world_seed": seed}
     out["wbc_period_s"] = wbc_period_s
-    if name == "push":
-        out["skipped"] = "the sim has no push hook (an external impulse on the base) yet"
-        return out
     with start_stack(world, seed, wbc_period_s, overrides or []) as stack:
         d = Driver(stack)
         d.start()

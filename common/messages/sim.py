@@ -8,7 +8,9 @@ velocity in world and angular velocity in the base frame.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
+
+import msgspec
 
 from common.messages.arrays import Array
 from common.messages.base import (
@@ -179,6 +181,23 @@ class WorldEvents(Message, frozen=True):
 
     stamp_ns: StampNs
     events: list[WorldEvent]
+
+
+class Push(Message, frozen=True):
+    """`dume/world/push` (tests and evaluation only; the sim alone reads it): an external
+    force on the robot's base, a disturbance for the controller to survive.
+
+    stamp_ns: sim time the push starts; the sim applies it from its step at that time
+        (lockstep-deterministic when it arrives before: publish it a participant period
+        or more ahead; a late one is applied at once and logged).
+    force_in_world: (3,) N on the base body's centre of mass, world axes.
+    duration_s: how long, s, in (0, 10]; the impulse is force × duration
+        (200 N for 0.1 s = 20 N·s).
+    """
+
+    stamp_ns: StampNs
+    force_in_world: Vec3
+    duration_s: Annotated[float, msgspec.Meta(gt=0.0, le=10.0)]
 
 
 class CameraInfo(Message, frozen=True):

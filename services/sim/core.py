@@ -15,6 +15,8 @@ and walk (`people`), take what is held out to them (`handover`), and contacts be
 height, level, while the legs hold `stand` and the arm still obeys commands; the feet are
 made frictionless (condim 1) so they glide instead of dragging the held legs (with
 friction a turn in place bends a hip by 0.17 rad), and foot contacts mean little there.
+`push(force, duration)` applies an external force on the base (tests and evaluation: a
+disturbance the controller must survive; `services.sim.push`).
 Time is exact: `time_ns = tick * 1_000_000`.
 """
 
@@ -36,9 +38,10 @@ from services.sim.drive import JAW, N_JOINTS, CommandError, JointDrive, joint_ad
 from services.sim.events import ContactMonitor, DropMonitor
 from services.sim.handover import Handover
 from services.sim.people import People
+from services.sim.push import PushError, PushQueue
 
 TICK_NS = 1_000_000
-__all__ = ["TICK_NS", "CommandError", "SimCore"]
+__all__ = ["TICK_NS", "CommandError", "PushError", "SimCore"]
 
 
 class SimCore:
@@ -81,6 +84,7 @@ class SimCore:
         self.drops = DropMonitor(self.model, self.contacts.artifact_ids)
         self._artifact_q = [int(self.model.joint(a).qposadr[0]) for a in self.drops.ids]
         self._cmd_vel = (0.0, 0.0, 0.0)
+        self.pushes = PushQueue(int(self.model.dof_bodyid[idx.qvel[0]]), self.dt)
         if locomotion == "kinematic":
             for foot in robot.FOOT_FRAMES:
                 self.model.geom_condim[self.model.geom(f"{foot}_0").id] = 1
@@ -122,6 +126,14 @@ class SimCore:
             raise CommandError([f"cmd_vel ({vx}, {vy}, {wz}) is not finite"])
         self._cmd_vel = (float(vx), float(vy), float(wz))
 
+    def push(self, force_in_world: ArrayLike, duration_s: float) -> int:
+        """Push the base with `force_in_world` (3,) N at its centre of mass for `duration_s`
+        from the next step on (200 N for 0.1 s = 20 N·s); the number of steps it lasts.
+
+        Raises PushError for a non-finite force or a duration outside (0, 10] s.
+        """
+        return self.pushes.add(force_in_world, duration_s)
+
     def reset_robot(self, x: float, y: float, yaw: float, posture: str = "stand") -> None:
         """Stand the robot still at (x, y, yaw) in `posture` (start-up and tests only)."""
         self.data.qpos[self._robot_qpos] = robot.q_pin_to_mj(robot.standing_q(posture, x, y, yaw))
@@ -137,6 +149,7 @@ class SimCore:
         data = self.data
         self.drive.before_step(data, self.time_ns)
         self.drive.write(data)
+        self.pushes.apply(data)
         x, y = data.qpos[self._base_xy].tolist()
         self.people.update(data, (x, y), self.dt)
         mujoco.mj_step(self.model, data)

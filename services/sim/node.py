@@ -10,7 +10,9 @@ the joints, as a robot's would); one that stalls past `time.stall_timeout_s` is 
 skipped until it answers again.
 
 The physics, people, handover and events live in `SimCore`; the cameras in `CameraRig`;
-this module only moves messages and keeps time.
+this module only moves messages and keeps time. A `Push` on `dume/world/push` (tests and
+evaluation) is applied at the step of its stamp, so a lockstep run with a push is as
+repeatable as one without.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from common.messages.sim import (
     Clock,
     JointCommand,
     Odom,
+    Push,
     RobotDescription,
     RobotState,
     SegmentationTruth,
@@ -42,7 +45,7 @@ from common.messages.world import WorldDescription
 from common.recording import default_blueprint, stamp
 from common.service import Service
 from services.sim.cameras import CameraRig
-from services.sim.core import CommandError, SimCore
+from services.sim.core import CommandError, PushError, SimCore
 from services.sim.rerun_scene import SceneLogger
 from services.sim.sim_log import SimLogger
 from services.sim.world import generate_world
@@ -62,6 +65,7 @@ class _Io:
     commands: Fifo[JointCommand]
     acks: Fifo[Ack]
     cmd_vel: Latest[CmdVel]
+    pushes: Fifo[Push]
 
 
 @dataclass
@@ -70,6 +74,7 @@ class _Stats:
     commands: int = 0
     rejected: int = 0
     stalls: int = 0
+    pushes: int = 0
     wall_start: float = field(default_factory=time.perf_counter)
 
 
@@ -154,7 +159,9 @@ class SimNode:
             commands=bus.fifo(keys.command, JointCommand, maxlen=256),
             acks=bus.fifo(keys.ack_all, Ack, maxlen=4096),
             cmd_vel=bus.latest(keys.cmd_vel, CmdVel, history=64),
+            pushes=bus.fifo(K.WORLD_PUSH, Push, maxlen=64),
         )
+        self._pending_pushes: list[Push] = []
         self.alive = bus.watch_alive(keys.alive_all)
         self._alive_names: set[str] = set()
         self._alive_version = -1
@@ -257,6 +264,29 @@ class SimNode:
         else:
             self.core.set_cmd_vel(0.0, 0.0, 0.0)
 
+    def _apply_pushes(self, t_ns: int) -> None:
+        """Start the pushes stamped at or before t (a late one at once, with a warning)."""
+        self._pending_pushes.extend(self.io.pushes.drain())
+        if not self._pending_pushes:
+            return
+        due = [p for p in self._pending_pushes if p.stamp_ns <= t_ns]
+        self._pending_pushes = [p for p in self._pending_pushes if p.stamp_ns > t_ns]
+        for push in due:
+            late_ms = (t_ns - push.stamp_ns) / 1e6
+            try:
+                steps = self.core.push(push.force_in_world, push.duration_s)
+            except PushError as exc:
+                self.svc.log.warning("push refused at t=%.3f s: %s", t_ns / NS_PER_S, exc)
+                continue
+            self.stats.pushes += 1
+            self.svc.log.info(
+                "push %s N for %d steps on the base at t=%.3f s%s",
+                [round(f, 1) for f in push.force_in_world],
+                steps,
+                t_ns / NS_PER_S,
+                f" ({late_ms:.0f} ms late: it arrived after its stamp)" if late_ms > 0 else "",
+            )
+
     # -- the loop -------------------------------------------------------------------------
 
     def _publish(self, t_ns: int, tick: int, wall_rtf: float) -> None:
@@ -327,6 +357,7 @@ class SimNode:
                     pass
                 self._apply(latest)
             self._apply_cmd_vel(t_ns)
+            self._apply_pushes(t_ns)
             events = self.core.step()
             tick += 1
             if events:
@@ -341,13 +372,15 @@ class SimNode:
         self.stats.ticks = tick
         wall = time.perf_counter() - wall0
         svc.log.info(
-            "stopped at t=%.3f s after %.1f s wall (rtf %.2f): %d commands, %d rejected, %d stalls",
+            "stopped at t=%.3f s after %.1f s wall (rtf %.2f): %d commands, %d rejected, "
+            "%d stalls, %d pushes",
             tick * self.tick_ns / NS_PER_S,
             wall,
             tick * self.tick_ns / NS_PER_S / max(wall, 1e-9),
             self.stats.commands,
             self.stats.rejected,
             self.stats.stalls,
+            self.stats.pushes,
         )
 
     def _pace(self, wall0: float, t_ns: int) -> None:

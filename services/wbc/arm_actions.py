@@ -10,8 +10,9 @@ reached (a frozen pose or joint target), so Grasp after Reach keeps the gripper 
   (fixed in the world from then on); the TCP moves there along minimum-jerk segments, via
   a pre-grasp pose `pregrasp_m` back along the approach axis; it succeeds when within
   `reach_tol_m` and `reach_tol_rad` after the motion (`held_tol_*` while gripping: the
-  controller's model does not know the payload, which sags the arm by about a
-  centimetre), fails after `settle_s` more. Reach opens the jaw unless it is gripping.
+  controller's model does not know the payload; its integral action takes the sag out
+  within about a second, not at once), fails after `settle_s` more. Reach opens the jaw
+  unless it is gripping.
 - Grasp: close under min(max_effort, `grip_effort_max_nm`) until `GraspDetector` says held
   (succeeded) or the jaw closes on nothing or `grasp_timeout_s` passes (failed).
 - Release: open the jaw; succeeded once open (or after `release_s`).

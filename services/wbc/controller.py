@@ -8,7 +8,10 @@ with PD targets at the state the QP's v̇ reaches one tick later
 (q_des = q + v dt + ½ v̇ dt², v_des = v + v̇ dt), so the sim's own 1 kHz PD only corrects
 what happens between ticks; the joints' damping and dry friction (which the rigid-body
 model lacks) are fed forward from v_des. The jaw is position-controlled, or torque-limited when
-closing on an object (`gripper_effort`), outside the QP's answer.
+closing on an object (`gripper_effort`), outside the QP's answer. The `gripper_tcp` task
+adds integral action on its position (`tcp_ki`, bounded): a held object the model does
+not know would otherwise sag the gripper by 1–3 cm. Only what the active tasks need is
+computed: no `gripper_tcp` Jacobian or drift without a TCP target.
 
 Values in and out mirror `common.messages.sim.RobotState` and `JointCommand` field by
 field. The controller reads no clock: pass `clock` (e.g. `time.perf_counter`) to get the
@@ -39,6 +42,8 @@ from services.wbc.qp import (
 )
 from services.wbc.tasks import ComTask, FrameTask, PostureTask, Task
 from services.wbc.values import ARM, JAW, WbcCommand, WbcGains, WbcReferences, WbcState
+
+_XYZ = slice(0, 3)
 
 __all__ = [
     "WbcCommand",
@@ -96,6 +101,12 @@ class WholeBodyController:
         self._damping = joint_damping()  # N m s/rad, what the sim's joints dissipate
         self._friction = joint_frictionloss()  # N m
         self._last_tau = np.zeros(19)
+        self._q = np.zeros(self.model.nq)
+        self._v = np.zeros(self.model.nv)
+        self._kp = np.full(19, g.joint_kp)
+        self._kd = np.full(19, g.joint_kd)
+        self._tcp_integral = np.zeros(3)  # ∫ (p_ref − p) dt of gripper_tcp, m s
+        self._neg_torque_limits = -robot.TORQUE_LIMITS
 
     def _make_solver(self) -> QpSolver:
         """Set OSQP up on the structural pattern, from generic states in full stance."""
@@ -116,20 +127,20 @@ class WholeBodyController:
         self.ref_yaw = yaw_of(_rotation(state.base_orientation_xyzw))
         self.gait = TrotGait(self.gait.params)
         self._initialised = True
-        self._update_model(state)
+        self._update_model(state, tcp=True)
         self.ref_xy = self.model.com[:2].copy()
+        self._tcp_integral[:] = 0.0
 
-    def _update_model(self, state: WbcState) -> FloatArray:
+    def _update_model(self, state: WbcState, tcp: bool) -> FloatArray:
         R = _rotation(state.base_orientation_xyzw)
-        q = np.concatenate([state.base_position_in_world, state.base_orientation_xyzw, state.q])
-        v = np.concatenate(
-            [
-                R.T @ state.base_linear_velocity_in_world,
-                state.base_angular_velocity_in_base,
-                state.v,
-            ]
-        )
-        self.model.update(q, v)
+        q, v = self._q, self._v
+        q[:3] = state.base_position_in_world
+        q[3:7] = state.base_orientation_xyzw
+        q[7:] = state.q
+        np.dot(state.base_linear_velocity_in_world, R, out=v[:3])  # Rᵀ v
+        v[3:6] = state.base_angular_velocity_in_base
+        v[6:] = state.v
+        self.model.update(q, v, tcp=tcp)
         return R
 
     def step(self, state: WbcState, refs: WbcReferences, dt: float) -> WbcCommand:
@@ -138,26 +149,24 @@ class WholeBodyController:
         t0 = clock() if clock else 0.0
         if not self._initialised:
             self.reset(state)
-        R = self._update_model(state)
+        R = self._update_model(state, tcp=refs.T_world_tcp is not None)
         m = self.model
         t1 = clock() if clock else 0.0
-        yaw = yaw_of(R)
-        feet = np.array([f.p for f in m.feet])
+        feet = m.feet_p
         self.gait.update(
             dt,
             refs.cmd_vel,
             m.frames[robot.BASE_FRAME].p[:2],
-            yaw,
+            math.atan2(R[1, 0], R[0, 0]),
             m.vcom,
-            float(m.com[2] - robot.FOOT_RADIUS_M),
+            float(m.com[2]) - robot.FOOT_RADIUS_M,
             feet,
         )
-        self._set_targets(refs, dt, feet)
+        self._set_targets(refs, dt)
         t_gait = clock() if clock else 0.0
         stance = self.gait.stance
         n_stance = max(float(stance.sum()), 1.0)
-        self.f_ref[:] = 0.0
-        self.f_ref[2::3] = stance * m.mass * 9.81 / n_stance
+        np.multiply(stance, m.mass * 9.81 / n_stance, out=self.f_ref[2::3])
         problem = build_qp(m, self.tasks, stance, self.f_ref, self.qp_params, out=self.problem)
         t2 = clock() if clock else 0.0
         sol = self.solver.solve(problem)
@@ -175,53 +184,84 @@ class WholeBodyController:
             }
         return cmd
 
-    def _set_targets(self, refs: WbcReferences, dt: float, feet: FloatArray) -> None:
+    def _set_targets(self, refs: WbcReferences, dt: float) -> None:
         g, m, gait = self.gains, self.model, self.gait
         # Horizontal: CoM over the feet when standing, an integrated reference when walking.
+        vx, vy, wz = gait.cmd.tolist()
         c, s = math.cos(self.ref_yaw), math.sin(self.ref_yaw)
-        v_world = np.array([c * gait.cmd[0] - s * gait.cmd[1], s * gait.cmd[0] + c * gait.cmd[1]])
+        v_world = (c * vx - s * vy, s * vx + c * vy)
+        com_x, com_y = m.com[0], m.com[1]
+        rx, ry = self.ref_xy
         if gait.walking:
-            self.ref_xy += v_world * dt
-            lead = self.ref_xy - m.com[:2]
-            dist = math.hypot(lead[0], lead[1])
+            rx, ry = rx + v_world[0] * dt, ry + v_world[1] * dt
+            lx, ly = rx - com_x, ry - com_y
+            dist = math.hypot(lx, ly)
             if dist > g.tracking_slack_m:
-                self.ref_xy = m.com[:2] + lead * (g.tracking_slack_m / dist)
+                k = g.tracking_slack_m / dist
+                rx, ry = com_x + lx * k, com_y + ly * k
         else:
-            centre = feet[:, :2].mean(axis=0)
-            step = centre - self.ref_xy
-            np.clip(step, -0.2 * dt, 0.2 * dt, out=step)
-            self.ref_xy += step
-        self.ref_yaw += gait.cmd[2] * dt
-        yaw_err = wrap_angle(self.ref_yaw - yaw_of(m.frames[robot.BASE_FRAME].R))
+            feet = m.feet_p
+            cx = 0.25 * (feet[0, 0] + feet[1, 0] + feet[2, 0] + feet[3, 0])
+            cy = 0.25 * (feet[0, 1] + feet[1, 1] + feet[2, 1] + feet[3, 1])
+            lim = 0.2 * dt
+            rx += min(max(cx - rx, -lim), lim)
+            ry += min(max(cy - ry, -lim), lim)
+        self.ref_xy[0], self.ref_xy[1] = rx, ry
+        self.ref_yaw += wz * dt
+        R_base = m.frames[robot.BASE_FRAME].R
+        yaw_err = wrap_angle(self.ref_yaw - math.atan2(R_base[1, 0], R_base[0, 0]))
         if abs(yaw_err) > 0.3:
             self.ref_yaw -= math.copysign(abs(yaw_err) - 0.3, yaw_err)
-        self.com_task.p_ref[:2] = self.ref_xy
-        self.com_task.v_ref[:2] = v_world
+        com = self.com_task
+        com.p_ref[0], com.p_ref[1] = rx, ry
+        com.v_ref[0], com.v_ref[1] = v_world
         self.base_task.p_ref[2] = refs.base_height
         c, s = math.cos(self.ref_yaw), math.sin(self.ref_yaw)
         R_ref = self.base_task.R_ref  # yaw only: the trunk stays level
         R_ref[0, 0], R_ref[0, 1], R_ref[1, 0], R_ref[1, 1] = c, -s, s, c
-        self.base_task.v_ref[5] = gait.cmd[2]
+        self.base_task.v_ref[5] = wz
+        swing = gait.swing
         for k, task in enumerate(self.foot_tasks):
-            swing = gait.swing.get(k)
-            if swing is None:
-                task.weight[:] = 0.0
+            target = swing.get(k)
+            if target is None:
+                if task.active:
+                    task.set_weight(0.0)
                 continue
-            task.weight[:3] = g.swing_w
-            task.set_target(swing.p)
-            task.v_ref[:3], task.a_ff[:3] = swing.v, swing.a
-        self.posture_task.q_ref[ARM] = refs.arm_posture
-        self.posture_task.q_ref[JAW] = refs.gripper_angle
+            if not task.active:
+                task.set_weight(g.swing_w, _XYZ)
+            task.p_ref[:] = target.p
+            task.v_ref[:3], task.a_ff[:3] = target.v, target.a
+        posture = self.posture_task
+        posture.q_ref[ARM] = refs.arm_posture
+        posture.q_ref[JAW] = refs.gripper_angle
+        tcp = self.tcp_task
         if refs.T_world_tcp is None:
-            self.tcp_task.weight[:] = 0.0
-            self.posture_task.weight[ARM] = g.posture_w_arm
+            if tcp.active:
+                tcp.set_weight(0.0)
+                posture.set_weight(g.posture_w_arm, ARM)
+            self._tcp_integral[:] = 0.0
+            return
+        if not tcp.active:
+            tcp.set_weight(g.tcp_w)
+            posture.set_weight(g.posture_w_arm_reaching, ARM)
+        T = refs.T_world_tcp
+        tcp.set_target(T[:3, 3], T[:3, :3])
+        if refs.tcp_twist is None:
+            tcp.v_ref[:] = 0.0
         else:
-            self.tcp_task.weight[:] = g.tcp_w
-            self.posture_task.weight[ARM] = g.posture_w_arm_reaching
-            self.tcp_task.set_target(refs.T_world_tcp[:3, 3], refs.T_world_tcp[:3, :3])
-            self.tcp_task.v_ref[:] = 0.0 if refs.tcp_twist is None else refs.tcp_twist
-            a_ff = refs.tcp_acceleration
-            self.tcp_task.a_ff[:] = 0.0 if a_ff is None else a_ff
+            tcp.v_ref[:] = refs.tcp_twist
+        a_ff = tcp.a_ff
+        if refs.tcp_acceleration is None:
+            a_ff[:] = 0.0
+        else:
+            a_ff[:] = refs.tcp_acceleration
+        # Integral action on the position: a payload the model does not know (a held
+        # bottle) sags the arm; the integral finds the extra force, bounded against windup.
+        if g.tcp_ki > 0.0:
+            e = self._tcp_integral
+            e += (tcp.p_ref - m.frames[robot.TCP_FRAME].p) * dt
+            np.clip(e, -g.tcp_integral_max, g.tcp_integral_max, out=e)
+            a_ff[:3] += g.tcp_ki * e
 
     def _command(
         self, state: WbcState, refs: WbcReferences, sol: QpSolution, dt: float
@@ -234,13 +274,17 @@ class WholeBodyController:
             self.qp_failures += 1
             tau = self._last_tau
         qdd = sol.vdot[6:]
-        q_des = state.q + state.v * dt + 0.5 * qdd * dt * dt
-        v_des = state.v + qdd * dt
-        kp = np.full(19, g.joint_kp)
-        kd = np.full(19, g.joint_kd)
+        v_des = qdd * dt
+        v_des += state.v
+        q_des = v_des + state.v  # q + (v + v_des) dt / 2 = q + v dt + ½ v̇ dt²
+        q_des *= 0.5 * dt
+        q_des += state.q
+        kp, kd = self._kp.copy(), self._kd.copy()
         # The model has no joint damping or dry friction; the sim's joints have both.
-        tau = tau + self._damping * v_des + self._friction * np.tanh(v_des / g.friction_v)
-        np.clip(tau, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS, out=tau)
+        tau = tau + self._damping * v_des
+        tau += self._friction * np.tanh(v_des * (1.0 / g.friction_v))
+        np.minimum(tau, robot.TORQUE_LIMITS, out=tau)
+        np.maximum(tau, self._neg_torque_limits, out=tau)
         if refs.gripper_effort is not None:
             tau[JAW], kp[JAW], kd[JAW] = refs.gripper_effort, 0.0, g.jaw_kd
         else:

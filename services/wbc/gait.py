@@ -52,10 +52,12 @@ def shape_velocity(
 ) -> FloatArray:
     """The command clamped to ±v_max, moved from `previous` by at most a_max dt per axis."""
     out = np.empty(3)
-    for i in range(3):
-        vmax, step = params.v_max[i], params.a_max[i] * dt
-        target = min(max(float(cmd[i]), -vmax), vmax)
-        out[i] = previous[i] + min(max(target - previous[i], -step), step)
+    for i, (c, prev, vmax, amax) in enumerate(
+        zip(cmd.tolist(), previous.tolist(), params.v_max, params.a_max, strict=True)
+    ):
+        target = min(max(c, -vmax), vmax)
+        step = amax * dt
+        out[i] = prev + min(max(target - prev, -step), step)
     return out
 
 
@@ -120,8 +122,9 @@ class TrotGait:
         p = self.params
         self.cmd = shape_velocity(cmd_vel, self.cmd, dt, p)
         eps = p.stop_threshold
-        moving = max(abs(cmd_vel[0]), abs(cmd_vel[1]), abs(cmd_vel[2])) > eps
-        moving = moving or max(abs(self.cmd[0]), abs(self.cmd[1]), abs(self.cmd[2])) > eps
+        cx, cy, cz = cmd_vel.tolist()
+        sx, sy, sz = self.cmd.tolist()
+        moving = max(abs(cx), abs(cy), abs(cz), abs(sx), abs(sy), abs(sz)) > eps
         if not self.walking:
             if not moving:
                 return
@@ -154,25 +157,31 @@ class TrotGait:
         com_height: float,
     ) -> FloatArray:
         """Touchdown point (3,) of foot k for the current command (Raibert + capture point)."""
+        bx, by = base_xy.tolist()
+        vcx, vcy = com_velocity[0], com_velocity[1]
+        return np.array(self._foothold(k, bx, by, base_yaw, float(vcx), float(vcy), com_height))
+
+    def _foothold(
+        self, k: int, bx: float, by: float, yaw: float, vcx: float, vcy: float, z: float
+    ) -> tuple[float, float, float]:
         p = self.params
         remaining = max(self.half_period - self.phase, 0.0)
-        c, s = math.cos(base_yaw), math.sin(base_yaw)
-        vx = c * self.cmd[0] - s * self.cmd[1]  # the command in world
-        vy = s * self.cmd[0] + c * self.cmd[1]
-        yaw_td = base_yaw + self.cmd[2] * (remaining + 0.5 * self.half_period)
+        sx, sy, sz = self.cmd.tolist()
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx = c * sx - s * sy  # the command in world
+        vy = s * sx + c * sy
+        yaw_td = yaw + sz * (remaining + 0.5 * self.half_period)
         c, s = math.cos(yaw_td), math.sin(yaw_td)
-        hx, hy = p.hip_offsets[k]
-        k_cp = math.sqrt(max(com_height, 0.0) / GRAVITY)
+        hx, hy = p.hip_offsets[k].tolist()
+        k_cp = math.sqrt(max(z, 0.0) / GRAVITY)
         half_stance = 0.5 * self.half_period
         lim = p.max_step_m
-        ox = min(max(vx * half_stance + k_cp * (com_velocity[0] - vx), -lim), lim)
-        oy = min(max(vy * half_stance + k_cp * (com_velocity[1] - vy), -lim), lim)
-        return np.array(
-            [
-                base_xy[0] + vx * remaining + c * hx - s * hy + ox,
-                base_xy[1] + vy * remaining + s * hx + c * hy + oy,
-                robot.FOOT_RADIUS_M,
-            ]
+        ox = min(max(vx * half_stance + k_cp * (vcx - vx), -lim), lim)
+        oy = min(max(vy * half_stance + k_cp * (vcy - vy), -lim), lim)
+        return (
+            bx + vx * remaining + c * hx - s * hy + ox,
+            by + vy * remaining + s * hx + c * hy + oy,
+            robot.FOOT_RADIUS_M,
         )
 
     def _plan_swing(
@@ -183,13 +192,16 @@ class TrotGait:
         s, ds, dds = quintic(tau)
         b, db, ddb = bump(tau)
         h = self.params.step_height_m
+        ds, dds, db, ddb = ds / T, dds / (T * T), db / T, ddb / (T * T)
+        bx, by = base_xy.tolist()
+        vcx, vcy = float(com_velocity[0]), float(com_velocity[1])
         self.swing = {}
         for k in PAIRS[self.pair]:  # in floats: this runs every tick for two feet
-            target = self.foothold(k, base_xy, base_yaw, com_velocity, com_height)
-            x0, y0, z0 = self.liftoff[k]
-            dx, dy, dz = target[0] - x0, target[1] - y0, target[2] - z0
+            tx, ty, tz = self._foothold(k, bx, by, base_yaw, vcx, vcy, com_height)
+            x0, y0, z0 = self.liftoff[k].tolist()
+            dx, dy, dz = tx - x0, ty - y0, tz - z0
             self.swing[k] = SwingTarget(
                 p=np.array([x0 + dx * s, y0 + dy * s, z0 + dz * s + h * b]),
-                v=np.array([dx * ds, dy * ds, dz * ds + h * db]) / T,
-                a=np.array([dx * dds, dy * dds, dz * dds + h * ddb]) / (T * T),
+                v=np.array([dx * ds, dy * ds, dz * ds + h * db]),
+                a=np.array([dx * dds, dy * dds, dz * dds + h * ddb]),
             )

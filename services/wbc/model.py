@@ -4,7 +4,9 @@
 nonlinear effects h, all joint Jacobians, the CoM and its Jacobian, and the joints'
 accelerations at v̇ = 0, which make the frames' classical accelerations the drifts J̇v),
 then reads the frames the controller uses (feet, base, `gripper_tcp`) into preallocated
-arrays, and the feet's rows into the contact Jacobian `Jc` (12, nv). Everything is in pinocchio's
+arrays, and the feet's rows into the contact Jacobian `Jc` (12, nv); `update(..., tcp=False)`
+skips the `gripper_tcp` Jacobian and drift when no task needs them (its placement is always
+read; `frame_jacobian` gives its Jacobian on demand). Everything is in pinocchio's
 conventions: q (26,) with the base quaternion xyzw, v (25,) with the base twist in the
 base frame; frame Jacobians are LOCAL_WORLD_ALIGNED (origin velocity and angular velocity
 in world axes), so frame tasks and contact rows are all in world coordinates.
@@ -30,10 +32,16 @@ class FrameState:
     __slots__ = ("H", "J", "R", "dJv", "frame_id", "name", "p", "twist")
 
     def __init__(
-        self, name: str, frame_id: int, J: FloatArray, dJv: FloatArray, twist: FloatArray
+        self,
+        name: str,
+        frame_id: int,
+        H: FloatArray,
+        J: FloatArray,
+        dJv: FloatArray,
+        twist: FloatArray,
     ) -> None:
         self.name, self.frame_id = name, frame_id
-        self.H: FloatArray = np.eye(4)
+        self.H: FloatArray = H
         self.p: FloatArray = self.H[:3, 3]
         self.R: FloatArray = self.H[:3, :3]
         self.J, self.dJv, self.twist = J, dJv, twist
@@ -43,7 +51,8 @@ class RobotModel:
     """pinocchio model + data and the per-tick quantities the WBC needs.
 
     After `update(q, v)`: `M` (nv, nv, symmetric), `h` (nv,) = C v + g, `com` (3,),
-    `vcom` (3,), `Jcom` (3, nv), `dJcom_v` (3,), and `frames[name]` for `TRACKED_FRAMES`.
+    `vcom` (3,), `Jcom` (3, nv), `dJcom_v` (3,), `frames[name]` for `TRACKED_FRAMES`, and
+    the feet's positions `feet_p` (4, 3).
     """
 
     def __init__(self, model: pin.Model | None = None) -> None:
@@ -68,6 +77,7 @@ class RobotModel:
         self._J_all: FloatArray = np.zeros((6 * n, nv))  # every frame's J, stacked
         self._dJv_all: FloatArray = np.zeros(6 * n)
         self._twist_all: FloatArray = np.zeros(6 * n)
+        self._H_all: FloatArray = np.tile(np.eye(4), (n, 1, 1))
         self.frames: dict[str, FrameState] = {}
         for k, name in enumerate(TRACKED_FRAMES):
             if not self.model.existFrame(name):
@@ -77,20 +87,31 @@ class RobotModel:
             self.frames[name] = FrameState(
                 name,
                 self.model.getFrameId(name),
+                self._H_all[k],
                 self._J_all[rows],
                 self._dJv_all[rows],
                 self._twist_all[rows],
             )
         self.feet: tuple[FrameState, ...] = tuple(self.frames[f] for f in robot.FOOT_FRAMES)
+        #: (4, 3) the feet's positions in world, a view that each update refreshes.
+        self.feet_p: FloatArray = self._H_all[: len(self.feet), :3, 3]
+        if TRACKED_FRAMES[: len(self.feet)] != robot.FOOT_FRAMES:  # feet_p is their rows
+            raise ValueError(f"the feet must be the first tracked frames: {TRACKED_FRAMES}")
         self._foot_rows = np.concatenate(
             [6 * TRACKED_FRAMES.index(f) + np.arange(3) for f in robot.FOOT_FRAMES]
         )
         self.Jc: FloatArray = np.zeros((3 * len(self.feet), nv))
         self.dJc_v: FloatArray = np.zeros(3 * len(self.feet))
         self.v_feet: FloatArray = np.zeros(3 * len(self.feet))
+        self._tcp = self.frames[robot.TCP_FRAME]
+        self._derived = tuple(fs for fs in self.frames.values() if fs is not self._tcp)
+        self._tcp_fresh = True
 
-    def update(self, q: FloatArray, v: FloatArray) -> None:
-        """Compute everything for the state (q, v) in pinocchio's layout."""
+    def update(self, q: FloatArray, v: FloatArray, tcp: bool = True) -> None:
+        """Compute everything for the state (q, v) in pinocchio's layout.
+
+        tcp=False leaves `gripper_tcp`'s J, J̇v and twist at zero (its placement is read).
+        """
         model, data = self.model, self.data
         self.q[:] = q
         self.v[:] = v
@@ -98,14 +119,33 @@ class RobotModel:
         pin.updateFramePlacements(model, data)
         pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION, False)
         oMf = data.oMf
-        for fs in self.frames.values():
-            fs.H[:] = oMf[fs.frame_id].homogeneous
-            fs.J[:] = pin.getFrameJacobian(model, data, fs.frame_id, LWA)
-            fs.dJv[:] = pin.getFrameClassicalAcceleration(model, data, fs.frame_id, LWA).vector
+        for fs in self._derived:
+            fid = fs.frame_id
+            fs.H[:] = oMf[fid].homogeneous
+            fs.J[:] = pin.getFrameJacobian(model, data, fid, LWA)
+            fs.dJv[:] = pin.getFrameClassicalAcceleration(model, data, fid, LWA).vector
+        tcp_state = self._tcp
+        tcp_state.H[:] = oMf[tcp_state.frame_id].homogeneous
+        if tcp:
+            tcp_state.J[:] = pin.getFrameJacobian(model, data, tcp_state.frame_id, LWA)
+            tcp_state.dJv[:] = pin.getFrameClassicalAcceleration(
+                model, data, tcp_state.frame_id, LWA
+            ).vector
+        elif self._tcp_fresh:
+            tcp_state.J[:] = 0.0
+            tcp_state.dJv[:] = 0.0
+        self._tcp_fresh = tcp
         np.dot(self._J_all, self.v, out=self._twist_all)
         np.take(self._J_all, self._foot_rows, axis=0, out=self.Jc)
         np.take(self._dJv_all, self._foot_rows, out=self.dJc_v)
         np.take(self._twist_all, self._foot_rows, out=self.v_feet)
+
+    def frame_jacobian(self, name: str) -> FloatArray:
+        """A tracked frame's LWA Jacobian (6, nv) at the last update, computed if skipped."""
+        fs = self.frames[name]
+        if fs is self._tcp and not self._tcp_fresh:
+            return np.asarray(pin.getFrameJacobian(self.model, self.data, fs.frame_id, LWA))
+        return fs.J
 
 
 def q_from_state(

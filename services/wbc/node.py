@@ -20,6 +20,8 @@ is answered with damping, a gap in the states (stale state) stops the robot.
 
 from __future__ import annotations
 
+import gc
+import math
 import threading
 import time
 from collections import deque
@@ -28,8 +30,9 @@ import numpy as np
 
 from common import robot
 from common.bus import RequestError, WaitTimeout
+from common.geometry import FloatArray
 from common.lockstep import NS_PER_S
-from common.messages import as_numpy, to_wire
+from common.messages import Array, ArrayError, as_numpy
 from common.messages.sim import JointCommand, RobotState
 from common.messages.wbc import (
     ArmGoal,
@@ -56,10 +59,27 @@ NAME = "wbc"
 TCP = robot.TCP_FRAME
 
 
+_F64 = np.dtype("<f8")
+_JOINTS = (len(robot.JOINT_NAMES),)
+
+
+def _joints_in(array: Array, name: str) -> FloatArray:
+    """A joint vector off the wire (a read-only view), checked as `as_numpy` would, fast."""
+    if array.dtype != "float64" or tuple(array.shape) != _JOINTS or len(array.data) != 152:
+        raise ArrayError(f"{name} must be float64 {_JOINTS}, got {array.dtype} {array.shape}")
+    return np.frombuffer(array.data, dtype=_F64)
+
+
+def _joints_out(x: FloatArray) -> Array:
+    """A joint vector on the wire (what `to_wire` does for a float64 (19,), without checks)."""
+    return Array("float64", _JOINTS, x.astype(_F64, copy=False).tobytes())
+
+
 def wbc_state(msg: RobotState) -> WbcState:
+    """The controller's view of a state; ArrayError when its joint vectors are malformed."""
     return WbcState(
-        q=np.asarray(as_numpy(msg.q), dtype=float),
-        v=np.asarray(as_numpy(msg.v), dtype=float),
+        q=_joints_in(msg.q, "q"),
+        v=_joints_in(msg.v, "v"),
         base_position_in_world=np.array(msg.base_position_in_world),
         base_orientation_xyzw=np.array(msg.base_orientation_xyzw),
         base_linear_velocity_in_world=np.array(msg.base_linear_velocity_in_world),
@@ -70,11 +90,11 @@ def wbc_state(msg: RobotState) -> WbcState:
 def joint_command(stamp_ns: int, cmd: WbcCommand) -> JointCommand:
     return JointCommand(
         stamp_ns=stamp_ns,
-        tau_ff=to_wire(cmd.tau_ff),
-        q_des=to_wire(cmd.q_des),
-        v_des=to_wire(cmd.v_des),
-        kp=to_wire(cmd.kp),
-        kd=to_wire(cmd.kd),
+        tau_ff=_joints_out(cmd.tau_ff),
+        q_des=_joints_out(cmd.q_des),
+        v_des=_joints_out(cmd.v_des),
+        kp=_joints_out(cmd.kp),
+        kd=_joints_out(cmd.kd),
         source=NAME,
     )
 
@@ -143,6 +163,11 @@ class WbcNode:
 
     def run(self) -> None:
         svc = self.svc
+        # Everything set up so far (pinocchio, MuJoCo, OSQP, Zenoh) lives as long as the
+        # service: out of the collector's reach, a collection costs microseconds, not
+        # milliseconds in the middle of a tick.
+        gc.collect()
+        gc.freeze()
         svc.ready()
         last = -1
 
@@ -162,8 +187,12 @@ class WbcNode:
 
     def tick(self, msg: RobotState, t0: float) -> None:
         t = msg.stamp_ns
-        state = wbc_state(msg)
-        if not (np.all(np.isfinite(state.q)) and np.all(np.isfinite(state.v))):
+        try:
+            state = wbc_state(msg)
+        except ArrayError as exc:  # no command: the sim's watchdog holds the joints
+            self._say(f"state at t={t / NS_PER_S:.3f} s is malformed ({exc}): not answered")
+            return
+        if not math.isfinite(float(state.q.sum()) + float(state.v.sum())):  # any NaN or inf
             self.commands.put(joint_command(t, damp_command(np.nan_to_num(state.q))))
             self._say(f"state at t={t / NS_PER_S:.3f} s has NaN: damping")
             return
@@ -285,7 +314,7 @@ class WbcNode:
             m.h,
             m.v,
             np.asarray(as_numpy(msg.tau), dtype=float),
-            m.frames[TCP].J,
+            m.frame_jacobian(TCP),  # computed here when no task needed it this tick
             m.frames[robot.BASE_FRAME].R,
         )
         base_err, tcp_m, tcp_rad = self._errors()

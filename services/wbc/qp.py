@@ -2,19 +2,22 @@
 
     min_x  ½ xᵀ P x + qᵀ x   s.t.  lo ≤ A x ≤ hi,      x = [v̇ (nv), f (12)]
 
-P stacks every task's rows (H = Jᵀ W J, one product) plus the force regularisation
-w_f ‖f − f_ref‖² and a tiny v̇ damping; A stacks the constraint blocks in a fixed order
-(dynamics, contact, friction, force bounds, torque). The problem is dense numpy arrays,
-so a test can read it; the solver keeps OSQP set up once with a fixed sparsity pattern
-(the structural nonzeros: P's upper triangle, A's from the kinematic tree) and each tick
-only pushes the values in that pattern's CSC order (OSQP's `update_data_mat` and
-`update_data_vec`), warm-started from the previous solution. OSQP's Ruiz scaling is off
+P stacks every task's rows (H = Jᵀ W J, one product over preallocated rows; a task that
+selects joints, the posture, adds its weights to the diagonal instead) plus the force
+regularisation w_f ‖f − f_ref‖² and a tiny v̇ damping; A stacks the constraint blocks in a
+fixed order (dynamics and torque, written together, contact, friction, force bounds,
+joint limits). The problem is dense numpy arrays, so a test can read it; the solver
+keeps OSQP set up once with a fixed sparsity pattern (the structural nonzeros: P's upper
+triangle, A's from the kinematic tree) and each tick only pushes the values in that
+pattern's CSC order (OSQP's `update_data_mat` and `update_data_vec`), warm-started from
+the previous solution. OSQP's Ruiz scaling is off
 by default: it is recomputed on every matrix update and costs twice the factorisation
 (40 of 60 µs here); eps 1e-3 leaves < 1 N of slack on forces of hundreds of N.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -41,6 +44,7 @@ class QpParams:
     mu: friction coefficient of the linearised cone (below the sim's 0.9 for margin).
     f_min, f_max: normal force bounds of a stance foot, N. k_slip: 1/s, stance foot
     velocity damping. w_force: weight of ‖f − f_ref‖² (per N²). w_vdot: v̇ damping.
+    limit_horizon_s, limit_acc_max: the joint-limit rows' horizon (s) and clip (rad/s²).
     """
 
     mu: float = 0.6
@@ -49,6 +53,8 @@ class QpParams:
     k_slip: float = 20.0
     w_force: float = 1e-4
     w_vdot: float = 1e-6
+    limit_horizon_s: float = 0.05
+    limit_acc_max: float = 300.0
 
 
 @dataclass
@@ -63,14 +69,26 @@ class QpProblem:
     blocks: dict[str, slice]
     nv: int
     mu: float
+    # Workspace: task rows stacked (J, b, w) and the diagonal tasks' share.
+    rows_jac: FloatArray
+    rows_b: FloatArray
+    rows_w: FloatArray
+    H: FloatArray
+    diag_w: FloatArray
+    diag_wb: FloatArray
+    tau_bound: FloatArray  # (nv,) 0 on the base rows, τ_max on the actuated ones
 
     @property
     def nx(self) -> int:
         return int(self.P.shape[0])
 
 
+#: Most task rows a problem stacks (every frame task, the CoM, margin).
+MAX_TASK_ROWS = 96
+
+
 def new_problem(nv: int, params: QpParams) -> QpProblem:
-    """An empty problem with the constant blocks (friction, force selection) filled."""
+    """An empty problem with the constant blocks (friction, force selection, limits) filled."""
     nx, blocks, start = nv + cons.NF, {}, 0
     for name, n in cons.ROWS.items():
         blocks[name] = slice(start, start + n)
@@ -84,11 +102,21 @@ def new_problem(nv: int, params: QpParams) -> QpProblem:
         blocks=blocks,
         nv=nv,
         mu=params.mu,
+        rows_jac=np.zeros((MAX_TASK_ROWS, nv)),
+        rows_b=np.zeros(MAX_TASK_ROWS),
+        rows_w=np.zeros(MAX_TASK_ROWS),
+        H=np.zeros((nv, nv)),
+        diag_w=np.zeros(nv),
+        diag_wb=np.zeros(nv),
+        tau_bound=np.zeros(nv),
     )
+    if blocks["dynamics"].stop != blocks["torque"].start or nv != 6 + cons.ROWS["torque"]:
+        raise ValueError(f"the dynamics and torque rows must be adjacent, nv of them: {blocks}")
     fr = blocks["friction"]
     cons.fill_friction(params.mu, nv, p.A[fr], p.lo[fr], p.hi[fr])
     fo = blocks["force"]
     cons.fill_force(np.ones(4), params.f_min, params.f_max, nv, p.A[fo], p.lo[fo], p.hi[fo])
+    cons.fill_limits_rows(nv, p.A[blocks["limits"]])
     return p
 
 
@@ -107,27 +135,58 @@ def build_qp(
     the same params), the problem is written into it instead of allocated.
     """
     p = out if out is not None and out.mu == params.mu else new_problem(m.nv, params)
-    nv, nf = m.nv, cons.NF
-    rows = [t.compute_rows(m) for t in tasks if t.active]
-    J = np.vstack([r.J for r in rows])
-    b = np.concatenate([r.b for r in rows])
-    WJ = J * np.concatenate([r.w for r in rows])[:, None]
-    p.P[:nv, :nv] = J.T @ WJ
-    p.P.flat[: nv * (nv + nf + 1) : nv + nf + 1] += params.w_vdot
-    p.P.flat[nv * (nv + nf + 1) :: nv + nf + 1] = params.w_force
-    np.dot(WJ.T, b, out=p.q[:nv])
-    np.negative(p.q[:nv], out=p.q[:nv])
+    nv = m.nv
+    Jr, br, wr = p.rows_jac, p.rows_b, p.rows_w
+    diag_w, diag_wb = p.diag_w, p.diag_wb
+    diag_w.fill(params.w_vdot)
+    diag_wb.fill(0.0)
+    n = 0
+    for t in tasks:
+        if not t.active:
+            continue
+        J, b, w = t.compute_rows(m)
+        cols = t.columns
+        if cols is not None:  # J selects these columns: a diagonal share
+            diag_w[cols] += w
+            diag_wb[cols] += w * b
+            continue
+        k = n + len(b)
+        Jr[n:k] = J
+        br[n:k] = b
+        wr[n:k] = w
+        n = k
+    WJ = Jr[:n] * wr[:n, None]
+    H = p.H
+    np.dot(Jr[:n].T, WJ, out=H)
+    H.flat[:: nv + 1] += diag_w
+    P = p.P
+    P[:nv, :nv] = H
+    P.flat[nv * (P.shape[0] + 1) :: P.shape[0] + 1] = params.w_force
+    qv = p.q[:nv]
+    np.dot(br[:n], WJ, out=qv)
+    qv += diag_wb
+    np.negative(qv, out=qv)
     np.multiply(f_ref, -params.w_force, out=p.q[nv:])
 
     A, lo, hi, bl = p.A, p.lo, p.hi, p.blocks
-    s = bl["dynamics"]
-    cons.fill_dynamics(m, A[s], lo[s], hi[s])
+    s = slice(bl["dynamics"].start, bl["torque"].stop)
+    if p.tau_bound[6] != tau_max[0]:
+        p.tau_bound[6:] = tau_max
+    cons.fill_equations_of_motion(m, p.tau_bound, A[s], lo[s], hi[s])
     s = bl["contact"]
     cons.fill_contact(m, stance, params.k_slip, A[s], lo[s], hi[s])
     s = bl["force"]
     cons.fill_force(stance, params.f_min, params.f_max, nv, A[s], lo[s], hi[s])
-    s = bl["torque"]
-    cons.fill_torque(m, tau_max, A[s], lo[s], hi[s])
+    s = bl["limits"]
+    cons.fill_limits(
+        m,
+        robot.POSITION_LOWER[: cons.N_LIMITED],
+        robot.POSITION_UPPER[: cons.N_LIMITED],
+        params.limit_horizon_s,
+        params.limit_acc_max,
+        lo[s],
+        hi[s],
+    )
     return p
 
 
@@ -169,7 +228,9 @@ class QpSolver:
         max_iter: int = 200,
         scaling: int = 0,
         check_termination: int = 2,
+        **settings: float | int | bool,
     ) -> None:
+        """`settings`: further OSQP settings (`rho`, `adaptive_rho`, …) for experiments."""
         nx = template.nx
         P_mask = np.zeros((nx, nx), dtype=bool)
         P_mask[: template.nv, : template.nv] = np.triu(np.ones((template.nv, template.nv), bool))
@@ -199,33 +260,31 @@ class QpSolver:
             verbose=False,
             check_termination=check_termination,
             scaling=scaling,
+            **settings,
         )
         self._ext = self.solver._solver
-        self._infty = float(self.solver.constant("OSQP_INFTY"))
-        self._lo = np.zeros(template.lo.shape)
-        self._hi = np.zeros(template.hi.shape)
+        if float(self.solver.constant("OSQP_INFTY")) > cons.INF:
+            raise ValueError(f"constraints' INF {cons.INF} is below OSQP's infinity")
         self.solve(template)
 
     def solve(self, problem: QpProblem) -> QpSolution:
         """Solve `problem` (built with the template's layout) from the last solution."""
         np.take(problem.P, self._P_flat, out=self._Px)
         np.take(problem.A, self._A_flat, out=self._Ax)
-        np.clip(problem.lo, -self._infty, self._infty, out=self._lo)
-        np.clip(problem.hi, -self._infty, self._infty, out=self._hi)
         # The C solver directly: osqp 1.1's Python wrapper adds ~40 µs a tick (a results
-        # namespace, a derivative cache) that a 1 kHz loop cannot spend.
+        # namespace, a derivative cache) that a 1 kHz loop cannot spend. The bounds go
+        # as they are: the constraints write OSQP's infinity, never inf.
         ext = self._ext
-        ext.update_data_vec(q=problem.q, l=self._lo, u=self._hi)
+        ext.update_data_vec(q=problem.q, l=problem.lo, u=problem.hi)
         ext.update_data_mat(P_x=self._Px, P_i=None, A_x=self._Ax, A_i=None)
         ext.solve()
         info = ext.info
         x = ext.solution.x
-        ok = info.status_val in _ACCEPTED and bool(np.all(np.isfinite(x)))
+        # One reduction finds any NaN or inf (they make the sum non-finite).
+        ok = info.status_val in _ACCEPTED and math.isfinite(float(x.sum()))
         if not ok:
             x = np.zeros(problem.nx)
-        return QpSolution(
-            x[: self.nv].copy(), x[self.nv :].copy(), ok, str(info.status), int(info.iter)
-        )
+        return QpSolution(x[: self.nv], x[self.nv :], ok, info.status, info.iter)
 
     def outside_pattern(self, problem: QpProblem) -> float:
         """The largest |A| entry the fixed pattern drops (0 when the pattern is right)."""

@@ -1,5 +1,6 @@
 """Weighted acceleration-level tasks of the whole-body QP, as in mink and pink.
 
+Weights change through `set_weight`, which keeps `active` and the weighted rows current.
 A task has an error e = target ⊖ current (world-aligned), a Jacobian J = ∂current/∂q in
 the tangent space (so `current(q ⊕ ε dq) − current(q) ≈ ε J dq`, checked against finite
 differences in the tests) and a drift J̇v. It asks for the acceleration
@@ -44,21 +45,38 @@ def _vec(x: float | FloatArray, n: int) -> FloatArray:
 
 
 class Task:
-    """Common gains and weights; subclasses define error, Jacobian, drift and velocity."""
+    """Common gains and weights; subclasses define error, Jacobian, drift and velocity.
+
+    `columns`: None, or the v̇ columns the Jacobian selects (J = [0 I 0]): the QP then
+    adds the weights to its diagonal instead of multiplying the rows out.
+    """
 
     dim: int = 0
+    columns: slice | None = None
 
     def __init__(self, kp: float | FloatArray, kd: float | FloatArray, weight: float | FloatArray):
         self.kp = _vec(kp, self.dim)
         self.kd = _vec(kd, self.dim)
         self.weight = _vec(weight, self.dim)
+        self._weighted()
         self.v_ref = np.zeros(self.dim)
         self.a_ff = np.zeros(self.dim)
 
     @property
     def active(self) -> bool:
         """False when every weight is zero: the QP leaves the task out."""
-        return bool(self.weight.any())
+        return self._active
+
+    def set_weight(self, weight: float | FloatArray, rows: slice = slice(None)) -> None:
+        """Set the weights of `rows`; change weights only through here (it keeps `active`)."""
+        self.weight[rows] = weight
+        self._weighted()
+
+    def _weighted(self) -> None:
+        nonzero = np.flatnonzero(self.weight)
+        self._active = len(nonzero) > 0
+        #: The span of rows with a weight: `compute_rows` of a frame task gives only those.
+        self.rows = slice(int(nonzero[0]), int(nonzero[-1]) + 1) if self._active else slice(0)
 
     def compute_error(self, m: RobotModel) -> FloatArray:
         raise NotImplementedError
@@ -128,18 +146,25 @@ class FrameTask(Task):
         return m.frames[self.frame].twist
 
     def compute_rows(self, m: RobotModel) -> TaskRows:
-        """As `Task.compute_rows`, with the frame read once and no temporaries to spare."""
+        """As `Task.compute_rows`, with the frame read once, only the weighted span of rows
+        (a swing foot's position, a base's height and attitude) and few temporaries."""
         fs = m.frames[self.frame]
         b = self.v_ref - fs.twist
         b *= self.kd
         e = np.empty(6)
         np.subtract(self.p_ref, fs.p, out=e[:3])
-        e[3:] = pin.log3(self.R_ref @ fs.R.T)
+        rows = self.rows
+        if rows.stop > 3:
+            e[3:] = pin.log3(self.R_ref @ fs.R.T)
+        else:
+            e[3:] = 0.0
         e *= self.kp
         b += e
         b += self.a_ff
         b -= fs.dJv
-        return TaskRows(fs.J, b, self.weight)
+        if rows.start == 0 and rows.stop == 6:
+            return TaskRows(fs.J, b, self.weight)
+        return TaskRows(fs.J[rows], b[rows], self.weight[rows])
 
 
 class ComTask(Task):
@@ -165,6 +190,17 @@ class ComTask(Task):
     def compute_velocity(self, m: RobotModel) -> FloatArray:
         return m.vcom
 
+    def compute_rows(self, m: RobotModel) -> TaskRows:
+        """As `Task.compute_rows`, with fewer temporaries."""
+        b = self.v_ref - m.vcom
+        b *= self.kd
+        e = self.p_ref - m.com
+        e *= self.kp
+        b += e
+        b += self.a_ff
+        b -= m.dJcom_v
+        return TaskRows(m.Jcom, b, self.weight)
+
 
 class PostureTask(Task):
     """Joint positions (all revolute, so the error is a plain difference)."""
@@ -184,6 +220,19 @@ class PostureTask(Task):
         self._J = np.zeros((self.dim, nv))
         self._J[:, nv - self.dim :] = np.eye(self.dim)
         self._drift = np.zeros(self.dim)
+        self.columns = slice(nv - self.dim, nv)
+        self._b = np.zeros(self.dim)
+
+    def compute_rows(self, m: RobotModel) -> TaskRows:
+        """As `Task.compute_rows` (the drift is zero), in place."""
+        b = self._b
+        np.subtract(self.v_ref, m.v[m.nv - self.dim :], out=b)
+        b *= self.kd
+        e = self.q_ref - m.q[m.nq - self.dim :]
+        e *= self.kp
+        b += e
+        b += self.a_ff
+        return TaskRows(self._J, b, self.weight)
 
     def compute_error(self, m: RobotModel) -> FloatArray:
         return self.q_ref - m.q[m.nq - self.dim :]

@@ -81,6 +81,8 @@ class WbcGains:
     tcp_kp: float = 200.0
     tcp_kd: float = 30.0
     tcp_w: float = 20.0
+    tcp_ki: float = 400.0  # 1/s³: integral action on the TCP position (unmodelled payload)
+    tcp_integral_max: float = 0.02  # m s per axis: ki × this bounds the integral's 8 m/s²
     posture_kp: float = 100.0
     posture_kd: float = 20.0
     posture_w_legs: float = 0.05

@@ -81,11 +81,38 @@ def test_constraint_blocks_have_the_declared_rows(controller: WholeBodyControlle
     m.update(*standing_state(4))
     blocks = [
         cons.dynamics(m),
+        cons.torque_limits(m, robot.TORQUE_LIMITS),
         cons.contact(m, np.ones(4), 10.0),
         cons.friction(0.6, m.nv),
         cons.force_bounds(np.ones(4), 5.0, 700.0, m.nv),
-        cons.torque_limits(m, robot.TORQUE_LIMITS),
+        cons.joint_limits(m, robot.POSITION_LOWER[:18], robot.POSITION_UPPER[:18], 0.05, 300.0),
     ]
     for name, block in zip(cons.ROWS, blocks, strict=True):
         assert block.A.shape == (cons.ROWS[name], m.nv + cons.NF)
         assert np.all(block.lo <= block.hi)
+
+
+def test_a_joint_running_into_its_limit_is_braked_by_the_qp(
+    controller: WholeBodyController,
+) -> None:
+    c = controller
+    m = c.model
+    q, v = standing_state(5)
+    arm = 12 + 3  # joint4
+    q[7 + arm] = robot.POSITION_UPPER[arm] - 0.01
+    v[6 + arm] = 2.0  # 0.01 rad from the limit at 2 rad/s: it must decelerate hard
+    m.update(q, v)
+    c.base_task.set_target(np.array([0.0, 0.0, robot.STAND_BASE_HEIGHT_M]), np.eye(3))
+    c.com_task.p_ref[:2] = m.com[:2]
+    c.posture_task.q_ref[arm] = robot.POSITION_UPPER[arm] + 0.5  # and the posture pulls on
+    f_ref = np.zeros(12)
+    f_ref[2::3] = m.mass * 9.81 / 4
+    try:
+        sol = c.solver.solve(build_qp(m, c.tasks, np.ones(4), f_ref, c.qp_params))
+    finally:
+        c.posture_task.q_ref[:] = robot.POSTURES["stand"]
+    assert sol.ok, sol.status
+    h = c.qp_params.limit_horizon_s
+    bound = 2.0 * (robot.POSITION_UPPER[arm] - q[7 + arm] - v[6 + arm] * h) / h**2
+    assert sol.vdot[6 + arm] <= max(bound, -c.qp_params.limit_acc_max) + 1.0
+    assert sol.vdot[6 + arm] < -50.0  # braking, though the posture task pulls the other way

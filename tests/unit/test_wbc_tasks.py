@@ -128,3 +128,29 @@ def test_model_views_follow_each_update(model: RobotModel) -> None:
         np.testing.assert_allclose(model.M, pin.crba(model.model, data, q), atol=1e-10)
         np.testing.assert_allclose(model.h, pin.nonLinearEffects(model.model, data, q, v))
         np.testing.assert_allclose(model.com, pin.centerOfMass(model.model, data, q))
+
+
+def test_com_and_posture_fast_rows_equal_the_generic_definition(model: RobotModel) -> None:
+    q, v = random_state(14)
+    model.update(q, v)
+    rng = np.random.default_rng(14)
+    for task in (ComTask(3.0, 4.0, 1.0), PostureTask(robot.POSTURES["ready"], 5.0, 6.0, 1.0)):
+        task.v_ref[:] = rng.normal(size=task.dim)
+        task.a_ff[:] = rng.normal(size=task.dim)
+        fast, generic = task.compute_rows(model), Task.compute_rows(task, model)
+        np.testing.assert_allclose(fast.J, generic.J)
+        np.testing.assert_allclose(fast.b, generic.b, atol=1e-12)
+
+
+def test_a_frame_task_gives_only_its_weighted_rows(model: RobotModel) -> None:
+    q, v = random_state(15)
+    model.update(q, v)
+    task = FrameTask(robot.FOOT_FRAMES[1], 2.0, 3.0, 0.0)
+    assert not task.active
+    task.set_weight(5.0, slice(0, 3))  # a swing foot: position only
+    full = Task.compute_rows(task, model)
+    rows = task.compute_rows(model)
+    assert task.active and rows.J.shape == (3, 25)
+    np.testing.assert_allclose(rows.J, full.J[:3])
+    np.testing.assert_allclose(rows.b, full.b[:3], atol=1e-12)
+    np.testing.assert_allclose(rows.w, 5.0)
