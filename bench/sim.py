@@ -18,10 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from common.keys import WORLD_CLOCK
+from bench.lockstep import commander, lockstep_rate
 from common.messages import as_numpy
-from common.messages.sim import Clock
-from common.stack import ProcessStack
 from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.hold import StandHold
@@ -86,25 +84,9 @@ def bare_loop(sim_s: float, world_name: str = "small") -> float:
 
 
 def lockstep_loop(sim_s: float, overrides: Sequence[str], cameras: bool) -> float:
-    """Ticks per wall second of sim + hold over Zenoh, from the clock's arrival times."""
-    settings = [
-        "time.participants={}",
-        'time.participants.hold.role="command"',
-        "time.participants.hold.period_s=0.001",
-        "time.participants.hold.latency_s=0.0",
-        'sim.world="small"',
-        "recording.enabled=false",
-        f"sim.duration_s={sim_s + 2.0}",
-        *([] if cameras else ["sim.cameras=[]"]),
-        *overrides,
-    ]
-    with ProcessStack(["sim", "hold"], settings) as stack:
-        clock = stack.bus.latest(WORLD_CLOCK, Clock)
-        first = clock.wait(lambda c: c.stamp_ns >= 500_000_000, 120.0)
-        t0 = time.perf_counter()
-        last = clock.wait(lambda c: c.stamp_ns >= first.stamp_ns + int(sim_s * 1e9), 600.0)
-        wall = time.perf_counter() - t0
-    return (last.tick - first.tick) / wall
+    """Ticks per wall second of sim + hold over Zenoh."""
+    settings = [*commander("hold", 0.001), *overrides]
+    return lockstep_rate(["sim", "hold"], settings, sim_s, cameras)
 
 
 def bench_sim(overrides: Sequence[str] = (), sim_s: float = 5.0) -> dict[str, Any]:

@@ -16,19 +16,16 @@ from __future__ import annotations
 
 import gc
 import os
-import time
 from collections.abc import Sequence
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from bench.lockstep import commander, lockstep_rate
 from bench.sim import bare_loop
 from bench.spike_wbc import floor_spec, set_initial_pose, simulate
 from common import robot
-from common.keys import WORLD_CLOCK
-from common.messages.sim import Clock
-from common.stack import ProcessStack
 from services.wbc.controller import WbcReferences, WbcState
 
 
@@ -56,28 +53,12 @@ def _us(x: np.ndarray, q: float) -> float:
     return round(float(np.percentile(x, q)) * 1e6, 1)
 
 
-def lockstep_rate(
+def wbc_lockstep_rate(
     period_s: float, sim_s: float, overrides: Sequence[str], cameras: bool = False
 ) -> float:
     """Ticks per wall second of sim + wbc in lockstep (the controller standing)."""
-    settings = [
-        'sim.world="small"',
-        'sim.cameras=["camera_head", "camera_wrist"]' if cameras else "sim.cameras=[]",
-        "recording.enabled=false",
-        f"sim.duration_s={sim_s + 2.0}",
-        "time.participants={}",
-        'time.participants.wbc.role="command"',
-        f"time.participants.wbc.period_s={period_s}",
-        "time.participants.wbc.latency_s=0.0",
-        *overrides,
-    ]
-    with ProcessStack(["sim", "wbc"], settings) as stack:
-        clock = stack.bus.latest(WORLD_CLOCK, Clock)
-        first = clock.wait(lambda c: c.stamp_ns >= 500_000_000, 120.0)
-        t0 = time.perf_counter()
-        last = clock.wait(lambda c: c.stamp_ns >= first.stamp_ns + int(sim_s * 1e9), 600.0)
-        wall = time.perf_counter() - t0
-    return (last.tick - first.tick) / wall
+    settings = [*commander("wbc", period_s), *overrides]
+    return lockstep_rate(["sim", "wbc"], settings, sim_s, cameras)
 
 
 def bench_wbc(overrides: Sequence[str] = (), sim_s: float = 5.0) -> dict[str, Any]:
@@ -96,7 +77,7 @@ def bench_wbc(overrides: Sequence[str] = (), sim_s: float = 5.0) -> dict[str, An
         ("500hz", 0.002, False),
         ("500hz_cameras", 0.002, True),
     ):
-        rate = lockstep_rate(period, sim_s, overrides, cameras)
+        rate = wbc_lockstep_rate(period, sim_s, overrides, cameras)
         result[f"lockstep_wbc_{name}_ticks_per_s"] = round(rate, 1)
         result[f"lockstep_wbc_{name}_rtf"] = round(rate / 1000.0, 3)
         result[f"lockstep_wbc_{name}_over_bare"] = round(rate / result["bare_ticks_per_s"], 3)

@@ -135,6 +135,11 @@ class Publisher(Generic[T]):
     def put_raw(self, payload: bytes) -> None:
         self._pub.put(payload)
 
+    def has_subscribers(self) -> bool:
+        """Whether any subscriber matches this key now (Zenoh's matching status)."""
+        status: Any = self._pub.matching_status  # a MatchingStatus (the stubs say bool)
+        return bool(getattr(status, "matching", status))
+
     def undeclare(self) -> None:
         self._pub.undeclare()
 

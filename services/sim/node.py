@@ -299,6 +299,12 @@ class SimNode:
             self.sim_log.state(t_ns, self.core.robot_state(tick))
         if t_ns % self.camera_period_ns == 0:
             for cam in self.svc.config.sim.cameras:
+                # Rendering is the sim's dearest work: only for someone who looks.
+                rgbd, truth_pub = self.io.rgbd[cam], self.io.truth[cam]
+                if not (
+                    self.sim_log.enabled or rgbd.has_subscribers() or truth_pub.has_subscribers()
+                ):
+                    continue
                 frame, truth = self.rig.capture(self.core.data, cam, t_ns)
                 self.io.rgbd[cam].put(frame)
                 if self.svc.config.sim.segmentation_truth:
