@@ -8,7 +8,8 @@ depths), the cut pixels given back to the neighbour nearest in depth. The artifa
 (bottle, can, box) are pooled before the split and each component takes the class its
 pixels' probabilities vote for, so an object read partly as one class and partly as another
 stays whole; people are split on their own. A component's score is its class's mean
-probability over it; components under `min_area` pixels or `min_score` are dropped. The
+probability over it; components under `min_area` pixels (`min_person_area` for people) or
+`min_score` are dropped. The
 model's JSON sidecar (same name, `.json`) gives the classes, input size and normalisation;
 frames of another size are resized in and the masks resized back.
 
@@ -116,7 +117,8 @@ class Segmenter:
         self,
         model: Path | str = DEFAULT_MODEL,
         min_area: int = 25,
-        min_score: float = 0.5,
+        min_person_area: int = 150,
+        min_score: float = 0.3,
         threads: int | None = None,
     ) -> None:
         model = Path(model)
@@ -139,9 +141,14 @@ class Segmenter:
         self.min_area, self.min_score = min_area, min_score
         # People apart; the artifact classes pooled, so that one object read partly as a can
         # and partly as a bottle stays one instance (of the class most of it voted for).
+        # Person fragments smaller than a far person's legs are noise, not people.
         objects = [c for c, name in enumerate(self.classes) if name not in ("background", "person")]
         people = [c for c, name in enumerate(self.classes) if name == "person"]
-        self.groups = [g for g in (objects, people) if g]
+        self.groups = [
+            (group, area)
+            for group, area in ((objects, min_area), (people, max(min_area, min_person_area)))
+            if group
+        ]
 
     def blob(self, rgb: NDArray[np.uint8], depth: NDArray[np.floating]) -> NDArray[np.float32]:
         """The network's (1, 4, h, w) input for one frame (resized to the model's size)."""
@@ -176,11 +183,11 @@ class Segmenter:
             prob = np.stack([cv2.resize(p, (w, h)) for p in prob])
         cuts = depth_cuts(depth)
         found: list[Instance] = []
-        for group in self.groups:
+        for group, min_area in self.groups:
             mask = np.isin(cls, group)
-            if np.count_nonzero(mask) < self.min_area:
+            if np.count_nonzero(mask) < min_area:
                 continue
-            for part in split_instances(mask, depth, cuts, self.min_area):
+            for part in split_instances(mask, depth, cuts, min_area):
                 votes = [float(prob[c][part].sum()) for c in group]
                 c = group[int(np.argmax(votes))]
                 score = float(prob[c][part].mean())

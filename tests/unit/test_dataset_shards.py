@@ -60,7 +60,8 @@ def test_a_shard_round_trips(
 def test_shards_load_as_class_maps_for_training(
     tmp_path: Path, small_world_frames: tuple[dict[int, str], list[dataset.Frame]]
 ) -> None:
-    data = pytest.importorskip("services.perception.training.data")
+    from services.perception.training import data
+
     names, frames = small_world_frames
     path = dataset.shard_path(tmp_path, 3)
     dataset.save_shard(path, 3, "small", names, frames)

@@ -102,7 +102,8 @@ def test_a_model_without_its_sidecar_is_refused(tmp_path: Path) -> None:
 
 
 def test_the_shipped_network_finds_the_bottle_in_an_unseen_world() -> None:
-    dataset = pytest.importorskip("services.sim.dataset")
+    from services.sim import dataset
+
     names, frames = dataset.render_seed(UNSEEN_SEED)
     seg = Segmenter(DEFAULT_MODEL)
     truth_seg = TruthSegmenter()

@@ -87,7 +87,7 @@ def test_wrong_shapes_are_refused_with_the_shapes() -> None:
 def build_synthetic_model(path: Path) -> None:
     """An ONNX graph with an ultralytics YOLOv8-seg export's inputs and outputs whose
     outputs are the known tensors above (plus 0 × the input, so they depend on it)."""
-    onnx = pytest.importorskip("onnx")
+    import onnx
     from onnx import TensorProto, helper, numpy_helper
 
     out0, protos = _output0(), _protos()
@@ -119,7 +119,6 @@ def build_synthetic_model(path: Path) -> None:
 
 
 def test_the_shipped_synthetic_model_is_what_the_builder_makes(tmp_path: Path) -> None:
-    pytest.importorskip("onnx")
     build_synthetic_model(tmp_path / "m.onnx")
     assert (tmp_path / "m.onnx").read_bytes() == SYNTHETIC.read_bytes()
 
@@ -132,5 +131,4 @@ def test_a_synthetic_export_runs_through_opencv_dnn() -> None:
 
 
 def test_class_names_come_from_the_models_metadata() -> None:
-    pytest.importorskip("onnx")
     assert yolo.names_from_onnx(SYNTHETIC) == NAMES

@@ -5,7 +5,8 @@ separation included) and is matched against `TruthSegmenter` instances of its la
 - bottle mask IoU: mean over bottles in wrist-camera frames with ≥ `CLOSE_UP_PIXELS` truth
   pixels (the close-up views the grasp relies on), and over every bottle with ≥ 50 pixels;
 - person recall over people with ≥ 500 truth pixels within 8 m (`metrics.person_recall`);
-- mean IoU per class; the `cv2.dnn` forward pass and whole `segment` call, ms p50/p95.
+- mean IoU per class; predicted instances matching no truth, per frame;
+- the `cv2.dnn` forward pass and the whole `segment` call, ms p50/p95.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ def evaluate(model: Path, frames: Frames) -> dict[str, Any]:
     close_bottles: list[float] = []
     forward_ms: list[float] = []
     segment_ms: list[float] = []
+    unmatched = 0
     for k in range(len(frames)):
         rgb = frames.rgb[k]
         depth = frames.depth_mm[k].astype(np.float32) * 1e-3
@@ -51,6 +53,7 @@ def evaluate(model: Path, frames: Frames) -> dict[str, Any]:
         truth = truth_seg.segment(frames.labels[k], frames.names[k])
         found = metrics.match_instances(predicted, truth, [t.truth_id or "" for t in truth], depth)
         matches += found
+        unmatched += len(predicted) - sum(m.matched is not None for m in found)
         if frames.camera[k] == "camera_wrist":
             close_bottles += [
                 m.iou for m in found if m.class_name == "bottle" and m.pixels >= CLOSE_UP_PIXELS
@@ -64,6 +67,7 @@ def evaluate(model: Path, frames: Frames) -> dict[str, Any]:
         "bottle_iou_all": per_class["bottle"] and round(per_class["bottle"], 4),
         "person_recall": round(float(found_people / counted_people), 4) if counted_people else None,
         "people_counted": counted_people,
+        "false_instances_per_frame": round(unmatched / max(1, len(frames)), 3),
         "mean_iou": {c: (None if v is None else round(v, 4)) for c, v in per_class.items()},
         "forward_ms": _percentiles(forward_ms),
         "segment_ms": _percentiles(segment_ms),

@@ -52,7 +52,7 @@ class TrainSettings:
     train_seeds: list[int]
     val_seeds: list[int]
     seed: int = 0
-    steps: int = 1600
+    steps: int = 4000
     batch: int = 8
     crop_hw: tuple[int, int] = (128, 192)
     lr: float = 3e-3
