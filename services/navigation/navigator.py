@@ -84,16 +84,20 @@ class Navigator:
         self.reason: NavFailure = ""
         self.detail = ""
         self.cmd = np.zeros(3)
+        self.plan: Plan | None = None
+        self.follower: Follower | None = None
+        self.recovery: Recovery = ""
+        self.total_m = 0.0
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
         self.t0 = t_ns
-        self.plan: Plan | None = None
-        self.follower: Follower | None = None
+        self.plan = None
+        self.follower = None
         self.last_plan_ns = -(10**18)
         self.blocked_since: int | None = None
         self.recoveries: list[Recovery] = ["clear", "rotate", "backoff"]
-        self.recovery: Recovery = ""
+        self.recovery = ""
         self.recovery_until = 0
         self.best_remaining = math.inf
         self.progress_ns = t_ns

@@ -116,3 +116,13 @@ def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
     assert handing.rule == "handover" and handing.speed == p.handover_speed
     d = distance_to_footprint(pose, FP, np.array([[FP.front + 0.5, 0.0]]))
     assert d[0] == pytest.approx(0.5)
+
+
+def test_an_idle_navigator_ticks_at_rest_without_a_goal() -> None:
+    from services.navigation.navigator import Navigator, NavParams
+
+    nav = Navigator(FP, NavParams(), 0.05)
+    cm = build_costmap(_room([]), FP, CostParams())
+    out = nav.tick(0, Pose(1.0, 1.0, 0.0), cm)
+    assert out.state == "idle"
+    assert not np.any(out.cmd)
