@@ -21,6 +21,8 @@ from common.messages.sim import Clock, Odom
 from common.recording import run_dir
 from common.stack import Supervised
 
+#: The services `dume up` runs (supervisord's programs that start by default).
+SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation")
 #: The base is down when it sinks this low (the B1 stands at about 0.53 m).
 FALLEN_BELOW_M = 0.35
 
@@ -44,7 +46,7 @@ def run_demo(args: argparse.Namespace) -> int:
     outcome, reason, sim_s, lowest = "failed", "", 0.0, float("inf")
     locomotion = stack.config.sim.locomotion
     try:
-        stack.wait_ready(["sim", "wbc"], timeout_s=120)
+        stack.wait_ready(list(SERVICES), timeout_s=120)
         clock = stack.bus.latest(WORLD_CLOCK, Clock)
         odom = stack.bus.latest(stack.keys.odom, Odom)
         deadline_ns = round(args.duration * 1e9)
@@ -69,11 +71,14 @@ def run_demo(args: argparse.Namespace) -> int:
             sim_s = c.stamp_ns / 1e9
             if c.stamp_ns >= deadline_ns:
                 stood = lowest > FALLEN_BELOW_M
-                outcome = "succeeded" if stood else "failed"
+                gone = sorted(set(SERVICES) - stack.alive())
+                outcome = "succeeded" if stood and not gone else "failed"
                 reason = (
-                    f"stood {sim_s:.1f} s; lowest base height {lowest:.3f} m"
-                    if stood
-                    else f"the base sank to {lowest:.3f} m"
+                    f"the base sank to {lowest:.3f} m"
+                    if not stood
+                    else f"services down at the end: {gone}"
+                    if gone
+                    else f"stood {sim_s:.1f} s with every service up; lowest base {lowest:.3f} m"
                 )
                 break
     except WaitTimeout as exc:
