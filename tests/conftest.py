@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -10,9 +12,22 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from common.config import REPO_ROOT
 from common.stack import MODULES, ProcessStack
 
 StartStack = Callable[..., ProcessStack]
+
+
+def dume(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    """Run the `dume` command line as a user would, from the repository."""
+    return subprocess.run(
+        [sys.executable, "-m", "common.cli", *args],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
 
 #: Settings that make the PD stand-hold (`hold`) the joint commander instead of the WBC.
 HOLD_COMMANDER = (

@@ -10,23 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from common.config import REPO_ROOT
 from common.keys import WORLD_CLOCK
 from common.messages.sim import Clock, Odom
 from common.stack import free_port
-from tests.conftest import HOLD_COMMANDER, StartStack
+from tests.conftest import HOLD_COMMANDER, StartStack, dume
 
 pytestmark = pytest.mark.integration
-
-
-def dume(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "common.cli", *args],
-        cwd=REPO_ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
 
 
 def test_dume_world_prints_the_generated_world_as_json() -> None:

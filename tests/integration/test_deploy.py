@@ -14,18 +14,9 @@ import pytest
 
 from common.config import REPO_ROOT
 from common.stack import SUPERVISORD_CONF, free_port, wait_until
+from tests.conftest import dume
 
 pytestmark = pytest.mark.integration
-
-
-def dume(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "common.cli", *args],
-        cwd=REPO_ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
 
 
 def alive(port: int) -> set[str]:
