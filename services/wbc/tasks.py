@@ -14,6 +14,7 @@ stacks every task's rows and forms H = Jᵀ W J in one product.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import NamedTuple
 
 import numpy as np
@@ -44,7 +45,7 @@ def _vec(x: float | FloatArray, n: int) -> FloatArray:
     return out
 
 
-class Task:
+class Task(ABC):
     """Common gains and weights; subclasses define error, Jacobian, drift and velocity.
 
     `columns`: None, or the v̇ columns the Jacobian selects (J = [0 I 0]): the QP then
@@ -78,15 +79,17 @@ class Task:
         #: The span of rows with a weight: `compute_rows` of a frame task gives only those.
         self.rows = slice(int(nonzero[0]), int(nonzero[-1]) + 1) if self._active else slice(0)
 
+    @abstractmethod
     def compute_error(self, m: RobotModel) -> FloatArray:
-        raise NotImplementedError
+        """The task's error (dim,): target minus current, in the task's frame."""
 
+    @abstractmethod
     def compute_jacobian(self, m: RobotModel) -> FloatArray:
-        raise NotImplementedError
+        """The task's Jacobian (dim, nv)."""
 
+    @abstractmethod
     def compute_drift(self, m: RobotModel) -> FloatArray:
         """J̇v (dim,)."""
-        raise NotImplementedError
 
     def compute_velocity(self, m: RobotModel) -> FloatArray:
         return self.compute_jacobian(m) @ m.v
