@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import coal
 import numpy as np
@@ -99,6 +100,7 @@ __all__ = [  # the description's names, re-exported, and this module's
     "T_STATOR_TCP",
     "VELOCITY_LIMITS",
     "CameraMount",
+    "Footprint",
     "MjRobotIndices",
     "arm_plane",
     "intrinsics",
@@ -365,3 +367,22 @@ FOOTPRINT: tuple[float, float] = (
     max(-FOOTPRINT_BOUNDS[0], FOOTPRINT_BOUNDS[1]),
     max(-FOOTPRINT_BOUNDS[2], FOOTPRINT_BOUNDS[3]),
 )
+
+
+class Footprint(NamedTuple):
+    """The robot's floor rectangle about the base origin, m: ahead, behind, to each side."""
+
+    front: float
+    back: float
+    half_width: float
+
+    @classmethod
+    def stowed(cls) -> Footprint:
+        """The rectangle of `FOOTPRINT_BOUNDS`: the robot with its arm stowed."""
+        x_min, x_max, y_min, y_max = FOOTPRINT_BOUNDS
+        return cls(float(x_max), float(-x_min), float(max(-y_min, y_max)))
+
+    @property
+    def circumscribed(self) -> float:
+        """The radius of the circle about the base origin that holds the rectangle, m."""
+        return math.hypot(max(self.front, self.back), self.half_width)

@@ -18,9 +18,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from common import robot
 from common.messages import semantic_map, world
 from common.messages.arrays import as_numpy
+from common.robot import Footprint
 
 BoolGrid = NDArray[np.bool_]
 FloatGrid = NDArray[np.float64]
@@ -32,23 +32,6 @@ class Pose(NamedTuple):
     x: float
     y: float
     yaw: float
-
-
-class Footprint(NamedTuple):
-    """The robot's floor rectangle about the base origin, m: ahead, behind, to each side."""
-
-    front: float
-    back: float
-    half_width: float
-
-    @classmethod
-    def stowed(cls) -> Footprint:
-        x_min, x_max, y_min, y_max = robot.FOOTPRINT_BOUNDS
-        return cls(float(x_max), float(-x_min), float(max(-y_min, y_max)))
-
-    @property
-    def circumscribed(self) -> float:
-        return math.hypot(max(self.front, self.back), self.half_width)
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from common.messages.world import (
     SupportSurface,
     WorldDescription,
 )
+from common.robot import Footprint
 
 #: Cell side of the occupancy grid, m.
 RESOLUTION_M = 0.05
@@ -52,18 +53,9 @@ class Pose2D(NamedTuple):
     yaw: float
 
 
-class Footprint(NamedTuple):
-    """The robot's floor rectangle about the base origin, m: ahead, behind, to each side."""
-
-    front: float
-    back: float
-    half_width: float
-
-
 def robot_footprint() -> Footprint:
     """The footprint from `common.robot.FOOTPRINT_BOUNDS` (x_min, x_max, y_min, y_max)."""
-    x_min, x_max, y_min, y_max = robot.FOOTPRINT_BOUNDS
-    return Footprint(float(x_max), float(-x_min), float(max(-y_min, y_max)))
+    return Footprint.stowed()
 
 
 def box_corners(
