@@ -292,11 +292,14 @@ class SimNode:
     def _publish(self, t_ns: int, tick: int, wall_rtf: float) -> None:
         """Everything stamped t: state, odom, cameras, then the clock."""
         # The state goes out when the commander answers it (every tick without one).
+        state = None
         if t_ns % self.command_period_ns == 0:
-            self.io.state.put(self.core.robot_state(tick))
+            state = self.core.robot_state(tick)
+            self.io.state.put(state)
         if t_ns % self.odom_period_ns == 0:
             self.io.odom.put(self.core.odom())
-            self.sim_log.state(t_ns, self.core.robot_state(tick))
+            if self.sim_log.enabled:
+                self.sim_log.state(t_ns, state or self.core.robot_state(tick))
         if t_ns % self.camera_period_ns == 0:
             for cam in self.svc.config.sim.cameras:
                 # Rendering is the sim's dearest work: only for someone who looks.
