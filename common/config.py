@@ -193,6 +193,8 @@ class SemanticMapSettings(_Section):
     patrol_speed: float = 0.5
     patrol_turn_rate: float = 0.6
     patrol_look_around: bool = True
+    #: How the patrol walks: pose goals to navigation, or its own cmd_vel (no navigation).
+    patrol_via: Literal["navigation", "cmd_vel"] = "navigation"
     #: Sim seconds between rerun logs of the entities and of the grid.
     log_every_s: float = 1.0
     grid_log_every_s: float = 5.0
@@ -236,6 +238,50 @@ class NavigationSettings(_Section):
     map_refresh_s: float = 1.0
 
 
+class MissionSettings(_Section):
+    """The mission service (`services/mission`); its rate is its lockstep participant's
+    `period_s` (`time.participants.mission`). Times are s of sim time unless named wall.
+
+    The algorithms' own numbers (approach gains, pull threshold) are defaults in their
+    modules; `approach_gains` and `pull_detector` override them by name.
+    """
+
+    #: A status goes out on every change and at least this often.
+    status_every_s: float = 1.0
+    #: Wall seconds a query may take (map, nav goal, arm goal) before it counts as no answer.
+    query_timeout_s: float = 2.0
+    #: Wall seconds to wait for the odom stamped at a tick before ticking without it.
+    input_timeout_s: float = 30.0
+    #: The whole-body controller must report a requested mode within this.
+    mode_timeout_s: float = 2.0
+    #: A navigation goal that reports no status this long after it was sent fails.
+    nav_status_timeout_s: float = 5.0
+    #: Arm goals: how long each may stay active before it counts as failed.
+    posture_timeout_s: float = 12.0
+    reach_timeout_s: float = 20.0
+    grasp_timeout_s: float = 8.0
+    release_timeout_s: float = 5.0
+    #: The whole visual approach (the controller re-acquires and fails by itself sooner).
+    approach_timeout_s: float = 90.0
+    #: Pose estimation: stand still this long, then wait this long for a detection.
+    settle_s: float = 0.5
+    detection_timeout_s: float = 3.0
+    #: Wrist detections older than this (sim time, behind the tick) are not a sighting.
+    sighting_max_age_s: float = 0.5
+    #: The handover: how long to wait for the pull; the back-off after the release.
+    handover_timeout_s: float = 60.0
+    back_off_speed: float = 0.15
+    back_off_s: float = 1.0
+    #: Recovery: re-picks after a grasp lost or failed; instances tried for a class request.
+    repick_budget: int = 2
+    max_candidates: int = 3
+    #: Overrides of `ApproachGains` fields and of `PullDetector` arguments, by name.
+    approach_gains: dict[str, float] = msgspec.field(default_factory=dict)
+    pull_detector: dict[str, float] = msgspec.field(default_factory=dict)
+
+
+
+
 class RecordingSettings(_Section):
     enabled: bool = True
     dir: str = "recordings"
@@ -263,6 +309,7 @@ class Config(_Section):
     perception: PerceptionSettings = msgspec.field(default_factory=PerceptionSettings)
     navigation: NavigationSettings = msgspec.field(default_factory=NavigationSettings)
     semantic_map: SemanticMapSettings = msgspec.field(default_factory=SemanticMapSettings)
+    mission: MissionSettings = msgspec.field(default_factory=MissionSettings)
     recording: RecordingSettings = msgspec.field(default_factory=RecordingSettings)
     log: LogSettings = msgspec.field(default_factory=LogSettings)
 

@@ -34,12 +34,34 @@ MissionState = Literal[
     "idle", "accepted", "running", "succeeded", "failed", "cancelled", "rejected"
 ]
 
+#: Every typed reason a mission status may carry (the one list; `detail` has the sentence).
+MissionReason = Literal[
+    "",
+    # a request refused before it starts (state `rejected`)
+    "malformed",  # not JSON, not an object, a field missing or of the wrong type
+    "busy",  # another mission is running: one at a time
+    "unknown_object",  # no mapped artifact has that id, or none of that class
+    "unknown_person",  # no mapped person has that id
+    "unavailable",  # a service the mission needs did not answer (the map, navigation, wbc)
+    # a mission that ran and stopped (state `failed` or `cancelled`)
+    "navigation_failed",  # navigation refused the goal or did not reach it
+    "object_not_found",  # approach or pose estimation could not see the object
+    "grasp_pose_failed",  # no grasp is possible from what was seen
+    "arm_failed",  # an arm goal (posture, reach, release) failed or timed out
+    "grasp_failed",  # the jaw closed on nothing or the grasp did not hold
+    "grasp_lost",  # the object was lost while carrying it, and the re-pick budget is spent
+    "handover_timeout",  # nobody took the object in time
+    "mode_timeout",  # the whole-body controller did not take the mode asked for
+    "cancelled",  # the user cancelled (state `cancelled`)
+    "internal",  # a bug: logged with its traceback; the service kept running
+]
+
 
 class MissionStatus(Message, frozen=True):
     """`dume/<r>/mission/status`: the state of a request, echoing its `request_id`.
 
     behaviour: the running leaf of the tree. progress: [0, 1].
-    reason: typed failure code (`unknown_object`, `grasp_failed`, …); detail: a sentence.
+    reason: typed failure code (`MissionReason`); detail: a sentence for a person.
     """
 
     WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
@@ -48,5 +70,5 @@ class MissionStatus(Message, frozen=True):
     state: MissionState
     behaviour: str = ""
     progress: Unit = 0.0
-    reason: str = ""
+    reason: MissionReason = ""
     detail: str = ""

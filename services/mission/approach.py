@@ -1,0 +1,236 @@
+"""approach_object's visual servoing: the paper's two proportional controllers (eq. 3).
+
+ξ = K (χ − χ_opt) on χ = (d_obj, θ_obj), the object's distance and heading in `base_yaw`
+from the wrist camera, toward (`D_OPT_M`, `THETA_OPT_RAD`) of `common.robot`: vx from the
+distance error (slowed while the heading is off, so the robot turns first), ωz from the
+heading error, vy zero. Commands are clipped to speed limits and rate-limited to
+acceleration limits. The states:
+
+- tracking: a sighting no older than `max_age_s` drives the controllers; between
+  `max_age_s` and `lost_after_s` without one the base slows to a stop and waits.
+- arrived: both errors within tolerance on every sighting for `settle_s`; latched (zero
+  command) until `reset`.
+- reacquiring: no sighting for `lost_after_s`: turn toward the last seen bearing (as
+  far as it was off), back off slowly; a sighting returns to tracking.
+- failed (latched, with a reason): reacquiring found nothing within `reacquire_s`, or no
+  arrival within `timeout_s` of `reset` — the controller never freezes.
+
+Pure: sightings and sim time (seconds) in, a command out; no clock reads, no transport.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from common.robot import D_OPT_M, THETA_OPT_RAD
+
+ApproachState = Literal["tracking", "reacquiring", "arrived", "failed"]
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """The object seen: d_obj (m) and θ_obj (rad) in `base_yaw` at capture `stamp_s` (sim s)."""
+
+    d_obj: float
+    theta_obj: float
+    stamp_s: float
+
+
+@dataclass(frozen=True)
+class ApproachGains:
+    """Gains (1/s), limits (m/s, rad/s, m/s², rad/s²), tolerances (m, rad), times (s)."""
+
+    k_d: float = 0.8  # vx per m of distance error
+    k_theta: float = 1.2  # ωz per rad of heading error
+    d_opt_m: float = D_OPT_M
+    theta_opt_rad: float = THETA_OPT_RAD
+    vx_max: float = 0.25
+    wz_max: float = 0.5
+    ax_max: float = 0.5
+    az_max: float = 1.0
+    tol_d_m: float = 0.03
+    tol_theta_rad: float = 0.05
+    settle_s: float = 0.6  # both errors within tolerance this long: arrived
+    max_age_s: float = 0.35  # a sighting older than this no longer drives the base
+    lost_after_s: float = 1.0  # no sighting this long: re-acquire
+    reacquire_s: float = 5.0  # re-acquiring this long without a sighting: failed
+    reacquire_wz: float = 0.3  # turn rate toward the last seen bearing
+    reacquire_turn_margin_rad: float = 0.15  # turn this much past the last bearing error
+    back_off_speed: float = 0.08  # m/s backwards while re-acquiring
+    back_off_max_m: float = 0.3  # backing off stops after this distance
+    timeout_s: float = 40.0  # no arrival this long after reset: failed
+
+    def __post_init__(self) -> None:
+        positive = {
+            k: v
+            for k, v in vars(self).items()
+            if k not in ("d_opt_m", "theta_opt_rad", "back_off_speed", "back_off_max_m")
+        }
+        bad = {k: v for k, v in positive.items() if not (math.isfinite(v) and v > 0.0)}
+        if bad:
+            raise ValueError(f"approach gains must be finite and positive: {bad}")
+        if not (self.max_age_s < self.lost_after_s):
+            raise ValueError(
+                f"max_age_s ({self.max_age_s}) must be shorter than lost_after_s "
+                f"({self.lost_after_s})"
+            )
+
+
+@dataclass(frozen=True)
+class ApproachCommand:
+    """Base velocity in `base_yaw` (m/s, m/s, rad/s), the state, and why (for a person)."""
+
+    vx: float
+    vy: float
+    wz: float
+    state: ApproachState
+    reason: str = ""
+
+
+def _usable(seen: Sighting | None) -> bool:
+    return (
+        seen is not None
+        and all(math.isfinite(x) for x in (seen.d_obj, seen.theta_obj, seen.stamp_s))
+        and seen.d_obj >= 0.0
+    )
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class ApproachController:
+    """See the module docstring: `reset(t)` at the start, then `step(t, sighting)` each tick."""
+
+    def __init__(self, gains: ApproachGains | None = None) -> None:
+        self.gains = gains or ApproachGains()
+        self.reset(0.0)
+
+    def reset(self, t_s: float) -> None:
+        """Start an approach at sim time `t_s` (s): nothing seen, base at rest."""
+        self._t0 = t_s
+        self._t_last: float | None = None
+        self._v = (0.0, 0.0)  # vx, wz last commanded
+        self._last: Sighting | None = None
+        self._in_tol_since: float | None = None
+        self._lost_since: float | None = None
+        self._backed_m = 0.0
+        self._latched: ApproachCommand | None = None
+
+    @property
+    def last_sighting(self) -> Sighting | None:
+        """The newest usable sighting since `reset`."""
+        return self._last
+
+    def errors(self) -> tuple[float, float] | None:
+        """(d_obj − d_opt m, θ_obj − θ_opt rad) of the newest sighting, if any."""
+        if self._last is None:
+            return None
+        g = self.gains
+        return self._last.d_obj - g.d_opt_m, _wrap(self._last.theta_obj - g.theta_opt_rad)
+
+    def step(self, t_s: float, seen: Sighting | None) -> ApproachCommand:
+        """The command at sim time `t_s` (s), given the newest sighting (None: none)."""
+        if self._latched is not None:
+            return self._latched
+        g = self.gains
+        dt = 0.0 if self._t_last is None else max(0.0, t_s - self._t_last)
+        self._t_last = t_s
+        if (
+            _usable(seen)
+            and seen is not None
+            and (self._last is None or seen.stamp_s >= self._last.stamp_s)
+        ):
+            if self._last is None or seen.stamp_s > self._last.stamp_s:
+                self._on_new_sighting(seen)
+            self._last = seen
+        elapsed = t_s - self._t0
+        if elapsed > g.timeout_s:
+            return self._latch("failed", f"not arrived {elapsed:.1f} s after the start")
+        age = math.inf if self._last is None else t_s - self._last.stamp_s
+        settled = self._in_tol_since is not None and t_s - self._in_tol_since >= g.settle_s
+        if settled and age <= g.max_age_s:
+            return self._latch("arrived", self._error_text())
+        if age <= g.max_age_s and self._last is not None:
+            self._lost_since = None
+            return self._track(self._last, dt)
+        if age <= g.lost_after_s:
+            return self._ramp(0.0, 0.0, dt, "tracking", f"no sighting for {age:.2f} s: waiting")
+        return self._reacquire(t_s, dt, age)
+
+    # -- states -------------------------------------------------------------------------
+
+    def _on_new_sighting(self, seen: Sighting) -> None:
+        g = self.gains
+        e_d = seen.d_obj - g.d_opt_m
+        e_t = _wrap(seen.theta_obj - g.theta_opt_rad)
+        within = abs(e_d) <= g.tol_d_m and abs(e_t) <= g.tol_theta_rad
+        if not within:
+            self._in_tol_since = None
+        elif self._in_tol_since is None:
+            self._in_tol_since = seen.stamp_s
+
+    def _track(self, seen: Sighting, dt: float) -> ApproachCommand:
+        g = self.gains
+        e_d = seen.d_obj - g.d_opt_m
+        e_t = _wrap(seen.theta_obj - g.theta_opt_rad)
+        vx = g.k_d * e_d * max(0.0, math.cos(e_t)) ** 2  # turn first when far off
+        wz = g.k_theta * e_t
+        return self._ramp(vx, wz, dt, "tracking", self._error_text())
+
+    def _reacquire(self, t_s: float, dt: float, age: float) -> ApproachCommand:
+        g = self.gains
+        if self._lost_since is None:
+            self._lost_since = t_s
+            self._backed_m = 0.0
+            self._in_tol_since = None
+        lost_for = t_s - self._lost_since
+        if lost_for > g.reacquire_s:
+            what = "never seen" if self._last is None else f"last seen {age:.1f} s ago"
+            return self._latch(
+                "failed",
+                f"lost the object: {what}; re-acquiring for {lost_for:.1f} s found nothing",
+            )
+        bearing = 0.0 if self._last is None else _wrap(self._last.theta_obj - g.theta_opt_rad)
+        turn_s = (abs(bearing) + g.reacquire_turn_margin_rad) / g.reacquire_wz
+        wz = math.copysign(g.reacquire_wz, bearing) if abs(bearing) > g.tol_theta_rad else 0.0
+        if lost_for > turn_s:
+            wz = 0.0
+        vx = -g.back_off_speed if self._backed_m < g.back_off_max_m else 0.0
+        self._backed_m += max(0.0, -self._v[0]) * dt
+        where = (
+            "never seen"
+            if self._last is None
+            else (f"last seen at {self._last.d_obj:.2f} m, {math.degrees(bearing):+.0f} deg")
+        )
+        return self._ramp(vx, wz, dt, "reacquiring", f"no sighting for {age:.1f} s ({where})")
+
+    # -- helpers ------------------------------------------------------------------------
+
+    def _ramp(
+        self, vx: float, wz: float, dt: float, state: ApproachState, reason: str
+    ) -> ApproachCommand:
+        """Clip to the speed limits, then move from the last command within the accel limits."""
+        g = self.gains
+        vx = min(max(vx, -g.vx_max), g.vx_max)
+        wz = min(max(wz, -g.wz_max), g.wz_max)
+        px, pz = self._v
+        vx = px + min(max(vx - px, -g.ax_max * dt), g.ax_max * dt)
+        wz = pz + min(max(wz - pz, -g.az_max * dt), g.az_max * dt)
+        self._v = (vx, wz)
+        return ApproachCommand(vx=float(vx), vy=0.0, wz=float(wz), state=state, reason=reason)
+
+    def _latch(self, state: ApproachState, reason: str) -> ApproachCommand:
+        self._v = (0.0, 0.0)
+        self._latched = ApproachCommand(vx=0.0, vy=0.0, wz=0.0, state=state, reason=reason)
+        return self._latched
+
+    def _error_text(self) -> str:
+        err = self.errors()
+        if err is None:
+            return "nothing seen yet"
+        return (
+            f"d_obj error {err[0] * 100:+.1f} cm, theta_obj error {math.degrees(err[1]):+.1f} deg"
+        )

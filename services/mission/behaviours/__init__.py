@@ -1,0 +1,1 @@
+"""The mission's behaviours: thin leaves that send goals and watch status."""

@@ -1,0 +1,86 @@
+"""The leaves that move the arm, only through the whole-body controller's arm goals.
+
+- `ArmAction`: sends one goal (Posture, Reach from the grasp plan, Grasp, Release) on
+  start and watches its state on `wbc/status`; a refusal, a failed goal or a goal still
+  active after its timeout fails with the action's typed reason. Preempted while its goal
+  is active, it asks the port to hold the arm where it is (the controller has no goal
+  cancel: leaving `manipulate` freezes the arm's joints).
+- `CheckHeld`: the grasp detector on `wbc/status` says an object is held.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from py_trees.common import Status
+
+from common.messages.mission import MissionReason
+from common.messages.wbc import ArmGoal
+from services.mission.behaviours.base import Context, MissionBehaviour
+from services.mission.ports import PortError, Refused
+
+GoalOf = Callable[[MissionBehaviour], ArmGoal]
+
+
+class ArmAction(MissionBehaviour):
+    def __init__(
+        self,
+        ctx: Context,
+        name: str,
+        goal: GoalOf,
+        reason: MissionReason,
+        timeout_s: float,
+        stage: str,
+    ) -> None:
+        super().__init__(name, ctx, stage)
+        self.goal_of, self.reason, self.timeout_s = goal, reason, timeout_s
+        self.goal_id = ""
+        self.active = False
+        self.error: str = ""
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.goal_id, self.active, self.error = "", False, ""
+        try:
+            goal = self.goal_of(self)
+            self.goal_id = self.port.send_arm_goal(goal)
+            self.active = True
+            self.ctx.decide(f"{self.name}: {type(goal).__name__} sent as {self.goal_id}")
+        except Refused as exc:
+            self.error = f"the controller refused it: {exc}"
+        except PortError as exc:
+            self.error = f"no answer from the controller: {exc}"
+
+    def update(self) -> Status:
+        if self.error:
+            return self.fail(self.reason if "refused" in self.error else "unavailable", self.error)
+        goal = self.port.arm_goal(self.goal_id)
+        if goal is not None and goal.state == "succeeded":
+            self.active = False
+            self.feedback_message = f"{self.goal_id} succeeded"
+            return Status.SUCCESS
+        if goal is not None and goal.state in ("failed", "cancelled"):
+            self.active = False
+            return self.fail(self.reason, f"{goal.kind} {goal.state}: {goal.reason}")
+        if self.elapsed_s() > self.timeout_s:
+            return self.fail(self.reason, f"still not done after {self.elapsed_s():.1f} s")
+        self.feedback_message = f"{self.goal_id} active"
+        return Status.RUNNING
+
+    def terminate(self, new_status: Status) -> None:
+        if self.active and new_status != Status.SUCCESS:
+            self.port.hold_arm(f"{self.name} stopped")
+            self.ctx.decide(f"{self.name}: arm held where it is")
+        self.active = False
+
+
+class CheckHeld(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("check_held", ctx, stage)
+
+    def update(self) -> Status:
+        status = self.port.wbc_status()
+        if status is not None and status.held:
+            return Status.SUCCESS
+        effort = "no wbc/status" if status is None else f"effort {status.gripper_effort:.2f}"
+        return self.fail("grasp_failed", f"the grasp detector does not say held ({effort})")

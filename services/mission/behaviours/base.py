@@ -1,0 +1,143 @@
+"""What every mission behaviour shares: the context, the blackboard, failing with a reason.
+
+A behaviour is a py_trees `Behaviour` that talks to the robot only through the
+`RobotPort` in its `Context`, keeps the mission's data on the blackboard under
+`/mission` (keys registered with their access), and ends a failure with `fail(reason,
+detail)`: the typed reason and the sentence go to the blackboard's `failure`, where the
+recovery decorators decide and `abort` reports. Time is the port's sim time.
+
+`stage`: which of the paper's six stages a leaf belongs to (for `mission/status`);
+`fraction`: how far the leaf is, [0, 1], where it can tell (navigation's progress).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import py_trees
+from py_trees.common import Access, Status
+
+from common.config import MissionSettings
+from common.messages.mission import MissionReason
+from services.mission.algorithms import Algorithms
+from services.mission.ports import RobotPort
+
+NS_PER_S = 1_000_000_000
+NAMESPACE = "/mission"
+
+#: The paper's stages, in order (the status's `behaviour` and progress come from them).
+STAGES = (
+    "navigate_to_object",
+    "approach_object",
+    "pose_estimation",
+    "pick_object",
+    "bring_to_user",
+    "release_object",
+)
+
+#: Blackboard keys, all under /mission.
+REQUEST = "request"  # MissionRequest
+CANDIDATES = "candidates"  # list[str]: map ids of the object, nearest first
+CANDIDATE = "candidate"  # int: index of the candidate being fetched
+TARGET = "target"  # Target: the object being fetched
+PERSON = "person"  # str: the person's map id
+DETECTION = "detection"  # tuple[int, Detection] | None: the grasp's detection
+GRASP_PLAN = "grasp_plan"  # a GraspPlan
+FAILURE = "failure"  # Failure | None
+ALL_KEYS = (REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, DETECTION, GRASP_PLAN, FAILURE)
+
+
+@dataclass(frozen=True)
+class Target:
+    """The object being fetched: its map id and class."""
+
+    map_id: str
+    class_name: str
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Why a leaf failed: the typed reason, a sentence, which leaf, when (sim ns)."""
+
+    reason: MissionReason
+    detail: str
+    behaviour: str
+    stamp_ns: int
+
+
+Decide = Callable[[str], None]
+
+
+@dataclass
+class Context:
+    """What every behaviour gets: the robot, the settings, the algorithms and a way to
+    say a decision (logged with sim time and to rerun by the node)."""
+
+    port: RobotPort
+    settings: MissionSettings
+    algorithms: Algorithms
+    decide: Decide = field(default=lambda text: logging.getLogger("dume.mission").info(text))
+
+
+def blackboard(name: str, write: bool = True) -> py_trees.blackboard.Client:
+    """A client of every mission key (read, and write unless told)."""
+    client = py_trees.blackboard.Client(name=name, namespace=NAMESPACE)
+    for key in ALL_KEYS:
+        client.register_key(key=key, access=Access.WRITE if write else Access.READ)
+    return client
+
+
+def reset_blackboard() -> None:
+    """A clean mission: every key unset (the blackboard is process-global)."""
+    for key in ALL_KEYS:
+        py_trees.blackboard.Blackboard.unset(f"{NAMESPACE}/{key}")
+
+
+def read(client: py_trees.blackboard.Client, key: str, default: Any = None) -> Any:
+    """A key's value, or `default` when it is not set."""
+    return client.get(key) if client.exists(key) else default
+
+
+class MissionBehaviour(py_trees.behaviour.Behaviour):
+    """Base of the mission's leaves (see the module docstring)."""
+
+    def __init__(self, name: str, ctx: Context, stage: str) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.port = ctx.port
+        self.settings = ctx.settings
+        self.stage = stage
+        self.fraction = 0.0
+        self.bb = blackboard(name)
+        self.started_ns = 0
+
+    def initialise(self) -> None:
+        self.started_ns = self.port.now_ns
+        self.fraction = 0.0
+        self.feedback_message = ""
+
+    def elapsed_s(self) -> float:
+        """Sim seconds since this activation began."""
+        return (self.port.now_ns - self.started_ns) / NS_PER_S
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return read(self.bb, key, default)
+
+    def set(self, key: str, value: Any) -> None:
+        self.bb.set(key, value)
+
+    def target(self) -> Target:
+        target = self.get(TARGET)
+        if not isinstance(target, Target):
+            raise RuntimeError(f"{self.name}: no target on the blackboard (tree misbuilt)")
+        return target
+
+    def fail(self, reason: MissionReason, detail: str) -> Status:
+        """Record why, say it, and return FAILURE."""
+        self.feedback_message = f"{reason}: {detail}"
+        self.set(FAILURE, Failure(reason, detail, self.name, self.port.now_ns))
+        self.ctx.decide(f"{self.name} failed: {reason}: {detail}")
+        return Status.FAILURE

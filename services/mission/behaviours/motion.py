@@ -1,0 +1,151 @@
+"""The leaves that move the base: the wbc mode, navigation goals, the back-off.
+
+- `SetMode(mode, source)`: asks the whole-body controller for a mode and the cmd_vel
+  source it obeys; succeeds once `wbc/status` reports both (modes take effect one
+  mission latency after their stamp), fails `mode_timeout` after `mode_timeout_s`.
+- `NavigateTo("artifact" | "person")`: sends `ArtifactStandoff(target)` or
+  `PersonHandover(person)` on start and watches `nav/status` for that goal id; a refusal
+  or a failed goal fails `navigation_failed` with navigation's reason (a goal refused as
+  `unavailable`, or not answered, is sent again each tick for `nav_status_timeout_s`:
+  navigation is ready before its first map). Carrying
+  (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
+  (or failing while the goal is active) it cancels its goal.
+- `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from py_trees.common import Status
+
+from common.messages.mission import MissionReason
+from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover
+from common.messages.wbc import WbcModeName
+from services.mission.behaviours.base import PERSON, Context, MissionBehaviour
+from services.mission.ports import PortError, Refused
+
+
+class SetMode(MissionBehaviour):
+    def __init__(
+        self, ctx: Context, mode: WbcModeName, source: str, stage: str, name: str = ""
+    ) -> None:
+        super().__init__(name or f"mode_{mode}_{source}", ctx, stage)
+        self.mode, self.source = mode, source
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.port.set_mode(self.mode, self.source)
+
+    def update(self) -> Status:
+        status = self.port.wbc_status()
+        if (
+            status is not None
+            and status.mode == self.mode
+            and (self.mode != "walk" or status.cmd_vel_source == self.source)
+        ):
+            self.feedback_message = f"in {self.mode} ({status.cmd_vel_source})"
+            return Status.SUCCESS
+        if self.elapsed_s() > self.settings.mode_timeout_s:
+            now = "no wbc/status" if status is None else f"{status.mode} ({status.reason})"
+            return self.fail(
+                "mode_timeout",
+                f"the controller is still in {now} {self.elapsed_s():.1f} s after "
+                f"{self.mode} from {self.source} was asked for",
+            )
+        self.feedback_message = f"waiting for mode {self.mode}"
+        return Status.RUNNING
+
+
+class NavigateTo(MissionBehaviour):
+    def __init__(
+        self,
+        ctx: Context,
+        kind: Literal["artifact", "person"],
+        stage: str,
+        watch_held: bool = False,
+        name: str = "",
+    ) -> None:
+        super().__init__(name or f"navigate_to_{kind}", ctx, stage)
+        self.kind = kind
+        self.watch_held = watch_held
+        self.goal_id = ""
+        self.active = False
+        self.error: PortError | None = None
+
+    def _goal(self) -> NavGoal:
+        if self.kind == "artifact":
+            return ArtifactStandoff(artifact_id=self.target().map_id)
+        return PersonHandover(person_id=str(self.get(PERSON)))
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.goal_id, self.active, self.error = "", False, None
+        self._send()
+
+    def _send(self) -> None:
+        goal = self._goal()
+        try:
+            self.goal_id = self.port.send_nav_goal(goal)
+            self.active, self.error = True, None
+            self.ctx.decide(f"{self.name}: {type(goal).__name__} sent as {self.goal_id}")
+        except PortError as exc:
+            self.error = exc
+
+    def update(self) -> Status:
+        retry = self.elapsed_s() <= self.settings.nav_status_timeout_s
+        if self.error is not None and self.error.code == "unavailable" and retry:
+            # Navigation is up but not ready yet (its map is still coming): ask again.
+            self._send()
+            if self.error is not None:
+                self.feedback_message = f"navigation not ready: {self.error}"
+                return Status.RUNNING
+        if self.error is not None:
+            reason: MissionReason = (
+                "navigation_failed" if isinstance(self.error, Refused) else "unavailable"
+            )
+            return self.fail(reason, f"navigation did not take the goal: {self.error}")
+        if self.watch_held:
+            wbc = self.port.wbc_status()
+            if wbc is not None and not wbc.held:
+                return self.fail("grasp_lost", "the grasp let go while carrying the object")
+        status = self.port.nav_status(self.goal_id)
+        if status is None or status.state == "idle":
+            if self.elapsed_s() > self.settings.nav_status_timeout_s:
+                return self.fail(
+                    "navigation_failed",
+                    f"no status of goal {self.goal_id} after {self.elapsed_s():.1f} s",
+                )
+            return Status.RUNNING
+        if status.state == "active":
+            self.fraction = status.progress
+            self.feedback_message = f"{status.remaining_m:.1f} m to go"
+            return Status.RUNNING
+        self.active = False
+        if status.state == "succeeded":
+            self.fraction = 1.0
+            self.feedback_message = f"goal {self.goal_id} reached"
+            return Status.SUCCESS
+        why = status.reason or status.state
+        return self.fail("navigation_failed", f"goal {self.goal_id} {why}: {status.detail}")
+
+    def terminate(self, new_status: Status) -> None:
+        if self.active and new_status != Status.SUCCESS:
+            self.port.cancel_nav(self.goal_id, f"{self.name} stopped")
+            self.ctx.decide(f"{self.name}: goal {self.goal_id} cancelled")
+        self.active = False
+
+
+class BackOff(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("back_off", ctx, stage)
+
+    def update(self) -> Status:
+        if self.elapsed_s() >= self.settings.back_off_s:
+            self.port.command_velocity(0.0, 0.0, 0.0)
+            return Status.SUCCESS
+        self.port.command_velocity(-self.settings.back_off_speed, 0.0, 0.0)
+        return Status.RUNNING
+
+    def terminate(self, new_status: Status) -> None:
+        self.port.command_velocity(0.0, 0.0, 0.0)

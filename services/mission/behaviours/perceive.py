@@ -1,0 +1,107 @@
+"""The leaves that look: the visual approach and the grasp pose.
+
+- `Approach`: each tick the wrist camera's newest detection of the target (by map id,
+  else its class) becomes a `Sighting` (none when older than `sighting_max_age_s`); the
+  approach controller (eq. 3, with its own re-acquire: turn, back off) turns it into
+  cmd_vel, sent as source `mission` (the tree set the mode before). `arrived` → stop,
+  SUCCESS; `failed` → stop, `object_not_found` with the controller's reason. It never
+  freezes: the controller fails by itself, and `approach_timeout_s` bounds it. Stopped
+  other than by arriving, it hands the base back to navigation (mode walk/navigation).
+- `EstimateGrasp`: standing still (`settle_s`), the first wrist detection captured after
+  that → `grasp_from_detection` → the plan and the detection on the blackboard; no
+  detection within `detection_timeout_s` → `object_not_found`; no grasp possible →
+  `grasp_pose_failed`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from py_trees.common import Status
+
+from services.mission.behaviours.base import (
+    DETECTION,
+    GRASP_PLAN,
+    NS_PER_S,
+    Context,
+    MissionBehaviour,
+)
+
+
+class Approach(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("approach", ctx, stage)
+        self.controller: Any = None
+        self.state = ""
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.controller = self.ctx.algorithms.approacher()
+        self.controller.reset(self.port.now_ns / NS_PER_S)
+        self.state = ""
+
+    def update(self) -> Status:
+        now_ns = self.port.now_ns
+        target = self.target()
+        seen = self.port.wrist_detection(target.map_id, target.class_name)
+        sighting = None
+        max_age_ns = round(self.settings.sighting_max_age_s * NS_PER_S)
+        if seen is not None and now_ns - seen[0] <= max_age_ns:
+            stamp, det = seen
+            sighting = self.ctx.algorithms.sighting(det.d_obj, det.theta_obj, stamp / NS_PER_S)
+        cmd = self.controller.step(now_ns / NS_PER_S, sighting)
+        if cmd.state != self.state:
+            self.ctx.decide(f"approach {target.map_id}: {cmd.state} {cmd.reason}".rstrip())
+            self.state = cmd.state
+        if cmd.state == "arrived":
+            self.port.command_velocity(0.0, 0.0, 0.0)
+            self.feedback_message = f"arrived {cmd.reason}".rstrip()
+            return Status.SUCCESS
+        if cmd.state == "failed":
+            self.port.command_velocity(0.0, 0.0, 0.0)
+            return self.fail("object_not_found", cmd.reason or f"{target.map_id} not acquired")
+        if self.elapsed_s() > self.settings.approach_timeout_s:
+            self.port.command_velocity(0.0, 0.0, 0.0)
+            return self.fail(
+                "object_not_found", f"no arrival at {target.map_id} in {self.elapsed_s():.0f} s"
+            )
+        self.port.command_velocity(cmd.vx, cmd.vy, cmd.wz)
+        self.feedback_message = f"{cmd.state} {cmd.reason}".rstrip()
+        return Status.RUNNING
+
+    def terminate(self, new_status: Status) -> None:
+        self.port.command_velocity(0.0, 0.0, 0.0)
+        if self.controller is not None and new_status != Status.SUCCESS:
+            self.port.set_mode("walk", "navigation")  # hand the base back to navigation
+        self.controller = None
+
+
+class EstimateGrasp(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("estimate_grasp", ctx, stage)
+
+    def update(self) -> Status:
+        s = self.settings
+        if self.elapsed_s() < s.settle_s:
+            self.feedback_message = "standing still"
+            return Status.RUNNING
+        target = self.target()
+        seen = self.port.wrist_detection(target.map_id, target.class_name)
+        settled_ns = self.started_ns + round(s.settle_s * NS_PER_S)
+        if seen is None or seen[0] < settled_ns:
+            if self.elapsed_s() > s.settle_s + s.detection_timeout_s:
+                return self.fail(
+                    "object_not_found",
+                    f"the wrist camera has not seen {target.map_id} for "
+                    f"{s.detection_timeout_s:.1f} s standing still",
+                )
+            return Status.RUNNING
+        stamp, det = seen
+        try:
+            plan = self.ctx.algorithms.grasp_from_detection(det, stamp)
+        except self.ctx.algorithms.grasp_error as exc:
+            return self.fail("grasp_pose_failed", f"no grasp of {target.map_id}: {exc}")
+        self.set(DETECTION, seen)
+        self.set(GRASP_PLAN, plan)
+        self.ctx.decide(f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp} ns")
+        return Status.SUCCESS

@@ -1,0 +1,87 @@
+"""The leaves about what was asked: wait for a request, pick the object, name the person.
+
+- `WaitForRequest`: RUNNING until the node put an accepted request on the blackboard.
+- `SelectTarget`: the object's candidates from the map on first use (a map id: itself; a
+  class: every mapped instance, nearest first, at most `max_candidates`), then the one at
+  the blackboard's `candidate` index becomes the `target`. The `next_instance` recovery
+  moves the index on; past the last one the object was not found.
+- `ResolvePerson`: the person's map id, checked against the map now (the request was
+  checked when it came; the map may have changed since).
+"""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from common.messages.mission import MissionRequest
+from services.mission import targets
+from services.mission.behaviours.base import (
+    CANDIDATE,
+    CANDIDATES,
+    PERSON,
+    REQUEST,
+    TARGET,
+    Context,
+    MissionBehaviour,
+    Target,
+)
+from services.mission.ports import Unavailable
+
+
+class WaitForRequest(MissionBehaviour):
+    def __init__(self, ctx: Context) -> None:
+        super().__init__("wait_for_request", ctx, stage="")
+
+    def update(self) -> Status:
+        if isinstance(self.get(REQUEST), MissionRequest):
+            return Status.SUCCESS
+        self.feedback_message = "waiting for a request"
+        return Status.RUNNING
+
+
+class SelectTarget(MissionBehaviour):
+    def __init__(self, ctx: Context) -> None:
+        super().__init__("select_target", ctx, stage="navigate_to_object")
+
+    def update(self) -> Status:
+        request: MissionRequest = self.get(REQUEST)
+        candidates: list[str] | None = self.get(CANDIDATES)
+        if candidates is None:
+            try:
+                found = targets.object_candidates(self.port, request.object)
+            except Unavailable as exc:
+                return self.fail("unavailable", f"the semantic map did not answer: {exc}")
+            if not found:
+                return self.fail("unknown_object", f"no mapped artifact is {request.object!r}")
+            candidates = [e.id for e in found[: max(1, self.settings.max_candidates)]]
+            self.set(CANDIDATES, candidates)
+            self.ctx.decide(f"object {request.object!r}: candidates {candidates}")
+        index = int(self.get(CANDIDATE, 0))
+        if index >= len(candidates):
+            return self.fail(
+                "object_not_found", f"none of {candidates} was found where the map has it"
+            )
+        map_id = candidates[index]
+        previous = self.get(TARGET)
+        self.set(TARGET, Target(map_id, targets.class_of(map_id)))
+        if not isinstance(previous, Target) or previous.map_id != map_id:
+            self.ctx.decide(f"target {map_id} ({index + 1} of {len(candidates)})")
+        self.feedback_message = f"target {map_id}"
+        return Status.SUCCESS
+
+
+class ResolvePerson(MissionBehaviour):
+    def __init__(self, ctx: Context) -> None:
+        super().__init__("resolve_person", ctx, stage="bring_to_user")
+
+    def update(self) -> Status:
+        request: MissionRequest = self.get(REQUEST)
+        try:
+            person = targets.person_named(self.port, request.person)
+        except Unavailable as exc:
+            return self.fail("unavailable", f"the semantic map did not answer: {exc}")
+        if person is None:
+            return self.fail("unknown_person", f"no mapped person is {request.person!r}")
+        self.set(PERSON, person.id)
+        self.feedback_message = f"person {person.id}"
+        return Status.SUCCESS

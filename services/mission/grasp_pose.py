@@ -1,0 +1,226 @@
+"""pose_estimation: a grasp pose ᴮH_G for `gripper_tcp` from one perception detection.
+
+The translation comes from the object's axis estimate (perception's cylinder or box
+fit, at the visible points' mid-height), the orientation from the fit's shape — better
+than the paper's identity rotation:
+
+- side grasp (upright cylinders: bottles, cans): the TCP's x (approach) horizontal along
+  the line of sight from the arm's shoulder to the axis, pitched nose-down by
+  `pitch_rad` (within `common.robot.GRASP_PITCH_RAD`); y (the jaw pivot) up along the
+  cylinder, so z (fixed jaw → moving jaw) is horizontal and the jaws close across it —
+  `services.wbc.reach.side_grasp`'s frame. Held low on the body (a bottle's neck is
+  narrow), clear of the surface it stands on.
+- top grasp (boxes): x down (tilted `top_tilt_rad` away from the robot, for reach), z
+  across the box's shorter side, perpendicular to its long faces (the sign nearer the
+  line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
+  just below the top face.
+
+Frames, as the WBC's Reach reads them (`services.wbc.arm_actions`): with the base pose at
+capture (`Detections.T_world_base`) the plan is in `world` — fixed, exact, whenever it is
+sent. Without it the plan is in `base` as of the detection's stamp, built in `base_yaw`
+(the WBC's `base` includes the trunk's pitch and roll, a few mm at arm's length while
+standing) and it must reach the WBC within its 2 s pose history. `approach_axis` is in
+H's own (TCP) frame, as `Reach` wants it: always the TCP's x.
+
+Pure numpy on msgspec values; no transport.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from common.geometry import FloatArray, inv_T, make_T, rot_z
+from common.messages.perception import Detection
+from common.messages.wbc import Reach
+from common.robot import GRASP_PITCH_RAD, arm_plane
+
+#: Classes whose upright cylinder fit gets a side grasp, and where along the visible
+#: height (0 bottom, 1 top) the TCP holds it: a bottle's body is its lower 3/4.
+SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
+TOP_GRASP_CLASSES = ("box",)
+
+
+class GraspPoseError(Exception):
+    """No grasp can be planned for this detection; `reason` says why, for a person."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class GraspParams:
+    """pitch_rad: side grasps' nose-down pitch; top_tilt_rad: top grasps' tilt from vertical
+    toward the robot; clearance_m: the TCP at least this far above the visible bottom (the
+    gripper reaches 4 cm below its TCP); top_depth_m: top grasps' TCP below the top face;
+    pregrasp_m: the approach starts this far back; max_width_m: the widest the jaws hold."""
+
+    pitch_rad: float = 0.0
+    top_tilt_rad: float = 0.3
+    clearance_m: float = 0.05
+    top_depth_m: float = 0.03
+    pregrasp_m: float = 0.12
+    max_width_m: float = 0.075
+
+    def __post_init__(self) -> None:
+        lo, hi = GRASP_PITCH_RAD
+        if not lo <= self.pitch_rad <= hi:
+            raise ValueError(f"pitch_rad {self.pitch_rad} is outside GRASP_PITCH_RAD {lo, hi}")
+        if not 0.0 <= self.top_tilt_rad < math.pi / 2:
+            raise ValueError(f"top_tilt_rad {self.top_tilt_rad} must be in [0, pi/2)")
+
+
+@dataclass(frozen=True)
+class GraspPlan:
+    """H: `gripper_tcp`'s goal (4×4) in `frame` as of `stamp_ns`; approach_axis in H's own
+    frame; pregrasp_m back along it; kind: side or top."""
+
+    H: FloatArray
+    frame: Literal["base", "world"]
+    approach_axis: tuple[float, float, float]
+    pregrasp_m: float
+    kind: Literal["side", "top"]
+    stamp_ns: int
+
+    def reach(self) -> Reach:
+        """The WBC's arm goal for this plan."""
+        return Reach(
+            H=tuple(float(x) for x in np.asarray(self.H, dtype=float).ravel()),
+            frame=self.frame,
+            stamp_ns=self.stamp_ns,
+            approach_axis=self.approach_axis,
+            pregrasp_m=self.pregrasp_m,
+        )
+
+    def in_world(self, T_world_base: FloatArray) -> FloatArray:
+        """H in the world, given the base pose at the plan's stamp (for a `base` plan)."""
+        H = np.asarray(self.H, dtype=float)
+        return H if self.frame == "world" else np.asarray(T_world_base, float) @ H
+
+
+def _finite(name: str, x: tuple[float, ...]) -> FloatArray:
+    a = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise GraspPoseError(f"the detection's {name} is not finite: {list(x)}")
+    return a
+
+
+def side_rotation(approach_xy: FloatArray, pitch_rad: float) -> FloatArray:
+    """TCP rotation (z-up frame) of a side grasp: x along `approach_xy` pitched down, y up."""
+    a = np.array([approach_xy[0], approach_xy[1], 0.0])
+    x = a / np.linalg.norm(a)
+    y = np.array([0.0, 0.0, 1.0])
+    R_level = np.column_stack([x, y, np.cross(x, y)])
+    return np.asarray(R_level @ rot_z(-pitch_rad))  # about the TCP's z: nose down
+
+
+def top_rotation(approach_xy: FloatArray, across: FloatArray, tilt_rad: float) -> FloatArray:
+    """TCP rotation (z-up frame) of a top grasp: x down, tilted by `tilt_rad` toward
+    `approach_xy`; z (the jaws' closing) perpendicular to x and to the box's long side (so
+    both pads meet the long faces), along ±`across` (the sign nearer `approach_xy`)."""
+    a = np.array([approach_xy[0], approach_xy[1], 0.0])
+    a /= np.linalg.norm(a)
+    u = np.array([across[0], across[1], 0.0])
+    u /= np.linalg.norm(u)
+    long_side = np.array([-u[1], u[0], 0.0])
+    x = math.sin(tilt_rad) * a - math.cos(tilt_rad) * np.array([0.0, 0.0, 1.0])
+    z = np.cross(x, long_side)
+    z /= np.linalg.norm(z)
+    if z @ a < 0.0 or (abs(z @ a) < 1e-9 and z @ u < 0.0):
+        z = -z
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def _base_yaw_in_world(det: Detection, T_world_base: FloatArray | None) -> FloatArray | None:
+    """T_world_base_yaw: from the base pose when given, else from the detection's two point
+    pairs (axis and centroid, in both frames) when they are far enough apart."""
+    if T_world_base is not None:
+        T = np.asarray(T_world_base, dtype=float)
+        yaw = math.atan2(T[1, 0], T[0, 0])
+        return make_T(rot_z(yaw), T[:3, 3])
+    d_by = np.subtract(det.centroid_in_base_yaw, det.axis_in_base_yaw)[:2]
+    d_w = np.subtract(det.centroid_in_world, det.axis_in_world)[:2]
+    if np.linalg.norm(d_by) < 0.01 or np.linalg.norm(d_w) < 0.01:
+        return None
+    yaw = math.atan2(d_w[1], d_w[0]) - math.atan2(d_by[1], d_by[0])
+    R = rot_z(yaw)
+    return make_T(R, np.asarray(det.axis_in_world) - R @ np.asarray(det.axis_in_base_yaw))
+
+
+def grasp_from_detection(
+    det: Detection,
+    stamp_ns: int,
+    T_world_base: FloatArray | None = None,
+    params: GraspParams | None = None,
+) -> GraspPlan:
+    """The grasp for `det` (captured at `stamp_ns`); `T_world_base` (4×4, the base at
+    capture, e.g. `Detections.T_world_base`) makes it a world-frame plan. Raises
+    `GraspPoseError` when the detection cannot be grasped (shape, size, bad numbers)."""
+    p = params or GraspParams()
+    if det.shape == "cylinder" and det.class_name in SIDE_GRASP_HEIGHT:
+        kind: Literal["side", "top"] = "side"
+    elif det.shape == "box" and det.class_name in TOP_GRASP_CLASSES:
+        kind = "top"
+    else:
+        raise GraspPoseError(
+            f"no grasp for a {det.class_name} fitted as {det.shape!r}: side grasps take "
+            f"upright {'/'.join(SIDE_GRASP_HEIGHT)} cylinders, top grasps boxes"
+        )
+    extent = _finite("extent", det.extent)
+    if det.n_points <= 0 or extent[2] <= 0.0:
+        raise GraspPoseError(f"the {det.class_name} has no visible height ({det.n_points} points)")
+    width = float(min(extent[0], extent[1]))
+    if width > p.max_width_m:
+        raise GraspPoseError(
+            f"the {det.class_name} is {width * 100:.1f} cm across: wider than the jaws "
+            f"hold ({p.max_width_m * 100:.1f} cm)"
+        )
+    T_w_by = _base_yaw_in_world(det, T_world_base)
+    world = T_world_base is not None
+    axis = _finite("axis", det.axis_in_world if world else det.axis_in_base_yaw)
+    sx, sz = arm_plane()["shoulder"]
+    shoulder = np.array([sx, 0.0, sz])
+    if T_world_base is not None:
+        T_wb = np.asarray(T_world_base, dtype=float)
+        shoulder = T_wb[:3, :3] @ shoulder + T_wb[:3, 3]
+    sight = (axis - shoulder)[:2]
+    if np.linalg.norm(sight) < 0.05:
+        raise GraspPoseError(f"the {det.class_name} is at the shoulder: no line of sight")
+    bottom, top = axis[2] - 0.5 * extent[2], axis[2] + 0.5 * extent[2]
+    centre = axis.copy()
+    if kind == "side":
+        z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
+        centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
+        R = side_rotation(sight, p.pitch_rad)
+    else:
+        yaw = det.yaw_in_world
+        if not world:
+            if T_w_by is None:
+                raise GraspPoseError(
+                    "a box's yaw is in the world: its grasp needs the base pose at capture "
+                    "(T_world_base)"
+                )
+            yaw -= math.atan2(T_w_by[1, 0], T_w_by[0, 0])
+        fit_x = np.array([math.cos(yaw), math.sin(yaw)])
+        across = fit_x if extent[0] <= extent[1] else np.array([-fit_x[1], fit_x[0]])
+        centre[2] = max(top - p.top_depth_m, axis[2])
+        R = top_rotation(sight, across, p.top_tilt_rad)
+    return GraspPlan(
+        H=make_T(R, centre),
+        frame="world" if world else "base",
+        approach_axis=(1.0, 0.0, 0.0),
+        pregrasp_m=p.pregrasp_m,
+        kind=kind,
+        stamp_ns=stamp_ns,
+    )
+
+
+def plan_error(H_plan_world: FloatArray, H_truth_world: FloatArray) -> tuple[float, float]:
+    """(distance m, rotation rad) between two world poses, e.g. a plan and the truth's."""
+    d = float(np.linalg.norm(H_plan_world[:3, 3] - H_truth_world[:3, 3]))
+    R = inv_T(H_truth_world)[:3, :3] @ H_plan_world[:3, :3]
+    return d, float(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))

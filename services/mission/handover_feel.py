@@ -1,0 +1,108 @@
+"""release_object's felt handover: does the person pull the object the robot holds out?
+
+The robot has no force sensor: the WBC estimates the wrench on `gripper_tcp` from the
+arm's joint torques (`WbcStatus.gripper_wrench`, force N in the base frame; a held
+bottle reads as its weight, −z). While the arm holds still in `handover`, `reset` takes
+the baseline (averaged over the first `baseline_s`); afterwards a person's pull shows
+as the force rising along `toward` (from the robot to the person, base frame: ahead),
+and the jaw's effort changes as the object is tugged between the pads. `update` returns
+True once
+
+    pull = (F − F₀) · toward ≥ `force_n`, or
+    pull ≥ `force_n` / 2 and |effort − effort₀| ≥ `effort_nm`,
+
+has held on every sample for `debounce_s` of sim time (a single spike from a footstep
+or the estimator's noise does not trip it). Tripped stays tripped until `reset`.
+
+Pure: statuses in (their sim-time stamps are the clock), a bool out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common.geometry import FloatArray
+from common.messages.wbc import WbcStatus
+
+NS = 1_000_000_000
+
+
+class PullDetector:
+    """See the module docstring."""
+
+    def __init__(
+        self,
+        force_n: float = 4.0,
+        effort_nm: float = 0.5,
+        debounce_s: float = 0.2,
+        baseline_s: float = 0.3,
+        toward: tuple[float, float, float] = (1.0, 0.0, 0.0),
+    ) -> None:
+        if not all(math.isfinite(x) and x > 0 for x in (force_n, effort_nm, debounce_s)):
+            raise ValueError(
+                f"thresholds must be finite and positive: force_n={force_n}, "
+                f"effort_nm={effort_nm}, debounce_s={debounce_s}"
+            )
+        direction = np.asarray(toward, dtype=float)
+        if not (np.all(np.isfinite(direction)) and np.linalg.norm(direction) > 1e-6):
+            raise ValueError(f"toward {toward} is not a direction")
+        self.force_n, self.effort_nm = force_n, effort_nm
+        self.debounce_s, self.baseline_s = debounce_s, max(0.0, baseline_s)
+        self.toward: FloatArray = direction / np.linalg.norm(direction)
+        self._t0_ns = 0
+        self._forces: list[FloatArray] = []
+        self._efforts: list[float] = []
+        self._F0: FloatArray = np.zeros(3)
+        self._e0 = 0.0
+        self._since_ns: int | None = None
+        self.tripped = False
+        self.pull_n = 0.0  # the last sample's pull, N (for logging)
+        self.effort_change_nm = 0.0  # the last sample's |effort − effort₀|, N·m
+        self.tripped_at_ns: int | None = None
+
+    def reset(self, status: WbcStatus) -> None:
+        """Start feeling from this status (the arm still in `handover`): a new baseline."""
+        self._t0_ns = status.stamp_ns
+        self._forces, self._efforts = [], []
+        self._since_ns, self.tripped, self.tripped_at_ns = None, False, None
+        self.pull_n = self.effort_change_nm = 0.0
+        self._add_baseline(status)
+
+    @property
+    def baseline(self) -> tuple[FloatArray, float]:
+        """(F₀ (3,) N in base, effort₀ N·m)."""
+        return self._F0.copy(), self._e0
+
+    def _add_baseline(self, status: WbcStatus) -> None:
+        self._forces.append(np.asarray(status.gripper_wrench[:3], dtype=float))
+        self._efforts.append(float(status.gripper_effort))
+        self._F0 = np.mean(self._forces, axis=0)
+        self._e0 = float(np.mean(self._efforts))
+
+    def update(self, status: WbcStatus) -> bool:
+        """Feed the next status; True once a pull has been felt (see the module docstring)."""
+        if self.tripped:
+            return True
+        if (status.stamp_ns - self._t0_ns) / NS < self.baseline_s:
+            self._add_baseline(status)
+            return False
+        F = np.asarray(status.gripper_wrench[:3], dtype=float)
+        effort = float(status.gripper_effort)
+        if not (np.all(np.isfinite(F)) and math.isfinite(effort)):
+            self._since_ns = None
+            return False
+        self.pull_n = float((F - self._F0) @ self.toward)
+        self.effort_change_nm = abs(effort - self._e0)
+        pulling = self.pull_n >= self.force_n or (
+            self.pull_n >= 0.5 * self.force_n and self.effort_change_nm >= self.effort_nm
+        )
+        if not pulling:
+            self._since_ns = None
+            return False
+        if self._since_ns is None:
+            self._since_ns = status.stamp_ns
+        if (status.stamp_ns - self._since_ns) / NS >= self.debounce_s:
+            self.tripped, self.tripped_at_ns = True, status.stamp_ns
+        return self.tripped

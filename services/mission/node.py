@@ -1,0 +1,235 @@
+"""The mission service: a 20 Hz lockstep participant that ticks the bring-me tree.
+
+Requests and cancels arrive as raw JSON (so a malformed one can still be answered with
+its `request_id`) and wait in a queue for the loop. Each tick b (multiples of
+`time.participants.mission.period_s`):
+
+1. inputs as of b: the odom stamped b (50 Hz, waited for), the `wbc/status` stamped
+   before b (waited for while the controller is alive), and the outputs of navigation
+   and perception that take effect by b (`UpstreamGate`);
+2. requests: parsed, refused at once when malformed, when a mission runs (`busy`) or
+   when the map does not know the object or the person; else the tree starts;
+   cancels of the running request stop the tree (`MissionTree.cancel`);
+3. the tree ticks once; its outcome, stage and progress become the status;
+4. published stamped b: cmd_vel from source `mission` (zero unless a behaviour drives),
+   a wbc mode when asked for, the status on change and every `status_every_s`; then the
+   ack. A bug in a behaviour is logged with its traceback, the robot halted and the
+   mission failed `internal`; the loop goes on.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+
+import zenoh
+
+from common.bus import WaitTimeout
+from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate
+from common.messages.mission import MissionRequest, MissionStatus
+from common.service import Service
+from services.mission.algorithms import Algorithms, default_algorithms, missing_algorithms
+from services.mission.behaviours.abort import halt
+from services.mission.behaviours.base import Context
+from services.mission.mission_log import MissionLogger
+from services.mission.requests import (
+    Rejection,
+    StatusBoard,
+    check_request,
+    parse_cancel,
+    parse_request,
+)
+from services.mission.robot import BusRobot
+from services.mission.tree import MissionTree, Outcome
+
+NAME = "mission"
+
+
+class RawInbox:
+    """Payloads of one key, kept raw for the loop (Zenoh's thread only appends)."""
+
+    def __init__(self, session: zenoh.Session, key: str, maxlen: int = 256) -> None:
+        self._q: deque[bytes] = deque(maxlen=maxlen)
+        self._lock = threading.Lock()
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self._q.append(sample.payload.to_bytes())
+
+    def drain(self) -> list[bytes]:
+        with self._lock:
+            out = list(self._q)
+            self._q.clear()
+        return out
+
+
+def _algorithms(svc: Service) -> Algorithms:
+    try:
+        return default_algorithms(svc.config.mission)
+    except ImportError as exc:
+        svc.log.error("mission algorithms unavailable (%s): missions will fail", exc)
+        return missing_algorithms(str(exc))
+
+
+class MissionNode:
+    """The loop and what it keeps between ticks; see the module docstring."""
+
+    def __init__(self, svc: Service) -> None:
+        self.svc, cfg = svc, svc.config
+        m = cfg.mission
+        me = cfg.time.participants.get(NAME)
+        self.period_s = me.period_s if me else 0.05
+        latency = {n: round(p.latency_s * NS_PER_S) for n, p in cfg.time.participants.items()}
+        bus, keys = svc.bus, svc.keys
+        self.robot = BusRobot(bus, keys, m.query_timeout_s, latency)
+        self.gate = UpstreamGate(bus, keys, cfg)
+        self.gate.watch("navigation", self.robot.nav)
+        self.gate.watch("perception", self.robot.detections)
+        self.alive = bus.watch_alive(keys.alive_all)
+        self.wbc_alive_key = keys.alive("wbc")
+        self.status_period_ns = round(NS_PER_S / cfg.wbc.status_hz)
+        self.requests = RawInbox(bus.session, keys.mission_request)
+        self.cancels = RawInbox(bus.session, keys.mission_cancel)
+        self.status_pub = bus.publisher(keys.mission_status, MissionStatus, "data")
+        self.log = MissionLogger(svc.rec, svc.log)
+        ctx = Context(self.robot, m, _algorithms(svc), self.log.decision)
+        self.tree = MissionTree(ctx)
+        self.board = StatusBoard(round(m.status_every_s * NS_PER_S))
+        self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
+
+    def run(self) -> None:
+        self.svc.ready()
+        for b in self.ticker.ticks():
+            try:
+                self.tick(b)
+            except Exception:  # a bug: say it, stop the robot, keep serving
+                self.svc.log.exception("mission tick at t=%.2f s failed", b / NS_PER_S)
+            finally:
+                self.ticker.ack(b)
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def _wait_inputs(self, b: int) -> None:
+        timeout = self.svc.config.mission.input_timeout_s
+        try:
+            self.robot.odom.wait_stamp(b, timeout)
+        except WaitTimeout:
+            self.svc.log.warning("no odom for t=%.2f s", b / NS_PER_S)
+        if b > 0 and self.wbc_alive_key in self.alive.alive():
+            need = ((b - 1) // self.status_period_ns) * self.status_period_ns
+            try:
+                self.robot.wbc.wait_stamp(need, timeout)
+            except WaitTimeout:
+                self.svc.log.warning("no wbc/status for t=%.2f s", need / NS_PER_S)
+        missing = self.gate.wait(b, timeout)
+        if missing:
+            self.svc.log.warning("t=%.2f s: no output of %s in time", b / NS_PER_S, missing)
+
+    # -- requests and cancels -------------------------------------------------------------
+
+    def _publish(self, status: MissionStatus) -> None:
+        self.status_pub.put(status)
+        self.log.status(status)
+
+    def _reject(self, b: int, rejection: Rejection) -> None:
+        self.log.request(
+            f"request {rejection.request_id or '(no id)'} rejected: "
+            f"{rejection.reason}: {rejection.detail}",
+            warn=True,
+        )
+        self._publish(
+            MissionStatus(
+                stamp_ns=b,
+                request_id=rejection.request_id,
+                state="rejected",
+                reason=rejection.reason,
+                detail=rejection.detail,
+            )
+        )
+
+    def _requests(self, b: int) -> None:
+        for payload in self.requests.drain():
+            parsed = parse_request(payload)
+            if isinstance(parsed, Rejection):
+                self._reject(b, parsed)
+                continue
+            self.log.request(f"request {parsed.request_id}: {parsed.object} to {parsed.person}")
+            if self.tree.busy:
+                running = self.tree.request.request_id if self.tree.request else ""
+                self._reject(
+                    b, Rejection(parsed.request_id, "busy", f"mission {running} is running")
+                )
+                continue
+            refused = check_request(parsed, self.robot)
+            if refused is not None:
+                self._reject(b, refused)
+                continue
+            self._start(b, parsed)
+
+    def _start(self, b: int, request: MissionRequest) -> None:
+        self.tree.start(request)
+        self.board.update(b, request.request_id, "accepted", detail="checked against the map")
+        self._publish(self.board.sent(b))
+
+    def _cancels(self) -> Outcome | None:
+        outcome = None
+        for payload in self.cancels.drain():
+            cancel = parse_cancel(payload)
+            current = self.tree.request
+            if cancel is None:
+                self.log.request(f"cancel ignored: not a MissionCancel: {payload[:200]!r}", True)
+            elif current is None or cancel.request_id != current.request_id:
+                running = current.request_id if current else "none"
+                self.log.request(
+                    f"cancel of {cancel.request_id} ignored: the running mission is {running}",
+                    True,
+                )
+            else:
+                self.log.request(f"cancel of {cancel.request_id}: {cancel.reason}")
+                outcome = self.tree.cancel(cancel.reason or "cancelled by the user")
+        return outcome
+
+    # -- the tick -------------------------------------------------------------------------
+
+    def tick(self, b: int) -> None:
+        self._wait_inputs(b)
+        self.log.at(b)
+        self.robot.begin(b)
+        self._requests(b)
+        request = self.tree.request
+        outcome = self._cancels()
+        if outcome is None:
+            try:
+                outcome = self.tree.tick()
+            except Exception:
+                self.svc.log.exception("the tree failed at t=%.2f s", b / NS_PER_S)
+                if self.tree.cancel("internal error") is None:
+                    halt(self.robot, "internal error")
+                outcome = Outcome("failed", "internal", "a behaviour raised: see the log")
+        self.log.tree(self.tree.statuses(), self.tree.text)
+        if outcome is not None and request is not None:
+            done = 1.0 if outcome.state == "succeeded" else self.board.status.progress
+            changed = self.board.update(
+                b,
+                request.request_id,
+                outcome.state,
+                self.board.status.behaviour,
+                done,
+                outcome.reason,
+                outcome.detail,
+            )
+        elif self.tree.request is not None:
+            stage, leaf, progress = self.tree.where()
+            changed = self.board.update(
+                b, self.tree.request.request_id, "running", stage, progress, detail=leaf
+            )
+        else:
+            changed = False
+        self.robot.end(b)
+        if changed or self.board.due(b):
+            self._publish(self.board.sent(b))
+
+
+def main(svc: Service) -> None:
+    MissionNode(svc).run()

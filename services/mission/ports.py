@@ -1,0 +1,123 @@
+"""What the mission's behaviours may ask of the robot: one small interface, no transport.
+
+Every bus interaction a behaviour needs goes through a `RobotPort`: the Zenoh client
+(`services.mission.robot.BusRobot`) in the service, a scripted fake in the unit tests.
+Reads are of the inputs as of the current tick (the node refreshes them before it ticks
+the tree); commands are either short queries with a timeout (a goal sent, a map entry
+read) or values the node publishes after the tick (cmd_vel, the wbc mode). Nothing here
+blocks for longer than one query: goals are sent, then watched over later ticks.
+
+Failures the behaviours must handle are typed: `Refused` (the service answered no, with
+its reason) and `Unavailable` (nobody answered in time).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from common.messages.navigation import NavGoal, NavStatus
+from common.messages.perception import Detection
+from common.messages.semantic_map import MapEntity
+from common.messages.wbc import ArmGoal, GoalStatus, WbcModeName, WbcStatus
+
+
+class PortError(Exception):
+    """A request the robot's services did not serve: the reason, for a person, and the
+    service's typed code when it gave one (`ErrorCode`: `unavailable`, `busy`, …)."""
+
+    def __init__(self, message: str, code: str = "") -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class Refused(PortError):
+    """The service answered and said no (its typed reason in the message)."""
+
+
+class Unavailable(PortError):
+    """Nobody answered within the timeout (the service is down or stalled)."""
+
+    def __init__(self, message: str, code: str = "unavailable") -> None:
+        super().__init__(message, code)
+
+
+class RobotPort(Protocol):
+    """The robot as the mission's behaviours see it (see the module docstring)."""
+
+    @property
+    def now_ns(self) -> int:
+        """The tick being processed: sim time, ns."""
+        ...
+
+    # -- the semantic map (queries) -----------------------------------------------------
+
+    def artifact(self, map_id: str) -> MapEntity | None:
+        """A mapped artifact by id (None: no such id); `Unavailable` if the map is down."""
+        ...
+
+    def artifacts_of_class(self, class_name: str) -> list[MapEntity]:
+        """Every mapped, not missing artifact of a class, in any order."""
+        ...
+
+    def person(self, person_id: str) -> MapEntity | None:
+        """A mapped person by id (None: no such id)."""
+        ...
+
+    def people(self) -> list[MapEntity]:
+        """Every mapped person."""
+        ...
+
+    def robot_xy(self) -> tuple[float, float] | None:
+        """The base's position in the world as of this tick (None before the first odom)."""
+        ...
+
+    # -- navigation ---------------------------------------------------------------------
+
+    def send_nav_goal(self, goal: NavGoal) -> str:
+        """Send a goal; its id. `Refused` with navigation's reason, or `Unavailable`."""
+        ...
+
+    def nav_status(self, goal_id: str) -> NavStatus | None:
+        """Navigation's newest status of that goal (None: none about it yet)."""
+        ...
+
+    def cancel_nav(self, goal_id: str, reason: str) -> None:
+        """Cancel a goal ("" for whatever is active)."""
+        ...
+
+    # -- the whole-body controller ------------------------------------------------------
+
+    def set_mode(self, mode: WbcModeName, cmd_vel_source: str) -> None:
+        """Ask for a mode and a cmd_vel source (published after the tick, stamped with it)."""
+        ...
+
+    def command_velocity(self, vx: float, vy: float, wz: float) -> None:
+        """This tick's cmd_vel from source `mission` (zero unless set again next tick)."""
+        ...
+
+    def send_arm_goal(self, goal: ArmGoal) -> str:
+        """Send an arm goal; its id. `Refused` with the controller's reason, or `Unavailable`."""
+        ...
+
+    def hold_arm(self, reason: str) -> None:
+        """Stop the arm where it is (the controller leaves `manipulate`: joints frozen)."""
+        ...
+
+    def arm_goal(self, goal_id: str) -> GoalStatus | None:
+        """The goal's state on the newest `wbc/status` (None: not listed yet)."""
+        ...
+
+    def wbc_status(self) -> WbcStatus | None:
+        """The newest `wbc/status` as of this tick."""
+        ...
+
+    # -- perception ---------------------------------------------------------------------
+
+    def wrist_detection(self, map_id: str, class_name: str) -> tuple[int, Detection] | None:
+        """The wrist camera's newest detection of the target, with its frame's stamp (ns).
+
+        The detection associated with `map_id` when perception associated one, else the
+        nearest of `class_name` to the base; None when the newest wrist frame due by now
+        shows none.
+        """
+        ...

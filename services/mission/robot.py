@@ -1,0 +1,221 @@
+"""`BusRobot`: the `RobotPort` over Zenoh — every bus interaction the behaviours need.
+
+Inputs are kept in `Latest` buffers and read as of the tick being processed (`begin(b)`):
+odom, `wbc/status`, `nav/status`, perception's detections (the wrist camera's newest
+frame that takes effect by b, i.e. stamped at or before b − perception's latency).
+Queries (map entries and listings, nav goals, arm goals) wait at most
+`query_timeout_s`; a typed refusal becomes `Refused`, no answer `Unavailable`, an
+unknown id None. What the tree commands during a tick (cmd_vel, a mode) is published by
+`end(b)` stamped b: cmd_vel from source `mission` every tick (zero unless a behaviour
+set it), a mode only when asked for. Nav cancels go out at once.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+
+import numpy as np
+
+from common.bus import Bus, BusError, NoReply, RemoteError
+from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, RobotKeys, map_artifact, map_person
+from common.messages import PayloadError
+from common.messages.navigation import (
+    NavCancel,
+    NavGoal,
+    NavGoalReply,
+    NavGoalRequest,
+    NavStatus,
+)
+from common.messages.perception import Detection, Detections
+from common.messages.semantic_map import MapEntity, MapListing
+from common.messages.sim import Odom
+from common.messages.wbc import (
+    ArmGoal,
+    ArmGoalReply,
+    ArmGoalRequest,
+    CmdVel,
+    GoalStatus,
+    WbcMode,
+    WbcModeName,
+    WbcStatus,
+)
+from services.mission.ports import Refused, Unavailable
+
+log = logging.getLogger("dume.mission")
+
+NAME = "mission"
+WRIST = "camera_wrist"
+#: Refusals that mean "no such thing" rather than "cannot answer now".
+_NOT_FOUND = ("unknown_id", "invalid")
+
+
+class BusRobot:
+    """The robot over the bus (see the module docstring)."""
+
+    def __init__(
+        self, bus: Bus, keys: RobotKeys, query_timeout_s: float, latency_ns: dict[str, int]
+    ) -> None:
+        self.bus, self.keys = bus, keys
+        self.timeout_s = query_timeout_s
+        self.perception_latency_ns = latency_ns.get("perception", 0)
+        self.nav_latency_ns = latency_ns.get("navigation", 0)
+        self.odom = bus.latest(keys.odom, Odom, history=16)
+        self.wbc = bus.latest(keys.wbc_status, WbcStatus, history=16)
+        self.nav = bus.latest(keys.nav_status, NavStatus, history=32)
+        #: The newest detections of either camera (what the lockstep gate waits on) …
+        self.detections = bus.latest(keys.detections, Detections, history=1)
+        # … and every frame, of which the wrist camera's are kept.
+        self._frames_in = bus.fifo(keys.detections, Detections, maxlen=256)
+        self._wrist: deque[Detections] = deque(maxlen=8)
+        self._cancel = bus.publisher(keys.nav_cancel, NavCancel, "data")
+        self._cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
+        self._mode_pub = bus.publisher(keys.wbc_mode, WbcMode, "control")
+        self._t = 0
+        self._cmd = (0.0, 0.0, 0.0)
+        self._mode: tuple[WbcModeName, str] | None = None
+
+    # -- the tick -------------------------------------------------------------------------
+
+    def begin(self, b: int) -> None:
+        self._t, self._cmd, self._mode = b, (0.0, 0.0, 0.0), None
+        for frame in self._frames_in.drain():
+            if frame.camera == WRIST:
+                self._wrist.append(frame)
+
+    def end(self, b: int) -> None:
+        if self._mode is not None:
+            mode, source = self._mode
+            self._mode_pub.put(WbcMode(stamp_ns=b, mode=mode, cmd_vel_source=source))
+        vx, vy, wz = self._cmd
+        self._cmd_pub.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=NAME))
+
+    @property
+    def now_ns(self) -> int:
+        return self._t
+
+    # -- the semantic map -----------------------------------------------------------------
+
+    def _query_map(self, key: str, type_: type[MapEntity] | type[MapListing]) -> object | None:
+        try:
+            return self.bus.query(key, None, type_, self.timeout_s)
+        except RemoteError as exc:
+            if exc.error.code in _NOT_FOUND:
+                return None
+            raise Unavailable(f"{key}: {exc.error.code}: {exc.error.message}") from None
+        except (NoReply, PayloadError, BusError) as exc:
+            raise Unavailable(str(exc)) from None
+
+    def artifact(self, map_id: str) -> MapEntity | None:
+        found = self._query_map(map_artifact(map_id), MapEntity)
+        return found if isinstance(found, MapEntity) else None
+
+    def artifacts_of_class(self, class_name: str) -> list[MapEntity]:
+        found = self._query_map(f"{MAP_ARTIFACTS}?class={class_name}", MapListing)
+        return list(found.entities) if isinstance(found, MapListing) else []
+
+    def person(self, person_id: str) -> MapEntity | None:
+        found = self._query_map(map_person(person_id), MapEntity)
+        return found if isinstance(found, MapEntity) else None
+
+    def people(self) -> list[MapEntity]:
+        found = self._query_map(MAP_PEOPLE, MapListing)
+        return list(found.entities) if isinstance(found, MapListing) else []
+
+    def robot_xy(self) -> tuple[float, float] | None:
+        odom = self.odom.at(self._t)
+        if odom is None:
+            return None
+        p = odom.base_position_in_world
+        return p[0], p[1]
+
+    def robot_yaw(self) -> float | None:
+        odom = self.odom.at(self._t)
+        if odom is None:
+            return None
+        return yaw_of(quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw)))
+
+    # -- navigation -----------------------------------------------------------------------
+
+    def send_nav_goal(self, goal: NavGoal) -> str:
+        try:
+            reply = self.bus.query(
+                self.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, self.timeout_s
+            )
+        except RemoteError as exc:
+            raise Refused(f"{exc.error.code}: {exc.error.message}", exc.error.code) from None
+        except (NoReply, PayloadError, BusError) as exc:
+            raise Unavailable(str(exc)) from None
+        if not reply.accepted:
+            raise Refused(reply.reason)
+        return reply.goal_id
+
+    def nav_status(self, goal_id: str) -> NavStatus | None:
+        status = self.nav.at(self._t - self.nav_latency_ns)
+        return status if status is not None and status.goal_id == goal_id else None
+
+    def cancel_nav(self, goal_id: str, reason: str) -> None:
+        self._cancel.put(NavCancel(goal_id=goal_id, reason=reason))
+
+    # -- the whole-body controller --------------------------------------------------------
+
+    def set_mode(self, mode: WbcModeName, cmd_vel_source: str) -> None:
+        self._mode = (mode, cmd_vel_source)
+
+    def command_velocity(self, vx: float, vy: float, wz: float) -> None:
+        self._cmd = (float(vx), float(vy), float(wz))
+
+    def hold_arm(self, reason: str) -> None:
+        """Leaving `manipulate` freezes the arm's joints where they are (the controller
+        has no goal cancel); a posture already under way in walk or stand ends at its
+        named, collision-checked posture."""
+        status = self.wbc_status()
+        if status is not None and status.mode == "manipulate":
+            log.info("holding the arm: %s", reason)
+            self._mode = ("stand", "navigation")
+
+    def send_arm_goal(self, goal: ArmGoal) -> str:
+        try:
+            reply = self.bus.query(
+                self.keys.arm_goal, ArmGoalRequest(goal=goal), ArmGoalReply, self.timeout_s
+            )
+        except RemoteError as exc:
+            raise Refused(f"{exc.error.code}: {exc.error.message}", exc.error.code) from None
+        except (NoReply, PayloadError, BusError) as exc:
+            raise Unavailable(str(exc)) from None
+        if not reply.accepted:
+            raise Refused(reply.reason)
+        return reply.goal_id
+
+    def wbc_status(self) -> WbcStatus | None:
+        # Stamped before the tick: the controller surely published it (lockstep) and the
+        # node waited for it; one stamped at the tick may or may not be in yet.
+        return self.wbc.at(self._t - 1)
+
+    def arm_goal(self, goal_id: str) -> GoalStatus | None:
+        status = self.wbc_status()
+        if status is None:
+            return None
+        return next((g for g in status.goals if g.goal_id == goal_id), None)
+
+    # -- perception -----------------------------------------------------------------------
+
+    def wrist_detection(self, map_id: str, class_name: str) -> tuple[int, Detection] | None:
+        due = self._t - self.perception_latency_ns
+        frame = self._wrist_frame(due)
+        if frame is None:
+            return None
+        mine = [d for d in frame.detections if d.map_id == map_id]
+        if not mine:
+            mine = sorted(
+                (d for d in frame.detections if d.class_name == class_name and d.map_id is None),
+                key=lambda d: d.d_obj,
+            )
+        return (frame.stamp_ns, mine[0]) if mine else None
+
+    def _wrist_frame(self, due_ns: int) -> Detections | None:
+        for frame in reversed(self._wrist):
+            if frame.stamp_ns <= due_ns:
+                return frame
+        return None

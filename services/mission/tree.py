@@ -1,0 +1,233 @@
+"""The bring-me behaviour tree (the paper's, with abort and recovery) and its lifecycle.
+
+    bring_me (sequence)
+      wait_for_request
+      mission_or_abort (selector)
+        mission (sequence)
+          regrasp (Recover: grasp_lost | grasp_failed, budget repick_budget)
+            fetch_and_carry (sequence)
+              next_instance (Recover: object_not_found | navigation_failed,
+                             budget max_candidates - 1, while candidates remain)
+                find_object (sequence)
+                  navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
+                  approach_object: mode walk/mission, Posture(look), approach (eq. 3)
+                  pose_estimation: mode manipulate, estimate_grasp
+              pick_object: Release (open), Reach(plan), Grasp, check_held, Posture(stow),
+                           mode walk/navigation
+              bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go)
+          release_object: mode stand, Posture(handover), feel_pull, Release,
+                          mode walk/mission, back_off, mode stand, Posture(stow)
+        abort: halt everything, FAILURE with the blackboard's reason
+
+Every sequence has memory (a running child resumes). `MissionTree` runs it: `start`
+puts an accepted request on the blackboard, `tick` ticks once and returns the outcome
+when the root finished, `cancel` stops every running leaf (each `terminate` cancels
+what it started) and halts like abort. After an outcome the blackboard is cleared and
+the root waits for the next request. Pure: the robot is the context's port.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import py_trees
+from py_trees.common import Status
+from py_trees.composites import Selector, Sequence
+
+from common.messages.mission import MissionReason, MissionRequest
+from common.messages.wbc import Grasp, Posture, Release
+from services.mission.behaviours.abort import Abort, halt
+from services.mission.behaviours.arm import ArmAction, CheckHeld
+from services.mission.behaviours.base import (
+    CANDIDATE,
+    CANDIDATES,
+    DETECTION,
+    FAILURE,
+    GRASP_PLAN,
+    REQUEST,
+    STAGES,
+    Context,
+    Failure,
+    MissionBehaviour,
+    blackboard,
+    read,
+    reset_blackboard,
+)
+from services.mission.behaviours.handover import FeelPull
+from services.mission.behaviours.motion import BackOff, NavigateTo, SetMode
+from services.mission.behaviours.perceive import Approach, EstimateGrasp
+from services.mission.behaviours.request import ResolvePerson, SelectTarget, WaitForRequest
+from services.mission.recovery import Recover
+
+REPICK_REASONS = frozenset({"grasp_lost", "grasp_failed"})
+NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed"})
+
+
+def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
+    return Sequence(name, memory=True, children=list(children))
+
+
+def build_tree(ctx: Context) -> Sequence:
+    """The tree of the module docstring, its leaves bound to `ctx`."""
+    s = ctx.settings
+    bb = blackboard("recovery")
+
+    def next_candidate(_failure: Failure) -> bool:
+        candidates = read(bb, CANDIDATES) or []
+        index = int(read(bb, CANDIDATE, 0)) + 1
+        if index >= len(candidates):
+            return False
+        bb.set(CANDIDATE, index)
+        return True
+
+    def forget_grasp(_failure: Failure) -> bool:
+        bb.set(GRASP_PLAN, None)
+        bb.set(DETECTION, None)
+        return True
+
+    st = STAGES
+    navigate = _seq(
+        st[0],
+        SelectTarget(ctx),
+        SetMode(ctx, "walk", "navigation", st[0]),
+        NavigateTo(ctx, "artifact", st[0]),
+    )
+    approach = _seq(
+        st[1],
+        SetMode(ctx, "walk", "mission", st[1]),
+        ArmAction(ctx, "look", lambda _b: Posture(name="look"), "arm_failed",
+                  s.posture_timeout_s, st[1]),
+        Approach(ctx, st[1]),
+    )  # fmt: skip
+    pose = _seq(st[2], SetMode(ctx, "manipulate", "navigation", st[2]), EstimateGrasp(ctx, st[2]))
+    pick = _seq(
+        st[3],
+        ArmAction(ctx, "open_jaw", lambda _b: Release(), "arm_failed", s.release_timeout_s, st[3]),
+        ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(), "arm_failed",
+                  s.reach_timeout_s, st[3]),
+        ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed", s.grasp_timeout_s, st[3]),
+        CheckHeld(ctx, st[3]),
+        ArmAction(ctx, "stow", lambda _b: Posture(name="stow"), "arm_failed",
+                  s.posture_timeout_s, st[3]),
+        SetMode(ctx, "walk", "navigation", st[3]),
+    )  # fmt: skip
+    bring = _seq(
+        st[4],
+        ResolvePerson(ctx),
+        SetMode(ctx, "walk", "navigation", st[4]),
+        NavigateTo(ctx, "person", st[4], watch_held=True),
+    )
+    release = _seq(
+        st[5],
+        SetMode(ctx, "stand", "navigation", st[5]),
+        ArmAction(ctx, "present", lambda _b: Posture(name="handover"), "arm_failed",
+                  s.posture_timeout_s, st[5]),
+        FeelPull(ctx, st[5]),
+        ArmAction(ctx, "release", lambda _b: Release(), "arm_failed", s.release_timeout_s, st[5]),
+        SetMode(ctx, "walk", "mission", st[5]),
+        BackOff(ctx, st[5]),
+        SetMode(ctx, "stand", "navigation", st[5], name="mode_stand_at_rest"),
+        ArmAction(ctx, "stow_empty", lambda _b: Posture(name="stow"), "arm_failed",
+                  s.posture_timeout_s, st[5]),
+    )  # fmt: skip
+    find = Recover(
+        "next_instance",
+        _seq("find_object", navigate, approach, pose),
+        NEXT_INSTANCE_REASONS,
+        max(0, s.max_candidates - 1),
+        ctx.decide,
+        next_candidate,
+    )
+    fetch = Recover(
+        "regrasp",
+        _seq("fetch_and_carry", find, pick, bring),
+        REPICK_REASONS,
+        s.repick_budget,
+        ctx.decide,
+        forget_grasp,
+    )
+    mission = _seq("mission", fetch, release)
+    return _seq(
+        "bring_me",
+        WaitForRequest(ctx),
+        Selector("mission_or_abort", memory=True, children=[mission, Abort(ctx)]),
+    )
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a mission ended: its state, the typed reason and a sentence."""
+
+    state: Literal["succeeded", "failed", "cancelled"]
+    reason: MissionReason = ""
+    detail: str = ""
+
+
+class MissionTree:
+    """The tree and one mission's lifecycle (see the module docstring)."""
+
+    def __init__(self, ctx: Context) -> None:
+        self.ctx = ctx
+        reset_blackboard()
+        self.root = build_tree(ctx)
+        self.bb = blackboard("mission_tree")
+        self.request: MissionRequest | None = None
+
+    @property
+    def busy(self) -> bool:
+        return self.request is not None
+
+    def start(self, request: MissionRequest) -> None:
+        if self.request is not None:
+            raise RuntimeError(f"mission {self.request.request_id} is still running")
+        reset_blackboard()
+        self.request = request
+        self.bb.set(REQUEST, request)
+        self.ctx.decide(f"mission {request.request_id}: bring {request.object} to {request.person}")
+
+    def tick(self) -> Outcome | None:
+        """Tick once; the outcome when the mission ended this tick."""
+        self.root.tick_once()
+        if self.request is None or self.root.status == Status.RUNNING:
+            return None
+        if self.root.status == Status.SUCCESS:
+            outcome = Outcome("succeeded", "", f"{self.request.object} handed over")
+        else:
+            failure = read(self.bb, FAILURE)
+            if isinstance(failure, Failure):
+                outcome = Outcome("failed", failure.reason, failure.detail)
+            else:
+                outcome = Outcome("failed", "internal", "the tree failed without a reason")
+        self._clear()
+        return outcome
+
+    def cancel(self, reason: str) -> Outcome | None:
+        """Stop every running leaf and halt; None when no mission runs."""
+        if self.request is None:
+            return None
+        self.root.stop(Status.INVALID)
+        halt(self.ctx.port, f"cancelled: {reason}")
+        self.ctx.decide(f"mission {self.request.request_id} cancelled: {reason}")
+        self._clear()
+        return Outcome("cancelled", "cancelled", reason or "cancelled by the user")
+
+    def _clear(self) -> None:
+        self.request = None
+        reset_blackboard()
+
+    def where(self) -> tuple[str, str, float]:
+        """(stage, running leaf, progress in [0, 1]) of the mission now."""
+        tip = self.root.tip()
+        if self.request is None or not isinstance(tip, MissionBehaviour) or not tip.stage:
+            return "", "" if tip is None else tip.name, 0.0
+        index = STAGES.index(tip.stage)
+        return tip.stage, tip.name, min(1.0, (index + tip.fraction) / len(STAGES))
+
+    def text(self) -> str:
+        """The tree with every node's status, as text (for the log and rerun)."""
+        return py_trees.display.unicode_tree(self.root, show_status=True)
+
+    def statuses(self) -> tuple[tuple[str, str], ...]:
+        """Every node's (name, status): what changes when the tree's state changes."""
+        return tuple((b.name, b.status.value) for b in self.root.iterate())

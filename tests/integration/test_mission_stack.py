@@ -1,0 +1,159 @@
+"""The mission service over real Zenoh, in lockstep: typed refusals, cancel, the bring-me.
+
+The semantic map is seeded from the small world's truth (`bottle_1`, `person_1`), so the
+mission can check requests against it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+from common.messages.navigation import NavStatus
+from common.messages.wbc import WbcStatus
+from common.stack import ProcessStack
+from tests.conftest import HOLD_COMMANDER, StartStack
+
+pytestmark = pytest.mark.integration
+
+MISSION = (
+    'time.participants.mission.role="periodic"',
+    "time.participants.mission.period_s=0.05",
+    "time.participants.mission.latency_s=0.05",
+)
+MAP = (
+    'time.participants.semantic_map.role="periodic"',
+    "time.participants.semantic_map.period_s=0.1",
+    "time.participants.semantic_map.latency_s=0.1",
+    'semantic_map.start="seed-from-world"',
+    'sim.world="small"',
+)
+
+
+class User:
+    """A person with a Zenoh client: puts JSON requests, reads every status in order."""
+
+    def __init__(self, s: ProcessStack) -> None:
+        self.s = s
+        self.statuses = s.bus.fifo(s.keys.mission_status, MissionStatus, maxlen=100_000)
+        self.seen: list[MissionStatus] = []
+        self._req = s.bus.publisher(s.keys.mission_request, MissionRequest)
+        self._cancel = s.bus.publisher(s.keys.mission_cancel, MissionCancel)
+
+    def request(self, payload: bytes | dict[str, object]) -> None:
+        raw = payload if isinstance(payload, bytes) else json.dumps(payload).encode()
+        self._req.put_raw(raw)
+
+    def cancel(self, request_id: str, reason: str = "test") -> None:
+        self._cancel.put_raw(json.dumps({"request_id": request_id, "reason": reason}).encode())
+
+    def wait(self, request_id: str, states: set[str], timeout_s: float) -> MissionStatus:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            st = self.statuses.pop(timeout_s=0.5)
+            if st is None:
+                continue
+            self.seen.append(st)
+            if st.request_id == request_id and st.state in states:
+                return st
+        seen = [(m.request_id, m.state, m.reason) for m in self.seen[-20:]]
+        raise AssertionError(f"no {states} for {request_id!r} in {timeout_s} s; last: {seen}")
+
+
+def test_bad_requests_get_typed_rejections_and_the_service_stays_up(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = stack(
+        ["sim", "hold", "semantic_map", "mission"],
+        *HOLD_COMMANDER, *MAP, *MISSION,
+        "sim.cameras=[]",
+        f'semantic_map.dir="{tmp_path / "map"}"',
+        # No controller in this stack: the first mission waits for its mode (stays busy).
+        "mission.mode_timeout_s=100000.0",
+    )  # fmt: skip
+    user = User(s)
+    cases: list[tuple[bytes | dict[str, object], str, str]] = [
+        (b"{not json", "", "malformed"),
+        ({"request_id": "r-types", "object": 7, "person": "person_1"}, "r-types", "malformed"),
+        ({"request_id": "r-missing", "object": "bottle_1"}, "r-missing", "malformed"),
+        ({"request_id": "r-obj", "object": "bottle_9", "person": "person_1"}, "r-obj",
+         "unknown_object"),
+        ({"request_id": "r-class", "object": "forklift", "person": "person_1"}, "r-class",
+         "unknown_object"),
+        ({"request_id": "r-person", "object": "bottle_1", "person": "person_7"}, "r-person",
+         "unknown_person"),
+    ]  # fmt: skip
+    for payload, request_id, reason in cases:
+        user.request(payload)
+        st = user.wait(request_id, {"rejected"}, 60.0)
+        assert st.reason == reason, st
+        assert st.detail
+    user.request({"request_id": "r-ok", "object": "bottle", "person": "person_1"})
+    assert user.wait("r-ok", {"accepted"}, 60.0).reason == ""
+    user.wait("r-ok", {"running"}, 60.0)
+    user.request({"request_id": "r-second", "object": "bottle_1", "person": "person_1"})
+    busy = user.wait("r-second", {"rejected"}, 60.0)
+    assert busy.reason == "busy" and "r-ok" in busy.detail
+    assert s.procs["mission"].poll() is None
+    assert "mission" in s.alive()
+    user.cancel("r-ok")
+    assert user.wait("r-ok", {"cancelled"}, 60.0).reason == "cancelled"
+
+
+def test_a_cancel_mid_navigation_ends_cancelled_with_the_nav_goal_cancelled(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = stack(
+        ["sim", "wbc", "semantic_map", "navigation", "mission"],
+        *MAP, *MISSION,
+        'sim.cameras=["camera_head"]',
+        'semantic_map.cameras=["camera_head"]',
+        f'semantic_map.dir="{tmp_path / "map"}"',
+    )  # fmt: skip
+    user = User(s)
+    nav = s.bus.latest(s.keys.nav_status, NavStatus, history=64)
+    wbc = s.bus.latest(s.keys.wbc_status, WbcStatus)
+    user.request({"request_id": "r1", "object": "bottle_1", "person": "person_1"})
+    user.wait("r1", {"accepted"}, 120.0)
+    deadline = time.monotonic() + 300.0
+    goal = None
+    while time.monotonic() < deadline:  # walking toward the bottle
+        st = nav.get()
+        if st is not None and st.state == "active" and st.progress > 0.05:
+            goal = st.goal_id
+            break
+        time.sleep(0.2)
+    assert goal is not None, f"navigation never got going: {nav.get()}"
+    user.cancel("r1", "changed my mind")
+    done = user.wait("r1", {"cancelled", "failed", "succeeded"}, 120.0)
+    assert (done.state, done.reason) == ("cancelled", "cancelled"), done
+    end = nav.wait(lambda m: m.goal_id == goal and m.state != "active", 60.0)
+    assert end.state == "cancelled"
+    at_rest = wbc.wait(lambda m: m.mode == "stand", 60.0)
+    assert at_rest.cmd_vel_source == "navigation"
+    assert s.procs["mission"].poll() is None
+
+
+@pytest.mark.slow
+def test_bring_me_small_world(stack: StartStack, tmp_path: Path) -> None:
+    """The whole job: dynamic gait, the network segmenter, lockstep; a recording is left."""
+    s = stack(
+        ["sim", "wbc", "perception", "semantic_map", "navigation", "mission"],
+        *MAP,
+        f'semantic_map.dir="{tmp_path / "map"}"',
+        record=True,
+    )
+    assert s.config.sim.locomotion == "dynamic"
+    user = User(s)
+    user.request({"request_id": "bring-1", "object": "bottle_1", "person": "person_1"})
+    user.wait("bring-1", {"accepted"}, 120.0)
+    done = user.wait("bring-1", {"succeeded", "failed", "cancelled"}, 3000.0)
+    stages = list(dict.fromkeys(m.behaviour for m in user.seen if m.behaviour))
+    assert done.state == "succeeded", (done, stages)
+    assert stages[:1] == ["navigate_to_object"] and stages[-1] == "release_object"
+    s.stop()
+    assert list((tmp_path / "recordings").glob("*/mission.rrd"))

@@ -1,0 +1,406 @@
+"""A scripted robot and scripted algorithms for the mission tree's unit tests (no Zenoh).
+
+`FakeRobot` implements `RobotPort`: a map of artifacts and people, a navigation that
+finishes a goal after `nav_ticks` ticks (or fails it, as scripted per goal kind), a
+whole-body controller whose modes take effect on the next tick and whose arm goals
+finish after `arm_ticks` (or fail, as scripted per kind), a grasp detector that holds
+after a Grasp and can be made to let go while carrying, and a wrist camera that sees the
+artifacts listed in `visible`. Everything the tree asked for is recorded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import cast
+
+import numpy as np
+
+from common.config import MissionSettings
+from common.messages import to_wire
+from common.messages.navigation import (
+    ArtifactStandoff,
+    NavFailure,
+    NavGoal,
+    NavState,
+    NavStatus,
+    PersonHandover,
+)
+from common.messages.perception import Detection
+from common.messages.semantic_map import MapEntity
+from common.messages.wbc import (
+    ArmGoal,
+    GoalState,
+    GoalStatus,
+    Grasp,
+    Reach,
+    Release,
+    WbcModeName,
+    WbcStatus,
+)
+from services.mission.algorithms import Algorithms
+from services.mission.behaviours.base import Context
+from services.mission.ports import Refused, Unavailable
+
+TICK_NS = 50_000_000
+
+
+def entity(map_id: str, x: float, y: float, kind: str = "artifact") -> MapEntity:
+    return MapEntity(
+        id=map_id,
+        class_name=map_id.rsplit("_", 1)[0],
+        kind=kind,  # type: ignore[arg-type]
+        position_in_world=(x, y, 0.8 if kind == "artifact" else 0.0),
+        uncertainty_m=0.05,
+        last_seen_ns=0,
+        source="seed-from-world",
+    )
+
+
+def detection(map_id: str, d_obj: float = 0.6) -> Detection:
+    return Detection(
+        class_name=map_id.rsplit("_", 1)[0],
+        score=0.9,
+        bbox=(0, 0, 2, 2),
+        mask=to_wire(np.ones((2, 2), np.uint8)),
+        centroid_in_base_yaw=(d_obj, 0.0, 0.8),
+        centroid_in_world=(d_obj, 0.0, 0.8),
+        axis_in_world=(d_obj, 0.0, 0.8),
+        extent=(0.07, 0.07, 0.2),
+        d_obj=d_obj,
+        theta_obj=0.0,
+        n_points=100,
+        map_id=map_id,
+        shape="cylinder",
+    )
+
+
+@dataclass
+class FakeRobot:
+    artifacts: dict[str, MapEntity] = field(default_factory=dict)
+    people_: dict[str, MapEntity] = field(default_factory=dict)
+    visible: set[str] = field(default_factory=set)
+    xy: tuple[float, float] = (0.0, 0.0)
+    nav_ticks: int = 3
+    arm_ticks: int = 2
+    #: Goal kind (`artifact_standoff`, `person_handover`) → "refuse" or a NavFailure.
+    nav_fail: dict[str, str] = field(default_factory=dict)
+    #: Arm goal kind (`posture`, `reach`, `grasp`, `release`) → "refuse" or a reason.
+    arm_fail: dict[str, str] = field(default_factory=dict)
+    #: Grasps that close on nothing before one holds.
+    grasp_misses: int = 0
+    #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
+    drops: int = 0
+    drop_after: int = 1
+    #: Goals refused as `unavailable` before navigation takes one (its map still coming).
+    nav_not_ready: int = 0
+    modes_work: bool = True
+    map_up: bool = True
+    t: int = 0
+    # what the tree did
+    nav_goals: list[tuple[str, NavGoal]] = field(default_factory=list)
+    nav_cancels: list[str] = field(default_factory=list)
+    arm_goals: list[tuple[str, ArmGoal]] = field(default_factory=list)
+    modes: list[tuple[WbcModeName, str]] = field(default_factory=list)
+    cmds: list[tuple[float, float, float]] = field(default_factory=list)
+    arm_holds: int = 0
+    held: bool = False
+    mode: WbcModeName = "stand"
+    source: str = "navigation"
+    _cmd: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    _nav: dict[str, tuple[int, str, str]] = field(default_factory=dict)
+    _arm: dict[str, tuple[int, ArmGoal]] = field(default_factory=dict)
+    _arm_state: dict[str, GoalStatus] = field(default_factory=dict)
+    _pending_mode: tuple[WbcModeName, str] | None = None
+
+    # -- the test's clock -----------------------------------------------------------------
+
+    def advance(self) -> None:
+        """End of a tick: the commanded cmd_vel is recorded, time moves on, modes apply."""
+        self.cmds.append(self._cmd)
+        self._cmd = (0.0, 0.0, 0.0)
+        self.t += TICK_NS
+        if self._pending_mode is not None and self.modes_work:
+            self.mode, self.source = self._pending_mode
+            self._pending_mode = None
+        for goal_id, (start, goal) in list(self._arm.items()):
+            if (
+                self._arm_state[goal_id].state == "active"
+                and self.t - start >= self.arm_ticks * TICK_NS
+            ):
+                self._finish_arm(goal_id, goal)
+        handover = [
+            g
+            for g, (_, k, state) in self._nav.items()
+            if k == "person_handover" and state == "active"
+        ]
+        if self.drops > 0 and self.held and handover:
+            start = self._nav[handover[-1]][0]
+            if self.t - start >= self.drop_after * TICK_NS:
+                self.held = False
+                self.drops -= 1
+
+    @property
+    def now_ns(self) -> int:
+        return self.t
+
+    # -- map ------------------------------------------------------------------------------
+
+    def _map(self) -> None:
+        if not self.map_up:
+            raise Unavailable("dume/map/artifacts: no queryable answered")
+
+    def artifact(self, map_id: str) -> MapEntity | None:
+        self._map()
+        return self.artifacts.get(map_id)
+
+    def artifacts_of_class(self, class_name: str) -> list[MapEntity]:
+        self._map()
+        return [e for e in self.artifacts.values() if e.class_name == class_name]
+
+    def person(self, person_id: str) -> MapEntity | None:
+        self._map()
+        return self.people_.get(person_id)
+
+    def people(self) -> list[MapEntity]:
+        self._map()
+        return list(self.people_.values())
+
+    def robot_xy(self) -> tuple[float, float] | None:
+        return self.xy
+
+    # -- navigation -----------------------------------------------------------------------
+
+    def send_nav_goal(self, goal: NavGoal) -> str:
+        kind = "artifact_standoff" if isinstance(goal, ArtifactStandoff) else "person_handover"
+        if self.nav_fail.get(kind) == "refuse":
+            raise Refused("invalid_goal: scripted refusal")
+        if self.nav_not_ready > 0:
+            self.nav_not_ready -= 1
+            raise Refused("unavailable: no map yet from semantic map", "unavailable")
+        goal_id = f"nav_{len(self.nav_goals) + 1}"
+        self.nav_goals.append((goal_id, goal))
+        self._nav[goal_id] = (self.t, kind, "active")
+        return goal_id
+
+    def nav_status(self, goal_id: str) -> NavStatus | None:
+        if goal_id not in self._nav:
+            return None
+        start, kind, state = self._nav[goal_id]
+        if state == "active" and self.t - start >= self.nav_ticks * TICK_NS:
+            failure = self.nav_fail.get(kind, "")
+            state = "failed" if failure else "succeeded"
+            self._nav[goal_id] = (start, kind, state)
+        reason = self.nav_fail.get(kind, "") if state == "failed" else ""
+        progress = min(1.0, (self.t - start) / (self.nav_ticks * TICK_NS))
+        return NavStatus(
+            stamp_ns=self.t,
+            goal_id=goal_id,
+            state=cast(NavState, state),
+            reason=cast(NavFailure, reason),
+            progress=progress,
+        )
+
+    def cancel_nav(self, goal_id: str, reason: str) -> None:
+        self.nav_cancels.append(goal_id)
+        for g, (start, kind, state) in self._nav.items():
+            if state == "active" and goal_id in ("", g):
+                self._nav[g] = (start, kind, "cancelled")
+
+    def active_nav_goals(self) -> list[str]:
+        return [g for g, (_, _, state) in self._nav.items() if state == "active"]
+
+    # -- wbc ------------------------------------------------------------------------------
+
+    def set_mode(self, mode: WbcModeName, cmd_vel_source: str) -> None:
+        self.modes.append((mode, cmd_vel_source))
+        self._pending_mode = (mode, cmd_vel_source)
+
+    def command_velocity(self, vx: float, vy: float, wz: float) -> None:
+        self._cmd = (vx, vy, wz)
+
+    def hold_arm(self, reason: str) -> None:
+        self.arm_holds += 1
+        for goal_id, status in self._arm_state.items():
+            if status.state == "active":
+                self._arm_state[goal_id] = GoalStatus(
+                    goal_id=goal_id, kind=status.kind, state="cancelled", reason=reason
+                )
+
+    def send_arm_goal(self, goal: ArmGoal) -> str:
+        kind = type(goal).__name__.lower()
+        if self.arm_fail.get(kind) == "refuse":
+            raise Refused(f"busy: scripted refusal of {kind}")
+        if isinstance(goal, Reach) and self.mode != "manipulate":
+            raise Refused(f"busy: mode {self.mode}: a reach needs mode manipulate")
+        goal_id = f"arm_{len(self.arm_goals) + 1}"
+        for g, status in self._arm_state.items():
+            if status.state == "active":
+                self._arm_state[g] = GoalStatus(goal_id=g, kind=status.kind, state="cancelled")
+        self.arm_goals.append((goal_id, goal))
+        self._arm[goal_id] = (self.t, goal)
+        self._arm_state[goal_id] = GoalStatus(goal_id=goal_id, kind=kind, state="active")
+        return goal_id
+
+    def _finish_arm(self, goal_id: str, goal: ArmGoal) -> None:
+        kind = type(goal).__name__.lower()
+        state, reason = "succeeded", ""
+        if kind in self.arm_fail:
+            state, reason = "failed", self.arm_fail[kind]
+        elif isinstance(goal, Grasp):
+            if self.grasp_misses > 0:
+                self.grasp_misses -= 1
+                state, reason = "failed", "the jaw closed on nothing"
+            else:
+                self.held = True
+        elif isinstance(goal, Release):
+            self.held = False
+        self._arm_state[goal_id] = GoalStatus(
+            goal_id=goal_id, kind=kind, state=cast(GoalState, state), reason=reason
+        )
+
+    def arm_goal(self, goal_id: str) -> GoalStatus | None:
+        return self._arm_state.get(goal_id)
+
+    def wbc_status(self) -> WbcStatus | None:
+        return WbcStatus(
+            stamp_ns=self.t,
+            mode=self.mode,
+            cmd_vel_source=self.source,
+            goals=list(self._arm_state.values()),
+            base_error_m=0.0,
+            gripper_error_m=0.0,
+            gripper_error_rad=0.0,
+            qp_time_us=0.0,
+            qp_failures=0,
+            contacts=(True, True, True, True),
+            gripper_angle=0.0,
+            gripper_effort=0.0,
+            held=self.held,
+            gripper_wrench=(0.0,) * 6,
+        )
+
+    # -- perception -----------------------------------------------------------------------
+
+    def wrist_detection(self, map_id: str, class_name: str) -> tuple[int, Detection] | None:
+        if map_id in self.visible:
+            return self.t, detection(map_id)
+        return None
+
+    # -- what the tests look at -----------------------------------------------------------
+
+    def arm_kinds(self) -> list[str]:
+        return [getattr(g, "name", type(g).__name__.lower()) for _, g in self.arm_goals]
+
+
+@dataclass
+class StubCommand:
+    vx: float
+    vy: float
+    wz: float
+    state: str
+    reason: str = ""
+
+
+class StubApproach:
+    """Arrives after 3 sightings; fails after 5 ticks without one (its re-acquire)."""
+
+    def __init__(self) -> None:
+        self.seen = 0
+        self.lost = 0
+
+    def reset(self, t_s: float) -> None:
+        self.seen = self.lost = 0
+
+    def step(self, t_s: float, seen: object | None) -> StubCommand:
+        if seen is None:
+            self.lost += 1
+            if self.lost > 5:
+                return StubCommand(0.0, 0.0, 0.0, "failed", "lost the object after turning")
+            return StubCommand(-0.1, 0.0, 0.5, "reacquiring")
+        self.seen += 1
+        if self.seen >= 3:
+            return StubCommand(0.0, 0.0, 0.0, "arrived")
+        return StubCommand(0.2, 0.0, 0.0, "tracking")
+
+
+class StubGraspError(Exception):
+    pass
+
+
+@dataclass
+class StubPlan:
+    kind: str = "side"
+    possible: bool = True
+
+    def reach(self) -> Reach:
+        return Reach(H=tuple(np.eye(4).ravel().tolist()), frame="base", stamp_ns=0)
+
+
+class StubPull:
+    """Feels the pull on the third status after the baseline (never, when `never`)."""
+
+    def __init__(self, never: bool = False) -> None:
+        self.never, self.count = never, 0
+
+    def reset(self, status: WbcStatus) -> None:
+        self.count = 0
+
+    def update(self, status: WbcStatus) -> bool:
+        self.count += 1
+        return not self.never and self.count >= 3
+
+
+def stub_algorithms(grasp_possible: bool = True, pull: bool = True) -> Algorithms:
+    def grasp(det: Detection, stamp_ns: int) -> StubPlan:
+        if not grasp_possible:
+            raise StubGraspError("the object lies on its side")
+        return StubPlan()
+
+    return Algorithms(
+        approacher=StubApproach,
+        sighting=lambda d, th, s: (d, th, s),
+        grasp_from_detection=grasp,
+        grasp_error=StubGraspError,
+        pull_detector=lambda: StubPull(never=not pull),
+    )
+
+
+def fast_settings(**overrides: float) -> MissionSettings:
+    """Short timeouts so a scripted mission ends in a few hundred ticks."""
+    base = dict(
+        settle_s=0.1,
+        detection_timeout_s=0.5,
+        mode_timeout_s=1.0,
+        posture_timeout_s=2.0,
+        reach_timeout_s=2.0,
+        grasp_timeout_s=2.0,
+        release_timeout_s=2.0,
+        handover_timeout_s=3.0,
+        approach_timeout_s=5.0,
+        nav_status_timeout_s=1.0,
+        back_off_s=0.2,
+    )
+    base.update(overrides)
+    return MissionSettings(**base)  # type: ignore[arg-type]
+
+
+def small_world(**kwargs: object) -> FakeRobot:
+    robot = FakeRobot(**kwargs)  # type: ignore[arg-type]
+    if not robot.artifacts:
+        robot.artifacts = {"bottle_1": entity("bottle_1", 3.0, 0.0)}
+    if not robot.people_:
+        robot.people_ = {"person_1": entity("person_1", -3.0, 1.0, kind="person")}
+    if not robot.visible:
+        robot.visible = set(robot.artifacts)
+    return robot
+
+
+def context(robot: FakeRobot, settings: MissionSettings | None = None, **alg: bool) -> Context:
+    decisions: list[str] = []
+    ctx = Context(robot, settings or fast_settings(), stub_algorithms(**alg), decisions.append)
+    ctx.decisions = decisions  # type: ignore[attr-defined]
+    return ctx
+
+
+def is_handover(goal: NavGoal) -> bool:
+    return isinstance(goal, PersonHandover)

@@ -1,0 +1,185 @@
+"""Grasp plans for synthetic detections: upright cylinders (side) and boxes (top), at
+several bearings, in the world frame (with the base pose) and in `base` (without)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from common.geometry import inv_T, make_T, rot_z
+from common.messages.arrays import to_wire
+from common.messages.perception import Detection
+from common.messages.wbc import Reach
+from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane
+from services.mission.grasp_pose import (
+    GraspParams,
+    GraspPoseError,
+    grasp_from_detection,
+    plan_error,
+)
+
+STAMP = 3_000_000_000
+BASE_Z = 0.53
+
+
+def base_pose(x: float, y: float, yaw: float) -> np.ndarray:
+    return make_T(rot_z(yaw), (x, y, BASE_Z))
+
+
+def detection(
+    T_wb: np.ndarray,
+    axis_by: tuple[float, float, float],
+    shape: str = "cylinder",
+    class_name: str = "bottle",
+    extent: tuple[float, float, float] = (0.05, 0.05, 0.2),
+    yaw_in_world: float = 0.0,
+) -> Detection:
+    """A detection whose axis is at `axis_by` (base_yaw), the centroid a radius nearer."""
+    axis_by_a = np.array(axis_by)
+    sight = axis_by_a[:2] / np.linalg.norm(axis_by_a[:2])
+    centroid_by = axis_by_a - 0.025 * np.array([*sight, 0.0])
+    T_wby = make_T(rot_z(math.atan2(T_wb[1, 0], T_wb[0, 0])), T_wb[:3, 3])
+    to_w = lambda p: tuple(float(v) for v in T_wby[:3, :3] @ p + T_wby[:3, 3])  # noqa: E731
+    return Detection(
+        class_name=class_name,
+        score=0.9,
+        bbox=(0, 0, 2, 2),
+        mask=to_wire(np.ones((2, 2), np.uint8)),
+        centroid_in_base_yaw=tuple(float(v) for v in centroid_by),  # type: ignore[arg-type]
+        centroid_in_world=to_w(centroid_by),  # type: ignore[arg-type]
+        axis_in_world=to_w(axis_by_a),  # type: ignore[arg-type]
+        axis_in_base_yaw=tuple(float(v) for v in axis_by_a),  # type: ignore[arg-type]
+        extent=extent,
+        d_obj=float(np.linalg.norm(centroid_by[:2])),
+        theta_obj=float(math.atan2(centroid_by[1], centroid_by[0])),
+        n_points=500,
+        shape=shape,  # type: ignore[arg-type]
+        yaw_in_world=yaw_in_world,
+        radius=extent[0] / 2 if shape == "cylinder" else 0.0,
+    )
+
+
+BEARINGS = [-0.6, -0.2, 0.0, 0.3, 0.7]
+BASES = [base_pose(0.0, 0.0, 0.0), base_pose(2.0, -1.0, 2.5), base_pose(-3.0, 4.0, -1.2)]
+
+
+def _shoulder_in(T: np.ndarray) -> np.ndarray:
+    sx, sz = arm_plane()["shoulder"]
+    return T[:3, :3] @ np.array([sx, 0.0, sz]) + T[:3, 3]
+
+
+@pytest.mark.parametrize("bearing", BEARINGS)
+@pytest.mark.parametrize("with_base", [True, False])
+def test_a_side_grasp_approaches_from_the_shoulder_and_closes_across_the_cylinder(
+    bearing: float, with_base: bool
+) -> None:
+    for T_wb in BASES:
+        axis = (D_OPT_M * math.cos(bearing), D_OPT_M * math.sin(bearing), 0.3)
+        det = detection(T_wb, axis)
+        plan = grasp_from_detection(det, STAMP, T_wb if with_base else None)
+        assert plan.kind == "side" and plan.stamp_ns == STAMP
+        assert plan.frame == ("world" if with_base else "base")
+        H = plan.in_world(T_wb)
+        R = H[:3, :3]
+        assert np.allclose(R.T @ R, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0.0
+        approach = R @ np.array(plan.approach_axis)
+        axis_w = np.array(det.axis_in_world)
+        # The approach is horizontal, from the shoulder toward the cylinder's axis.
+        sight = axis_w - _shoulder_in(T_wb)
+        sight[2] = 0.0
+        assert approach[2] == pytest.approx(0.0, abs=1e-9)
+        assert approach @ sight / np.linalg.norm(sight) == pytest.approx(1.0, abs=1e-9)
+        # The TCP is on the axis (x, y), below its mid-height on a bottle's body.
+        assert np.allclose(H[:2, 3], axis_w[:2], atol=1e-9)
+        assert axis_w[2] - 0.1 + 0.05 <= H[2, 3] < axis_w[2]
+        # Jaw pivot (y) along the cylinder; the jaws close (z) across it, horizontally.
+        assert R[:, 1] @ np.array([0.0, 0.0, 1.0]) == pytest.approx(1.0)
+        assert R[2, 2] == pytest.approx(0.0, abs=1e-9)
+        assert abs(R[:, 2] @ sight) < 1e-9
+        # And the Reach the WBC gets carries all of it.
+        reach = plan.reach()
+        assert isinstance(reach, Reach)
+        assert reach.frame == plan.frame and reach.stamp_ns == STAMP
+        assert np.allclose(np.array(reach.H).reshape(4, 4), plan.H)
+        assert reach.pregrasp_m == plan.pregrasp_m > 0.0
+
+
+def test_a_base_plan_is_the_world_plan_seen_from_the_level_base() -> None:
+    T_wb = base_pose(1.0, 2.0, 0.7)
+    det = detection(T_wb, (0.7, 0.1, 0.3))
+    world = grasp_from_detection(det, STAMP, T_wb)
+    base = grasp_from_detection(det, STAMP)
+    d, angle = plan_error(world.H, T_wb @ base.H)
+    assert d < 1e-9 and angle < 1e-6
+    assert np.allclose(inv_T(T_wb) @ world.H, base.H, atol=1e-9)
+
+
+def test_a_pitched_side_grasp_points_nose_down_with_the_jaws_still_horizontal() -> None:
+    T_wb = base_pose(0.0, 0.0, 0.0)
+    pitch = GRASP_PITCH_RAD[1]
+    plan = grasp_from_detection(
+        detection(T_wb, (0.7, 0.0, 0.3)), STAMP, T_wb, GraspParams(pitch_rad=pitch)
+    )
+    R = plan.H[:3, :3]
+    assert R[2, 0] == pytest.approx(-math.sin(pitch))  # x dips
+    assert R[2, 2] == pytest.approx(0.0, abs=1e-9)  # jaws close horizontally
+    with pytest.raises(ValueError, match="GRASP_PITCH_RAD"):
+        GraspParams(pitch_rad=1.2)
+
+
+@pytest.mark.parametrize("bearing", BEARINGS)
+@pytest.mark.parametrize("box_yaw", [0.0, 0.5, 1.3, -2.0])
+@pytest.mark.parametrize("with_base", [True, False])
+def test_a_top_grasp_comes_down_with_the_jaws_across_the_shorter_side(
+    bearing: float, box_yaw: float, with_base: bool
+) -> None:
+    for T_wb in BASES:
+        axis = (D_OPT_M * math.cos(bearing), D_OPT_M * math.sin(bearing), 0.3)
+        extent = (0.12, 0.05, 0.16)  # the fit's x is the long side
+        det = detection(T_wb, axis, "box", "box", extent, yaw_in_world=box_yaw)
+        plan = grasp_from_detection(det, STAMP, T_wb if with_base else None)
+        assert plan.kind == "top"
+        H = plan.in_world(T_wb)
+        R = H[:3, :3]
+        assert np.allclose(R.T @ R, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0.0
+        approach = R @ np.array(plan.approach_axis)
+        assert approach[2] < -0.9  # down
+        sight = np.array(det.axis_in_world) - _shoulder_in(T_wb)
+        assert approach[:2] @ sight[:2] >= 0.0  # tilted away from the robot, not toward it
+        short_side = np.array([-math.sin(box_yaw), math.cos(box_yaw), 0.0])
+        long_side = np.array([math.cos(box_yaw), math.sin(box_yaw), 0.0])
+        closing = R[:, 2]
+        assert abs(closing @ long_side) < 1e-9  # the pads meet the long faces
+        assert abs(closing @ short_side) > 0.9  # the jaws close across the short side
+        top = det.axis_in_world[2] + extent[2] / 2
+        assert top - 0.05 < H[2, 3] < top
+        assert np.allclose(H[:2, 3], np.array(det.axis_in_world)[:2], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("shape", "class_name", "extent", "match"),
+    [
+        ("centroid", "person", (0.4, 0.4, 1.7), "no grasp for a person"),
+        ("cylinder", "bottle", (0.12, 0.12, 0.2), "wider than the jaws"),
+        ("cylinder", "bottle", (0.05, 0.05, 0.0), "no visible height"),
+        ("box", "bottle", (0.05, 0.05, 0.2), "no grasp for a bottle"),
+    ],
+)
+def test_what_cannot_be_grasped_is_refused_with_a_reason(
+    shape: str, class_name: str, extent: tuple[float, float, float], match: str
+) -> None:
+    T_wb = base_pose(0.0, 0.0, 0.0)
+    det = detection(T_wb, (0.7, 0.0, 0.3), shape, class_name, extent)
+    with pytest.raises(GraspPoseError, match=match) as err:
+        grasp_from_detection(det, STAMP, T_wb)
+    assert err.value.reason == str(err.value)
+
+
+def test_a_short_bottle_is_held_clear_of_its_table() -> None:
+    T_wb = base_pose(0.0, 0.0, 0.0)
+    det = detection(T_wb, (0.7, 0.0, 0.3), extent=(0.05, 0.05, 0.12))
+    plan = grasp_from_detection(det, STAMP, T_wb)
+    bottom = 0.3 - 0.06
+    assert plan.H[2, 3] >= bottom + GraspParams().clearance_m - 1e-9

@@ -1,0 +1,145 @@
+"""The felt handover: the pull detector on `wbc/status` samples — synthetic noise and
+steps, and the samples recorded in the `fetch` trial (`bench.trial_fetch`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.messages.wbc import WbcStatus
+from services.mission.handover_feel import PullDetector
+
+MS = 1_000_000
+PERIOD = 20 * MS  # wbc/status at 50 Hz
+HELD = np.array([0.0, 0.0, -3.0, 0.0, 0.0, 0.0])  # a held bottle's weight, base frame
+DATA = Path(__file__).parent / "data"
+#: `wbc/status` while the robot held a bottle out in `handover` for 20 s and nobody took it
+#: (`bench.trial_fetch`, small world seed 1): the held weight settling, estimator noise.
+HOLD = DATA / "handover_hold_status.json"
+#: The same when the person took it and pulled.
+RECORDED = DATA / "handover_status.json"
+
+
+def status(stamp_ns: int, wrench: np.ndarray, effort: float = -2.0) -> WbcStatus:
+    return WbcStatus(
+        stamp_ns=stamp_ns,
+        mode="manipulate",
+        cmd_vel_source="mission",
+        goals=[],
+        base_error_m=0.0,
+        gripper_error_m=0.0,
+        gripper_error_rad=0.0,
+        qp_time_us=0.0,
+        qp_failures=0,
+        contacts=(True, True, True, True),
+        gripper_angle=-0.4,
+        gripper_effort=effort,
+        held=True,
+        gripper_wrench=tuple(float(x) for x in wrench),  # type: ignore[arg-type]
+    )
+
+
+def feed(detector: PullDetector, wrenches: np.ndarray, efforts: np.ndarray | None = None) -> int:
+    """Reset on the first sample, feed the rest; the index that tripped, or -1."""
+    efforts = np.full(len(wrenches), -2.0) if efforts is None else efforts
+    detector.reset(status(0, wrenches[0], efforts[0]))
+    for k in range(1, len(wrenches)):
+        if detector.update(status(k * PERIOD, wrenches[k], efforts[k])):
+            return k
+    return -1
+
+
+def noisy(n: int, sigma: float, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return HELD + rng.normal(0.0, sigma, (n, 6))
+
+
+def test_estimator_noise_and_footstep_spikes_do_not_trip_it() -> None:
+    w = noisy(1500, 0.8)  # 30 s of 0.8 N noise on every axis
+    w[200:202, 0] += 12.0  # two 40 ms spikes toward the person
+    w[700, 0] += 20.0
+    w[900:905, 0] -= 15.0  # a shove away from the person
+    assert feed(PullDetector(), w) == -1
+
+
+def test_a_sustained_pull_toward_the_person_trips_it_within_the_debounce() -> None:
+    detector = PullDetector()
+    w = noisy(300, 0.5)
+    ramp = np.clip((np.arange(300) - 100) / 50.0, 0.0, 1.0)  # 0 → 15 N over 1 s from 2 s
+    w[:, 0] += 15.0 * ramp
+    k = feed(detector, w)
+    assert k > 0
+    onset = 100 + round(50 * detector.force_n / 15.0)  # the ramp crosses the threshold
+    assert onset <= k <= onset + round(detector.debounce_s * 1e9 / PERIOD) + 8
+    assert detector.tripped and detector.tripped_at_ns == k * PERIOD
+    assert detector.update(status((k + 1) * PERIOD, HELD))  # latched until reset
+
+
+def test_a_pull_sideways_or_a_change_of_weight_alone_does_not_trip_it() -> None:
+    w = noisy(400, 0.3)
+    w[100:, 1] += 10.0  # sideways
+    w[100:, 2] += 3.0  # the weight taken off
+    assert feed(PullDetector(), w) == -1
+
+
+def test_a_weaker_pull_trips_it_when_the_jaw_effort_changes_too() -> None:
+    w = noisy(300, 0.3)
+    w[100:, 0] += 2.5  # below force_n alone
+    efforts = np.full(300, -2.0)
+    assert feed(PullDetector(), w, efforts) == -1
+    efforts[100:] = -3.0
+    assert feed(PullDetector(), w, efforts) > 100
+
+
+def test_the_baseline_absorbs_the_held_weight_and_an_offset() -> None:
+    detector = PullDetector()
+    offset = HELD + np.array([3.0, -1.0, -2.0, 0.0, 0.0, 0.0])
+    w = np.tile(offset, (200, 1))
+    assert feed(detector, w) == -1
+    F0, _ = detector.baseline
+    assert np.allclose(F0, offset[:3])
+
+
+def test_non_finite_samples_are_ignored() -> None:
+    detector = PullDetector()
+    detector.reset(status(0, HELD))
+    bad = HELD.copy()
+    bad[0] = np.nan
+    for k in range(1, 100):
+        assert not detector.update(status(k * PERIOD, bad))
+
+
+def test_bad_thresholds_are_refused() -> None:
+    with pytest.raises(ValueError, match="positive"):
+        PullDetector(force_n=0.0)
+    with pytest.raises(ValueError, match="direction"):
+        PullDetector(toward=(0.0, 0.0, 0.0))
+
+
+def _replay(path: Path) -> tuple[list[dict[str, object]], dict[str, object] | None]:
+    samples = json.loads(path.read_text())
+    detector = PullDetector()
+    first = samples[0]
+    detector.reset(status(first["stamp_ns"], np.array(first["wrench"]), first["effort"]))
+    for s in samples[1:]:
+        if detector.update(status(s["stamp_ns"], np.array(s["wrench"]), s["effort"])):
+            return samples, s
+    return samples, None
+
+
+def test_twenty_seconds_of_a_recorded_hold_with_nobody_pulling_do_not_trip_it() -> None:
+    samples, tripped = _replay(HOLD)
+    assert len(samples) > 900 and not any(s["taken"] for s in samples)
+    assert tripped is None
+
+
+@pytest.mark.skipif(not RECORDED.exists(), reason="no recorded handover samples")
+def test_the_recorded_handover_trips_after_the_person_took_it_and_not_before() -> None:
+    samples, tripped = _replay(RECORDED)
+    assert tripped is not None
+    assert tripped["taken"], "tripped before the person took the object"
+    taken_ns = next(int(s["stamp_ns"]) for s in samples if s["taken"])  # type: ignore[call-overload]
+    assert int(tripped["stamp_ns"]) - taken_ns < 2_000_000_000  # type: ignore[call-overload]

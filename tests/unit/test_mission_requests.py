@@ -1,0 +1,113 @@
+"""Requests and statuses without Zenoh: parsing, checks against the map, the status board."""
+
+from __future__ import annotations
+
+import pytest
+
+from common.config import load_config
+from common.messages.mission import MissionRequest
+from services.mission.algorithms import default_algorithms
+from services.mission.requests import (
+    Rejection,
+    StatusBoard,
+    check_request,
+    parse_cancel,
+    parse_request,
+)
+from tests.unit.mission_fakes import entity, small_world
+
+
+@pytest.mark.parametrize(
+    ("payload", "request_id", "says"),
+    [
+        (b"not json", "", "malformed"),
+        (b"[1, 2]", "", "Expected `object`"),
+        (b'{"request_id": "r7", "object": 3, "person": "person_1"}', "r7", "$.object"),
+        (b'{"request_id": "r8", "object": "bottle_1"}', "r8", "person"),
+        (b'{"request_id": "r9", "object": "Bottle 1!", "person": "person_1"}', "r9", "$.object"),
+        (b'{"request_id": "", "object": "bottle_1", "person": "person_1"}', "", "request_id"),
+        (b'{"request_id": 5, "object": "bottle_1", "person": "person_1"}', "", "request_id"),
+        (b'{"request_id": "r", "object": "bottle_1", "person": "p_1", "x": 1}', "r", "x"),
+    ],
+)
+def test_a_malformed_request_is_rejected_with_its_id_when_it_has_one(
+    payload: bytes, request_id: str, says: str
+) -> None:
+    parsed = parse_request(payload)
+    assert isinstance(parsed, Rejection)
+    assert (parsed.request_id, parsed.reason) == (request_id, "malformed")
+    assert says in parsed.detail or says == "malformed"
+
+
+def test_a_well_formed_request_parses() -> None:
+    parsed = parse_request(b'{"request_id": "r1", "object": "bottle", "person": "person_1"}')
+    assert parsed == MissionRequest(request_id="r1", object="bottle", person="person_1")
+
+
+@pytest.mark.parametrize(
+    ("obj", "person", "reason"),
+    [
+        ("bottle_1", "person_1", None),
+        ("bottle", "person_1", None),
+        ("bottle", "person", None),
+        ("bottle_2", "person_1", "unknown_object"),
+        ("can", "person_1", "unknown_object"),
+        ("person_1", "person_1", "unknown_object"),
+        ("bottle_1", "person_2", "unknown_person"),
+        ("bottle_1", "bottle_1", "unknown_person"),
+    ],
+)
+def test_requests_are_checked_against_the_map(obj: str, person: str, reason: str | None) -> None:
+    robot = small_world()
+    rejection = check_request(MissionRequest(request_id="r", object=obj, person=person), robot)
+    assert (rejection.reason if rejection else None) == reason
+
+
+def test_a_request_while_the_map_is_down_is_rejected_as_unavailable() -> None:
+    robot = small_world(map_up=False)
+    rejection = check_request(
+        MissionRequest(request_id="r", object="bottle_1", person="person_1"), robot
+    )
+    assert rejection is not None and rejection.reason == "unavailable"
+
+
+def test_a_class_with_only_missing_instances_is_unknown() -> None:
+    e = entity("bottle_1", 1.0, 0.0)
+    fields = {f: getattr(e, f) for f in e.__struct_fields__}
+    robot = small_world(artifacts={"bottle_1": type(e)(**{**fields, "missing_since_ns": 1})})
+    rejection = check_request(
+        MissionRequest(request_id="r", object="bottle", person="person_1"), robot
+    )
+    assert rejection is not None and rejection.reason == "unknown_object"
+
+
+def test_cancels_parse_or_are_ignored() -> None:
+    assert parse_cancel(b'{"request_id": "r1", "reason": "no"}') is not None
+    assert parse_cancel(b'{"reason": "no"}') is None
+    assert parse_cancel(b"\xff") is None
+
+
+def test_the_status_board_publishes_on_change_and_periodically() -> None:
+    board = StatusBoard(every_ns=1_000_000_000)
+    assert board.due(0)
+    board.sent(0)
+    assert not board.due(500_000_000)
+    assert board.update(50, "r1", "running", "navigate_to_object", 0.1)
+    assert not board.update(100, "r1", "running", "navigate_to_object", 0.101)
+    assert board.update(150, "r1", "running", "approach_object", 1 / 6)
+    assert board.due(1_000_000_000)
+    status = board.sent(1_000_000_000)
+    assert (status.stamp_ns, status.request_id, status.behaviour) == (
+        1_000_000_000, "r1", "approach_object",
+    )  # fmt: skip
+
+
+def test_the_real_algorithms_bind_with_config_overrides() -> None:
+    settings = load_config(["mission.approach_gains.k_d=0.5"]).mission
+    algorithms = default_algorithms(settings)
+    controller = algorithms.approacher()
+    assert controller.gains.k_d == 0.5  # type: ignore[attr-defined]
+    controller.reset(0.0)
+    step = controller.step(0.1, algorithms.sighting(1.5, 0.0, 0.05))
+    assert step.state in ("tracking", "arrived")
+    assert algorithms.pull_detector() is not None

@@ -1,0 +1,246 @@
+"""The bring-me tree against a scripted robot: success, every failure path, cancels."""
+
+from __future__ import annotations
+
+import pytest
+
+from common.config import MissionSettings
+from common.messages.mission import MissionRequest
+from common.messages.navigation import ArtifactStandoff, PersonHandover
+from common.messages.wbc import Grasp, Posture, Reach, Release
+from services.mission.tree import MissionTree, Outcome
+from tests.unit.mission_fakes import FakeRobot, context, fast_settings, small_world
+
+REQUEST = MissionRequest(request_id="r1", object="bottle_1", person="person_1")
+
+
+def run(tree: MissionTree, robot: FakeRobot, max_ticks: int = 2000) -> Outcome:
+    for _ in range(max_ticks):
+        outcome = tree.tick()
+        robot.advance()
+        if outcome is not None:
+            return outcome
+    raise AssertionError(f"no outcome after {max_ticks} ticks: {tree.where()}\n{tree.text()}")
+
+
+def mission(
+    robot: FakeRobot,
+    request: MissionRequest = REQUEST,
+    settings: MissionSettings | None = None,
+    **algorithms: bool,
+) -> MissionTree:
+    tree = MissionTree(context(robot, settings, **algorithms))
+    tree.tick()  # idle: waiting for a request
+    robot.advance()
+    tree.start(request)
+    return tree
+
+
+def assert_halted(robot: FakeRobot) -> None:
+    """Abort's promise: no navigation goal active, base commanded to rest, arm held."""
+    assert robot.active_nav_goals() == []
+    assert "" in robot.nav_cancels
+    assert robot.cmds[-1] == (0.0, 0.0, 0.0)
+    assert robot.modes[-1] == ("stand", "navigation")
+    assert robot.arm_holds >= 1
+    assert all(g.state != "active" for g in robot.wbc_status().goals)  # type: ignore[union-attr]
+
+
+def test_a_mission_runs_the_six_stages_in_order_and_succeeds() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    seen_stages: list[str] = []
+    outcome = None
+    for _ in range(2000):
+        outcome = tree.tick()
+        stage = tree.where()[0]
+        if stage and (not seen_stages or seen_stages[-1] != stage):
+            seen_stages.append(stage)
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome == Outcome("succeeded", "", "bottle_1 handed over")
+    assert seen_stages == [
+        "navigate_to_object",
+        "approach_object",
+        "pose_estimation",
+        "pick_object",
+        "bring_to_user",
+        "release_object",
+    ]
+    goals = [g for _, g in robot.nav_goals]
+    assert goals == [
+        ArtifactStandoff(artifact_id="bottle_1"),
+        PersonHandover(person_id="person_1"),
+    ]
+    assert robot.arm_kinds() == [
+        "look", "release", "reach", "grasp", "stow", "handover", "release", "stow",
+    ]  # fmt: skip
+    assert any(c[0] < 0 for c in robot.cmds), "it backs off after the release"
+    assert robot.cmds[-1] == (0.0, 0.0, 0.0)
+    assert not robot.held
+    assert not tree.busy
+
+
+def test_the_approach_commands_cmd_vel_as_source_mission_and_hands_back_the_base() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    run(tree, robot)
+    i = robot.modes.index(("walk", "mission"))
+    assert robot.modes[i - 1] == ("walk", "navigation")  # navigation drove before
+    assert ("manipulate", "navigation") in robot.modes[i:]
+    assert any(c == (0.2, 0.0, 0.0) for c in robot.cmds)
+
+
+FAILURES = [
+    ("the map has no such object", dict(artifacts={"can_1": None}), {}, "unknown_object"),
+    ("navigation refuses the standoff", dict(nav_fail={"artifact_standoff": "refuse"}), {},
+     "navigation_failed"),
+    ("navigation finds no path", dict(nav_fail={"artifact_standoff": "no_path"}), {},
+     "navigation_failed"),
+    ("the look posture fails", dict(arm_fail={"posture": "joint limit"}), {}, "arm_failed"),
+    ("the wrist camera never sees it", dict(visible={"nothing_1"}), {}, "object_not_found"),
+    ("no grasp is possible", {}, dict(grasp_possible=False), "grasp_pose_failed"),
+    ("the reach fails", dict(arm_fail={"reach": "2 cm off"}), {}, "arm_failed"),
+    ("every grasp closes on nothing", dict(grasp_misses=10), {}, "grasp_failed"),
+    ("the controller never takes a mode", dict(modes_work=False), {}, "mode_timeout"),
+    ("the person is not mapped", dict(people_={"person_9": None}), {}, "unknown_person"),
+    ("nobody can be reached", dict(nav_fail={"person_handover": "blocked"}), {},
+     "navigation_failed"),
+    ("nobody pulls", {}, dict(pull=False), "handover_timeout"),
+    ("the grasp is lost on every carry", dict(drops=10), {}, "grasp_lost"),
+    ("the map is down", dict(map_up=False), {}, "unavailable"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("why", "script", "algorithms", "reason"), FAILURES,
+                         ids=[f[0] for f in FAILURES])  # fmt: skip
+def test_every_failure_ends_in_abort_with_its_typed_reason(
+    why: str, script: dict[str, object], algorithms: dict[str, bool], reason: str
+) -> None:
+    from tests.unit.mission_fakes import entity
+
+    fixed = dict(script)
+    if fixed.get("artifacts") == {"can_1": None}:
+        fixed["artifacts"] = {"can_1": entity("can_1", 1.0, 1.0)}
+    if fixed.get("people_") == {"person_9": None}:
+        fixed["people_"] = {"person_9": entity("person_9", 1.0, 1.0, "person")}
+    robot = small_world(**fixed)
+    tree = mission(robot, REQUEST, None, **algorithms)
+    outcome = run(tree, robot)
+    assert outcome.state == "failed", why
+    assert outcome.reason == reason, outcome
+    assert outcome.detail
+    assert_halted(robot)
+    assert not tree.busy
+
+
+def _running_leaves(robot: FakeRobot, tree: MissionTree) -> list[str]:
+    """The leaves left running at the end of a tick, in order (a leaf used twice: twice)."""
+    names: list[str] = []
+    last = None
+    for _ in range(2000):
+        if tree.tick() is not None:
+            break
+        tip = tree.root.tip()
+        if tip is not None and tip is not last:
+            names.append(f"{len(names)}:{tip.name}")
+            last = tip
+        robot.advance()
+    return names
+
+
+_ROBOT = small_world()
+LEAVES = _running_leaves(_ROBOT, mission(_ROBOT))
+
+
+def test_the_cancel_test_visits_every_leaf_that_runs_on_the_happy_path() -> None:
+    names = {leaf.split(":")[1] for leaf in LEAVES}
+    assert {
+        "mode_walk_navigation", "navigate_to_artifact", "mode_walk_mission", "look", "approach",
+        "mode_manipulate_navigation", "estimate_grasp", "open_jaw", "reach", "grasp", "stow",
+        "navigate_to_person", "mode_stand_navigation", "present", "feel_pull", "release",
+        "back_off", "mode_stand_at_rest", "stow_empty",
+    } <= names  # fmt: skip
+
+
+@pytest.mark.parametrize("leaf", LEAVES)
+def test_a_cancel_at_every_leaf_stops_cleanly(leaf: str) -> None:
+    robot = small_world()
+    tree = mission(robot)
+    index = int(leaf.split(":")[0])
+    seen, last = -1, None
+    for _ in range(2000):
+        assert tree.tick() is None
+        tip = tree.root.tip()
+        if tip is not None and tip is not last:
+            seen, last = seen + 1, tip
+        if seen == index:
+            break
+        robot.advance()
+    else:
+        raise AssertionError(f"never reached {leaf}")
+    nav_before = robot.active_nav_goals()
+    arm_before = len(robot.arm_goals)
+    outcome = tree.cancel("user changed their mind")
+    robot.advance()
+    assert outcome == Outcome("cancelled", "cancelled", "user changed their mind")
+    for goal_id in nav_before:
+        assert goal_id in robot.nav_cancels or "" in robot.nav_cancels
+    assert_halted(robot)
+    assert len(robot.arm_goals) == arm_before, "a cancel sends no arm goal (no release)"
+    # Nothing moves afterwards: the idle tree commands nothing.
+    goals = len(robot.arm_goals) + len(robot.nav_goals)
+    for _ in range(20):
+        assert tree.tick() is None
+        robot.advance()
+    assert len(robot.arm_goals) + len(robot.nav_goals) == goals
+    assert robot.cmds[-1] == (0.0, 0.0, 0.0)
+
+
+def test_after_an_outcome_the_tree_takes_the_next_request() -> None:
+    robot = small_world(nav_fail={"artifact_standoff": "no_path"})
+    tree = mission(robot)
+    assert run(tree, robot).reason == "navigation_failed"
+    robot.nav_fail = {}
+    tree.start(MissionRequest(request_id="r2", object="bottle_1", person="person_1"))
+    assert run(tree, robot).state == "succeeded"
+
+
+def test_a_reach_is_only_sent_once_the_controller_is_in_manipulate() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    run(tree, robot)
+    reach = next(i for i, (_, g) in enumerate(robot.arm_goals) if isinstance(g, Reach))
+    assert isinstance(robot.arm_goals[reach - 1][1], Release)  # the jaw opened first
+    assert isinstance(robot.arm_goals[reach + 1][1], Grasp)
+    assert robot.arm_goals[reach + 2][1] == Posture(name="stow")
+
+
+def test_settings_change_the_handover_patience() -> None:
+    robot = small_world()
+    tree = mission(robot, pull=False, settings=fast_settings(handover_timeout_s=1.0))
+    ticks_short = 0
+    while tree.tick() is None:
+        robot.advance()
+        ticks_short += 1
+    robot2 = small_world()
+    tree2 = mission(robot2, pull=False, settings=fast_settings(handover_timeout_s=3.0))
+    ticks_long = 0
+    while tree2.tick() is None:
+        robot2.advance()
+        ticks_long += 1
+    assert ticks_long - ticks_short == pytest.approx(40, abs=2)  # 2 s at 20 Hz
+
+
+def test_a_navigation_not_ready_yet_is_asked_again_until_it_takes_the_goal() -> None:
+    robot = small_world(nav_not_ready=5)
+    assert run(mission(robot), robot).state == "succeeded"
+    assert robot.nav_not_ready == 0
+
+
+def test_a_navigation_that_stays_unavailable_fails_the_mission_with_a_reason() -> None:
+    robot = small_world(nav_not_ready=10_000)
+    outcome = run(mission(robot), robot)
+    assert (outcome.state, outcome.reason) == ("failed", "navigation_failed")
+    assert "no map yet" in outcome.detail
