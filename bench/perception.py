@@ -76,7 +76,8 @@ def _stats(name: str, x: Sequence[float], scale: float = 1.0) -> dict[str, Any]:
 
 
 def _shots(world: WorldDescription, rng: np.random.Generator) -> Iterator[tuple[str, Any, str]]:
-    """(camera, base pose, artifact id): wrist in `look` at standoff, head 1-3 m away."""
+    """(camera, base pose, target id): wrist in `look` at standoff, head 1-3 m away from
+    each artifact; head 2-7 m from each person, facing them from a free pose."""
     surfaces = {s.id: s for s in world.surfaces}
     for a in world.artifacts:
         for _ in range(2):
@@ -85,6 +86,18 @@ def _shots(world: WorldDescription, rng: np.random.Generator) -> Iterator[tuple[
             yield "camera_wrist", pose, a.id
         pose = fz.standoff_pose_for(a, surfaces[a.surface_id], float(rng.uniform(1.2, 2.0)))
         yield "camera_head", pose, a.id
+    fp = fz.robot_footprint()
+    for person in world.people:
+        for _ in range(2):
+            for _try in range(50):
+                d, bearing = float(rng.uniform(2.0, 7.0)), float(rng.uniform(-math.pi, math.pi))
+                x = person.position[0] + d * math.cos(bearing)
+                y = person.position[1] + d * math.sin(bearing)
+                yaw = math.atan2(person.position[1] - y, person.position[0] - x)
+                pose = fz.Pose2D(x, y, yaw + float(rng.uniform(-0.3, 0.3)))
+                if fz.footprint_free(world.occupancy, pose, fp, 0.1):
+                    yield "camera_head", pose, person.id
+                    break
 
 
 def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, SegmentationTruth]]:
@@ -127,6 +140,9 @@ def _errors(
     geo = frame_geometry(frame)
     T_world_camera = geo.T_world_base_yaw @ geo.T_base_yaw_camera
     artifacts = {a.id: a for a in world.artifacts}
+    found, counted = metrics.person_recall(matches)
+    out[f"{prefix}people_found"].append(float(found))
+    out[f"{prefix}people_counted"].append(float(counted))
     for t, m in zip(truths, matches, strict=True):
         art = artifacts.get(t.truth_id or "")
         u0, v0, u1, v1 = t.bbox
@@ -170,10 +186,17 @@ def accuracy(seeds: Sequence[int], net: Segmenter | None) -> dict[str, Any]:
                 depth = np.asarray(as_numpy(frame.depth), dtype=np.float32)
                 _errors(world, frame, truth, net.segment(rgb, depth), out, "network_")
     result: dict[str, Any] = {"eval_seeds": list(seeds), "eval_frames": frames}
+    for prefix in ("truth_", "network_"):
+        counted = sum(out.get(f"{prefix}people_counted", []))
+        if counted:
+            found = sum(out[f"{prefix}people_found"])
+            result[f"{prefix}person_recall"] = round(found / counted, 4)
     for key in sorted(out):
         values = out[key]
         if key.endswith("missed"):
             result[key] = len(values)
+        elif key.endswith(("people_found", "people_counted")):
+            result[key] = int(sum(values))
         elif key.endswith("iou"):
             result[f"{key}_mean"] = round(float(np.mean(values)), 4) if values else None
             result[f"{key}_n"] = len(values)

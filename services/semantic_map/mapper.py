@@ -7,7 +7,9 @@ missing test, and the depth points of the learned obstacles). What changed since
 `take_changes()` is what the node writes to the database in one transaction.
 Measurement conventions: an artifact is placed at the detection's axis point (about a
 radius behind the visible surface) at the visible centroid's height; a person at the
-axis point's floor projection; the horizontal noise grows with the range d_obj.
+axis point's floor projection; the horizontal noise grows with the range d_obj. Person
+detections of one frame within `PERSON_MERGE_M` of each other are one person, and an
+artifact detection that close to a person of the same frame is dropped (clothes).
 """
 
 from __future__ import annotations
@@ -27,10 +29,12 @@ from services.semantic_map.artifacts import ArtifactTracker, FusionParams
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
 from services.semantic_map.looks import View, looks_at
 from services.semantic_map.occupancy import Occupancy, depth_points_world
-from services.semantic_map.people import PeopleParams, PeopleTracker
+from services.semantic_map.people import PeopleParams, PeopleTracker, merge_split_people
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
 SELF_RADIUS_M = 0.7
+#: Person detections of one frame closer than this are one person, m.
+PERSON_MERGE_M = 0.4
 
 
 @dataclass(frozen=True)
@@ -151,6 +155,14 @@ class SemanticMap:
                 continue
             obs = self.observation(det, rgb)
             (people if obs.class_name == "person" else arts).append(obs)
+        people = merge_split_people(people, PERSON_MERGE_M)
+        # A person's clothes are not artifacts: an artifact detection on a person is dropped.
+        on_person = [
+            o for o in arts if any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)
+        ]
+        if on_person:
+            report.ignored += len(on_person)
+            arts = [o for o in arts if all(o is not q for q in on_person)]
         before = {id(tr) for tr in self.tracks()}
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)

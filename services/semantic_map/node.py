@@ -5,7 +5,7 @@ mapping patrol.
 Per tick b (period and latency from `time.participants.semantic_map`): wait for
 perception's detections due by b (`UpstreamGate`), fuse every frame's detections whose
 stamp is complete (each configured camera's, or a later stamp, arrived; or two periods
-passed), step the patrol on the odom at b (cmd_vel stamped b, source `semantic_map`),
+passed), step the patrol on the odom at b (`patrol_driver`: pose goals to navigation),
 commit the changes in one SQLite transaction, then ack b. Queryables run on their own
 threads under the map's lock.
 """
@@ -41,14 +41,14 @@ from common.messages.semantic_map import (
     PatrolStatus,
 )
 from common.messages.sim import CameraFrame, Odom
-from common.messages.wbc import CmdVel, WbcMode
 from common.messages.world import WorldDescription
 from common.recording import stamp
 from common.service import Service
 from services.semantic_map import queries
 from services.semantic_map.mapfile import occupancy_from_grid, tracks_from_file
 from services.semantic_map.mapper import SemanticMap
-from services.semantic_map.patrol import PatrolFollower, coverage_route
+from services.semantic_map.patrol import coverage_route
+from services.semantic_map.patrol_driver import PatrolDriver
 from services.semantic_map.rerun_log import MapLogger
 from services.semantic_map.startup import open_map, save_all
 from services.semantic_map.store import Grid, MapStore
@@ -80,13 +80,9 @@ class MapNode:
             for cam in self.cfg.cameras
         }
         self.odom = bus.latest(keys.odom, Odom, history=16)
-        self.cmd_vel = bus.publisher(keys.cmd_vel, CmdVel, "control")
-        self.mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self.pending: dict[int, dict[str, Detections]] = defaultdict(dict)
         self.newest_det = -1
-        self.patrol: PatrolFollower | None = None
-        self.patrol_state = PatrolStatus(stamp_ns=0, state="idle")
-        self._patrol_cmd: str | None = None  # "start" or "stop", taken by the loop
+        self.patrol = PatrolDriver(bus, keys, self.cfg, NAME, svc.config.wbc.cmd_vel_source)
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
         self.last_grid_save = 0
         bus.serve(MAP_ARTIFACTS, None, lambda _r, sel: self._q(queries.listing, "artifact", sel))
@@ -171,46 +167,40 @@ class MapNode:
         assert req is not None
         with self.lock:
             if req.action == "start":
-                if self.patrol is not None and not self.patrol.done:
+                if self.patrol.running:
                     raise RequestError("busy", "a patrol is running; stop it first")
                 odom = self.odom.get()
                 if odom is None:
                     raise RequestError("unavailable", "no odometry: is the sim running?")
                 occ = self.smap.occupancy
+                x, y, _z = odom.base_position_in_world
                 route = coverage_route(
                     occ.cells(),
                     occ.resolution_m,
                     occ.origin_xy,
-                    (odom.base_position_in_world[0], odom.base_position_in_world[1]),
+                    (x, y),
                     req.spacing_m or self.cfg.patrol_spacing_m,
                     self.cfg.patrol_clearance_m,
                 )
                 if not route.viewpoints:
                     raise RequestError("unavailable", "no free space to patrol in the grid")
-                self.patrol = PatrolFollower(
-                    route,
-                    speed=self.cfg.patrol_speed,
-                    turn_rate=self.cfg.patrol_turn_rate,
-                    look_around=self.cfg.patrol_look_around,
-                )
-                self._patrol_cmd = "start"
-                self.patrol_state = self._patrol_status("running")
-                log.info("patrol: %d viewpoints", len(route.viewpoints))
-            elif req.action == "stop" and self.patrol is not None and not self.patrol.done:
-                self._patrol_cmd = "stop"
-            return self.patrol_state
+                self.patrol.start(route, yaw_of(quat_xyzw_to_matrix(odom.base_orientation_xyzw)))
+                log.info("patrol: %d viewpoints via %s", len(route.viewpoints), self.cfg.patrol_via)
+            elif req.action == "stop":
+                self.patrol.stop()
+            return self._patrol_status()
 
-    def _patrol_status(self, state: str, reason: str = "") -> PatrolStatus:
-        f = self.patrol
+    def _patrol_status(self) -> PatrolStatus:
+        at, n, travelled, _skipped = self.patrol.progress()
         return PatrolStatus(
             stamp_ns=self.smap.stamp_ns,
-            state=state,  # type: ignore[arg-type]
-            waypoint=0 if f is None else min(f.leg + 1, len(f.route.paths)),
-            waypoints=0 if f is None else len(f.route.paths),
-            travelled_m=0.0 if f is None else f.travelled_m,
+            state=self.patrol.state,
+            waypoint=at,
+            waypoints=n,
+            travelled_m=travelled,
             artifacts=len(self.smap.artifacts.confirmed),
             people=len(self.smap.people.confirmed),
-            reason=reason,
+            reason=self.patrol.reason,
         )
 
     # -- the tick --------------------------------------------------------------------------
@@ -281,34 +271,16 @@ class MapNode:
             log.info("%s missing: looked at its place from %s, not seen", entity_id, dets.camera)
 
     def _step_patrol(self, b: int) -> None:
-        f = self.patrol
-        if f is None or self.patrol_state.state != "running":
+        if not self.patrol.running:
             return
-        source = self.svc.config.wbc.cmd_vel_source
-        if self._patrol_cmd == "start":
-            self.mode.put(WbcMode(stamp_ns=b, mode="walk", cmd_vel_source=NAME))
-            self._patrol_cmd = None
         try:
             self.odom.wait_stamp(b, 1.0)
         except WaitTimeout:
             log.warning("patrol: no odom at %.1f s", b / NS_PER_S)
-        odom = self.odom.at(b)
-        stop = self._patrol_cmd == "stop"
-        if odom is None or f.done or stop:
-            self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=NAME))
-            if f.done or stop:
-                self.mode.put(WbcMode(stamp_ns=b, mode="stand", cmd_vel_source=source))
-                why = f"{f.skipped} viewpoint(s) skipped" if f.skipped else ""
-                self.patrol_state = self._patrol_status("stopped" if stop else "done", why)
-                self._patrol_cmd = None
-                log.info("patrol %s: %.1f m walked", self.patrol_state.state, f.travelled_m)
-            return
-        x, y, _z = odom.base_position_in_world
-        yaw = yaw_of(quat_xyzw_to_matrix(odom.base_orientation_xyzw))
-        vx, vy, wz = f.step(x, y, yaw, b)
-        self.cmd_vel.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=NAME))
-        self.patrol_state = self._patrol_status("running")
-        self.logger.patrol(b, f)
+        self.patrol.step(b, self.odom.at(b))
+        route = self.patrol.route
+        if route is not None:
+            self.logger.patrol(b, route)
 
     def _commit(self, b: int) -> None:
         self.smap.stamp_ns = max(self.smap.stamp_ns, b)

@@ -1,5 +1,7 @@
-"""The mapping patrol: a coverage route over the occupancy grid and a follower that walks
-it with `cmd_vel` (until navigation exists), looking around at every viewpoint.
+"""The mapping patrol: a coverage route over the occupancy grid, and a follower that walks
+it with `cmd_vel` itself, looking around at every viewpoint (`patrol_via = "cmd_vel"`, for
+a stack without navigation; the default walks the route through navigation:
+`nav_patrol`).
 
 `coverage_route` puts viewpoints on a lattice of `spacing_m` over the free space that
 keeps `clearance_m` from every obstacle and is connected to the start, visits them

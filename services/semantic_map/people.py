@@ -9,7 +9,9 @@ assigned to people by the Hungarian method on a cost that adds the Mahalanobis d
 of the innovation (gated at χ²₂ 99.9 %, or within `gate_min_m`) and the Bhattacharyya
 distance of the colour histograms (gated at `max_appearance`): two people crossing are
 told apart by their clothes where their positions are ambiguous. A detection left over
-starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections.
+starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
+unless it lies within `min_separation_m` of a person (then it is a piece of that body,
+e.g. legs whose colours did not match the shirt).
 """
 
 from __future__ import annotations
@@ -39,6 +41,28 @@ class PeopleParams:
     v_max: float = 1.5
     #: The position's σ never grows past this, m.
     max_sigma_m: float = 10.0
+    #: A detection left over this close to a person is a piece of them, never a new
+    #: person (two bodies do not overlap), m.
+    min_separation_m: float = 0.35
+
+
+def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
+    """One observation per person: detections of one frame closer than `radius_m` are
+    pieces of one body the segmenter split (a person is about 0.5 m across), merged into
+    the best-scored one at their mean position."""
+    out: list[Observation] = []
+    left = sorted(observations, key=lambda o: -o.score)
+    while left:
+        best, rest = left[0], left[1:]
+        near = [o for o in rest if float(np.linalg.norm(o.xy - best.xy)) < radius_m]
+        left = [o for o in rest if float(np.linalg.norm(o.xy - best.xy)) >= radius_m]
+        if near:
+            xy = np.mean([best.xy, *(o.xy for o in near)], axis=0)
+            best = Observation(
+                best.class_name, xy, best.z, best.sigma_m, best.score, best.appearance
+            )
+        out.append(best)
+    return out
 
 
 def _F(dt: float) -> FloatArray:
@@ -148,8 +172,9 @@ class PeopleTracker:
                     tr.id = self.ids.next_id("person")
                 if tr.confirmed:
                     changed.append(tr)
+        sep = self.params.min_separation_m
         for j, obs in enumerate(observations):
-            if j in used:
+            if j in used or any(float(np.linalg.norm(t.xy - obs.xy)) < sep for t in self.tracks):
                 continue
             tr = Track(
                 class_name="person",

@@ -11,7 +11,7 @@ from common.lockstep import NS_PER_S
 from common.recording import is_recording
 from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import OCCUPIED
-from services.semantic_map.patrol import PatrolFollower
+from services.semantic_map.patrol import Route
 
 ARTIFACT = (40, 160, 255)
 PERSON = (60, 200, 90)
@@ -66,18 +66,18 @@ class MapLogger:
                     rr.Points3D(xyz, radii=occ.resolution_m / 2, colors=colour),
                 )
 
-    def patrol(self, t_ns: int, f: PatrolFollower) -> None:
-        if not is_recording(self.rec) or self._route_logged == id(f):
+    def patrol(self, t_ns: int, route: Route) -> None:
+        if not is_recording(self.rec) or self._route_logged == id(route):
             return
-        self._route_logged = id(f)
+        self._route_logged = id(route)
         self.rec.log(
             "world/map/patrol",
             rr.LineStrips3D(
-                [np.column_stack([p, np.full(len(p), 0.05)]) for p in f.route.paths],
+                [np.column_stack([p, np.full(len(p), 0.05)]) for p in route.paths],
                 colors=(200, 60, 200),
             ),
         )
         self.rec.log(
             "world/map/patrol/viewpoints",
-            rr.Points3D([(v[0], v[1], 0.05) for v in f.route.viewpoints], radii=0.08),
+            rr.Points3D([(v[0], v[1], 0.05) for v in route.viewpoints], radii=0.08),
         )

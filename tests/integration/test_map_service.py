@@ -65,7 +65,7 @@ def map_settings(db_dir: str, **extra: object) -> list[str]:
     return out + [f"semantic_map.{k}={v}" for k, v in extra.items()]
 
 
-def detection(cls: str, xyz_: Sequence[float], d_obj: float = 1.5) -> Detection:
+def detection(cls: str, xyz_: Sequence[float] | np.ndarray, d_obj: float = 1.5) -> Detection:
     xyz = (float(xyz_[0]), float(xyz_[1]), float(xyz_[2]))
     return Detection(
         class_name=cls,
@@ -197,7 +197,7 @@ def test_ids_and_acknowledged_writes_survive_a_sigkill_in_the_middle_of_writes(
     per_frame = 40  # many rows per transaction: the kill lands inside writes
     killed = threading.Event()
 
-    def frame(k: int) -> list:  # type: ignore[type-arg]
+    def frame(k: int) -> list:
         return [detection("bottle", [0.5 * j, 1.0 * k, 0.8]) for j in range(per_frame)]
 
     def killer() -> None:
@@ -290,3 +290,99 @@ def test_seed_from_world_uses_the_sims_ids_with_noise_and_its_floor_plan(
     grid = s.bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 5.0)
     assert grid.static_source == "world"
     assert grid.cells.shape == world.occupancy.cells.shape
+
+
+def test_an_artifact_looked_for_at_its_place_and_not_seen_is_marked_missing(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    """A running stack (sim, the WBC, the network segmenter, the map): a map imported
+    with bottle_1 where it is and a can_1 that is not there, both ahead of the head camera;
+    the robot walks 1.2 m towards the table. The can is marked missing with a time; the
+    bottle, seen, is not."""
+    from common.keys import WORLD_DESCRIPTION
+    from common.messages.sim import Odom
+    from common.messages.wbc import CmdVel, WbcMode
+    from common.messages.world import WorldDescription
+
+    s = stack(
+        ["sim", "wbc", "perception", "semantic_map"],
+        "time.participants={}",
+        'time.participants.wbc.role="command"',
+        "time.participants.wbc.period_s=0.002",
+        "time.participants.wbc.latency_s=0.0",
+        'time.participants.semantic_map.role="periodic"',
+        "time.participants.semantic_map.period_s=0.1",
+        "time.participants.semantic_map.latency_s=0.1",
+        'time.participants.perception.role="periodic"',
+        "time.participants.perception.period_s=0.1",
+        "time.participants.perception.latency_s=0.1",
+        'sim.world="small"',
+        'sim.cameras=["camera_head"]',
+        'perception.cameras=["camera_head"]',
+        f'semantic_map.dir="{tmp_path / "map"}"',
+        'semantic_map.start="empty"',
+    )
+    world = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 10.0)
+    bottle = world.artifacts[0]
+    assert bottle.id == "bottle_1"
+
+    def entity(id_: str, cls: str, xyz: Sequence[float]) -> MapEntity:
+        return MapEntity(
+            id=id_,
+            class_name=cls,
+            kind="artifact",
+            position_in_world=(float(xyz[0]), float(xyz[1]), float(xyz[2])),
+            uncertainty_m=0.05,
+            last_seen_ns=0,
+            source="prior",
+        )
+
+    # On the floor 1.5 m in front of the robot, in plain view: nothing is there.
+    start = world.robot_start
+    ghost = (start.x + 1.6 * np.cos(start.yaw), start.y + 1.6 * np.sin(start.yaw), 0.05)
+    mf = MapFile(
+        entities=[
+            entity("bottle_1", "bottle", (*bottle.position[:2], bottle.position[2] + 0.07)),
+            entity("can_1", "can", ghost),
+        ],
+        counters={"bottle": 1, "can": 1},
+    )
+    summary = s.bus.query(MAP_IMPORT, mf, MapSummary, 10.0)
+    assert (summary.artifacts, summary.missing) == (2, 0)
+    # Walk 1.2 m towards the table (3.4 m ahead), past the ghost's place.
+    clock = s.bus.latest(WORLD_CLOCK, Clock)
+    odom = s.bus.latest(s.keys.odom, Odom)
+    mode = s.bus.publisher(s.keys.wbc_mode, WbcMode, "control")
+    cmd = s.bus.publisher(s.keys.cmd_vel, CmdVel, "control")
+    c0 = clock.wait(lambda c: c.stamp_ns > 0, 30.0)
+    mode.put(WbcMode(stamp_ns=c0.stamp_ns, mode="walk", cmd_vel_source="test"))
+    x0 = odom.wait(lambda o: o.stamp_ns > 0, 30.0).base_position_in_world[0]
+
+    def walked() -> bool:
+        c = clock.get()
+        o = odom.get()
+        far = o is not None and o.base_position_in_world[0] - x0 >= 1.2
+        if c is not None:
+            cmd.put(
+                CmdVel(stamp_ns=c.stamp_ns, vx=0.0 if far else 0.4, vy=0.0, wz=0.0, source="test")
+            )
+        return far
+
+    assert wait_until(walked, 300.0, poll_s=0.02), "the robot did not walk"
+    for _ in range(20):  # stop, and keep stopped
+        walked()
+        time.sleep(0.05)
+
+    def missing() -> list[str]:
+        q = MAP_ARTIFACTS + "?missing=true"
+        return [e.id for e in s.bus.query(q, None, MapListing, 5.0).entities]
+
+    assert wait_until(lambda: "can_1" in missing(), 180.0), "can_1 was never marked missing"
+    can = s.bus.query(map_artifact("can_1"), None, MapEntity, 5.0)
+    assert can.missing_since_ns is not None and can.missing_since_ns > 0
+    assert can.observations == 0
+    # The bottle was looked at all along and seen: fused, never missing.
+    one = s.bus.query(map_artifact("bottle_1"), None, MapEntity, 5.0)
+    assert one.missing_since_ns is None
+    assert one.last_seen_ns > 0 and one.observations > 0
+    assert missing() == ["can_1"]

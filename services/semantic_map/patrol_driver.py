@@ -1,0 +1,182 @@
+"""The mapping patrol's transport: the map node's side of `dume map --patrol`.
+
+`PatrolDriver.step(b, odom)` runs in the map's lockstep tick. Through navigation
+(`semantic_map.patrol_via = "navigation"`, the default): the WBC is put in `walk` obeying
+navigation, each `NavPatrol` goal goes to `nav/goal` as a `PoseGoal` and the patrol moves
+on when `nav/status` reports that goal ended; a navigation that has no map yet is asked
+again for up to `NAV_WAIT_S` of sim time, one that does not answer fails the patrol.
+With `patrol_via = "cmd_vel"` (when no navigation runs) a `PatrolFollower` walks the
+route with cmd_vel of source `semantic_map`. When done or stopped: zero velocity, the
+navigation goal cancelled, the WBC back to `stand`.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Literal
+
+from common.bus import Bus, NoReply, RemoteError
+from common.config import SemanticMapSettings
+from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.keys import RobotKeys
+from common.lockstep import NS_PER_S
+from common.messages import PayloadError
+from common.messages.navigation import NavCancel, NavGoalReply, NavGoalRequest, NavStatus, PoseGoal
+from common.messages.semantic_map import PatrolState
+from common.messages.sim import Odom
+from common.messages.wbc import CmdVel, WbcMode
+from services.semantic_map.nav_patrol import NavPatrol, patrol_goals
+from services.semantic_map.patrol import PatrolFollower, Route
+
+log = logging.getLogger("dume.semantic_map.patrol")
+
+#: Sim seconds a patrol waits for navigation to have a map before it fails.
+NAV_WAIT_S = 30.0
+WALK_TOLERANCE_M = 0.3
+TURN_TOLERANCE_RAD = 0.2
+TERMINAL = ("succeeded", "failed", "cancelled")
+
+
+class PatrolDriver:
+    """One patrol at a time; `state` and `reason` say where it stands."""
+
+    def __init__(
+        self, bus: Bus, keys: RobotKeys, cfg: SemanticMapSettings, name: str, nav_source: str
+    ) -> None:
+        self.bus, self.keys, self.cfg, self.name = bus, keys, cfg, name
+        self.nav_source = nav_source
+        self.cmd_vel = bus.publisher(keys.cmd_vel, CmdVel, "control")
+        self.mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
+        self.cancel = bus.publisher(keys.nav_cancel, NavCancel, "control")
+        self.nav_status = bus.latest(keys.nav_status, NavStatus, history=8)
+        self.walker: NavPatrol | PatrolFollower | None = None
+        self.state: PatrolState = "idle"
+        self.reason = ""
+        self._started = False
+        self._stop = False
+        self._since_ns = 0
+
+    @property
+    def running(self) -> bool:
+        return self.state == "running"
+
+    @property
+    def route(self) -> Route | None:
+        return None if self.walker is None else self.walker.route
+
+    def start(self, route: Route, yaw: float) -> None:
+        c = self.cfg
+        if c.patrol_via == "navigation":
+            turns = 3 if c.patrol_look_around else 0
+            self.walker = NavPatrol(route, patrol_goals(route, yaw, turns))
+        else:
+            self.walker = PatrolFollower(
+                route,
+                speed=c.patrol_speed,
+                turn_rate=c.patrol_turn_rate,
+                look_around=c.patrol_look_around,
+            )
+        self.state, self.reason, self._started, self._stop = "running", "", False, False
+
+    def stop(self) -> None:
+        if self.running:
+            self._stop = True
+
+    def progress(self) -> tuple[int, int, float, int]:
+        """(viewpoint, viewpoints, travelled m, skipped)."""
+        w = self.walker
+        if w is None:
+            return 0, 0, 0.0, 0
+        n = len(w.route.viewpoints)
+        at = w.viewpoint if isinstance(w, NavPatrol) else min(w.leg + 1, n)
+        return at, n, w.travelled_m, w.skipped
+
+    def step(self, b: int, odom: Odom | None) -> None:
+        w = self.walker
+        if w is None or not self.running:
+            return
+        via_nav = isinstance(w, NavPatrol)
+        if not self._started:
+            source = self.nav_source if via_nav else self.name
+            self.mode.put(WbcMode(stamp_ns=b, mode="walk", cmd_vel_source=source))
+            self._started, self._since_ns = True, b
+        if self._stop or w.done:
+            self._end(b, "stopped" if self._stop else "done")
+            return
+        if odom is None:
+            if not via_nav:
+                self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
+            return
+        x, y, _z = odom.base_position_in_world
+        if isinstance(w, NavPatrol):
+            w.moved_to(x, y)
+            self._step_nav(b, w)
+        else:
+            yaw = yaw_of(quat_xyzw_to_matrix(odom.base_orientation_xyzw))
+            vx, vy, wz = w.step(x, y, yaw, b)
+            self.cmd_vel.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=self.name))
+        if w.done:
+            self._end(b, "done")
+
+    def _step_nav(self, b: int, w: NavPatrol) -> None:
+        if w.goal_id:
+            st = self.nav_status.get()
+            if st is not None and st.goal_id == w.goal_id and st.state in TERMINAL:
+                ok = st.state == "succeeded"
+                if not ok:
+                    log.info("patrol goal %s %s: %s %s", w.goal_id, st.state, st.reason, st.detail)
+                w.finished(ok, f"{st.state}: {st.reason} {st.detail}".strip())
+            if w.goal_id:
+                return
+        goal = w.current
+        if goal is None:
+            return
+        tol = 0.5 if goal.look else WALK_TOLERANCE_M
+        req = NavGoalRequest(
+            goal=PoseGoal(
+                x=goal.x,
+                y=goal.y,
+                yaw=goal.yaw,
+                position_tolerance_m=tol,
+                yaw_tolerance_rad=TURN_TOLERANCE_RAD,
+            )
+        )
+        try:
+            reply = self.bus.query(self.keys.nav_goal, req, NavGoalReply, 5.0)
+        except RemoteError as exc:
+            if exc.error.code == "unavailable" and b - self._since_ns < NAV_WAIT_S * NS_PER_S:
+                return  # navigation has no map yet: ask again next tick
+            self._end(b, "failed", f"navigation refused the patrol: {exc}")
+            return
+        except (NoReply, PayloadError) as exc:
+            self._end(b, "failed", f"navigation does not answer: {exc}")
+            return
+        if reply.accepted:
+            w.sent(reply.goal_id)
+            self._since_ns = b
+        else:
+            log.info("patrol: viewpoint %d goal refused: %s", goal.viewpoint + 1, reply.reason)
+            w.refused(reply.reason)
+
+    def _end(self, b: int, state: Literal["done", "stopped", "failed"], reason: str = "") -> None:
+        w = self.walker
+        if isinstance(w, NavPatrol):
+            if w.goal_id:
+                self.cancel.put(NavCancel(goal_id=w.goal_id, reason=f"patrol {state}"))
+        else:
+            self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
+        self.mode.put(WbcMode(stamp_ns=b, mode="stand", cmd_vel_source=self.nav_source))
+        skipped = 0 if w is None else w.skipped
+        if not reason and skipped:
+            reason = f"{skipped} viewpoint(s) skipped"
+        self.state, self.reason = state, reason
+        log.info(
+            "patrol %s at %.1f s: %.1f m walked%s",
+            state,
+            b / NS_PER_S,
+            0.0 if w is None else w.travelled_m,
+            f" ({reason})" if reason else "",
+        )
+        if w is not None:
+            for line in w.log:
+                log.info("patrol: %s", line)
