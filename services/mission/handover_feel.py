@@ -9,10 +9,15 @@ and the jaw's effort changes as the object is tugged between the pads. `update` 
 True once
 
     pull = (F − F₀) · toward ≥ `force_n`, or
-    pull ≥ `force_n` / 2 and |effort − effort₀| ≥ `effort_nm`,
+    pull ≥ `force_n` / 2 and |effort − effort₀| ≥ `effort_nm`, or
+    F · toward ≥ `absolute_n` (a person who took hold before the baseline was taken:
+    holding still, the load is the object's weight, across `toward`),
 
 has held on every sample for `debounce_s` of sim time (a single spike from a footstep
 or the estimator's noise does not trip it). Tripped stays tripped until `reset`.
+Recorded in `bench.trial_fetch`: holding still, F · toward stays within ±1.5 N (0.12 N
+noise); a person's pull reaches +13..15 N within 0.4 s of their grip closing; the jaw's
+effort stays at its cap throughout, so the force does the work.
 
 Pure: statuses in (their sim-time stamps are the clock), a bool out.
 """
@@ -39,16 +44,18 @@ class PullDetector:
         debounce_s: float = 0.2,
         baseline_s: float = 0.3,
         toward: tuple[float, float, float] = (1.0, 0.0, 0.0),
+        absolute_n: float = 8.0,
     ) -> None:
-        if not all(math.isfinite(x) and x > 0 for x in (force_n, effort_nm, debounce_s)):
+        thresholds = (force_n, effort_nm, debounce_s, absolute_n)
+        if not all(math.isfinite(x) and x > 0 for x in thresholds):
             raise ValueError(
                 f"thresholds must be finite and positive: force_n={force_n}, "
-                f"effort_nm={effort_nm}, debounce_s={debounce_s}"
+                f"effort_nm={effort_nm}, debounce_s={debounce_s}, absolute_n={absolute_n}"
             )
         direction = np.asarray(toward, dtype=float)
         if not (np.all(np.isfinite(direction)) and np.linalg.norm(direction) > 1e-6):
             raise ValueError(f"toward {toward} is not a direction")
-        self.force_n, self.effort_nm = force_n, effort_nm
+        self.force_n, self.effort_nm, self.absolute_n = force_n, effort_nm, absolute_n
         self.debounce_s, self.baseline_s = debounce_s, max(0.0, baseline_s)
         self.toward: FloatArray = direction / np.linalg.norm(direction)
         self._t0_ns = 0
@@ -95,8 +102,10 @@ class PullDetector:
             return False
         self.pull_n = float((F - self._F0) @ self.toward)
         self.effort_change_nm = abs(effort - self._e0)
-        pulling = self.pull_n >= self.force_n or (
-            self.pull_n >= 0.5 * self.force_n and self.effort_change_nm >= self.effort_nm
+        pulling = (
+            self.pull_n >= self.force_n
+            or (self.pull_n >= 0.5 * self.force_n and self.effort_change_nm >= self.effort_nm)
+            or float(F @ self.toward) >= self.absolute_n
         )
         if not pulling:
             self._since_ns = None

@@ -21,6 +21,8 @@ DATA = Path(__file__).parent / "data"
 HOLD = DATA / "handover_hold_status.json"
 #: The same when the person took it and pulled.
 RECORDED = DATA / "handover_status.json"
+#: A person who took hold before the arm had settled (seed 2): pulling from the first sample.
+LATE = DATA / "handover_late_status.json"
 
 
 def status(stamp_ns: int, wrench: np.ndarray, effort: float = -2.0) -> WbcStatus:
@@ -94,6 +96,13 @@ def test_a_weaker_pull_trips_it_when_the_jaw_effort_changes_too() -> None:
     assert feed(PullDetector(), w, efforts) > 100
 
 
+def test_a_person_already_pulling_when_the_baseline_is_taken_still_trips_it() -> None:
+    w = noisy(200, 0.3)
+    w[:, 0] += 16.0  # the person took hold while the arm was settling (trial seed 2)
+    k = feed(PullDetector(), w)
+    assert k > 0 and k * PERIOD >= PullDetector().debounce_s * 1e9
+
+
 def test_the_baseline_absorbs_the_held_weight_and_an_offset() -> None:
     detector = PullDetector()
     offset = HELD + np.array([3.0, -1.0, -2.0, 0.0, 0.0, 0.0])
@@ -143,3 +152,9 @@ def test_the_recorded_handover_trips_after_the_person_took_it_and_not_before() -
     assert tripped["taken"], "tripped before the person took the object"
     taken_ns = next(int(s["stamp_ns"]) for s in samples if s["taken"])  # type: ignore[call-overload]
     assert int(tripped["stamp_ns"]) - taken_ns < 2_000_000_000  # type: ignore[call-overload]
+
+
+def test_the_recorded_pull_that_began_before_the_baseline_trips_it() -> None:
+    samples, tripped = _replay(LATE)
+    assert samples[0]["wrench"][0] > 10.0  # type: ignore[index]
+    assert tripped is not None
