@@ -177,6 +177,10 @@ class SemanticMapSettings(_Section):
     missing_after_frames: int = 5
     #: Range within which a camera is trusted to see an artifact, m.
     look_range_m: float = 3.0
+    #: An artifact the map created itself from perception and fused fewer times than this
+    #: is a false entry when looked for at its place and not seen: it is deleted, not
+    #: marked missing (prior, seeded and imported artifacts are only marked missing).
+    drop_below_observations: int = 5
     #: People: acceleration noise of the constant-velocity model, m/s², and the weight of
     #: the colour-histogram distance in the association cost.
     person_accel_sigma: float = 1.5
@@ -261,6 +265,8 @@ class MissionSettings(_Section):
     reach_timeout_s: float = 20.0
     grasp_timeout_s: float = 8.0
     release_timeout_s: float = 5.0
+    #: After the grasp, the object is lifted this far straight up before stowing, m.
+    lift_m: float = 0.10
     #: The whole visual approach (the controller re-acquires and fails by itself sooner).
     approach_timeout_s: float = 90.0
     #: Pose estimation: stand still this long, then wait this long for a detection.
@@ -278,8 +284,6 @@ class MissionSettings(_Section):
     #: Overrides of `ApproachGains` fields and of `PullDetector` arguments, by name.
     approach_gains: dict[str, float] = msgspec.field(default_factory=dict)
     pull_detector: dict[str, float] = msgspec.field(default_factory=dict)
-
-
 
 
 class RecordingSettings(_Section):

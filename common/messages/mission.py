@@ -48,7 +48,7 @@ MissionReason = Literal[
     "object_not_found",  # approach or pose estimation could not see the object
     "grasp_pose_failed",  # no grasp is possible from what was seen
     "arm_failed",  # an arm goal (posture, reach, release) failed or timed out
-    "grasp_failed",  # the jaw closed on nothing or the grasp did not hold
+    "grasp_failed",  # the reach to the grasp, the jaw or the lift failed (re-picked first)
     "grasp_lost",  # the object was lost while carrying it, and the re-pick budget is spent
     "handover_timeout",  # nobody took the object in time
     "mode_timeout",  # the whole-body controller did not take the mode asked for

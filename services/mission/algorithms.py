@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from common.config import MissionSettings
+from common.geometry import FloatArray
 from common.messages.perception import Detection
 from common.messages.wbc import Reach, WbcStatus
 
@@ -42,6 +43,10 @@ class GraspPlanLike(Protocol):
     kind: str
 
     def reach(self) -> Reach: ...
+
+    def to_world(self, T_world_base: FloatArray) -> GraspPlanLike: ...
+
+    def lifted(self, dz_m: float) -> GraspPlanLike: ...
 
 
 class PullFeeler(Protocol):

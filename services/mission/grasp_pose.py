@@ -28,7 +28,7 @@ Pure numpy on msgspec values; no transport.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -95,6 +95,21 @@ class GraspPlan:
             approach_axis=self.approach_axis,
             pregrasp_m=self.pregrasp_m,
         )
+
+    def to_world(self, T_world_base: FloatArray) -> GraspPlan:
+        """This plan fixed in the world by the base pose at its stamp: a `world` Reach
+        stays valid however long the arm takes to get ready (a `base` one must reach the
+        controller while it still remembers the base at the stamp)."""
+        return replace(self, H=self.in_world(T_world_base), frame="world")
+
+    def lifted(self, dz_m: float) -> GraspPlan:
+        """The grasp pose raised `dz_m` in the world, reached straight (no pre-grasp):
+        the lift that takes the object off its surface before stowing."""
+        if self.frame != "world":
+            raise GraspPoseError("a lift needs a world-frame plan (to_world first)")
+        H = np.array(self.H, dtype=float)
+        H[2, 3] += dz_m
+        return replace(self, H=H, pregrasp_m=0.0)
 
     def in_world(self, T_world_base: FloatArray) -> FloatArray:
         """H in the world, given the base pose at the plan's stamp (for a `base` plan)."""

@@ -13,12 +13,22 @@ its reason) and `Unavailable` (nobody answered in time).
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
+from common.messages.base import Mat4
 from common.messages.navigation import NavGoal, NavStatus
 from common.messages.perception import Detection
 from common.messages.semantic_map import MapEntity
 from common.messages.wbc import ArmGoal, GoalStatus, WbcModeName, WbcStatus
+
+
+class WristSighting(NamedTuple):
+    """A wrist-camera detection of the target: its frame's stamp (ns), the detection and
+    the base pose at capture (`T_world_base`, row-major 4×4) that places it in the world."""
+
+    stamp_ns: int
+    detection: Detection
+    T_world_base: Mat4
 
 
 class PortError(Exception):
@@ -113,8 +123,8 @@ class RobotPort(Protocol):
 
     # -- perception ---------------------------------------------------------------------
 
-    def wrist_detection(self, map_id: str, class_name: str) -> tuple[int, Detection] | None:
-        """The wrist camera's newest detection of the target, with its frame's stamp (ns).
+    def wrist_detection(self, map_id: str, class_name: str) -> WristSighting | None:
+        """The wrist camera's newest detection of the target, with its frame's stamp and base pose.
 
         The detection associated with `map_id` when perception associated one, else the
         nearest of `class_name` to the base; None when the newest wrist frame due by now

@@ -28,7 +28,7 @@ from common.messages.navigation import (
     NavGoalRequest,
     NavStatus,
 )
-from common.messages.perception import Detection, Detections
+from common.messages.perception import Detections
 from common.messages.semantic_map import MapEntity, MapListing
 from common.messages.sim import Odom
 from common.messages.wbc import (
@@ -41,7 +41,7 @@ from common.messages.wbc import (
     WbcModeName,
     WbcStatus,
 )
-from services.mission.ports import Refused, Unavailable
+from services.mission.ports import Refused, Unavailable, WristSighting
 
 log = logging.getLogger("dume.mission")
 
@@ -201,7 +201,7 @@ class BusRobot:
 
     # -- perception -----------------------------------------------------------------------
 
-    def wrist_detection(self, map_id: str, class_name: str) -> tuple[int, Detection] | None:
+    def wrist_detection(self, map_id: str, class_name: str) -> WristSighting | None:
         due = self._t - self.perception_latency_ns
         frame = self._wrist_frame(due)
         if frame is None:
@@ -212,7 +212,7 @@ class BusRobot:
                 (d for d in frame.detections if d.class_name == class_name and d.map_id is None),
                 key=lambda d: d.d_obj,
             )
-        return (frame.stamp_ns, mine[0]) if mine else None
+        return WristSighting(frame.stamp_ns, mine[0], frame.T_world_base) if mine else None
 
     def _wrist_frame(self, due_ns: int) -> Detections | None:
         for frame in reversed(self._wrist):

@@ -12,8 +12,8 @@
                   navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
-              pick_object: Release (open), Reach(plan), Grasp, check_held, Posture(stow),
-                           mode walk/navigation
+              pick_object: Release (open), Posture(ready), Reach(plan), Grasp, check_held,
+                           lift (Reach up lift_m), Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go)
           release_object: mode stand, Posture(handover), feel_pull, Release,
                           mode walk/mission, back_off, mode stand, Posture(stow)
@@ -104,10 +104,14 @@ def build_tree(ctx: Context) -> Sequence:
     pick = _seq(
         st[3],
         ArmAction(ctx, "open_jaw", lambda _b: Release(), "arm_failed", s.release_timeout_s, st[3]),
-        ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(), "arm_failed",
+        ArmAction(ctx, "ready", lambda _b: Posture(name="ready"), "arm_failed",
+                  s.posture_timeout_s, st[3]),
+        ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(), "grasp_failed",
                   s.reach_timeout_s, st[3]),
         ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed", s.grasp_timeout_s, st[3]),
         CheckHeld(ctx, st[3]),
+        ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
+                  "grasp_failed", s.reach_timeout_s, st[3]),
         ArmAction(ctx, "stow", lambda _b: Posture(name="stow"), "arm_failed",
                   s.posture_timeout_s, st[3]),
         SetMode(ctx, "walk", "navigation", st[3]),

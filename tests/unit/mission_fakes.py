@@ -11,7 +11,7 @@ artifacts listed in `visible`. Everything the tree asked for is recorded.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import cast
+from typing import Literal, cast
 
 import numpy as np
 
@@ -39,7 +39,7 @@ from common.messages.wbc import (
 )
 from services.mission.algorithms import Algorithms
 from services.mission.behaviours.base import Context
-from services.mission.ports import Refused, Unavailable
+from services.mission.ports import Refused, Unavailable, WristSighting
 
 TICK_NS = 50_000_000
 
@@ -281,9 +281,9 @@ class FakeRobot:
 
     # -- perception -----------------------------------------------------------------------
 
-    def wrist_detection(self, map_id: str, class_name: str) -> tuple[int, Detection] | None:
+    def wrist_detection(self, map_id: str, class_name: str) -> WristSighting | None:
         if map_id in self.visible:
-            return self.t, detection(map_id)
+            return WristSighting(self.t, detection(map_id), tuple(np.eye(4).ravel().tolist()))
         return None
 
     # -- what the tests look at -----------------------------------------------------------
@@ -330,10 +330,19 @@ class StubGraspError(Exception):
 @dataclass
 class StubPlan:
     kind: str = "side"
+    frame: Literal["base", "world"] = "base"
     possible: bool = True
+    pregrasp_m: float = 0.08
 
     def reach(self) -> Reach:
-        return Reach(H=tuple(np.eye(4).ravel().tolist()), frame="base", stamp_ns=0)
+        H = tuple(np.eye(4).ravel().tolist())
+        return Reach(H=H, frame=self.frame, stamp_ns=0, pregrasp_m=self.pregrasp_m)
+
+    def to_world(self, T_world_base: object) -> StubPlan:
+        return StubPlan(self.kind, "world", self.possible, self.pregrasp_m)
+
+    def lifted(self, dz_m: float) -> StubPlan:
+        return StubPlan(self.kind, self.frame, self.possible, 0.0)
 
 
 class StubPull:

@@ -74,7 +74,8 @@ def test_a_mission_runs_the_six_stages_in_order_and_succeeds() -> None:
         PersonHandover(person_id="person_1"),
     ]
     assert robot.arm_kinds() == [
-        "look", "release", "reach", "grasp", "stow", "handover", "release", "stow",
+        "look", "release", "ready", "reach", "grasp", "reach", "stow", "handover", "release",
+        "stow",
     ]  # fmt: skip
     assert any(c[0] < 0 for c in robot.cmds), "it backs off after the release"
     assert robot.cmds[-1] == (0.0, 0.0, 0.0)
@@ -101,7 +102,7 @@ FAILURES = [
     ("the look posture fails", dict(arm_fail={"posture": "joint limit"}), {}, "arm_failed"),
     ("the wrist camera never sees it", dict(visible={"nothing_1"}), {}, "object_not_found"),
     ("no grasp is possible", {}, dict(grasp_possible=False), "grasp_pose_failed"),
-    ("the reach fails", dict(arm_fail={"reach": "2 cm off"}), {}, "arm_failed"),
+    ("the reach fails every time", dict(arm_fail={"reach": "2 cm off"}), {}, "grasp_failed"),
     ("every grasp closes on nothing", dict(grasp_misses=10), {}, "grasp_failed"),
     ("the controller never takes a mode", dict(modes_work=False), {}, "mode_timeout"),
     ("the person is not mapped", dict(people_={"person_9": None}), {}, "unknown_person"),
@@ -158,7 +159,8 @@ def test_the_cancel_test_visits_every_leaf_that_runs_on_the_happy_path() -> None
     names = {leaf.split(":")[1] for leaf in LEAVES}
     assert {
         "mode_walk_navigation", "navigate_to_artifact", "mode_walk_mission", "look", "approach",
-        "mode_manipulate_navigation", "estimate_grasp", "open_jaw", "reach", "grasp", "stow",
+        "mode_manipulate_navigation", "estimate_grasp", "open_jaw", "ready", "reach", "grasp",
+        "lift", "stow",
         "navigate_to_person", "mode_stand_navigation", "present", "feel_pull", "release",
         "back_off", "mode_stand_at_rest", "stow_empty",
     } <= names  # fmt: skip
@@ -212,9 +214,12 @@ def test_a_reach_is_only_sent_once_the_controller_is_in_manipulate() -> None:
     tree = mission(robot)
     run(tree, robot)
     reach = next(i for i, (_, g) in enumerate(robot.arm_goals) if isinstance(g, Reach))
-    assert isinstance(robot.arm_goals[reach - 1][1], Release)  # the jaw opened first
+    assert isinstance(robot.arm_goals[reach - 2][1], Release)  # the jaw opened first
+    assert robot.arm_goals[reach - 1][1] == Posture(name="ready")
     assert isinstance(robot.arm_goals[reach + 1][1], Grasp)
-    assert robot.arm_goals[reach + 2][1] == Posture(name="stow")
+    lift = robot.arm_goals[reach + 2][1]
+    assert isinstance(lift, Reach) and lift.frame == "world" and lift.pregrasp_m == 0.0
+    assert robot.arm_goals[reach + 3][1] == Posture(name="stow")
 
 
 def test_settings_change_the_handover_patience() -> None:

@@ -8,7 +8,9 @@
   freezes: the controller fails by itself, and `approach_timeout_s` bounds it. Stopped
   other than by arriving, it hands the base back to navigation (mode walk/navigation).
 - `EstimateGrasp`: standing still (`settle_s`), the first wrist detection captured after
-  that → `grasp_from_detection` → the plan and the detection on the blackboard; no
+  that → `grasp_from_detection` → ᴮH_G, fixed in the world by the base pose at capture
+  (so the Reach stays valid while the arm gets ready) → the plan and the detection on
+  the blackboard; no
   detection within `detection_timeout_s` → `object_not_found`; no grasp possible →
   `grasp_pose_failed`.
 """
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from py_trees.common import Status
 
 from services.mission.behaviours.base import (
@@ -46,9 +49,11 @@ class Approach(MissionBehaviour):
         seen = self.port.wrist_detection(target.map_id, target.class_name)
         sighting = None
         max_age_ns = round(self.settings.sighting_max_age_s * NS_PER_S)
-        if seen is not None and now_ns - seen[0] <= max_age_ns:
-            stamp, det = seen
-            sighting = self.ctx.algorithms.sighting(det.d_obj, det.theta_obj, stamp / NS_PER_S)
+        if seen is not None and now_ns - seen.stamp_ns <= max_age_ns:
+            det = seen.detection
+            sighting = self.ctx.algorithms.sighting(
+                det.d_obj, det.theta_obj, seen.stamp_ns / NS_PER_S
+            )
         cmd = self.controller.step(now_ns / NS_PER_S, sighting)
         if cmd.state != self.state:
             self.ctx.decide(f"approach {target.map_id}: {cmd.state} {cmd.reason}".rstrip())
@@ -88,7 +93,7 @@ class EstimateGrasp(MissionBehaviour):
         target = self.target()
         seen = self.port.wrist_detection(target.map_id, target.class_name)
         settled_ns = self.started_ns + round(s.settle_s * NS_PER_S)
-        if seen is None or seen[0] < settled_ns:
+        if seen is None or seen.stamp_ns < settled_ns:
             if self.elapsed_s() > s.settle_s + s.detection_timeout_s:
                 return self.fail(
                     "object_not_found",
@@ -96,12 +101,14 @@ class EstimateGrasp(MissionBehaviour):
                     f"{s.detection_timeout_s:.1f} s standing still",
                 )
             return Status.RUNNING
-        stamp, det = seen
+        stamp, det = seen.stamp_ns, seen.detection
         try:
-            plan = self.ctx.algorithms.grasp_from_detection(det, stamp)
+            plan = self.ctx.algorithms.grasp_from_detection(det, stamp)  # ᴮH_G
         except self.ctx.algorithms.grasp_error as exc:
             return self.fail("grasp_pose_failed", f"no grasp of {target.map_id}: {exc}")
         self.set(DETECTION, seen)
-        self.set(GRASP_PLAN, plan)
-        self.ctx.decide(f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp} ns")
+        self.set(GRASP_PLAN, plan.to_world(np.asarray(seen.T_world_base).reshape(4, 4)))
+        self.ctx.decide(
+            f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp / NS_PER_S:.2f} s"
+        )
         return Status.SUCCESS
