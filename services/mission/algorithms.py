@@ -44,8 +44,6 @@ class GraspPlanLike(Protocol):
 
     def reach(self) -> Reach: ...
 
-    def to_world(self, T_world_base: FloatArray) -> GraspPlanLike: ...
-
     def lifted(self, dz_m: float) -> GraspPlanLike: ...
 
 
@@ -62,7 +60,8 @@ class Algorithms:
     approacher: Callable[[], Approacher]
     #: (d_obj m, θ_obj rad, stamp s) → the approach controller's `Sighting`.
     sighting: Callable[[float, float, float], Any]
-    grasp_from_detection: Callable[[Detection, int], GraspPlanLike]
+    #: (detection, its frame's stamp ns, T_world_base at capture 4×4) → a world-frame plan.
+    grasp_from_detection: Callable[[Detection, int, FloatArray], GraspPlanLike]
     #: The exception `grasp_from_detection` raises when no grasp is possible.
     grasp_error: type[Exception]
     pull_detector: Callable[[], PullFeeler]

@@ -96,17 +96,11 @@ class GraspPlan:
             pregrasp_m=self.pregrasp_m,
         )
 
-    def to_world(self, T_world_base: FloatArray) -> GraspPlan:
-        """This plan fixed in the world by the base pose at its stamp: a `world` Reach
-        stays valid however long the arm takes to get ready (a `base` one must reach the
-        controller while it still remembers the base at the stamp)."""
-        return replace(self, H=self.in_world(T_world_base), frame="world")
-
     def lifted(self, dz_m: float) -> GraspPlan:
         """The grasp pose raised `dz_m` in the world, reached straight (no pre-grasp):
         the lift that takes the object off its surface before stowing."""
         if self.frame != "world":
-            raise GraspPoseError("a lift needs a world-frame plan (to_world first)")
+            raise GraspPoseError("a lift needs a world-frame plan (give T_world_base)")
         H = np.array(self.H, dtype=float)
         H[2, 3] += dz_m
         return replace(self, H=H, pregrasp_m=0.0)

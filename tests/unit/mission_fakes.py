@@ -330,16 +330,13 @@ class StubGraspError(Exception):
 @dataclass
 class StubPlan:
     kind: str = "side"
-    frame: Literal["base", "world"] = "base"
+    frame: Literal["base", "world"] = "world"
     possible: bool = True
     pregrasp_m: float = 0.08
 
     def reach(self) -> Reach:
         H = tuple(np.eye(4).ravel().tolist())
         return Reach(H=H, frame=self.frame, stamp_ns=0, pregrasp_m=self.pregrasp_m)
-
-    def to_world(self, T_world_base: object) -> StubPlan:
-        return StubPlan(self.kind, "world", self.possible, self.pregrasp_m)
 
     def lifted(self, dz_m: float) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, 0.0)
@@ -360,7 +357,7 @@ class StubPull:
 
 
 def stub_algorithms(grasp_possible: bool = True, pull: bool = True) -> Algorithms:
-    def grasp(det: Detection, stamp_ns: int) -> StubPlan:
+    def grasp(det: Detection, stamp_ns: int, T_world_base: object) -> StubPlan:
         if not grasp_possible:
             raise StubGraspError("the object lies on its side")
         return StubPlan()

@@ -8,9 +8,9 @@
   freezes: the controller fails by itself, and `approach_timeout_s` bounds it. Stopped
   other than by arriving, it hands the base back to navigation (mode walk/navigation).
 - `EstimateGrasp`: standing still (`settle_s`), the first wrist detection captured after
-  that → `grasp_from_detection` → ᴮH_G, fixed in the world by the base pose at capture
-  (so the Reach stays valid while the arm gets ready) → the plan and the detection on
-  the blackboard; no
+  that → `grasp_from_detection` → ᴮH_G composed with the base pose at capture: a
+  world-fixed goal (so the Reach stays valid while the arm gets ready, and a box's
+  world yaw is usable) → the plan and the detection on the blackboard; no
   detection within `detection_timeout_s` → `object_not_found`; no grasp possible →
   `grasp_pose_failed`.
 """
@@ -102,12 +102,13 @@ class EstimateGrasp(MissionBehaviour):
                 )
             return Status.RUNNING
         stamp, det = seen.stamp_ns, seen.detection
+        T_world_base = np.asarray(seen.T_world_base, dtype=float).reshape(4, 4)
         try:
-            plan = self.ctx.algorithms.grasp_from_detection(det, stamp)  # ᴮH_G
+            plan = self.ctx.algorithms.grasp_from_detection(det, stamp, T_world_base)
         except self.ctx.algorithms.grasp_error as exc:
             return self.fail("grasp_pose_failed", f"no grasp of {target.map_id}: {exc}")
         self.set(DETECTION, seen)
-        self.set(GRASP_PLAN, plan.to_world(np.asarray(seen.T_world_base).reshape(4, 4)))
+        self.set(GRASP_PLAN, plan)
         self.ctx.decide(
             f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp / NS_PER_S:.2f} s"
         )
