@@ -23,6 +23,8 @@ WORLD_DESCRIPTION = f"{ROOT}/world/description"
 WORLD_EVENTS = f"{ROOT}/world/events"
 #: A push on the robot's base (`sim.Push`): tests and evaluation publish, the sim applies.
 WORLD_PUSH = f"{ROOT}/world/push"
+#: Move a person (`sim.PersonCommand`): tests and evaluation publish, the sim applies.
+WORLD_PEOPLE_COMMAND = f"{ROOT}/world/people_command"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
 MAP_PEOPLE = f"{ROOT}/map/people"
 MAP_OCCUPANCY = f"{ROOT}/map/occupancy"

@@ -200,6 +200,33 @@ class Push(Message, frozen=True):
     duration_s: Annotated[float, msgspec.Meta(gt=0.0, le=10.0)]
 
 
+class PersonCommand(Message, frozen=True):
+    """`dume/world/people_command` (tests and evaluation only; the sim alone reads it): move
+    one person of the world, e.g. to step into the robot's path.
+
+    stamp_ns: sim time it takes effect; applied at the sim's step at that time (publish it
+        a participant period or more ahead for a lockstep-deterministic run; a late one is
+        applied at once and logged).
+    person_id: the world's person (`person_1`).
+    position: (2,) m, world: teleport the person there first (None: where they are).
+    yaw: rad, the direction they face after a teleport (None: unchanged).
+    walk_to: (k, 2) m, world: floor points walked in order at `speed`, then the person
+        stands at the last one; empty: they stand where they are (their own route is
+        dropped either way).
+    speed: m/s along `walk_to`, (0, 1.2].
+    ignore_robot: the person no longer stops and turns to face the robot when it comes
+        within 3 m (`services.sim.people.FACE_RADIUS_M`): they walk through their route.
+    """
+
+    stamp_ns: StampNs
+    person_id: EntityId
+    position: tuple[Finite, Finite] | None = None
+    yaw: Finite | None = None
+    walk_to: tuple[tuple[Finite, Finite], ...] = ()
+    speed: Annotated[float, msgspec.Meta(gt=0.0, le=1.2)] = 1.0
+    ignore_robot: bool = True
+
+
 class CameraInfo(Message, frozen=True):
     """A camera mount: parent frame, `T_parent_camera` (optical), intrinsics and rate."""
 

@@ -9,9 +9,17 @@ v ≤ √(2 a d)) and the caller's cap (people). The heading follows the path's 
 (the B1 walks forward faster than sideways) and turns to the goal's yaw over the last
 `heading_blend_m`; a large heading error holds translation back until the robot has
 turned. The velocity goes to `base_yaw` (vx, vy scaled together to their limits, so the
-direction is kept) and through per-axis acceleration limits. Inside the position
-tolerance translation stops and only the heading is aligned; `arrived` once both
-tolerances hold.
+direction is kept) and through per-axis acceleration limits.
+
+The final align: once inside the position tolerance the follower latches `aligning`
+(released if the base drifts `align_release_m` beyond the tolerance, or out of it with
+the heading already aligned, so that it walks back in): translation
+stops and the heading goes to the goal's yaw itself — not the blend, whose path
+direction is meaningless a few cm from the goal (it held the robot at a fixed 0.15 rad
+off the goal's yaw, a stall only the recoveries broke) — at a rate of at least
+`min_turn_rate` while the error exceeds half the tolerance (a trot turns poorly at
+tiny rates, and a proportional command fades as the error shrinks). `arrived` once both
+tolerances hold and the base is slow.
 """
 
 from __future__ import annotations
@@ -41,7 +49,8 @@ class ControllerParams:
     cost_slowdown: float = 0.5
     min_speed: float = 0.05
     k_position: float = 1.2
-    min_turn_rate: float = 0.0
+    min_turn_rate: float = 0.25
+    align_release_m: float = 0.05
 
 
 class FollowOutput(NamedTuple):
@@ -54,6 +63,9 @@ class FollowOutput(NamedTuple):
     remaining_m: float
     lookahead: tuple[float, float]
     direction: tuple[float, float] | None
+    aligning: bool = False
+    #: rad, the heading reference minus the base's yaw (the goal's yaw when aligning).
+    yaw_error: float = 0.0
 
 
 def limit_accel(prev: Vec3, want: Vec3, a_max: tuple[float, float, float], dt: float) -> Vec3:
@@ -81,6 +93,7 @@ class Follower:
         self.p = p
         self.set_path(poses)
         self.cmd: Vec3 = np.zeros(3)
+        self.aligning = False
 
     def set_path(self, poses: NDArray[np.float64]) -> None:
         self.poses = poses
@@ -122,11 +135,18 @@ class Follower:
             d = self.poses[k, :2] - np.array([pose.x, pose.y])
             if np.hypot(*d) > 0.1:
                 path_yaw = math.atan2(d[1], d[0])
+        goal_err = math.remainder(yaw_goal - pose.yaw, math.tau)
+        if to_goal <= tol_xy:
+            self.aligning = True
+        elif to_goal > tol_xy + p.align_release_m or abs(goal_err) <= 0.5 * tol_yaw:
+            self.aligning = False  # drifted out while turning: walk back in
+        inside = self.aligning
         blend = min(1.0, remaining / p.heading_blend_m) if p.heading_blend_m > 0 else 0.0
+        if inside:
+            blend = 0.0
         yaw_ref = yaw_goal + blend * math.remainder(path_yaw - yaw_goal, math.tau)
         yaw_err = math.remainder(yaw_ref - pose.yaw, math.tau)
         wz = float(np.clip(p.k_heading * yaw_err, -p.v_max[2], p.v_max[2]))
-        inside = to_goal <= tol_xy
         if inside and abs(yaw_err) > 0.5 * tol_yaw:  # a gait turns poorly at tiny rates
             wz = math.copysign(max(abs(wz), p.min_turn_rate), yaw_err)
         direction: tuple[float, float] | None = None
@@ -154,7 +174,7 @@ class Follower:
         want = np.array([vx, vy, wz])
         self.cmd = limit_accel(self.cmd, want, p.a_max, dt)
         slow = float(np.hypot(self.cmd[0], self.cmd[1])) < 0.05
-        arrived = inside and abs(math.remainder(yaw_goal - pose.yaw, math.tau)) <= tol_yaw and slow
+        arrived = to_goal <= tol_xy and abs(goal_err) <= tol_yaw and slow
         return FollowOutput(
             self.cmd.copy(),
             arrived,
@@ -162,6 +182,8 @@ class Follower:
             remaining,
             (float(target[0]), float(target[1])),
             direction,
+            inside,
+            yaw_err,
         )
 
     def stop(self, dt: float) -> Vec3:

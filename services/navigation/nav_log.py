@@ -1,7 +1,9 @@
 """What navigation tells a person, in the log and in rerun, on the sim-time timeline.
 
 Logged on change: the goal's state and reason, the speed rule acting (slow, handover,
-stop — with the person and their distance), recoveries. To rerun: every new plan
+stop — with the person and their distance), recoveries; at 2 Hz while the robot aligns
+its final heading (within 0.3 m of the goal): the yaw error, the commanded and the
+measured ωz. To rerun: every new plan
 (`nav/plan`), the lookahead point and the follower's command at 5 Hz, and the costmap
 as an image at 1 Hz (lethal 255, costs scaled to 0–200).
 """
@@ -9,6 +11,7 @@ as an image at 1 Hz (lethal 255, costs scaled to 0–200).
 from __future__ import annotations
 
 import logging
+import math
 from typing import Any
 
 import numpy as np
@@ -29,8 +32,18 @@ class NavLogger:
         self.state = ""
         self.recovery = ""
         self.last_costmap = -(10**18)
+        self.last_align = -(10**18)
 
-    def tick(self, b: int, pose: Pose, nav: Any, out: Any, cm: Costmap, tick_ms: float) -> None:
+    def tick(
+        self,
+        b: int,
+        pose: Pose,
+        nav: Any,
+        out: Any,
+        cm: Costmap,
+        tick_ms: float,
+        wz_measured: float = 0.0,
+    ) -> None:
         t = b / 1e9
         goal_id = nav.goal.goal_id if nav.goal else ""
         if out.state != self.state:
@@ -53,6 +66,7 @@ class NavLogger:
             if out.recovery:
                 self.log.warning("t=%.2f s goal %s recovery: %s", t, goal_id, out.recovery)
             self.recovery = out.recovery
+        self._align(b, pose, nav, out, wz_measured)
         if not self.on:
             return
         stamp(self.rec, b)
@@ -69,3 +83,17 @@ class NavLogger:
             self.last_costmap = b
             img = np.where(cm.cost < 0, 255, np.clip(cm.cost * 200, 0, 200)).astype(np.uint8)
             self.rec.log("nav/costmap", rr.Image(img[::-1]))
+
+    def _align(self, b: int, pose: Pose, nav: Any, out: Any, wz_measured: float) -> None:
+        if out.state != "active" or nav.goal is None or out.remaining_m > 0.3:
+            return
+        if b - self.last_align < 500_000_000:
+            return
+        self.last_align = b
+        g = nav.goal.pose
+        yaw_err = math.remainder(g.yaw - pose.yaw, math.tau)
+        self.log.info(
+            "t=%.2f s aligning: %.3f m, yaw error %+.3f rad; cmd (%+.2f, %+.2f, %+.3f), "
+            "measured wz %+.3f rad/s",
+            b / 1e9, math.hypot(g.x - pose.x, g.y - pose.y), yaw_err, *out.cmd, wz_measured,
+        )  # fmt: skip

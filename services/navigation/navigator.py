@@ -7,6 +7,8 @@ tick and returns the cmd_vel and the status. Per goal:
   `blocked_timeout_s`;
 - follow with `Follower`, capped by `people_limit` (a stop for a person counts as blocked
   time, so a person who stays leads to a replan around them, then to recovery);
+- progress is the remaining distance shrinking by 5 cm, or the heading error (to the
+  follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad;
 - when blocked for `blocked_timeout_s` (no plan, or no progress), recoveries in order:
   clear the short-lived layer, rotate in place (`rotate_s`), back off (`backoff_s`), each
   followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
@@ -88,6 +90,7 @@ class Navigator:
         self.follower: Follower | None = None
         self.recovery: Recovery = ""
         self.total_m = 0.0
+        self.limit_rule = ""
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
@@ -100,8 +103,10 @@ class Navigator:
         self.recovery = ""
         self.recovery_until = 0
         self.best_remaining = math.inf
+        self.best_yaw_error = math.inf
         self.progress_ns = t_ns
         self.total_m = 0.0
+        self.limit_rule = ""
 
     def cancel(self, reason: str) -> None:
         if self.state == "active":
@@ -178,7 +183,9 @@ class Navigator:
         probe = f.poses[min(f.index + 10, len(f.poses) - 1), :2] - np.array([pose.x, pose.y])
         norm = float(np.hypot(*probe))
         direction = (probe[0] / norm, probe[1] / norm) if norm > 1e-3 else None
-        limit = people_limit(pose, direction, cm.people, self.fp, self.p.people, g.handover_id)
+        limit = people_limit(pose, direction, cm.people, self.fp, self.p.people, g.handover_id,
+                             self.limit_rule == "stop")  # fmt: skip
+        self.limit_rule = limit.rule
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
                      g.tol_xy, g.tol_yaw)  # fmt: skip
         self.cmd = out.cmd
@@ -188,8 +195,10 @@ class Navigator:
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
             return self._out(limit, new_plan)
-        if out.remaining_m < self.best_remaining - 0.05 or limit.rule == "":
+        yaw_error = abs(out.yaw_error)
+        if out.remaining_m < self.best_remaining - 0.05 or yaw_error < self.best_yaw_error - 0.05:
             self.best_remaining = min(self.best_remaining, out.remaining_m)
+            self.best_yaw_error = yaw_error
             self.progress_ns = t_ns
         if limit.rule == "stop" or t_ns - self.progress_ns > self.p.blocked_timeout_s * NS:
             return self._blocked(t_ns, pose, cm, limit, new_plan)
@@ -224,6 +233,7 @@ class Navigator:
             self.last_plan_ns = -(10**18)
             self.progress_ns = t_ns
             self.best_remaining = math.inf
+            self.best_yaw_error = math.inf
             return self._out()
         if rec == "rotate":
             self.cmd = np.array([0.0, 0.0, 0.5])

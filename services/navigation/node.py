@@ -6,8 +6,10 @@ its own (grid and people), and until its grid is in, navigation is ready but idl
 ("waiting for the map": zero cmd_vel, goals refused as unavailable). Each tick b (multiples of
 `time.participants.navigation.period_s`): the odom stamped b (waited for: odom is on a
 known 50 Hz schedule), the head camera's depth when a frame is due at b (10 Hz; marks
-and clears the short-lived layer), the cancels received; the costmap is rebuilt when a
-layer changed; `Navigator.tick`; then `wbc/cmd_vel` (source `navigation`, zero when
+and clears the short-lived layer), perception's person detections that apply by b (the
+head camera's, `PerceptionFeed`, waited for in lockstep; the people layer is those seen
+over the map's people, `SeenPeople`), the cancels received; the costmap is rebuilt when
+a layer changed; `Navigator.tick`; then `wbc/cmd_vel` (source `navigation`, zero when
 idle) and `nav/status` stamped b every tick, `nav/path` on every new plan, and the ack.
 Goals arrive on the `nav/goal` queryable's thread: resolved there against the newest
 costmap (a standoff or handover pose from the map's data; refusals with a reason) and
@@ -47,7 +49,9 @@ from services.navigation.grid import Footprint, Grid, Pose
 from services.navigation.nav_log import NavLogger
 from services.navigation.navigator import GoalSpec, Navigator, NavParams, TickOutput
 from services.navigation.people import PeopleParams
+from services.navigation.perceived import PerceptionFeed
 from services.navigation.planner import PlanParams
+from services.navigation.seen_people import SeenPeople
 from services.navigation.sources import MapSource, Source, SourceError, WorldSource
 
 NAME = "navigation"
@@ -85,6 +89,7 @@ class NavNode:
                 slow_speed=n.slow_speed,
                 stop_distance_m=n.stop_distance_m,
                 handover_speed=n.handover_speed,
+                ramp_top_mps=max(n.v_max[0], n.v_max[1]),
             ),
         )
         self.depth_params = DepthParams()
@@ -94,6 +99,8 @@ class NavNode:
         self.grid: Grid | None = None
         self.layer = ObstacleLayer((1, 1), self.ttl_ns)
         self.people: list[Person] = []
+        self.map_people: list[Person] = []
+        self.seen = SeenPeople()
         self.costmap: Costmap | None = None
         self._fresh: tuple[Grid, list[Person]] | None = None
         if isinstance(self.source, WorldSource):  # truth: there at once, and static
@@ -106,6 +113,8 @@ class NavNode:
             bus.latest(keys.camera_rgbd(self.camera), CameraFrame, 2) if self.camera else None
         )
         self.cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
+        # People seen by perception (the head camera), applied at their stamp + latency.
+        self.perception = PerceptionFeed(bus, keys, cfg, self.camera, INPUT_TIMEOUT_S)
         self.cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self.status_pub = bus.publisher(keys.nav_status, NavStatus, "data")
         self.path_pub = bus.publisher(keys.nav_path, NavPath, "data")
@@ -152,7 +161,8 @@ class NavNode:
                 "map from %s: %s cells of %.2f m", self.source.name, grid.shape, grid.resolution
             )
             self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
-        self.grid, self.people = grid, people
+        self.grid, self.map_people = grid, people
+        self.people = self.seen.merge(people, t_ns)
         self.costmap = self._build(t_ns)
 
     def _build(self, t_ns: int) -> Costmap:
@@ -236,6 +246,14 @@ class NavNode:
         self.layer.mark(my, mx, b)
         return bool(len(my) or through.any() or len(iy))
 
+    def _perceive(self, b: int) -> bool:
+        """The head camera's people detections due by b; whether the people seen changed."""
+        due = self.perception.due(b)
+        before = self.seen.active(b)
+        for d in due:
+            self.seen.update(d)
+        return self.seen.active(b) != before
+
     def tick(self, b: int) -> None:
         t0 = time.perf_counter()
         try:
@@ -251,8 +269,12 @@ class NavNode:
         changed = self._camera(b, pose)
         with self._lock:
             fresh, self._fresh = self._fresh, None
+        seen_changed = self._perceive(b)  # every tick: lockstep waits on perception here
         if fresh is not None:
             self._adopt(*fresh, b)
+        elif seen_changed and self.grid is not None:
+            self.people = self.seen.merge(self.map_people, b)
+            changed = True
         if self.costmap is None:
             self._publish(b, np.zeros(3), None, "waiting for the map")
             return
@@ -280,7 +302,9 @@ class NavNode:
             self.layer.clear_all()
             self.costmap = self._build(b)
         self._publish(b, out.cmd, out)
-        self.log.tick(b, pose, self.nav, out, self.costmap, (time.perf_counter() - t0) * 1e3)
+        tick_ms = (time.perf_counter() - t0) * 1e3
+        wz = odom.base_angular_velocity_in_base[2]
+        self.log.tick(b, pose, self.nav, out, self.costmap, tick_ms, wz)
 
     def _publish(self, b: int, cmd: np.ndarray, out: TickOutput | None, detail: str = "") -> None:
         self.cmd_pub.put(

@@ -12,7 +12,7 @@ skipped until it answers again.
 The physics, people, handover and events live in `SimCore`; the cameras in `CameraRig`;
 this module only moves messages and keeps time. A `Push` on `dume/world/push` (tests and
 evaluation) is applied at the step of its stamp, so a lockstep run with a push is as
-repeatable as one without.
+repeatable as one without; so is a `PersonCommand` on `dume/world/people_command`.
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ from common.recording import default_blueprint, stamp
 from common.service import Service
 from services.sim.cameras import CameraRig
 from services.sim.core import CommandError, PushError, SimCore
+from services.sim.people_hook import PeopleHook
 from services.sim.rerun_scene import SceneLogger
 from services.sim.sim_log import SimLogger
 from services.sim.world import generate_world
@@ -162,6 +163,7 @@ class SimNode:
             pushes=bus.fifo(K.WORLD_PUSH, Push, maxlen=64),
         )
         self._pending_pushes: list[Push] = []
+        self.people_hook = PeopleHook(bus, svc.log)
         self.alive = bus.watch_alive(keys.alive_all)
         self._alive_names: set[str] = set()
         self._alive_version = -1
@@ -367,6 +369,7 @@ class SimNode:
                 self._apply(latest)
             self._apply_cmd_vel(t_ns)
             self._apply_pushes(t_ns)
+            self.people_hook.apply(t_ns, self.core.people)
             events = self.core.step()
             tick += 1
             if events:

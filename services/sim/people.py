@@ -6,8 +6,9 @@ position: when the base is within `FACE_RADIUS_M` the person stops and turns tow
 `position -> waypoints[0] -> ... -> waypoints[-1] -> ... -> position -> ...` at their
 speed (at most `MAX_SPEED_MPS`), pausing `PAUSE_S` at each end of a leg and turning in
 place towards the next one before walking on. Turns run at `TURN_RATE_RADPS`. With
-walking off, or no waypoints, a person only turns. The hand and the handover are
-`services.sim.handover`'s; the hand moves with the person's body.
+walking off, or no waypoints, a person only turns. `command` (a test hook) teleports a
+person and/or sends them along given points once, optionally ignoring the robot. The hand
+and the handover are `services.sim.handover`'s; the hand moves with the person's body.
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ class _Walker:
     leg: int = 0  # walking from route[leg] towards route[leg + 1] (cyclic, ping-pong)
     pause_s: float = 0.0
     dirty: bool = True  # the mocap pose needs writing
+    once: bool = False  # a commanded walk: the route once, no pauses, then stand
+    ignore_robot: bool = False  # walk on even with the robot within FACE_RADIUS_M
 
 
 def _route(person: Person) -> list[tuple[float, float]]:
@@ -72,11 +75,37 @@ class People:
         w = self._walkers[self.ids.index(person_id)]
         return w.x, w.y, w.yaw
 
+    def command(
+        self,
+        person_id: str,
+        position: tuple[float, float] | None,
+        yaw: float | None,
+        walk_to: list[tuple[float, float]],
+        speed: float,
+        ignore_robot: bool,
+    ) -> None:
+        """A test hook (`dume/world/people_command`): teleport a person (position, yaw),
+        then walk `walk_to` once at `speed` and stand; their own route is dropped.
+        `ignore_robot`: no stopping to face the robot. Raises KeyError for an unknown id,
+        ValueError for a bad speed."""
+        if person_id not in self.ids:
+            raise KeyError(f"no person {person_id!r}; the world has {list(self.ids)}")
+        if not 0.0 < speed <= MAX_SPEED_MPS:
+            raise ValueError(f"a person walks at (0, {MAX_SPEED_MPS}] m/s, got {speed}")
+        w = self._walkers[self.ids.index(person_id)]
+        if position is not None:
+            w.x, w.y = float(position[0]), float(position[1])
+        if yaw is not None:
+            w.yaw = wrap_angle(float(yaw))
+        w.route = [(w.x, w.y), *walk_to] if walk_to else []
+        w.leg, w.pause_s, w.speed, w.once = 0, 0.0, speed, True
+        w.ignore_robot, w.dirty = ignore_robot, True
+
     def update(self, data: mujoco.MjData, base_xy: tuple[float, float], dt: float) -> None:
         """Advance every person by dt seconds with the robot's base at base_xy; write mocap."""
         for w in self._walkers:
             dx, dy = base_xy[0] - w.x, base_xy[1] - w.y
-            if dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M:
+            if not w.ignore_robot and dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M:
                 self._turn_towards(w, math.atan2(dy, dx), dt)
             elif w.route:
                 self._walk(w, dt)
@@ -107,7 +136,10 @@ class People:
         if distance <= ARRIVE_M:  # there: stand on the point, pause, then the next leg
             w.x, w.y, w.dirty = tx, ty, True
             w.leg = (w.leg + 1) % len(w.route)
-            w.pause_s = PAUSE_S
+            if w.once and w.leg == len(w.route) - 1:
+                w.route, w.leg = [], 0  # a commanded walk ends standing at its last point
+                return
+            w.pause_s = 0.0 if w.once else PAUSE_S
             return
         if not self._turn_towards(w, math.atan2(dy, dx), dt):
             return

@@ -1,17 +1,22 @@
 """Navigation over a real lockstep stack with the whole-body controller (dynamic gait).
 
-The map is the sim's truth (`navigation.map_source="world"`): the semantic map is not
-part of these stacks. The WBC starts in `walk` obeying navigation's cmd_vel.
+The map is the semantic map's (`navigation.map_source="map"`, seeded from the world into
+the test's folder), so its occupancy and people queryables are exercised. The WBC starts
+in `walk` obeying navigation's cmd_vel. What is checked comes from the sim's truth
+(odom, contact events, the people commands the test itself sends).
 """
 
 from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from bench import nav_person
+from common.bus import RemoteError
 from common.geometry import quat_xyzw_to_matrix, yaw_of
 from common.keys import WORLD_EVENTS
 from common.messages.navigation import (
@@ -38,13 +43,33 @@ NAV = (
     'time.participants.navigation.role="periodic"',
     "time.participants.navigation.period_s=0.05",
     "time.participants.navigation.latency_s=0.05",
-    'navigation.map_source="world"',
+    'time.participants.semantic_map.role="periodic"',
+    "time.participants.semantic_map.period_s=0.1",
+    "time.participants.semantic_map.latency_s=0.1",
+    'semantic_map.start="seed-from-world"',
+    "semantic_map.reset=true",
+    'semantic_map.name="nav_test"',
+    'navigation.map_source="map"',
     'wbc.initial_mode="walk"',
 )
+NAV_SERVICES = ["sim", "wbc", "semantic_map", "navigation"]
+
+
+def _map_dir(tmp_path: Path) -> str:
+    return f'semantic_map.dir="{tmp_path / "map"}"'
 
 
 def _send(s: ProcessStack, goal: PoseGoal) -> str:
-    reply = s.bus.query(s.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, 10.0)
+    """The goal's id; while navigation waits for the map's first grid, sent again."""
+    deadline = time.monotonic() + 120.0
+    while True:
+        try:
+            reply = s.bus.query(s.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, 10.0)
+            break
+        except RemoteError as exc:
+            if exc.error.code != "unavailable" or time.monotonic() > deadline:
+                raise
+            time.sleep(0.5)
     assert reply.accepted, reply.reason
     return reply.goal_id
 
@@ -54,7 +79,7 @@ def _wait_done(status: object, goal_id: str, timeout_s: float) -> NavStatus:
     while time.monotonic() < deadline:
         st = status.get()  # type: ignore[attr-defined]
         if st is not None and st.goal_id == goal_id and st.state not in ("active", "idle"):
-            return st  # type: ignore[no-any-return]
+            return st
         time.sleep(0.2)
     raise AssertionError(f"goal {goal_id} not done within {timeout_s} s: {status.get()}")  # type: ignore[attr-defined]
 
@@ -65,9 +90,9 @@ def _pose(odom: Odom) -> tuple[float, float, float]:
 
 
 def test_three_goals_in_the_small_world_are_reached_without_touching_obstacles(
-    stack: StartStack,
+    stack: StartStack, tmp_path: Path
 ) -> None:
-    s = stack(["sim", "wbc", "navigation"], *NAV)
+    s = stack(NAV_SERVICES, *NAV, _map_dir(tmp_path))
     status = s.bus.latest(s.keys.nav_status, NavStatus)
     odom = s.bus.latest(s.keys.odom, Odom)
     events = s.bus.fifo(WORLD_EVENTS, WorldEvents)
@@ -87,8 +112,10 @@ def test_three_goals_in_the_small_world_are_reached_without_touching_obstacles(
     assert contacts == []
 
 
-def test_a_cancel_brings_the_base_to_rest_within_half_a_second(stack: StartStack) -> None:
-    s = stack(["sim", "wbc", "navigation"], *NAV)
+def test_a_cancel_brings_the_base_to_rest_within_half_a_second(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = stack(NAV_SERVICES, *NAV, _map_dir(tmp_path))
     status = s.bus.latest(s.keys.nav_status, NavStatus)
     odom = s.bus.fifo(s.keys.odom, Odom, maxlen=100_000)
     cancel = s.bus.publisher(s.keys.nav_cancel, NavCancel)
@@ -111,3 +138,35 @@ def test_a_cancel_brings_the_base_to_rest_within_half_a_second(stack: StartStack
         if m.stamp_ns >= cancelled_at and math.hypot(*m.base_linear_velocity_in_world[:2]) < 0.05
     )  # fmt: skip
     assert (rest - cancelled_at) / 1e9 <= 0.5
+
+
+# -- a person stepping into the path ----------------------------------------------------
+
+HALL_PERSON = (
+    *NAV,
+    *nav_person.SETTINGS,
+    'time.participants.perception.role="periodic"',
+    "time.participants.perception.period_s=0.1",
+    "time.participants.perception.latency_s=0.1",
+)
+
+
+@pytest.mark.slow
+def test_a_person_stepping_into_the_path_slows_and_stops_the_robot_which_then_goes_on(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    """The person steps into the path 4.5 m ahead and stands there (`bench.nav_person`):
+    the robot slows within 2 m (after a 0.5 s reaction time), and either walks round them
+    (the plan avoids people and what the head camera's depth shows) or stops short of
+    them and goes on once they leave; never closer than 0.5 m; it reaches its goal."""
+    services = ["sim", "wbc", "perception", "semantic_map", "navigation"]
+    s = stack(services, *HALL_PERSON, _map_dir(tmp_path))
+    f = nav_person.person_step_in(s)
+    assert f.t_in_s > 0, f
+    assert f.state == "succeeded", f
+    assert f.closest_m >= 0.5, f
+    assert f.fastest_near_mps <= 0.3, f
+    # It stopped for them, or its plan took it round them (6 m straight ahead otherwise).
+    assert f.slowest_near_mps < 0.05 or f.walked_m > 6.3, f
+    assert not f.t_out_s or f.moving_after_out, f
+    assert f.contacts == {}, f

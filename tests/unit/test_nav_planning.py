@@ -107,13 +107,16 @@ def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
     ahead = lambda x: [Person("person_1", x, 0.0)]  # noqa: E731
     assert people_limit(pose, (1.0, 0.0), ahead(5.0), FP, p).rule == ""
     slow = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.5), FP, p)
-    assert slow.rule == "slow" and slow.speed == p.slow_speed
+    assert slow.rule == "slow" and slow.speed == pytest.approx(
+        p.slow_speed * (1 - p.tracking_margin)
+    )
     stop = people_limit(pose, (1.0, 0.0), ahead(FP.front + 0.5), FP, p)
     assert stop.rule == "stop" and stop.speed == 0.0
     leaving = people_limit(pose, (-1.0, 0.0), ahead(FP.front + 0.5), FP, p)
     assert leaving.rule == "slow"
     handing = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.0), FP, p, "person_1")
-    assert handing.rule == "handover" and handing.speed == p.handover_speed
+    assert handing.rule == "handover"
+    assert handing.speed == pytest.approx(p.handover_speed * (1 - p.tracking_margin))
     d = distance_to_footprint(pose, FP, np.array([[FP.front + 0.5, 0.0]]))
     assert d[0] == pytest.approx(0.5)
 

@@ -1,0 +1,157 @@
+"""Navigation's path follower and goal state machine against a simple base model.
+
+The base model integrates the command one tick late (the lockstep latency) and, like a
+trot at tiny rates, does not turn at all below a dead band.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.navigation.controller import ControllerParams, Follower
+from services.navigation.costmap import CostParams, Person, build_costmap
+from services.navigation.grid import Footprint, Grid, Pose
+from services.navigation.navigator import GoalSpec, Navigator, NavParams
+from services.navigation.people import PeopleParams, SpeedLimit, people_limit
+
+DT = 0.05
+FP = Footprint.stowed()
+
+
+def _step(pose: Pose, cmd: np.ndarray, dead_band: float = 0.0) -> Pose:
+    vx, vy, wz = (float(v) for v in cmd)
+    wz = 0.0 if abs(wz) < dead_band else wz
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    return Pose(
+        pose.x + (c * vx - s * vy) * DT,
+        pose.y + (s * vx + c * vy) * DT,
+        math.remainder(pose.yaw + wz * DT, math.tau),
+    )
+
+
+def _path(x1: float, yaw_end: float) -> np.ndarray:
+    xs = np.linspace(0.0, x1, int(x1 / 0.05) + 1)
+    poses = np.column_stack([xs, np.zeros_like(xs), np.zeros_like(xs)])
+    poses[-1, 2] = yaw_end
+    return poses
+
+
+def _follow(f: Follower, pose: Pose, ticks: int, dead_band: float = 0.0) -> tuple[bool, Pose]:
+    cmd = np.zeros(3)
+    for _ in range(ticks):
+        pose = _step(pose, cmd, dead_band)  # the previous tick's command acts now
+        out = f.step(pose, DT, 0.0, math.inf, 0.1, 0.1)
+        if out.arrived:
+            return True, pose
+        cmd = out.cmd
+    return False, pose
+
+
+def test_inside_the_position_tolerance_the_heading_goes_to_the_goal_yaw_not_the_path() -> None:
+    # 7 cm short of the goal, beside the path: the blend's path direction points sideways.
+    f = Follower(_path(2.0, math.pi / 2), ControllerParams())
+    f.index = len(f.poses) - 3
+    pose = Pose(1.95, 0.05, math.pi / 2 - 0.25)
+    out = f.step(pose, DT, 0.0, math.inf, 0.1, 0.1)
+    assert out.aligning
+    assert out.yaw_error == pytest.approx(0.25, abs=1e-9)
+    arrived, end = _follow(f, pose, 200)
+    assert arrived
+    assert abs(math.remainder(end.yaw - math.pi / 2, math.tau)) <= 0.1
+
+
+@pytest.mark.parametrize("yaw_off", [0.12, -0.2, 0.6, -2.5])
+def test_the_final_align_finishes_through_a_turning_dead_band(yaw_off: float) -> None:
+    """A base that ignores |ωz| < 0.15 rad/s still reaches a 0.1 rad tolerance."""
+    f = Follower(_path(1.0, 0.0), ControllerParams())
+    f.index = len(f.poses) - 1
+    arrived, end = _follow(f, Pose(1.0, 0.02, yaw_off), 400, dead_band=0.15)
+    assert arrived, end
+    assert abs(end.yaw) <= 0.1
+
+
+def test_the_align_latch_holds_translation_while_the_base_drifts_a_little() -> None:
+    f = Follower(_path(1.0, 0.0), ControllerParams())
+    f.index = len(f.poses) - 1
+    f.step(Pose(0.95, 0.0, 1.0), DT, 0.0, math.inf, 0.1, 0.1)
+    out = f.step(Pose(0.88, 0.0, 1.0), DT, 0.0, math.inf, 0.1, 0.1)  # 12 cm: still latched
+    assert out.aligning and out.cmd[0] == 0.0 and out.cmd[1] == 0.0
+    out = f.step(Pose(0.8, 0.0, 1.0), DT, 0.0, math.inf, 0.1, 0.1)  # 20 cm: walks back
+    assert not out.aligning
+
+
+def _open_floor() -> Grid:
+    occ = np.zeros((120, 160), dtype=bool)
+    occ[:2, :] = occ[-2:, :] = occ[:, :2] = occ[:, -2:] = True
+    return Grid(occ, 0.05, (-1.0, -3.0))
+
+
+def _run(nav: Navigator, pose: Pose, cm_for_t, ticks: int):  # type: ignore[no-untyped-def]
+    cmd = np.zeros(3)
+    outs = []
+    for k in range(ticks):
+        t = round(k * DT * 1e9)
+        pose = _step(pose, cmd, dead_band=0.05)
+        out = nav.tick(t, pose, cm_for_t(t, pose))
+        outs.append((t, pose, out))
+        cmd = out.cmd
+        if out.state != "active":
+            break
+    return outs
+
+
+def test_a_goal_behind_the_robot_is_reached_without_any_recovery() -> None:
+    cm = build_costmap(_open_floor(), FP, CostParams())
+    nav = Navigator(FP, NavParams(), DT)
+    nav.start(GoalSpec("g", Pose(3.0, 1.0, -2.0), 0.1, 0.1), 0)
+    outs = _run(nav, Pose(2.0, 0.0, math.pi), lambda _t, _p: cm, 2000)
+    assert outs[-1][2].state == "succeeded", outs[-1][2]
+    assert all(o.recovery == "" for _, _, o in outs)
+
+
+def test_a_person_ahead_slows_then_stops_the_robot_short_of_them() -> None:
+    person = Person("person_1", 4.0, 0.0, math.pi)
+    cm = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    cm = type(cm)(cm.grid, cm.cost, cm.occupied, cm.clearance, (person,))
+    nav = Navigator(FP, NavParams(), DT)
+    nav.start(GoalSpec("g", Pose(5.5, 0.0, 0.0), 0.1, 0.1), 0)
+    outs = _run(nav, Pose(0.0, 0.0, 0.0), lambda _t, _p: cm, 400)
+    gap = [person.x - p.x - FP.front for _, p, _ in outs]
+    speed = [float(np.hypot(*o.cmd[:2])) for _, _, o in outs]
+    within_2m = [v for g, v in zip(gap, speed, strict=True) if g <= 2.0 - 0.05]
+    assert within_2m and max(within_2m) <= 0.3 + 1e-6
+    assert min(gap) >= 0.5
+    assert any(o.limit.rule == "stop" for _, _, o in outs)
+
+
+def test_a_base_that_drifted_out_while_turning_walks_back_in_and_arrives() -> None:
+    f = Follower(_path(1.0, 0.0), ControllerParams())
+    f.index = len(f.poses) - 1
+    f.step(Pose(0.95, 0.0, 0.5), DT, 0.0, math.inf, 0.1, 0.1)  # latched, turning
+    out = f.step(Pose(0.88, 0.0, 0.02), DT, 0.0, math.inf, 0.1, 0.1)  # turned, 12 cm out
+    assert not out.aligning
+    arrived, end = _follow(f, Pose(0.88, 0.0, 0.02), 200)
+    assert arrived and math.hypot(end.x - 1.0, end.y) <= 0.1
+
+
+def test_the_people_caps_are_met_at_their_boundaries_on_a_braking_ramp() -> None:
+    p = PeopleParams()
+    pose = Pose(0.0, 0.0, 0.0)
+
+    def cap(gap: float, direction: tuple[float, float] | None = (1.0, 0.0)) -> SpeedLimit:
+        return people_limit(pose, direction, [Person("person_1", FP.front + gap, 0.0)], FP, p)
+
+    assert cap(4.0).rule == ""  # far: no cap below the top speed
+    assert 0.3 < cap(2.3).speed < 0.6  # braking towards the slow zone
+    slow = 0.3 * (1.0 - p.tracking_margin)
+    assert cap(2.0 + p.brake_lead_m).speed == pytest.approx(slow)  # in it at the slow speed
+    assert cap(1.5, None).speed == pytest.approx(slow)  # not moving towards them: just slow
+    assert cap(0.75).speed < slow  # ahead: braking towards the stop distance
+    assert cap(p.stop_distance_m + p.brake_lead_m).rule == "stop"
+    held = p.stop_distance_m + p.brake_lead_m + 0.5 * p.resume_margin_m
+    assert cap(held).rule == "slow"
+    assert people_limit(pose, (1.0, 0.0), [Person("p", FP.front + held, 0.0)], FP, p,
+                        stopped=True).rule == "stop"  # fmt: skip
