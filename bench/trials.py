@@ -19,6 +19,14 @@ on its last line.
 - push: 20 N·s lateral pushes on the base (200 N for 0.1 s, `dume/world/push`): standing,
   then trotting at 0.5 m/s, to the left and to the right; after each, the lowest base,
   the largest roll/pitch and how far the base was thrown sideways; never falls.
+
+Navigation's trials run over the full navigation stack instead (`bench.nav_run`):
+- goto X Y [yaw]: one pose goal (`bench.trial_goto`).
+- goals: `count` random goals in a row across the world (`bench.trial_goals`).
+- person: a person steps into the path (hall, seed 3; `bench.nav_person`).
+
+- fetch: the mission's manipulation algorithms (approach, grasp pose, felt handover) in a
+  scripted bring-me over the full stack, judged from the sim's truth (`bench.trial_fetch`).
 """
 
 from __future__ import annotations
@@ -37,7 +45,21 @@ from common import robot
 from common.geometry import wrap_angle
 from common.messages.wbc import Posture, Reach
 
-TRIALS = ("walk", "turn", "strafe", "random", "reach", "pick", "push")
+TRIALS = (
+    "walk",
+    "turn",
+    "strafe",
+    "random",
+    "reach",
+    "pick",
+    "push",
+    "goto",
+    "goals",
+    "person",
+    "fetch",
+    "patrol",
+)
+NAV_TRIALS = ("goto", "goals", "person")
 Figures = dict[str, Any]
 
 
@@ -211,6 +233,8 @@ WORLDS = {
     "turn": ("hall", 3),
     "random": ("hall", 3),
     "push": ("hall", 3),
+    "goto": ("hall", 3),
+    "goals": ("hall", 3),
 }
 DEFAULT_WORLD = ("small", 1)
 
@@ -220,10 +244,23 @@ def run_trial(
     world_seed: int | None = None,
     wbc_period_s: float = 0.002,
     overrides: list[str] | None = None,
+    options: dict[str, Any] | None = None,
 ) -> Figures:
-    """Run one trial on a fresh stack; its figures."""
+    """Run one trial on a fresh stack; its figures. `options`: the navigation trials'
+    `world`, and goto's `x`, `y`, `yaw` or goals' `count`."""
     world, seed = WORLDS.get(name, DEFAULT_WORLD)
     seed = seed if world_seed is None else world_seed
+    if name in NAV_TRIALS:
+        return _nav_trial(name, seed, overrides or [], dict(options or {}), world)
+    if name == "patrol":  # the semantic map's mapping patrol from an empty map
+        from bench.trial_patrol import patrol_run
+
+        world = (options or {}).get("world") or "hall"
+        return patrol_run(world, 0 if world_seed is None else world_seed, overrides or [])
+    if name == "fetch":  # the mission's manipulation algorithms over the full stack
+        from bench.trial_fetch import run_fetch
+
+        return run_fetch(seed, overrides)
     out: Figures = {"trial": name, "world": world, "world_seed": seed}
     out["wbc_period_s"] = wbc_period_s
     with start_stack(world, seed, wbc_period_s, overrides or []) as stack:
@@ -232,3 +269,20 @@ def run_trial(
         figures: Figures = {}
         d.run(SCRIPTS[name](d, figures))
     return out | d.figures() | figures
+
+
+def _nav_trial(
+    name: str, seed: int, overrides: list[str], opts: dict[str, Any], world: str
+) -> Figures:
+    world = opts.pop("world", None) or world
+    if name == "goto":
+        from bench.trial_goto import goto
+
+        return goto(opts["x"], opts["y"], opts.get("yaw", 0.0), world, seed, overrides)
+    if name == "person":
+        from bench.nav_person import person_trial
+
+        return person_trial(overrides)
+    from bench.trial_goals import goals_trial
+
+    return goals_trial(opts.get("count", 10), world, seed, overrides)
