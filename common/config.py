@@ -105,6 +105,8 @@ class WbcSettings(_Section):
     #: Base velocity limits (vx m/s, vy m/s, wz rad/s) and acceleration limits (per s).
     cmd_vel_max: list[float] = msgspec.field(default_factory=lambda: [0.8, 0.4, 1.0])
     cmd_vel_accel_max: list[float] = msgspec.field(default_factory=lambda: [1.0, 1.0, 2.0])
+    #: Braking limits (|v| decreasing), per s: harder than speeding up, so stops are short.
+    cmd_vel_decel_max: list[float] = msgspec.field(default_factory=lambda: [2.0, 2.0, 3.0])
     #: A gap in the state's stamps longer than this stops the robot.
     stale_state_s: float = 0.05
     #: `wbc/status` rate and rerun time-series rate, Hz of sim time.
@@ -401,7 +403,7 @@ def _check(config: Config) -> None:
         ticks = p.period_s * config.time.tick_hz
         if abs(ticks - round(ticks)) > 1e-6:
             raise ConfigError(f"time.participants.{name}.period_s must be whole ticks")
-    for key in ("cmd_vel_max", "cmd_vel_accel_max"):
+    for key in ("cmd_vel_max", "cmd_vel_accel_max", "cmd_vel_decel_max"):
         limits = getattr(config.wbc, key)
         if len(limits) != 3 or min(limits) <= 0:
             raise ConfigError(f"wbc.{key} must be 3 positive numbers (vx, vy, wz), got {limits}")

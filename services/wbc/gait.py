@@ -38,6 +38,8 @@ class GaitParams:
     step_height_m: float = 0.08
     v_max: tuple[float, float, float] = (0.8, 0.4, 1.0)
     a_max: tuple[float, float, float] = (1.0, 1.0, 2.0)
+    #: Braking (|v| decreasing) may be harder than speeding up: a stop comes sooner.
+    d_max: tuple[float, float, float] = (2.0, 2.0, 3.0)
     stop_threshold: float = 0.02
     max_step_m: float = 0.25  # foothold offset from the hip, per axis
     hip_offsets: FloatArray = field(
@@ -50,13 +52,14 @@ class GaitParams:
 def shape_velocity(
     cmd: FloatArray, previous: FloatArray, dt: float, params: GaitParams
 ) -> FloatArray:
-    """The command clamped to ±v_max, moved from `previous` by at most a_max dt per axis."""
+    """The command clamped to ±v_max, moved from `previous` by at most a_max dt per axis
+    (d_max dt while it slows down)."""
     out = np.empty(3)
-    for i, (c, prev, vmax, amax) in enumerate(
-        zip(cmd.tolist(), previous.tolist(), params.v_max, params.a_max, strict=True)
+    for i, (c, prev, vmax, amax, dmax) in enumerate(
+        zip(cmd.tolist(), previous.tolist(), params.v_max, params.a_max, params.d_max, strict=True)
     ):
         target = min(max(c, -vmax), vmax)
-        step = amax * dt
+        step = (dmax if prev * (target - prev) < 0.0 else amax) * dt
         out[i] = prev + min(max(target - prev, -step), step)
     return out
 

@@ -108,7 +108,11 @@ class WbcNode:
         me = cfg.time.participants.get(NAME)
         self.period_ns = round((me.period_s if me else 1.0 / cfg.time.tick_hz) * NS_PER_S)
         latency = {n: round(p.latency_s * NS_PER_S) for n, p in cfg.time.participants.items()}
-        gait = GaitParams(v_max=tuple(w.cmd_vel_max), a_max=tuple(w.cmd_vel_accel_max))  # type: ignore[arg-type]
+        gait = GaitParams(
+            v_max=tuple(w.cmd_vel_max),  # type: ignore[arg-type]
+            a_max=tuple(w.cmd_vel_accel_max),  # type: ignore[arg-type]
+            d_max=tuple(w.cmd_vel_decel_max),  # type: ignore[arg-type]
+        )
         self.ctrl = WholeBodyController(gait_params=gait, clock=time.perf_counter)
         self.actions = ArmActions(ArmParams(grip_effort_max_nm=w.grip_effort_max_nm))
         self.arbiter = CmdVelArbiter(latency, round(w.cmd_vel_timeout_s * NS_PER_S))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from common import robot
 from services.wbc.gait import GaitParams, TrotGait, bump, quintic, shape_velocity
@@ -65,3 +66,23 @@ def test_footholds_step_ahead_when_walking_forward_and_into_a_push() -> None:
     assert still[2] == robot.FOOT_RADIUS_M
     pushed = gait.foothold(0, np.zeros(2), 0.0, np.array([0.5, 0.3, 0.0]), 0.5)
     assert pushed[1] > still[1] + 0.05
+
+
+def test_braking_is_harder_than_speeding_up() -> None:
+    p = GaitParams(a_max=(1.0, 1.0, 2.0), d_max=(2.0, 2.0, 3.0))
+    dt = 0.002
+    v = np.zeros(3)
+    t_up = 0
+    while v[0] < 0.5 - 1e-9:
+        v = shape_velocity(np.array([0.5, 0.0, 0.0]), v, dt, p)
+        t_up += 1
+    t_down = 0
+    while v[0] > 1e-9:
+        v = shape_velocity(np.zeros(3), v, dt, p)
+        t_down += 1
+    assert t_up * dt == pytest.approx(0.5, abs=2 * dt)
+    assert t_down * dt == pytest.approx(0.25, abs=2 * dt)
+    # A reversal brakes to zero at d_max, then speeds up the other way at a_max.
+    v = np.array([0.0, 0.4, 0.0])
+    v = shape_velocity(np.array([0.0, -0.4, 0.0]), v, dt, p)
+    assert v[1] == pytest.approx(0.4 - 2.0 * dt)
