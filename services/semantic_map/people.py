@@ -39,8 +39,11 @@ class PeopleParams:
     tentative_ttl_ns: int = 2_000_000_000
     coast_ns: int = 2_000_000_000
     v_max: float = 1.5
-    #: The position's σ never grows past this, m.
-    max_sigma_m: float = 10.0
+    #: The position's σ never grows past this, m: a person long unseen is gated within
+    #: about 3.7 m of where they were last seen, so a stray detection far away (a false
+    #: positive) never drags them across the hall; one back after a long walk unseen gets
+    #: a new id instead.
+    max_sigma_m: float = 1.0
     #: A detection left over this close to a person is a piece of them, never a new
     #: person (two bodies do not overlap), m.
     min_separation_m: float = 0.35

@@ -107,3 +107,18 @@ def test_the_colour_histogram_tells_two_shirts_apart_and_matches_one_shirt() -> 
     assert bhattacharyya(red, red2) < 0.1
     assert bhattacharyya(red, blue) > 0.9
     assert colour_histogram(img, (70, 0, 90, 60), np.ones((60, 20), np.uint8)) is None
+
+
+def test_a_stray_detection_far_away_never_drags_a_long_unseen_person() -> None:
+    rng = np.random.default_rng(3)
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    look = _hist(2, rng)
+    for k in range(5):  # person_1 seen standing at the origin, then not for a minute
+        tracker.update(k * DT_NS, [Observation("person", np.zeros(2), 0.0, 0.05, appearance=look)])
+    (person,) = tracker.confirmed
+    later = 600 * DT_NS
+    for k in range(5):  # a false positive 12 m away with the same colours
+        far = Observation("person", np.array([12.0, 0.0]), 0.0, 0.05, appearance=look)
+        tracker.update(later + k * DT_NS, [far])
+    assert np.linalg.norm(person.xy) < 0.5, "person_1 stays where it was seen"
+    assert len(tracker.confirmed) == 2, "the stray one is somebody else"
