@@ -39,6 +39,7 @@ from services.perception.locate import (
 from services.perception.perception_log import PerceptionLogger
 from services.perception.pipeline import CLASSES, Detected, Segmented, detect
 from services.perception.segmenter import Segmenter, SegmenterError, TruthSegmenter
+from services.perception.self_filter import drop_self
 
 NAME = "perception"
 log = logging.getLogger(f"dume.{NAME}")
@@ -140,6 +141,10 @@ class PerceptionNode:
             try:
                 instances, reason, segment_ms = self._segment(cam, frame, b)
                 detected = detect(frame, instances, self.settings.min_score) if not reason else []
+                detected, selves = drop_self(detected)
+                if selves:
+                    log.debug("%s at t=%.3f s: %d person(s) inside the robot dropped",
+                              cam, b / NS_PER_S, selves)  # fmt: skip
             except (ArrayError, ValueError) as exc:
                 reason = f"bad frame: {exc}"
             except Exception as exc:  # a segmenter bug: say so, keep ticking
