@@ -182,7 +182,7 @@ class SemanticMapSettings(_Section):
     #: An artifact the map created itself from perception and fused fewer times than this
     #: is a false entry when looked for at its place and not seen: it is deleted, not
     #: marked missing (prior, seeded and imported artifacts are only marked missing).
-    drop_below_observations: int = 5
+    drop_below_observations: int = 10
     #: People: acceleration noise of the constant-velocity model, m/s², and the weight of
     #: the colour-histogram distance in the association cost.
     person_accel_sigma: float = 1.5

@@ -2,8 +2,10 @@
 
 `measure(frame_geometry, depth, mask, origin, class_name)` chains `geometry`: eq. 1 in the
 camera frame, the outlier gate there (depth bleed shows along the optical axis), then the
-inliers through `T_base_camera` to `base`, `base_yaw` (eq. 2: d_obj, θ_obj) and the world
-(`T_world_base`), and the class's upright fit in `base_yaw` (z up), carried to the world.
+inliers through `T_base_camera` to `base` and `base_yaw`, where, for upright objects
+(bottles, cans, boxes), the mask's bleed onto their support is dropped (`support`); the
+centroid of what is left gives eq. 2 (d_obj, θ_obj) and, through `T_world_base`, the
+world position, and the class's upright fit in `base_yaw` (z up) is carried to the world.
 `FrameGeometry` holds what a `CameraFrame` says about its geometry, as numpy.
 """
 
@@ -23,12 +25,15 @@ from services.perception.geometry import (
     T_base_yaw_base,
     backproject,
     heading,
-    robust_centroid,
+    robust_inliers,
     transform,
 )
+from services.perception.support import support_inliers
 
 #: Fewer valid points than this: no measurement (a sliver of mask or no depth).
 MIN_POINTS = 8
+#: Rounds of the depth-gap and support gates (`object_inliers`).
+GATE_ROUNDS = 3
 
 
 @dataclass(frozen=True)
@@ -72,6 +77,28 @@ class Measurement:
     n_outliers: int
 
 
+def object_inliers(pts_cam: FloatArray, T_base_yaw_camera: FloatArray, upright: bool) -> BoolArray:
+    """The points (camera frame) that are the object: depth-connected to its median depth
+    (`geometry.robust_inliers`) and, for an upright object, not its support
+    (`support.support_inliers`, in `base_yaw`). The two alternate until neither removes
+    anything (at most `GATE_ROUNDS` rounds): once the table around a foot is gone, what
+    it bridged in depth to the object (something behind) shows its gap."""
+    if not upright:  # people and unknown classes: the depth-gap gate alone
+        return robust_inliers(pts_cam)
+    keep = np.ones(len(pts_cam), dtype=bool)
+    for _ in range(GATE_ROUNDS):
+        idx = np.flatnonzero(keep)
+        ok = robust_inliers(pts_cam[idx])
+        kept = pts_cam[idx[ok]]
+        on_object = support_inliers(transform(T_base_yaw_camera, kept), kept[:, 2])
+        if on_object.sum() >= MIN_POINTS:  # else too little is left to judge: gap only
+            ok[ok] = on_object
+        keep[idx[~ok]] = False
+        if ok.all():
+            break
+    return keep
+
+
 def measure(
     geo: FrameGeometry,
     depth: npt.NDArray[np.floating],
@@ -84,15 +111,16 @@ def measure(
     pts_cam = backproject(depth, mask, geo.K, origin)
     if len(pts_cam) < MIN_POINTS:
         return None
-    centroid_cam, keep = robust_centroid(pts_cam)
-    inliers = pts_cam[keep]
     T_by_c = geo.T_base_yaw_camera
     T_w_by = geo.T_world_base_yaw
-    pts_by = transform(T_by_c, inliers)
+    shape = CLASS_SHAPES.get(class_name, "centroid")
+    keep = object_inliers(pts_cam, T_by_c, shape != "centroid")
+    pts_by = transform(T_by_c, pts_cam[keep])
+    centroid_cam = pts_cam[keep].mean(axis=0)
     centroid_by = pts_by.mean(axis=0)
     d_obj, theta_obj = heading(centroid_by)
     eye_by = T_by_c[:3, 3]
-    fit = fit_upright(pts_by, eye_by, CLASS_SHAPES.get(class_name, "centroid"))
+    fit = fit_upright(pts_by, eye_by, shape)
     base_yaw_in_world = float(np.arctan2(T_w_by[1, 0], T_w_by[0, 0]))
     return Measurement(
         centroid_camera=centroid_cam,

@@ -8,7 +8,8 @@ max(gate_min, gate_sigmas × √(σ_track² + σ_meas²)). A detection that matc
 starts a tentative track; the second hit gives it the next `<class>_<n>`. Tentative tracks
 not seen again within `tentative_ttl_ns` are dropped (a one-frame false positive never
 gets an id). An artifact moved elsewhere shows up as a new artifact while the old one is
-found missing at its place (`missing`).
+found missing at its place (`missing`); a false entry the map made itself, from a few
+detections, is dropped instead (`drop`; the rule is the map's, see `mapper`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,10 @@ class ArtifactTracker:
         if track.id is not None:
             self.ids.reserve(track.id)
         self.tracks.append(track)
+
+    def drop(self, track: Track) -> None:
+        """Forget an artifact (a false entry); its id is never given again."""
+        self.tracks = [t for t in self.tracks if t is not track]
 
     def gate(self, track: Track, obs: Observation) -> float:
         spread = np.sqrt(track.sigma_m**2 + obs.sigma_m**2)

@@ -4,7 +4,13 @@
 and no transport: `ingest(detections, frame)` fuses one camera frame's detections (the
 frame, when at hand, gives the people's colour histograms, the frustum and depth of the
 missing test, and the depth points of the learned obstacles). What changed since the last
-`take_changes()` is what the node writes to the database in one transaction.
+`take_changes()` (and `take_deletions()`) is what the node writes to the database in one
+transaction.
+False entries: an artifact the map created itself (source `perception`) from fewer than
+`drop_below_observations` detections that is then looked for at its place and not seen
+(`missing_after_frames` looks) is deleted with the reason, not marked missing: a table
+leg read as a box a few times during a patrol should not send the mission searching.
+Prior, seeded and imported artifacts, and well-observed ones, are only marked missing.
 Measurement conventions: an artifact is placed at the detection's axis point (about a
 radius behind the visible surface) at the visible centroid's height; a person at the
 axis point's floor projection; the horizontal noise grows with the range d_obj. Person
@@ -44,19 +50,23 @@ class MapParams:
     min_score: float = 0.5
     missing_after_frames: int = 5
     look_range_m: float = 3.0
+    drop_below_observations: int = 10
     fusion: FusionParams = field(default_factory=FusionParams)
     people: PeopleParams = field(default_factory=PeopleParams)
 
 
 @dataclass
 class IngestReport:
-    """What one frame did: fused detections, new ids, newly missing ids, learned cells."""
+    """What one frame did: fused detections, new ids, newly missing ids, learned cells,
+    deleted false entries."""
 
     fused: int = 0
     ignored: int = 0
     new_ids: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     learned_cells: int = 0
+    #: (id, reason) of the false entries deleted in this frame.
+    dropped: list[tuple[str, str]] = field(default_factory=list)
 
 
 def _mat(values: tuple[float, ...]) -> FloatArray:
@@ -76,6 +86,7 @@ class SemanticMap:
         #: Where the static occupancy layer came from: world, file or none.
         self.static_source: Literal["world", "file", "none"] = "none"
         self._dirty: dict[str, Track] = {}
+        self._deleted: list[str] = []
         self._counters_dirty = False
         self.grid_dirty = False
 
@@ -93,6 +104,7 @@ class SemanticMap:
         self.people.tracks.clear()
         self.ids.counters.clear()
         self._dirty.clear()
+        self._deleted.clear()
 
     def entities(self, kind: EntityKind) -> list[MapEntity]:
         tracker = self.people if kind == "person" else self.artifacts
@@ -124,6 +136,15 @@ class SemanticMap:
         self._dirty.clear()
         self._counters_dirty = False
         return changed, counters
+
+    def take_deletions(self) -> list[str]:
+        """The ids deleted since the last call (to remove from the database)."""
+        deleted, self._deleted = self._deleted, []
+        return deleted
+
+    def is_false_entry(self, tr: Track) -> bool:
+        """An artifact the map made itself from too few detections to be trusted missing."""
+        return tr.source == "perception" and tr.hits < self.params.drop_below_observations
 
     # -- fusion --------------------------------------------------------------------------
 
@@ -184,13 +205,16 @@ class SemanticMap:
                 frame.height,
                 np.asarray(as_numpy(frame.depth), np.float32),
             )
-            report.missing = self._look(t, view, seen)
+            report.missing, report.dropped = self._look(t, view, seen)
             report.learned_cells = self._learn(dets, frame, view)
         return report
 
-    def _look(self, t: int, view: View, seen: set[int]) -> list[str]:
-        """Count a miss for each artifact this frame looked at and did not see."""
+    def _look(self, t: int, view: View, seen: set[int]) -> tuple[list[str], list[tuple[str, str]]]:
+        """Count a miss for each artifact this frame looked at and did not see; after
+        `missing_after_frames` of them it is missing, or deleted if a false entry.
+        Returns the newly missing ids and the (id, reason) of the deleted ones."""
         newly: list[str] = []
+        dropped: list[tuple[Track, str, str]] = []
         for i, tr in enumerate(self.artifacts.tracks):
             if tr.id is None or i in seen:
                 continue
@@ -198,11 +222,24 @@ class SemanticMap:
             if not looks_at(view, p, self.params.look_range_m):
                 continue
             tr.misses += 1
-            if tr.misses >= self.params.missing_after_frames and tr.missing_since_ns is None:
+            if tr.misses < self.params.missing_after_frames:
+                continue
+            if self.is_false_entry(tr):
+                reason = (
+                    f"a false entry: made from {tr.hits} detection(s) (fewer than "
+                    f"{self.params.drop_below_observations}), then not seen in {tr.misses} "
+                    f"looks at its place"
+                )
+                dropped.append((tr, tr.id, reason))
+            elif tr.missing_since_ns is None:
                 tr.missing_since_ns = t
                 self._dirty[tr.id] = tr
                 newly.append(tr.id)
-        return newly
+        for tr, entity_id, _ in dropped:
+            self.artifacts.drop(tr)
+            self._dirty.pop(entity_id, None)
+            self._deleted.append(entity_id)
+        return newly, [(entity_id, reason) for _, entity_id, reason in dropped]
 
     def _learn(self, dets: Detections, frame: CameraFrame, view: View) -> int:
         """Obstacles seen in this frame's depth, leaving out people and the robot."""

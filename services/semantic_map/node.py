@@ -269,6 +269,8 @@ class MapNode:
                 )
         for entity_id in report.missing:
             log.info("%s missing: looked at its place from %s, not seen", entity_id, dets.camera)
+        for entity_id, reason in report.dropped:
+            log.info("%s deleted from %s: %s", entity_id, dets.camera, reason)
 
     def _step_patrol(self, b: int) -> None:
         if not self.patrol.running:
@@ -285,19 +287,21 @@ class MapNode:
     def _commit(self, b: int) -> None:
         self.smap.stamp_ns = max(self.smap.stamp_ns, b)
         changed, counters = self.smap.take_changes()
+        deleted = self.smap.take_deletions()
         grids = None
         occ = self.smap.occupancy
         if self.smap.grid_dirty and b - self.last_grid_save >= 2 * NS_PER_S:
             grids = {"learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy)}
             self.smap.grid_dirty = False
             self.last_grid_save = b
-        if not changed and counters is None and grids is None:
+        if not changed and not deleted and counters is None and grids is None:
             return
         self.store.commit(
             entities=[(t.to_message(), t.appearance) for t in changed],
             counters=counters,
             grids=grids,
             meta={"stamp_ns": str(b)},
+            deleted=deleted,
         )
 
     def close(self) -> None:

@@ -1,7 +1,8 @@
 """The map's SQLite database: entities, id counters and the occupancy layers.
 
 One file per map (`<dir>/<name>.sqlite`) in WAL mode with `synchronous=FULL`. Every
-change of one tick goes in one transaction (`commit`), and the node acknowledges the tick
+change of one tick (entities written or deleted, counters, grids) goes in one
+transaction (`commit`), and the node acknowledges the tick
 only after it returns: a SIGKILL at any moment leaves the database as of the last
 committed transaction — the last acknowledged write is kept, nothing half-written is seen.
 Appearance histograms travel as float32 blobs; grids as zlib-compressed bytes.
@@ -107,8 +108,10 @@ class MapStore:
         grids: dict[str, Grid] | None = None,
         meta: dict[str, str] | None = None,
         replace: bool = False,
+        deleted: Iterable[str] = (),
     ) -> None:
-        """Write these changes atomically; `replace` clears the entities first (an import)."""
+        """Write these changes atomically; `replace` clears the entities first (an import);
+        the entities with the ids in `deleted` are removed (after the writes)."""
         cur = self.conn.cursor()
         cur.execute("BEGIN IMMEDIATE")
         try:
@@ -127,6 +130,7 @@ class MapStore:
                     for e, app in entities
                 ],
             )
+            cur.executemany("DELETE FROM entities WHERE id = ?", [(i,) for i in deleted])
             if counters:
                 cur.executemany(
                     "INSERT OR REPLACE INTO counters (class_name, last) VALUES (?,?)",

@@ -1,0 +1,175 @@
+"""False entries of the map: an artifact the map made itself from a few detections and
+then did not see when it looked at its place is deleted (in the database too, with the
+reason), while prior, seeded and well-observed artifacts are only marked missing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from common.geometry import make_T
+from common.messages import to_wire
+from common.messages.perception import Detection, Detections
+from common.messages.sim import CameraFrame
+from common.robot_description import R_FORWARD_OPTICAL
+from services.semantic_map.entities import Track
+from services.semantic_map.mapper import IngestReport, MapParams, SemanticMap
+from services.semantic_map.occupancy import Occupancy
+from services.semantic_map.store import MapStore
+
+S = 100_000_000
+W, H = 320, 240
+T_WORLD_BASE = np.eye(4)
+#: The head camera 0.8 m up looking along world +x; depth 5 m everywhere (nothing hides).
+T_BASE_CAMERA = make_T(R_FORWARD_OPTICAL, (0.0, 0.0, 0.8))
+BOX_XY, CAN_XY, BOTTLE_XY = (2.0, 0.0), (2.0, -0.5), (2.0, 0.5)
+
+
+def _frame(t: int) -> CameraFrame:
+    return CameraFrame(
+        stamp_ns=t,
+        camera="camera_head",
+        width=W,
+        height=H,
+        fx=200.0,
+        fy=200.0,
+        cx=(W - 1) / 2,
+        cy=(H - 1) / 2,
+        rgb=to_wire(np.zeros((H, W, 3), np.uint8)),
+        depth=to_wire(np.full((H, W), 5.0, np.float32)),
+        T_base_camera=tuple(T_BASE_CAMERA.ravel().tolist()),
+        T_world_base=tuple(T_WORLD_BASE.ravel().tolist()),
+    )
+
+
+def _det(cls: str, xy: tuple[float, float]) -> Detection:
+    p = (xy[0], xy[1], 0.5)
+    return Detection(
+        class_name=cls,
+        score=0.9,
+        bbox=(10, 10, 12, 12),
+        mask=to_wire(np.ones((2, 2), np.uint8)),
+        centroid_in_base_yaw=p,
+        centroid_in_world=p,
+        axis_in_world=p,
+        extent=(0.1, 0.1, 0.1),
+        d_obj=float(np.hypot(*xy)),
+        theta_obj=0.0,
+        n_points=50,
+    )
+
+
+def _ingest(smap: SemanticMap, t: int, *dets: Detection) -> IngestReport:
+    msg = Detections(
+        stamp_ns=t,
+        camera="camera_head",
+        T_world_base=tuple(T_WORLD_BASE.ravel().tolist()),
+        segmenter="network",
+        detections=list(dets),
+    )
+    return smap.ingest(msg, _frame(t))
+
+
+def _map(drop_below: int = 5) -> SemanticMap:
+    occ = Occupancy(np.zeros((20, 20), np.uint8), 0.5, (-5.0, -5.0), hits_needed=3)
+    return SemanticMap(MapParams(drop_below_observations=drop_below), occ, {})
+
+
+def _seeded_bottle() -> Track:
+    return Track(
+        class_name="bottle",
+        kind="artifact",
+        xy=np.array(BOTTLE_XY),
+        cov=np.eye(2) * 0.05**2,
+        z=0.5,
+        source="seed-from-world",
+        id="bottle_1",
+    )
+
+
+def _commit(smap: SemanticMap, store: MapStore) -> None:
+    """What the node does at the end of a tick."""
+    changed, counters = smap.take_changes()
+    store.commit(
+        [(t.to_message(), t.appearance) for t in changed],
+        counters,
+        deleted=smap.take_deletions(),
+    )
+
+
+def _run(smap: SemanticMap, store: MapStore | None = None) -> list[IngestReport]:
+    """A box seen twice and a can seen six times (both made by the map), then eight frames
+    looking at their places (and the seeded bottle's) and seeing nothing."""
+    reports = []
+    for k in range(1, 15):
+        dets = []
+        if k <= 2:
+            dets.append(_det("box", BOX_XY))
+        if k <= 6:
+            dets.append(_det("can", CAN_XY))
+        reports.append(_ingest(smap, k * S, *dets))
+        if store is not None:
+            _commit(smap, store)
+    return reports
+
+
+def test_a_false_entry_made_from_few_detections_is_deleted_when_not_seen() -> None:
+    smap = _map()
+    smap.add(_seeded_bottle())
+    reports = _run(smap)
+    created = [i for r in reports for i in r.new_ids]
+    assert created == ["box_1", "can_1"]
+    dropped = [d for r in reports for d in r.dropped]
+    assert [i for i, _ in dropped] == ["box_1"]
+    assert "2 detection(s)" in dropped[0][1] and "not seen" in dropped[0][1]
+    ids = {e.id: e for e in smap.entities("artifact")}
+    assert "box_1" not in ids
+    # the well-observed can and the seeded bottle are only marked missing
+    assert ids["can_1"].missing_since_ns is not None
+    assert ids["bottle_1"].missing_since_ns is not None
+    assert smap.take_deletions() == ["box_1"]
+
+
+def test_the_threshold_is_configurable_and_zero_keeps_every_entry() -> None:
+    smap = _map(drop_below=0)
+    reports = _run(smap)
+    assert not [d for r in reports for d in r.dropped]
+    assert smap.entity("artifact", "box_1") is not None
+    smap = _map(drop_below=10)
+    reports = _run(smap)
+    assert sorted(i for r in reports for i, _ in r.dropped) == ["box_1", "can_1"]
+
+
+def test_a_deleted_entry_is_gone_from_the_database_and_its_id_is_never_reused(
+    tmp_path: Path,
+) -> None:
+    store = MapStore(tmp_path / "m.sqlite")
+    smap = _map()
+    smap.add(_seeded_bottle())
+    _run(smap, store)
+    store.close()
+    snap = MapStore(tmp_path / "m.sqlite").load()
+    stored = {e.id: e for e, _ in snap.entities}
+    assert sorted(stored) == ["bottle_1", "can_1"]
+    assert stored["can_1"].missing_since_ns is not None
+    assert snap.counters["box"] == 1
+    # a restarted map gives the next box a new number
+    again = SemanticMap(MapParams(), smap.occupancy, snap.counters)
+    for e, app in snap.entities:
+        again.add(Track.from_message(e, app))
+    for k in (20, 21):
+        report = _ingest(again, k * S, _det("box", (2.0, 1.0)))
+    assert report.new_ids == ["box_2"]
+
+
+def test_writes_and_deletions_of_one_tick_land_together(tmp_path: Path) -> None:
+    store = MapStore(tmp_path / "m.sqlite")
+    a, b = _seeded_bottle(), _seeded_bottle()
+    b.id = "bottle_2"
+    store.commit([(a.to_message(), None), (b.to_message(), None)], {"bottle": 2})
+    b.missing_since_ns = 5
+    store.commit([(b.to_message(), None)], deleted=["bottle_1", "bottle_9"])
+    snap = store.load()
+    assert [(e.id, e.missing_since_ns) for e, _ in snap.entities] == [("bottle_2", 5)]
+    assert store.integrity() == "ok"
