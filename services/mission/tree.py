@@ -12,7 +12,8 @@
                   navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
-              pick_object: Release (open), Posture(ready), Reach(plan), Grasp, check_held,
+              pick_object: Release (open), Posture(ready), Reach(plan), Grasp, check_held
+                           (not held: open on the spot and fail grasp_failed),
                            lift (Reach up lift_m), Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go)
           release_object: mode stand, Posture(handover), feel_pull, Release,
@@ -109,7 +110,19 @@ def build_tree(ctx: Context) -> Sequence:
         ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(), "grasp_failed",
                   s.reach_timeout_s, st[3]),
         ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed", s.grasp_timeout_s, st[3]),
-        CheckHeld(ctx, st[3]),
+        Selector(
+            "held_or_let_go",
+            memory=True,
+            children=[
+                CheckHeld(ctx, st[3]),
+                _seq(
+                    "let_go",  # open on the spot: the object stays where it is for a re-pick
+                    ArmAction(ctx, "let_go", lambda _b: Release(), "arm_failed",
+                              s.release_timeout_s, st[3]),
+                    py_trees.behaviours.Failure(name="not_held"),
+                ),
+            ],
+        ),
         ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
                   "grasp_failed", s.reach_timeout_s, st[3]),
         ArmAction(ctx, "stow", lambda _b: Posture(name="stow"), "arm_failed",

@@ -4,8 +4,10 @@ A single revolute jaw closing under a torque limit stops where it meets the obje
 Held means: the gripper is closing with effort, the jaw has stopped (|velocity| below
 `still_rad_s` for `still_s`), it stopped short of closed by more than
 `short_of_closed_rad`, and the measured effort is at least `effort_min_nm` in the closing
-direction. A jaw that reaches closed has nothing in it (`empty`). No force sensing, no
-vision: what a real gripper's driver knows.
+direction. Once held, it stays held while the jaw stays short of closed under that effort
+(the jaw's velocity jitters on a held object as the arm moves). A jaw that reaches closed
+has nothing in it (`empty`): an object that slips out is no longer held. No force
+sensing, no vision: what a real gripper's driver knows.
 """
 
 from __future__ import annotations
@@ -54,6 +56,8 @@ class GraspDetector:
         self._still_for = self._still_for + dt if abs(velocity) < p.still_rad_s else 0.0
         still = self._still_for >= p.still_s
         short = angle < robot.GRIPPER_CLOSED - p.short_of_closed_rad
+        if self.held and short and effort >= p.effort_min_nm:
+            return True  # latched: a jaw that jitters on a held object still holds it
         self.held = still and short and effort >= p.effort_min_nm
         self.empty = still and not short
         return self.held

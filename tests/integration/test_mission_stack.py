@@ -12,8 +12,10 @@ from pathlib import Path
 
 import pytest
 
+from common.keys import WORLD_EVENTS
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.navigation import NavStatus
+from common.messages.sim import HandoverTaken, ObjectDropped, WorldEvents
 from common.messages.wbc import WbcStatus
 from common.stack import ProcessStack
 from tests.conftest import HOLD_COMMANDER, StartStack
@@ -148,6 +150,7 @@ def test_bring_me_small_world(stack: StartStack, tmp_path: Path) -> None:
         record=True,
     )
     assert s.config.sim.locomotion == "dynamic"
+    events = s.bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)  # truth, to judge
     user = User(s)
     user.request({"request_id": "bring-1", "object": "bottle_1", "person": "person_1"})
     user.wait("bring-1", {"accepted"}, 120.0)
@@ -155,5 +158,9 @@ def test_bring_me_small_world(stack: StartStack, tmp_path: Path) -> None:
     stages = list(dict.fromkeys(m.behaviour for m in user.seen if m.behaviour))
     assert done.state == "succeeded", (done, stages)
     assert stages[:1] == ["navigate_to_object"] and stages[-1] == "release_object"
+    happened = [e for w in events.drain() for e in w.events]
+    taken = [e for e in happened if isinstance(e, HandoverTaken)]
+    assert [(e.object_id, e.person_id) for e in taken] == [("bottle_1", "person_1")]
+    assert not [e for e in happened if isinstance(e, ObjectDropped)]
     s.stop()
     assert list((tmp_path / "recordings").glob("*/mission.rrd"))

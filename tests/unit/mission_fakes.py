@@ -88,6 +88,8 @@ class FakeRobot:
     arm_fail: dict[str, str] = field(default_factory=dict)
     #: Grasps that close on nothing before one holds.
     grasp_misses: int = 0
+    #: Grasps that succeed but do not hold (the object slips as the jaw settles).
+    slips: int = 0
     #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
     drops: int = 0
     drop_after: int = 1
@@ -250,6 +252,8 @@ class FakeRobot:
             if self.grasp_misses > 0:
                 self.grasp_misses -= 1
                 state, reason = "failed", "the jaw closed on nothing"
+            elif self.slips > 0:
+                self.slips -= 1
             else:
                 self.held = True
         elif isinstance(goal, Release):

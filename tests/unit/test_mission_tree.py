@@ -249,3 +249,14 @@ def test_a_navigation_that_stays_unavailable_fails_the_mission_with_a_reason() -
     outcome = run(mission(robot), robot)
     assert (outcome.state, outcome.reason) == ("failed", "navigation_failed")
     assert "no map yet" in outcome.detail
+
+
+def test_a_grasp_that_does_not_hold_lets_go_on_the_spot_and_picks_again() -> None:
+    robot = small_world()
+    robot.slips = 1
+    tree = mission(robot)
+    assert run(tree, robot).state == "succeeded"
+    kinds = robot.arm_kinds()
+    first = kinds.index("grasp")
+    assert kinds[first + 1] == "release", "it opens where it grasped, before walking away"
+    assert kinds.count("grasp") == 2

@@ -28,14 +28,14 @@ def _det(cls: str, x: float, y: float) -> Detection:
 
 
 def test_a_person_inside_the_footprint_or_just_beyond_is_the_robot() -> None:
-    x0, x1, y0, y1 = FOOTPRINT_BOUNDS
+    _, x1, y0, _ = FOOTPRINT_BOUNDS
     assert is_self(_det("person", 0.0, 0.0))
     assert is_self(_det("person", x1 + SELF_MARGIN_M - 0.01, 0.0))
     assert is_self(_det("person", 0.0, y0 - SELF_MARGIN_M + 0.01))
 
 
 def test_people_outside_and_artifacts_anywhere_are_kept() -> None:
-    x0, x1, y0, y1 = FOOTPRINT_BOUNDS
+    x0, x1, _, y1 = FOOTPRINT_BOUNDS
     assert not is_self(_det("person", x1 + SELF_MARGIN_M + 0.05, 0.0))
     assert not is_self(_det("person", 0.0, y1 + 0.6))
     assert not is_self(_det("person", x0 - 0.8, 0.0))

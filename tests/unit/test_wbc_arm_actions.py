@@ -170,11 +170,16 @@ def test_a_reach_whose_h_is_not_rigid_is_refused(H: np.ndarray, words: str) -> N
         check_reach(reach_goal(H))
 
 
-def test_the_grasp_detector_needs_the_jaw_still_for_a_while() -> None:
+def test_the_grasp_detector_needs_the_jaw_still_for_a_while_then_latches() -> None:
     det = GraspDetector()
     assert not det.update(True, -0.4, 0.0, 4.0, 0.05)
     assert det.update(True, -0.4, 0.0, 4.0, 0.06)
-    assert not det.update(True, -0.4, 0.3, 4.0, 0.001)  # moving again: not held
+    # Once held, jitter of the jaw on the object does not let go of it...
+    assert det.update(True, -0.4, 0.3, 4.0, 0.001)
+    assert det.update(True, -0.38, -0.2, 4.0, 0.001)
+    # ...but the object slipping out (the jaw closing past it) does.
+    assert not det.update(True, -0.02, 0.5, 4.0, 0.001)
+    assert not det.update(True, -0.4, 0.0, 4.0, 0.001), "held again only once still"
     assert not det.update(False, -0.4, 0.0, 4.0, 1.0)  # not closing: nothing held
 
 
