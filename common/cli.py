@@ -6,9 +6,12 @@
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
     dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
     dume map [--patrol | --export FILE | --import FILE]     the semantic map (JSON)
-    dume demo [--world-seed N] [--duration S]               run a whole job, print a JSON line
+    dume demo [--world-seed N] [--object ID --person ID]    bring an object, print a JSON line
+    dume eval --worlds N --seed S --out DIR                 N worlds judged from truth: a report
     dume bench sim|wbc|nav|all                              print figures (JSON last line)
     dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
+    dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
+    dume trial goals [--count 10] | person             random goals; a person stepping in (JSON)
     dume train-segmenter [--seed S]                         render data, train, export ONNX
 
 Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's) to talk to the
@@ -197,6 +200,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return run_demo(args)
 
 
+def cmd_eval(args: argparse.Namespace) -> int:
+    from common.evaluate import run_eval
+
+    return run_eval(args)
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from bench import run_bench
 
@@ -206,7 +215,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_trial(args: argparse.Namespace) -> int:
     from bench.trials import run_trial
 
-    result = run_trial(args.which, args.world_seed, args.wbc_period, args.set)
+    options: dict[str, object] = {"world": args.world, "count": args.count, "yaw": args.yaw}
+    if args.which == "goto":
+        if len(args.xy) != 2:
+            print("dume trial goto needs X Y (m, world)", file=sys.stderr)
+            return 2
+        options |= {"x": args.xy[0], "y": args.xy[1]}
+    result = run_trial(args.which, args.world_seed, args.wbc_period, args.set, options)
     print(json.dumps(result))
     return 0
 
@@ -286,11 +301,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds for the patrol")
     p.set_defaults(func=cmd_map)
 
-    p = add("demo", "start a stack, run the job, stop it, print a JSON result")
+    p = add("demo", "start a stack, bring an object to a person, stop it, print a JSON result")
+    p.description = (
+        "Start every service under supervisord, ask for an object for a person (by default "
+        "the bottle and the person farthest apart in the map), show the mission's progress, "
+        "stop, and print a JSON line; exit 0 only on success. The semantic map starts from "
+        "the world's truth positions with noise (seed-from-world), standing in for an earlier "
+        "mapping run, unless --map gives a prior map file."
+    )
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
-    p.add_argument("--duration", type=float, default=10.0, help="sim seconds to run")
+    p.add_argument("--object", default=None, help="a map id or class (default: a bottle)")
+    p.add_argument("--person", default=None, help="a person's map id (default: the farthest)")
+    p.add_argument("--map", default=None, metavar="FILE", help="a prior map file (dume map)")
+    p.add_argument("--timeout", type=float, default=600.0, help="sim seconds for the mission")
     p.set_defaults(func=cmd_demo)
+
+    p = add("eval", "N seeded worlds, one request each, judged from sim truth; a report")
+    p.description = (
+        "N seeded worlds (seeds S..S+N-1), each on a fresh stack with the default segmenter and "
+        "the dynamic controller, the map seeded from the world's truth with noise; one random "
+        "mapped artifact and person requested per world; success judged from the sim's "
+        "handover event. Writes DIR/report.md, DIR/results.json and PNG plots; the last "
+        "stdout line is a JSON summary."
+    )
+    p.add_argument("--worlds", type=int, default=20, help="how many worlds")
+    p.add_argument("--seed", type=int, default=0, help="world i is seed S + i")
+    p.add_argument("--out", default="var/eval/latest", metavar="DIR")
+    p.add_argument("--world", choices=["hall", "small"], default="hall")
+    p.add_argument("--walking-people", action="store_true", help="the walking-people scenario")
+    p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per world")
+    p.add_argument("--record", action="store_true", help="write each world's recording")
+    p.set_defaults(func=cmd_eval)
 
     p = add("bench", "benchmarks; each prints JSON on its last line")
     from bench import BENCHES
@@ -299,7 +341,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")
-    p.add_argument("which", choices=["walk", "turn", "strafe", "random", "reach", "pick", "push"])
+    p.add_argument(
+        "which",
+        choices=[
+            "walk",
+            "turn",
+            "strafe",
+            "random",
+            "reach",
+            "pick",
+            "push",
+            "goto",
+            "goals",
+            "person",
+            "patrol",
+        ],
+    )
+    p.add_argument("xy", nargs="*", type=float, help="goto: the goal's X Y, m in the world")
+    p.add_argument("--yaw", type=float, default=0.0, help="goto: the goal's yaw, rad")
+    p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals")
+    p.add_argument("--count", type=int, default=10, help="goals: how many")
     p.add_argument("--world-seed", type=int, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)

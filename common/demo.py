@@ -1,9 +1,17 @@
-"""`dume demo`: start a stack under supervisord, run the job, stop, print one JSON line.
+"""`dume demo`: start a stack under supervisord, ask for an object, follow it, stop, and
+print one JSON line.
 
-Until the mission service exists the job is the simulator's and the whole-body
-controller's: the robot stands in the generated world for `--duration` seconds of sim time, every
-camera and the world go to the run's recording, and the outcome says whether the robot
-stayed up. The last line is JSON:
+The stack is every service (`SERVICES`) under supervisord (`common.stack.Supervised`),
+lockstep, recording to `recordings/<run>/`. The semantic map starts from the world's
+truth positions with noise (`semantic_map.start = "seed-from-world"`), standing in for an
+earlier mapping run (`dume map --patrol`), or from a prior map file (`--map FILE`), in a
+fresh database of its own. Once every service is ready the demo asks, by map ids, for
+the bottle and the person farthest apart in the map (the longest job), or for the
+`--object` (an id or a class) and `--person` given, the other side chosen far from it.
+Progress goes to stderr: each status change, and every sim second the behaviour,
+progress, sim time and real-time factor. The outcome is `succeeded` when the mission
+says so and the sim's truth agrees (its `HandoverTaken` event: the object the requested
+map id stands for in the requested person's hand); exit code 0 only then. The last line:
 `{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording"}`.
 """
 
@@ -13,90 +21,145 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
-from common.bus import WaitTimeout
-from common.config import resolve
-from common.keys import WORLD_CLOCK
-from common.messages.sim import Clock, Odom
-from common.recording import run_dir
+from common.bus import BusError
+from common.config import REPO_ROOT, resolve
+from common.eval_judge import WorldResult, evaluate
+from common.eval_run import (
+    read_back,
+    read_map,
+    read_world,
+    request_result,
+    sigterm_interrupts,
+    watch_mission,
+)
+from common.eval_targets import TargetError, demo_pair
+from common.messages import PayloadError
+from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.sim import Clock
+from common.recording import new_run_id, run_dir
 from common.stack import Supervised
 
 #: The services `dume up` runs (supervisord's programs that start by default).
-SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation")
-#: The base is down when it sinks this low (the B1 stands at about 0.53 m).
-FALLEN_BELOW_M = 0.35
+SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation", "mission")
+#: Wall seconds for every service to be ready, and for supervisord to stop them all.
+READY_TIMEOUT_S = 300.0
+STOP_TIMEOUT_S = 180.0
 
 
-def run_demo(args: argparse.Namespace) -> int:
-    overrides = [
+def demo_overrides(args: argparse.Namespace, map_name: str) -> list[str]:
+    """The demo stack's settings: the world, the recording, a fresh map of its own."""
+    start = (
+        ['semantic_map.start="prior"', f'semantic_map.prior_file="{resolve(args.map)}"']
+        if args.map
+        else ['semantic_map.start="seed-from-world"']
+    )
+    return [
         f"sim.world_seed={args.world_seed}",
         f'sim.world="{args.world}"',
         "recording.enabled=true",
+        *start,
+        f'semantic_map.name="{map_name}"',
+        "semantic_map.reset=true",
         *args.set,
     ]
-    stack = Supervised(overrides, port=args.port)
-    recording = run_dir(stack.config.recording, stack.run_id)
+
+
+def _show(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
+    t = f"t={clock.stamp_ns / 1e9:6.1f} s  rtf {clock.rtf:4.2f}"
+    if status is None:
+        print(f"  {t}  waiting for the mission's first status", file=sys.stderr)
+        return
+    why = "  " + ": ".join(x for x in (status.reason, status.detail) if x)
+    mark = "→" if changed else " "
     print(
-        f"dume demo: {args.world} world seed {args.world_seed}, port {stack.port}, "
-        f"run {stack.run_id}",
+        f"{mark} {t}  {status.state:9s} {status.behaviour or '-':18s} "
+        f"{100 * status.progress:3.0f} %{why}",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _ask(stack: Supervised, args: argparse.Namespace, result: WorldResult) -> str:
+    """Choose, send and follow the request; fill `result`. Returns the locomotion."""
+    bus, keys = stack.bus, stack.keys
+    locomotion = read_back(bus, keys, timeout_s=30.0)["locomotion"]
+    world, (arts, people) = read_world(bus), read_map(bus)
+    pair = demo_pair(arts, people, args.object, args.person)
+    request_result(result, pair, arts, people, world)
+    request = MissionRequest(
+        request_id=f"demo-{stack.run_id}", object=pair.object, person=pair.person
+    )
+    far = "" if pair.distance_m != pair.distance_m else f", {pair.distance_m:.1f} m apart"
+    print(f"dume demo: asking for {pair.object} for {pair.person}{far}", file=sys.stderr)
+    evaluate(result, watch_mission(bus, keys, request, args.timeout, _show), world)
+    return locomotion
+
+
+def _verdict(result: WorldResult) -> tuple[str, str]:
+    """The demo's outcome and reason: the mission's success, confirmed by truth."""
+    if result.error:
+        return "failed", result.error
+    mission = result.mission_state or "no final status"
+    said = ": ".join(x for x in (result.mission_reason, result.mission_detail) if x)
+    if result.mission_state == "succeeded" and result.succeeded:
+        return "succeeded", f"{result.truth_reason} (asked: {result.object} for {result.person})"
+    if result.mission_state == "succeeded":
+        return "failed", f"the mission said succeeded but {result.truth_reason}"
+    return "failed", f"mission {mission} in {result.last_behaviour or '-'}: {said or '-'}"
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    run_id = new_run_id()
+    map_name = f"demo-{run_id}"
+    stack = Supervised(demo_overrides(args, map_name), port=args.port, run_id=run_id)
+    recording = run_dir(stack.config.recording, stack.run_id)
+    start = f"prior map {args.map}" if args.map else "seed-from-world (truth + noise)"
+    print(
+        f"dume demo: {args.world} world seed {args.world_seed}, map {start}, "
+        f"port {stack.port}, run {stack.run_id}",
         file=sys.stderr,
     )
     wall0 = time.perf_counter()
-    stack.start()
-    outcome, reason, sim_s, lowest = "failed", "", 0.0, float("inf")
-    locomotion = stack.config.sim.locomotion
-    try:
-        stack.wait_ready(list(SERVICES), timeout_s=120)
-        clock = stack.bus.latest(WORLD_CLOCK, Clock)
-        odom = stack.bus.latest(stack.keys.odom, Odom)
-        deadline_ns = round(args.duration * 1e9)
-        last_print = -1
-        while True:
-            try:
-                c = clock.wait(lambda c: c.stamp_ns > last_print, 30.0)  # noqa: B023
-            except WaitTimeout:
-                reason = "the simulator stopped publishing its clock"
-                break
-            o = odom.get()
-            if o is not None:
-                lowest = min(lowest, o.base_position_in_world[2])
-                locomotion = o.locomotion
-            if c.stamp_ns // 1_000_000_000 != last_print // 1_000_000_000:
-                print(
-                    f"  t={c.stamp_ns / 1e9:5.1f} s  rtf {c.rtf:4.2f}  "
-                    f"base {o.base_position_in_world[2] if o else float('nan'):.3f} m",
-                    file=sys.stderr,
-                )
-            last_print = c.stamp_ns
-            sim_s = c.stamp_ns / 1e9
-            if c.stamp_ns >= deadline_ns:
-                stood = lowest > FALLEN_BELOW_M
-                gone = sorted(set(SERVICES) - stack.alive())
-                outcome = "succeeded" if stood and not gone else "failed"
-                reason = (
-                    f"the base sank to {lowest:.3f} m"
-                    if not stood
-                    else f"services down at the end: {gone}"
-                    if gone
-                    else f"stood {sim_s:.1f} s with every service up; lowest base {lowest:.3f} m"
-                )
-                break
-    except WaitTimeout as exc:
-        reason = f"the stack did not come up: {exc}"
-    finally:
-        stack.stop()
+    result = WorldResult(world=args.world, world_seed=args.world_seed, scenario="demo")
+    locomotion: str = stack.config.sim.locomotion
+    step = "bring the stack up"
+    with sigterm_interrupts():
+        try:
+            stack.start()
+            stack.wait_ready(list(SERVICES), timeout_s=READY_TIMEOUT_S)
+            step = "run the request"
+            locomotion = _ask(stack, args, result)
+            result.services_down = sorted(set(SERVICES) - stack.alive())
+        except (BusError, PayloadError, TargetError) as exc:
+            result.error = f"could not {step}: {exc}"
+        finally:
+            # supervisord stops the services one by one and the sim flushes its recording:
+            # under load that takes longer than `Supervised.stop`'s default wait.
+            stack.stop(timeout_s=STOP_TIMEOUT_S)
+            for suffix in ("", "-wal", "-shm"):
+                db = resolve(stack.config.semantic_map.dir) / f"{map_name}.sqlite{suffix}"
+                db.unlink(missing_ok=True)
+    outcome, reason = _verdict(result)
+    if result.services_down:
+        outcome, reason = "failed", f"{reason}; services down at the end: {result.services_down}"
     wall = time.perf_counter() - wall0
     print(
         json.dumps(
             {
                 "outcome": outcome,
                 "reason": reason,
-                "sim_time_s": round(sim_s, 3),
+                "sim_time_s": result.sim_time_s,
                 "wall_time_s": round(wall, 2),
-                "rtf": round(sim_s / wall, 3) if wall > 0 else 0.0,
+                "rtf": result.rtf,
                 "locomotion": locomotion,
-                "recording": str(recording.relative_to(resolve("."))),
+                "recording": _shown(recording),
             }
         )
     )
     return 0 if outcome == "succeeded" else 1
+
+
+def _shown(path: Path) -> str:
+    return str(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)

@@ -101,3 +101,51 @@ def test_a_run_records_the_world_the_robot_and_both_cameras(
         "/plots/sim/base_height_m",
     ):
         assert entity in stats, entity
+
+
+DEMO_KEYS = {"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording"}
+
+
+def _last_json(out: subprocess.CompletedProcess[str]) -> dict[str, object]:
+    assert out.stdout.strip(), out.stderr[-3000:]
+    return dict(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def test_the_demo_refuses_an_object_the_map_does_not_hold_and_stops_its_stack() -> None:
+    out = dume("demo", "--world", "small", "--object", "bottle_9", timeout=600)
+    assert out.returncode == 1
+    line = _last_json(out)
+    assert set(line) == DEMO_KEYS
+    assert line["outcome"] == "failed"
+    assert "bottle_9" in str(line["reason"]) and "bottle_1" in str(line["reason"])
+
+
+@pytest.mark.slow
+def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Path) -> None:
+    out = dume(
+        "eval",
+        "--worlds",
+        "1",
+        "--world",
+        "small",
+        "--seed",
+        "0",
+        "--out",
+        str(tmp_path),
+        timeout=3000,
+    )
+    summary = _last_json(out)
+    assert out.returncode == 0, out.stderr[-4000:]
+    assert summary["worlds"] == 1
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["settings"]["segmenter"] == "network"
+    assert doc["settings"]["locomotion"] == "dynamic"
+    (world,) = doc["worlds"]
+    assert (world["object"], world["person"]) == ("bottle_1", "person_1")
+    assert (world["truth_object"], world["truth_person"]) == ("bottle_1", "person_1")
+    assert world["outcome"] == "succeeded", world
+    assert world["agree"] and world["stages_passed"][-1] == "release_object"
+    assert summary["succeeded"] == 1 and summary["success_rate"] == 1.0
+    report = (tmp_path / "report.md").read_text()
+    assert "**Success: 1/1 (100 %)**" in report
+    assert (tmp_path / "stage_times.png").exists() and (tmp_path / "outcomes.png").exists()

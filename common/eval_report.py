@@ -1,0 +1,201 @@
+"""`dume eval`'s outputs from its per-world results: a summary, `report.md`,
+`results.json` and two PNG plots.
+
+`summarize` counts: success rate (truth), how many worlds got through each stage of the
+tree, how often the mission's own outcome agreed with the truth, sim and wall times and
+the real-time factor. `write_report` writes the Markdown report (settings, per-stage
+table, every failure with its world seed and reason, times, a per-world table), the JSON
+(settings, summary, every `WorldResult`) and the plots, drawn with matplotlib's Agg
+canvas on `Figure` objects (no pyplot state, no display needed). Pure but for the files.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from common.eval_judge import STAGES, WorldResult
+
+PLOTS = ("stage_times.png", "outcomes.png")
+
+
+def _stats(values: Sequence[float]) -> dict[str, float]:
+    if not values:
+        return {"mean": math.nan, "median": math.nan}
+    return {
+        "mean": round(statistics.fmean(values), 2),
+        "median": round(statistics.median(values), 2),
+    }
+
+
+def summarize(results: Sequence[WorldResult]) -> dict[str, Any]:
+    """The figures a reader wants first; JSON-ready."""
+    n = len(results)
+    ok = [r for r in results if r.succeeded]
+    ran = [r for r in results if not r.error]
+    through = {s: sum(s in r.stages_passed for r in results) for s in STAGES}
+    wall = sum(r.wall_time_s for r in ran)
+    sim = sum(r.sim_time_s for r in ran)
+    return {
+        "worlds": n,
+        "succeeded": len(ok),
+        "success_rate": round(len(ok) / n, 4) if n else 0.0,
+        "stages_through": through,
+        "mission_agrees": sum(r.agree for r in ran),
+        "errors": sum(bool(r.error) for r in results),
+        "sim_time_s": _stats([r.sim_time_s for r in ran]),
+        "sim_time_s_succeeded": _stats([r.sim_time_s for r in ok]),
+        "wall_time_s": _stats([r.wall_time_s for r in ran]),
+        "rtf": round(sim / wall, 3) if wall > 0 else 0.0,
+        "contacts_static": sum(r.contacts_static for r in results),
+        "drops": sum(r.drops for r in results),
+    }
+
+
+def _pct(k: int, n: int) -> str:
+    return f"{100 * k / n:.0f} %" if n else "-"
+
+
+def _fmt(x: float) -> str:
+    return "-" if math.isnan(x) else f"{x:.1f}"
+
+
+def report_markdown(
+    settings: Mapping[str, Any], summary: Mapping[str, Any], results: Sequence[WorldResult]
+) -> str:
+    """The report's Markdown text."""
+    n = summary["worlds"]
+    lines = [
+        "# dume eval",
+        "",
+        "## Settings",
+        "",
+        *(f"- {k}: {v}" for k, v in settings.items()),
+        "",
+        "## Result",
+        "",
+        f"**Success: {summary['succeeded']}/{n} ({_pct(summary['succeeded'], n)})**, judged "
+        "from sim truth (the requested object in the requested person's hand). The "
+        f"mission's own outcome agreed with the truth in {summary['mission_agrees']} of "
+        f"{n - summary['errors']} runs.",
+        "",
+        "| stage | worlds through | rate |",
+        "|---|---|---|",
+        *(f"| {s} | {k} | {_pct(k, n)} |" for s, k in summary["stages_through"].items()),
+        "",
+        "## Times",
+        "",
+        "| | mean | median |",
+        "|---|---|---|",
+        *(
+            f"| {label} | {_fmt(summary[key]['mean'])} | {_fmt(summary[key]['median'])} |"
+            for label, key in (
+                ("sim time per world, s", "sim_time_s"),
+                ("sim time per success, s", "sim_time_s_succeeded"),
+                ("wall time per world, s", "wall_time_s"),
+            )
+        ),
+        "",
+        f"Real-time factor (sim / wall, over the missions): {summary['rtf']:.2f}. "
+        f"Contacts with static obstacles: {summary['contacts_static']}; "
+        f"objects dropped: {summary['drops']}.",
+        "",
+        "## Failures",
+        "",
+    ]
+    failures = [r for r in results if not r.succeeded]
+    lines += [
+        f"- world seed {r.world_seed} ({r.object} → {r.person}): {r.failure}" for r in failures
+    ]
+    lines += ["- none"] if not failures else []
+    lines += [
+        "",
+        "## Worlds",
+        "",
+        "| seed | object → person | truth | mission | agree | stage reached | sim s | wall s "
+        "| rtf | contacts | drops |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        mission = r.mission_state + (f" ({r.mission_reason})" if r.mission_reason else "")
+        lines.append(
+            f"| {r.world_seed} | {r.object} → {r.person} | {r.outcome} | {mission or '-'} "
+            f"| {'yes' if r.agree else 'no'} | {r.stage_reached or '-'} | {r.sim_time_s:.1f} "
+            f"| {r.wall_time_s:.0f} | {r.rtf:.2f} | {r.contacts_static} | {r.drops} |"
+        )
+    lines += ["", "## Plots", "", *(f"![{p}]({p})\n" for p in PLOTS)]
+    return "\n".join(lines)
+
+
+def plot_stage_times(results: Sequence[WorldResult], path: Path) -> None:
+    """A stacked horizontal bar per world: sim seconds in each stage; failures marked."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 1.5 + 0.35 * max(1, len(results))), layout="constrained")
+    ax = fig.add_subplot()
+    for i, r in enumerate(results):
+        left = 0.0
+        for j, stage in enumerate(STAGES):
+            w = r.stage_times_s.get(stage, 0.0)
+            ax.barh(i, w, left=left, color=f"C{j}", label=stage if i == 0 else None)
+            left += w
+        if not r.succeeded:
+            ax.text(left, i, "  ✗", va="center", color="red")
+    ax.set_yticks(range(len(results)), [f"seed {r.world_seed}" for r in results])
+    ax.invert_yaxis()
+    ax.set_xlabel("sim time, s")
+    ax.set_title("Time per stage (✗: failed)")
+    if results:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    fig.savefig(path, dpi=100)
+
+
+def plot_outcomes(results: Sequence[WorldResult], path: Path) -> None:
+    """Per world, the stages got through; green succeeded, red failed."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(max(6.5, 0.45 * len(results) + 3), 3.5), layout="constrained")
+    ax = fig.add_subplot()
+    xs = range(len(results))
+    heights = [len(r.stages_passed) for r in results]
+    ax.bar(xs, heights, color=["tab:green" if r.succeeded else "tab:red" for r in results])
+    for x, r in zip(xs, results, strict=True):
+        if not r.stages_passed:  # nothing to draw: mark it, with why when the run failed
+            ax.text(x, 0.1, "✗" if not r.error else "✗ error", ha="center", color="tab:red")
+    ax.set_xticks(xs, [str(r.world_seed) for r in results])
+    ax.set_yticks(range(len(STAGES) + 1), ["none", *STAGES], fontsize="small")
+    ax.set_ylim(0, len(STAGES) + 0.3)
+    ax.set_xlabel("world seed")
+    ax.set_title("Stages got through (green: succeeded, red: failed)", fontsize="medium")
+    fig.savefig(path, dpi=100)
+
+
+def json_safe(x: Any) -> Any:
+    """`x` with every NaN as None (JSON has no NaN)."""
+    if isinstance(x, float) and math.isnan(x):
+        return None
+    if isinstance(x, dict):
+        return {k: json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_safe(v) for v in x]
+    return x
+
+
+def write_report(
+    out: Path, settings: Mapping[str, Any], results: Sequence[WorldResult]
+) -> dict[str, Any]:
+    """Write report.md, results.json and the plots under `out`; return the summary."""
+    out.mkdir(parents=True, exist_ok=True)
+    summary = summarize(results)
+    (out / "report.md").write_text(report_markdown(settings, summary, results))
+    doc = {"settings": dict(settings), "summary": summary, "worlds": msgspec.to_builtins(results)}
+    (out / "results.json").write_text(json.dumps(json_safe(doc), indent=2) + "\n")
+    plot_stage_times(results, out / PLOTS[0])
+    plot_outcomes(results, out / PLOTS[1])
+    return summary

@@ -1,0 +1,215 @@
+"""One bring-me request on a live stack, watched from outside: what `dume demo` and
+`dume eval` share.
+
+`read_map` lists the semantic map (the request's candidates); `read_world` asks the sim
+for its truth; `read_back` reads the settings the stack actually runs with from what it
+publishes (the segmenter on every `Detections`, the locomotion on every `Odom`), not
+from the launcher's config. `watch_mission` subscribes to the mission's status, the
+world's events and the clock, sends the request once the mission's subscriber matches,
+and follows it to a final state, a sim-time timeout (then it cancels the request) or a
+clock that stops; `on_progress` sees every status change and every sim second. It
+never sleeps on wall time except in waits with timeouts. `sigterm_interrupts` turns
+SIGTERM into KeyboardInterrupt so that a killed demo or eval still stops its stack.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import time
+from collections.abc import Callable, Iterator
+from types import FrameType
+
+from common.bus import Bus, Fifo, Latest, WaitTimeout
+from common.eval_judge import TERMINAL, MissionRecord, WorldResult, transitions
+from common.eval_judge import truth_object as match_object
+from common.eval_judge import truth_person as match_person
+from common.eval_targets import Pair
+from common.keys import (
+    MAP_ARTIFACTS,
+    MAP_PEOPLE,
+    WORLD_CLOCK,
+    WORLD_DESCRIPTION,
+    WORLD_EVENTS,
+    RobotKeys,
+)
+from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+from common.messages.perception import Detections
+from common.messages.semantic_map import MapEntity, MapListing
+from common.messages.sim import Clock, Odom, WorldEvents
+from common.messages.world import WorldDescription
+
+#: Called with the request's status (None before the first), the clock, and whether the
+#: status just changed (otherwise: another sim second went by).
+Progress = Callable[[MissionStatus | None, Clock, bool], None]
+#: Wall seconds without a clock tick after which the sim is taken as stopped.
+STALL_WALL_S = 120.0
+#: Sim seconds of world events still collected after the final status.
+GRACE_S = 1.0
+
+
+@contextlib.contextmanager
+def sigterm_interrupts() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt while inside, so a killed demo or eval still
+    tears its stack down in its `finally`."""
+
+    def handler(_sig: int, _frame: FrameType | None) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def read_map(bus: Bus, timeout_s: float = 10.0) -> tuple[list[MapEntity], list[MapEntity]]:
+    """The map's artifacts and people (missing ones included; the choosers skip them)."""
+    arts = bus.query(MAP_ARTIFACTS, None, MapListing, timeout_s).entities
+    people = bus.query(MAP_PEOPLE, None, MapListing, timeout_s).entities
+    return arts, people
+
+
+def read_world(bus: Bus, timeout_s: float = 10.0) -> WorldDescription:
+    """The sim's world description (truth: for judging only)."""
+    return bus.query(WORLD_DESCRIPTION, None, WorldDescription, timeout_s)
+
+
+def read_back(bus: Bus, keys: RobotKeys, timeout_s: float = 60.0) -> dict[str, str]:
+    """`{"segmenter", "locomotion"}` as the running perception and sim report them."""
+    dets = bus.latest(keys.detections, Detections)
+    odom = bus.latest(keys.odom, Odom)
+    out = {"segmenter": "unknown", "locomotion": "unknown"}
+    try:
+        with contextlib.suppress(WaitTimeout):
+            out["locomotion"] = odom.wait(lambda _o: True, timeout_s).locomotion
+        with contextlib.suppress(WaitTimeout):
+            out["segmenter"] = dets.wait(lambda _d: True, timeout_s).segmenter
+    finally:
+        dets.undeclare()
+        odom.undeclare()
+    return out
+
+
+def request_result(
+    base: WorldResult,
+    pair: Pair,
+    artifacts: list[MapEntity],
+    people: list[MapEntity],
+    world: WorldDescription,
+) -> WorldResult:
+    """`base` with the request's targets and the truth ids they stand for, now."""
+    base.object, base.person, base.distance_m = pair.object, pair.person, pair.distance_m
+    obj = next((a for a in artifacts if a.id == pair.object), None)
+    who = next((p for p in people if p.id == pair.person), None)
+    o = match_object(world, obj.position_in_world[:2]) if obj else None
+    p = match_person(world, who.position_in_world[:2]) if who else None
+    base.truth_object = o.id if o else ""
+    base.truth_person = p.id if p else ""
+    base.truth_match_m = (
+        round(o.distance_m, 3) if o else float("nan"),
+        round(p.distance_m, 3) if p else float("nan"),
+    )
+    return base
+
+
+def watch_mission(
+    bus: Bus,
+    keys: RobotKeys,
+    request: MissionRequest,
+    timeout_s: float,
+    on_progress: Progress | None = None,
+) -> MissionRecord:
+    """Send `request`, follow it until a final state or `timeout_s` of sim time."""
+    statuses = bus.fifo(keys.mission_status, MissionStatus, maxlen=1 << 16)
+    events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=1 << 16)
+    clock = bus.latest(WORLD_CLOCK, Clock)
+    publisher = bus.publisher(keys.mission_request, MissionRequest, "control")
+    wall0 = time.perf_counter()
+    record = MissionRecord(request=request, start_ns=0)
+    try:
+        clock.wait(lambda _c: True, STALL_WALL_S)
+        _wait_matching(publisher.has_subscribers, 10.0)
+        now = clock.get()
+        record.start_ns = record.end_ns = now.stamp_ns if now else 0
+        publisher.put(request)
+        wall0 = time.perf_counter()
+        _follow(record, statuses, events, clock, timeout_s, on_progress)
+        record.wall_s = time.perf_counter() - wall0
+        if not record.changes or record.changes[-1].state not in TERMINAL:
+            _cancel(bus, keys, record, statuses)
+    except WaitTimeout:
+        record.ended = "the simulator's clock stopped"
+    finally:
+        record.wall_s = record.wall_s or time.perf_counter() - wall0
+        for sub in (statuses, events, clock):
+            sub.undeclare()
+        publisher.undeclare()
+    return record
+
+
+def _wait_matching(matched: Callable[[], bool], timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not matched() and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
+def _follow(
+    record: MissionRecord,
+    statuses: Fifo[MissionStatus],
+    events: Fifo[WorldEvents],
+    clock: Latest[Clock],
+    timeout_s: float,
+    on_progress: Progress | None,
+) -> None:
+    deadline_ns = record.start_ns + round(timeout_s * 1e9)
+    rid = record.request.request_id
+    last_second, final_ns, last_tick = -1, -1, time.monotonic()
+    seen: list[MissionStatus] = []
+    while True:
+        statuses.wait(0.1)
+        seen.extend(s for s in statuses.drain() if s.request_id == rid)
+        for batch in events.drain():
+            record.events.extend(batch.events)
+        changes = transitions(seen, rid)
+        c = clock.get()
+        if c is None:
+            continue
+        if c.stamp_ns > record.end_ns:
+            record.end_ns, last_tick = c.stamp_ns, time.monotonic()
+        elif time.monotonic() - last_tick > STALL_WALL_S:
+            record.changes = changes
+            raise WaitTimeout(f"no clock tick for {STALL_WALL_S:.0f} s")
+        if on_progress is not None:
+            new = changes[len(record.changes) :]
+            for ch in new:
+                on_progress(ch, c, True)
+            if not new and c.stamp_ns // 1_000_000_000 != last_second:
+                on_progress(changes[-1] if changes else None, c, False)
+        last_second = c.stamp_ns // 1_000_000_000
+        record.changes = changes
+        if changes and changes[-1].state in TERMINAL and final_ns < 0:
+            final_ns = c.stamp_ns
+        if final_ns >= 0 and c.stamp_ns >= final_ns + round(GRACE_S * 1e9):
+            record.end_ns = changes[-1].stamp_ns
+            return
+        if final_ns < 0 and c.stamp_ns >= deadline_ns:
+            record.ended = f"no final status within {timeout_s:.0f} s of sim time"
+            return
+
+
+def _cancel(
+    bus: Bus, keys: RobotKeys, record: MissionRecord, statuses: Fifo[MissionStatus]
+) -> None:
+    """Cancel a request that outlived its timeout; keep the status that answers it."""
+    rid = record.request.request_id
+    cancel = bus.publisher(keys.mission_cancel, MissionCancel, "control")
+    cancel.put(MissionCancel(request_id=rid, reason="evaluation timeout"))
+    cancel.undeclare()
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        s = statuses.pop(timeout_s=0.2)
+        if s is not None and s.request_id == rid:
+            record.changes = transitions([*record.changes, s], rid)
+            if s.state in TERMINAL:
+                return

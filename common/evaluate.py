@@ -1,0 +1,183 @@
+"""`dume eval --worlds N --seed S --out DIR`: N seeded worlds, one bring-me request each,
+judged from the simulator's truth, reported in DIR.
+
+World i is seed S + i. Each world gets a fresh stack (`ProcessStack`: the router and
+every service as child processes in their own sessions, on a free port, lockstep) so no
+state leaks between worlds, a crashed service shows as down rather than restarted, and
+teardown is certain: the stack stops in a `finally`, on failure, on Ctrl-C and on
+SIGTERM (turned into the same interrupt). The map starts from the world's truth with
+noise (`seed-from-world`, noise seeded by the world seed, a fresh database per world),
+standing in for an earlier mapping run. The request is a random mapped artifact and
+person (`common.eval_targets.seeded_pair`, seeded by the world seed). Success is the
+truth's (`common.eval_judge`). The segmenter and the locomotion the report states are
+read back from what the running stack publishes.
+
+Progress is one compact line per stage change and one per world on stderr, not a
+progress bar: a world takes minutes of wall time, so a bar would sit still, while a line
+per stage says where the robot is, reads well in CI logs, and needs no dependency. The
+report is rewritten after every world, so an interrupted run still leaves one (of the
+worlds that finished: the one cut short is not counted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+from common.bus import BusError
+from common.config import REPO_ROOT, ConfigError, resolve
+from common.demo import SERVICES
+from common.eval_judge import MissionRecord, WorldResult, evaluate
+from common.eval_report import json_safe, write_report
+from common.eval_run import (
+    Progress,
+    read_back,
+    read_map,
+    read_world,
+    request_result,
+    sigterm_interrupts,
+    watch_mission,
+)
+from common.eval_targets import TargetError, seeded_pair
+from common.messages import PayloadError
+from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.sim import Clock
+from common.stack import ProcessStack
+
+#: Wall seconds for a world's stack to come up (every service ready), and for each of
+#: its processes to exit when stopped (the sim may be flushing a recording).
+START_TIMEOUT_S = 300.0
+STOP_TIMEOUT_S = 60.0
+
+
+def scenario_of(walking: bool) -> str:
+    return "walking people" if walking else "standing people"
+
+
+def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> list[str]:
+    """The settings of world `seed`'s stack."""
+    return [
+        f'sim.world="{args.world}"',
+        f"sim.world_seed={seed}",
+        f"sim.walking_people={'true' if args.walking_people else 'false'}",
+        'sim.locomotion="dynamic"',
+        'semantic_map.start="seed-from-world"',
+        f'semantic_map.name="{map_name}"',
+        "semantic_map.reset=true",
+        f"semantic_map.seed_noise_seed={seed}",
+        f"recording.enabled={'true' if args.record else 'false'}",
+        *args.set,
+    ]
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def _stage_line(seed: int) -> Progress:
+    def on_progress(status: MissionStatus | None, _clock: Clock, changed: bool) -> None:
+        if changed and status is not None:
+            why = f" ({status.reason})" if status.reason else ""
+            _say(
+                f"    seed {seed} t={status.stamp_ns / 1e9:6.1f} s: {status.state} "
+                f"{status.behaviour}{why}"
+            )
+
+    return on_progress
+
+
+def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) -> WorldResult:
+    """One world, start to teardown; never raises for a failed run (only on Ctrl-C)."""
+    scenario = scenario_of(args.walking_people)
+    result = WorldResult(world=args.world, world_seed=seed, scenario=scenario)
+    map_name = f"eval-{time.strftime('%Y%m%d-%H%M%S')}-{seed}"
+    # A ConfigError (a settings file this process's schema no longer reads) stops the run.
+    stack = ProcessStack(list(SERVICES), world_overrides(args, seed, map_name))
+    wall0 = time.perf_counter()
+    step = "start the stack"
+    try:
+        stack.start(timeout_s=START_TIMEOUT_S)
+        result.setup_wall_s = round(time.perf_counter() - wall0, 2)
+        bus, keys = stack.bus, stack.keys
+        step = "read the running settings"
+        for k, v in read_back(bus, keys).items():
+            seen.setdefault(k, set()).add(v)
+        step = "read the world and the map"
+        world, (arts, people) = read_world(bus), read_map(bus)
+        pair = seeded_pair(arts, people, seed)
+        request_result(result, pair, arts, people, world)
+        request = MissionRequest(request_id=f"eval-{seed}", object=pair.object, person=pair.person)
+        step = "run the mission"
+        record: MissionRecord = watch_mission(bus, keys, request, args.timeout, _stage_line(seed))
+        evaluate(result, record, world)
+    except (BusError, PayloadError, TargetError) as exc:
+        result.error = f"could not {step}: {exc}"
+    finally:
+        result.services_down = sorted(
+            n for n, p in stack.procs.items() if n != "router" and p.poll() is not None
+        )
+        stack.stop(timeout_s=STOP_TIMEOUT_S)
+        for suffix in ("", "-wal", "-shm"):
+            (resolve(stack.config.semantic_map.dir) / f"{map_name}.sqlite{suffix}").unlink(
+                missing_ok=True
+            )
+    if args.record:
+        folder = resolve(stack.config.recording.dir) / stack.run_id
+        result.recording = str(
+            folder.relative_to(REPO_ROOT) if folder.is_relative_to(REPO_ROOT) else folder
+        )
+    return result
+
+
+def run_eval(args: argparse.Namespace) -> int:
+    out = resolve(args.out)
+    seeds = [args.seed + i for i in range(args.worlds)]
+    seen: dict[str, set[str]] = {}
+    results: list[WorldResult] = []
+    wall0 = time.perf_counter()
+
+    def settings() -> dict[str, Any]:
+        return {
+            "world": args.world,
+            "world seeds": f"{seeds[0]}..{seeds[-1]}" if seeds else "-",
+            "scenario": scenario_of(args.walking_people),
+            "segmenter": ", ".join(sorted(seen.get("segmenter", {"not read"}))),
+            "locomotion": ", ".join(sorted(seen.get("locomotion", {"not read"}))),
+            "map start": "seed-from-world (truth positions with noise, for an earlier mapping run)",
+            "request": "a random mapped artifact and person per world (seeded by the world seed)",
+            "timeout per world": f"{args.timeout:.0f} s sim",
+            "extra settings": ", ".join(args.set) or "none",
+            "wall time": f"{time.perf_counter() - wall0:.0f} s",
+            **({"stopped early": stopped} if stopped else {}),
+        }
+
+    _say(f"dume eval: {len(seeds)} {args.world} worlds from seed {args.seed}, out {out}")
+    summary: dict[str, Any] = {}
+    stopped = ""
+    with sigterm_interrupts():
+        try:
+            for i, seed in enumerate(seeds):
+                r = run_world(args, seed, seen)
+                results.append(r)
+                ok = sum(x.succeeded for x in results)
+                _say(
+                    f"[{i + 1}/{len(seeds)}] seed {seed} {r.object or '-'} → {r.person or '-'}: "
+                    f"{r.outcome} (mission {r.mission_state or '-'}) sim {r.sim_time_s:.1f} s "
+                    f"wall {r.wall_time_s + r.setup_wall_s:.0f} s rtf {r.rtf:.2f} | "
+                    f"{ok}/{i + 1} succeeded" + (f" | {r.failure}" if not r.succeeded else "")
+                )
+                summary = write_report(out, settings(), results)
+        except KeyboardInterrupt:
+            stopped = "interrupted"
+        except ConfigError as exc:
+            stopped = f"the settings no longer load (changed during the run?): {exc}"
+    if stopped:
+        _say(f"dume eval: stopped, {stopped}; the report covers the worlds that finished")
+        summary = write_report(out, settings(), results)
+    print(json.dumps(json_safe({**summary, "out": str(out), "stopped": stopped})))
+    if stopped:
+        return 130 if stopped == "interrupted" else 2
+    return 0 if results and not any(r.error for r in results) else 1
