@@ -4,7 +4,9 @@
 tick and returns the cmd_vel and the status. Per goal:
 - (re)plan at start, every `replan_s`, and when the path ahead (`blocked_lookahead_m`) crosses
   a lethal cell; a plan that fails while a path is held keeps the old one until
-  `blocked_timeout_s`;
+  `blocked_timeout_s`; a goal in an obstacle fails `invalid_goal` only on its first plan:
+  later, what covers it is the short-lived layers (depth, people), so it counts as
+  blocked (the `clear` recovery may free it);
 - follow with `Follower`, capped by `people_limit` (a stop for a person counts as blocked
   time, so a person who stays leads to a replan around them, then to recovery);
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
@@ -97,6 +99,7 @@ class Navigator:
         self.t0 = t_ns
         self.plan = None
         self.follower = None
+        self.planned_once = False
         self.last_plan_ns = -(10**18)
         self.blocked_since: int | None = None
         self.recoveries: list[Recovery] = ["clear", "rotate", "backoff"]
@@ -130,11 +133,12 @@ class Navigator:
     def _replan(self, t_ns: int, pose: Pose, cm: Costmap) -> Plan | None:
         assert self.goal is not None
         self.last_plan_ns = t_ns
+        first, self.planned_once = not self.planned_once, True
         try:
             new = plan(cm, pose, self.goal.pose, self.fp, self.p.planner)
         except PlanError as exc:
             self.detail = str(exc)
-            if exc.reason == "invalid_goal" and self.plan is None:
+            if exc.reason == "invalid_goal" and first:
                 self._finish("failed", "invalid_goal", str(exc))
             return None
         self.plan = new

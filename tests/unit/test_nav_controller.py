@@ -155,3 +155,20 @@ def test_the_people_caps_are_met_at_their_boundaries_on_a_braking_ramp() -> None
     assert cap(held).rule == "slow"
     assert people_limit(pose, (1.0, 0.0), [Person("p", FP.front + held, 0.0)], FP, p,
                         stopped=True).rule == "stop"  # fmt: skip
+
+
+def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid() -> None:
+    free = build_costmap(_open_floor(), FP, CostParams())
+    blob = np.zeros_like(_open_floor().occupied)
+    iy, ix = _open_floor().cell(3.0, 0.0) or (0, 0)
+    blob[iy - 9 : iy + 10, ix - 9 : ix + 10] = True  # a depth blob on the goal and the way
+    covered = build_costmap(_open_floor(), FP, CostParams(), obstacles=blob)
+    nav = Navigator(FP, NavParams(), DT)
+    nav.start(GoalSpec("g", Pose(3.0, 0.0, 0.0), 0.1, 0.1), 0)
+    outs = _run(nav, Pose(1.6, 0.0, 0.0), lambda t, _p: free if t == 0 else covered, 40)
+    assert all(o.reason != "invalid_goal" for _, _, o in outs)
+    assert outs[-1][2].state == "active", "blocked: waiting, then the recoveries"
+    # ...whereas a goal in an obstacle from the start is refused at once.
+    nav.start(GoalSpec("h", Pose(3.0, 0.0, 0.0), 0.1, 0.1), 0)
+    out = nav.tick(0, Pose(0.0, 0.0, 0.0), covered)
+    assert out.state == "failed" and out.reason == "invalid_goal"
