@@ -145,7 +145,6 @@ def test_twenty_seconds_of_a_recorded_hold_with_nobody_pulling_do_not_trip_it() 
     assert tripped is None
 
 
-@pytest.mark.skipif(not RECORDED.exists(), reason="no recorded handover samples")
 def test_the_recorded_handover_trips_after_the_person_took_it_and_not_before() -> None:
     samples, tripped = _replay(RECORDED)
     assert tripped is not None
