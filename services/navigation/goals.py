@@ -23,7 +23,7 @@ import numpy as np
 
 from common import robot
 from services.navigation.costmap import Costmap, Person
-from services.navigation.grid import Footprint, Pose, footprint_free
+from services.navigation.grid import Footprint, Pose
 from services.navigation.planner import pose_ok
 
 RAY_STEP_RAD = math.radians(1.0)
@@ -81,7 +81,9 @@ def handover_pose(
     else:
         preferred = math.atan2(robot_xy[1] - person.y, robot_xy[0] - person.x)
     d = robot.HANDOVER_DISTANCE_M
-    # The person's own lethal disc is not an obstacle to the handover pose's footprint.
+    # The planner's own test (`pose_ok`), so a pose chosen here is one it plans to: the
+    # footprint on free cells, the base not in lethal cost (the person's lethal disc ends
+    # short of the handover distance).
     for k in range(0, 181, 5):
         for sign in (1, -1) if k else (1,):
             a = preferred + sign * math.radians(k)
@@ -90,12 +92,7 @@ def handover_pose(
                 person.y + d * math.sin(a),
                 math.remainder(a + math.pi, math.tau),
             )
-            cell = costmap.grid.cell(pose.x, pose.y)
-            if cell is None:
-                continue
-            if footprint_free(costmap.occupied, costmap.grid, pose, fp, margin) and (
-                costmap.clearance[cell] > fp.half_width
-            ):
+            if pose_ok(costmap, pose, fp, margin):
                 return pose
     raise GoalError(
         f"no free handover pose {d:.2f} m from {person.id} at ({person.x:.2f}, {person.y:.2f})"

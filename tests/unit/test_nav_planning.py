@@ -10,10 +10,10 @@ from scipy.sparse.csgraph import dijkstra
 
 from services.navigation import native
 from services.navigation.costmap import CostParams, Person, build_costmap
-from services.navigation.goals import handover_pose, standoff_pose
+from services.navigation.goals import GoalError, handover_pose, standoff_pose
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint, footprint_free
 from services.navigation.people import PeopleParams, people_limit
-from services.navigation.planner import PlanError, PlanParams, plan
+from services.navigation.planner import PlanError, PlanParams, plan, pose_ok
 from services.sim import feasibility as fz
 from services.sim.world import generate_world
 
@@ -90,15 +90,35 @@ def test_standoff_poses_are_free_and_face_their_artifact(name: str, seed: int) -
         assert abs(math.remainder(pose.yaw - truth.yaw, math.tau)) < 0.35
 
 
-@pytest.mark.parametrize(("name", "seed"), [("small", 1), ("hall", 3)])
+@pytest.mark.parametrize(("name", "seed"), [("small", 1), ("hall", 1), ("hall", 3)])
 def test_handover_poses_are_free_and_face_their_person(name: str, seed: int) -> None:
     _, cm = _world_costmap(name, seed)
     for person in cm.people:
         pose = handover_pose(cm, person, (0.0, 0.0), FP)
         assert footprint_free(cm.occupied, cm.grid, pose, FP, 0.03)
+        assert pose_ok(cm, pose, FP, 0.03), "the planner takes the pose as it is"
         bearing = math.atan2(person.y - pose.y, person.x - pose.x)
         assert abs(math.remainder(bearing - pose.yaw, math.tau)) < 1e-6
         assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(1.3, abs=0.01)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_handover_pose_near_a_wall_is_one_the_planner_accepts(seed: int) -> None:
+    """The map's person positions are noisy: wherever the person is, a handover pose that
+    `handover_pose` gives is one `plan` takes as it is (no `invalid_goal` on arrival)."""
+    _, cm = _world_costmap("small", seed)
+    rng = np.random.default_rng(seed)
+    tried = 0
+    for person in cm.people:
+        for _ in range(20):
+            p = Person(person.id, person.x + rng.normal(0, 0.3), person.y + rng.normal(0, 0.3))
+            try:
+                pose = handover_pose(cm, p, (0.0, 0.0), FP)
+            except GoalError:
+                continue
+            tried += 1
+            assert pose_ok(cm, pose, FP, 0.03), (p, pose)
+    assert tried >= 10
 
 
 def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
