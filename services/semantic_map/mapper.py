@@ -41,6 +41,10 @@ from services.semantic_map.people import PeopleParams, PeopleTracker, merge_spli
 SELF_RADIUS_M = 0.7
 #: Person detections of one frame closer than this are one person, m.
 PERSON_MERGE_M = 0.4
+#: Detections farther than this (d_obj, m) are not fused: the segmenter is validated
+#: within 8 m, and a depth read through to the background (a person "143 m" away, seen in
+#: the hall) must not move an entity across the map.
+MAX_RANGE_M = 8.0
 
 
 @dataclass(frozen=True)
@@ -171,7 +175,11 @@ class SemanticMap:
         arts: list[Observation] = []
         people: list[Observation] = []
         for det in dets.detections:
-            if det.score < self.params.min_score or not _mask_fits(det):
+            if (
+                det.score < self.params.min_score
+                or not _mask_fits(det)
+                or not 0.0 < det.d_obj <= MAX_RANGE_M
+            ):
                 report.ignored += 1
                 continue
             obs = self.observation(det, rgb)

@@ -121,6 +121,7 @@ def test_the_demo_refuses_an_object_the_map_does_not_hold_and_stops_its_stack() 
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(2400)  # a whole job: minutes of wall time on 2 cores
 def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Path) -> None:
     out = dume(
         "eval",

@@ -141,6 +141,7 @@ def test_a_cancel_mid_navigation_ends_cancelled_with_the_nav_goal_cancelled(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(2400)  # a whole job: minutes of wall time on 2 cores
 def test_bring_me_small_world(stack: StartStack, tmp_path: Path) -> None:
     """The whole job: dynamic gait, the network segmenter, lockstep; a recording is left."""
     s = stack(

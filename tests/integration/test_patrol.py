@@ -17,6 +17,7 @@ from bench.trial_patrol import patrol_run
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
+@pytest.mark.timeout(2400)  # a whole job: minutes of wall time on 2 cores
 def test_a_patrol_of_the_small_world_maps_the_bottle_within_10_cm_and_the_person(
     tmp_path: Path,
 ) -> None:

@@ -173,3 +173,14 @@ def test_writes_and_deletions_of_one_tick_land_together(tmp_path: Path) -> None:
     snap = store.load()
     assert [(e.id, e.missing_since_ns) for e, _ in snap.entities] == [("bottle_2", 5)]
     assert store.integrity() == "ok"
+
+
+def test_a_detection_beyond_the_validated_range_is_not_fused() -> None:
+    smap = _map()
+    far = _det("person", (140.0, 130.0))  # a depth read through to the background
+    near = _det("person", (3.0, 0.0))
+    for k in range(1, 4):
+        report = _ingest(smap, k * S, far, near)
+        assert report.ignored >= 1
+    people = [tr for tr in smap.tracks() if tr.class_name == "person"]
+    assert people and all(float(np.hypot(*tr.xy)) < 8.0 for tr in people)
