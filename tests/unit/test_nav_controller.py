@@ -150,7 +150,7 @@ def test_the_people_caps_are_met_at_their_boundaries_on_a_braking_ramp() -> None
     assert cap(2.0 + p.brake_lead_m).speed == pytest.approx(slow)  # in it at the slow speed
     assert cap(1.5, None).speed == pytest.approx(slow)  # not moving towards them: just slow
     assert cap(0.75).speed < slow  # ahead: braking towards the stop distance
-    assert cap(p.stop_distance_m + p.brake_lead_m).rule == "stop"
+    assert cap(p.stop_distance_m + p.brake_lead_m - 1e-6).rule == "stop"
     held = p.stop_distance_m + p.brake_lead_m + 0.5 * p.resume_margin_m
     assert cap(held).rule == "slow"
     assert people_limit(pose, (1.0, 0.0), [Person("p", FP.front + held, 0.0)], FP, p,
