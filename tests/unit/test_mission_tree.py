@@ -260,3 +260,17 @@ def test_a_grasp_that_does_not_hold_lets_go_on_the_spot_and_picks_again() -> Non
     first = kinds.index("grasp")
     assert kinds[first + 1] == "release", "it opens where it grasped, before walking away"
     assert kinds.count("grasp") == 2
+
+
+def test_an_object_that_slips_out_while_presented_fails_at_once_as_lost() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    for _ in range(2000):
+        outcome = tree.tick()
+        if tree.where()[1] == "feel_pull":
+            robot.held = False  # it falls out of the jaw in the handover posture
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "failed"
+    assert outcome.reason == "grasp_lost"

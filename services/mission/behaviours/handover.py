@@ -2,8 +2,10 @@
 
 `FeelPull` holds still `settle_s` with the object presented, takes the pull detector's
 baseline from `wbc/status` (gripper effort and wrench at rest), then feeds it every
-status until it feels the pull: SUCCESS (the tree releases next). Nobody pulls within
-`handover_timeout_s` → `handover_timeout`. The sim's handover event is never read.
+status until it feels the pull: SUCCESS (the tree releases next). The grasp detector
+letting go before any pull → `grasp_lost` at once (the object fell: nobody will pull).
+Nobody pulls within `handover_timeout_s` → `handover_timeout`. The sim's handover event
+is never read.
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ class FeelPull(MissionBehaviour):
         if status is None or status.stamp_ns == self.last_stamp:
             return Status.RUNNING
         self.last_stamp = status.stamp_ns
+        if not status.held:
+            return self.fail("grasp_lost", "the object slipped out while presenting it")
         if not self.baseline:
             if self.elapsed_s() >= s.settle_s:
                 self.detector.reset(status)
