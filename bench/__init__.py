@@ -42,6 +42,14 @@ BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
 }
 
 
+#: `dume trial <name>`: the trials `bench.trials.run_trial` runs (named here, so the
+#: command line lists them without importing the trials' dependencies).
+TRIALS = (
+    "walk", "turn", "strafe", "random", "reach", "pick", "push",
+    "goto", "goals", "person", "fetch", "patrol",
+)  # fmt: skip
+
+
 def run_bench(which: str, overrides: Sequence[str] = ()) -> int:
     names = list(BENCHES) if which == "all" else [which]
     results = {name: BENCHES[name](overrides) for name in names}

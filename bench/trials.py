@@ -45,20 +45,6 @@ from common import robot
 from common.geometry import wrap_angle
 from common.messages.wbc import Posture, Reach
 
-TRIALS = (
-    "walk",
-    "turn",
-    "strafe",
-    "random",
-    "reach",
-    "pick",
-    "push",
-    "goto",
-    "goals",
-    "person",
-    "fetch",
-    "patrol",
-)
 NAV_TRIALS = ("goto", "goals", "person")
 Figures = dict[str, Any]
 

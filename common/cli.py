@@ -335,28 +335,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_eval)
 
     p = add("bench", "benchmarks; each prints JSON on its last line")
-    from bench import BENCHES
+    from bench import BENCHES, TRIALS
 
     p.add_argument("which", choices=[*BENCHES, "all"])
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")
-    p.add_argument(
-        "which",
-        choices=[
-            "walk",
-            "turn",
-            "strafe",
-            "random",
-            "reach",
-            "pick",
-            "push",
-            "goto",
-            "goals",
-            "person",
-            "patrol",
-        ],
-    )
+    p.add_argument("which", choices=TRIALS)
     p.add_argument("xy", nargs="*", type=float, help="goto: the goal's X Y, m in the world")
     p.add_argument("--yaw", type=float, default=0.0, help="goto: the goal's yaw, rad")
     p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals")
