@@ -139,10 +139,17 @@ class BusRobot:
     # -- navigation -----------------------------------------------------------------------
 
     def send_nav_goal(self, goal: NavGoal) -> str:
+        return self._send_goal(self.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply)
+
+    def _send_goal(
+        self,
+        key: str,
+        request: NavGoalRequest | ArmGoalRequest,
+        reply_type: type[NavGoalReply] | type[ArmGoalReply],
+    ) -> str:
+        """A goal query: its id, `Refused` with the reason, or `Unavailable`."""
         try:
-            reply = self.bus.query(
-                self.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, self.timeout_s
-            )
+            reply = self.bus.query(key, request, reply_type, self.timeout_s)
         except RemoteError as exc:
             raise Refused(f"{exc.error.code}: {exc.error.message}", exc.error.code) from None
         except (NoReply, PayloadError, BusError) as exc:
@@ -176,17 +183,7 @@ class BusRobot:
             self._mode = ("stand", "navigation")
 
     def send_arm_goal(self, goal: ArmGoal) -> str:
-        try:
-            reply = self.bus.query(
-                self.keys.arm_goal, ArmGoalRequest(goal=goal), ArmGoalReply, self.timeout_s
-            )
-        except RemoteError as exc:
-            raise Refused(f"{exc.error.code}: {exc.error.message}", exc.error.code) from None
-        except (NoReply, PayloadError, BusError) as exc:
-            raise Unavailable(str(exc)) from None
-        if not reply.accepted:
-            raise Refused(reply.reason)
-        return reply.goal_id
+        return self._send_goal(self.keys.arm_goal, ArmGoalRequest(goal=goal), ArmGoalReply)
 
     def wbc_status(self) -> WbcStatus | None:
         # Stamped before the tick: the controller surely published it (lockstep) and the
