@@ -58,10 +58,14 @@ from common.robot_description import (
 
 TIMESTEP_S = 0.001  # 1 kHz
 INTEGRATOR = mujoco.mjtIntegrator.mjINT_IMPLICITFAST  # joint damping integrated implicitly
-# Elliptic cones with friction 10x stiffer than the normal: with MuJoCo's defaults a held
-# bottle creeps out of the jaws at ~1 cm/s; with these it holds (tests/unit/test_robot.py).
+# Elliptic cones with friction 100x stiffer than the normal. With MuJoCo's defaults a held
+# bottle creeps out of the jaws at ~1 cm/s; at 10x the single revolute jaw's wedge (its pads
+# meet at ~35 deg on a 6 cm bottle) still squeezed a carried bottle out, the jaw closing
+# 0.1 rad in 20 s of walking; at 100x it holds still (0.003 rad) and the gait is unchanged
+# (walk and push trials identical to the millimetre). No noslip pass: it also acts on the
+# joints' dry friction, and the arm then sticks short of its postures.
 CONE = mujoco.mjtCone.mjCONE_ELLIPTIC
-IMPRATIO = 10.0
+IMPRATIO = 100.0
 _COMPILER = '<mujoco><compiler discardvisual="true" fusestatic="false"/></mujoco>'
 FOOT_FRICTION = (0.9, 0.02, 0.001)  # sliding, torsional, rolling; condim 3 uses sliding
 # Jaw pads: grippy rubber, torsional friction (condim 4) so a held bottle does not spin,

@@ -7,10 +7,10 @@ so the robot keeps its unprefixed names, its root at the start pose. A geom's in
 its root body's name, which is how `segmentation_ids` labels pixels.
 
 Physics: timestep 1 ms with `implicitfast` (stable with the actuators' damping at no extra
-cost), elliptic friction cones with `impratio` 10 (the accurate cone for grasping: a
-pyramidal cone lets objects creep out of a grip under large normal forces); artifacts have
-condim 4 (torsional friction, so a pinched object does not spin about the jaw axis) and
-friction 1.0. No noslip pass: it is slow and the elliptic cone holds a grasp without it.
+cost), elliptic friction cones with `impratio` 100 (the accurate cone for grasping: a
+pyramidal or soft cone lets objects creep out of a grip; `common.robot_mjcf` says why 100,
+and sets them all in `set_sim_options`); artifacts have condim 4 (torsional friction, so a
+pinched object does not spin about the jaw axis) and friction 1.0.
 Sleeping islands are on (`SLEEP`): artifacts resting on tables drop out of the solver and
 wake on any contact, weld or qpos write, which halves a hall's step (about 100 to 50 us
 with the robot standing); the actuated robot never sleeps.
@@ -39,7 +39,6 @@ from numpy.typing import NDArray
 from common import robot
 from common.messages.world import Artifact, Cuboid, Light, Obstacle, Person, Rgba, WorldDescription
 
-TIMESTEP_S = 0.001
 #: Let resting artifacts sleep (MuJoCo's island sleeping).
 SLEEP = True
 #: Offscreen framebuffer, pixels: room for a 640 x 480 camera at twice its size.
@@ -309,10 +308,7 @@ def _light(spec: mujoco.MjSpec, k: int, light: Light) -> None:
 
 def _options(spec: mujoco.MjSpec, world: WorldDescription) -> None:
     spec.modelname = f"dume_{world.name}_{world.seed}"
-    spec.option.timestep = TIMESTEP_S
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    spec.option.impratio = 10.0
+    robot.set_sim_options(spec)
     if SLEEP:
         spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     spec.visual.global_.offwidth, spec.visual.global_.offheight = OFFSCREEN_SIZE
