@@ -177,11 +177,12 @@ class SemanticMapSettings(_Section):
     min_score: float = 0.5
     #: Frames looking at an artifact's place without seeing it before it is missing.
     missing_after_frames: int = 5
-    #: Range within which a camera is trusted to see an artifact, m.
+    #: Range within which a camera is trusted to see an artifact, and a person, m.
     look_range_m: float = 3.0
-    #: An artifact the map created itself from perception and fused fewer times than this
-    #: is a false entry when looked for at its place and not seen: it is deleted, not
-    #: marked missing (prior, seeded and imported artifacts are only marked missing).
+    person_look_range_m: float = 6.0
+    #: An artifact or person the map created itself from perception and fused fewer times
+    #: than this is a false entry when looked for at its place and not seen: it is
+    #: deleted (prior, seeded and imported artifacts are only marked missing).
     drop_below_observations: int = 10
     #: People: acceleration noise of the constant-velocity model, m/s², and the weight of
     #: the colour-histogram distance in the association cost.

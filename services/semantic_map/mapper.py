@@ -6,11 +6,15 @@ frame, when at hand, gives the people's colour histograms, the frustum and depth
 missing test, and the depth points of the learned obstacles). What changed since the last
 `take_changes()` (and `take_deletions()`) is what the node writes to the database in one
 transaction.
-False entries: an artifact the map created itself (source `perception`) from fewer than
+False entries: an entity the map created itself (source `perception`) from fewer than
 `drop_below_observations` detections that is then looked for at its place and not seen
 (`missing_after_frames` looks) is deleted with the reason, not marked missing: a table
-leg read as a box a few times during a patrol should not send the mission searching.
-Prior, seeded and imported artifacts, and well-observed ones, are only marked missing.
+leg read as a box a few times during a patrol should not send the mission searching, and
+a person made of a few stray detections (a split track, a false positive) should not
+stand in navigation's way or answer a request. People are looked for at chest height
+within `person_look_range_m` (the segmenter finds people farther than artifacts).
+Prior, seeded and imported entities, and well-observed ones, are only marked missing
+(artifacts) or kept (people).
 Measurement conventions: an artifact is placed at the detection's axis point (about a
 radius behind the visible surface) at the visible centroid's height; a person at the
 axis point's floor projection; the horizontal noise grows with the range d_obj. Person
@@ -41,6 +45,8 @@ from services.semantic_map.people import PeopleParams, PeopleTracker, merge_spli
 SELF_RADIUS_M = 0.7
 #: Person detections of one frame closer than this are one person, m.
 PERSON_MERGE_M = 0.4
+#: A person is looked for at this height above their floor point, m (the chest).
+PERSON_LOOK_HEIGHT_M = 1.0
 #: Detections farther than this (d_obj, m) are not fused: the segmenter is validated
 #: within 8 m, and a depth read through to the background (a person "143 m" away, seen in
 #: the hall) must not move an entity across the map.
@@ -54,6 +60,7 @@ class MapParams:
     min_score: float = 0.5
     missing_after_frames: int = 5
     look_range_m: float = 3.0
+    person_look_range_m: float = 6.0
     drop_below_observations: int = 10
     fusion: FusionParams = field(default_factory=FusionParams)
     people: PeopleParams = field(default_factory=PeopleParams)
@@ -147,7 +154,7 @@ class SemanticMap:
         return deleted
 
     def is_false_entry(self, tr: Track) -> bool:
-        """An artifact the map made itself from too few detections to be trusted missing."""
+        """An entity the map made itself from too few detections to be trusted missing."""
         return tr.source == "perception" and tr.hits < self.params.drop_below_observations
 
     # -- fusion --------------------------------------------------------------------------
@@ -218,36 +225,51 @@ class SemanticMap:
         return report
 
     def _look(self, t: int, view: View, seen: set[int]) -> tuple[list[str], list[tuple[str, str]]]:
-        """Count a miss for each artifact this frame looked at and did not see; after
-        `missing_after_frames` of them it is missing, or deleted if a false entry.
+        """Count a miss for each entity this frame looked at and did not see; after
+        `missing_after_frames` of them an artifact is missing; a false entry is deleted.
         Returns the newly missing ids and the (id, reason) of the deleted ones."""
+        p = self.params
         newly: list[str] = []
-        dropped: list[tuple[Track, str, str]] = []
+        dropped: list[tuple[Track, str]] = []
         for i, tr in enumerate(self.artifacts.tracks):
             if tr.id is None or i in seen:
                 continue
-            p = np.array([tr.xy[0], tr.xy[1], tr.z])
-            if not looks_at(view, p, self.params.look_range_m):
-                continue
-            tr.misses += 1
-            if tr.misses < self.params.missing_after_frames:
+            if not self._missed(tr, view, tr.z, p.look_range_m):
                 continue
             if self.is_false_entry(tr):
-                reason = (
-                    f"a false entry: made from {tr.hits} detection(s) (fewer than "
-                    f"{self.params.drop_below_observations}), then not seen in {tr.misses} "
-                    f"looks at its place"
-                )
-                dropped.append((tr, tr.id, reason))
+                dropped.append((tr, self._false_entry_reason(tr)))
             elif tr.missing_since_ns is None:
                 tr.missing_since_ns = t
                 self._dirty[tr.id] = tr
                 newly.append(tr.id)
-        for tr, entity_id, _ in dropped:
-            self.artifacts.drop(tr)
-            self._dirty.pop(entity_id, None)
-            self._deleted.append(entity_id)
-        return newly, [(entity_id, reason) for _, entity_id, reason in dropped]
+        for tr in self.people.tracks:  # only false entries: people move, nobody is missing
+            if tr.id is None or tr.last_seen_ns == t or not self.is_false_entry(tr):
+                continue
+            if self._missed(tr, view, PERSON_LOOK_HEIGHT_M, p.person_look_range_m):
+                dropped.append((tr, self._false_entry_reason(tr)))
+        out: list[tuple[str, str]] = []
+        for tr, reason in dropped:
+            assert tr.id is not None
+            (self.people if tr.kind == "person" else self.artifacts).drop(tr)
+            self._dirty.pop(tr.id, None)
+            self._deleted.append(tr.id)
+            out.append((tr.id, reason))
+        return newly, out
+
+    def _missed(self, tr: Track, view: View, z: float, range_m: float) -> bool:
+        """Count a miss if this frame looked at the entity's place (at height z); whether
+        it has now been missed `missing_after_frames` times in a row."""
+        if not looks_at(view, np.array([tr.xy[0], tr.xy[1], z]), range_m):
+            return False
+        tr.misses += 1
+        return tr.misses >= self.params.missing_after_frames
+
+    def _false_entry_reason(self, tr: Track) -> str:
+        return (
+            f"a false entry: made from {tr.hits} detection(s) (fewer than "
+            f"{self.params.drop_below_observations}), then not seen in {tr.misses} "
+            f"looks at its place"
+        )
 
     def _learn(self, dets: Detections, frame: CameraFrame, view: View) -> int:
         """Obstacles seen in this frame's depth, leaving out people and the robot."""

@@ -95,6 +95,10 @@ class PeopleTracker:
     def by_id(self, entity_id: str) -> Track | None:
         return next((t for t in self.tracks if t.id == entity_id), None)
 
+    def drop(self, track: Track) -> None:
+        """Forget a person (a false entry); the id is never given again."""
+        self.tracks = [t for t in self.tracks if t is not track]
+
     def add(self, track: Track, stamp_ns: int = 0) -> None:
         """A known person (from a prior, a seed, the database)."""
         if track.id is not None:

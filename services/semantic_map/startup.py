@@ -41,6 +41,7 @@ def map_params(s: SemanticMapSettings) -> MapParams:
         min_score=s.min_score,
         missing_after_frames=s.missing_after_frames,
         look_range_m=s.look_range_m,
+        person_look_range_m=s.person_look_range_m,
         drop_below_observations=s.drop_below_observations,
         fusion=FusionParams(
             gate_min_m=s.gate_min_m, gate_sigmas=s.gate_sigmas, confirm_hits=s.confirm_hits

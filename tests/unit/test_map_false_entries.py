@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from common.geometry import make_T
@@ -184,3 +185,41 @@ def test_a_detection_beyond_the_validated_range_is_not_fused() -> None:
         assert report.ignored >= 1
     people = [tr for tr in smap.tracks() if tr.class_name == "person"]
     assert people and all(float(np.hypot(*tr.xy)) < 8.0 for tr in people)
+
+
+def test_a_person_made_from_a_few_detections_then_not_seen_is_deleted() -> None:
+    """A split track or a false positive: two detections, then five looks at chest height
+    that find nobody. A person seen often is kept when not seen (they walk away), and one
+    hidden behind something nearer is not looked at at all."""
+    smap = _map()
+    reports = []
+    for k in range(1, 15):
+        dets = [_det("person", (3.0, 0.0))] if k <= 2 else []
+        dets += [_det("person", (4.0, 1.5))] if k <= 6 else []
+        reports.append(_ingest(smap, k * S, *dets))
+    created = [i for r in reports for i in r.new_ids]
+    assert created == ["person_1", "person_2"]
+    dropped = [d for r in reports for d in r.dropped]
+    assert [i for i, _ in dropped] == ["person_1"]
+    assert "2 detection(s)" in dropped[0][1]
+    assert [e.id for e in smap.entities("person")] == ["person_2"]  # 6 hits, drop_below 5
+    assert smap.take_deletions() == ["person_1"]
+
+
+def test_a_hidden_person_is_not_counted_missed() -> None:
+    smap = _map()
+    for k in (1, 2):
+        _ingest(smap, k * S, _det("person", (3.0, 0.0)))
+    for k in range(3, 12):  # a wall 1 m in front of the camera: the frame says nothing
+        frame = msgspec.structs.replace(
+            _frame(k * S), depth=to_wire(np.full((H, W), 1.0, np.float32))
+        )
+        msg = Detections(
+            stamp_ns=k * S,
+            camera="camera_head",
+            T_world_base=tuple(T_WORLD_BASE.ravel().tolist()),
+            segmenter="network",
+            detections=[],
+        )
+        assert not smap.ingest(msg, frame).dropped
+    assert [e.id for e in smap.entities("person")] == ["person_1"]
