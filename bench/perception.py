@@ -40,7 +40,7 @@ import numpy as np
 import zenoh
 
 from common import robot
-from common.config import resolve
+from common.config import load_config, resolve
 from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z
 from common.messages import as_numpy, decode
 from common.messages.perception import Detections
@@ -336,8 +336,10 @@ def _unseen(seeds: Sequence[int], model: Path) -> list[int]:
 
 
 def bench_perception(overrides: Sequence[str] = (), sim_s: float = 8.0) -> dict[str, Any]:
-    model = resolve("services/perception/models/segmenter.onnx")
-    net = Segmenter(model) if model.exists() else None
+    settings = load_config(overrides).perception
+    model = resolve(settings.model)
+    # the reference forward with the service's thread count, so that the ratio is fair
+    net = Segmenter(model, threads=settings.dnn_threads or None) if model.exists() else None
     segmenter = "network" if net is not None else "truth"
     result: dict[str, Any] = {"bench": "perception", "network": net is not None}
     result.update(live(overrides, segmenter, sim_s, net))

@@ -139,6 +139,11 @@ class PerceptionSettings(_Section):
     #: Locate by map id: a detection of the entity's class within this distance of its
     #: mapped position (m, horizontal) is that entity.
     locate_gate_m: float = 0.5
+    #: Threads of the network's forward (`cv2.setNumThreads`). One: on a small machine the
+    #: sim and the controller hold the other cores, and a forward split over threads waits
+    #: for the slowest (under load, 2 threads: p50 42-56 ms, p95 88-105 ms; 1: 33-36 ms,
+    #: 72-75 ms). 0 lets OpenCV choose.
+    dnn_threads: int = 1
 
 
 class SemanticMapSettings(_Section):

@@ -55,7 +55,7 @@ def load_network(settings: PerceptionSettings) -> tuple[Segmenter | None, str]:
             'evaluate with --set perception.segmenter="truth"'
         )
     try:
-        return Segmenter(path), ""
+        return Segmenter(path, threads=settings.dnn_threads or None), ""
     except SegmenterError as exc:
         return None, f"network segmenter cannot start: {exc}"
 
