@@ -51,6 +51,7 @@ from services.perception import metrics
 from services.perception.geometry import backproject, transform
 from services.perception.pipeline import detect, frame_geometry
 from services.perception.segmenter import Segmenter, TruthSegmenter
+from services.perception.self_filter import is_self
 from services.sim import feasibility as fz
 from services.sim import scene
 from services.sim.cameras import CameraRig
@@ -151,6 +152,9 @@ def _errors(
     found, counted = metrics.person_recall(matches)
     out[f"{prefix}people_found"].append(float(found))
     out[f"{prefix}people_counted"].append(float(counted))
+    matched = {m.matched for m in matches if m.matched is not None}
+    false_people = [i for i, p in enumerate(predicted) if p.class_name == "person"]
+    out[f"{prefix}false_people"].append(float(len(set(false_people) - matched)))
     for t, m in zip(truths, matches, strict=True):
         art = artifacts.get(t.truth_id or "")
         u0, v0, u1, v1 = t.bbox
@@ -193,14 +197,36 @@ def accuracy(seeds: Sequence[int], net: Segmenter | None) -> dict[str, Any]:
             if net is not None:
                 rgb = np.asarray(as_numpy(frame.rgb), dtype=np.uint8)
                 depth = np.asarray(as_numpy(frame.depth), dtype=np.float32)
-                _errors(world, frame, truth, net.segment(rgb, depth), out, "network_")
-    return {"eval_seeds": list(seeds), "eval_frames": frames, **summarise(out)}
+                predicted = net.segment(rgb, depth)
+                _errors(world, frame, truth, predicted, out, "network_")
+                _errors(world, frame, truth, reported(frame, predicted), out, "reported_")
+    result = summarise(out)
+    for prefix in ("truth_", "network_", "reported_"):
+        if frames and f"{prefix}false_people" in result:
+            result[f"{prefix}false_people_per_frame"] = round(
+                result[f"{prefix}false_people"] / frames, 3
+            )
+    return {"eval_seeds": list(seeds), "eval_frames": frames, **result}
+
+
+def reported(frame: CameraFrame, instances: Sequence[Any]) -> list[Any]:
+    """The instances the service reports (`reported_` figures): a person without depth
+    points, or one the robot sees inside itself (`services.perception.self_filter`), is
+    dropped."""
+    out = []
+    for inst in instances:
+        if inst.class_name == "person":
+            det = detect(frame, [inst], 0.0)
+            if not det or is_self(det[0].detection):
+                continue
+        out.append(inst)
+    return out
 
 
 def summarise(out: dict[str, list[float]]) -> dict[str, Any]:
     """The figures' statistics: recall, mean IoU, p50/p95/max of errors in mm, counts."""
     result: dict[str, Any] = {}
-    for prefix in ("truth_", "network_"):
+    for prefix in ("truth_", "network_", "reported_"):
         counted = sum(out.get(f"{prefix}people_counted", []))
         if counted:
             found = sum(out[f"{prefix}people_found"])
@@ -209,7 +235,7 @@ def summarise(out: dict[str, list[float]]) -> dict[str, Any]:
         values = out[key]
         if key.endswith("missed"):
             result[key] = len(values)
-        elif key.endswith(("people_found", "people_counted")):
+        elif key.endswith(("people_found", "people_counted", "false_people")):
             result[key] = int(sum(values))
         elif key.endswith("iou"):
             result[f"{key}_mean"] = round(float(np.mean(values)), 4) if values else None
