@@ -6,7 +6,8 @@ acceleration noise σ_a). A person unseen for `coast_ns` stops being extrapolate
 velocity is reset to zero with a covariance of (v_max)², so the position's uncertainty
 then grows like a walker's reach instead of drifting along an old heading. Detections are
 assigned to people by the Hungarian method on a cost that adds the Mahalanobis distance
-of the innovation (gated at χ²₂ 99.9 %, or within `gate_min_m`) and the Bhattacharyya
+of the innovation (gated at χ²₂ 99.9 %, or within `gate_min_m`; never beyond
+`max_gate_m`) and the Bhattacharyya
 distance of the colour histograms (gated at `max_appearance`): two people crossing are
 told apart by their clothes where their positions are ambiguous. A detection left over
 starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
@@ -44,6 +45,11 @@ class PeopleParams:
     #: positive) never drags them across the hall; one back after a long walk unseen gets
     #: a new id instead.
     max_sigma_m: float = 1.0
+    #: Never farther than this from where a person is predicted, m, whatever the σ: a
+    #: seeded or prior person has no colours yet, and a table or pallet the segmenter
+    #: read as a person 1.6-2.6 m away once pulled one 3.7 m off in a hall eval. A
+    #: walker's prediction carries their velocity, so the innovation stays small.
+    max_gate_m: float = 1.2
     #: A detection left over this close to a person is a piece of them, never a new
     #: person (two bodies do not overlap), m.
     min_separation_m: float = 0.35
@@ -151,8 +157,8 @@ class PeopleTracker:
         S = tr.P[:2, :2] + np.eye(2) * obs.sigma_m**2
         nu = obs.xy - tr.xy
         d2 = float(nu @ np.linalg.solve(S, nu))
-        near = float(np.linalg.norm(nu)) <= p.gate_min_m
-        if d2 > CHI2_2D_999 and not near:
+        dist = float(np.linalg.norm(nu))
+        if dist > p.max_gate_m or (d2 > CHI2_2D_999 and dist > p.gate_min_m):
             return _BIG
         app = 0.0
         if tr.appearance is not None and obs.appearance is not None:

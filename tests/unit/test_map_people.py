@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from services.semantic_map.appearance import SIZE, bhattacharyya, colour_histogram
-from services.semantic_map.entities import IdBook, Observation
+from services.semantic_map.entities import IdBook, Observation, Track
 from services.semantic_map.people import PeopleParams, PeopleTracker
 
 DT_NS = 100_000_000  # 10 Hz frames
@@ -122,3 +122,25 @@ def test_a_stray_detection_far_away_never_drags_a_long_unseen_person() -> None:
         tracker.update(later + k * DT_NS, [far])
     assert np.linalg.norm(person.xy) < 0.5, "person_1 stays where it was seen"
     assert len(tracker.confirmed) == 2, "the stray one is somebody else"
+
+
+def test_a_seeded_person_is_not_pulled_to_a_false_detection_nearby() -> None:
+    """A person from the seed (no colours yet) unseen for 30 s, and a pallet read as a
+    person 1.6 m away for two seconds: the pallet is somebody else, the person stays."""
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    seeded = Track(
+        class_name="person",
+        kind="person",
+        xy=np.array([-6.96, -3.46]),
+        cov=np.eye(2) * 0.1**2,
+        z=0.0,
+        source="seed-from-world",
+        id="person_1",
+    )
+    tracker.add(seeded)
+    later = 300 * DT_NS
+    pallet = Observation("person", np.array([-5.67, -2.58]), 0.0, 0.1)
+    for k in range(20):
+        tracker.update(later + k * DT_NS, [pallet])
+    assert np.linalg.norm(seeded.xy - np.array([-6.96, -3.46])) < 1e-6
+    assert sorted(t.id or "" for t in tracker.confirmed) == ["person_1", "person_2"]
