@@ -8,8 +8,11 @@ then grows like a walker's reach instead of drifting along an old heading. Detec
 assigned to people by the Hungarian method on a cost that adds the Mahalanobis distance
 of the innovation (gated at χ²₂ 99.9 %, or within `gate_min_m`; never beyond
 `max_gate_m`) and the Bhattacharyya
-distance of the colour histograms (gated at `max_appearance`): two people crossing are
-told apart by their clothes where their positions are ambiguous. A detection left over
+distance of the colour histograms: two people crossing are told apart by their clothes
+where their positions are ambiguous. The colours veto a match (beyond `max_appearance`)
+only when the detection is not where the person is expected (outside χ²₂ 95 %): a person
+standing where they were, seen from behind or under another light, is still them (the
+small-world patrol gave one standing person four ids when the colours vetoed). A detection left over
 starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
 unless it lies within `min_separation_m` of a person (then it is a piece of that body,
 e.g. legs whose colours did not match the shirt).
@@ -27,6 +30,7 @@ from services.semantic_map.appearance import bhattacharyya, blend
 from services.semantic_map.entities import IdBook, Observation, Track
 
 CHI2_2D_999 = 13.82
+CHI2_2D_95 = 5.99
 _BIG = 1e6
 
 
@@ -139,7 +143,13 @@ class PeopleTracker:
             P = F @ tr.P @ F.T + _Q(dt, p.accel_sigma)
             cap = p.max_sigma_m**2
             if P[0, 0] > cap or P[1, 1] > cap:
+                # Long unseen: somewhere within the capped σ, at an unknown walking
+                # velocity, the two uncorrelated. Scaling the position block alone left
+                # the velocity's variance in the hundreds and the cross terms stale, and
+                # the next detection then flung the velocity (and the person) away.
                 P[:2, :2] *= cap / max(P[0, 0], P[1, 1])
+                P[:2, 2:] = P[2:, :2] = 0.0
+                P[2:, 2:] = np.eye(2) * p.v_max**2
             self._set(tr, x, P)
             tr.stamp_ns = stamp_ns
 
@@ -163,8 +173,8 @@ class PeopleTracker:
         app = 0.0
         if tr.appearance is not None and obs.appearance is not None:
             app = bhattacharyya(tr.appearance, obs.appearance)
-            if app > p.max_appearance:
-                return _BIG
+            if app > p.max_appearance and d2 > CHI2_2D_95:
+                return _BIG  # unlike, and not where they are expected: somebody else
         return min(d2, CHI2_2D_999) / CHI2_2D_999 + p.appearance_weight * app
 
     def update(self, stamp_ns: int, observations: list[Observation]) -> list[Track]:

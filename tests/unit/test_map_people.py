@@ -144,3 +144,41 @@ def test_a_seeded_person_is_not_pulled_to_a_false_detection_nearby() -> None:
         tracker.update(later + k * DT_NS, [pallet])
     assert np.linalg.norm(seeded.xy - np.array([-6.96, -3.46])) < 1e-6
     assert sorted(t.id or "" for t in tracker.confirmed) == ["person_1", "person_2"]
+
+
+def test_a_standing_person_seen_in_other_colours_where_they_stand_keeps_the_id() -> None:
+    """From behind, under another light: the colours differ, the place does not."""
+    rng = np.random.default_rng(4)
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    front, back = np.full(SIZE, 1e-3), np.full(SIZE, 1e-3)
+    front[5], back[40] = 1.0, 1.0
+    front, back = front / front.sum(), back / back.sum()
+    assert bhattacharyya(front, back) > 0.9
+    for k in range(10):
+        xy = np.array([2.0, 1.0]) + rng.normal(0.0, 0.03, 2)
+        tracker.update(k * DT_NS, [Observation("person", xy, 0.0, 0.05, appearance=front)])
+    later = 200 * DT_NS  # 20 s away, then seen from the other side
+    for k in range(10):
+        xy = np.array([2.0, 1.0]) + rng.normal(0.0, 0.03, 2)
+        tracker.update(later + k * DT_NS, [Observation("person", xy, 0.0, 0.05, appearance=back)])
+    (person,) = tracker.confirmed
+    assert person.id == "person_1"
+    assert person.last_seen_ns == later + 9 * DT_NS, "the detections joined them"
+    assert np.linalg.norm(person.xy - [2.0, 1.0]) < 0.1
+    assert np.linalg.norm(person.velocity) < 0.5
+
+
+def test_a_long_unseen_person_seen_again_is_not_flung_by_a_stale_velocity() -> None:
+    """Seen walking, unseen for a minute, seen again where they stopped: the first
+    detection after the gap must not give them a large velocity."""
+    tracker = PeopleTracker(IdBook(), PeopleParams())
+    for k in range(10):
+        xy = np.array([0.5 * k * 0.1, 0.0])
+        tracker.update(k * DT_NS, [Observation("person", xy, 0.0, 0.05)])
+    later = 600 * DT_NS
+    for k in range(5):
+        xy = np.array([1.0, 0.3])
+        tracker.update(later + k * DT_NS, [Observation("person", xy, 0.0, 0.05)])
+        (person,) = tracker.confirmed
+        assert np.linalg.norm(person.velocity) < 2.0, person.velocity
+    assert np.linalg.norm(person.xy - [1.0, 0.3]) < 0.1
