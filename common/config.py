@@ -282,6 +282,8 @@ class MissionSettings(_Section):
     detection_timeout_s: float = 3.0
     #: Wrist detections older than this (sim time, behind the tick) are not a sighting.
     sighting_max_age_s: float = 0.5
+    #: A wrist detection is the target only this close to its mapped place, m.
+    sighting_gate_m: float = 0.35
     #: The handover: how long to wait for the pull; the back-off after the release.
     handover_timeout_s: float = 60.0
     back_off_speed: float = 0.15

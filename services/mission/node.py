@@ -82,7 +82,7 @@ class MissionNode:
         self.period_s = me.period_s if me else 0.05
         latency = {n: round(p.latency_s * NS_PER_S) for n, p in cfg.time.participants.items()}
         bus, keys = svc.bus, svc.keys
-        self.robot = BusRobot(bus, keys, m.query_timeout_s, latency)
+        self.robot = BusRobot(bus, keys, m.query_timeout_s, latency, m.sighting_gate_m)
         self.gate = UpstreamGate(bus, keys, cfg)
         self.gate.watch("navigation", self.robot.nav)
         self.gate.watch("perception", self.robot.detections)

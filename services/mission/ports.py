@@ -123,11 +123,14 @@ class RobotPort(Protocol):
 
     # -- perception ---------------------------------------------------------------------
 
-    def wrist_detection(self, map_id: str, class_name: str) -> WristSighting | None:
+    def wrist_detection(
+        self, map_id: str, class_name: str, near_xy: tuple[float, float] | None = None
+    ) -> WristSighting | None:
         """The wrist camera's newest detection of the target, with its frame's stamp and base pose.
 
         The detection associated with `map_id` when perception associated one, else the
-        nearest of `class_name` to the base; None when the newest wrist frame due by now
-        shows none.
+        one of `class_name` at the target's mapped place `near_xy` (world; gated,
+        `targets.pick_detection`), or without it the nearest of the class to the base;
+        None when the newest wrist frame due by now shows none.
         """
         ...

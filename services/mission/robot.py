@@ -41,6 +41,7 @@ from common.messages.wbc import (
     WbcModeName,
     WbcStatus,
 )
+from services.mission import targets
 from services.mission.ports import Refused, Unavailable, WristSighting
 
 log = logging.getLogger("dume.mission")
@@ -55,10 +56,16 @@ class BusRobot:
     """The robot over the bus (see the module docstring)."""
 
     def __init__(
-        self, bus: Bus, keys: RobotKeys, query_timeout_s: float, latency_ns: dict[str, int]
+        self,
+        bus: Bus,
+        keys: RobotKeys,
+        query_timeout_s: float,
+        latency_ns: dict[str, int],
+        sighting_gate_m: float = 0.35,
     ) -> None:
         self.bus, self.keys = bus, keys
         self.timeout_s = query_timeout_s
+        self.sighting_gate_m = sighting_gate_m
         self.perception_latency_ns = latency_ns.get("perception", 0)
         self.nav_latency_ns = latency_ns.get("navigation", 0)
         self.odom = bus.latest(keys.odom, Odom, history=16)
@@ -198,18 +205,18 @@ class BusRobot:
 
     # -- perception -----------------------------------------------------------------------
 
-    def wrist_detection(self, map_id: str, class_name: str) -> WristSighting | None:
+    def wrist_detection(
+        self, map_id: str, class_name: str, near_xy: tuple[float, float] | None = None
+    ) -> WristSighting | None:
         due = self._t - self.perception_latency_ns
         frame = self._wrist_frame(due)
         if frame is None:
             return None
-        mine = [d for d in frame.detections if d.map_id == map_id]
-        if not mine:
-            mine = sorted(
-                (d for d in frame.detections if d.class_name == class_name and d.map_id is None),
-                key=lambda d: d.d_obj,
-            )
-        return WristSighting(frame.stamp_ns, mine[0], frame.T_world_base) if mine else None
+        mine = next((d for d in frame.detections if d.map_id == map_id), None)
+        if mine is None:
+            free = [d for d in frame.detections if d.map_id is None]
+            mine = targets.pick_detection(free, class_name, near_xy, self.sighting_gate_m)
+        return WristSighting(frame.stamp_ns, mine, frame.T_world_base) if mine else None
 
     def _wrist_frame(self, due_ns: int) -> Detections | None:
         for frame in reversed(self._wrist):

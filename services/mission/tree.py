@@ -29,7 +29,7 @@ the root waits for the next request. Pure: the robot is the context's port.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import py_trees
@@ -48,9 +48,11 @@ from services.mission.behaviours.base import (
     GRASP_PLAN,
     REQUEST,
     STAGES,
+    TARGET,
     Context,
     Failure,
     MissionBehaviour,
+    Target,
     blackboard,
     read,
     reset_blackboard,
@@ -82,9 +84,12 @@ def build_tree(ctx: Context) -> Sequence:
         bb.set(CANDIDATE, index)
         return True
 
-    def forget_grasp(_failure: Failure) -> bool:
+    def forget_grasp(failure: Failure) -> bool:
         bb.set(GRASP_PLAN, None)
         bb.set(DETECTION, None)
+        target = read(bb, TARGET)
+        if failure.reason == "grasp_lost" and isinstance(target, Target):
+            bb.set(TARGET, replace(target, xy=None))  # dropped on the way: not at its place
         return True
 
     st = STAGES

@@ -80,6 +80,8 @@ class FakeRobot:
     people_: dict[str, MapEntity] = field(default_factory=dict)
     visible: set[str] = field(default_factory=set)
     xy: tuple[float, float] = (0.0, 0.0)
+    #: Where each wrist_detection call looked for the target (its mapped place or None).
+    looked_near: list[tuple[float, float] | None] = field(default_factory=list)
     nav_ticks: int = 3
     arm_ticks: int = 2
     #: Goal kind (`artifact_standoff`, `person_handover`) → "refuse" or a NavFailure.
@@ -285,7 +287,10 @@ class FakeRobot:
 
     # -- perception -----------------------------------------------------------------------
 
-    def wrist_detection(self, map_id: str, class_name: str) -> WristSighting | None:
+    def wrist_detection(
+        self, map_id: str, class_name: str, near_xy: tuple[float, float] | None = None
+    ) -> WristSighting | None:
+        self.looked_near.append(near_xy)
         if map_id in self.visible:
             return WristSighting(self.t, detection(map_id), tuple(np.eye(4).ravel().tolist()))
         return None

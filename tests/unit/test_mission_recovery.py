@@ -26,6 +26,15 @@ def test_a_grasp_lost_while_carrying_is_picked_again_and_the_mission_succeeds() 
     assert standoffs(robot) == ["bottle_1", "bottle_1"]  # went back to the object
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     assert any("regrasp: grasp_lost: try 1 of 2" in d for d in decisions)
+    # The wrist camera looked for it at its mapped place; dropped on the way, anywhere.
+    places = list(dict.fromkeys(robot.looked_near))
+    assert places == [(3.0, 0.0), None], places
+
+
+def test_a_grasp_that_closed_on_nothing_looks_for_the_object_at_its_place_again() -> None:
+    robot = small_world(grasp_misses=1)
+    run(mission(robot), robot)
+    assert set(robot.looked_near) == {(3.0, 0.0)}
 
 
 def test_a_grasp_lost_three_times_fails_once_the_budget_of_two_is_spent() -> None:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import msgspec
 import pytest
 
 from common.config import load_config
 from common.messages.mission import MissionRequest
+from common.messages.perception import Detection
 from services.mission.algorithms import default_algorithms
 from services.mission.requests import (
     Rejection,
@@ -14,7 +16,8 @@ from services.mission.requests import (
     parse_cancel,
     parse_request,
 )
-from tests.unit.mission_fakes import entity, small_world
+from services.mission.targets import pick_detection
+from tests.unit.mission_fakes import detection, entity, small_world
 
 
 @pytest.mark.parametrize(
@@ -111,3 +114,21 @@ def test_the_real_algorithms_bind_with_config_overrides() -> None:
     step = controller.step(0.1, algorithms.sighting(1.5, 0.0, 0.05))
     assert step.state in ("tracking", "arrived")
     assert algorithms.pull_detector() is not None
+
+
+def _seen(cls: str, x: float, y: float, d_obj: float) -> Detection:
+    return msgspec.structs.replace(
+        detection(f"{cls}_1", d_obj), centroid_in_world=(x, y, 0.8), map_id=None
+    )
+
+
+def test_the_target_is_the_detection_of_its_class_at_its_mapped_place() -> None:
+    box = _seen("box", 5.05, 0.10, 1.07)  # the box, at its mapped place
+    edge = _seen("box", 4.45, 0.05, 1.67)  # a table edge read as a box, behind it
+    can = _seen("can", 5.06, 0.08, 1.07)  # the box read as a can
+    assert pick_detection([edge, box, can], "box", (5.06, 0.08), 0.35) is box
+    # the box missed in this frame: the edge is not taken for it
+    assert pick_detection([edge, can], "box", (5.06, 0.08), 0.35) is None
+    # no mapped place (dropped on the way): the nearest of the class to the base
+    assert pick_detection([edge, box], "box", None, 0.35) is box
+    assert pick_detection([], "box", None, 0.35) is None

@@ -52,10 +52,12 @@ ALL_KEYS = (REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, DETECTION, GRASP_PLA
 
 @dataclass(frozen=True)
 class Target:
-    """The object being fetched: its map id and class."""
+    """The object being fetched: its map id, class and mapped place (world x, y; None
+    when the map did not say)."""
 
     map_id: str
     class_name: str
+    xy: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,7 @@ class Approach(MissionBehaviour):
     def update(self) -> Status:
         now_ns = self.port.now_ns
         target = self.target()
-        seen = self.port.wrist_detection(target.map_id, target.class_name)
+        seen = self.port.wrist_detection(target.map_id, target.class_name, target.xy)
         sighting = None
         max_age_ns = round(self.settings.sighting_max_age_s * NS_PER_S)
         if seen is not None and now_ns - seen.stamp_ns <= max_age_ns:
@@ -91,7 +91,7 @@ class EstimateGrasp(MissionBehaviour):
             self.feedback_message = "standing still"
             return Status.RUNNING
         target = self.target()
-        seen = self.port.wrist_detection(target.map_id, target.class_name)
+        seen = self.port.wrist_detection(target.map_id, target.class_name, target.xy)
         settled_ns = self.started_ns + round(s.settle_s * NS_PER_S)
         if seen is None or seen.stamp_ns < settled_ns:
             if self.elapsed_s() > s.settle_s + s.detection_timeout_s:

@@ -63,7 +63,18 @@ class SelectTarget(MissionBehaviour):
             )
         map_id = candidates[index]
         previous = self.get(TARGET)
-        self.set(TARGET, Target(map_id, targets.class_of(map_id)))
+        if isinstance(previous, Target) and previous.map_id == map_id:
+            target = previous  # a re-pick: the place as it was (None once dropped in transit)
+        else:
+            try:
+                entity = self.port.artifact(map_id)
+            except Unavailable as exc:
+                return self.fail("unavailable", f"the semantic map did not answer: {exc}")
+            xy = None
+            if entity is not None:
+                xy = (entity.position_in_world[0], entity.position_in_world[1])
+            target = Target(map_id, targets.class_of(map_id), xy)
+        self.set(TARGET, target)
         if not isinstance(previous, Target) or previous.map_id != map_id:
             self.ctx.decide(f"target {map_id} ({index + 1} of {len(candidates)})")
         self.feedback_message = f"target {map_id}"
