@@ -11,7 +11,8 @@ acceleration limits. The states:
 - arrived: both errors within tolerance on every sighting for `settle_s`; latched (zero
   command) until `reset`.
 - reacquiring: no sighting for `lost_after_s`: turn toward the last seen bearing (as
-  far as it was off), back off slowly; a sighting returns to tracking.
+  far as it was off) and, when it was last seen beyond d_opt, creep toward it (as far
+  as it was beyond), else back off slowly; a sighting returns to tracking.
 - failed (latched, with a reason): reacquiring found nothing within `reacquire_s`, or no
   arrival within `timeout_s` of `reset` — the controller never freezes.
 
@@ -198,8 +199,16 @@ class ApproachController:
         wz = math.copysign(g.reacquire_wz, bearing) if abs(bearing) > g.tol_theta_rad else 0.0
         if lost_for > turn_s:
             wz = 0.0
-        vx = -g.back_off_speed if self._backed_m < g.back_off_max_m else 0.0
-        self._backed_m += max(0.0, -self._v[0]) * dt
+        # Last seen beyond d_opt: creep toward it (the segmenter is surest up close: a box
+        # seen at 0.95 m and lost, then backed away from, was never seen again at 1.25 m);
+        # nearer, or never seen: back off to get it into view.
+        ahead = 0.0 if self._last is None else self._last.d_obj - g.d_opt_m - g.tol_d_m
+        creep_m = min(max(ahead, 0.0), g.back_off_max_m)
+        if ahead > 0.0:
+            vx = g.back_off_speed if self._backed_m < creep_m else 0.0
+        else:
+            vx = -g.back_off_speed if self._backed_m < g.back_off_max_m else 0.0
+        self._backed_m += abs(self._v[0]) * dt
         where = (
             "never seen"
             if self._last is None

@@ -102,11 +102,16 @@ def test_commands_respect_the_speed_and_acceleration_limits() -> None:
     assert all(c.vy == 0.0 for c in cmds)
 
 
-def test_a_vanished_object_is_reacquired_by_turning_toward_it_and_backing_off_then_fails() -> None:
+@pytest.mark.parametrize("last_d", [0.6, 1.0])
+def test_a_vanished_object_is_reacquired_by_turning_toward_it_and_moving_then_fails(
+    last_d: float,
+) -> None:
+    """Last seen nearer than d_opt: back off to get it into view; beyond: creep toward it,
+    no farther than it was beyond."""
     gains = ApproachGains()
     ctrl = ApproachController(gains)
     ctrl.reset(0.0)
-    seen = Sighting(d_obj=1.0, theta_obj=0.3, stamp_s=0.0)
+    seen = Sighting(d_obj=last_d, theta_obj=0.3, stamp_s=0.0)
     states = []
     t = 0.0
     cmds = []
@@ -123,7 +128,13 @@ def test_a_vanished_object_is_reacquired_by_turning_toward_it_and_backing_off_th
     assert reacq[0][0] == pytest.approx(gains.lost_after_s, abs=2 * DT)
     assert any(c.wz > 0.1 for _, c in reacq)  # toward the last bearing (+0.3 rad: left)
     assert all(c.wz >= 0.0 for _, c in reacq)
-    assert any(c.vx < -0.05 for _, c in reacq)  # backs off
+    moved = sum(c.vx * DT for _, c in reacq)
+    if last_d < gains.d_opt_m:
+        assert any(c.vx < -0.05 for _, c in reacq)  # backs off
+        assert -gains.back_off_max_m - 0.05 < moved < -0.1
+    else:
+        assert all(c.vx >= 0.0 for _, c in reacq)  # creeps toward where it was
+        assert 0.1 < moved <= last_d - gains.d_opt_m + 0.02
     last_t, last = cmds[-1]
     assert last.state == "failed" and "lost the object" in last.reason
     assert last_t == pytest.approx(gains.lost_after_s + gains.reacquire_s, abs=2 * DT)
