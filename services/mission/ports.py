@@ -124,13 +124,18 @@ class RobotPort(Protocol):
     # -- perception ---------------------------------------------------------------------
 
     def wrist_detection(
-        self, map_id: str, class_name: str, near_xy: tuple[float, float] | None = None
+        self,
+        map_id: str,
+        class_name: str,
+        near_xy: tuple[float, float] | None = None,
+        any_class: bool = False,
     ) -> WristSighting | None:
         """The wrist camera's newest detection of the target, with its frame's stamp and base pose.
 
         The detection associated with `map_id` when perception associated one, else the
-        one of `class_name` at the target's mapped place `near_xy` (world; gated,
-        `targets.pick_detection`), or without it the nearest of the class to the base;
-        None when the newest wrist frame due by now shows none.
+        one of `class_name` (with `any_class`, else any artifact) at the target's mapped
+        place `near_xy` (world; gated, `targets.pick_detection`), or without it the
+        nearest of the class to the base; None when the newest wrist frame due by now
+        shows none.
         """
         ...

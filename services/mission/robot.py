@@ -206,7 +206,11 @@ class BusRobot:
     # -- perception -----------------------------------------------------------------------
 
     def wrist_detection(
-        self, map_id: str, class_name: str, near_xy: tuple[float, float] | None = None
+        self,
+        map_id: str,
+        class_name: str,
+        near_xy: tuple[float, float] | None = None,
+        any_class: bool = False,
     ) -> WristSighting | None:
         due = self._t - self.perception_latency_ns
         frame = self._wrist_frame(due)
@@ -215,7 +219,9 @@ class BusRobot:
         mine = next((d for d in frame.detections if d.map_id == map_id), None)
         if mine is None:
             free = [d for d in frame.detections if d.map_id is None]
-            mine = targets.pick_detection(free, class_name, near_xy, self.sighting_gate_m)
+            mine = targets.pick_detection(
+                free, class_name, near_xy, self.sighting_gate_m, any_class
+            )
         return WristSighting(frame.stamp_ns, mine, frame.T_world_base) if mine else None
 
     def _wrist_frame(self, due_ns: int) -> Detections | None:

@@ -56,12 +56,15 @@ def pick_detection(
     class_name: str,
     near_xy: tuple[float, float] | None,
     gate_m: float,
+    any_class: bool = False,
 ) -> Detection | None:
     """The detection that is the target: of `class_name`, nearest to its mapped place
-    `near_xy` (world, horizontal) and within `gate_m` of it; without a mapped place, the
-    nearest of the class to the base. The gate keeps the approach off another thing of
-    the class in view (a table edge the network read as a box, 0.6 m behind the box it
-    missed for a frame, drew the hall's box approaches back and forth)."""
+    `near_xy` (world, horizontal) and within `gate_m` of it; with `any_class`, when none
+    of the class is there, any artifact there (the network reads a box 1.5 m away as a
+    can: where it is is all the approach needs). Without a mapped place, the nearest of
+    the class to the base. The gate keeps the approach off another thing in view (a
+    table edge the network read as a box, 0.6 m behind the box it missed for a frame,
+    drew the hall's box approaches back and forth)."""
     same = [d for d in detections if d.class_name == class_name]
     if near_xy is None:
         return min(same, key=lambda d: d.d_obj, default=None)
@@ -70,8 +73,12 @@ def pick_detection(
     def off(d: Detection) -> float:
         return math.hypot(d.centroid_in_world[0] - x, d.centroid_in_world[1] - y)
 
-    best = min(same, key=off, default=None)
-    return best if best is not None and off(best) <= gate_m else None
+    others = [d for d in detections if d.class_name not in (class_name, "person")]
+    for pool in (same, others if any_class else []):
+        best = min(pool, key=off, default=None)
+        if best is not None and off(best) <= gate_m:
+            return best
+    return None
 
 
 def person_named(port: RobotPort, name: str) -> MapEntity | None:

@@ -288,7 +288,11 @@ class FakeRobot:
     # -- perception -----------------------------------------------------------------------
 
     def wrist_detection(
-        self, map_id: str, class_name: str, near_xy: tuple[float, float] | None = None
+        self,
+        map_id: str,
+        class_name: str,
+        near_xy: tuple[float, float] | None = None,
+        any_class: bool = False,
     ) -> WristSighting | None:
         self.looked_near.append(near_xy)
         if map_id in self.visible:

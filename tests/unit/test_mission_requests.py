@@ -129,6 +129,8 @@ def test_the_target_is_the_detection_of_its_class_at_its_mapped_place() -> None:
     assert pick_detection([edge, box, can], "box", (5.06, 0.08), 0.35) is box
     # the box missed in this frame: the edge is not taken for it
     assert pick_detection([edge, can], "box", (5.06, 0.08), 0.35) is None
+    # … but for the approach, the can at the box's place is the box
+    assert pick_detection([edge, can], "box", (5.06, 0.08), 0.35, any_class=True) is can
     # no mapped place (dropped on the way): the nearest of the class to the base
     assert pick_detection([edge, box], "box", None, 0.35) is box
     assert pick_detection([], "box", None, 0.35) is None

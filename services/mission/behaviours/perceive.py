@@ -1,7 +1,8 @@
 """The leaves that look: the visual approach and the grasp pose.
 
 - `Approach`: each tick the wrist camera's newest detection of the target (by map id,
-  else its class) becomes a `Sighting` (none when older than `sighting_max_age_s`); the
+  else the one at its mapped place, of its class or, failing that, of any artifact class)
+  becomes a `Sighting` (none when older than `sighting_max_age_s`); the
   approach controller (eq. 3, with its own re-acquire: turn, back off) turns it into
   cmd_vel, sent as source `mission` (the tree set the mode before). `arrived` → stop,
   SUCCESS; `failed` → stop, `object_not_found` with the controller's reason. It never
@@ -46,7 +47,8 @@ class Approach(MissionBehaviour):
     def update(self) -> Status:
         now_ns = self.port.now_ns
         target = self.target()
-        seen = self.port.wrist_detection(target.map_id, target.class_name, target.xy)
+        # Where it is is all the approach needs, whatever the network calls it there.
+        seen = self.port.wrist_detection(target.map_id, target.class_name, target.xy, True)
         sighting = None
         max_age_ns = round(self.settings.sighting_max_age_s * NS_PER_S)
         if seen is not None and now_ns - seen.stamp_ns <= max_age_ns:
