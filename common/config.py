@@ -286,6 +286,10 @@ class MissionSettings(_Section):
     sighting_gate_m: float = 0.35
     #: The handover: how long to wait for the pull; the back-off after the release.
     handover_timeout_s: float = 60.0
+    #: At the handover pose: look this long, then walk again if the person's mapped place
+    #: is farther than this from straight ahead at the handover distance (m).
+    handover_check_s: float = 1.0
+    handover_tol_m: float = 0.12
     back_off_speed: float = 0.15
     back_off_s: float = 1.0
     #: Recovery: re-picks after a grasp lost or failed; instances tried for a class request.

@@ -81,6 +81,10 @@ class RobotPort(Protocol):
         """The base's position in the world as of this tick (None before the first odom)."""
         ...
 
+    def robot_yaw(self) -> float | None:
+        """The base's heading in the world, rad, as of this tick (None before the first odom)."""
+        ...
+
     # -- navigation ---------------------------------------------------------------------
 
     def send_nav_goal(self, goal: NavGoal) -> str:

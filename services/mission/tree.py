@@ -15,7 +15,8 @@
               pick_object: Release (open), Posture(ready), Reach(plan), Grasp, check_held
                            (not held: open on the spot and fail grasp_failed),
                            lift (Reach up lift_m), Posture(stow), mode walk/navigation
-              bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go)
+              bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
+                             at_the_person: person_ahead, else PersonHandover once more
           release_object: mode stand, Posture(handover), feel_pull, Release,
                           mode walk/mission, back_off, mode stand, Posture(stow)
         abort: halt everything, FAILURE with the blackboard's reason
@@ -58,7 +59,7 @@ from services.mission.behaviours.base import (
     reset_blackboard,
 )
 from services.mission.behaviours.handover import FeelPull
-from services.mission.behaviours.motion import BackOff, NavigateTo, SetMode
+from services.mission.behaviours.motion import BackOff, NavigateTo, PersonAhead, SetMode
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
 from services.mission.behaviours.request import ResolvePerson, SelectTarget, WaitForRequest
 from services.mission.recovery import Recover
@@ -139,6 +140,14 @@ def build_tree(ctx: Context) -> Sequence:
         ResolvePerson(ctx),
         SetMode(ctx, "walk", "navigation", st[4]),
         NavigateTo(ctx, "person", st[4], watch_held=True),
+        Selector(
+            "at_the_person",
+            memory=True,
+            children=[
+                PersonAhead(ctx, st[4]),
+                NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
+            ],
+        ),
     )
     release = _seq(
         st[5],

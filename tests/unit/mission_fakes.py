@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal, cast
 
+import msgspec
 import numpy as np
 
 from common.config import MissionSettings
@@ -37,6 +38,7 @@ from common.messages.wbc import (
     WbcModeName,
     WbcStatus,
 )
+from common.robot import HANDOVER_DISTANCE_M
 from services.mission.algorithms import Algorithms
 from services.mission.behaviours.base import Context
 from services.mission.ports import Refused, Unavailable, WristSighting
@@ -80,6 +82,10 @@ class FakeRobot:
     people_: dict[str, MapEntity] = field(default_factory=dict)
     visible: set[str] = field(default_factory=set)
     xy: tuple[float, float] = (0.0, 0.0)
+    yaw: float = 0.0
+    #: The person's mapped place moves this far (m, +y) once the robot first stands at
+    #: the handover pose.
+    person_shift_m: float = 0.0
     #: Where each wrist_detection call looked for the target (its mapped place or None).
     looked_near: list[tuple[float, float] | None] = field(default_factory=list)
     nav_ticks: int = 3
@@ -172,6 +178,9 @@ class FakeRobot:
     def robot_xy(self) -> tuple[float, float] | None:
         return self.xy
 
+    def robot_yaw(self) -> float | None:
+        return self.yaw
+
     # -- navigation -----------------------------------------------------------------------
 
     def send_nav_goal(self, goal: NavGoal) -> str:
@@ -194,6 +203,8 @@ class FakeRobot:
             failure = self.nav_fail.get(kind, "")
             state = "failed" if failure else "succeeded"
             self._nav[goal_id] = (start, kind, state)
+            if state == "succeeded" and kind == "person_handover":
+                self._arrive_at_person(goal_id)
         reason = self.nav_fail.get(kind, "") if state == "failed" else ""
         progress = min(1.0, (self.t - start) / (self.nav_ticks * TICK_NS))
         return NavStatus(
@@ -203,6 +214,21 @@ class FakeRobot:
             reason=cast(NavFailure, reason),
             progress=progress,
         )
+
+    def _arrive_at_person(self, goal_id: str) -> None:
+        """Stand facing +x at the handover distance from the person's mapped place, as
+        navigation would; then, once, the map moves the person by `person_shift_m` (seen
+        from close by, they were not quite where the map had them)."""
+        goal = next(g for i, g in self.nav_goals if i == goal_id)
+        assert isinstance(goal, PersonHandover)
+        p = self.people_[goal.person_id].position_in_world
+        self.xy, self.yaw = (p[0] - HANDOVER_DISTANCE_M, p[1]), 0.0
+        if self.person_shift_m:
+            moved = (p[0], p[1] + self.person_shift_m, p[2])
+            self.people_[goal.person_id] = msgspec.structs.replace(
+                self.people_[goal.person_id], position_in_world=moved
+            )
+            self.person_shift_m = 0.0
 
     def cancel_nav(self, goal_id: str, reason: str) -> None:
         self.nav_cancels.append(goal_id)
@@ -397,6 +423,7 @@ def fast_settings(**overrides: float) -> MissionSettings:
         handover_timeout_s=3.0,
         approach_timeout_s=5.0,
         nav_status_timeout_s=1.0,
+        handover_check_s=0.1,
         back_off_s=0.2,
     )
     base.update(overrides)

@@ -161,7 +161,8 @@ def test_the_cancel_test_visits_every_leaf_that_runs_on_the_happy_path() -> None
         "mode_walk_navigation", "navigate_to_artifact", "mode_walk_mission", "look", "approach",
         "mode_manipulate_navigation", "estimate_grasp", "open_jaw", "ready", "reach", "grasp",
         "lift", "stow",
-        "navigate_to_person", "mode_stand_navigation", "present", "feel_pull", "release",
+        "navigate_to_person", "person_ahead", "mode_stand_navigation", "present", "feel_pull",
+        "release",
         "back_off", "mode_stand_at_rest", "stow_empty",
     } <= names  # fmt: skip
 
@@ -274,3 +275,19 @@ def test_an_object_that_slips_out_while_presented_fails_at_once_as_lost() -> Non
             break
     assert outcome is not None and outcome.state == "failed"
     assert outcome.reason == "grasp_lost"
+
+
+@pytest.mark.parametrize(("shift_m", "handovers"), [(0.05, 1), (0.5, 2)])
+def test_a_person_found_off_their_place_at_the_handover_pose_is_walked_to_again(
+    shift_m: float, handovers: int
+) -> None:
+    """Seen from close by, the person is not where the map had them: within
+    `handover_tol_m` the robot presents where it stands; farther, it walks to them again."""
+    robot = small_world(person_shift_m=shift_m)
+    tree = mission(robot)
+    assert run(tree, robot).state == "succeeded"
+    sent = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert len(sent) == handovers
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    again = [d for d in decisions if "walking to them again" in d]
+    assert len(again) == handovers - 1

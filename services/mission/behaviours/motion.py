@@ -10,11 +10,18 @@
   navigation is ready before its first map). Carrying
   (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
   (or failing while the goal is active) it cancels its goal.
+- `PersonAhead`: at the handover pose, stand `handover_check_s` (the head camera's
+  fresh sightings of the person reach the map), then check that the person's latest
+  mapped place is `HANDOVER_DISTANCE_M` straight ahead within `handover_tol_m`; when not,
+  FAILURE, a condition (no mission failure): the tree walks to the person again. The map
+  can hold a person some tenths of a metre off until it sees them from close by, and the
+  person's hand takes only what is held out within 0.25 m of it.
 - `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 from py_trees.common import Status
@@ -22,8 +29,9 @@ from py_trees.common import Status
 from common.messages.mission import MissionReason
 from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover
 from common.messages.wbc import WbcModeName
+from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import PERSON, Context, MissionBehaviour
-from services.mission.ports import PortError, Refused
+from services.mission.ports import PortError, Refused, Unavailable
 
 
 class SetMode(MissionBehaviour):
@@ -134,6 +142,39 @@ class NavigateTo(MissionBehaviour):
             self.port.cancel_nav(self.goal_id, f"{self.name} stopped")
             self.ctx.decide(f"{self.name}: goal {self.goal_id} cancelled")
         self.active = False
+
+
+class PersonAhead(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("person_ahead", ctx, stage)
+
+    def update(self) -> Status:
+        s = self.settings
+        if self.elapsed_s() < s.handover_check_s:
+            self.feedback_message = "looking at the person"
+            return Status.RUNNING
+        person_id = str(self.get(PERSON))
+        xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
+        try:
+            person = self.port.person(person_id)
+        except Unavailable:
+            person = None
+        if person is None or xy is None or yaw is None:
+            self.feedback_message = "cannot check: presenting where navigation stopped"
+            return Status.SUCCESS
+        dx = person.position_in_world[0] - xy[0]
+        dy = person.position_in_world[1] - xy[1]
+        ahead = math.cos(yaw) * dx + math.sin(yaw) * dy
+        left = -math.sin(yaw) * dx + math.cos(yaw) * dy
+        off = math.hypot(ahead - HANDOVER_DISTANCE_M, left)
+        if off <= s.handover_tol_m:
+            self.feedback_message = f"{person_id} {off:.2f} m from the handover place"
+            return Status.SUCCESS
+        self.ctx.decide(
+            f"{person_id} is {off:.2f} m from where the handover pose put them "
+            f"({ahead:.2f} m ahead, {left:+.2f} m left): walking to them again"
+        )
+        return Status.FAILURE
 
 
 class BackOff(MissionBehaviour):
