@@ -25,19 +25,10 @@ from typing import NamedTuple
 
 import msgspec
 
-from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.mission import STAGES, MissionRequest, MissionStatus
 from common.messages.sim import HandoverTaken, ObjectDropped, RobotContact, WorldEvent
 from common.messages.world import WorldDescription
 
-#: The paper's tree, in order: what the per-stage table counts.
-STAGES = (
-    "navigate_to_object",
-    "approach_object",
-    "pose_estimation",
-    "pick_object",
-    "bring_to_user",
-    "release_object",
-)
 TERMINAL = frozenset({"succeeded", "failed", "cancelled", "rejected"})
 
 

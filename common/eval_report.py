@@ -20,7 +20,8 @@ from typing import Any
 
 import msgspec
 
-from common.eval_judge import STAGES, WorldResult
+from common.eval_judge import WorldResult
+from common.messages.mission import STAGES
 
 PLOTS = ("stage_times.png", "outcomes.png")
 

@@ -57,6 +57,18 @@ MissionReason = Literal[
 ]
 
 
+#: The paper's stages of the tree, in order: a running status's `behaviour` names one at
+#: the start of each (the mission's progress and the eval's per-stage table count them).
+STAGES = (
+    "navigate_to_object",
+    "approach_object",
+    "pose_estimation",
+    "pick_object",
+    "bring_to_user",
+    "release_object",
+)
+
+
 class MissionStatus(Message, frozen=True):
     """`dume/<r>/mission/status`: the state of a request, echoing its `request_id`.
 

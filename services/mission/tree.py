@@ -37,7 +37,7 @@ import py_trees
 from py_trees.common import Status
 from py_trees.composites import Selector, Sequence
 
-from common.messages.mission import MissionReason, MissionRequest
+from common.messages.mission import STAGES, MissionReason, MissionRequest
 from common.messages.wbc import Grasp, Posture, Release
 from services.mission.behaviours.abort import Abort, halt
 from services.mission.behaviours.arm import ArmAction, CheckHeld
@@ -48,7 +48,6 @@ from services.mission.behaviours.base import (
     FAILURE,
     GRASP_PLAN,
     REQUEST,
-    STAGES,
     TARGET,
     Context,
     Failure,

@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 
 from common.eval_judge import (
-    STAGES,
     MissionRecord,
     WorldResult,
     evaluate,
@@ -25,7 +24,7 @@ from common.eval_judge import (
 )
 from common.eval_report import summarize, write_report
 from common.eval_targets import TargetError, demo_pair, seeded_pair
-from common.messages.mission import MissionRequest, MissionState, MissionStatus
+from common.messages.mission import STAGES, MissionRequest, MissionState, MissionStatus
 from common.messages.semantic_map import MapEntity
 from common.messages.sim import HandoverTaken, ObjectDropped, RobotContact, WorldEvent
 from common.messages.world import WorldDescription

@@ -28,15 +28,6 @@ from services.mission.ports import RobotPort
 NS_PER_S = 1_000_000_000
 NAMESPACE = "/mission"
 
-#: The paper's stages, in order (the status's `behaviour` and progress come from them).
-STAGES = (
-    "navigate_to_object",
-    "approach_object",
-    "pose_estimation",
-    "pick_object",
-    "bring_to_user",
-    "release_object",
-)
 
 #: Blackboard keys, all under /mission.
 REQUEST = "request"  # MissionRequest
