@@ -185,6 +185,8 @@ class SemanticMapSettings(_Section):
     #: Range within which a camera is trusted to see an artifact, and a person, m.
     look_range_m: float = 3.0
     person_look_range_m: float = 6.0
+    #: A person detection this close to a static obstacle cell is not a person, m.
+    person_obstacle_margin_m: float = 0.1
     #: An artifact or person the map created itself from perception and fused fewer times
     #: than this is a false entry when looked for at its place and not seen: it is
     #: deleted (prior, seeded and imported artifacts are only marked missing).
@@ -286,6 +288,8 @@ class MissionSettings(_Section):
     sighting_gate_m: float = 0.35
     #: The handover: how long to wait for the pull; the back-off after the release.
     handover_timeout_s: float = 60.0
+    #: The object leaving the jaws this soon after a pull was felt was taken, not lost (s).
+    handover_taken_window_s: float = 0.5
     #: At the handover pose: look this long, then walk again if the person's mapped place
     #: is farther than this from straight ahead at the handover distance (m).
     handover_check_s: float = 1.0

@@ -15,6 +15,10 @@ True once
 
 has held on every sample for `debounce_s` of sim time (a single spike from a footstep
 or the estimator's noise does not trip it). Tripped stays tripped until `reset`.
+`pulled_within(t, window_s)` says whether a pull of at least half of `force_n` was felt
+in the `window_s` before t, tripped or not: a person who pulls the object out of the jaws
+faster than the debounce has taken it, where an object that slips out has not been pulled
+toward anyone.
 Recorded in `bench.trial_fetch`: holding still, F · toward stays within ±1.5 N (0.12 N
 noise); a person's pull reaches +13..15 N within 0.4 s of their grip closing; the jaw's
 effort stays at its cap throughout, so the force does the work.
@@ -68,12 +72,14 @@ class PullDetector:
         self.pull_n = 0.0  # the last sample's pull, N (for logging)
         self.effort_change_nm = 0.0  # the last sample's |effort − effort₀|, N·m
         self.tripped_at_ns: int | None = None
+        self.last_pull_ns: int | None = None  # the last sample pulling ≥ force_n / 2
 
     def reset(self, status: WbcStatus) -> None:
         """Start feeling from this status (the arm still in `handover`): a new baseline."""
         self._t0_ns = status.stamp_ns
         self._forces, self._efforts = [], []
         self._since_ns, self.tripped, self.tripped_at_ns = None, False, None
+        self.last_pull_ns = None
         self.pull_n = self.effort_change_nm = 0.0
         self._add_baseline(status)
 
@@ -102,6 +108,8 @@ class PullDetector:
             return False
         self.pull_n = float((F - self._F0) @ self.toward)
         self.effort_change_nm = abs(effort - self._e0)
+        if self.pull_n >= 0.5 * self.force_n:
+            self.last_pull_ns = status.stamp_ns
         pulling = (
             self.pull_n >= self.force_n
             or (self.pull_n >= 0.5 * self.force_n and self.effort_change_nm >= self.effort_nm)
@@ -115,3 +123,8 @@ class PullDetector:
         if (status.stamp_ns - self._since_ns) / NS >= self.debounce_s:
             self.tripped, self.tripped_at_ns = True, status.stamp_ns
         return self.tripped
+
+    def pulled_within(self, t_ns: int, window_s: float) -> bool:
+        """Whether a pull of at least half `force_n` was felt in the `window_s` before t."""
+        last = self.last_pull_ns
+        return last is not None and 0 <= t_ns - last <= window_s * NS

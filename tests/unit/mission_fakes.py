@@ -382,10 +382,12 @@ class StubPlan:
 
 
 class StubPull:
-    """Feels the pull on the third status after the baseline (never, when `never`)."""
+    """A pull begins on the first status after the baseline and is felt on the third
+    (never either, when `never`)."""
 
     def __init__(self, never: bool = False) -> None:
         self.never, self.count = never, 0
+        self.pull_n = 0.0
 
     def reset(self, status: WbcStatus) -> None:
         self.count = 0
@@ -393,6 +395,9 @@ class StubPull:
     def update(self, status: WbcStatus) -> bool:
         self.count += 1
         return not self.never and self.count >= 3
+
+    def pulled_within(self, t_ns: int, window_s: float) -> bool:
+        return not self.never and self.count >= 1
 
 
 def stub_algorithms(grasp_possible: bool = True, pull: bool = True) -> Algorithms:

@@ -157,3 +157,23 @@ def test_the_recorded_pull_that_began_before_the_baseline_trips_it() -> None:
     samples, tripped = _replay(LATE)
     assert samples[0]["wrench"][0] > 10.0  # type: ignore[index]
     assert tripped is not None
+
+
+def test_a_pull_cut_short_by_the_object_leaving_the_jaws_is_remembered() -> None:
+    """A person who pulls the object out faster than the debounce: the detector has not
+    tripped, but `pulled_within` knows a pull was felt just before."""
+    detector = PullDetector()
+    w = noisy(60, 0.3)
+    w[50:, 0] += 6.0  # a pull for 0.1 s (under the 0.2 s debounce), then the jaws are empty
+    assert feed(detector, w) == -1
+    last = 59 * PERIOD
+    assert detector.pulled_within(last, 0.5)
+    assert not detector.pulled_within(last + 600 * MS, 0.5), "a pull long ago is not this one"
+
+
+def test_no_pull_felt_means_nothing_to_remember() -> None:
+    detector = PullDetector()
+    w = noisy(60, 0.3)
+    w[50:, 2] += 3.0  # the weight gone (the object fell), nobody pulling toward the person
+    assert feed(detector, w) == -1
+    assert not detector.pulled_within(59 * PERIOD, 0.5)

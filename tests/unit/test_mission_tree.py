@@ -8,6 +8,7 @@ from common.config import MissionSettings
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PersonHandover
 from common.messages.wbc import Grasp, Posture, Reach, Release
+from services.mission.behaviours.handover import FeelPull
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import FakeRobot, context, fast_settings, small_world
 
@@ -263,18 +264,32 @@ def test_a_grasp_that_does_not_hold_lets_go_on_the_spot_and_picks_again() -> Non
     assert kinds.count("grasp") == 2
 
 
-def test_an_object_that_slips_out_while_presented_fails_at_once_as_lost() -> None:
+def _let_go_while_presenting(pull: bool, after_pull_statuses: int) -> Outcome:
     robot = small_world()
-    tree = mission(robot)
+    tree = mission(robot, pull=pull)
+    feel = next(b for b in tree.root.iterate() if isinstance(b, FeelPull))
+    outcome = None
     for _ in range(2000):
         outcome = tree.tick()
-        if tree.where()[1] == "feel_pull":
-            robot.held = False  # it falls out of the jaw in the handover posture
+        presenting = tree.where()[1] == "feel_pull" and feel.baseline
+        if presenting and feel.detector.count >= after_pull_statuses:
+            robot.held = False  # out of the jaw in the handover posture
         robot.advance()
         if outcome is not None:
             break
-    assert outcome is not None and outcome.state == "failed"
-    assert outcome.reason == "grasp_lost"
+    assert outcome is not None
+    return outcome
+
+
+def test_an_object_that_slips_out_while_presented_fails_at_once_as_lost() -> None:
+    outcome = _let_go_while_presenting(pull=False, after_pull_statuses=0)
+    assert outcome.state == "failed" and outcome.reason == "grasp_lost"
+
+
+def test_an_object_pulled_out_of_the_jaws_before_the_pull_is_felt_was_taken() -> None:
+    """The person pulls it out faster than the detector's debounce (hall seed 17)."""
+    outcome = _let_go_while_presenting(pull=True, after_pull_statuses=1)
+    assert outcome.state == "succeeded"
 
 
 @pytest.mark.parametrize(("shift_m", "handovers"), [(0.05, 1), (0.5, 2)])

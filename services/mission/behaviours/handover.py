@@ -3,7 +3,9 @@
 `FeelPull` holds still `settle_s` with the object presented, takes the pull detector's
 baseline from `wbc/status` (gripper effort and wrench at rest), then feeds it every
 status until it feels the pull: SUCCESS (the tree releases next). The grasp detector
-letting go before any pull → `grasp_lost` at once (the object fell: nobody will pull).
+letting go while a pull was being felt (within `handover_taken_window_s`, before the
+detector's debounce) is the person taking it: SUCCESS too. Letting go with no pull →
+`grasp_lost` at once (the object fell: nobody will pull).
 Nobody pulls within `handover_timeout_s` → `handover_timeout`. The sim's handover event
 is never read.
 """
@@ -41,6 +43,15 @@ class FeelPull(MissionBehaviour):
             return Status.RUNNING
         self.last_stamp = status.stamp_ns
         if not status.held:
+            if self.baseline and (
+                self.detector.update(status)
+                or self.detector.pulled_within(status.stamp_ns, s.handover_taken_window_s)
+            ):
+                self.ctx.decide(
+                    f"handover: the object left the jaws while pulled "
+                    f"({self.detector.pull_n:+.1f} N toward the person): taken"
+                )
+                return Status.SUCCESS
             return self.fail("grasp_lost", "the object slipped out while presenting it")
         if not self.baseline:
             if self.elapsed_s() >= s.settle_s:
