@@ -41,6 +41,12 @@ class Grid:
     occupied: BoolGrid
     resolution: float
     origin: tuple[float, float]
+    #: The cells known to hold something (unknown ones left out); None: `occupied`.
+    solid: BoolGrid | None = None
+
+    @property
+    def known_occupied(self) -> BoolGrid:
+        return self.occupied if self.solid is None else self.solid
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -50,14 +56,24 @@ class Grid:
     @classmethod
     def from_world(cls, grid: world.OccupancyGrid) -> Grid:
         cells = np.asarray(as_numpy(grid.cells))
-        return cls(cells != world.FREE, float(grid.resolution), tuple(grid.origin))  # type: ignore[arg-type]
+        return cls(
+            cells != world.FREE,
+            float(grid.resolution),
+            tuple(grid.origin),  # type: ignore[arg-type]
+            cells == world.OCCUPIED,
+        )
 
     @classmethod
     def from_map(cls, grid: semantic_map.OccupancyGrid) -> Grid:
         cells = np.asarray(as_numpy(grid.cells))
         if cells.ndim != 2 or grid.resolution_m <= 0:
             raise ValueError(f"occupancy grid of shape {cells.shape}, res {grid.resolution_m}")
-        return cls(cells != 0, float(grid.resolution_m), grid.origin_xy)
+        return cls(
+            cells != world.FREE,  # the map uses the world's codes (unknown 255)
+            float(grid.resolution_m),
+            grid.origin_xy,
+            cells == world.OCCUPIED,
+        )
 
     def cell(self, x: float, y: float) -> tuple[int, int] | None:
         """The (iy, ix) holding (x, y), or None outside the grid."""

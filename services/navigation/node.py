@@ -251,7 +251,7 @@ class NavNode:
         due = self.perception.due(b)
         before = self.seen.active(b)
         for d in due:
-            self.seen.update(d)
+            self.seen.update(d, self.grid)
         return self.seen.active(b) != before
 
     def tick(self, b: int) -> None:

@@ -8,6 +8,13 @@ in front of the person's centre, so distances err on the safe side; at least
 was last seen, and `merge` puts them over the map's people: a map person with a seen
 person's id (perception associated the detection with it), or within `same_m` of a
 seen one, is that person, seen now: the seen position wins.
+
+A person cannot stand inside a machine: a detection whose floor point lies within
+`obstacle_margin_m` of a cell the map's grid knows to be occupied (unknown cells do
+not count: a patrol starts with every cell unknown) is a fixed thing the network
+took for a person (a machine's face read as a person in every frame stopped the robot
+0.3 m short of its goal in two hall worlds), and is left out. A real person is a body
+width from the nearest obstacle surface they face the camera across.
 """
 
 from __future__ import annotations
@@ -15,8 +22,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from common.grid import occupied_near
 from common.messages.perception import Detections
 from services.navigation.costmap import Person
+from services.navigation.grid import Grid
 
 NS = 1_000_000_000
 
@@ -31,6 +40,8 @@ class SeenParams:
     #: m, the least height of a detection's points for a person (a head camera sees a
     #: person close by from the floor up; a short blob is something else, e.g. the arm).
     min_height_m: float = 0.6
+    #: m: a "person" whose floor point is this close to an occupied cell is not one.
+    obstacle_margin_m: float = 0.1
 
 
 class SeenPeople:
@@ -40,8 +51,9 @@ class SeenPeople:
         self.p = p
         self._seen: list[tuple[int, Person]] = []
 
-    def update(self, dets: Detections) -> None:
-        """Replace what the camera showed before with what this frame shows."""
+    def update(self, dets: Detections, grid: Grid | None = None) -> None:
+        """Replace what the camera showed before with what this frame shows (people
+        inside `grid`'s obstacles left out)."""
         fresh = [
             Person(d.map_id or f"seen_{k + 1}", d.centroid_in_world[0], d.centroid_in_world[1])
             for k, d in enumerate(dets.detections)
@@ -49,6 +61,12 @@ class SeenPeople:
             and d.score >= self.p.min_score
             and d.extent[2] >= self.p.min_height_m
         ]
+        if grid is not None and fresh:
+            xy = [(f.x, f.y) for f in fresh]
+            inside = occupied_near(
+                grid.known_occupied, grid.resolution, grid.origin, xy, self.p.obstacle_margin_m
+            )
+            fresh = [f for f, bad in zip(fresh, inside, strict=True) if not bad]
         # An earlier sighting nobody in this frame matches stays until it expires (the
         # person may be out of view, not gone).
         kept = [

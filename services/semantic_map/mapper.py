@@ -19,7 +19,11 @@ Measurement conventions: an artifact is placed at the detection's axis point (ab
 radius behind the visible surface) at the visible centroid's height; a person at the
 axis point's floor projection; the horizontal noise grows with the range d_obj. Person
 detections of one frame within `PERSON_MERGE_M` of each other are one person, and an
-artifact detection that close to a person of the same frame is dropped (clothes).
+artifact detection that close to a person of the same frame is dropped (clothes). A
+person detection within `person_obstacle_margin_m` of a static obstacle cell (a person
+cannot stand inside a machine or on a bench) is a fixed thing the network read as a
+person: ignored, and it hides no artifact (the hall patrol lost cans on benches that
+way). Only the static layer counts: a learned cell may be a person perception missed.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from typing import Literal
 import numpy as np
 
 from common.geometry import FloatArray
+from common.grid import occupied_near
 from common.messages import as_numpy, to_wire
 from common.messages.perception import Detection, Detections
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
@@ -38,7 +43,7 @@ from services.semantic_map.appearance import colour_histogram
 from services.semantic_map.artifacts import ArtifactTracker, FusionParams
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
 from services.semantic_map.looks import View, looks_at
-from services.semantic_map.occupancy import Occupancy, depth_points_world
+from services.semantic_map.occupancy import OCCUPIED, Occupancy, depth_points_world
 from services.semantic_map.people import PeopleParams, PeopleTracker, merge_split_people
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
@@ -61,6 +66,7 @@ class MapParams:
     missing_after_frames: int = 5
     look_range_m: float = 3.0
     person_look_range_m: float = 6.0
+    person_obstacle_margin_m: float = 0.1
     drop_below_observations: int = 10
     fusion: FusionParams = field(default_factory=FusionParams)
     people: PeopleParams = field(default_factory=PeopleParams)
@@ -173,6 +179,21 @@ class SemanticMap:
             return Observation("person", xy.copy(), 0.0, sigma, det.score, app)
         return Observation(det.class_name, xy.copy(), float(centroid[2]), sigma, det.score)
 
+    def _plausible(self, people: list[Observation], report: IngestReport) -> list[Observation]:
+        """The people observations not on a static obstacle (module docstring)."""
+        if not people:
+            return people
+        occ = self.occupancy
+        inside = occupied_near(
+            occ.static == OCCUPIED,
+            occ.resolution_m,
+            occ.origin_xy,
+            np.array([o.xy for o in people]),
+            self.params.person_obstacle_margin_m,
+        )
+        report.ignored += int(inside.sum())
+        return [o for o, bad in zip(people, inside, strict=True) if not bad]
+
     def ingest(self, dets: Detections, frame: CameraFrame | None = None) -> IngestReport:
         """Fuse one camera frame's detections (`frame`: the same camera at the same stamp)."""
         report = IngestReport()
@@ -191,7 +212,7 @@ class SemanticMap:
                 continue
             obs = self.observation(det, rgb)
             (people if obs.class_name == "person" else arts).append(obs)
-        people = merge_split_people(people, PERSON_MERGE_M)
+        people = self._plausible(merge_split_people(people, PERSON_MERGE_M), report)
         # A person's clothes are not artifacts: an artifact detection on a person is dropped.
         on_person = [
             o for o in arts if any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)

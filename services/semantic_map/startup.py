@@ -42,6 +42,7 @@ def map_params(s: SemanticMapSettings) -> MapParams:
         missing_after_frames=s.missing_after_frames,
         look_range_m=s.look_range_m,
         person_look_range_m=s.person_look_range_m,
+        person_obstacle_margin_m=s.person_obstacle_margin_m,
         drop_below_observations=s.drop_below_observations,
         fusion=FusionParams(
             gate_min_m=s.gate_min_m, gate_sigmas=s.gate_sigmas, confirm_hits=s.confirm_hits

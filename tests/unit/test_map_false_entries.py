@@ -16,7 +16,7 @@ from common.messages.sim import CameraFrame
 from common.robot_description import R_FORWARD_OPTICAL
 from services.semantic_map.entities import Track
 from services.semantic_map.mapper import IngestReport, MapParams, SemanticMap
-from services.semantic_map.occupancy import Occupancy
+from services.semantic_map.occupancy import OCCUPIED, Occupancy
 from services.semantic_map.store import MapStore
 
 S = 100_000_000
@@ -223,3 +223,18 @@ def test_a_hidden_person_is_not_counted_missed() -> None:
         )
         assert not smap.ingest(msg, frame).dropped
     assert [e.id for e in smap.entities("person")] == ["person_1"]
+
+
+def test_a_person_on_a_static_obstacle_is_not_a_person_and_hides_no_artifact() -> None:
+    """Hall patrol: a bench read as a person, the can on it then dropped as clothes. With
+    the bench in the static layer the "person" is ignored and the can is mapped; a real
+    person half a metre in front of the bench is."""
+    static = np.zeros((40, 40), np.uint8)
+    static[18:22, 24:28] = OCCUPIED  # a bench: x 1.0–2.0 (res 0.25, origin −5), y −0.5–0.5
+    smap = SemanticMap(MapParams(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
+    for k in range(1, 4):
+        _ingest(smap, k * S, _det("person", (1.5, 0.0)), _det("can", (1.45, 0.05)),
+                _det("person", (0.5, 2.0)))  # fmt: skip
+    assert [e.id for e in smap.entities("artifact")] == ["can_1"]
+    people = smap.entities("person")
+    assert [(e.id, round(e.position_in_world[0], 2)) for e in people] == [("person_1", 0.5)]

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.messages import semantic_map, world
 from common.messages.arrays import to_wire
 from common.messages.perception import Detection, Detections
 from services.navigation.costmap import Person
+from services.navigation.grid import Grid
 from services.navigation.seen_people import SeenPeople
 
 S = 1_000_000_000
@@ -48,3 +50,33 @@ def test_a_person_seen_elsewhere_hides_where_the_map_last_had_them_under_their_i
     seen.update(_frame(0, _det("person", 3.0, 2.6, map_id="person_2")))
     merged = seen.merge([Person("person_2", 3.0, 0.0)], 0)  # the map: still in the path
     assert [(p.id, p.x, p.y) for p in merged] == [("person_2", 3.0, 2.6)]
+
+
+def _grid_with_a_machine() -> Grid:
+    """A 4 × 4 m grid of 5 cm cells at the origin; a machine fills x 1.75–2.75, y 2–3;
+    the row y 3.5–4 is unknown."""
+    cells = np.zeros((80, 80), np.uint8)
+    cells[40:60, 35:55] = world.OCCUPIED
+    cells[70:, :] = 255
+    return Grid.from_map(
+        semantic_map.OccupancyGrid(stamp_ns=0, resolution_m=0.05, origin_xy=(0.0, 0.0),
+                                   cells=to_wire(cells))
+    )  # fmt: skip
+
+
+def test_a_person_inside_or_on_the_face_of_an_obstacle_is_not_a_person() -> None:
+    """Hall seed 4: a machine's face read as a person in every frame stopped the robot."""
+    grid = _grid_with_a_machine()
+    seen = SeenPeople()
+    seen.update(
+        _frame(0, _det("person", 1.75, 2.5), _det("person", 2.2, 2.4), _det("person", 1.5, 2.5)),
+        grid,
+    )
+    assert [(p.x, p.y) for p in seen.active(0)] == [(1.5, 2.5)], "a real person 25 cm off stays"
+
+
+def test_unknown_cells_do_not_hide_a_person() -> None:
+    """A patrol starts with the map unknown: everyone seen must still count."""
+    seen = SeenPeople()
+    seen.update(_frame(0, _det("person", 1.0, 3.75)), _grid_with_a_machine())
+    assert len(seen.active(0)) == 1
