@@ -183,3 +183,13 @@ def test_a_short_bottle_is_held_clear_of_its_table() -> None:
     plan = grasp_from_detection(det, STAMP, T_wb)
     bottom = 0.3 - 0.06
     assert plan.H[2, 3] >= bottom + GraspParams().clearance_m - 1e-9
+
+
+def test_a_box_measured_a_little_wider_than_the_jaws_is_still_tried() -> None:
+    """Hall seed 15: a 6.2 cm box side measured 8.1 cm from one view (yaw 10° off)."""
+    T_wb = base_pose(0.0, 0.0, 0.0)
+    det = detection(T_wb, (0.7, 0.0, 0.3), "box", "box", (0.081, 0.13, 0.12))
+    assert grasp_from_detection(det, STAMP, T_wb).kind == "top"
+    wide = detection(T_wb, (0.7, 0.0, 0.3), "box", "box", (0.095, 0.13, 0.12))
+    with pytest.raises(GraspPoseError, match="wider than the jaws"):
+        grasp_from_detection(wide, STAMP, T_wb)
