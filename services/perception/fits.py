@@ -54,23 +54,30 @@ def _z_range(z: FloatArray) -> tuple[float, float]:
     return float(np.min(z)), float(np.max(z))
 
 
-def _ring_system(xy: FloatArray, rings: npt.NDArray[np.int_], n: int) -> tuple[FloatArray, ...]:
-    """Linear system of concentric circles: [2x 2y e_k] [a b c_k]ᵀ = x² + y²."""
-    A = np.zeros((len(xy), 2 + n))
-    A[:, 0:2] = 2.0 * xy
-    A[np.arange(len(xy)), 2 + rings] = 1.0
-    return A, np.sum(xy * xy, axis=1)
+def _ring_normal(
+    u: FloatArray, s: float, rings: npt.NDArray[np.int_], n: int, rhs: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """JᵀJ and Jᵀ·rhs of a concentric-rings Jacobian whose row i is [uᵢ (2), s·e_ring(i)]:
+    an arrow matrix, summed per ring with `bincount` (O(points), not O(points · rings))."""
+    M = np.zeros((2 + n, 2 + n))
+    M[:2, :2] = u.T @ u
+    for j in (0, 1):
+        M[j, 2:] = M[2:, j] = s * np.bincount(rings, weights=u[:, j], minlength=n)
+    M[np.arange(2, 2 + n), np.arange(2, 2 + n)] = s * s * np.bincount(rings, minlength=n)
+    v = np.concatenate([u.T @ rhs, s * np.bincount(rings, weights=rhs, minlength=n)])
+    return M, v
 
 
 def _fit_rings(
     xy: FloatArray, rings: npt.NDArray[np.int_], n: int
 ) -> tuple[FloatArray, FloatArray] | None:
-    """Common centre (2,) and per-ring radii (n,): algebraic, then Gauss-Newton geometric."""
-    A, b = _ring_system(xy, rings, n)
-    normal = A.T @ A
+    """Common centre (2,) and per-ring radii (n,): algebraic, then Gauss-Newton geometric.
+
+    Algebraic: [2x 2y e_k] [a b c_k]ᵀ = x² + y² (concentric circles, linear)."""
+    normal, rhs = _ring_normal(2.0 * xy, 1.0, rings, n, np.sum(xy * xy, axis=1))
     if np.linalg.cond(normal) > 1e14:  # the arc is too short to locate a centre
         return None
-    sol = np.linalg.solve(normal, A.T @ b)
+    sol = np.linalg.solve(normal, rhs)
     centre = sol[:2]
     r2 = sol[2:] + centre @ centre
     if np.any(r2 <= 0.0):
@@ -80,10 +87,8 @@ def _fit_rings(
         diff = xy - centre
         dist = np.maximum(np.linalg.norm(diff, axis=1), 1e-9)
         res = dist - radii[rings]
-        J = np.zeros((len(xy), 2 + n))
-        J[:, 0:2] = -diff / dist[:, None]
-        J[np.arange(len(xy)), 2 + rings] = -1.0
-        step = np.linalg.lstsq(J.T @ J, -J.T @ res, rcond=None)[0]
+        JtJ, Jtr = _ring_normal(-diff / dist[:, None], -1.0, rings, n, res)
+        step = np.linalg.lstsq(JtJ, -Jtr, rcond=None)[0]
         centre = centre + step[:2]
         radii = radii + step[2:]
         if np.linalg.norm(step) < 1e-7:

@@ -57,6 +57,12 @@ class SegmenterError(ValueError):
     """A model that cannot be used, or a frame that cannot be segmented; says which and why."""
 
 
+def _softmax(logits: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Class probabilities along axis 0."""
+    e = np.exp(logits - logits.max(axis=0, keepdims=True))
+    return np.asarray(e / e.sum(axis=0, keepdims=True), dtype=np.float32)
+
+
 def bbox_of(mask: BoolArray) -> tuple[int, int, int, int]:
     """(u0, v0, u1, v1) of a non-empty mask, inclusive-exclusive."""
     vs, us = np.nonzero(mask)
@@ -174,13 +180,14 @@ class Segmenter:
         """Instances in an (H, W, 3) uint8 RGB frame with its (H, W) depth in m (0 = none)."""
         rgb, depth = self._check(rgb, depth)
         logits = self.forward(self.blob(rgb, depth))
-        e = np.exp(logits - logits.max(axis=0, keepdims=True))
-        prob = e / e.sum(axis=0, keepdims=True)
-        cls = prob.argmax(axis=0)
         h, w = depth.shape
-        if cls.shape != (h, w):
-            cls = cv2.resize(cls.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
-            prob = np.stack([cv2.resize(p, (w, h)) for p in prob])
+        if logits.shape[1:] != (h, w):  # back to the frame's size: probabilities resized
+            prob = _softmax(logits)
+            cls = cv2.resize(prob.argmax(axis=0).astype(np.uint8), (w, h),
+                             interpolation=cv2.INTER_NEAREST)  # fmt: skip
+            logits = np.log(np.stack([cv2.resize(p, (w, h)) for p in prob]) + 1e-12)
+        else:
+            cls = logits.argmax(axis=0)  # the softmax keeps the order: only where needed
         cuts = depth_cuts(depth)
         found: list[Instance] = []
         for group, min_area in self.groups:
@@ -188,9 +195,10 @@ class Segmenter:
             if np.count_nonzero(mask) < min_area:
                 continue
             for part in split_instances(mask, depth, cuts, min_area):
-                votes = [float(prob[c][part].sum()) for c in group]
+                prob = _softmax(logits[:, part])  # (C, pixels of the part)
+                votes = [float(prob[c].sum()) for c in group]
                 c = group[int(np.argmax(votes))]
-                score = float(prob[c][part].mean())
+                score = float(prob[c].mean())
                 if score >= self.min_score:
                     found.append(Instance(self.classes[c], score, part, bbox_of(part)))
         return found
