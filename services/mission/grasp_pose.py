@@ -109,6 +109,14 @@ class GraspPlan:
         H[2, 3] += dz_m
         return replace(self, H=H, pregrasp_m=0.0)
 
+    def backed_out(self) -> GraspPlan:
+        """The pre-grasp pose (H moved `pregrasp_m` back along the approach), reached
+        straight: how the gripper leaves an object it did not pick, before the base walks."""
+        H = np.array(self.H, dtype=float)
+        axis = np.asarray(self.approach_axis, dtype=float)
+        H[:3, 3] -= self.pregrasp_m * (H[:3, :3] @ (axis / max(float(np.linalg.norm(axis)), 1e-9)))
+        return replace(self, H=H, pregrasp_m=0.0)
+
     def in_world(self, T_world_base: FloatArray) -> FloatArray:
         """H in the world, given the base pose at the plan's stamp (for a `base` plan)."""
         H = np.asarray(self.H, dtype=float)

@@ -12,9 +12,10 @@
                   navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
-              pick_object: Release (open), Posture(ready), Reach(plan), Grasp, check_held
-                           (not held: open on the spot and fail grasp_failed),
-                           lift (Reach up lift_m), Posture(stow), mode walk/navigation
+              pick_object: Release (open), Posture(ready), then Reach(plan), Grasp,
+                           check_held, lift (Reach up lift_m) — any of these failing: open
+                           on the spot, Reach back to the pre-grasp pose, Posture(stow), and
+                           fail with its reason — then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
                              at_the_person: person_ahead, else PersonHandover once more
           release_object: mode stand, Posture(handover), feel_pull, Release,
@@ -112,24 +113,38 @@ def build_tree(ctx: Context) -> Sequence:
         ArmAction(ctx, "open_jaw", lambda _b: Release(), "arm_failed", s.release_timeout_s, st[3]),
         ArmAction(ctx, "ready", lambda _b: Posture(name="ready"), "arm_failed",
                   s.posture_timeout_s, st[3]),
-        ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(), "grasp_failed",
-                  s.reach_timeout_s, st[3]),
-        ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed", s.grasp_timeout_s, st[3]),
         Selector(
-            "held_or_let_go",
+            "picked_or_back_out",
             memory=True,
             children=[
-                CheckHeld(ctx, st[3]),
                 _seq(
-                    "let_go",  # open on the spot: the object stays where it is for a re-pick
+                    "grasp_it",
+                    ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(),
+                              "grasp_failed", s.reach_timeout_s, st[3]),
+                    ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed",
+                              s.grasp_timeout_s, st[3]),
+                    CheckHeld(ctx, st[3]),
+                    ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
+                              "grasp_failed", s.reach_timeout_s, st[3]),
+                ),
+                _seq(
+                    # open on the spot (the object stays for a re-pick), leave along the
+                    # approach and stow before the base moves: an arm left out over the
+                    # table sweeps it when the robot walks (hall seed 11)
+                    "back_out",
                     ArmAction(ctx, "let_go", lambda _b: Release(), "arm_failed",
                               s.release_timeout_s, st[3]),
-                    py_trees.behaviours.Failure(name="not_held"),
+                    py_trees.decorators.FailureIsSuccess(  # stuck short of it: stow anyway
+                        "leave_or_not",
+                        ArmAction(ctx, "leave", lambda b: b.get(GRASP_PLAN).backed_out().reach(),
+                                  "grasp_failed", s.reach_timeout_s, st[3]),
+                    ),
+                    ArmAction(ctx, "stow_empty", lambda _b: Posture(name="stow"), "arm_failed",
+                              s.posture_timeout_s, st[3]),
+                    py_trees.behaviours.Failure(name="not_picked"),
                 ),
             ],
         ),
-        ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
-                  "grasp_failed", s.reach_timeout_s, st[3]),
         ArmAction(ctx, "stow", lambda _b: Posture(name="stow"), "arm_failed",
                   s.posture_timeout_s, st[3]),
         SetMode(ctx, "walk", "navigation", st[3]),

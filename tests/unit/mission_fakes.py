@@ -380,6 +380,9 @@ class StubPlan:
     def lifted(self, dz_m: float) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, 0.0)
 
+    def backed_out(self) -> StubPlan:
+        return StubPlan(self.kind, self.frame, self.possible, 0.0)
+
 
 class StubPull:
     """A pull begins on the first status after the baseline and is felt on the third

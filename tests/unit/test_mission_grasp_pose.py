@@ -193,3 +193,16 @@ def test_a_box_measured_a_little_wider_than_the_jaws_is_still_tried() -> None:
     wide = detection(T_wb, (0.7, 0.0, 0.3), "box", "box", (0.095, 0.13, 0.12))
     with pytest.raises(GraspPoseError, match="wider than the jaws"):
         grasp_from_detection(wide, STAMP, T_wb)
+
+
+def test_backing_out_goes_back_along_the_approach_to_the_pregrasp_pose() -> None:
+    T_wb = base_pose(1.0, 2.0, 0.7)
+    plan = grasp_from_detection(detection(T_wb, (0.7, 0.0, 0.3)), STAMP, T_wb)
+    out = plan.backed_out()
+    H, H_out = np.asarray(plan.H), np.asarray(out.H)
+    approach = H[:3, :3] @ np.asarray(plan.approach_axis)
+    assert np.allclose(H_out[:3, 3], H[:3, 3] - plan.pregrasp_m * approach)
+    assert np.allclose(H_out[:3, :3], H[:3, :3]) and out.pregrasp_m == 0.0
+    # back toward the robot: the pre-grasp pose is nearer the base than the grasp
+    base = T_wb[:3, 3]
+    assert np.linalg.norm(H_out[:2, 3] - base[:2]) < np.linalg.norm(H[:2, 3] - base[:2])

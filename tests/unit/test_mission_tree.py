@@ -306,3 +306,29 @@ def test_a_person_found_off_their_place_at_the_handover_pose_is_walked_to_again(
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     again = [d for d in decisions if "walking to them again" in d]
     assert len(again) == handovers - 1
+
+
+@pytest.mark.parametrize("failing", ["reach", "grasp"])
+def test_a_failed_pick_opens_backs_out_and_stows_before_the_base_walks_again(failing: str) -> None:
+    """Hall seed 11: the reach failed beside the can, the robot walked off with the arm
+    out over the table and swept a bottle off it."""
+    robot = small_world(arm_fail={failing: "blocked"})
+    tree = mission(robot)
+    navs_at_failure = -1
+    outcome = None
+    arms_at_failure = 0
+    for _ in range(4000):
+        outcome = tree.tick()
+        if navs_at_failure >= 0 and len(robot.nav_goals) > navs_at_failure:
+            break  # the next walk was sent: what did the arm do before it?
+        robot.advance()
+        failed = [g for g in robot._arm_state.values() if g.kind == failing and g.state == "failed"]
+        if failed and navs_at_failure < 0:
+            navs_at_failure, arms_at_failure = len(robot.nav_goals), len(robot.arm_goals)
+        if outcome is not None:
+            break
+    assert navs_at_failure >= 0 and len(robot.nav_goals) > navs_at_failure
+    after = [g for _, g in robot.arm_goals[arms_at_failure:]]
+    assert isinstance(after[0], Release)
+    assert isinstance(after[1], Reach) and after[1].pregrasp_m == 0.0  # out along the approach
+    assert after[-1] == Posture(name="stow")
