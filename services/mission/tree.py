@@ -13,7 +13,8 @@
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
               pick_object: Release (open), Posture(ready), then Reach(plan), Grasp,
-                           check_held, lift (Reach up lift_m) — any of these failing: open
+                           check_held, lift (Reach up lift_m; short of it is enough),
+                           still_held — any of these failing: open
                            on the spot, Reach back to the pre-grasp pose, Posture(stow), and
                            fail with its reason — then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
@@ -124,8 +125,15 @@ def build_tree(ctx: Context) -> Sequence:
                     ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed",
                               s.grasp_timeout_s, st[3]),
                     CheckHeld(ctx, st[3]),
-                    ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
-                              "grasp_failed", s.reach_timeout_s, st[3]),
+                    # a lift short of its goal with the object still held is lift enough
+                    # (hall seed 16: a box held, lifted 5.8 cm short; letting go drops it)
+                    py_trees.decorators.FailureIsSuccess(
+                        "lift_or_not",
+                        ArmAction(ctx, "lift",
+                                  lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
+                                  "grasp_failed", s.reach_timeout_s, st[3]),
+                    ),
+                    CheckHeld(ctx, st[3], name="still_held"),
                 ),
                 _seq(
                     # open on the spot (the object stays for a re-pick), leave along the

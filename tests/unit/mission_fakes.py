@@ -98,6 +98,8 @@ class FakeRobot:
     grasp_misses: int = 0
     #: Grasps that succeed but do not hold (the object slips as the jaw settles).
     slips: int = 0
+    #: Reaches made holding the object (the lift) that end short of their goal.
+    lift_fails: int = 0
     #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
     drops: int = 0
     drop_after: int = 1
@@ -276,6 +278,9 @@ class FakeRobot:
         state, reason = "succeeded", ""
         if kind in self.arm_fail:
             state, reason = "failed", self.arm_fail[kind]
+        elif isinstance(goal, Reach) and self.held and self.lift_fails > 0:
+            self.lift_fails -= 1
+            state, reason = "failed", "gripper_tcp 5.8 cm from the goal"
         elif isinstance(goal, Grasp):
             if self.grasp_misses > 0:
                 self.grasp_misses -= 1

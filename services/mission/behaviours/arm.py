@@ -75,8 +75,8 @@ class ArmAction(MissionBehaviour):
 
 
 class CheckHeld(MissionBehaviour):
-    def __init__(self, ctx: Context, stage: str) -> None:
-        super().__init__("check_held", ctx, stage)
+    def __init__(self, ctx: Context, stage: str, name: str = "check_held") -> None:
+        super().__init__(name, ctx, stage)
 
     def update(self) -> Status:
         status = self.port.wbc_status()
