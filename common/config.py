@@ -273,6 +273,9 @@ class MissionSettings(_Section):
     #: Arm goals: how long each may stay active before it counts as failed.
     posture_timeout_s: float = 12.0
     reach_timeout_s: float = 20.0
+    #: A grasp's Reach that gives up farther than this from its goal met something solid
+    #: or is out of reach: `grasp_pose_failed`, not re-picked (m).
+    reach_miss_max_m: float = 0.06
     grasp_timeout_s: float = 8.0
     release_timeout_s: float = 5.0
     #: After the grasp, the object is lifted this far straight up before stowing, m.

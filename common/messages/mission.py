@@ -46,7 +46,7 @@ MissionReason = Literal[
     # a mission that ran and stopped (state `failed` or `cancelled`)
     "navigation_failed",  # navigation refused the goal or did not reach it
     "object_not_found",  # approach or pose estimation could not see the object
-    "grasp_pose_failed",  # no grasp is possible from what was seen
+    "grasp_pose_failed",  # no grasp possible from what was seen, or its reach stopped far short
     "arm_failed",  # an arm goal (posture, reach, release) failed or timed out
     "grasp_failed",  # the reach to the grasp, the jaw or the lift failed (re-picked first)
     "grasp_lost",  # the object was lost while carrying it, and the re-pick budget is spent

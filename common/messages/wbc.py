@@ -83,12 +83,16 @@ GoalState = Literal["active", "succeeded", "failed", "cancelled"]
 
 
 class GoalStatus(Message, frozen=True):
-    """One arm goal: id, kind (reach, grasp, …), state, and the reason when it failed."""
+    """One arm goal: id, kind (reach, grasp, …), state, and the reason when it failed.
+
+    miss_m: a failed reach's distance from its goal when it gave up, m (0 otherwise).
+    """
 
     goal_id: str
     kind: str
     state: GoalState
     reason: str = ""
+    miss_m: NonNegative = 0.0
 
 
 class WbcStatus(Message, frozen=True):

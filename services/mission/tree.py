@@ -12,7 +12,8 @@
                   navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
-              pick_object: Release (open), Posture(ready), then Reach(plan), Grasp,
+              pick_object: Release (open), Posture(ready), then Reach(plan) (stopped
+                           more than reach_miss_max_m short: grasp_pose_failed), Grasp,
                            check_held, lift (Reach up lift_m; short of it is enough),
                            still_held — any of these failing: open
                            on the spot, Reach back to the pre-grasp pose, Posture(stow), and
@@ -42,7 +43,7 @@ from py_trees.composites import Selector, Sequence
 from common.messages.mission import STAGES, MissionReason, MissionRequest
 from common.messages.wbc import Grasp, Posture, Release
 from services.mission.behaviours.abort import Abort, halt
-from services.mission.behaviours.arm import ArmAction, CheckHeld
+from services.mission.behaviours.arm import ArmAction, CheckHeld, GraspReach
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
@@ -120,19 +121,14 @@ def build_tree(ctx: Context) -> Sequence:
             children=[
                 _seq(
                     "grasp_it",
-                    ArmAction(ctx, "reach", lambda b: b.get(GRASP_PLAN).reach(),
-                              "grasp_failed", s.reach_timeout_s, st[3]),
+                    GraspReach(ctx, lambda b: b.get(GRASP_PLAN).reach(), st[3]),
                     ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed",
                               s.grasp_timeout_s, st[3]),
                     CheckHeld(ctx, st[3]),
                     # a lift short of its goal with the object still held is lift enough
                     # (hall seed 16: a box held, lifted 5.8 cm short; letting go drops it)
-                    py_trees.decorators.FailureIsSuccess(
-                        "lift_or_not",
-                        ArmAction(ctx, "lift",
-                                  lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
-                                  "grasp_failed", s.reach_timeout_s, st[3]),
-                    ),
+                    ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
+                              "grasp_failed", s.reach_timeout_s, st[3], must_succeed=False),
                     CheckHeld(ctx, st[3], name="still_held"),
                 ),
                 _seq(
@@ -142,11 +138,9 @@ def build_tree(ctx: Context) -> Sequence:
                     "back_out",
                     ArmAction(ctx, "let_go", lambda _b: Release(), "arm_failed",
                               s.release_timeout_s, st[3]),
-                    py_trees.decorators.FailureIsSuccess(  # stuck short of it: stow anyway
-                        "leave_or_not",
-                        ArmAction(ctx, "leave", lambda b: b.get(GRASP_PLAN).backed_out().reach(),
-                                  "grasp_failed", s.reach_timeout_s, st[3]),
-                    ),
+                    ArmAction(ctx, "leave", lambda b: b.get(GRASP_PLAN).backed_out().reach(),
+                              "grasp_failed", s.reach_timeout_s, st[3],
+                              must_succeed=False),  # stuck short of it: stow anyway
                     ArmAction(ctx, "stow_empty", lambda _b: Posture(name="stow"), "arm_failed",
                               s.posture_timeout_s, st[3]),
                     py_trees.behaviours.Failure(name="not_picked"),

@@ -99,10 +99,15 @@ class _Goal:
     state: GoalState = "active"
     reason: str = ""
     start_ns: int = 0
+    miss_m: float = 0.0
 
     def status(self) -> GoalStatus:
         return GoalStatus(
-            goal_id=self.goal_id, kind=self.kind, state=self.state, reason=self.reason
+            goal_id=self.goal_id,
+            kind=self.kind,
+            state=self.state,
+            reason=self.reason,
+            miss_m=self.miss_m,
         )
 
 
@@ -230,9 +235,10 @@ class ArmActions:
         if drop_pose and (self._segments or self._T_hold is not None or self.T_goal is not None):
             self._start_joints(obs.q_arm, now_ns, obs.q_arm)
 
-    def _end(self, state: GoalState, reason: str = "") -> None:
+    def _end(self, state: GoalState, reason: str = "", miss_m: float = 0.0) -> None:
         if self.active is not None:
             self.active.state, self.active.reason = state, reason
+            self.active.miss_m = miss_m if math.isfinite(miss_m) else 0.0
             self.active = None
 
     def statuses(self) -> list[GoalStatus]:
@@ -300,6 +306,7 @@ class ArmActions:
                     "failed",
                     f"gripper_tcp {dist * 100:.1f} cm / {math.degrees(angle):.1f} deg from "
                     f"the goal {elapsed:.1f} s after the start",
+                    miss_m=dist,
                 )
         elif goal.kind == "posture":
             err = float(np.max(np.abs(obs.q_arm - self._q_to)))

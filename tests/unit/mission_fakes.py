@@ -100,6 +100,8 @@ class FakeRobot:
     slips: int = 0
     #: Reaches made holding the object (the lift) that end short of their goal.
     lift_fails: int = 0
+    #: How far from its goal a reach failed by `arm_fail` gives up, m.
+    reach_miss_m: float = 0.02
     #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
     drops: int = 0
     drop_after: int = 1
@@ -275,9 +277,10 @@ class FakeRobot:
 
     def _finish_arm(self, goal_id: str, goal: ArmGoal) -> None:
         kind = type(goal).__name__.lower()
-        state, reason = "succeeded", ""
+        state, reason, miss = "succeeded", "", 0.0
         if kind in self.arm_fail:
             state, reason = "failed", self.arm_fail[kind]
+            miss = self.reach_miss_m if isinstance(goal, Reach) else 0.0
         elif isinstance(goal, Reach) and self.held and self.lift_fails > 0:
             self.lift_fails -= 1
             state, reason = "failed", "gripper_tcp 5.8 cm from the goal"
@@ -292,7 +295,7 @@ class FakeRobot:
         elif isinstance(goal, Release):
             self.held = False
         self._arm_state[goal_id] = GoalStatus(
-            goal_id=goal_id, kind=kind, state=cast(GoalState, state), reason=reason
+            goal_id=goal_id, kind=kind, state=cast(GoalState, state), reason=reason, miss_m=miss
         )
 
     def arm_goal(self, goal_id: str) -> GoalStatus | None:

@@ -340,3 +340,21 @@ def test_a_lift_short_of_its_goal_with_the_object_held_goes_on_to_stow() -> None
     tree = mission(robot)
     assert run(tree, robot).state == "succeeded"
     assert robot.arm_kinds().count("grasp") == 1, "no re-pick"
+
+
+def test_a_reach_stopped_far_short_of_the_grasp_is_not_tried_again() -> None:
+    """Hall seed 15: the gripper hit the bench 11.7 cm short; the re-pick's reach tipped the
+    robot over. Far short: backed out, stowed, and `grasp_pose_failed`; a near miss is
+    re-picked."""
+    robot = small_world(arm_fail={"reach": "blocked"}, reach_miss_m=0.12)
+    tree = mission(robot)
+    outcome = run(tree, robot)
+    assert outcome.state == "failed" and outcome.reason == "grasp_pose_failed"
+    assert "11" in outcome.detail or "12" in outcome.detail
+    grasp_reaches = [g for _, g in robot.arm_goals if isinstance(g, Reach) and g.pregrasp_m > 0]
+    assert len(grasp_reaches) == 1
+    assert robot.arm_goals[-1][1] == Posture(name="stow")
+    near = small_world(arm_fail={"reach": "blocked"}, reach_miss_m=0.03)
+    tree = mission(near)
+    assert run(tree, near).reason == "grasp_failed"
+    assert len([g for _, g in near.arm_goals if isinstance(g, Reach) and g.pregrasp_m > 0]) == 3

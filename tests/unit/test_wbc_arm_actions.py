@@ -86,6 +86,7 @@ def test_a_reach_that_never_gets_there_fails_and_says_how_far() -> None:
     a.update(60_000 * MS, obs(make_T(np.eye(3), [0.6, 0.0, 0.85])))
     status = a.statuses()[0]
     assert status.state == "failed" and "5.0 cm" in status.reason
+    assert status.miss_m == pytest.approx(0.05)
 
 
 def test_a_new_goal_preempts_the_active_one_and_the_arm_holds_its_reference() -> None:

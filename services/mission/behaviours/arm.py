@@ -4,7 +4,12 @@
   start and watches its state on `wbc/status`; a refusal, a failed goal or a goal still
   active after its timeout fails with the action's typed reason. Preempted while its goal
   is active, it asks the port to hold the arm where it is (the controller has no goal
-  cancel: leaving `manipulate` freezes the arm's joints).
+  cancel: leaving `manipulate` freezes the arm's joints). With `must_succeed` False a
+  failed goal is said and passed over (SUCCESS, no failure recorded): a best effort.
+- `GraspReach`: the grasp's Reach; one that gave up farther than `reach_miss_max_m`
+  from the grasp pose met something solid or is out of reach: `grasp_pose_failed`, not
+  re-picked (hall seed 15: the gripper hit the bench under a tall box 11.7 cm short, and
+  the second try tipped the robot over).
 - `CheckHeld`: the grasp detector on `wbc/status` says an object is held.
 """
 
@@ -31,9 +36,11 @@ class ArmAction(MissionBehaviour):
         reason: MissionReason,
         timeout_s: float,
         stage: str,
+        must_succeed: bool = True,
     ) -> None:
         super().__init__(name, ctx, stage)
         self.goal_of, self.reason, self.timeout_s = goal, reason, timeout_s
+        self.must_succeed = must_succeed
         self.goal_id = ""
         self.active = False
         self.error: str = ""
@@ -61,6 +68,9 @@ class ArmAction(MissionBehaviour):
             return Status.SUCCESS
         if goal is not None and goal.state in ("failed", "cancelled"):
             self.active = False
+            if not self.must_succeed:
+                self.ctx.decide(f"{self.name}: {goal.kind} {goal.state}: {goal.reason}; going on")
+                return Status.SUCCESS
             return self.fail(self.reason, f"{goal.kind} {goal.state}: {goal.reason}")
         if self.elapsed_s() > self.timeout_s:
             return self.fail(self.reason, f"still not done after {self.elapsed_s():.1f} s")
@@ -72,6 +82,25 @@ class ArmAction(MissionBehaviour):
             self.port.hold_arm(f"{self.name} stopped")
             self.ctx.decide(f"{self.name}: arm held where it is")
         self.active = False
+
+
+class GraspReach(ArmAction):
+    """See the module docstring."""
+
+    def __init__(self, ctx: Context, goal: GoalOf, stage: str) -> None:
+        super().__init__(ctx, "reach", goal, "grasp_failed", ctx.settings.reach_timeout_s, stage)
+
+    def update(self) -> Status:
+        goal = self.port.arm_goal(self.goal_id) if self.goal_id else None
+        limit = self.settings.reach_miss_max_m
+        if goal is not None and goal.state == "failed" and goal.miss_m > limit:
+            self.active = False
+            return self.fail(
+                "grasp_pose_failed",
+                f"the gripper stopped {goal.miss_m * 100:.1f} cm from the grasp pose (more than "
+                f"{limit * 100:.0f} cm): blocked or out of reach, not tried again",
+            )
+        return super().update()
 
 
 class CheckHeld(MissionBehaviour):
