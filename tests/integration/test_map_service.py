@@ -244,7 +244,11 @@ def test_ids_and_acknowledged_writes_survive_a_sigkill_in_the_middle_of_writes(
     d.step([detection("bottle", [-3.0, -3.0, 0.8])])
     d.step([detection("bottle", [-3.0, -3.0, 0.8])])  # the same bottle again, fused
     after_restart = f"bottle_{len(stored) + 1}"  # the next number, none reused
-    assert wait_until(lambda: after_restart in {e.id for e in _listing(s)}, 20.0)
+
+    def ids() -> set[str]:
+        return {e.id for e in _listing(s)}
+
+    assert wait_until(lambda: after_restart in ids(), 20.0), sorted(ids() - set(stored))
 
 
 def test_a_map_exported_then_imported_is_the_same_map(stack: StartStack, tmp_path: Path) -> None:
