@@ -12,12 +12,12 @@
                   navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
-              pick_object: Release (open), Posture(ready), then Reach(plan) (stopped
-                           more than reach_miss_max_m short: grasp_pose_failed), Grasp,
-                           check_held, lift (Reach up lift_m; short of it is enough),
-                           still_held — any of these failing: open
-                           on the spot, Reach back to the pre-grasp pose, Posture(stow), and
-                           fail with its reason — then Posture(stow), mode walk/navigation
+              pick_object: Release (open), Posture(ready), then grasp_it: Reach(plan)
+                           (stopped more than reach_miss_max_m short: grasp_pose_failed),
+                           Grasp, check_held, lift (Reach up lift_m; short is enough),
+                           still_held; any of these failing, back_out: open on the spot,
+                           Reach back to the pre-grasp pose, Posture(stow), fail with its
+                           reason; then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
                              at_the_person: person_ahead, else PersonHandover once more
           release_object: mode stand, Posture(handover), feel_pull, Release,
