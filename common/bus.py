@@ -21,6 +21,7 @@ import json
 import logging
 import queue
 import threading
+import time
 from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -306,9 +307,15 @@ class Server(Generic[T]):
 
 
 class AliveWatch:
-    """Who is alive under a liveliness key expression, kept current by Zenoh."""
+    """Who is alive under a liveliness key expression, kept current by Zenoh.
+
+    `wait_for` also asks `liveliness().get` once a second while someone is missing: a
+    token announced as the subscription was still reaching the router can be missed by
+    the subscriber (a fresh-clone CI run waited 300 s for a mission that was up).
+    """
 
     def __init__(self, session: zenoh.Session, key_expr: str) -> None:
+        self._session, self._key_expr = session, key_expr
         self._alive: set[str] = set()
         #: Counts changes, so a hot loop can skip looking when nothing changed.
         self.version = 0
@@ -330,10 +337,30 @@ class AliveWatch:
             return set(self._alive)
 
     def wait_for(self, keys: set[str], timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            with self._cond:
+                if self._cond.wait_for(lambda: keys <= self._alive, max(0.0, min(1.0, left))):
+                    return
+                if left <= 1.0:
+                    missing = sorted(keys - self._alive)
+                    raise WaitTimeout(f"not alive after {timeout_s:.3g} s: {missing}")
+            self._ask()
+
+    def _ask(self) -> None:
+        """Who the router says is alive now (added; a DELETE still removes them)."""
+        try:
+            replies = self._session.liveliness().get(self._key_expr, timeout=1.0)
+            found = {str(r.ok.key_expr) for r in replies if r.ok is not None}
+        except zenoh.ZError as exc:
+            log.debug("liveliness get %s: %s", self._key_expr, exc)
+            return
         with self._cond:
-            if not self._cond.wait_for(lambda: keys <= self._alive, timeout_s):
-                missing = sorted(keys - self._alive)
-                raise WaitTimeout(f"not alive after {timeout_s:.3g} s: {missing}")
+            if found - self._alive:
+                self._alive |= found
+                self.version += 1
+                self._cond.notify_all()
 
     def undeclare(self) -> None:
         self._sub.undeclare()

@@ -1,0 +1,38 @@
+"""`common.bus.AliveWatch` on a real Zenoh session (loopback, scouting off)."""
+
+from __future__ import annotations
+
+import json
+import socket
+
+import pytest
+import zenoh
+
+from common.bus import AliveWatch, WaitTimeout
+
+
+def _session() -> zenoh.Session:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def test_a_token_whose_announcement_was_missed_is_found_by_asking() -> None:
+    """A fresh-clone CI run waited 300 s for a service that was up: the watch had missed
+    its token's PUT. Waiting also asks who is alive."""
+    with _session() as s:
+        watch = AliveWatch(s, "test/alive/*")
+        token = s.liveliness().declare_token("test/alive/a")
+        watch.wait_for({"test/alive/a"}, 5.0)
+        watch._alive.clear()  # the PUT never arrived
+        watch.wait_for({"test/alive/a"}, 5.0)
+        assert watch.alive() == {"test/alive/a"}
+        with pytest.raises(WaitTimeout, match="test/alive/b"):
+            watch.wait_for({"test/alive/a", "test/alive/b"}, 1.5)
+        token.undeclare()
+        watch.undeclare()
