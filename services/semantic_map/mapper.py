@@ -43,7 +43,7 @@ from services.semantic_map.appearance import colour_histogram
 from services.semantic_map.artifacts import ArtifactTracker, FusionParams
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
 from services.semantic_map.looks import View, looks_at
-from services.semantic_map.occupancy import OCCUPIED, Occupancy, depth_points_world
+from services.semantic_map.occupancy import Occupancy, depth_points_world
 from services.semantic_map.people import PeopleParams, PeopleTracker, merge_split_people
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
@@ -185,7 +185,7 @@ class SemanticMap:
             return people
         occ = self.occupancy
         inside = occupied_near(
-            occ.static == OCCUPIED,
+            occ.static_occupied,
             occ.resolution_m,
             occ.origin_xy,
             np.array([o.xy for o in people]),

@@ -32,6 +32,8 @@ class Occupancy:
         hits: NDArray[np.uint16] | None = None,
     ) -> None:
         self.static = np.ascontiguousarray(static, dtype=np.uint8)
+        #: The static layer's obstacle cells (the static layer never changes after this).
+        self.static_occupied: NDArray[np.bool_] = self.static == OCCUPIED
         self.resolution_m = float(resolution_m)
         self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))
         self.hits_needed = hits_needed

@@ -10,7 +10,6 @@ import rerun as rr
 from common.lockstep import NS_PER_S
 from common.recording import is_recording
 from services.semantic_map.mapper import SemanticMap
-from services.semantic_map.occupancy import OCCUPIED
 from services.semantic_map.patrol import Route
 
 ARTIFACT = (40, 160, 255)
@@ -47,9 +46,8 @@ class MapLogger:
         if t_ns % self.grid_every_ns == 0:
             occ = smap.occupancy
             learned = occ.learned_mask()
-            static = occ.static == OCCUPIED
             for name, mask, colour in (
-                ("static", static, (150, 150, 150)),
+                ("static", occ.static_occupied, (150, 150, 150)),
                 ("learned", learned, (255, 140, 0)),
             ):
                 iy, ix = np.nonzero(mask)
