@@ -306,6 +306,10 @@ class Server(Generic[T]):
         self._thread.join(timeout=1.0)
 
 
+#: How often a query that nobody answered is asked again (`Bus.query_all`).
+QUERY_RETRY_S = 0.1
+
+
 class AliveWatch:
     """Who is alive under a liveliness key expression, kept current by Zenoh.
 
@@ -416,14 +420,27 @@ class Bus:
     def query_all(
         self, key: str, request: Any, reply_type: type[R], timeout_s: float = 5.0
     ) -> list[R]:
+        """Every reply; asks again until `timeout_s` while nobody answers.
+
+        A get that no queryable matches ends at once with no reply. A queryable this
+        session has not heard of yet (its declaration still on its way, or one a fresh-
+        clone CI run never saw reach a session opened as the services started) is
+        therefore asked again every `QUERY_RETRY_S` until the deadline.
+        """
         payload = None if request is None else encode(request)
-        out: list[R] = []
-        for reply in self.session.get(key, payload=payload, timeout=timeout_s):
-            if reply.ok is not None:
-                out.append(decode(reply.ok.payload.to_bytes(), reply_type, key=key))
-            elif reply.err is not None:
-                raise RemoteError(key, decode(reply.err.payload.to_bytes(), ErrorReply, key=key))
-        return out
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            out: list[R] = []
+            for reply in self.session.get(key, payload=payload, timeout=max(left, 0.01)):
+                if reply.ok is not None:
+                    out.append(decode(reply.ok.payload.to_bytes(), reply_type, key=key))
+                elif reply.err is not None:
+                    err = decode(reply.err.payload.to_bytes(), ErrorReply, key=key)
+                    raise RemoteError(key, err)
+            if out or deadline - time.monotonic() < QUERY_RETRY_S:
+                return out
+            time.sleep(QUERY_RETRY_S)
 
     def declare_alive(self, key: str) -> None:
         """Declare a liveliness token (kept until the bus closes)."""

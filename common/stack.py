@@ -107,11 +107,21 @@ class _Stack:
         return {service_of_alive_key(k) for k in self.bus.alive_now(self.keys.alive_all)}
 
     def wait_ready(self, services: Sequence[str], timeout_s: float = 60.0) -> None:
-        watch = self.bus.watch_alive(self.keys.alive_all)
+        """Wait until `services` are alive.
+
+        The wait has a session of its own when `bus` is not open yet, so that `bus` opens
+        after every service declared its queryables and receives them as current
+        declarations, not as news racing the session's own start.
+        """
+        own = Bus.open(self.config) if self._bus is None else None
+        bus = own or self.bus
+        watch = bus.watch_alive(self.keys.alive_all)
         try:
             watch.wait_for({self.keys.alive(s) for s in services}, timeout_s)
         finally:
             watch.undeclare()
+            if own is not None:
+                own.close()
 
     def close_bus(self) -> None:
         if self._bus is not None:

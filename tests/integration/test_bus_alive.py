@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
 
 import pytest
 import zenoh
 
-from common.bus import AliveWatch, WaitTimeout
+from common.bus import AliveWatch, Bus, NoReply, WaitTimeout
+from common.messages import ErrorReply
 
 
 def _session() -> zenoh.Session:
@@ -36,3 +38,22 @@ def test_a_token_whose_announcement_was_missed_is_found_by_asking() -> None:
             watch.wait_for({"test/alive/a", "test/alive/b"}, 1.5)
         token.undeclare()
         watch.undeclare()
+
+
+def test_a_query_asks_again_until_a_late_queryable_answers() -> None:
+    """A get nobody matches ends at once with no reply (a fresh-clone CI eval read the
+    map 'within 10 s' and failed at once): `Bus.query` asks again until its deadline."""
+    with _session() as s:
+        bus = Bus(s)
+        answer = ErrorReply("internal", "late")
+        late = threading.Timer(0.5, lambda: bus.serve("test/late", None, lambda _r, _s: answer))
+        late.start()
+        try:
+            reply = bus.query("test/late", None, ErrorReply, 5.0)
+        finally:
+            late.join()
+        assert reply == answer
+        with pytest.raises(NoReply, match="test/nobody"):
+            bus.query("test/nobody", None, ErrorReply, 0.5)
+        for server in bus._servers:
+            server.close()
