@@ -114,6 +114,7 @@ __all__ = [  # the description's names, re-exported, and this module's
     "robot_spec",
     "set_sim_options",
     "standing_q",
+    "tcp_reach_gap",
     "v_mj_to_pin",
     "v_pin_to_mj",
 ]
@@ -305,6 +306,31 @@ def _tcp_reachable(
     a4 = pitch - a2 - a3
     ok = (a4 >= POSITION_LOWER[k4] + margin) & (a4 <= POSITION_UPPER[k4] - margin)
     return wrist + _planar(np.full_like(a2, pitch), arm_plane()["tool"]), ok
+
+
+@functools.cache
+def _limit_grid() -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """`_arm_grid` at the joint limits, and joint1's axis x in the base (at rest)."""
+    q = pin.neutral(_MODEL)
+    data = _MODEL.createData()
+    pin.forwardKinematics(_MODEL, data, q)
+    x1 = float(data.oMi[_MODEL.getJointId(ARM_JOINTS[0])].translation[0])
+    return (*_arm_grid(0.0), x1)
+
+
+def tcp_reach_gap(p_base: FloatArray, pitch_rad: float) -> float:
+    """How far (m) a TCP at `p_base` (x, y, z in the base frame), nose-down `pitch_rad`
+    in the arm's plane (joint1 turned toward it), lies outside what the arm reaches within
+    its joint limits with the trunk at its standing pose; 0 inside (to the grid's ~1 cm).
+    The whole-body controller moves the trunk too, so a few cm of gap may still be
+    reached: the caller picks the slack.
+    """
+    a2, a3, wrist, x1 = _limit_grid()
+    r = x1 + math.hypot(float(p_base[0]) - x1, float(p_base[1]))
+    tcp, ok = _tcp_reachable(a2, a3, wrist, pitch_rad, 0.0)
+    if not ok.any():
+        return math.inf
+    return float(np.min(np.hypot(tcp[ok, 0] - r, tcp[ok, 1] - float(p_base[2]))))
 
 
 def _reach_and_standoff() -> tuple[float, float]:

@@ -13,7 +13,10 @@ than the paper's identity rotation:
 - top grasp (boxes): x down (tilted `top_tilt_rad` away from the robot, for reach), z
   across the box's shorter side, perpendicular to its long faces (the sign nearer the
   line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
-  just below the top face.
+  just below the top face. A box whose top grasp lies out of the arm's reach
+  (`common.robot.tcp_reach_gap` over `reach_slack_m`: a tall box on a bench) is held
+  from the side instead: x horizontal along its long faces (the sign away from the
+  shoulder), the jaws closing across its shorter side, at half its visible height.
 
 Frames, as the WBC's Reach reads them (`services.wbc.arm_actions`): with the base pose at
 capture (`Detections.T_world_base`) the plan is in `world` — fixed, exact, whenever it is
@@ -36,12 +39,14 @@ import numpy as np
 from common.geometry import FloatArray, inv_T, make_T, rot_z
 from common.messages.perception import Detection
 from common.messages.wbc import Reach
-from common.robot import GRASP_PITCH_RAD, arm_plane
+from common.robot import GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 
 #: Classes whose upright cylinder fit gets a side grasp, and where along the visible
 #: height (0 bottom, 1 top) the TCP holds it: a bottle's body is its lower 3/4.
 SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 TOP_GRASP_CLASSES = ("box",)
+#: Where a box too high for a top grasp is held from the side (0 bottom, 1 top).
+BOX_SIDE_HEIGHT = 0.5
 
 
 class GraspPoseError(Exception):
@@ -60,7 +65,11 @@ class GraspParams:
     pregrasp_m: the approach starts this far back; max_width_m: the widest the jaws hold;
     width_slack_m: a measured width up to this much wider is still tried (one view's fit
     overestimates: hall seed 15's box measured 8.1 cm across its 6.2 cm side, its yaw
-    10° off, and the closing jaws turn a box square)."""
+    10° off, and the closing jaws turn a box square); reach_slack_m: a box whose top
+    grasp lies further than this outside the arm's reach (`common.robot.tcp_reach_gap`;
+    the trunk gives a few cm more) is taken from the side instead: hall seed 15's 19 cm
+    box on a 0.84 m bench, whose top grasp stopped 11.7 cm short with the gripper on
+    the bench)."""
 
     pitch_rad: float = 0.0
     top_tilt_rad: float = 0.3
@@ -69,6 +78,7 @@ class GraspParams:
     pregrasp_m: float = 0.12
     max_width_m: float = 0.075
     width_slack_m: float = 0.015
+    reach_slack_m: float = 0.06
 
     def __post_init__(self) -> None:
         lo, hi = GRASP_PITCH_RAD
@@ -231,6 +241,15 @@ def grasp_from_detection(
         across = fit_x if extent[0] <= extent[1] else np.array([-fit_x[1], fit_x[0]])
         centre[2] = max(top - p.top_depth_m, axis[2])
         R = top_rotation(sight, across, p.top_tilt_rad)
+        if _top_gap(R, centre, T_world_base) > p.reach_slack_m:
+            # Too high for a top grasp: from the side, along the long faces.
+            kind = "side"
+            along = np.array([-across[1], across[0]])
+            along = along if along @ sight >= 0.0 else -along
+            z = bottom + BOX_SIDE_HEIGHT * extent[2]
+            centre = axis.copy()
+            centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
+            R = side_rotation(along, p.pitch_rad)
     return GraspPlan(
         H=make_T(R, centre),
         frame="world" if world else "base",
@@ -239,6 +258,17 @@ def grasp_from_detection(
         kind=kind,
         stamp_ns=stamp_ns,
     )
+
+
+def _top_gap(R: FloatArray, centre: FloatArray, T_world_base: FloatArray | None) -> float:
+    """`common.robot.tcp_reach_gap` of a top grasp (TCP `centre`, rotation `R`, in the
+    world when `T_world_base` is given, else in the base): how far out of the arm's reach."""
+    p_base = centre
+    if T_world_base is not None:
+        p_base = (inv_T(np.asarray(T_world_base, dtype=float)) @ np.append(centre, 1.0))[:3]
+    x = R[:, 0]
+    pitch = math.atan2(-float(x[2]), float(np.hypot(x[0], x[1])))
+    return tcp_reach_gap(p_base, pitch)
 
 
 def plan_error(H_plan_world: FloatArray, H_truth_world: FloatArray) -> tuple[float, float]:
