@@ -5,8 +5,9 @@ fit, at the visible points' mid-height), the orientation from the fit's shape �
 than the paper's identity rotation:
 
 - side grasp (upright cylinders: bottles, cans): the TCP's x (approach) horizontal along
-  the line of sight from the arm's shoulder to the axis, pitched nose-down by
-  `pitch_rad` (within `common.robot.GRASP_PITCH_RAD`); y (the jaw pivot) up along the
+  the line of sight from the arm's shoulder to the axis, pitched nose-down by the least
+  pitch (from `pitch_rad`, within `common.robot.GRASP_PITCH_RAD`) at which the arm alone
+  reaches it — low grasps come from a little above; y (the jaw pivot) up along the
   cylinder, so z (fixed jaw → moving jaw) is horizontal and the jaws close across it —
   `services.wbc.reach.side_grasp`'s frame. Held low on the body (a bottle's neck is
   narrow), clear of the surface it stands on.
@@ -47,6 +48,8 @@ SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 TOP_GRASP_CLASSES = ("box",)
 #: Where a box too high for a top grasp is held from the side (0 bottom, 1 top).
 BOX_SIDE_HEIGHT = 0.5
+#: The side grasps' pitches tried, from `GraspParams.pitch_rad` up (rad).
+PITCH_STEP_RAD = 0.05
 
 
 class GraspPoseError(Exception):
@@ -59,10 +62,13 @@ class GraspPoseError(Exception):
 
 @dataclass(frozen=True)
 class GraspParams:
-    """pitch_rad: side grasps' nose-down pitch; top_tilt_rad: top grasps' tilt from vertical
-    toward the robot; clearance_m: the TCP at least this far above the visible bottom (the
-    gripper reaches 4 cm below its TCP); top_depth_m: top grasps' TCP below the top face;
-    pregrasp_m: the approach starts this far back; max_width_m: the widest the jaws hold;
+    """pitch_rad: side grasps' least nose-down pitch, raised (within GRASP_PITCH_RAD)
+    until the arm alone reaches the grasp within comfort_gap_m (`common.robot.
+    tcp_reach_gap`: the whole-body controller stoops the trunk for the rest);
+    top_tilt_rad: top grasps' tilt from vertical toward the robot; clearance_m: the TCP
+    at least this far above the visible bottom (the gripper reaches 4 cm below its TCP);
+    top_depth_m: top grasps' TCP below the top face; pregrasp_m: the approach starts this
+    far back; max_width_m: the widest the jaws hold;
     width_slack_m: a measured width up to this much wider is still tried (one view's fit
     overestimates: hall seed 15's box measured 8.1 cm across its 6.2 cm side, its yaw
     10° off, and the closing jaws turn a box square); reach_slack_m: a box whose top
@@ -72,6 +78,7 @@ class GraspParams:
     the bench)."""
 
     pitch_rad: float = 0.0
+    comfort_gap_m: float = 0.02
     top_tilt_rad: float = 0.3
     clearance_m: float = 0.05
     top_depth_m: float = 0.03
@@ -227,7 +234,7 @@ def grasp_from_detection(
     if kind == "side":
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
-        R = side_rotation(sight, p.pitch_rad)
+        R = side_rotation(sight, _side_pitch(centre, T_world_base, p))
     else:
         yaw = det.yaw_in_world
         if not world:
@@ -249,7 +256,7 @@ def grasp_from_detection(
             z = bottom + BOX_SIDE_HEIGHT * extent[2]
             centre = axis.copy()
             centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
-            R = side_rotation(along, p.pitch_rad)
+            R = side_rotation(along, _side_pitch(centre, T_world_base, p))
     return GraspPlan(
         H=make_T(R, centre),
         frame="world" if world else "base",
@@ -260,15 +267,32 @@ def grasp_from_detection(
     )
 
 
+def _in_base(centre: FloatArray, T_world_base: FloatArray | None) -> FloatArray:
+    if T_world_base is None:
+        return centre
+    return (inv_T(np.asarray(T_world_base, dtype=float)) @ np.append(centre, 1.0))[:3]
+
+
 def _top_gap(R: FloatArray, centre: FloatArray, T_world_base: FloatArray | None) -> float:
     """`common.robot.tcp_reach_gap` of a top grasp (TCP `centre`, rotation `R`, in the
     world when `T_world_base` is given, else in the base): how far out of the arm's reach."""
-    p_base = centre
-    if T_world_base is not None:
-        p_base = (inv_T(np.asarray(T_world_base, dtype=float)) @ np.append(centre, 1.0))[:3]
     x = R[:, 0]
     pitch = math.atan2(-float(x[2]), float(np.hypot(x[0], x[1])))
-    return tcp_reach_gap(p_base, pitch)
+    return tcp_reach_gap(_in_base(centre, T_world_base), pitch)
+
+
+def _side_pitch(centre: FloatArray, T_world_base: FloatArray | None, p: GraspParams) -> float:
+    """The least nose-down pitch from `p.pitch_rad` up to `GRASP_PITCH_RAD`'s top (in
+    `PITCH_STEP_RAD`) at which the arm alone reaches the TCP within `p.comfort_gap_m`;
+    the best of them when none does. A low side grasp held level needs the trunk to
+    stoop for it (hall seed 11: a can on a 0.72 m table, its level reach 2.4 cm short)."""
+    p_base = _in_base(centre, T_world_base)
+    pitches = np.arange(p.pitch_rad, GRASP_PITCH_RAD[1] + 1e-9, PITCH_STEP_RAD)
+    gaps = [tcp_reach_gap(p_base, float(a)) for a in pitches]
+    for pitch, gap in zip(pitches, gaps, strict=True):
+        if gap <= p.comfort_gap_m:
+            return float(pitch)
+    return float(pitches[int(np.argmin(gaps))])
 
 
 def plan_error(H_plan_world: FloatArray, H_truth_world: FloatArray) -> tuple[float, float]:

@@ -12,7 +12,7 @@ from common.geometry import inv_T, make_T, rot_z
 from common.messages.arrays import to_wire
 from common.messages.perception import Detection
 from common.messages.wbc import Reach
-from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane
+from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
     GraspParams,
     GraspPoseError,
@@ -76,7 +76,8 @@ def test_a_side_grasp_approaches_from_the_shoulder_and_closes_across_the_cylinde
     bearing: float, with_base: bool
 ) -> None:
     for T_wb in BASES:
-        axis = (D_OPT_M * math.cos(bearing), D_OPT_M * math.sin(bearing), 0.3)
+        # High enough (0.93 m) for the arm to hold it level.
+        axis = (D_OPT_M * math.cos(bearing), D_OPT_M * math.sin(bearing), 0.4)
         det = detection(T_wb, axis)
         plan = grasp_from_detection(det, STAMP, T_wb if with_base else None)
         assert plan.kind == "side" and plan.stamp_ns == STAMP
@@ -232,3 +233,24 @@ def test_a_box_too_high_for_a_top_grasp_is_held_from_the_side_across_its_short_s
     assert abs(abs(R[:, 2] @ short_side) - 1.0) < 1e-9  # the jaws close across 6.2 cm
     assert np.isclose(H[2, 3], high.axis_in_world[2])  # half way up
     assert np.allclose(H[:2, 3], np.array(high.axis_in_world)[:2], atol=1e-9)
+
+
+def test_a_low_side_grasp_comes_from_a_little_above_at_the_least_pitch_that_reaches() -> None:
+    """Hall seed 11: a can on a 0.72 m table, held level, stopped 2.4 cm short."""
+    T_wb = base_pose(2.0, 1.0, -0.5)
+    params = GraspParams()
+    pitches = []
+    for z_axis in (0.45, 0.3, 0.25, 0.2):  # the can's centre above the base, high to low
+        can = detection(T_wb, (D_OPT_M, 0.0, z_axis), class_name="can", extent=(0.064, 0.064, 0.12))
+        plan = grasp_from_detection(can, STAMP, T_wb, params)
+        R = plan.H[:3, :3]
+        pitch = math.asin(-R[2, 0])
+        assert R[2, 2] == pytest.approx(0.0, abs=1e-9)  # the jaws still close horizontally
+        assert GRASP_PITCH_RAD[0] <= pitch <= GRASP_PITCH_RAD[1] + 1e-9
+        tcp_base = (inv_T(T_wb) @ plan.H)[:3, 3]
+        assert tcp_reach_gap(tcp_base, pitch) <= params.comfort_gap_m
+        if pitch > 1e-9:  # and no less pitch would have done
+            assert tcp_reach_gap(tcp_base, pitch - 0.05) > params.comfort_gap_m
+        pitches.append(pitch)
+    assert pitches[0] == pytest.approx(0.0, abs=1e-9)
+    assert pitches == sorted(pitches) and pitches[-1] > 0.1
