@@ -32,7 +32,10 @@ log = logging.getLogger("dume.semantic_map.patrol")
 
 #: Sim seconds a patrol waits for navigation to have a map before it fails.
 NAV_WAIT_S = 30.0
-WALK_TOLERANCE_M = 0.3
+#: How far navigation may move a viewpoint (walk) or a look-around turn to a pose its
+#: footprint fits, m: a viewpoint is only a place to look from (the hall patrol skipped
+#: two, "in an obstacle", at 0.3 m). One value, so the turns find the walk's pose again.
+POSITION_TOLERANCE_M = 0.5
 TURN_TOLERANCE_RAD = 0.2
 TERMINAL = ("succeeded", "failed", "cancelled")
 
@@ -131,13 +134,12 @@ class PatrolDriver:
         goal = w.current
         if goal is None:
             return
-        tol = 0.5 if goal.look else WALK_TOLERANCE_M
         req = NavGoalRequest(
             goal=PoseGoal(
                 x=goal.x,
                 y=goal.y,
                 yaw=goal.yaw,
-                position_tolerance_m=tol,
+                position_tolerance_m=POSITION_TOLERANCE_M,
                 yaw_tolerance_rad=TURN_TOLERANCE_RAD,
             )
         )
