@@ -16,8 +16,10 @@ than the paper's identity rotation:
   line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
   just below the top face. A box whose top grasp lies out of the arm's reach
   (`common.robot.tcp_reach_gap` over `reach_slack_m`: a tall box on a bench) is held
-  from the side instead: x horizontal along its long faces (the sign away from the
-  shoulder), the jaws closing across its shorter side, at half its visible height.
+  from the side instead: x along its long faces (the sign away from the shoulder),
+  nose-down, the jaws closing across its shorter side, at half its visible height — if
+  those faces are within `box_side_max_off_rad` of the line of sight; otherwise it is
+  refused with the reason (the robot would need another stance).
 
 Frames, as the WBC's Reach reads them (`services.wbc.arm_actions`): with the base pose at
 capture (`Detections.T_world_base`) the plan is in `world` — fixed, exact, whenever it is
@@ -73,9 +75,12 @@ class GraspParams:
     overestimates: hall seed 15's box measured 8.1 cm across its 6.2 cm side, its yaw
     10° off, and the closing jaws turn a box square); reach_slack_m: a box whose top
     grasp lies further than this outside the arm's reach (`common.robot.tcp_reach_gap`;
-    the trunk gives a few cm more) is taken from the side instead: hall seed 15's 19 cm
-    box on a 0.84 m bench, whose top grasp stopped 11.7 cm short with the gripper on
-    the bench)."""
+    the trunk gives a few cm more) is taken from the side instead, nose-down at
+    GRASP_PITCH_RAD's top (held level, the forearm met the support), when its long
+    faces lie within box_side_max_off_rad of the line of sight; else it is refused (hall
+    seed 15: a 19 cm box on a 0.94 m bench, short side to the robot: the top grasp stopped
+    11.7 cm short with the gripper on the bench; a side grasp 69° off, level, met the
+    bench with the forearm, nose-down, ended 1.3-3 cm / 4-15° off in three tries)."""
 
     pitch_rad: float = 0.0
     comfort_gap_m: float = 0.02
@@ -86,6 +91,7 @@ class GraspParams:
     max_width_m: float = 0.075
     width_slack_m: float = 0.015
     reach_slack_m: float = 0.06
+    box_side_max_off_rad: float = math.radians(45.0)
 
     def __post_init__(self) -> None:
         lo, hi = GRASP_PITCH_RAD
@@ -248,15 +254,24 @@ def grasp_from_detection(
         across = fit_x if extent[0] <= extent[1] else np.array([-fit_x[1], fit_x[0]])
         centre[2] = max(top - p.top_depth_m, axis[2])
         R = top_rotation(sight, across, p.top_tilt_rad)
-        if _top_gap(R, centre, T_world_base) > p.reach_slack_m:
-            # Too high for a top grasp: from the side, along the long faces.
-            kind = "side"
+        gap = _top_gap(R, centre, T_world_base)
+        if gap > p.reach_slack_m:
+            # Too high for a top grasp: from the side, along the long faces, from above.
             along = np.array([-across[1], across[0]])
             along = along if along @ sight >= 0.0 else -along
+            off = math.acos(min(1.0, float(along @ sight) / float(np.linalg.norm(sight))))
+            if off > p.box_side_max_off_rad:
+                raise GraspPoseError(
+                    f"the {det.class_name}'s top is out of the arm's reach ({gap * 100:.0f} cm) "
+                    f"and its long faces are {math.degrees(off):.0f}° off the line of sight "
+                    f"(at most {math.degrees(p.box_side_max_off_rad):.0f}° for a side grasp): "
+                    "it needs a stance along its long side"
+                )
+            kind = "side"
             z = bottom + BOX_SIDE_HEIGHT * extent[2]
             centre = axis.copy()
             centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
-            R = side_rotation(along, _side_pitch(centre, T_world_base, p))
+            R = side_rotation(along, GRASP_PITCH_RAD[1])
     return GraspPlan(
         H=make_T(R, centre),
         frame="world" if world else "base",

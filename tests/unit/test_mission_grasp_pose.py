@@ -209,27 +209,37 @@ def test_backing_out_goes_back_along_the_approach_to_the_pregrasp_pose() -> None
     assert np.linalg.norm(H_out[:2, 3] - base[:2]) < np.linalg.norm(H[:2, 3] - base[:2])
 
 
-@pytest.mark.parametrize("box_yaw", [0.0, 1.2, 2.77])
+@pytest.mark.parametrize("box_yaw", [0.0, 0.6, -0.5, 1.2, 2.77, 3.0])
 def test_a_box_too_high_for_a_top_grasp_is_held_from_the_side_across_its_short_side(
     box_yaw: float,
 ) -> None:
-    """Hall seed 15: a 19 cm box on a 0.84 m bench; its top grasp stopped 11.7 cm short."""
+    """Hall seed 15: a 19 cm box on a 0.94 m bench; its top grasp stopped 11.7 cm short.
+    From the side along its long faces when they lie near the line of sight; else refused
+    (69° off, the arm could not turn the gripper that far at that height)."""
     T_wb = base_pose(1.0, -2.0, 0.4)
     extent = (0.083, 0.062, 0.19)  # the fit's x is the long side
     low = detection(T_wb, (D_OPT_M, 0.0, 0.15), "box", "box", extent, yaw_in_world=box_yaw)
     assert grasp_from_detection(low, STAMP, T_wb).kind == "top"
     high = detection(T_wb, (D_OPT_M, 0.0, 0.49), "box", "box", extent, yaw_in_world=box_yaw)
+    sight = np.array(high.axis_in_world) - _shoulder_in(T_wb)
+    sight[2] = 0.0
+    long_side = np.array([math.cos(box_yaw), math.sin(box_yaw), 0.0])
+    off = math.acos(abs(long_side @ sight) / np.linalg.norm(sight))
+    if off > GraspParams().box_side_max_off_rad:
+        with pytest.raises(GraspPoseError, match=r"out of the arm's reach .* off the line"):
+            grasp_from_detection(high, STAMP, T_wb)
+        return
     plan = grasp_from_detection(high, STAMP, T_wb)
     assert plan.kind == "side"
     H = plan.H
     R = H[:3, :3]
     assert np.allclose(R.T @ R, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0.0
-    long_side = np.array([math.cos(box_yaw), math.sin(box_yaw), 0.0])
     short_side = np.array([-math.sin(box_yaw), math.cos(box_yaw), 0.0])
     approach = R @ np.array(plan.approach_axis)
-    assert abs(abs(approach @ long_side) - 1.0) < 1e-9  # in along the long faces, level
-    sight = np.array(high.axis_in_world) - _shoulder_in(T_wb)
-    assert approach[:2] @ sight[:2] >= 0.0  # away from the robot
+    assert approach[2] == pytest.approx(-math.sin(GRASP_PITCH_RAD[1]))  # nose-down
+    level = approach[:2] / np.linalg.norm(approach[:2])
+    assert abs(abs(level @ long_side[:2]) - 1.0) < 1e-9  # in along the long faces
+    assert approach[:2] @ sight[:2] > 0.0  # away from the robot
     assert abs(abs(R[:, 2] @ short_side) - 1.0) < 1e-9  # the jaws close across 6.2 cm
     assert np.isclose(H[2, 3], high.axis_in_world[2])  # half way up
     assert np.allclose(H[:2, 3], np.array(high.axis_in_world)[:2], atol=1e-9)
