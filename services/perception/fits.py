@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -54,18 +55,56 @@ def _z_range(z: FloatArray) -> tuple[float, float]:
     return float(np.min(z)), float(np.max(z))
 
 
+class _Arrow(NamedTuple):
+    """Normal equations M x = v whose M = [[A, B], [Bᵀ, diag(d)]] is an arrow matrix
+    (A 2×2, B 2×n, d (n,) > 0): those of a concentric-rings Jacobian (`_ring_normal`)."""
+
+    A: FloatArray
+    B: FloatArray
+    d: FloatArray
+    v: FloatArray
+
+    def dense(self) -> FloatArray:
+        n = len(self.d)
+        M = np.zeros((2 + n, 2 + n))
+        M[:2, :2] = self.A
+        M[:2, 2:] = self.B
+        M[2:, :2] = self.B.T
+        M[np.arange(2, 2 + n), np.arange(2, 2 + n)] = self.d
+        return M
+
+    def lstsq(self) -> FloatArray:
+        """The least-squares solution, by the Schur complement of the diagonal block
+        (O(n), where the dense SVD is O(n³) and most of a cylinder fit's time); the dense
+        least squares itself when that 2×2 complement is near singular."""
+        Bd = self.B / self.d
+        S = self.A - Bd @ self.B.T
+        r = self.v[:2] - Bd @ self.v[2:]
+        a, b, c = float(S[0, 0]), 0.5 * float(S[0, 1] + S[1, 0]), float(S[1, 1])
+        hi = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)  # its eigenvalues: hi, det / hi
+        det = a * c - b * b
+        # S is A less nearly all of it when the rings' arcs are short: its small eigenvalue
+        # is then round-off of A's size, and M nearly singular (the dense SVD truncates)
+        scale = max(float(self.A[0, 0] + self.A[1, 1]), float(self.d.max()))
+        if not (hi > 0.0 and det > 1e-8 * scale * hi):
+            return np.asarray(np.linalg.lstsq(self.dense(), self.v, rcond=None)[0])
+        x = np.array([(c * r[0] - b * r[1]) / det, (a * r[1] - b * r[0]) / det])
+        return np.concatenate([x, (self.v[2:] - self.B.T @ x) / self.d])
+
+
 def _ring_normal(
-    u: FloatArray, s: float, rings: npt.NDArray[np.int_], n: int, rhs: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """JᵀJ and Jᵀ·rhs of a concentric-rings Jacobian whose row i is [uᵢ (2), s·e_ring(i)]:
-    an arrow matrix, summed per ring with `bincount` (O(points), not O(points · rings))."""
-    M = np.zeros((2 + n, 2 + n))
-    M[:2, :2] = u.T @ u
-    for j in (0, 1):
-        M[j, 2:] = M[2:, j] = s * np.bincount(rings, weights=u[:, j], minlength=n)
-    M[np.arange(2, 2 + n), np.arange(2, 2 + n)] = s * s * np.bincount(rings, minlength=n)
+    u: FloatArray,
+    s: float,
+    rings: npt.NDArray[np.int_],
+    counts: npt.NDArray[np.int_],
+    rhs: FloatArray,
+) -> _Arrow:
+    """JᵀJ and Jᵀ·rhs of a concentric-rings Jacobian whose row i is [uᵢ (2), s·e_ring(i)]
+    (`counts`: points per ring), summed per ring with `bincount` (O(points))."""
+    n = len(counts)
+    B = np.stack([s * np.bincount(rings, weights=u[:, j], minlength=n) for j in (0, 1)])
     v = np.concatenate([u.T @ rhs, s * np.bincount(rings, weights=rhs, minlength=n)])
-    return M, v
+    return _Arrow(u.T @ u, B, np.asarray(s * s * counts, dtype=float), v)
 
 
 def _fit_rings(
@@ -74,10 +113,12 @@ def _fit_rings(
     """Common centre (2,) and per-ring radii (n,): algebraic, then Gauss-Newton geometric.
 
     Algebraic: [2x 2y e_k] [a b c_k]ᵀ = x² + y² (concentric circles, linear)."""
-    normal, rhs = _ring_normal(2.0 * xy, 1.0, rings, n, np.sum(xy * xy, axis=1))
+    counts = np.bincount(rings, minlength=n)
+    algebraic = _ring_normal(2.0 * xy, 1.0, rings, counts, np.sum(xy * xy, axis=1))
+    normal = algebraic.dense()
     if np.linalg.cond(normal) > 1e14:  # the arc is too short to locate a centre
         return None
-    sol = np.linalg.solve(normal, rhs)
+    sol = np.linalg.solve(normal, algebraic.v)
     centre = sol[:2]
     r2 = sol[2:] + centre @ centre
     if np.any(r2 <= 0.0):
@@ -87,8 +128,7 @@ def _fit_rings(
         diff = xy - centre
         dist = np.maximum(np.linalg.norm(diff, axis=1), 1e-9)
         res = dist - radii[rings]
-        JtJ, Jtr = _ring_normal(-diff / dist[:, None], -1.0, rings, n, res)
-        step = np.linalg.lstsq(JtJ, -Jtr, rcond=None)[0]
+        step = _ring_normal(diff / dist[:, None], 1.0, rings, counts, res).lstsq()
         centre = centre + step[:2]
         radii = radii + step[2:]
         if np.linalg.norm(step) < 1e-7:
@@ -104,22 +144,25 @@ def _trimmed_rings(
     """Concentric rings fitted to the kept points, refitted without the points farther
     than max(3 σ_MAD, 2 mm) from their ring, up to `rounds` times: centre, radii, rms."""
     best: tuple[FloatArray, FloatArray, float] | None = None
+    idx = np.flatnonzero(keep)
     for _ in range(rounds + 1):
-        if keep.sum() < 6:
+        if len(idx) < 6:
             break
-        _, rings = np.unique(ring_of[keep], return_inverse=True)
-        fit = _fit_rings(xy[keep], rings, int(rings.max()) + 1)
+        # the kept points' rings renumbered 0.. in order (np.unique's inverse, by counting)
+        present = np.bincount(ring_of[idx]) > 0
+        rings = (np.cumsum(present) - 1)[ring_of[idx]]
+        xy_kept = xy[idx]
+        fit = _fit_rings(xy_kept, rings, int(np.count_nonzero(present)))
         if fit is None:
             break
         centre, radii = fit
-        res = np.linalg.norm(xy[keep] - centre, axis=1) - radii[rings]
+        res = np.linalg.norm(xy_kept - centre, axis=1) - radii[rings]
         best = (centre, radii, float(np.sqrt(np.mean(res * res))))
         gate = max(3.0 * MAD_TO_SIGMA * float(np.median(np.abs(res))), 0.002)
-        new = keep.copy()
-        new[np.flatnonzero(keep)[np.abs(res) > gate]] = False
-        if np.array_equal(new, keep):
+        out = np.abs(res) > gate
+        if not out.any():
             break
-        keep = new
+        idx = idx[~out]
     return best
 
 
@@ -131,7 +174,10 @@ def _line_of_sight_axis(
     sight = sight / max(float(np.linalg.norm(sight)), 1e-9)
     across = np.array([-sight[1], sight[0]])
     s = (xy - centroid_xy) @ across
-    radius = 0.5 * float(np.percentile(s, 98) - np.percentile(s, 2)) if len(s) > 1 else 0.0
+    if len(s) < 2:
+        return centroid_xy, 0.0
+    hi, lo = np.percentile(s, [98, 2])
+    radius = 0.5 * float(hi - lo)
     return centroid_xy + radius * sight, radius
 
 
@@ -212,7 +258,7 @@ def fit_box(points: FloatArray) -> UprightFit:
     yaw = float(fine[int(np.argmin(rms))])
     rot = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
     local = d @ rot  # coordinates along the rectangle's axes
-    lo, hi = np.percentile(local, 1, axis=0), np.percentile(local, 99, axis=0)
+    lo, hi = np.percentile(local, [1, 99], axis=0)
     centre = centre0 + rot @ (0.5 * (lo + hi))
     return UprightFit(
         axis=np.array([*centre, 0.5 * (z0 + z1)]),
@@ -226,7 +272,7 @@ def fit_box(points: FloatArray) -> UprightFit:
 
 def fit_centroid(points: FloatArray) -> UprightFit:
     """No shape model: the centroid with the points' extent (2nd to 98th percentile)."""
-    lo, hi = np.percentile(points, 2, axis=0), np.percentile(points, 98, axis=0)
+    lo, hi = np.percentile(points, [2, 98], axis=0)
     return UprightFit(
         axis=points.mean(axis=0),
         extent=hi - lo,
