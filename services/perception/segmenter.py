@@ -105,26 +105,57 @@ def depth_cuts(depth: NDArray[np.floating]) -> BoolArray:
     return cut
 
 
+def depth_cuts_within(depth: NDArray[np.floating], box: tuple[int, int, int, int]) -> BoolArray:
+    """`depth_cuts(depth)` inside `box` (u0, v0, u1, v1), False outside it. A pixel's cut
+    reads its 4-neighbours alone: the box grown by one pixel is all that is computed."""
+    h, w = depth.shape
+    u0, v0, u1, v1 = box
+    a0, b0 = max(u0 - 1, 0), max(v0 - 1, 0)
+    cut = np.zeros((h, w), dtype=bool)
+    grown = depth_cuts(depth[b0 : min(v1 + 1, h), a0 : min(u1 + 1, w)])
+    cut[v0:v1, u0:u1] = grown[v0 - b0 : v1 - b0, u0 - a0 : u1 - a0]
+    return cut
+
+
 def split_instances(
     mask: BoolArray, depth: NDArray[np.floating], cuts: BoolArray, min_area: int
 ) -> list[BoolArray]:
     """The components of `mask` separated by `cuts`, cut pixels returned to the
-    4-neighbour component nearest in depth; components under `min_area` dropped."""
+    4-neighbour component nearest in depth; components under `min_area` dropped.
+    Computed on the mask's bounding box: nothing outside it is a component."""
+    if not mask.any():
+        return []
+    u0, v0, u1, v1 = bbox_of(mask)
+    box = np.s_[v0:v1, u0:u1]
+    parts = []
+    for inside in _split(mask[box], np.asarray(depth, dtype=np.float32)[box], cuts[box], min_area):
+        part = np.zeros(mask.shape, dtype=bool)
+        part[box] = inside
+        parts.append(part)
+    return parts
+
+
+def _split(
+    mask: BoolArray, d: NDArray[np.float32], cuts: BoolArray, min_area: int
+) -> list[BoolArray]:
+    """`split_instances` of a mask's box: a neighbour off the box is off the mask, as one
+    clipped to the box (the pixel itself, a cut one) is."""
     inner = (mask & ~cuts).astype(np.uint8)
     n, labels = cv2.connectedComponents(inner, connectivity=4)
     if n <= 1:
         return []
     rest = mask & cuts
     if rest.any():
-        d = np.asarray(depth, dtype=np.float32)
         vs, us = np.nonzero(rest)
         h, w = mask.shape
         best = np.full(vs.size, np.inf, dtype=np.float32)
         owner = np.zeros(vs.size, dtype=labels.dtype)
+        d_rest = d[vs, us]
         for dv, du in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-            nv, nu = np.clip(vs + dv, 0, h - 1), np.clip(us + du, 0, w - 1)
+            nv = np.minimum(np.maximum(vs + dv, 0), h - 1)
+            nu = np.minimum(np.maximum(us + du, 0), w - 1)
             lab = labels[nv, nu]
-            gap = np.where(lab > 0, np.abs(d[nv, nu] - d[vs, us]), np.inf)
+            gap = np.where(lab > 0, np.abs(d[nv, nu] - d_rest), np.inf)
             better = gap < best
             best[better], owner[better] = gap[better], lab[better]
         labels[vs, us] = owner
@@ -215,14 +246,18 @@ class Segmenter:
             logits = np.log(np.stack([cv2.resize(p, (w, h)) for p in prob]) + 1e-12)
         else:
             cls = _argmax0(logits)  # the softmax keeps the order: only where needed
-        cuts = depth_cuts(depth)
-        found: list[Instance] = []
+        masks = []
         for group, min_area in self.groups:
             mask = cls == group[0]
             for c in group[1:]:
                 mask |= cls == c
-            if np.count_nonzero(mask) < min_area:
-                continue
+            if np.count_nonzero(mask) >= min_area:
+                masks.append((group, min_area, mask))
+        if not masks:
+            return []
+        cuts = depth_cuts_within(depth, bbox_of(np.logical_or.reduce([m for *_, m in masks])))
+        found: list[Instance] = []
+        for group, min_area, mask in masks:
             for part in split_instances(mask, depth, cuts, min_area):
                 u0, v0, u1, v1 = bbox = bbox_of(part)
                 # the part's pixels in the same (row-major) order as over the whole frame
@@ -243,7 +278,9 @@ class Segmenter:
             raise SegmenterError(f"rgb must be (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
         if depth.shape != rgb.shape[:2]:
             raise SegmenterError(f"depth {depth.shape} does not match rgb {rgb.shape[:2]}")
-        depth = np.nan_to_num(depth.astype(np.float32, copy=False), nan=0.0, posinf=0.0)
+        depth = depth.astype(np.float32)
+        if not np.isfinite(depth).all():  # no return: 0
+            depth = np.nan_to_num(depth, copy=False, nan=0.0, posinf=0.0)
         return rgb, depth
 
 
