@@ -160,14 +160,19 @@ def robust_inliers(points: FloatArray, gap_m: float = GAP_M, gap_rel: float = GA
     (mask pixels bled onto the background behind it, or onto an occluder in front, lie
     across such a gap). A surface's own points never split: their depths are dense.
     """
-    z = points[:, 2]
+    return depth_inliers(points[:, 2], gap_m, gap_rel)
+
+
+def depth_inliers(z: FloatArray, gap_m: float = GAP_M, gap_rel: float = GAP_REL) -> BoolArray:
+    """`robust_inliers` of points given by their depths (N,) alone."""
     order = np.argsort(z, kind="stable")
     zs = z[order]
     mid = len(zs) // 2
-    split = np.flatnonzero(np.diff(zs) > gap_m + gap_rel * zs[mid])
-    lo = int(split[split < mid].max()) + 1 if np.any(split < mid) else 0
-    hi = int(split[split >= mid].min()) + 1 if np.any(split >= mid) else len(zs)
-    keep = np.zeros(len(points), dtype=bool)
+    split = np.flatnonzero(zs[1:] - zs[:-1] > gap_m + gap_rel * zs[mid])
+    i = int(np.searchsorted(split, mid))  # split[:i] below the median, split[i:] above
+    lo = int(split[i - 1]) + 1 if i > 0 else 0
+    hi = int(split[i]) + 1 if i < len(split) else len(zs)
+    keep = np.zeros(len(z), dtype=bool)
     keep[order[lo:hi]] = True
     return keep
 

@@ -24,6 +24,7 @@ from services.perception.geometry import (
     Intrinsics,
     T_base_yaw_base,
     backproject,
+    depth_inliers,
     heading,
     robust_inliers,
     transform,
@@ -88,7 +89,7 @@ def object_inliers(pts_cam: FloatArray, T_base_yaw_camera: FloatArray, upright: 
     keep = np.ones(len(pts_cam), dtype=bool)
     for _ in range(GATE_ROUNDS):
         idx = np.flatnonzero(keep)
-        ok = robust_inliers(pts_cam[idx])
+        ok = depth_inliers(pts_cam[idx, 2])
         kept = pts_cam[idx[ok]]
         on_object = support_inliers(transform(T_base_yaw_camera, kept), kept[:, 2])
         if on_object.sum() >= MIN_POINTS:  # else too little is left to judge: gap only

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from common.geometry import FloatArray
-from services.perception.geometry import BoolArray, percentiles, robust_inliers
+from services.perception.geometry import BoolArray, depth_inliers, percentiles
 
 #: Points within this height of the low end are the band tested against the footprint, m.
 SUPPORT_BAND_M = 0.01
@@ -42,7 +42,7 @@ def outside_hull_m(xy: FloatArray, hull_xy: FloatArray) -> FloatArray:
     """
     if len(hull_xy) < 3:
         return np.full(len(xy), np.inf)
-    a, b = hull_xy, np.roll(hull_xy, -1, axis=0)
+    a, b = hull_xy, np.concatenate([hull_xy[1:], hull_xy[:1]])
     edge = b - a
     length = np.linalg.norm(edge, axis=1)
     ok = length > 1e-12
@@ -83,7 +83,7 @@ def support_inliers(
     upper = np.flatnonzero(~low)
     if len(upper) < MIN_UPPER_POINTS or not low.any():
         return keep
-    upper_ok = robust_inliers(np.column_stack([points[upper, :2], depth[upper]]))
+    upper_ok = depth_inliers(depth[upper])
     if upper_ok.sum() < MIN_UPPER_POINTS:
         return keep
     keep[upper[~upper_ok]] = False
