@@ -80,31 +80,6 @@ class _Arrow(NamedTuple):
         M[np.arange(2, 2 + n), np.arange(2, 2 + n)] = self.d
         return M
 
-    def cond_above(self, limit: float) -> bool:
-        """`np.linalg.cond(M) > limit`, without its SVD where the bound ‖M‖_F ‖M⁻¹‖_F
-        (≥ the 2-norm condition; ‖M⁻¹‖_F in O(n) through the Schur complement S of the
-        diagonal) is under a thousandth of the limit; the SVD itself otherwise."""
-        Bd = self.B / self.d
-        S = self.A - Bd @ self.B.T
-        det = float(S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0])
-        if det > 0.0 and S[0, 0] > 0.0:
-            Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
-            SiBd = Si @ Bd
-            T = Si @ (Bd @ Bd.T)
-            inv_d = 1.0 / self.d
-            # M⁻¹ = [[S⁻¹, -S⁻¹Bd], [-Bdᵀ S⁻¹, D⁻¹ + Bdᵀ S⁻¹ Bd]], its blocks' squared norms
-            inv2 = (
-                np.sum(Si * Si)
-                + 2.0 * np.sum(SiBd * SiBd)
-                + np.sum(inv_d * inv_d)
-                + 2.0 * np.sum(np.sum(Bd * SiBd, axis=0) * inv_d)
-                + np.sum(T * T.T)
-            )
-            m2 = np.sum(self.A * self.A) + 2.0 * np.sum(self.B * self.B) + np.sum(self.d * self.d)
-            if math.sqrt(float(m2 * inv2)) < 1e-3 * limit:
-                return False
-        return bool(np.linalg.cond(self.dense()) > limit)
-
     def lstsq(self) -> FloatArray:
         """The least-squares solution, by the Schur complement of the diagonal block
         (O(n), where the dense SVD is O(n³) and most of a cylinder fit's time); the dense
@@ -147,9 +122,10 @@ def _fit_rings(
     Algebraic: [2x 2y e_k] [a b c_k]ᵀ = x² + y² (concentric circles, linear)."""
     counts = np.bincount(rings, minlength=n)
     algebraic = _ring_normal(2.0 * xy, 1.0, rings, counts, np.sum(xy * xy, axis=1))
-    if algebraic.cond_above(1e14):  # the arc is too short to locate a centre
+    normal = algebraic.dense()
+    if np.linalg.cond(normal) > 1e14:  # the arc is too short to locate a centre
         return None
-    sol = np.linalg.solve(algebraic.dense(), algebraic.v)
+    sol = np.linalg.solve(normal, algebraic.v)
     centre = sol[:2]
     r2 = sol[2:] + centre @ centre
     if np.any(r2 <= 0.0):
