@@ -27,8 +27,6 @@ from services.perception.geometry import (
     MAD_TO_SIGMA,
     BoolArray,
     Shape,
-    median,
-    percentiles,
     thin,
 )
 
@@ -165,7 +163,7 @@ def _trimmed_rings(
         centre, radii = fit
         res = np.linalg.norm(xy_kept - centre, axis=1) - radii[rings]
         best = (centre, radii, float(np.sqrt(np.mean(res * res))))
-        gate = max(3.0 * MAD_TO_SIGMA * median(np.abs(res)), 0.002)
+        gate = max(3.0 * MAD_TO_SIGMA * float(np.median(np.abs(res))), 0.002)
         out = np.abs(res) > gate
         if not out.any():
             break
@@ -183,7 +181,7 @@ def _line_of_sight_axis(
     s = (xy - centroid_xy) @ across
     if len(s) < 2:
         return centroid_xy, 0.0
-    hi, lo = percentiles(s, (98, 2))
+    hi, lo = np.percentile(s, [98, 2])
     radius = 0.5 * float(hi - lo)
     return centroid_xy + radius * sight, radius
 
@@ -203,7 +201,7 @@ def fit_cylinder(points: FloatArray, eye: npt.ArrayLike, trim_rounds: int = 2) -
     fallback_centre, width_radius = _line_of_sight_axis(xy, xy.mean(axis=0), eye_xy)
     if fit is not None:
         centre, radii, rms = fit
-        radius = float(percentiles(radii, (90,))[0])  # the body's rings, not a bottle's neck
+        radius = float(np.percentile(radii, 90))  # the body's rings, not a bottle's neck
         # the axis lies behind the visible surface, and the ring is about as wide as it shows
         behind = np.dot(centre - xy.mean(axis=0), xy.mean(axis=0) - eye_xy) > 0.0
         plausible = 0.5 * width_radius <= radius <= 2.0 * max(width_radius, 1e-3)
@@ -265,7 +263,7 @@ def fit_box(points: FloatArray) -> UprightFit:
     yaw = float(fine[int(np.argmin(rms))])
     rot = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
     local = d @ rot  # coordinates along the rectangle's axes
-    lo, hi = percentiles(local, (1, 99))
+    lo, hi = np.percentile(local, [1, 99], axis=0)
     centre = centre0 + rot @ (0.5 * (lo + hi))
     return UprightFit(
         axis=np.array([*centre, 0.5 * (z0 + z1)]),
@@ -279,7 +277,7 @@ def fit_box(points: FloatArray) -> UprightFit:
 
 def fit_centroid(points: FloatArray) -> UprightFit:
     """No shape model: the centroid with the points' extent (2nd to 98th percentile)."""
-    lo, hi = percentiles(points, (2, 98))
+    lo, hi = np.percentile(points, [2, 98], axis=0)
     return UprightFit(
         axis=points.mean(axis=0),
         extent=hi - lo,

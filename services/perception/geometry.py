@@ -18,7 +18,6 @@ Pure numpy: values in, values out; `node.py` does the transport.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -110,46 +109,6 @@ def thin(points: FloatArray, max_points: int = MAX_FIT_POINTS) -> FloatArray:
     """At most `max_points` of the points, at an even stride (deterministic)."""
     stride = -(-len(points) // max_points)
     return points[::stride] if stride > 1 else points
-
-
-def percentiles(x: npt.ArrayLike, q: Sequence[float]) -> FloatArray:
-    """`np.percentile(x, q, axis=0)` (its linear method) of (N,) or (N, k) floats, N ≥ 1.
-
-    The same bits (the same order statistics from a partition, the same interpolation,
-    NaN where a column holds one) without numpy's ~40 µs of overhead per call, nor its
-    partition of (N, k) along the strided axis: per call, these run to milliseconds.
-    """
-    x = np.asarray(x, dtype=float)
-    n = len(x)
-    at = [(n - 1) * (qi / 100) for qi in q]  # the virtual index of each
-    lo = [min(math.floor(v), n - 1) for v in at]
-    kth = sorted({0, *lo, *(min(i + 1, n - 1) for i in lo), n - 1})  # as numpy's
-    cols = x.reshape(n, -1)
-    out = np.empty((len(q), cols.shape[1]))
-    for j in range(cols.shape[1]):
-        part = np.partition(cols[:, j], kth)
-        if np.isnan(part[n - 1]):  # NaNs sort last
-            out[:, j] = np.nan
-            continue
-        for i, (v, k) in enumerate(zip(at, lo, strict=True)):
-            if v >= n - 1:  # numpy's lerp of the last with itself, at v + 1
-                a = b = part[n - 1]
-                t = v + 1
-            else:
-                a, b, t = part[k], part[k + 1], v - k
-            out[i, j] = b - (b - a) * (1 - t) if t >= 0.5 else a + (b - a) * t
-    return out.reshape((len(q), *x.shape[1:]))
-
-
-def median(x: FloatArray) -> float:
-    """`np.median` of (N,) floats, N ≥ 1, the same bits without its overhead."""
-    n = len(x)
-    half = n // 2
-    part = np.partition(x, [half - 1, half, -1] if n % 2 == 0 else [half, -1])  # as numpy's
-    if np.isnan(part[n - 1]):
-        return math.nan
-    # numpy's mean of the middle one or two, its sum started at +0.0
-    return float(0.0 + part[half]) if n % 2 else float((0.0 + part[half - 1] + part[half]) / 2)
 
 
 def robust_inliers(points: FloatArray, gap_m: float = GAP_M, gap_rel: float = GAP_REL) -> BoolArray:

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from common.geometry import FloatArray
-from services.perception.geometry import BoolArray, depth_inliers, percentiles
+from services.perception.geometry import BoolArray, depth_inliers
 
 #: Points within this height of the low end are the band tested against the footprint, m.
 SUPPORT_BAND_M = 0.01
@@ -79,7 +79,7 @@ def support_inliers(
     if len(points) == 0:
         return keep
     z = points[:, 2]
-    low = z < float(percentiles(z, (2,))[0]) + band_m
+    low = z < float(np.percentile(z, 2)) + band_m
     upper = np.flatnonzero(~low)
     if len(upper) < MIN_UPPER_POINTS or not low.any():
         return keep
