@@ -302,12 +302,13 @@ def _side_pitch(centre: FloatArray, T_world_base: FloatArray | None, p: GraspPar
     the best of them when none does. A low side grasp held level needs the trunk to
     stoop for it (hall seed 11: a can on a 0.72 m table, its level reach 2.4 cm short)."""
     p_base = _in_base(centre, T_world_base)
-    pitches = np.arange(p.pitch_rad, GRASP_PITCH_RAD[1] + 1e-9, PITCH_STEP_RAD)
-    gaps = [tcp_reach_gap(p_base, float(a)) for a in pitches]
-    for pitch, gap in zip(pitches, gaps, strict=True):
+    best = (math.inf, p.pitch_rad)
+    for pitch in np.arange(p.pitch_rad, GRASP_PITCH_RAD[1] + 1e-9, PITCH_STEP_RAD):
+        gap = tcp_reach_gap(p_base, float(pitch))
         if gap <= p.comfort_gap_m:
             return float(pitch)
-    return float(pitches[int(np.argmin(gaps))])
+        best = min(best, (gap, float(pitch)))
+    return best[1]
 
 
 def plan_error(H_plan_world: FloatArray, H_truth_world: FloatArray) -> tuple[float, float]:
