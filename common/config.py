@@ -176,9 +176,6 @@ class SemanticMapSettings(_Section):
     #: max(gate_min_m, gate_sigmas × combined σ).
     gate_min_m: float = 0.25
     gate_sigmas: float = 3.0
-    #: ...and an artifact detection left over joins an artifact of another class this
-    #: close (m): one object the network names differently in two frames is one place.
-    cross_class_gate_m: float = 0.12
     #: Detections an artifact or person needs before it gets an id.
     confirm_hits: int = 2
     #: Below this score a detection is ignored.

@@ -2,18 +2,10 @@
 
 An artifact does not move, so its estimate is a static Kalman filter on the horizontal
 position: each detection with noise σ(range) pulls the mean by K = P (P + R)⁻¹ and
-shrinks P. One frame's detections are matched to the artifacts greedily by distance, each
-artifact taking at most one detection: first to artifacts of their class inside a gate
-of max(gate_min, gate_sigmas × √(σ_track² + σ_meas²)), then, what is left, to an artifact
-of another class within `cross_class_gate_m` — one object the network calls a can in one
-frame and a box in the next is one place (artifacts stand `ARTIFACT_SPACING_M` 0.3 m
-apart in the sim's worlds), not two entries. Every fused detection votes for its class
-(its score). A detection that matches nothing starts a tentative track; the second hit
-gives it the next `<class>_<n>` of the class its votes lead. A confirmed artifact that
-perception made keeps its class and id unless another class comes to lead its votes
-`reclass_ratio` to one after `reclass_min_hits` detections: then it is reclassified, a
-new id of that class replacing the old (the hall patrol mapped a can on a bench as
-`box_2` from its first two detections). Tentative tracks
+shrinks P. One frame's detections are matched to the artifacts of their class greedily by
+distance, each artifact taking at most one detection, inside a gate of
+max(gate_min, gate_sigmas × √(σ_track² + σ_meas²)). A detection that matches nothing
+starts a tentative track; the second hit gives it the next `<class>_<n>`. Tentative tracks
 not seen again within `tentative_ttl_ns` are dropped (a one-frame false positive never
 gets an id). An artifact moved elsewhere shows up as a new artifact while the old one is
 found missing at its place (`missing`); a false entry the map made itself, from a few
@@ -35,9 +27,6 @@ class FusionParams:
     gate_sigmas: float = 3.0
     confirm_hits: int = 2
     tentative_ttl_ns: int = 3_000_000_000
-    cross_class_gate_m: float = 0.12
-    reclass_min_hits: int = 6
-    reclass_ratio: float = 2.0
 
 
 class ArtifactTracker:
@@ -71,25 +60,22 @@ class ArtifactTracker:
 
     def update(
         self, stamp_ns: int, observations: list[Observation]
-    ) -> tuple[list[Track], set[int], list[tuple[str, Track]]]:
-        """Fuse one frame. Returns the tracks changed (confirmed ones, to store), the
-        indices (into `self.tracks`, after the update) of the tracks seen in this frame,
-        and the (old id, track) of the artifacts reclassified (the old id is gone)."""
-        pairs: list[tuple[int, float, int, int]] = []
+    ) -> tuple[list[Track], set[int]]:
+        """Fuse one frame. Returns the tracks changed (confirmed ones, to store) and the
+        indices (into `self.tracks`, after the update) of the tracks seen in this frame."""
+        pairs: list[tuple[float, int, int]] = []
         for j, obs in enumerate(observations):
             for i, tr in enumerate(self.tracks):
+                if tr.class_name != obs.class_name:
+                    continue
                 d = float(np.linalg.norm(tr.xy - obs.xy))
-                if tr.class_name == obs.class_name:
-                    if d <= self.gate(tr, obs):
-                        pairs.append((0, d, i, j))
-                elif d <= self.params.cross_class_gate_m:
-                    pairs.append((1, d, i, j))
+                if d <= self.gate(tr, obs):
+                    pairs.append((d, i, j))
         pairs.sort()
         used_t: set[int] = set()
         used_o: set[int] = set()
         changed: list[Track] = []
-        renamed: list[tuple[str, Track]] = []
-        for _other, _d, i, j in pairs:
+        for _d, i, j in pairs:
             if i in used_t or j in used_o:
                 continue
             used_t.add(i)
@@ -97,14 +83,7 @@ class ArtifactTracker:
             tr = self.tracks[i]
             self._fuse(tr, observations[j], stamp_ns)
             if not tr.confirmed and tr.hits >= self.params.confirm_hits:
-                tr.class_name = tr.leading_class()
                 tr.id = self.ids.next_id(tr.class_name)
-            elif tr.confirmed and self._outvoted(tr):
-                old = tr.id
-                assert old is not None
-                tr.class_name = tr.leading_class()
-                tr.id = self.ids.next_id(tr.class_name)
-                renamed.append((old, tr))
             if tr.confirmed:
                 changed.append(tr)
         for j, obs in enumerate(observations):
@@ -120,7 +99,6 @@ class ArtifactTracker:
                 last_seen_ns=stamp_ns,
                 first_seen_ns=stamp_ns,
                 hits=1,
-                votes={obs.class_name: obs.score},
             )
             if self.params.confirm_hits <= 1:
                 tr.id = self.ids.next_id(tr.class_name)
@@ -129,15 +107,7 @@ class ArtifactTracker:
             used_t.add(len(self.tracks) - 1)
         self._expire(stamp_ns)
         seen = {i for i, t in enumerate(self.tracks) if t.last_seen_ns == stamp_ns}
-        return changed, seen, renamed
-
-    def _outvoted(self, tr: Track) -> bool:
-        """A perception-made artifact whose detections have come to call it something else."""
-        if tr.source != "perception" or tr.hits < self.params.reclass_min_hits:
-            return False
-        lead = tr.leading_class()
-        own = tr.votes.get(tr.class_name, 0.0)
-        return lead != tr.class_name and tr.votes[lead] >= self.params.reclass_ratio * own
+        return changed, seen
 
     def _fuse(self, tr: Track, obs: Observation, stamp_ns: int) -> None:
         R = np.eye(2) * obs.sigma_m**2
@@ -146,7 +116,6 @@ class ArtifactTracker:
         tr.cov = (np.eye(2) - K) @ tr.cov
         tr.z += (obs.z - tr.z) / (tr.hits + 1)  # the height: a plain running mean
         tr.hits += 1
-        tr.votes[obs.class_name] = tr.votes.get(obs.class_name, 0.0) + obs.score
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None

@@ -77,17 +77,6 @@ class Track:
     stamp_ns: int = 0
     #: People: the (4, 4) covariance of (x, y, vx, vy); `cov` is its position block.
     P: FloatArray | None = None
-    #: Artifacts: the detections' summed scores per class (`ArtifactTracker`'s votes).
-    votes: dict[str, float] = field(default_factory=dict)
-
-    def leading_class(self) -> str:
-        """The class the votes lead (ties and no votes: the track's own)."""
-        if not self.votes:
-            return self.class_name
-        best = max(self.votes.values())
-        if self.votes.get(self.class_name, 0.0) >= best:
-            return self.class_name
-        return max(self.votes, key=lambda c: self.votes[c])
 
     @property
     def confirmed(self) -> bool:
@@ -132,7 +121,6 @@ class Track:
             velocity=np.array(e.velocity_in_world, dtype=float),
             appearance=appearance,
             hits=e.observations,
-            votes={e.class_name: float(e.observations)} if e.kind == "artifact" else {},
         )
 
 

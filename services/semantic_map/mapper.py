@@ -82,7 +82,7 @@ class IngestReport:
     new_ids: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     learned_cells: int = 0
-    #: (id, reason) of the ids deleted in this frame: false entries, reclassified ones.
+    #: (id, reason) of the false entries deleted in this frame.
     dropped: list[tuple[str, str]] = field(default_factory=list)
 
 
@@ -221,13 +221,8 @@ class SemanticMap:
             report.ignored += len(on_person)
             arts = [o for o in arts if all(o is not q for q in on_person)]
         before = {id(tr) for tr in self.tracks()}
-        changed_a, seen, renamed = self.artifacts.update(t, arts)
+        changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)
-        for old_id, tr in renamed:
-            self._dirty.pop(old_id, None)
-            self._deleted.append(old_id)
-            report.dropped.append((old_id, f"reclassified as {tr.id}: {_votes(tr)}"))
-            before.discard(id(tr))
         for tr in [*changed_a, *changed_p]:
             assert tr.id is not None
             self._dirty[tr.id] = tr
@@ -246,8 +241,7 @@ class SemanticMap:
                 frame.height,
                 np.asarray(as_numpy(frame.depth), np.float32),
             )
-            report.missing, looked_out = self._look(t, view, seen)
-            report.dropped += looked_out
+            report.missing, report.dropped = self._look(t, view, seen)
             report.learned_cells = self._learn(dets, frame, view)
         return report
 
@@ -314,10 +308,6 @@ class SemanticMap:
         learned = self.occupancy.integrate(pts)
         self.grid_dirty = True
         return learned
-
-
-def _votes(tr: Track) -> str:
-    return ", ".join(f"{c} {v:.1f}" for c, v in sorted(tr.votes.items(), key=lambda cv: -cv[1]))
 
 
 def _mask_fits(det: Detection, image: tuple[int, ...] | None = None) -> bool:

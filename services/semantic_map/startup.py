@@ -45,10 +45,7 @@ def map_params(s: SemanticMapSettings) -> MapParams:
         person_obstacle_margin_m=s.person_obstacle_margin_m,
         drop_below_observations=s.drop_below_observations,
         fusion=FusionParams(
-            gate_min_m=s.gate_min_m,
-            gate_sigmas=s.gate_sigmas,
-            confirm_hits=s.confirm_hits,
-            cross_class_gate_m=s.cross_class_gate_m,
+            gate_min_m=s.gate_min_m, gate_sigmas=s.gate_sigmas, confirm_hits=s.confirm_hits
         ),
         people=PeopleParams(
             accel_sigma=s.person_accel_sigma,

@@ -164,24 +164,6 @@ def test_a_deleted_entry_is_gone_from_the_database_and_its_id_is_never_reused(
     assert report.new_ids == ["box_2"]
 
 
-def test_a_reclassified_artifact_replaces_its_old_id_in_the_database(tmp_path: Path) -> None:
-    store = MapStore(tmp_path / "m.sqlite")
-    smap = _map()
-    reports = []
-    for k in range(1, 11):
-        reports.append(_ingest(smap, k * S, _det("box" if k <= 2 else "can", BOX_XY)))
-        _commit(smap, store)
-    assert [i for r in reports for i in r.new_ids] == ["box_1", "can_1"]
-    dropped = [d for r in reports for d in r.dropped]
-    assert [i for i, _ in dropped] == ["box_1"]
-    assert dropped[0][1].startswith("reclassified as can_1: can 3.6, box 1.8")
-    snap = store.load()
-    assert [(e.id, e.class_name, e.observations) for e, _ in snap.entities] == [
-        ("can_1", "can", 10)
-    ]
-    assert snap.counters == {"box": 1, "can": 1} and store.integrity() == "ok"
-
-
 def test_writes_and_deletions_of_one_tick_land_together(tmp_path: Path) -> None:
     store = MapStore(tmp_path / "m.sqlite")
     a, b = _seeded_bottle(), _seeded_bottle()
