@@ -306,6 +306,12 @@ class Server(Generic[T]):
         self._thread.join(timeout=1.0)
 
 
+def alive_now(session: zenoh.Session, key_expr: str, timeout_s: float) -> set[str]:
+    """The liveliness tokens the router knows under `key_expr` now."""
+    replies = session.liveliness().get(key_expr, timeout=timeout_s)
+    return {str(r.ok.key_expr) for r in replies if r.ok is not None}
+
+
 #: How often a query that nobody answered is asked again (`Bus.query_all`).
 QUERY_RETRY_S = 0.1
 
@@ -355,8 +361,7 @@ class AliveWatch:
     def _ask(self) -> None:
         """Who the router says is alive now (added; a DELETE still removes them)."""
         try:
-            replies = self._session.liveliness().get(self._key_expr, timeout=1.0)
-            found = {str(r.ok.key_expr) for r in replies if r.ok is not None}
+            found = alive_now(self._session, self._key_expr, 1.0)
         except zenoh.ZError as exc:
             log.debug("liveliness get %s: %s", self._key_expr, exc)
             return
@@ -450,11 +455,7 @@ class Bus:
         return AliveWatch(self.session, key_expr)
 
     def alive_now(self, key_expr: str, timeout_s: float = 2.0) -> set[str]:
-        out = set()
-        for reply in self.session.liveliness().get(key_expr, timeout=timeout_s):
-            if reply.ok is not None:
-                out.add(str(reply.ok.key_expr))
-        return out
+        return alive_now(self.session, key_expr, timeout_s)
 
     def close(self) -> None:
         for server in self._servers:
