@@ -127,7 +127,7 @@ def depth_inliers(z: FloatArray, gap_m: float = GAP_M, gap_rel: float = GAP_REL)
     order = np.argsort(z, kind="stable")
     zs = z[order]
     mid = len(zs) // 2
-    split = np.flatnonzero(zs[1:] - zs[:-1] > gap_m + gap_rel * zs[mid])
+    split = np.flatnonzero(np.diff(zs) > gap_m + gap_rel * zs[mid])
     i = int(np.searchsorted(split, mid))  # split[:i] below the median, split[i:] above
     lo = int(split[i - 1]) + 1 if i > 0 else 0
     hi = int(split[i]) + 1 if i < len(split) else len(zs)

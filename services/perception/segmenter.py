@@ -152,8 +152,7 @@ def _split(
         owner = np.zeros(vs.size, dtype=labels.dtype)
         d_rest = d[vs, us]
         for dv, du in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-            nv = np.minimum(np.maximum(vs + dv, 0), h - 1)
-            nu = np.minimum(np.maximum(us + du, 0), w - 1)
+            nv, nu = np.clip(vs + dv, 0, h - 1), np.clip(us + du, 0, w - 1)
             lab = labels[nv, nu]
             gap = np.where(lab > 0, np.abs(d[nv, nu] - d_rest), np.inf)
             better = gap < best

@@ -42,7 +42,7 @@ def outside_hull_m(xy: FloatArray, hull_xy: FloatArray) -> FloatArray:
     """
     if len(hull_xy) < 3:
         return np.full(len(xy), np.inf)
-    a, b = hull_xy, np.concatenate([hull_xy[1:], hull_xy[:1]])
+    a, b = hull_xy, np.roll(hull_xy, -1, axis=0)
     edge = b - a
     length = np.linalg.norm(edge, axis=1)
     ok = length > 1e-12
