@@ -207,6 +207,10 @@ class SemanticMapSettings(_Section):
     patrol_speed: float = 0.5
     patrol_turn_rate: float = 0.6
     patrol_look_around: bool = True
+    #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
+    #: looking ahead and down) where it sees the tops of benches that the head camera,
+    #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.
+    patrol_arm_posture: Literal["look", "stow"] = "look"
     #: How the patrol walks: pose goals to navigation, or its own cmd_vel (no navigation).
     patrol_via: Literal["navigation", "cmd_vel"] = "navigation"
     #: Sim seconds between rerun logs of the entities and of the grid.

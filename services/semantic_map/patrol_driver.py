@@ -6,8 +6,12 @@ navigation, each `NavPatrol` goal goes to `nav/goal` as a `PoseGoal` and the pat
 on when `nav/status` reports that goal ended; a navigation that has no map yet is asked
 again for up to `NAV_WAIT_S` of sim time, one that does not answer fails the patrol.
 With `patrol_via = "cmd_vel"` (when no navigation runs) a `PatrolFollower` walks the
-route with cmd_vel of source `semantic_map`. When done or stopped: zero velocity, the
-navigation goal cancelled, the WBC back to `stand`.
+route with cmd_vel of source `semantic_map`. Before the first step the arm goes to
+`patrol_arm_posture` (`look`: the wrist camera up, where it sees bench tops the head
+camera cannot) and holds it while the robot walks and turns (its footprint is inside the
+stowed one); an arm that does not get there within `ARM_WAIT_S` leaves the patrol to the
+head camera. When done or stopped: zero velocity, the navigation goal cancelled, the arm
+sent back to `stow`, the WBC back to `stand`.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from common.messages import PayloadError
 from common.messages.navigation import NavCancel, NavGoalReply, NavGoalRequest, NavStatus, PoseGoal
 from common.messages.semantic_map import PatrolState
 from common.messages.sim import Odom
-from common.messages.wbc import CmdVel, WbcMode
+from common.messages.wbc import ArmGoalReply, ArmGoalRequest, CmdVel, Posture, WbcMode, WbcStatus
 from services.semantic_map.nav_patrol import NavPatrol, patrol_goals
 from services.semantic_map.patrol import PatrolFollower, Route
 
@@ -38,6 +42,8 @@ NAV_WAIT_S = 30.0
 POSITION_TOLERANCE_M = 0.5
 TURN_TOLERANCE_RAD = 0.2
 TERMINAL = ("succeeded", "failed", "cancelled")
+#: Sim seconds the patrol waits for the arm to reach its posture before it walks anyway.
+ARM_WAIT_S = 20.0
 
 
 class PatrolDriver:
@@ -52,12 +58,18 @@ class PatrolDriver:
         self.mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self.cancel = bus.publisher(keys.nav_cancel, NavCancel, "control")
         self.nav_status = bus.latest(keys.nav_status, NavStatus, history=8)
+        self.wbc_status = bus.latest(keys.wbc_status, WbcStatus, history=4)
         self.walker: NavPatrol | PatrolFollower | None = None
         self.state: PatrolState = "idle"
         self.reason = ""
         self._started = False
         self._stop = False
         self._since_ns = 0
+        #: Whether the arm is still to reach its patrol posture before walking (False
+        #: once there or given up), and the WBC's goal id once sent.
+        self._arm_pending = False
+        self._arm_goal = ""
+        self._arm_since_ns = 0
 
     @property
     def running(self) -> bool:
@@ -80,6 +92,7 @@ class PatrolDriver:
                 look_around=c.patrol_look_around,
             )
         self.state, self.reason, self._started, self._stop = "running", "", False, False
+        self._arm_pending, self._arm_goal = True, ""
 
     def stop(self) -> None:
         if self.running:
@@ -102,10 +115,16 @@ class PatrolDriver:
         if not self._started:
             source = self.nav_source if via_nav else self.name
             self.mode.put(WbcMode(stamp_ns=b, mode="walk", cmd_vel_source=source))
-            self._started, self._since_ns = True, b
+            self._started, self._since_ns, self._arm_since_ns = True, b, b
         if self._stop or w.done:
             self._end(b, "stopped" if self._stop else "done")
             return
+        if self._arm_pending:
+            self._step_arm(b)
+            if self._arm_pending:
+                if not via_nav:
+                    self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
+                return
         if odom is None:
             if not via_nav:
                 self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
@@ -120,6 +139,58 @@ class PatrolDriver:
             self.cmd_vel.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=self.name))
         if w.done:
             self._end(b, "done")
+
+    def _step_arm(self, b: int) -> None:
+        """Send the arm its patrol posture (again while the WBC cannot take it yet) and
+        clear `_arm_pending` once it is there, failed, or `ARM_WAIT_S` passed."""
+        name = self.cfg.patrol_arm_posture
+        if b - self._arm_since_ns > ARM_WAIT_S * NS_PER_S:
+            log.warning("patrol: the arm did not reach %s in %.0f s: walking on", name, ARM_WAIT_S)
+            self._arm_pending = False
+            return
+        if not self._arm_goal:
+            try:
+                reply = self.bus.query(
+                    self.keys.arm_goal, ArmGoalRequest(goal=Posture(name=name)), ArmGoalReply, 5.0
+                )
+            except RemoteError as exc:  # e.g. damped yet: ask again next tick
+                log.info("patrol: arm posture %s not taken yet: %s", name, exc)
+                return
+            except (NoReply, PayloadError) as exc:
+                log.warning("patrol: no arm posture (%s): walking on", exc)
+                self._arm_pending = False
+                return
+            if not reply.accepted:
+                log.warning("patrol: arm posture %s refused: %s: walking on", name, reply.reason)
+                self._arm_pending = False
+                return
+            self._arm_goal = reply.goal_id
+            return
+        st = self.wbc_status.get()
+        goal = (
+            None if st is None else next((g for g in st.goals if g.goal_id == self._arm_goal), None)
+        )
+        if goal is None or goal.state not in TERMINAL:
+            return
+        if goal.state == "succeeded":
+            log.info("patrol: arm in %s at %.1f s", name, b / NS_PER_S)
+        else:
+            log.warning("patrol: arm posture %s %s: %s: walking on", name, goal.state, goal.reason)
+        self._arm_pending = False
+
+    def _stow_arm(self) -> None:
+        """Fold the arm back after a patrol that raised it (the WBC finishes it in stand)."""
+        if self.cfg.patrol_arm_posture == "stow":
+            return
+        try:
+            reply = self.bus.query(
+                self.keys.arm_goal, ArmGoalRequest(goal=Posture(name="stow")), ArmGoalReply, 2.0
+            )
+        except (RemoteError, NoReply, PayloadError) as exc:
+            log.warning("patrol: could not stow the arm: %s", exc)
+            return
+        if not reply.accepted:
+            log.warning("patrol: could not stow the arm: %s", reply.reason)
 
     def _step_nav(self, b: int, w: NavPatrol) -> None:
         if w.goal_id:
@@ -168,6 +239,8 @@ class PatrolDriver:
         else:
             self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
         self.mode.put(WbcMode(stamp_ns=b, mode="stand", cmd_vel_source=self.nav_source))
+        self._arm_pending = False
+        self._stow_arm()
         skipped = 0 if w is None else w.skipped
         if not reason and skipped:
             reason = f"{skipped} viewpoint(s) skipped"
