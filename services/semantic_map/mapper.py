@@ -64,7 +64,7 @@ class MapParams:
     sigma_per_m: float = 0.02
     min_score: float = 0.5
     missing_after_frames: int = 5
-    look_range_m: float = 3.0
+    look_range_m: float = 2.0
     person_look_range_m: float = 6.0
     person_obstacle_margin_m: float = 0.1
     drop_below_observations: int = 10

@@ -24,7 +24,7 @@ W, H = 320, 240
 T_WORLD_BASE = np.eye(4)
 #: The head camera 0.8 m up looking along world +x; depth 5 m everywhere (nothing hides).
 T_BASE_CAMERA = make_T(R_FORWARD_OPTICAL, (0.0, 0.0, 0.8))
-BOX_XY, CAN_XY, BOTTLE_XY = (2.0, 0.0), (2.0, -0.5), (2.0, 0.5)
+BOX_XY, CAN_XY, BOTTLE_XY = (1.5, 0.0), (1.5, -0.4), (1.5, 0.4)
 
 
 def _frame(t: int) -> CameraFrame:
