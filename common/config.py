@@ -178,6 +178,10 @@ class SemanticMapSettings(_Section):
     gate_sigmas: float = 3.0
     #: Detections an artifact or person needs before it gets an id.
     confirm_hits: int = 2
+    #: One object under two classes: artifacts closer than `class_merge_m` are one, and
+    #: the class seen more often from within `class_near_m` keeps it, m.
+    class_near_m: float = 2.0
+    class_merge_m: float = 0.05
     #: Below this score a detection is ignored.
     min_score: float = 0.5
     #: Frames looking at an artifact's place without seeing it before it is missing.

@@ -10,6 +10,12 @@ not seen again within `tentative_ttl_ns` are dropped (a one-frame false positive
 gets an id). An artifact moved elsewhere shows up as a new artifact while the old one is
 found missing at its place (`missing`); a false entry the map made itself, from a few
 detections, is dropped instead (`drop`; the rule is the map's, see `mapper`).
+One object under two classes: the network may call a can on a bench a box from 3 m and a
+can from 1.5 m, which makes two artifacts at one place (their axis points within
+`class_merge_m`, closer than two real objects' centres can be). `class_conflicts()`
+pairs such perception-made artifacts as (loser, winner): the class seen more often from
+within `near_m` (where the network tells the classes apart) wins, then the one with more
+detections; two seen from near fewer than `confirm_hits` times are left alone.
 """
 
 from __future__ import annotations
@@ -27,6 +33,8 @@ class FusionParams:
     gate_sigmas: float = 3.0
     confirm_hits: int = 2
     tentative_ttl_ns: int = 3_000_000_000
+    near_m: float = 2.0
+    class_merge_m: float = 0.05
 
 
 class ArtifactTracker:
@@ -99,6 +107,7 @@ class ArtifactTracker:
                 last_seen_ns=stamp_ns,
                 first_seen_ns=stamp_ns,
                 hits=1,
+                near_hits=int(obs.range_m <= self.params.near_m),
             )
             if self.params.confirm_hits <= 1:
                 tr.id = self.ids.next_id(tr.class_name)
@@ -116,9 +125,29 @@ class ArtifactTracker:
         tr.cov = (np.eye(2) - K) @ tr.cov
         tr.z += (obs.z - tr.z) / (tr.hits + 1)  # the height: a plain running mean
         tr.hits += 1
+        tr.near_hits += int(obs.range_m <= self.params.near_m)
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None
+
+    def class_conflicts(self) -> list[tuple[Track, Track]]:
+        """(loser, winner) for each perception-made artifact that is another class's
+        artifact at the same place (see the module docstring); each loser once."""
+        made = [t for t in self.tracks if t.confirmed and t.source == "perception"]
+        out: list[tuple[Track, Track]] = []
+        losers: set[int] = set()
+        for i, a in enumerate(made):
+            for b in made[i + 1 :]:
+                if a.class_name == b.class_name or id(a) in losers or id(b) in losers:
+                    continue
+                if float(np.linalg.norm(a.xy - b.xy)) > self.params.class_merge_m:
+                    continue
+                if max(a.near_hits, b.near_hits) < self.params.confirm_hits:
+                    continue  # as many near looks as it takes to confirm, or no evidence
+                loser, winner = (a, b) if (a.near_hits, a.hits) < (b.near_hits, b.hits) else (b, a)
+                losers.add(id(loser))
+                out.append((loser, winner))
+        return out
 
     def _expire(self, stamp_ns: int) -> None:
         ttl = self.params.tentative_ttl_ns

@@ -55,6 +55,8 @@ class Track:
     velocity: (2,) m/s (people). appearance: colour histogram (people), or None.
     vel_cov: (2, 2) (m/s)², the velocity's covariance.
     hits: detections fused. misses: consecutive looks at its place without seeing it.
+    near_hits: detections fused from within the fusion's `near_m` (the class is trusted
+    from there; not stored: a track read from the database starts at 0).
     """
 
     class_name: str
@@ -73,6 +75,7 @@ class Track:
     appearance: FloatArray | None = None
     hits: int = 0
     misses: int = 0
+    near_hits: int = 0
     #: Sim time the state refers to (people are predicted forward), ns.
     stamp_ns: int = 0
     #: People: the (4, 4) covariance of (x, y, vx, vy); `cov` is its position block.
@@ -130,6 +133,7 @@ class Observation:
 
     xy: (2,) m, world (an artifact's axis point, a person's feet). z: m. sigma_m: 1-σ
     horizontal noise of this measurement (grows with range). appearance: histogram or None.
+    range_m: the detection's distance from the camera's base, d_obj.
     """
 
     class_name: str
@@ -138,6 +142,7 @@ class Observation:
     sigma_m: float
     score: float = 1.0
     appearance: FloatArray | None = None
+    range_m: float = 0.0
 
 
 def measurement_sigma(range_m: float, sigma0_m: float, per_m: float) -> float:

@@ -14,7 +14,9 @@ a person made of a few stray detections (a split track, a false positive) should
 stand in navigation's way or answer a request. People are looked for at chest height
 within `person_look_range_m` (the segmenter finds people farther than artifacts).
 Prior, seeded and imported entities, and well-observed ones, are only marked missing
-(artifacts) or kept (people).
+(artifacts) or kept (people). One object the map made under two classes (a can on a bench
+read as a box from 3 m and as a can from 1.5 m) keeps the class seen from near, and the
+other entry is deleted with the reason (`ArtifactTracker.class_conflicts`).
 Measurement conventions: an artifact is placed at the detection's axis point (about a
 radius behind the visible surface) at the visible centroid's height; a person at the
 axis point's floor projection; the horizontal noise grows with the range d_obj. Person
@@ -177,7 +179,9 @@ class SemanticMap:
                 mask = np.asarray(as_numpy(det.mask))
                 app = colour_histogram(rgb, det.bbox, mask.astype(np.uint8))
             return Observation("person", xy.copy(), 0.0, sigma, det.score, app)
-        return Observation(det.class_name, xy.copy(), float(centroid[2]), sigma, det.score)
+        return Observation(
+            det.class_name, xy.copy(), float(centroid[2]), sigma, det.score, range_m=det.d_obj
+        )
 
     def _plausible(self, people: list[Observation], report: IngestReport) -> list[Observation]:
         """The people observations not on a static obstacle (module docstring)."""
@@ -230,6 +234,10 @@ class SemanticMap:
                 report.new_ids.append(tr.id)
                 self._counters_dirty = True
         report.fused = len(arts) + len(people)
+        merged = [(lo, self._class_reason(lo, win)) for lo, win in self.artifacts.class_conflicts()]
+        if merged:
+            report.dropped += self._delete(merged)
+            seen = {i for i, tr in enumerate(self.artifacts.tracks) if tr.last_seen_ns == t}
         if frame is not None and not dets.reason:  # a frame perception did process
             view = View(
                 _mat(dets.T_world_base) @ _mat(frame.T_base_camera),
@@ -241,7 +249,8 @@ class SemanticMap:
                 frame.height,
                 np.asarray(as_numpy(frame.depth), np.float32),
             )
-            report.missing, report.dropped = self._look(t, view, seen)
+            report.missing, dropped = self._look(t, view, seen)
+            report.dropped += dropped
             report.learned_cells = self._learn(dets, frame, view)
         return report
 
@@ -268,14 +277,25 @@ class SemanticMap:
                 continue
             if self._missed(tr, view, PERSON_LOOK_HEIGHT_M, p.person_look_range_m):
                 dropped.append((tr, self._false_entry_reason(tr)))
+        return newly, self._delete(dropped)
+
+    def _delete(self, entries: list[tuple[Track, str]]) -> list[tuple[str, str]]:
+        """Forget these entities (and delete them from the database); (id, reason)."""
         out: list[tuple[str, str]] = []
-        for tr, reason in dropped:
+        for tr, reason in entries:
             assert tr.id is not None
             (self.people if tr.kind == "person" else self.artifacts).drop(tr)
             self._dirty.pop(tr.id, None)
             self._deleted.append(tr.id)
             out.append((tr.id, reason))
-        return newly, out
+        return out
+
+    def _class_reason(self, loser: Track, winner: Track) -> str:
+        return (
+            f"the same object as {winner.id}, seen as a {winner.class_name} from within "
+            f"{self.params.fusion.near_m:g} m {winner.near_hits} time(s) and as a "
+            f"{loser.class_name} {loser.near_hits} time(s)"
+        )
 
     def _missed(self, tr: Track, view: View, z: float, range_m: float) -> bool:
         """Count a miss if this frame looked at the entity's place (at height z); whether

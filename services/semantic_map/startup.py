@@ -45,7 +45,11 @@ def map_params(s: SemanticMapSettings) -> MapParams:
         person_obstacle_margin_m=s.person_obstacle_margin_m,
         drop_below_observations=s.drop_below_observations,
         fusion=FusionParams(
-            gate_min_m=s.gate_min_m, gate_sigmas=s.gate_sigmas, confirm_hits=s.confirm_hits
+            gate_min_m=s.gate_min_m,
+            gate_sigmas=s.gate_sigmas,
+            confirm_hits=s.confirm_hits,
+            near_m=s.class_near_m,
+            class_merge_m=s.class_merge_m,
         ),
         people=PeopleParams(
             accel_sigma=s.person_accel_sigma,

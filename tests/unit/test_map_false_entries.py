@@ -238,3 +238,25 @@ def test_a_person_on_a_static_obstacle_is_not_a_person_and_hides_no_artifact() -
     assert [e.id for e in smap.entities("artifact")] == ["can_1"]
     people = smap.entities("person")
     assert [(e.id, round(e.position_in_world[0], 2)) for e in people] == [("person_1", 0.5)]
+
+
+def test_one_object_seen_as_two_classes_keeps_one_id_and_deletes_the_other(
+    tmp_path: Path,
+) -> None:
+    """A box from 3 m away (the network's far guess), then a can from 1.5 m at the same
+    place: the box is deleted, with the reason, from the map and the database."""
+    smap = _map()
+    store = MapStore(tmp_path / "m.sqlite")
+    far = msgspec.structs.replace(_det("box", CAN_XY), d_obj=3.0)
+    reports = []
+    for k in range(1, 6):
+        reports.append(_ingest(smap, k * S, far))
+        _commit(smap, store)
+    for k in range(6, 9):
+        reports.append(_ingest(smap, k * S, _det("can", CAN_XY)))
+        _commit(smap, store)
+    dropped = [d for r in reports for d in r.dropped]
+    assert [i for i, _ in dropped] == ["box_1"]
+    assert "the same object as can_1" in dropped[0][1]
+    assert [e.id for e in smap.entities("artifact")] == ["can_1"]
+    assert sorted(e.id for e, _app in store.load().entities) == ["can_1"]

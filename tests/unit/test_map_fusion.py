@@ -104,3 +104,40 @@ def test_the_patrol_route_reaches_viewpoints_over_the_small_world() -> None:
         vx, _vy, wz = f.step(x, y, yaw, t)
         x, y, yaw, t = x + 0.1 * vx * np.cos(yaw), y + 0.1 * vx * np.sin(yaw), yaw + 0.1 * wz, t + S
     assert f.done and f.skipped == 0
+
+
+def _seen(
+    tracker: ArtifactTracker, k: int, cls: str, xy: tuple[float, float], range_m: float
+) -> None:
+    tracker.update(k * S, [Observation(cls, np.array(xy), 0.9, 0.03, range_m=range_m)])
+
+
+def test_one_object_under_two_classes_keeps_the_class_seen_from_near() -> None:
+    # A can on a bench: a box from 3 m (many times), a can from 1.5 m (a few times).
+    tracker = ArtifactTracker(IdBook(), FusionParams())
+    for k in range(10):
+        _seen(tracker, k, "box", (2.0, 1.0), 3.0)
+    assert tracker.class_conflicts() == []  # one class only
+    for k in range(10, 12):
+        _seen(tracker, k, "can", (2.01, 1.0), 1.5)
+    ((loser, winner),) = tracker.class_conflicts()
+    assert (loser.id, winner.id) == ("box_1", "can_1")
+    assert (loser.near_hits, winner.near_hits) == (0, 2)
+
+
+def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> None:
+    tracker = ArtifactTracker(IdBook(), FusionParams())
+    for k in range(4):
+        _seen(tracker, k, "box", (2.0, 1.0), 3.0)
+        _seen(tracker, k, "can", (2.0, 1.01), 2.5)  # both from far: no evidence
+    assert tracker.class_conflicts() == []
+    for k in range(4, 8):
+        _seen(tracker, k, "bottle", (2.08, 1.0), 1.0)  # near, but 8 cm away: two objects
+    assert tracker.class_conflicts() == []
+    prior = ArtifactTracker(IdBook(), FusionParams())
+    for k in range(4):
+        _seen(prior, k, "can", (0.0, 0.0), 1.0)
+    prior.tracks[0].source = "prior"
+    for k in range(4, 8):
+        _seen(prior, k, "box", (0.0, 0.01), 1.0)
+    assert prior.class_conflicts() == []  # a prior artifact is the user's word
