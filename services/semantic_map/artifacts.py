@@ -15,7 +15,9 @@ can from 1.5 m, which makes two artifacts at one place (their axis points within
 `class_merge_m`, closer than two real objects' centres can be). `class_conflicts()`
 pairs such perception-made artifacts as (loser, winner): the class seen more often from
 within `near_m` (where the network tells the classes apart) wins, then the one with more
-detections; two seen from near fewer than `confirm_hits` times are left alone.
+detections; two seen from near fewer than `confirm_hits` times are left alone. A
+tentative track that would give way to a confirmed artifact this way gets no id (it stays
+tentative while seen, and takes an id once its class has the better evidence).
 """
 
 from __future__ import annotations
@@ -91,7 +93,7 @@ class ArtifactTracker:
             tr = self.tracks[i]
             self._fuse(tr, observations[j], stamp_ns)
             if not tr.confirmed and tr.hits >= self.params.confirm_hits:
-                tr.id = self.ids.next_id(tr.class_name)
+                self._confirm(tr)
             if tr.confirmed:
                 changed.append(tr)
         for j, obs in enumerate(observations):
@@ -110,8 +112,9 @@ class ArtifactTracker:
                 near_hits=int(obs.range_m <= self.params.near_m),
             )
             if self.params.confirm_hits <= 1:
-                tr.id = self.ids.next_id(tr.class_name)
-                changed.append(tr)
+                self._confirm(tr)
+                if tr.confirmed:
+                    changed.append(tr)
             self.tracks.append(tr)
             used_t.add(len(self.tracks) - 1)
         self._expire(stamp_ns)
@@ -133,21 +136,42 @@ class ArtifactTracker:
     def class_conflicts(self) -> list[tuple[Track, Track]]:
         """(loser, winner) for each perception-made artifact that is another class's
         artifact at the same place (see the module docstring); each loser once."""
-        made = [t for t in self.tracks if t.confirmed and t.source == "perception"]
+        made = [t for t in self.tracks if t.confirmed]
         out: list[tuple[Track, Track]] = []
         losers: set[int] = set()
-        for i, a in enumerate(made):
-            for b in made[i + 1 :]:
-                if a.class_name == b.class_name or id(a) in losers or id(b) in losers:
+        for i, old in enumerate(made):
+            for new in made[i + 1 :]:
+                if id(old) in losers or id(new) in losers:
                     continue
-                if float(np.linalg.norm(a.xy - b.xy)) > self.params.class_merge_m:
-                    continue
-                if max(a.near_hits, b.near_hits) < self.params.confirm_hits:
-                    continue  # as many near looks as it takes to confirm, or no evidence
-                loser, winner = (a, b) if (a.near_hits, a.hits) < (b.near_hits, b.hits) else (b, a)
-                losers.add(id(loser))
-                out.append((loser, winner))
+                loser = self._loser(new, old)
+                if loser is not None:
+                    losers.add(id(loser))
+                    out.append((loser, old if loser is new else new))
         return out
+
+    def _loser(self, new: Track, old: Track) -> Track | None:
+        """Of two perception-made artifacts of different classes at one place, the one
+        whose class gives way (a tie goes against `new`); None when they are not one
+        object or neither was seen from near `confirm_hits` times."""
+        p = self.params
+        if (
+            new.class_name == old.class_name
+            or new.source != "perception"
+            or new.source != old.source
+        ):
+            return None
+        if float(np.linalg.norm(new.xy - old.xy)) > p.class_merge_m:
+            return None
+        if max(new.near_hits, old.near_hits) < p.confirm_hits:
+            return None
+        return new if (new.near_hits, new.hits) <= (old.near_hits, old.hits) else old
+
+    def _confirm(self, tr: Track) -> None:
+        """Give a tentative track its id, unless another class's artifact at its place
+        outclasses it (it stays tentative: no id is spent on a class that gives way)."""
+        if any(self._loser(tr, o) is tr for o in self.tracks if o.confirmed):
+            return
+        tr.id = self.ids.next_id(tr.class_name)
 
     def _expire(self, stamp_ns: int) -> None:
         ttl = self.params.tentative_ttl_ns

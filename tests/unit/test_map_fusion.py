@@ -42,7 +42,7 @@ def test_a_detection_outside_the_gate_or_of_another_class_is_a_new_artifact() ->
             [
                 Observation("bottle", np.array([0.0, 0.0]), 0.8, 0.03),
                 Observation("bottle", np.array([0.6, 0.0]), 0.8, 0.03),
-                Observation("can", np.array([0.0, 0.0]), 0.8, 0.03),
+                Observation("can", np.array([0.0, 0.1]), 0.8, 0.03),  # beside it
             ],
         )
     assert sorted(t.id or "" for t in tracker.confirmed) == ["bottle_5", "bottle_6", "can_1"]
@@ -141,3 +141,16 @@ def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> 
     for k in range(4, 8):
         _seen(prior, k, "box", (0.0, 0.01), 1.0)
     assert prior.class_conflicts() == []  # a prior artifact is the user's word
+
+
+def test_a_class_that_gives_way_spends_no_id_until_it_has_the_better_evidence() -> None:
+    tracker = ArtifactTracker(IdBook(), FusionParams())
+    for k in range(3):
+        _seen(tracker, k, "bottle", (1.0, 0.0), 1.5)  # bottle_1, three near views
+    for k in range(3, 6):
+        _seen(tracker, k, "can", (1.0, 0.01), 1.5)  # the same object as a can: no id
+    assert [t.id for t in tracker.confirmed] == ["bottle_1"]
+    assert tracker.class_conflicts() == []
+    _seen(tracker, 6, "can", (1.0, 0.01), 1.5)  # a fourth near can view: the can wins
+    ((loser, winner),) = tracker.class_conflicts()
+    assert (loser.id, winner.id) == ("bottle_1", "can_1")
