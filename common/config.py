@@ -213,6 +213,9 @@ class SemanticMapSettings(_Section):
     patrol_speed: float = 0.5
     patrol_turn_rate: float = 0.6
     patrol_look_around: bool = True
+    #: The floor plan's tables and benches are seen from a viewpoint within this, m (the
+    #: network finds a can on a bench from 2 m with the arm in `look`).
+    patrol_see_m: float = 1.6
     #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
     #: looking ahead and down) where it sees the tops of benches that the head camera,
     #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.

@@ -19,7 +19,7 @@ from collections import defaultdict
 
 from common.bus import NoReply, RemoteError, RequestError, WaitTimeout
 from common.config import resolve
-from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.geometry import FloatArray, quat_xyzw_to_matrix, yaw_of
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_ARTIFACTS_ONE,
@@ -47,7 +47,7 @@ from common.service import Service
 from services.semantic_map import queries
 from services.semantic_map.mapfile import occupancy_from_grid, tracks_from_file
 from services.semantic_map.mapper import SemanticMap
-from services.semantic_map.patrol import coverage_route
+from services.semantic_map.patrol import coverage_route, support_targets
 from services.semantic_map.patrol_driver import PatrolDriver
 from services.semantic_map.rerun_log import MapLogger
 from services.semantic_map.startup import open_map, save_all
@@ -83,6 +83,7 @@ class MapNode:
         self.pending: dict[int, dict[str, Detections]] = defaultdict(dict)
         self.newest_det = -1
         self.patrol = PatrolDriver(bus, keys, self.cfg, NAME, svc.config.wbc.cmd_vel_source)
+        self._supports: FloatArray | None = None
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
         self.last_grid_save = 0
         bus.serve(MAP_ARTIFACTS, None, lambda _r, sel: self._q(queries.listing, "artifact", sel))
@@ -163,8 +164,23 @@ class MapNode:
             missing=sum(e.missing_since_ns is not None for e in arts),
         )
 
+    def _support_targets(self) -> FloatArray | None:
+        """The floor plan's tables and benches as places the patrol must see (only with
+        `floor_plan = "world"`: the world description's surfaces, fetched once)."""
+        if self.cfg.floor_plan != "world":
+            return None
+        if self._supports is None:
+            try:
+                w = self.svc.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 5.0)
+            except (NoReply, RemoteError, PayloadError) as exc:
+                log.warning("patrol: no floor plan's supports to look at: %s", exc)
+                return None
+            self._supports = support_targets(w.surfaces)
+        return self._supports
+
     def _on_patrol(self, req: PatrolRequest | None, _selector: str) -> PatrolStatus:
         assert req is not None
+        targets = self._support_targets() if req.action == "start" else None
         with self.lock:
             if req.action == "start":
                 if self.patrol.running:
@@ -181,6 +197,8 @@ class MapNode:
                     (x, y),
                     req.spacing_m or self.cfg.patrol_spacing_m,
                     self.cfg.patrol_clearance_m,
+                    targets,
+                    self.cfg.patrol_see_m,
                 )
                 if not route.viewpoints:
                     raise RequestError("unavailable", "no free space to patrol in the grid")

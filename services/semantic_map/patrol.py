@@ -6,6 +6,11 @@ a stack without navigation; the default walks the route through navigation:
 `coverage_route` puts viewpoints on a lattice of `spacing_m` over the free space that
 keeps `clearance_m` from every obstacle and is connected to the start, visits them
 nearest-first, and joins them with shortest 8-connected paths (Dijkstra on a 10 cm grid).
+`targets` are places that must be seen from within `see_m` (the tops of the floor plan's
+tables and benches, `support_targets`: the network finds a can there from 2 m, and the
+lattice leaves bench tops 2.2-2.3 m from every viewpoint in the hall): each target the
+lattice leaves farther gets the reachable cell nearest to it as a viewpoint of its own,
+when that cell is within `see_m`.
 `PatrolFollower.step(pose, t)` is a pure-pursuit controller along that path (turn in
 place when the heading error is large) and, at each viewpoint, a full turn on the spot so
 the head camera sweeps the surroundings. A viewpoint not reached within `stuck_ns` of
@@ -15,6 +20,7 @@ no progress is skipped and counted.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +30,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from common.geometry import FloatArray, wrap_angle
+from common.messages.world import SupportSurface
 from services.semantic_map.occupancy import OCCUPIED
 
 PLAN_RES_M = 0.1
@@ -43,6 +50,20 @@ def _coarsen(cells: NDArray[np.uint8], factor: int) -> NDArray[np.bool_]:
     return occ.reshape(ny // factor, factor, nx // factor, factor).any(axis=(1, 3))
 
 
+def support_targets(surfaces: Sequence[SupportSurface], step_m: float = 0.5) -> FloatArray:
+    """(n, 2) points along each surface's long centre line, `step_m` apart, ends included."""
+    points = []
+    for sf in surfaces:
+        hx, hy = sf.half_extents
+        along = np.array([math.cos(sf.yaw), math.sin(sf.yaw)])
+        if hy > hx:
+            along, hx = np.array([-along[1], along[0]]), hy
+        n = max(1, math.ceil(2 * hx / step_m)) + 1
+        for t in np.linspace(-hx, hx, n):
+            points.append(np.asarray(sf.centre_xy, float) + t * along)
+    return np.array(points).reshape(-1, 2)
+
+
 def coverage_route(
     cells: NDArray[np.uint8],
     resolution_m: float,
@@ -50,6 +71,8 @@ def coverage_route(
     start_xy: tuple[float, float],
     spacing_m: float,
     clearance_m: float,
+    targets: FloatArray | None = None,
+    see_m: float = 1.6,
 ) -> Route:
     factor = max(1, round(PLAN_RES_M / resolution_m))
     res = resolution_m * factor
@@ -76,6 +99,8 @@ def coverage_route(
     lattice = np.zeros_like(reach)
     lattice[step // 2 :: step, step // 2 :: step] = True
     cand = [(int(a), int(b)) for a, b in zip(*np.nonzero(reach & lattice), strict=True)]
+    if targets is not None and len(targets):
+        cand += _viewpoints_for(targets, cand, np.argwhere(reach), centre, see_m)
     # The graph of the reachable cells, 8-connected, edge length in m.
     index = -np.ones(safe.shape, np.int64)
     ys, xs = np.nonzero(reach)
@@ -109,6 +134,29 @@ def coverage_route(
         viewpoints.append(centre(*nxt))
         here = nxt
     return Route(viewpoints, paths)
+
+
+def _viewpoints_for(
+    targets: FloatArray,
+    cand: list[tuple[int, int]],
+    reachable: NDArray[np.intp],
+    centre: Callable[[int, int], FloatArray],
+    see_m: float,
+) -> list[tuple[int, int]]:
+    """The cells to add so that each target is within `see_m` of a viewpoint (greedy, in
+    the targets' order; a target with no reachable cell within `see_m` is left)."""
+    cells_xy = np.array([centre(int(iy), int(ix)) for iy, ix in reachable])
+    seen_from = [centre(*c) for c in cand]
+    added: list[tuple[int, int]] = []
+    for t in np.asarray(targets, float):
+        if seen_from and float(np.min(np.linalg.norm(np.array(seen_from) - t, axis=1))) <= see_m:
+            continue
+        d = np.linalg.norm(cells_xy - t, axis=1)
+        k = int(np.argmin(d))
+        if d[k] <= see_m:
+            added.append((int(reachable[k][0]), int(reachable[k][1])))
+            seen_from.append(cells_xy[k])
+    return added
 
 
 @dataclass

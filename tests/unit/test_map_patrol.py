@@ -1,5 +1,5 @@
 """The patrol through navigation: the pose goals of a coverage route and how the patrol
-moves on when navigation answers."""
+moves on when navigation answers; the viewpoints the floor plan's tables and benches add."""
 
 from __future__ import annotations
 
@@ -8,8 +8,10 @@ import math
 
 import numpy as np
 
+from common.messages.world import SupportSurface
 from services.semantic_map.nav_patrol import NavPatrol, patrol_goals
-from services.semantic_map.patrol import Route
+from services.semantic_map.occupancy import OCCUPIED
+from services.semantic_map.patrol import Route, coverage_route, support_targets
 
 
 def _route() -> Route:
@@ -53,3 +55,28 @@ def test_the_patrol_counts_the_path_it_walked() -> None:
     for x, y in [(0.0, 0.0), (3.0, 0.0), (3.0, 4.0)]:
         p.moved_to(x, y)
     assert math.isclose(p.travelled_m, 7.0)
+
+
+def test_support_targets_run_along_each_tops_long_centre_line() -> None:
+    bench = SupportSurface("bench_1", (1.0, 2.0), (0.1, 0.5), 0.0, 0.9)  # long along y
+    pts = support_targets([bench], step_m=0.5)
+    assert np.allclose(pts[:, 0], 1.0)
+    assert np.allclose(pts[:, 1], [1.5, 2.0, 2.5])
+
+
+def test_a_top_the_lattice_leaves_too_far_gets_a_viewpoint_within_see_m() -> None:
+    # A 12 × 6 m room (10 cm cells) with a 1.6 × 0.6 m bench against the middle of the
+    # bottom wall; lattice viewpoints every 4 m leave its top 2+ m away.
+    cells = np.zeros((60, 120), np.uint8)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = OCCUPIED
+    cells[1:7, 52:68] = OCCUPIED
+    target = np.array([[6.0, 0.4]])
+    plain = coverage_route(cells, 0.1, (0.0, 0.0), (2.0, 3.0), 4.0, 0.5)
+    far = min(float(np.linalg.norm(v - target[0])) for v in plain.viewpoints)
+    assert far > 1.6
+    route = coverage_route(cells, 0.1, (0.0, 0.0), (2.0, 3.0), 4.0, 0.5, target, 1.6)
+    near = min(float(np.linalg.norm(v - target[0])) for v in route.viewpoints)
+    assert near <= 1.6 and len(route.viewpoints) == len(plain.viewpoints) + 1
+    # every path still ends at its viewpoint and starts where the last one ended
+    for a, b in zip(route.paths, route.paths[1:], strict=False):
+        assert np.allclose(a[-1], b[0])
