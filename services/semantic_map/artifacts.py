@@ -13,8 +13,9 @@ detections, is dropped instead (`drop`; the rule is the map's, see `mapper`).
 One object under two classes: the network may call a can on a bench a box from 3 m and a
 can from 1.5 m, which makes two artifacts at one place (their axis points within
 `class_merge_m`, closer than two real objects' centres can be). `class_conflicts()`
-pairs such perception-made artifacts as (loser, winner): the class seen more often from
-within `near_m` (where the network tells the classes apart) wins, then the one with more
+pairs such perception-made artifacts as (loser, winner): the class seen more often whole
+(its mask off the image border) from within `near_m` (where the network tells the
+classes apart) wins, then the one with more
 detections; two seen from near fewer than `confirm_hits` times are left alone. A
 tentative track that would give way to a confirmed artifact this way gets no id (it stays
 tentative while seen, and takes an id once its class has the better evidence).
@@ -109,7 +110,7 @@ class ArtifactTracker:
                 last_seen_ns=stamp_ns,
                 first_seen_ns=stamp_ns,
                 hits=1,
-                near_hits=int(obs.range_m <= self.params.near_m),
+                near_hits=int(self._near(obs)),
             )
             if self.params.confirm_hits <= 1:
                 self._confirm(tr)
@@ -128,10 +129,14 @@ class ArtifactTracker:
         tr.cov = (np.eye(2) - K) @ tr.cov
         tr.z += (obs.z - tr.z) / (tr.hits + 1)  # the height: a plain running mean
         tr.hits += 1
-        tr.near_hits += int(obs.range_m <= self.params.near_m)
+        tr.near_hits += int(self._near(obs))
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None
+
+    def _near(self, obs: Observation) -> bool:
+        """A detection whose class counts: whole in its image and within `near_m`."""
+        return obs.whole and obs.range_m <= self.params.near_m
 
     def class_conflicts(self) -> list[tuple[Track, Track]]:
         """(loser, winner) for each perception-made artifact that is another class's

@@ -55,8 +55,8 @@ class Track:
     velocity: (2,) m/s (people). appearance: colour histogram (people), or None.
     vel_cov: (2, 2) (m/s)², the velocity's covariance.
     hits: detections fused. misses: consecutive looks at its place without seeing it.
-    near_hits: detections fused from within the fusion's `near_m` (the class is trusted
-    from there; not stored: a track read from the database starts at 0).
+    near_hits: whole detections fused from within the fusion's `near_m` (the class is
+    trusted from there; not stored: a track read from the database starts at 0).
     """
 
     class_name: str
@@ -133,7 +133,9 @@ class Observation:
 
     xy: (2,) m, world (an artifact's axis point, a person's feet). z: m. sigma_m: 1-σ
     horizontal noise of this measurement (grows with range). appearance: histogram or None.
-    range_m: the detection's distance from the camera's base, d_obj.
+    range_m: the detection's distance from the camera's base, d_obj. whole: its mask does
+    not touch the image's border (a cut object's class is a guess: the head camera sees
+    the lower half of a bottle on a table 1.5 m away, and the network calls that a can).
     """
 
     class_name: str
@@ -143,6 +145,7 @@ class Observation:
     score: float = 1.0
     appearance: FloatArray | None = None
     range_m: float = 0.0
+    whole: bool = True
 
 
 def measurement_sigma(range_m: float, sigma0_m: float, per_m: float) -> float:

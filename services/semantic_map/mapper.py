@@ -179,8 +179,16 @@ class SemanticMap:
                 mask = np.asarray(as_numpy(det.mask))
                 app = colour_histogram(rgb, det.bbox, mask.astype(np.uint8))
             return Observation("person", xy.copy(), 0.0, sigma, det.score, app)
+        u0, v0, u1, v1 = det.bbox
+        cut = rgb is not None and (u0 == 0 or v0 == 0 or u1 >= rgb.shape[1] or v1 >= rgb.shape[0])
         return Observation(
-            det.class_name, xy.copy(), float(centroid[2]), sigma, det.score, range_m=det.d_obj
+            det.class_name,
+            xy.copy(),
+            float(centroid[2]),
+            sigma,
+            det.score,
+            range_m=det.d_obj,
+            whole=not cut,
         )
 
     def _plausible(self, people: list[Observation], report: IngestReport) -> list[Observation]:

@@ -260,3 +260,17 @@ def test_one_object_seen_as_two_classes_keeps_one_id_and_deletes_the_other(
     assert "the same object as can_1" in dropped[0][1]
     assert [e.id for e in smap.entities("artifact")] == ["can_1"]
     assert sorted(e.id for e, _app in store.load().entities) == ["can_1"]
+
+
+def test_a_detection_cut_by_the_image_border_does_not_decide_the_class() -> None:
+    smap = _map()
+    cut = msgspec.structs.replace(
+        _det("can", CAN_XY), bbox=(10, 0, 12, 2), mask=to_wire(np.ones((2, 2), np.uint8))
+    )
+    for k in range(1, 4):
+        _ingest(smap, k * S, _det("box", CAN_XY))
+        _ingest(smap, k * S + S // 2, cut)
+    # The whole box views win; the cut can views, no evidence, never get an id.
+    assert [e.id for e in smap.entities("artifact")] == ["box_1"]
+    (can,) = [t for t in smap.artifacts.tracks if t.class_name == "can"]
+    assert (can.id, can.hits, can.near_hits) == (None, 3, 0)

@@ -154,3 +154,15 @@ def test_a_class_that_gives_way_spends_no_id_until_it_has_the_better_evidence() 
     _seen(tracker, 6, "can", (1.0, 0.01), 1.5)  # a fourth near can view: the can wins
     ((loser, winner),) = tracker.class_conflicts()
     assert (loser.id, winner.id) == ("bottle_1", "can_1")
+
+
+def test_a_view_cut_by_the_image_border_is_no_evidence_of_the_class() -> None:
+    # The head camera sees a bottle's lower half 1.5 m away and calls it a can.
+    tracker = ArtifactTracker(IdBook(), FusionParams())
+    for k in range(5):
+        _seen(tracker, k, "bottle", (2.0, 1.0), 2.5)  # whole, from far
+        tracker.update(
+            k * S, [Observation("can", np.array([2.0, 1.01]), 0.5, 0.03, range_m=1.5, whole=False)]
+        )
+    assert [t.near_hits for t in tracker.confirmed] == [0, 0]
+    assert tracker.class_conflicts() == []
