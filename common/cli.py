@@ -208,12 +208,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     from bench import run_bench
+    from common.eval_run import sigterm_interrupts
 
-    return run_bench(args.which, args.set)
+    with sigterm_interrupts():  # a killed bench still stops its stack
+        return run_bench(args.which, args.set)
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
     from bench.trials import run_trial
+    from common.eval_run import sigterm_interrupts
 
     options: dict[str, object] = {"world": args.world, "count": args.count, "yaw": args.yaw}
     if args.which == "goto":
@@ -221,7 +224,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
             print("dume trial goto needs X Y (m, world)", file=sys.stderr)
             return 2
         options |= {"x": args.xy[0], "y": args.xy[1]}
-    result = run_trial(args.which, args.world_seed, args.wbc_period, args.set, options)
+    with sigterm_interrupts():  # a killed trial still stops its stack
+        result = run_trial(args.which, args.world_seed, args.wbc_period, args.set, options)
     print(json.dumps(result))
     return 0
 
