@@ -25,7 +25,9 @@ artifact detection that close to a person of the same frame is dropped (clothes)
 person detection within `person_obstacle_margin_m` of a static obstacle cell (a person
 cannot stand inside a machine or on a bench) is a fixed thing the network read as a
 person: ignored, and it hides no artifact (the hall patrol lost cans on benches that
-way). Only the static layer counts: a learned cell may be a person perception missed.
+way); nor does any "person" hide an artifact that stands on a static obstacle (the wrist
+camera reads a bench's front as a person 15-35 cm from the can on it, outside the
+margin). Only the static layer counts: a learned cell may be a person perception missed.
 """
 
 from __future__ import annotations
@@ -206,6 +208,20 @@ class SemanticMap:
         report.ignored += int(inside.sum())
         return [o for o, bad in zip(people, inside, strict=True) if not bad]
 
+    def _on_static(self, observations: list[Observation]) -> list[bool]:
+        """Whether each observation's place is a static obstacle cell (furniture)."""
+        if not observations:
+            return []
+        occ = self.occupancy
+        inside = occupied_near(
+            occ.static_occupied,
+            occ.resolution_m,
+            occ.origin_xy,
+            np.array([o.xy for o in observations]),
+            0.0,
+        )
+        return [bool(b) for b in inside]
+
     def ingest(self, dets: Detections, frame: CameraFrame | None = None) -> IngestReport:
         """Fuse one camera frame's detections (`frame`: the same camera at the same stamp)."""
         report = IngestReport()
@@ -225,9 +241,12 @@ class SemanticMap:
             obs = self.observation(det, rgb)
             (people if obs.class_name == "person" else arts).append(obs)
         people = self._plausible(merge_split_people(people, PERSON_MERGE_M), report)
-        # A person's clothes are not artifacts: an artifact detection on a person is dropped.
+        # A person's clothes are not artifacts: an artifact detection on a person is dropped,
+        # unless it stands on a static obstacle (a table, a bench) where nobody stands.
         on_person = [
-            o for o in arts if any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)
+            o
+            for o, on_support in zip(arts, self._on_static(arts), strict=True)
+            if not on_support and any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)
         ]
         if on_person:
             report.ignored += len(on_person)

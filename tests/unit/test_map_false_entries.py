@@ -240,6 +240,20 @@ def test_a_person_on_a_static_obstacle_is_not_a_person_and_hides_no_artifact() -
     assert [(e.id, round(e.position_in_world[0], 2)) for e in people] == [("person_1", 0.5)]
 
 
+def test_a_person_beside_a_bench_hides_no_artifact_on_it_but_clothes_stay_dropped() -> None:
+    """The wrist camera reads a bench's front as a person 25 cm in front of the can on it,
+    outside the obstacle margin: the can, on the bench, is still mapped; an artifact
+    detection on a person standing in the open is still dropped."""
+    static = np.zeros((40, 40), np.uint8)
+    static[18:22, 24:28] = OCCUPIED  # a bench: x 1.0–2.0, y −0.5–0.5
+    smap = SemanticMap(MapParams(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
+    for k in range(1, 4):
+        _ingest(smap, k * S, _det("person", (0.7, 0.0)), _det("can", (1.1, 0.0)),
+                _det("person", (-1.0, 1.0)), _det("box", (-1.0, 1.1)))  # fmt: skip
+    assert [e.id for e in smap.entities("artifact")] == ["can_1"]
+    assert len(smap.entities("person")) == 2
+
+
 def test_one_object_seen_as_two_classes_keeps_one_id_and_deletes_the_other(
     tmp_path: Path,
 ) -> None:
