@@ -216,6 +216,8 @@ class SemanticMapSettings(_Section):
     #: The floor plan's tables and benches are seen from a viewpoint within this, m (the
     #: network finds a can on a bench from 2 m with the arm in `look`).
     patrol_see_m: float = 1.6
+    #: Cameras also fused while a patrol holds the arm in `look`.
+    patrol_cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_wrist"])
     #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
     #: looking ahead and down) where it sees the tops of benches that the head camera,
     #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.

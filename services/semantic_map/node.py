@@ -54,6 +54,8 @@ from services.semantic_map.startup import open_map, save_all
 from services.semantic_map.store import Grid, MapStore
 
 NAME = "semantic_map"
+#: Sim seconds between the per-camera summaries of what was fused.
+SUMMARY_EVERY_S = 10.0
 log = logging.getLogger(f"dume.{NAME}")
 
 
@@ -86,6 +88,10 @@ class MapNode:
         self._supports: FloatArray | None = None
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
         self.last_grid_save = 0
+        #: Per camera since the last summary: frames, detections fused, ignored (logged
+        #: every `SUMMARY_EVERY_S` of sim time: what each camera adds to the map).
+        self.counts: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0])
+        self.last_summary_ns = 0
         bus.serve(MAP_ARTIFACTS, None, lambda _r, sel: self._q(queries.listing, "artifact", sel))
         bus.serve(MAP_PEOPLE, None, lambda _r, sel: self._q(queries.listing, "person", sel))
         bus.serve(MAP_ARTIFACTS_ONE, None, lambda _r, sel: self._q(queries.one, "artifact", sel))
@@ -242,19 +248,26 @@ class MapNode:
                 self.logger.log(b, self.smap)
             ticker.ack(b)
 
+    def _cameras(self) -> list[str]:
+        """The cameras fused now: `cameras`, and `patrol_cameras` while a patrol holds the
+        arm in `look` (the wrist camera then sees bench tops; stowed, it sees the legs)."""
+        extra = self.cfg.patrol_cameras if self.patrol.arm_up else []
+        return [*self.cfg.cameras, *(c for c in extra if c not in self.cfg.cameras)]
+
     def _fuse_due(self, b: int) -> None:
+        cameras = self._cameras()
         for dets in self.det_fifo.drain():
-            if dets.camera not in self.cfg.cameras:
+            if dets.camera not in cameras:
                 continue
             self.pending[dets.stamp_ns][dets.camera] = dets
             self.newest_det = max(self.newest_det, dets.stamp_ns)
-        wanted = set(self.cfg.cameras)
+        wanted = set(cameras)
         for s in sorted(self.pending):
             cams = self.pending[s]
             complete = s < self.newest_det or wanted <= set(cams) or s <= b - 2 * self.period_ns
             if s > b or not complete:
                 break
-            for cam in self.cfg.cameras:
+            for cam in cameras:
                 if cam in cams:
                     self._fuse(cams[cam])
             del self.pending[s]
@@ -279,6 +292,17 @@ class MapNode:
         except (ValueError, PayloadError) as exc:
             log.warning("detections of %s at %d rejected: %s", dets.camera, dets.stamp_ns, exc)
             return
+        c = self.counts[dets.camera]
+        c[0], c[1], c[2] = c[0] + 1, c[1] + report.fused, c[2] + report.ignored
+        if dets.stamp_ns - self.last_summary_ns >= SUMMARY_EVERY_S * NS_PER_S:
+            self.last_summary_ns = dets.stamp_ns
+            log.info(
+                "fused in the last %.0f s: %s",
+                SUMMARY_EVERY_S,
+                ", ".join(f"{cam} {f} frames {n} detections ({i} ignored)"
+                          for cam, (f, n, i) in sorted(self.counts.items())),
+            )  # fmt: skip
+            self.counts.clear()
         for entity_id in report.new_ids:
             tr = self.smap.artifacts.by_id(entity_id) or self.smap.people.by_id(entity_id)
             if tr is not None:

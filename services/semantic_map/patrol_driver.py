@@ -70,10 +70,16 @@ class PatrolDriver:
         self._arm_pending = False
         self._arm_goal = ""
         self._arm_since_ns = 0
+        self._arm_in_look = False
 
     @property
     def running(self) -> bool:
         return self.state == "running"
+
+    @property
+    def arm_up(self) -> bool:
+        """The patrol holds the arm in `look` now (the wrist camera sees bench tops)."""
+        return self.running and self._arm_in_look
 
     @property
     def route(self) -> Route | None:
@@ -92,7 +98,7 @@ class PatrolDriver:
                 look_around=c.patrol_look_around,
             )
         self.state, self.reason, self._started, self._stop = "running", "", False, False
-        self._arm_pending, self._arm_goal = True, ""
+        self._arm_pending, self._arm_goal, self._arm_in_look = True, "", False
 
     def stop(self) -> None:
         if self.running:
@@ -174,6 +180,7 @@ class PatrolDriver:
             return
         if goal.state == "succeeded":
             log.info("patrol: arm in %s at %.1f s", name, b / NS_PER_S)
+            self._arm_in_look = name == "look"
         else:
             log.warning("patrol: arm posture %s %s: %s: walking on", name, goal.state, goal.reason)
         self._arm_pending = False

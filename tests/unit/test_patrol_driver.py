@@ -105,8 +105,13 @@ def test_the_arm_reaches_look_before_the_first_walk_goal() -> None:
     d.step(3 * S, _odom())
     assert bus.nav_requests() == 0
     bus.latests[KEYS.wbc_status].value = _wbc("arm_9", "succeeded")
+    assert not d.arm_up
     d.step(4 * S, _odom())
     assert bus.nav_requests() == 1 and bus.arm_requests() == ["look"]
+    assert d.arm_up  # the map fuses the wrist camera from now on
+    d.stop()
+    d.step(5 * S, _odom())
+    assert not d.arm_up
 
 
 def test_a_wbc_not_ready_is_asked_again_and_a_failed_posture_walks_on() -> None:
