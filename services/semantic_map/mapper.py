@@ -195,32 +195,24 @@ class SemanticMap:
 
     def _plausible(self, people: list[Observation], report: IngestReport) -> list[Observation]:
         """The people observations not on a static obstacle (module docstring)."""
-        if not people:
-            return people
-        occ = self.occupancy
-        inside = occupied_near(
-            occ.static_occupied,
-            occ.resolution_m,
-            occ.origin_xy,
-            np.array([o.xy for o in people]),
-            self.params.person_obstacle_margin_m,
-        )
-        report.ignored += int(inside.sum())
+        inside = self._near_static(people, self.params.person_obstacle_margin_m)
+        report.ignored += sum(inside)
         return [o for o, bad in zip(people, inside, strict=True) if not bad]
 
-    def _on_static(self, observations: list[Observation]) -> list[bool]:
-        """Whether each observation's place is a static obstacle cell (furniture)."""
+    def _near_static(self, observations: list[Observation], margin_m: float) -> list[bool]:
+        """Whether each observation's place is within `margin_m` of a static obstacle cell
+        (furniture, walls: the floor plan's layer, not the learned one)."""
         if not observations:
             return []
         occ = self.occupancy
-        inside = occupied_near(
+        near = occupied_near(
             occ.static_occupied,
             occ.resolution_m,
             occ.origin_xy,
             np.array([o.xy for o in observations]),
-            0.0,
+            margin_m,
         )
-        return [bool(b) for b in inside]
+        return [bool(b) for b in near]
 
     def ingest(self, dets: Detections, frame: CameraFrame | None = None) -> IngestReport:
         """Fuse one camera frame's detections (`frame`: the same camera at the same stamp)."""
@@ -245,7 +237,7 @@ class SemanticMap:
         # unless it stands on a static obstacle (a table, a bench) where nobody stands.
         on_person = [
             o
-            for o, on_support in zip(arts, self._on_static(arts), strict=True)
+            for o, on_support in zip(arts, self._near_static(arts, 0.0), strict=True)
             if not on_support and any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)
         ]
         if on_person:
