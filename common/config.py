@@ -188,7 +188,8 @@ class SemanticMapSettings(_Section):
     missing_after_frames: int = 5
     #: Range within which a camera is trusted to see an artifact, and a person, m (the
     #: network finds a can on a bench from the wrist camera at 2 m, not at 2.5 m: a look
-    #: from farther proves nothing, and with the arm up in a patrol it deleted true ones).
+    #: from farther proves nothing; the head camera's looks from 2-3 m deleted the small
+    #: world's true bottle twice in a patrol).
     look_range_m: float = 2.0
     person_look_range_m: float = 6.0
     #: A person detection this close to a static obstacle cell is not a person, m.

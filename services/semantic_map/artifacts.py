@@ -23,6 +23,8 @@ tentative while seen, and takes an id once its class has the better evidence).
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -138,16 +140,20 @@ class ArtifactTracker:
         """A detection whose class counts: whole in its image and within `near_m`."""
         return obs.whole and obs.range_m <= self.params.near_m
 
-    def class_conflicts(self) -> list[tuple[Track, Track]]:
+    def class_conflicts(self, fused: Sequence[Track] | None = None) -> list[tuple[Track, Track]]:
         """(loser, winner) for each perception-made artifact that is another class's
-        artifact at the same place (see the module docstring); each loser once."""
-        made = [t for t in self.tracks if t.confirmed]
+        artifact at the same place (see the module docstring); each loser once. Only pairs
+        with an artifact in `fused` (the ones this frame updated; None: every artifact) are
+        checked: only a fusion moves an artifact or adds to its evidence."""
+        confirmed = [t for t in self.tracks if t.confirmed]
+        order = {id(t): i for i, t in enumerate(confirmed)}
         out: list[tuple[Track, Track]] = []
         losers: set[int] = set()
-        for i, old in enumerate(made):
-            for new in made[i + 1 :]:
-                if id(old) in losers or id(new) in losers:
+        for a in confirmed if fused is None else [t for t in fused if id(t) in order]:
+            for b in confirmed:
+                if b is a or id(a) in losers or id(b) in losers:
                     continue
+                old, new = (a, b) if order[id(a)] < order[id(b)] else (b, a)
                 loser = self._loser(new, old)
                 if loser is not None:
                     losers.add(id(loser))
@@ -165,7 +171,7 @@ class ArtifactTracker:
             or new.source != old.source
         ):
             return None
-        if float(np.linalg.norm(new.xy - old.xy)) > p.class_merge_m:
+        if math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1]) > p.class_merge_m:
             return None
         if max(new.near_hits, old.near_hits) < p.confirm_hits:
             return None

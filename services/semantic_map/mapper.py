@@ -235,10 +235,11 @@ class SemanticMap:
         people = self._plausible(merge_split_people(people, PERSON_MERGE_M), report)
         # A person's clothes are not artifacts: an artifact detection on a person is dropped,
         # unless it stands on a static obstacle (a table, a bench) where nobody stands.
+        near = [
+            o for o in arts if any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)
+        ]
         on_person = [
-            o
-            for o, on_support in zip(arts, self._near_static(arts, 0.0), strict=True)
-            if not on_support and any(np.linalg.norm(o.xy - p.xy) < PERSON_MERGE_M for p in people)
+            o for o, sup in zip(near, self._near_static(near, 0.0), strict=True) if not sup
         ]
         if on_person:
             report.ignored += len(on_person)
@@ -253,7 +254,10 @@ class SemanticMap:
                 report.new_ids.append(tr.id)
                 self._counters_dirty = True
         report.fused = len(arts) + len(people)
-        merged = [(lo, self._class_reason(lo, win)) for lo, win in self.artifacts.class_conflicts()]
+        merged = [
+            (lo, self._class_reason(lo, win))
+            for lo, win in self.artifacts.class_conflicts(changed_a)
+        ]
         if merged:
             report.dropped += self._delete(merged)
             seen = {i for i, tr in enumerate(self.artifacts.tracks) if tr.last_seen_ns == t}

@@ -103,8 +103,8 @@ class MapNode:
 
     # -- start-up ------------------------------------------------------------------------
 
-    def _world(self) -> WorldDescription | None:
-        deadline = time.monotonic() + 30.0
+    def _world(self, wait_s: float = 30.0) -> WorldDescription | None:
+        deadline = time.monotonic() + wait_s
         while not self.svc.stopping and time.monotonic() < deadline:
             try:
                 return self.svc.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 5.0)
@@ -176,10 +176,9 @@ class MapNode:
         if self.cfg.floor_plan != "world":
             return None
         if self._supports is None:
-            try:
-                w = self.svc.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 5.0)
-            except (NoReply, RemoteError, PayloadError) as exc:
-                log.warning("patrol: no floor plan's supports to look at: %s", exc)
+            w = self._world(wait_s=5.0)
+            if w is None:
+                log.warning("patrol: no world description: no floor plan's supports to look at")
                 return None
             self._supports = support_targets(w.surfaces)
         return self._supports
