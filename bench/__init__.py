@@ -34,12 +34,25 @@ def _nav(overrides: Sequence[str]) -> dict[str, Any]:
     return bench_nav(overrides)
 
 
+#: `dume bench startup --rounds N`: how many stacks it starts.
+STARTUP_ROUNDS = {"rounds": 10}
+
+
+def _startup(overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.startup import bench_startup
+
+    return bench_startup(overrides, STARTUP_ROUNDS["rounds"])
+
+
 BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
     "sim": _sim,
     "wbc": _wbc,
     "perception": _perception,
     "nav": _nav,
+    "startup": _startup,
 }
+#: What `dume bench all` runs (`startup` starts whole stacks in a loop: on its own).
+ALL = ("sim", "wbc", "perception", "nav")
 
 
 #: `dume trial <name>`: the trials `bench.trials.run_trial` runs (named here, so the
@@ -50,8 +63,9 @@ TRIALS = (
 )  # fmt: skip
 
 
-def run_bench(which: str, overrides: Sequence[str] = ()) -> int:
-    names = list(BENCHES) if which == "all" else [which]
+def run_bench(which: str, overrides: Sequence[str] = (), rounds: int = 10) -> int:
+    STARTUP_ROUNDS["rounds"] = rounds
+    names = list(ALL) if which == "all" else [which]
     results = {name: BENCHES[name](overrides) for name in names}
     print(json.dumps(results if which == "all" else results[which]))
     return 0

@@ -211,7 +211,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from common.eval_run import sigterm_interrupts
 
     with sigterm_interrupts():  # a killed bench still stops its stack
-        return run_bench(args.which, args.set)
+        return run_bench(args.which, args.set, args.rounds)
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
@@ -342,6 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bench import BENCHES, TRIALS
 
     p.add_argument("which", choices=[*BENCHES, "all"])
+    p.add_argument("--rounds", type=int, default=10, help="startup: how many stacks to start")
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")

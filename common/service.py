@@ -18,6 +18,7 @@ session closes well inside 2 s.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import logging
 import signal
 import sys
@@ -74,6 +75,9 @@ def parse_args(name: str, argv: Sequence[str] | None) -> argparse.Namespace:
 
 
 def setup_logging(level: str, name: str) -> None:
+    # A native crash (a segfault in a C extension) leaves every thread's Python stack in
+    # the service's log instead of a bare "terminated by SIGSEGV" from supervisord.
+    faulthandler.enable(file=sys.stderr, all_threads=True)
     logging.basicConfig(
         level=level,
         format=f"%(asctime)s {name} %(levelname)s %(name)s: %(message)s",

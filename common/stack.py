@@ -66,6 +66,9 @@ def stack_env(
             "DUME_RUN_DIR": str(run_dir),
             "MUJOCO_GL": env.get("MUJOCO_GL", "egl"),
             "PYTHONUNBUFFERED": "1",
+            # Every process of the stack (the router, supervisord's children, a test's
+            # own) prints all threads' Python stacks on a native crash.
+            "PYTHONFAULTHANDLER": "1",
         }
     )
     env.update(settings or {})
