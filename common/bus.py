@@ -30,6 +30,7 @@ from typing import Any, Generic, Literal, TypeVar
 import zenoh
 
 from common.config import Config, resolve
+from common.lifelines import Lifelines
 from common.messages import ErrorReply, PayloadError, decode, encode
 from common.messages.errors import ErrorCode
 
@@ -329,6 +330,8 @@ class AliveWatch:
         self._alive: set[str] = set()
         #: Counts changes, so a hot loop can skip looking when nothing changed.
         self.version = 0
+        #: The same, with how often each token went away (`common.lifelines`).
+        self.lifelines = Lifelines()
         self._cond = threading.Condition()
         self._sub = session.liveliness().declare_subscriber(key_expr, self._on_sample, history=True)
 
@@ -337,8 +340,10 @@ class AliveWatch:
         with self._cond:
             if sample.kind == zenoh.SampleKind.PUT:
                 self._alive.add(key)
+                self.lifelines.up(key)
             else:
                 self._alive.discard(key)
+                self.lifelines.down(key)
             self.version += 1
             self._cond.notify_all()
 
@@ -367,6 +372,8 @@ class AliveWatch:
             return
         with self._cond:
             if found - self._alive:
+                for key in found - self._alive:
+                    self.lifelines.up(key)
                 self._alive |= found
                 self.version += 1
                 self._cond.notify_all()

@@ -21,6 +21,7 @@ stack on that port, and `--set key=value` to override settings.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import pathlib
@@ -34,6 +35,7 @@ import msgspec
 from common.bus import Bus, NoRouter, WaitTimeout
 from common.config import REPO_ROOT, Config, ConfigError, load_config
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
+from common.lifelines import Dependencies
 from common.messages import encode
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 
@@ -114,28 +116,47 @@ def cmd_request(args: argparse.Namespace) -> int:
     )
     with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         statuses = bus.fifo(keys.mission_status, MissionStatus)
+        alive = bus.watch_alive(keys.alive_all)
+        mission = Dependencies(alive.lifelines, ["mission"], keys.alive)
         time.sleep(0.2)  # let the subscription reach the router before the request goes out
+        with contextlib.suppress(WaitTimeout):
+            alive.wait_for({keys.alive("mission")}, 2.0)
+        mission.arm()
         bus.session.put(keys.mission_request, encode(request))
         print(json.dumps({"request_id": request.request_id, "sent": msgspec.to_builtins(request)}))
         if not args.wait:
             return 0
         deadline = time.monotonic() + args.timeout
+        ours = False
         while time.monotonic() < deadline:
             status = statuses.pop(timeout_s=0.2)
-            if status is None or status.request_id != request.request_id:
+            # Nobody waits for the dead: a mission gone, restarted or without our request.
+            lost = mission.lost() or ("mission is not running" if mission.missing() else None)
+            if status is not None and status.request_id != request.request_id:
+                if ours and status.state == "idle":
+                    lost = "mission restarted: it has no request in progress"
+                status = None
+            if lost is not None:
+                out = {"request_id": request.request_id, "outcome": "dependency_lost"}
+                print(json.dumps(out | {"reason": lost}))
+                return 3
+            if status is None:
                 continue
+            ours = True
             print(json.dumps(msgspec.to_builtins(status)), flush=True)
             if status.state == "succeeded":
                 return 0
             if status.state in ("failed", "cancelled", "rejected"):
                 return 1
-        alive = {service_of_alive_key(k) for k in bus.alive_now(keys.alive_all, 1.0)}
-        why = (
-            "no mission service is running on this stack"
-            if "mission" not in alive
-            else "the mission did not finish in time"
+        print(
+            json.dumps(
+                {
+                    "request_id": request.request_id,
+                    "outcome": "timeout",
+                    "reason": "the mission did not finish in time",
+                }
+            )
         )
-        print(json.dumps({"request_id": request.request_id, "outcome": "timeout", "reason": why}))
         return 3
 
 

@@ -27,6 +27,7 @@ from common.bus import BusError
 from common.config import REPO_ROOT, resolve
 from common.eval_judge import WorldResult, evaluate
 from common.eval_run import (
+    DEPENDENCY_LOST,
     read_back,
     read_map,
     read_world,
@@ -103,6 +104,8 @@ def _verdict(result: WorldResult) -> tuple[str, str]:
         return "failed", result.error
     mission = result.mission_state or "no final status"
     said = ": ".join(x for x in (result.mission_reason, result.mission_detail) if x)
+    if result.mission_reason == DEPENDENCY_LOST:  # nobody waits for the dead
+        return "failed", f"{said} (the mission was in {result.last_behaviour or '-'})"
     if result.mission_state == "succeeded" and result.succeeded:
         return "succeeded", f"{result.truth_reason} (asked: {result.object} for {result.person})"
     if result.mission_state == "succeeded":

@@ -232,8 +232,16 @@ def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription
     result.outcome = "succeeded" if verdict.success else "failed"
     result.truth_reason = verdict.reason
     result.mission_state = final.state if final else ""
-    result.mission_reason = (final.reason if final else "") or record.ended
-    result.mission_detail = final.detail if final else ""
+    if record.ended and not (final is not None and final.state in TERMINAL):
+        # Watching stopped before a final status: why (a timeout, a stopped clock, a
+        # dependency lost) is the reason, "dependency_lost: mission is gone" split so.
+        reason, _, detail = record.ended.partition(": ")
+        result.mission_reason, result.mission_detail = (
+            (reason, detail) if detail and " " not in reason else (record.ended, "")
+        )
+    else:
+        result.mission_reason = (final.reason if final else "") or record.ended
+        result.mission_detail = final.detail if final else ""
     result.agree = mission_ok == verdict.success
     result.stage_reached = stage_reached(record.changes)
     result.last_behaviour = behaviours[-1] if behaviours else ""

@@ -6,9 +6,12 @@ for its truth; `read_back` reads the settings the stack actually runs with from 
 publishes (the segmenter on every `Detections`, the locomotion on every `Odom`), not
 from the launcher's config. `watch_mission` subscribes to the mission's status, the
 world's events and the clock, sends the request once the mission's subscriber matches,
-and follows it to a final state, a sim-time timeout (then it cancels the request) or a
-clock that stops; `on_progress` sees every status change and every sim second. It
-never sleeps on wall time except in waits with timeouts. `sigterm_interrupts` turns
+and follows it to a final state, a sim-time timeout (then it cancels the request), a
+clock that stops, or a dependency lost: the sim or the mission going away or restarting
+(their liveliness), or the mission saying it has no request in progress after it had
+ours, end the watch at once with `dependency_lost: <who> …` (nobody waits for the dead);
+`on_progress` sees every status change and every sim second. It never sleeps on wall
+time except in waits with timeouts. `sigterm_interrupts` turns
 SIGTERM into KeyboardInterrupt so that a killed demo or eval still stops its stack.
 """
 
@@ -33,6 +36,7 @@ from common.keys import (
     WORLD_EVENTS,
     RobotKeys,
 )
+from common.lifelines import Dependencies
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.perception import Detections
 from common.messages.semantic_map import MapEntity, MapListing
@@ -46,6 +50,10 @@ Progress = Callable[[MissionStatus | None, Clock, bool], None]
 STALL_WALL_S = 120.0
 #: Sim seconds of world events still collected after the final status.
 GRACE_S = 1.0
+#: The typed reason of a watch that ended because a service it depends on went away.
+DEPENDENCY_LOST = "dependency_lost"
+#: The services a watch of one request depends on: the clock's and the request's.
+WATCHED = ("sim", "mission")
 
 
 @contextlib.contextmanager
@@ -125,18 +133,27 @@ def watch_mission(
     events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=1 << 16)
     clock = bus.latest(WORLD_CLOCK, Clock)
     publisher = bus.publisher(keys.mission_request, MissionRequest, "control")
+    alive = bus.watch_alive(keys.alive_all)
+    deps = Dependencies(alive.lifelines, WATCHED, keys.alive)
     wall0 = time.perf_counter()
     record = MissionRecord(request=request, start_ns=0)
     try:
         clock.wait(lambda _c: True, STALL_WALL_S)
         _wait_matching(publisher.has_subscribers, 10.0)
+        with contextlib.suppress(WaitTimeout):
+            alive.wait_for({keys.alive(n) for n in WATCHED}, 10.0)
+        if down := deps.missing():
+            record.ended = f"{DEPENDENCY_LOST}: not running: {', '.join(down)}"
+            return record
+        deps.arm()
         now = clock.get()
         record.start_ns = record.end_ns = now.stamp_ns if now else 0
         publisher.put(request)
         wall0 = time.perf_counter()
-        _follow(record, statuses, events, clock, timeout_s, on_progress)
+        _follow(record, statuses, events, clock, timeout_s, on_progress, deps)
         record.wall_s = time.perf_counter() - wall0
-        if not record.changes or record.changes[-1].state not in TERMINAL:
+        lost = record.ended.startswith(DEPENDENCY_LOST)
+        if not lost and (not record.changes or record.changes[-1].state not in TERMINAL):
             _cancel(bus, keys, record, statuses)
     except WaitTimeout:
         record.ended = "the simulator's clock stopped"
@@ -144,6 +161,7 @@ def watch_mission(
         record.wall_s = record.wall_s or time.perf_counter() - wall0
         for sub in (statuses, events, clock):
             sub.undeclare()
+        alive.undeclare()
         publisher.undeclare()
     return record
 
@@ -161,6 +179,7 @@ def _follow(
     clock: Latest[Clock],
     timeout_s: float,
     on_progress: Progress | None,
+    deps: Dependencies,
 ) -> None:
     deadline_ns = record.start_ns + round(timeout_s * 1e9)
     rid = record.request.request_id
@@ -168,10 +187,24 @@ def _follow(
     seen: list[MissionStatus] = []
     while True:
         statuses.wait(0.1)
-        seen.extend(s for s in statuses.drain() if s.request_id == rid)
+        forgotten = False
+        for s in statuses.drain():
+            if s.request_id == rid:
+                seen.append(s)
+            elif seen and s.state == "idle" and final_ns < 0:
+                forgotten = True  # the mission had our request and now has none
         for batch in events.drain():
             record.events.extend(batch.events)
         changes = transitions(seen, rid)
+        lost = deps.lost() or (
+            "mission restarted: it has no request in progress" if forgotten else None
+        )
+        if lost is not None and final_ns < 0:
+            record.changes = changes
+            record.ended = f"{DEPENDENCY_LOST}: {lost}"
+            c = clock.get()
+            record.end_ns = max(record.end_ns, c.stamp_ns if c else 0)
+            return
         c = clock.get()
         if c is None:
             continue

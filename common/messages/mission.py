@@ -52,6 +52,7 @@ MissionReason = Literal[
     "grasp_lost",  # the object was lost while carrying it, and the re-pick budget is spent
     "handover_timeout",  # nobody took the object in time
     "mode_timeout",  # the whole-body controller did not take the mode asked for
+    "dependency_lost",  # a service it depends on went away or restarted while it ran
     "cancelled",  # the user cancelled (state `cancelled`)
     "internal",  # a bug: logged with its traceback; the service kept running
 ]

@@ -7,14 +7,22 @@ its `request_id`) and wait in a queue for the loop. Each tick b (multiples of
 1. inputs as of b: the odom stamped b (50 Hz, waited for), the `wbc/status` stamped
    before b (waited for while the controller is alive), and the outputs of navigation
    and perception that take effect by b (`UpstreamGate`);
-2. requests: parsed, refused at once when malformed, when a mission runs (`busy`) or
-   when the map does not know the object or the person; else the tree starts;
-   cancels of the running request stop the tree (`MissionTree.cancel`);
-3. the tree ticks once; its outcome, stage and progress become the status;
+2. requests: parsed, refused at once when malformed, when a mission runs (`busy`), when
+   a service it depends on is not running (`unavailable`) or when the map does not know
+   the object or the person; else the tree starts; cancels of the running request stop
+   the tree (`MissionTree.cancel`);
+3. a dependency (the WBC, navigation, perception, the map: those of `time.participants`)
+   that went away or restarted since the request started fails it `dependency_lost`
+   (nobody waits for the dead); else the tree ticks once; its outcome, stage and
+   progress become the status;
 4. published stamped b: cmd_vel from source `mission` (zero unless a behaviour drives),
    a wbc mode when asked for, the status on change and every `status_every_s`; then the
    ack. A bug in a behaviour is logged with its traceback, the robot halted and the
    mission failed `internal`; the loop goes on.
+
+A mission that (re)starts says so: its first status is `idle` with no request and the
+sim time it started at, so a client whose request was in progress knows it was lost and
+can send it again.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from collections import deque
 import zenoh
 
 from common.bus import WaitTimeout
+from common.lifelines import Dependencies
 from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate
 from common.messages.mission import MissionRequest, MissionStatus
 from common.service import Service
@@ -43,6 +52,8 @@ from services.mission.robot import BusRobot
 from services.mission.tree import MissionTree, Outcome
 
 NAME = "mission"
+#: The services a running mission depends on (those that are lockstep participants).
+DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map")
 
 
 class RawInbox:
@@ -88,6 +99,9 @@ class MissionNode:
         self.gate.watch("perception", self.robot.detections)
         self.alive = bus.watch_alive(keys.alive_all)
         self.wbc_alive_key = keys.alive("wbc")
+        needed = [n for n in DEPENDENCIES if n in cfg.time.participants]
+        self.deps = Dependencies(self.alive.lifelines, needed, keys.alive)
+        self.started = False
         self.status_period_ns = round(NS_PER_S / cfg.wbc.status_hz)
         self.requests = RawInbox(bus.session, keys.mission_request)
         self.cancels = RawInbox(bus.session, keys.mission_cancel)
@@ -161,7 +175,12 @@ class MissionNode:
                     b, Rejection(parsed.request_id, "busy", f"mission {running} is running")
                 )
                 continue
-            refused = check_request(parsed, self.robot)
+            down = self.deps.missing()
+            refused = (
+                Rejection(parsed.request_id, "unavailable", f"not running: {', '.join(down)}")
+                if down
+                else check_request(parsed, self.robot)
+            )
             if refused is not None:
                 self._reject(b, refused)
                 continue
@@ -169,6 +188,7 @@ class MissionNode:
 
     def _start(self, b: int, request: MissionRequest) -> None:
         self.tree.start(request)
+        self.deps.arm()
         self.board.update(b, request.request_id, "accepted", detail="checked against the map")
         self._publish(self.board.sent(b))
 
@@ -196,9 +216,16 @@ class MissionNode:
         self._wait_inputs(b)
         self.log.at(b)
         self.robot.begin(b)
+        if not self.started:  # (re)started: no request is in progress, and clients hear it
+            self.started = True
+            self.board.update(b, "", "idle", detail=f"mission started at t={b / NS_PER_S:.2f} s")
         self._requests(b)
         request = self.tree.request
         outcome = self._cancels()
+        lost = self.deps.lost() if outcome is None and request is not None else None
+        if lost is not None:
+            self.svc.log.error("t=%.2f s: %s: the mission fails", b / NS_PER_S, lost)
+            outcome = self.tree.fail("dependency_lost", lost)
         if outcome is None:
             try:
                 outcome = self.tree.tick()
@@ -209,6 +236,7 @@ class MissionNode:
                 outcome = Outcome("failed", "internal", "a behaviour raised: see the log")
         self.log.tree(self.tree.statuses(), self.tree.text)
         if outcome is not None and request is not None:
+            self.deps.disarm()
             done = 1.0 if outcome.state == "succeeded" else self.board.status.progress
             changed = self.board.update(
                 b,

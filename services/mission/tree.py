@@ -251,13 +251,25 @@ class MissionTree:
 
     def cancel(self, reason: str) -> Outcome | None:
         """Stop every running leaf and halt; None when no mission runs."""
+        return self._end(Outcome("cancelled", "cancelled", reason or "cancelled by the user"))
+
+    def fail(self, reason: MissionReason, detail: str) -> Outcome | None:
+        """Stop every running leaf and halt, failed for `reason`; None when idle."""
+        return self._end(Outcome("failed", reason, detail))
+
+    def _end(self, outcome: Outcome) -> Outcome | None:
         if self.request is None:
             return None
         self.root.stop(Status.INVALID)
-        halt(self.ctx.port, f"cancelled: {reason}")
-        self.ctx.decide(f"mission {self.request.request_id} cancelled: {reason}")
+        said = (
+            outcome.detail
+            if outcome.state == "cancelled"
+            else f"{outcome.reason}: {outcome.detail}"
+        )
+        halt(self.ctx.port, f"{outcome.state}: {said}")
+        self.ctx.decide(f"mission {self.request.request_id} {outcome.state}: {said}")
         self._clear()
-        return Outcome("cancelled", "cancelled", reason or "cancelled by the user")
+        return outcome
 
     def _clear(self) -> None:
         self.request = None

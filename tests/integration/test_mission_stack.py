@@ -7,15 +7,18 @@ mission can check requests against it.
 from __future__ import annotations
 
 import json
+import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from common.keys import WORLD_EVENTS
+from common.eval_judge import MissionRecord
+from common.eval_run import watch_mission
+from common.keys import WORLD_CLOCK, WORLD_EVENTS
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.navigation import NavStatus
-from common.messages.sim import HandoverTaken, ObjectDropped, WorldEvents
+from common.messages.sim import Clock, HandoverTaken, ObjectDropped, WorldEvents
 from common.messages.wbc import WbcStatus
 from common.stack import ProcessStack
 from tests.conftest import HOLD_COMMANDER, StartStack
@@ -66,17 +69,21 @@ class User:
         raise AssertionError(f"no {states} for {request_id!r} in {timeout_s} s; last: {seen}")
 
 
-def test_bad_requests_get_typed_rejections_and_the_service_stays_up(
-    stack: StartStack, tmp_path: Path
-) -> None:
-    s = stack(
+def _no_controller_stack(stack: StartStack, tmp_path: Path) -> ProcessStack:
+    """The map and the mission with a stand-hold: a mission stays running (no mode)."""
+    return stack(
         ["sim", "hold", "semantic_map", "mission"],
         *HOLD_COMMANDER, *MAP, *MISSION,
         "sim.cameras=[]",
         f'semantic_map.dir="{tmp_path / "map"}"',
-        # No controller in this stack: the first mission waits for its mode (stays busy).
         "mission.mode_timeout_s=100000.0",
     )  # fmt: skip
+
+
+def test_bad_requests_get_typed_rejections_and_the_service_stays_up(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = _no_controller_stack(stack, tmp_path)
     user = User(s)
     cases: list[tuple[bytes | dict[str, object], str, str]] = [
         (b"{not json", "", "malformed"),
@@ -104,6 +111,48 @@ def test_bad_requests_get_typed_rejections_and_the_service_stays_up(
     assert "mission" in s.alive()
     user.cancel("r-ok")
     assert user.wait("r-ok", {"cancelled"}, 60.0).reason == "cancelled"
+
+
+def test_a_dependency_that_dies_mid_mission_fails_it_within_a_second_of_sim_time(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = _no_controller_stack(stack, tmp_path)
+    user = User(s)
+    clock = s.bus.latest(WORLD_CLOCK, Clock)
+    user.request({"request_id": "r1", "object": "bottle_1", "person": "person_1"})
+    user.wait("r1", {"running"}, 60.0)
+    before = clock.wait(lambda _c: True, 10.0).stamp_ns
+    s.kill("semantic_map")
+    done = user.wait("r1", {"failed", "cancelled", "succeeded"}, 60.0)
+    assert (done.state, done.reason) == ("failed", "dependency_lost"), done
+    assert done.detail == "semantic_map is gone"
+    assert done.stamp_ns - before <= 1_000_000_000, "the mission waited for the dead"
+    # A new request without the map is refused at once, not started.
+    user.request({"request_id": "r2", "object": "bottle_1", "person": "person_1"})
+    refused = user.wait("r2", {"rejected", "accepted"}, 60.0)
+    assert (refused.state, refused.reason) == ("rejected", "unavailable"), refused
+    assert "semantic_map" in refused.detail
+    assert s.procs["mission"].poll() is None
+
+
+def test_a_watch_whose_mission_dies_ends_with_dependency_lost_instead_of_waiting(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = _no_controller_stack(stack, tmp_path)
+    user = User(s)
+    request = MissionRequest(request_id="r1", object="bottle_1", person="person_1")
+    records: list[MissionRecord] = []
+    watch = threading.Thread(
+        target=lambda: records.append(watch_mission(s.bus, s.keys, request, timeout_s=3600.0))
+    )
+    watch.start()
+    user.wait("r1", {"running"}, 60.0)
+    s.kill("mission")
+    watch.join(timeout=120.0)
+    assert not watch.is_alive(), "the watch kept waiting for a dead mission"
+    (record,) = records
+    assert record.ended == "dependency_lost: mission is gone", record.ended
+    assert record.changes[-1].state == "running"
 
 
 def test_a_cancel_mid_navigation_ends_cancelled_with_the_nav_goal_cancelled(

@@ -358,3 +358,17 @@ def test_a_reach_stopped_far_short_of_the_grasp_is_not_tried_again() -> None:
     tree = mission(near)
     assert run(tree, near).reason == "grasp_failed"
     assert len([g for _, g in near.arm_goals if isinstance(g, Reach) and g.pregrasp_m > 0]) == 3
+
+
+def test_a_lost_dependency_fails_the_mission_halted_with_its_reason() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    for _ in range(30):  # walking to the object
+        assert tree.tick() is None
+        robot.advance()
+    outcome = tree.fail("dependency_lost", "navigation is gone")
+    robot.advance()
+    assert outcome == Outcome("failed", "dependency_lost", "navigation is gone")
+    assert_halted(robot)
+    assert not tree.busy
+    assert tree.fail("dependency_lost", "again") is None  # nothing runs now

@@ -1,0 +1,78 @@
+"""Nobody waits for the dead: which of the services a job depends on went away.
+
+A job (a mission request, a demo's or an eval's watch of one) depends on some services.
+`Lifelines` is what Zenoh's liveliness said about them: who is alive now and how often
+each one's token went away (a service that supervisord restarted within one tick of the
+watcher still counts: its token went, then came back). `Dependencies.lost()` names the
+first one that went away since the job started, as a sentence for the typed reason
+`dependency_lost` ("mission restarted", "navigation is gone").
+
+Pure bookkeeping: `common.bus.AliveWatch` feeds a `Lifelines` from Zenoh's liveliness
+subscriber; a unit test feeds it by hand.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterable
+
+
+class Lifelines:
+    """Who is alive (liveliness keys) and how often each one's token went away."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._alive: set[str] = set()
+        self._losses: dict[str, int] = {}
+
+    def up(self, key: str) -> None:
+        with self._lock:
+            self._alive.add(key)
+
+    def down(self, key: str) -> None:
+        with self._lock:
+            if key in self._alive:
+                self._alive.discard(key)
+                self._losses[key] = self._losses.get(key, 0) + 1
+
+    def snapshot(self) -> tuple[frozenset[str], dict[str, int]]:
+        """(who is alive, how often each key went away) now."""
+        with self._lock:
+            return frozenset(self._alive), dict(self._losses)
+
+
+class Dependencies:
+    """The services one job depends on, watched from when it started (`arm`).
+
+    `key_of(name)` is the service's liveliness key. `lost()` is None while every one of
+    them alive at `arm` is still the same process; else "<name> restarted" (it went away
+    and is back) or "<name> is gone".
+    """
+
+    def __init__(
+        self, lifelines: Lifelines, names: Iterable[str], key_of: Callable[[str], str]
+    ) -> None:
+        self._lifelines = lifelines
+        self._keys = {name: key_of(name) for name in names}
+        self._armed: dict[str, int] = {}
+
+    def missing(self) -> list[str]:
+        """The dependencies not alive now (a job should not start without them)."""
+        alive, _ = self._lifelines.snapshot()
+        return [n for n, k in self._keys.items() if k not in alive]
+
+    def arm(self) -> None:
+        """The job starts now: from here on, a dependency that goes away is lost."""
+        alive, losses = self._lifelines.snapshot()
+        self._armed = {n: losses.get(k, 0) for n, k in self._keys.items() if k in alive}
+
+    def disarm(self) -> None:
+        self._armed = {}
+
+    def lost(self) -> str | None:
+        alive, losses = self._lifelines.snapshot()
+        for name, before in self._armed.items():
+            key = self._keys[name]
+            if losses.get(key, 0) > before:
+                return f"{name} restarted" if key in alive else f"{name} is gone"
+        return None
