@@ -34,7 +34,7 @@ def _nav(overrides: Sequence[str]) -> dict[str, Any]:
     return bench_nav(overrides)
 
 
-#: `dume bench startup --rounds N`: how many stacks it starts.
+#: `dume bench startup|decoders --rounds N`: how many stacks (processes) it starts.
 STARTUP_ROUNDS = {"rounds": 10}
 
 
@@ -44,14 +44,21 @@ def _startup(overrides: Sequence[str]) -> dict[str, Any]:
     return bench_startup(overrides, STARTUP_ROUNDS["rounds"])
 
 
+def _decoders(_overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.decoder_race import bench_decoders
+
+    return bench_decoders(STARTUP_ROUNDS["rounds"])
+
+
 BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
     "sim": _sim,
     "wbc": _wbc,
     "perception": _perception,
     "nav": _nav,
     "startup": _startup,
+    "decoders": _decoders,
 }
-#: What `dume bench all` runs (`startup` starts whole stacks in a loop: on its own).
+#: What `dume bench all` runs (`startup` and `decoders` start processes in a loop: alone).
 ALL = ("sim", "wbc", "perception", "nav")
 
 

@@ -65,7 +65,7 @@ def one_round(index: int, overrides: Sequence[str]) -> dict[str, Any]:
         request = MissionRequest(
             request_id=f"startup-{index}", object=pair.object, person=pair.person
         )
-        record = watch_mission(stack.bus, stack.keys, request, SIM_S)
+        record = watch_mission(stack.bus, stack.keys, request, SIM_S, start_gate=True)
         states = [c.state for c in record.changes]
         error = record.ended if "running" not in states else ""
     except BusError as exc:

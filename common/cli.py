@@ -363,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bench import BENCHES, TRIALS
 
     p.add_argument("which", choices=[*BENCHES, "all"])
-    p.add_argument("--rounds", type=int, default=10, help="startup: how many stacks to start")
+    p.add_argument("--rounds", type=int, default=10, help="startup, decoders: rounds")
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")

@@ -51,12 +51,15 @@ class Participant(_Section):
     """A lockstep participant.
 
     role: `command` (answers every state it gets with a command; the sim waits for it
-    before stepping) or `periodic` (ticks on sim time every `period_s`; its outputs take
+    before stepping), `periodic` (ticks on sim time every `period_s`; its outputs take
     effect `latency_s` after their input, and the sim never steps past that before the
-    participant's ack for the input has arrived).
+    participant's ack for the input has arrived) or `start` (a client the sim waits for
+    at t = 0 and never again: the demo and the eval hand their request to the mission
+    before they come alive, so it starts at the mission's first tick in every run;
+    `period_s` and `latency_s` unused).
     """
 
-    role: Literal["command", "periodic"] = "periodic"
+    role: Literal["command", "periodic", "start"] = "periodic"
     period_s: float = 0.1
     latency_s: float = 0.05
 

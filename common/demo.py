@@ -12,7 +12,9 @@ Progress goes to stderr: each status change, and every sim second the behaviour,
 progress, sim time and real-time factor. The outcome is `succeeded` when the mission
 says so and the sim's truth agrees (its `HandoverTaken` event: the object the requested
 map id stands for in the requested person's hand); exit code 0 only then. The last line:
-`{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording"}`.
+`{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording",
+"digest"}`: the digest fingerprints the run (`common.eval_judge.run_digest`: the status
+timeline and the base's trajectory at 10 Hz), so two runs of one seed can be compared.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from common.eval_run import (
     read_world,
     request_result,
     sigterm_interrupts,
+    start_gate_overrides,
     watch_mission,
 )
 from common.eval_targets import TargetError, demo_pair
@@ -63,6 +66,7 @@ def demo_overrides(args: argparse.Namespace, map_name: str) -> list[str]:
         *start,
         f'semantic_map.name="{map_name}"',
         "semantic_map.reset=true",
+        *start_gate_overrides(),
         *args.set,
     ]
 
@@ -85,7 +89,6 @@ def _show(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
 def _ask(stack: Supervised, args: argparse.Namespace, result: WorldResult) -> str:
     """Choose, send and follow the request; fill `result`. Returns the locomotion."""
     bus, keys = stack.bus, stack.keys
-    locomotion = read_back(bus, keys, timeout_s=30.0)["locomotion"]
     world, (arts, people) = read_world(bus), read_map(bus)
     pair = demo_pair(arts, people, args.object, args.person)
     request_result(result, pair, arts, people, world)
@@ -94,8 +97,9 @@ def _ask(stack: Supervised, args: argparse.Namespace, result: WorldResult) -> st
     )
     far = "" if pair.distance_m != pair.distance_m else f", {pair.distance_m:.1f} m apart"
     print(f"dume demo: asking for {pair.object} for {pair.person}{far}", file=sys.stderr)
-    evaluate(result, watch_mission(bus, keys, request, args.timeout, _show), world)
-    return locomotion
+    record = watch_mission(bus, keys, request, args.timeout, _show, start_gate=True)
+    evaluate(result, record, world)
+    return read_back(bus, keys, timeout_s=30.0)["locomotion"]
 
 
 def _verdict(result: WorldResult) -> tuple[str, str]:
@@ -158,6 +162,7 @@ def run_demo(args: argparse.Namespace) -> int:
                 "rtf": result.rtf,
                 "locomotion": locomotion,
                 "recording": _shown(recording),
+                "digest": result.digest,
             }
         )
     )

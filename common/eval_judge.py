@@ -18,6 +18,7 @@ succeeded. Pure: no transport.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -147,6 +148,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     contacts_static: robot contacts with static obstacles (`contacts`: who touched what).
     drops: objects that fell (`ObjectDropped`). services_down: stack processes that had
     exited by the end of the run. recording: the run's recording folder ("" when off).
+    digest: the run's fingerprint (`run_digest`): the same seed gives the same digest.
     """
 
     world: str
@@ -178,6 +180,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     services_down: list[str] = msgspec.field(default_factory=list)
     recording: str = ""
     error: str = ""
+    digest: str = ""
 
     @property
     def succeeded(self) -> bool:
@@ -215,6 +218,26 @@ class MissionRecord:
     events: list[WorldEvent] = field(default_factory=list)
     ended: str = ""
     wall_s: float = 0.0
+    #: The base every `TRAJECTORY_EVERY_NS` of sim time from the request on: (stamp_ns,
+    #: x, y, z, qx, qy, qz, qw) from the sim's odom.
+    trajectory: list[tuple[float, ...]] = field(default_factory=list)
+
+
+#: The trajectory's sample period in a `MissionRecord` (10 Hz).
+TRAJECTORY_EVERY_NS = 100_000_000
+
+
+def run_digest(record: MissionRecord) -> str:
+    """A fingerprint of one run: its status timeline (every change, exactly as published)
+    and the base's trajectory at 10 Hz up to the last change, bit for bit. Two runs of
+    the same seed must print the same digest; one differing sample changes it."""
+    until = record.changes[-1].stamp_ns if record.changes else record.end_ns
+    body = {
+        "request": msgspec.to_builtins(record.request),
+        "changes": [msgspec.to_builtins(c) for c in record.changes],
+        "trajectory": [p for p in record.trajectory if p[0] <= until],
+    }
+    return hashlib.sha256(msgspec.json.encode(body)).hexdigest()[:16]
 
 
 def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription) -> WorldResult:
@@ -254,4 +277,5 @@ def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription
     result.contacts_static = len(contacts)
     result.contacts = [f"{c.body}-{c.other}@{c.stamp_ns / 1e9:.1f}s" for c in contacts]
     result.drops = len(events_of(record.events, "drop"))
+    result.digest = run_digest(record)
     return result

@@ -24,7 +24,13 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 
 from common.bus import Bus, Fifo, Latest, WaitTimeout
-from common.eval_judge import TERMINAL, MissionRecord, WorldResult, transitions
+from common.eval_judge import (
+    TERMINAL,
+    TRAJECTORY_EVERY_NS,
+    MissionRecord,
+    WorldResult,
+    transitions,
+)
 from common.eval_judge import truth_object as match_object
 from common.eval_judge import truth_person as match_person
 from common.eval_targets import Pair
@@ -37,7 +43,7 @@ from common.keys import (
     RobotKeys,
 )
 from common.lifelines import Dependencies
-from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
 from common.messages.perception import Detections
 from common.messages.semantic_map import MapEntity, MapListing
 from common.messages.sim import Clock, Odom, WorldEvents
@@ -52,6 +58,8 @@ STALL_WALL_S = 120.0
 GRACE_S = 1.0
 #: The typed reason of a watch that ended because a service it depends on went away.
 DEPENDENCY_LOST = "dependency_lost"
+#: The lockstep participant (role `start`) a gated watch comes alive as (`watch_mission`).
+START_GATE = "client"
 #: The services a watch of one request depends on: the clock's and the request's.
 WATCHED = ("sim", "mission")
 
@@ -121,36 +129,55 @@ def request_result(
     return base
 
 
+def start_gate_overrides() -> list[str]:
+    """The stack settings that let `watch_mission(start_gate=True)` start the run: the sim
+    waits at t = 0 for the `START_GATE` client too."""
+    return [f'time.participants.{START_GATE}.role="start"']
+
+
 def watch_mission(
     bus: Bus,
     keys: RobotKeys,
     request: MissionRequest,
     timeout_s: float,
     on_progress: Progress | None = None,
+    start_gate: bool = False,
 ) -> MissionRecord:
-    """Send `request`, follow it until a final state or `timeout_s` of sim time."""
+    """Send `request`, follow it until a final state or `timeout_s` of sim time.
+
+    With `start_gate` (a stack with `start_gate_overrides`, its sim held at t = 0 for
+    us) the request goes as a `mission/submit` query, and only once the mission holds it
+    does this client come alive and let the sim start: the mission takes it at its first
+    tick, in every run. Without, it is put once the clock runs, at whatever tick.
+    """
     statuses = bus.fifo(keys.mission_status, MissionStatus, maxlen=1 << 16)
     events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=1 << 16)
     clock = bus.latest(WORLD_CLOCK, Clock)
+    odom = bus.fifo(keys.odom, Odom, maxlen=1 << 20)
     publisher = bus.publisher(keys.mission_request, MissionRequest, "control")
     alive = bus.watch_alive(keys.alive_all)
     deps = Dependencies(alive.lifelines, WATCHED, keys.alive)
     wall0 = time.perf_counter()
     record = MissionRecord(request=request, start_ns=0)
     try:
-        clock.wait(lambda _c: True, STALL_WALL_S)
-        _wait_matching(publisher.has_subscribers, 10.0)
+        if not start_gate:
+            clock.wait(lambda _c: True, STALL_WALL_S)
+            _wait_matching(publisher.has_subscribers, 10.0)
         with contextlib.suppress(WaitTimeout):
             alive.wait_for({keys.alive(n) for n in WATCHED}, 10.0)
         if down := deps.missing():
             record.ended = f"{DEPENDENCY_LOST}: not running: {', '.join(down)}"
             return record
         deps.arm()
-        now = clock.get()
-        record.start_ns = record.end_ns = now.stamp_ns if now else 0
-        publisher.put(request)
+        if start_gate:
+            bus.query(keys.mission_submit, request, MissionReceipt, 30.0)
+            bus.declare_alive(keys.alive(START_GATE))  # the sim starts now
+        else:
+            now = clock.get()
+            record.start_ns = record.end_ns = now.stamp_ns if now else 0
+            publisher.put(request)
         wall0 = time.perf_counter()
-        _follow(record, statuses, events, clock, timeout_s, on_progress, deps)
+        _follow(record, statuses, events, clock, odom, timeout_s, on_progress, deps)
         record.wall_s = time.perf_counter() - wall0
         lost = record.ended.startswith(DEPENDENCY_LOST)
         if not lost and (not record.changes or record.changes[-1].state not in TERMINAL):
@@ -159,7 +186,7 @@ def watch_mission(
         record.ended = "the simulator's clock stopped"
     finally:
         record.wall_s = record.wall_s or time.perf_counter() - wall0
-        for sub in (statuses, events, clock):
+        for sub in (statuses, events, clock, odom):
             sub.undeclare()
         alive.undeclare()
         publisher.undeclare()
@@ -177,6 +204,7 @@ def _follow(
     statuses: Fifo[MissionStatus],
     events: Fifo[WorldEvents],
     clock: Latest[Clock],
+    odom: Fifo[Odom],
     timeout_s: float,
     on_progress: Progress | None,
     deps: Dependencies,
@@ -195,6 +223,7 @@ def _follow(
                 forgotten = True  # the mission had our request and now has none
         for batch in events.drain():
             record.events.extend(batch.events)
+        _sample(record, odom)
         changes = transitions(seen, rid)
         lost = deps.lost() or (
             "mission restarted: it has no request in progress" if forgotten else None
@@ -229,6 +258,15 @@ def _follow(
         if final_ns < 0 and c.stamp_ns >= deadline_ns:
             record.ended = f"no final status within {timeout_s:.0f} s of sim time"
             return
+
+
+def _sample(record: MissionRecord, odom: Fifo[Odom]) -> None:
+    """Keep the base's pose every `TRAJECTORY_EVERY_NS` from the request on."""
+    for o in odom.drain():
+        if o.stamp_ns >= record.start_ns and o.stamp_ns % TRAJECTORY_EVERY_NS == 0:
+            record.trajectory.append(
+                (o.stamp_ns, *o.base_position_in_world, *o.base_orientation_xyzw)
+            )
 
 
 def _cancel(

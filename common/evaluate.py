@@ -39,6 +39,7 @@ from common.eval_run import (
     read_world,
     request_result,
     sigterm_interrupts,
+    start_gate_overrides,
     watch_mission,
 )
 from common.eval_targets import TargetError, seeded_pair
@@ -69,6 +70,7 @@ def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> list[
         "semantic_map.reset=true",
         f"semantic_map.seed_noise_seed={seed}",
         f"recording.enabled={'true' if args.record else 'false'}",
+        *start_gate_overrides(),
         *args.set,
     ]
 
@@ -102,17 +104,19 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         stack.start(timeout_s=START_TIMEOUT_S)
         result.setup_wall_s = round(time.perf_counter() - wall0, 2)
         bus, keys = stack.bus, stack.keys
-        step = "read the running settings"
-        for k, v in read_back(bus, keys).items():
-            seen.setdefault(k, set()).add(v)
         step = "read the world and the map"
         world, (arts, people) = read_world(bus), read_map(bus)
         pair = seeded_pair(arts, people, seed)
         request_result(result, pair, arts, people, world)
         request = MissionRequest(request_id=f"eval-{seed}", object=pair.object, person=pair.person)
         step = "run the mission"
-        record: MissionRecord = watch_mission(bus, keys, request, args.timeout, _stage_line(seed))
+        record: MissionRecord = watch_mission(
+            bus, keys, request, args.timeout, _stage_line(seed), start_gate=True
+        )
         evaluate(result, record, world)
+        step = "read the running settings"
+        for k, v in read_back(bus, keys).items():
+            seen.setdefault(k, set()).add(v)
     except (BusError, PayloadError, TargetError) as exc:
         result.error = f"could not {step}: {exc}"
     finally:

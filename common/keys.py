@@ -149,6 +149,11 @@ class RobotKeys:
         return f"{self.prefix}/mission/request"
 
     @property
+    def mission_submit(self) -> str:
+        """A request as a query: answered once the mission holds it (`MissionReceipt`)."""
+        return f"{self.prefix}/mission/submit"
+
+    @property
     def mission_cancel(self) -> str:
         return f"{self.prefix}/mission/cancel"
 
@@ -176,6 +181,15 @@ def _camera(camera: str) -> str:
     if camera not in CAMERAS:
         raise ValueError(f"unknown camera {camera!r}; cameras are {CAMERAS}")
     return camera
+
+
+def as_of(key: str, at_ns: int | None) -> str:
+    """A map query's selector as of a sim time (`?at=<ns>`): the map answers from its state
+    after its last tick whose output takes effect by then (a lockstep consumer's view,
+    the same in every run); None: its state now."""
+    if at_ns is None:
+        return key
+    return f"{key}{';' if '?' in key else '?'}at={at_ns}"
 
 
 def service_of_alive_key(key: str) -> str:

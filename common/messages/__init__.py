@@ -4,12 +4,20 @@
 (JSON for the user-facing mission keys). A payload that does not decode raises
 `PayloadError`, which says which key, which type, and what was wrong, with the path
 of the bad field (`Expected float, got str - at $.x`).
+
+Decoders are built once per type, one at a time (`decoder`): msgspec 0.22 publishes a
+Struct's type information on the class before it has finished building it (it evaluates
+the annotations in Python, and another thread runs meanwhile), so a second thread that
+builds or uses a decoder of that type then reads it half-made and crashes the process
+(SIGSEGV). Two Zenoh callback threads receiving their first `Detections` at once did
+exactly that: the mission and navigation died on their first inputs
+(`dume bench decoders` reproduces it).
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Hashable
-from functools import cache
 from typing import Any, TypeVar, cast
 
 import msgspec
@@ -28,6 +36,7 @@ __all__ = [
     "Pose2D",
     "as_numpy",
     "decode",
+    "decoder",
     "encode",
     "seconds",
     "to_ns",
@@ -60,17 +69,32 @@ def encode(msg: Any) -> bytes:
     return _JSON.encode(msg) if wire_of(type(msg)) == "json" else _MSGPACK.encode(msg)
 
 
-@cache
-def _decoder(type_: Any, wire: str) -> msgspec.msgpack.Decoder[Any] | msgspec.json.Decoder[Any]:
-    if wire == "json":
-        return msgspec.json.Decoder(type_)
-    return msgspec.msgpack.Decoder(type_)
+Decoder = msgspec.msgpack.Decoder[Any] | msgspec.json.Decoder[Any]
+_DECODERS: dict[tuple[Hashable, str], Decoder] = {}
+_BUILDING = threading.Lock()
+
+
+def decoder(type_: Any, wire: str | None = None) -> Decoder:
+    """The one decoder of `type_` for `wire` (its `WIRE` by default), built under a
+    process-wide lock: never two at once (see the module docstring)."""
+    key = (cast(Hashable, type_), wire or wire_of(type_))
+    found = _DECODERS.get(key)
+    if found is None:
+        with _BUILDING:
+            found = _DECODERS.get(key)
+            if found is None:
+                found = (
+                    msgspec.json.Decoder(type_)
+                    if key[1] == "json"
+                    else msgspec.msgpack.Decoder(type_)
+                )
+                _DECODERS[key] = found
+    return found
 
 
 def decode(data: bytes | bytearray | memoryview, type_: type[T], *, key: str = "") -> T:
     """Deserialize and validate `data` as `type_`; raise `PayloadError` with the reason."""
     try:
-        decoder: Any = _decoder(cast(Hashable, type_), wire_of(type_))
-        return cast(T, decoder.decode(data))
+        return cast(T, decoder(type_).decode(data))
     except msgspec.DecodeError as exc:
         raise PayloadError(getattr(type_, "__name__", str(type_)), str(exc), key) from None

@@ -22,6 +22,14 @@ class MissionRequest(Message, frozen=True):
     person: Target
 
 
+class MissionReceipt(Message, frozen=True):
+    """The answer of `dume/<r>/mission/submit`: the mission holds the request, which it
+    takes at its next tick (its status follows on `mission/status` as for a put)."""
+
+    WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
+    request_id: RequestId
+
+
 class MissionCancel(Message, frozen=True):
     """`dume/<r>/mission/cancel`: `{"request_id", "reason"}`."""
 

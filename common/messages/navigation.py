@@ -34,9 +34,19 @@ NavGoal = PoseGoal | ArtifactStandoff | PersonHandover
 
 
 class NavGoalRequest(Message, frozen=True):
-    """`dume/<r>/nav/goal` (query): a goal; replaced goals are cancelled."""
+    """`dume/<r>/nav/goal` (query): a goal; replaced goals are cancelled.
+
+    stamp_ns: the sender's tick (a lockstep participant's): navigation plans the goal from
+    its own state as of then (its tick one latency earlier, which it has surely done), and
+    the map's. effective_ns: the sender's tick plus its lockstep latency; the goal starts
+    at navigation's first tick at or after it (the sim cannot get there before the
+    sender's ack, which follows the reply). None for both: now and at the next tick (a
+    person's or a trial's goal), as the run's timing falls.
+    """
 
     goal: NavGoal
+    stamp_ns: StampNs | None = None
+    effective_ns: StampNs | None = None
 
 
 class NavGoalReply(Message, frozen=True):
@@ -48,10 +58,15 @@ class NavGoalReply(Message, frozen=True):
 
 
 class NavCancel(Message, frozen=True):
-    """`dume/<r>/nav/cancel`: cancel a goal (empty id: whatever is active)."""
+    """`dume/<r>/nav/cancel`: cancel a goal (empty id: whatever is active).
+
+    effective_ns: as `NavGoalRequest`'s: at navigation's first tick at or after it (None:
+    its next tick).
+    """
 
     goal_id: str = ""
     reason: str = ""
+    effective_ns: StampNs | None = None
 
 
 NavState = Literal["idle", "active", "succeeded", "failed", "cancelled"]

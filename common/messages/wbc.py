@@ -66,9 +66,16 @@ ArmGoal = Reach | Grasp | Release | Posture
 
 
 class ArmGoalRequest(Message, frozen=True):
-    """`dume/<r>/wbc/arm_goal` (query)."""
+    """`dume/<r>/wbc/arm_goal` (query).
+
+    effective_ns: the sender's tick plus its lockstep latency: the controller starts the
+    goal at its first tick at or after it (in lockstep the sim cannot get there before
+    the sender's ack, which follows the reply), so the same run starts it at the same
+    tick. None: at the controller's next tick (a person's or a trial's goal).
+    """
 
     goal: ArmGoal
+    effective_ns: StampNs | None = None
 
 
 class ArmGoalReply(Message, frozen=True):

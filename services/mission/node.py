@@ -1,8 +1,9 @@
 """The mission service: a 20 Hz lockstep participant that ticks the bring-me tree.
 
 Requests and cancels arrive as raw JSON (so a malformed one can still be answered with
-its `request_id`) and wait in a queue for the loop. Each tick b (multiples of
-`time.participants.mission.period_s`):
+its `request_id`) and wait in a queue for the loop; a request can also come as a query
+(`mission/submit`), answered once it is in that queue, so a client knows it was heard.
+Each tick b (multiples of `time.participants.mission.period_s`):
 
 1. inputs as of b: the odom stamped b (50 Hz, waited for), the `wbc/status` stamped
    before b (waited for while the controller is alive), and the outputs of navigation
@@ -35,7 +36,8 @@ import zenoh
 from common.bus import WaitTimeout
 from common.lifelines import Dependencies
 from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate
-from common.messages.mission import MissionRequest, MissionStatus
+from common.messages import encode
+from common.messages.mission import MissionReceipt, MissionRequest, MissionStatus
 from common.service import Service
 from services.mission.algorithms import Algorithms, default_algorithms, missing_algorithms
 from services.mission.behaviours.abort import halt
@@ -48,7 +50,7 @@ from services.mission.requests import (
     parse_cancel,
     parse_request,
 )
-from services.mission.robot import BusRobot
+from services.mission.robot import WRIST, BusRobot
 from services.mission.tree import MissionTree, Outcome
 
 NAME = "mission"
@@ -65,8 +67,11 @@ class RawInbox:
         self._sub = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        self.push(sample.payload.to_bytes())
+
+    def push(self, payload: bytes) -> None:
         with self._lock:
-            self._q.append(sample.payload.to_bytes())
+            self._q.append(payload)
 
     def drain(self) -> list[bytes]:
         with self._lock:
@@ -104,6 +109,7 @@ class MissionNode:
         self.started = False
         self.status_period_ns = round(NS_PER_S / cfg.wbc.status_hz)
         self.requests = RawInbox(bus.session, keys.mission_request)
+        bus.serve(keys.mission_submit, MissionRequest, self._on_submit)
         self.cancels = RawInbox(bus.session, keys.mission_cancel)
         self.status_pub = bus.publisher(keys.mission_status, MissionStatus, "data")
         self.log = MissionLogger(svc.rec, svc.log)
@@ -139,8 +145,28 @@ class MissionNode:
         missing = self.gate.wait(b, timeout)
         if missing:
             self.svc.log.warning("t=%.2f s: no output of %s in time", b / NS_PER_S, missing)
+        self.robot.begin(b)
+        perception = self.gate.gate.schedules.get("perception")
+        due = b - self.gate.latency_ns("perception")
+        if (
+            perception is not None
+            and "perception" in self.gate.gate.alive
+            and self.gate.lockstep
+            and WRIST in self.svc.config.perception.cameras
+            and WRIST in self.svc.config.sim.cameras
+            and due >= 0
+            and due % perception.period_ns == 0
+            and not self.robot.wait_wrist(timeout)
+        ):
+            self.svc.log.warning("t=%.2f s: no wrist detections stamped %d", b / NS_PER_S, due)
 
     # -- requests and cancels -------------------------------------------------------------
+
+    def _on_submit(self, request: MissionRequest | None, _selector: str) -> MissionReceipt:
+        """A request by query (the server's thread): in the inbox before the reply goes."""
+        assert request is not None  # served with a request type: Server decoded it
+        self.requests.push(encode(request))
+        return MissionReceipt(request_id=request.request_id)
 
     def _publish(self, status: MissionStatus) -> None:
         self.status_pub.put(status)
@@ -215,7 +241,6 @@ class MissionNode:
     def tick(self, b: int) -> None:
         self._wait_inputs(b)
         self.log.at(b)
-        self.robot.begin(b)
         if not self.started:  # (re)started: no request is in progress, and clients hear it
             self.started = True
             self.board.update(b, "", "idle", detail=f"mission started at t={b / NS_PER_S:.2f} s")

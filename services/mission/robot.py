@@ -5,21 +5,25 @@ odom, `wbc/status`, `nav/status`, perception's detections (the wrist camera's ne
 frame that takes effect by b, i.e. stamped at or before b − perception's latency).
 Queries (map entries and listings, nav goals, arm goals) wait at most
 `query_timeout_s`; a typed refusal becomes `Refused`, no answer `Unavailable`, an
-unknown id None. What the tree commands during a tick (cmd_vel, a mode) is published by
-`end(b)` stamped b: cmd_vel from source `mission` every tick (zero unless a behaviour
-set it), a mode only when asked for. Nav cancels go out at once.
+unknown id None. Map queries ask for the map as of the tick (`common.keys.as_of`); nav
+goals, nav cancels and arm goals carry the tick and take effect at the tick plus the
+mission's latency, so the same seed gives the same run. What the tree commands during a
+tick (cmd_vel, a mode) is published by `end(b)` stamped b: cmd_vel from source `mission`
+every tick (zero unless a behaviour set it), a mode only when asked for. Nav cancels go
+out at once.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections import deque
 
 import numpy as np
 
 from common.bus import Bus, BusError, NoReply, RemoteError
 from common.geometry import quat_xyzw_to_matrix, yaw_of
-from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, RobotKeys, map_artifact, map_person
+from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, RobotKeys, as_of, map_artifact, map_person
 from common.messages import PayloadError
 from common.messages.navigation import (
     NavCancel,
@@ -68,6 +72,8 @@ class BusRobot:
         self.sighting_gate_m = sighting_gate_m
         self.perception_latency_ns = latency_ns.get("perception", 0)
         self.nav_latency_ns = latency_ns.get("navigation", 0)
+        #: What the mission sends at its tick b takes effect at b + its own latency.
+        self.latency_ns = latency_ns.get(NAME, 0)
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.wbc = bus.latest(keys.wbc_status, WbcStatus, history=16)
         self.nav = bus.latest(keys.nav_status, NavStatus, history=32)
@@ -102,11 +108,30 @@ class BusRobot:
     def now_ns(self) -> int:
         return self._t
 
+    @property
+    def _effective(self) -> int:
+        """When what this tick sends takes effect (the tick plus the mission's latency)."""
+        return self._t + self.latency_ns
+
+    def wait_wrist(self, timeout_s: float) -> bool:
+        """Wait (bounded) for the wrist camera's detections due at this tick: the gate was
+        met by either camera's, and both share one key. False when they did not come."""
+        due = self._t - self.perception_latency_ns
+        deadline = time.monotonic() + timeout_s
+        while not self._wrist or self._wrist[-1].stamp_ns < due:
+            left = deadline - time.monotonic()
+            frame = self._frames_in.pop(timeout_s=left) if left > 0 else None
+            if frame is None:
+                return False
+            if frame.camera == WRIST:
+                self._wrist.append(frame)
+        return True
+
     # -- the semantic map -----------------------------------------------------------------
 
     def _query_map(self, key: str, type_: type[MapEntity] | type[MapListing]) -> object | None:
-        try:
-            return self.bus.query(key, None, type_, self.timeout_s)
+        try:  # the map as of this tick: the same answer in every run
+            return self.bus.query(as_of(key, self._t), None, type_, self.timeout_s)
         except RemoteError as exc:
             if exc.error.code in _NOT_FOUND:
                 return None
@@ -146,7 +171,8 @@ class BusRobot:
     # -- navigation -----------------------------------------------------------------------
 
     def send_nav_goal(self, goal: NavGoal) -> str:
-        return self._send_goal(self.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply)
+        request = NavGoalRequest(goal=goal, stamp_ns=self._t, effective_ns=self._effective)
+        return self._send_goal(self.keys.nav_goal, request, NavGoalReply)
 
     def _send_goal(
         self,
@@ -170,7 +196,7 @@ class BusRobot:
         return status if status is not None and status.goal_id == goal_id else None
 
     def cancel_nav(self, goal_id: str, reason: str) -> None:
-        self._cancel.put(NavCancel(goal_id=goal_id, reason=reason))
+        self._cancel.put(NavCancel(goal_id=goal_id, reason=reason, effective_ns=self._effective))
 
     # -- the whole-body controller --------------------------------------------------------
 
@@ -190,7 +216,8 @@ class BusRobot:
             self._mode = ("stand", "navigation")
 
     def send_arm_goal(self, goal: ArmGoal) -> str:
-        return self._send_goal(self.keys.arm_goal, ArmGoalRequest(goal=goal), ArmGoalReply)
+        request = ArmGoalRequest(goal=goal, effective_ns=self._effective)
+        return self._send_goal(self.keys.arm_goal, request, ArmGoalReply)
 
     def wbc_status(self) -> WbcStatus | None:
         # Stamped before the tick: the controller surely published it (lockstep) and the

@@ -1,9 +1,11 @@
 """The navigation service: a 20 Hz lockstep participant around the pure modules.
 
 Start-up: the map source (`navigation.map_source`): the sim's truth description (tests)
-is read before ready; the semantic map is fetched every `map_refresh_s` on a thread of
-its own (grid and people), and until its grid is in, navigation is ready but idle
-("waiting for the map": zero cmd_vel, goals refused as unavailable). Each tick b (multiples of
+is read before ready; the semantic map is fetched every `map_refresh_s` of sim time on a
+thread of its own (grid and people as of that tick), adopted `MAP_ADOPT_S` later (waited
+for in lockstep, so every run adopts it at the same tick), and until its grid is in,
+navigation is ready but idle ("waiting for the map": zero cmd_vel, goals refused as
+unavailable). Each tick b (multiples of
 `time.participants.navigation.period_s`): the odom stamped b (waited for: odom is on a
 known 50 Hz schedule), the head camera's depth when a frame is due at b (10 Hz; marks
 and clears the short-lived layer), perception's person detections that apply by b (the
@@ -11,9 +13,13 @@ head camera's, `PerceptionFeed`, waited for in lockstep; the people layer is tho
 over the map's people, `SeenPeople`), the cancels received; the costmap is rebuilt when
 a layer changed; `Navigator.tick`; then `wbc/cmd_vel` (source `navigation`, zero when
 idle) and `nav/status` stamped b every tick, `nav/path` on every new plan, and the ack.
-Goals arrive on the `nav/goal` queryable's thread: resolved there against the newest
-costmap (a standoff or handover pose from the map's data; refusals with a reason) and
-started by the loop at its next tick. Speed-limit changes and recoveries are logged.
+Goals arrive on the `nav/goal` queryable's thread: resolved there against the costmap
+and pose as of the sender's tick (`NavGoalRequest.stamp_ns`: navigation's tick one
+latency before it, which the sender waited for; the newest without a stamp) and the
+map's data as of that tick (refusals with a reason), and started by the loop at its
+first tick at or after `effective_ns`; cancels likewise. So goals, cancels and map
+updates take effect at ticks fixed by sim time, never by when a message happened to
+arrive. Speed-limit changes and recoveries are logged.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections import deque
 
 import numpy as np
 
@@ -56,6 +63,10 @@ from services.navigation.sources import MapSource, Source, SourceError, WorldSou
 
 NAME = "navigation"
 INPUT_TIMEOUT_S = 30.0
+#: Sim seconds from a map fetch's tick to the tick that adopts it.
+MAP_ADOPT_S = 0.25
+#: Ticks of (costmap, pose) kept to resolve goals as of their sender's tick.
+HISTORY = 16
 
 
 def odom_pose(odom: Odom) -> Pose:
@@ -102,7 +113,14 @@ class NavNode:
         self.map_people: list[Person] = []
         self.seen = SeenPeople()
         self.costmap: Costmap | None = None
-        self._fresh: tuple[Grid, list[Person]] | None = None
+        self.period_ns = round(self.period_s * NS_PER_S)
+        self.latency_ns = round((me.latency_s if me else self.period_s) * NS_PER_S)
+        self.refresh_ns = round(n.map_refresh_s * NS_PER_S)
+        self.lockstep = cfg.time.mode == "lockstep"
+        #: The map fetch in flight: (its tick, the result once in: grid and people, or the
+        #: error's sentence).
+        self._fetch: tuple[int, tuple[Grid, list[Person]] | str | None] | None = None
+        self._fetch_due = threading.Event()
         if isinstance(self.source, WorldSource):  # truth: there at once, and static
             self._adopt(self.source.grid(), self.source.people(), 0)
         self.nav = Navigator(self.fp, self.params, self.period_s)
@@ -121,7 +139,12 @@ class NavNode:
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
         self.log = NavLogger(svc.rec, svc.log)
         self._lock = threading.Lock()
-        self._pending: GoalSpec | None = None
+        #: Navigation's ticks done, with their costmap and pose (goals resolve against them).
+        self._ticked = threading.Condition(self._lock)
+        self._history: deque[tuple[int, Costmap | None, Pose | None]] = deque(maxlen=HISTORY)
+        self._history.append((-1, self.costmap, None))  # before the first tick
+        self._pending: tuple[GoalSpec, int] | None = None
+        self._cancels: list[NavCancel] = []
         self._count = 0
         self._pose: Pose | None = None
         bus.serve(keys.nav_goal, NavGoalRequest, self._on_goal)
@@ -138,22 +161,53 @@ class NavNode:
                     raise
 
     def _fetch_map(self) -> None:
-        """The semantic map's grid and people, every `map_refresh_s` (its own thread:
-        a query may take seconds, which the lockstep loop must not)."""
-        period = self.svc.config.navigation.map_refresh_s
+        """The semantic map's grid and people as of the tick the loop asks for (its own
+        thread: a query may take seconds, which the lockstep loop must not)."""
         said = ""
         while not self.svc.stopping:
+            if not self._fetch_due.wait(0.2):
+                continue
+            self._fetch_due.clear()
+            with self._lock:
+                if self._fetch is None:
+                    continue
+                b = self._fetch[0]
             try:
-                grid = self.source.grid()
-                people = self.source.people()
-                with self._lock:
-                    self._fresh = (grid, people)
+                got: tuple[Grid, list[Person]] | str = (
+                    self.source.grid(at_ns=b),
+                    self.source.people(at_ns=b),
+                )
                 said = ""
             except SourceError as exc:
-                if str(exc) != said:
+                got = str(exc)
+                if got != said:
                     self.svc.log.warning("map unavailable: %s", exc)
-                    said = str(exc)
-            self.svc.stop.wait(period)
+                    said = got
+            with self._ticked:
+                if self._fetch is not None and self._fetch[0] == b:
+                    self._fetch = (b, got)
+                    self._ticked.notify_all()
+
+    def _map_tick(self, b: int) -> tuple[Grid, list[Person]] | None:
+        """Ask for the map at every `map_refresh_s`; the fetch to adopt at b, if any."""
+        with self._ticked:
+            fetch = self._fetch
+            if fetch is not None and b >= fetch[0] + round(MAP_ADOPT_S * NS_PER_S):
+                if fetch[1] is None and self.lockstep:  # every run adopts it at this tick
+                    self._ticked.wait_for(
+                        lambda: self._fetch is None or self._fetch[1] is not None,
+                        INPUT_TIMEOUT_S,
+                    )
+                    fetch = self._fetch
+                if fetch is not None and (fetch[1] is not None or not self.lockstep):
+                    self._fetch = None
+            else:
+                fetch = None
+            if self._fetch is None and b % self.refresh_ns == 0:
+                self._fetch = (b, None)
+                self._fetch_due.set()
+        got = None if fetch is None else fetch[1]
+        return got if isinstance(got, tuple) else None
 
     def _adopt(self, grid: Grid, people: list[Person], t_ns: int) -> None:
         if self.grid is None or self.grid.shape != grid.shape:
@@ -174,10 +228,31 @@ class NavNode:
 
     # -- goals (the server's thread) ------------------------------------------------------
 
+    def _as_of(self, stamp_ns: int | None) -> tuple[Costmap | None, Pose | None]:
+        """The costmap and pose after navigation's tick one latency before `stamp_ns` (the
+        sender's tick; it waited for that tick's output), or the newest without a stamp
+        (or, with a warning, when that tick is not done within `INPUT_TIMEOUT_S`)."""
+        if stamp_ns is None:
+            return self.costmap, self._pose
+        want = ((stamp_ns - self.latency_ns) // self.period_ns) * self.period_ns
+        with self._ticked:
+            done = self._ticked.wait_for(
+                lambda: bool(self._history) and self._history[-1][0] >= want, INPUT_TIMEOUT_S
+            )
+            for b, cm, pose in reversed(self._history):
+                if b <= want:
+                    return cm, pose
+        if done:  # older than the history: the oldest kept is the best guess
+            self.svc.log.warning("goal stamped %d: tick %d is out of the history", stamp_ns, want)
+        else:
+            self.svc.log.warning("goal stamped %d: navigation has not done tick %d", stamp_ns, want)
+        return self.costmap, self._pose
+
     def _on_goal(self, req: NavGoalRequest | None, _selector: str) -> NavGoalReply:
         if req is None:
             raise RequestError("malformed", "a NavGoalRequest is needed")
-        cm, pose, cfg = self.costmap, self._pose, self.svc.config.navigation
+        cm, pose = self._as_of(req.stamp_ns)
+        cfg, at = self.svc.config.navigation, req.stamp_ns
         if cm is None:
             raise RequestError("unavailable", f"no map yet from {self.source.name}")
         g = req.goal
@@ -190,12 +265,12 @@ class NavNode:
                     "",
                 )
             elif isinstance(g, ArtifactStandoff):
-                x, y = self.source.artifact_xy(g.artifact_id)
+                x, y = self.source.artifact_xy(g.artifact_id, at_ns=at)
                 target = goals.standoff_pose(cm, x, y, self.fp)
                 tol, tol_yaw, handover = cfg.goal_tolerance_m, cfg.goal_tolerance_rad, ""
             else:
                 assert isinstance(g, PersonHandover)
-                person = self.source.person(g.person_id)
+                person = self.source.person(g.person_id, at_ns=at)
                 here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
                 target = goals.handover_pose(cm, person, here, self.fp)
                 tol, tol_yaw, handover = cfg.goal_tolerance_m, cfg.goal_tolerance_rad, g.person_id
@@ -208,7 +283,7 @@ class NavNode:
         with self._lock:
             self._count += 1
             spec = GoalSpec(f"nav_{self._count}", target, tol, tol_yaw, handover)
-            self._pending = spec
+            self._pending = (spec, -1 if req.effective_ns is None else req.effective_ns)
         self.svc.log.info(
             "goal %s accepted: %s -> (%.2f, %.2f, %.2f)", spec.goal_id, type(g).__name__, *target
         )
@@ -263,12 +338,12 @@ class NavNode:
         odom = self.odom.at(b)
         if odom is None:
             self._publish(b, np.zeros(3), None, "no odom")
+            self._done(b)
             return
         pose = odom_pose(odom)
         self._pose = pose
         changed = self._camera(b, pose)
-        with self._lock:
-            fresh, self._fresh = self._fresh, None
+        fresh = self._map_tick(b) if isinstance(self.source, MapSource) else None
         seen_changed = self._perceive(b)  # every tick: lockstep waits on perception here
         if fresh is not None:
             self._adopt(*fresh, b)
@@ -277,8 +352,13 @@ class NavNode:
             changed = True
         if self.costmap is None:
             self._publish(b, np.zeros(3), None, "waiting for the map")
+            self._done(b)
             return
-        for c in self.cancels.drain():
+        with self._lock:
+            self._cancels.extend(self.cancels.drain())
+            due = [c for c in self._cancels if c.effective_ns is None or c.effective_ns <= b]
+            self._cancels = [c for c in self._cancels if c not in due]
+        for c in due:
             if self.nav.state == "active" and c.goal_id in (
                 "",
                 self.nav.goal.goal_id if self.nav.goal else "",
@@ -290,7 +370,9 @@ class NavNode:
                     c.reason,
                 )
         with self._lock:
-            pending, self._pending = self._pending, None
+            pending = None
+            if self._pending is not None and self._pending[1] <= b:
+                pending, self._pending = self._pending[0], None
         if pending is not None:
             if self.nav.state == "active" and self.nav.goal is not None:
                 self.svc.log.info("goal %s replaced by %s", self.nav.goal.goal_id, pending.goal_id)
@@ -302,9 +384,15 @@ class NavNode:
             self.layer.clear_all()
             self.costmap = self._build(b)
         self._publish(b, out.cmd, out)
+        self._done(b)
         tick_ms = (time.perf_counter() - t0) * 1e3
         wz = odom.base_angular_velocity_in_base[2]
         self.log.tick(b, pose, self.nav, out, self.costmap, tick_ms, wz)
+
+    def _done(self, b: int) -> None:
+        with self._ticked:
+            self._history.append((b, self.costmap, self._pose))
+            self._ticked.notify_all()
 
     def _publish(self, b: int, cmd: np.ndarray, out: TickOutput | None, detail: str = "") -> None:
         self.cmd_pub.put(

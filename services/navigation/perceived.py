@@ -10,24 +10,13 @@ message, this camera's is still on its way and is waited for (bounded).
 
 from __future__ import annotations
 
-import numpy as np
-
 from common.bus import Bus
 from common.config import Config
 from common.keys import RobotKeys
 from common.lockstep import UpstreamGate
-from common.messages import decode, encode
 from common.messages.perception import Detections
 
 PRODUCER = "perception"
-
-
-def warm_decoder() -> None:
-    """Build the `Detections` decoder here, before two subscriptions' threads race to build
-    it on the first sample (that race crashed the process in msgspec's C core)."""
-    eye = tuple(float(v) for v in np.eye(4).ravel())
-    msg = Detections(stamp_ns=0, camera="", T_world_base=eye, segmenter="truth", detections=[])
-    decode(encode(msg), Detections)
 
 
 class PerceptionFeed:
@@ -39,7 +28,6 @@ class PerceptionFeed:
         self.camera, self.timeout_s = camera, timeout_s
         self.enabled = bool(camera) and camera in config.perception.cameras
         self.camera_period_ns = round(1e9 / config.sim.camera_hz)
-        warm_decoder()
         self.latest = bus.latest(keys.detections, Detections, history=16)
         self.fifo = bus.fifo(keys.detections, Detections, maxlen=1024)
         self.pending: list[Detections] = []

@@ -28,12 +28,14 @@ class SourceError(RuntimeError):
 
 
 class Source(Protocol):
+    """`at_ns`: the map as of that sim time (a lockstep participant's tick); None: now."""
+
     name: str
 
-    def grid(self) -> Grid: ...
-    def artifact_xy(self, artifact_id: str) -> tuple[float, float]: ...
-    def person(self, person_id: str) -> Person: ...
-    def people(self) -> list[Person]: ...
+    def grid(self, at_ns: int | None = None) -> Grid: ...
+    def artifact_xy(self, artifact_id: str, at_ns: int | None = None) -> tuple[float, float]: ...
+    def person(self, person_id: str, at_ns: int | None = None) -> Person: ...
+    def people(self, at_ns: int | None = None) -> list[Person]: ...
 
 
 class WorldSource:
@@ -53,24 +55,24 @@ class WorldSource:
             self.world.seed,
         )
 
-    def grid(self) -> Grid:
+    def grid(self, at_ns: int | None = None) -> Grid:
         return Grid.from_world(self.world.occupancy)
 
-    def artifact_xy(self, artifact_id: str) -> tuple[float, float]:
+    def artifact_xy(self, artifact_id: str, at_ns: int | None = None) -> tuple[float, float]:
         for a in self.world.artifacts:
             if a.id == artifact_id:
                 return a.position[0], a.position[1]
         known = sorted(a.id for a in self.world.artifacts)
         raise SourceError(f"no artifact {artifact_id!r} in the truth world; it has {known}")
 
-    def person(self, person_id: str) -> Person:
+    def person(self, person_id: str, at_ns: int | None = None) -> Person:
         for p in self.people():
             if p.id == person_id:
                 return p
         known = sorted(p.id for p in self.world.people)
         raise SourceError(f"no person {person_id!r} in the truth world; it has {known}")
 
-    def people(self) -> list[Person]:
+    def people(self, at_ns: int | None = None) -> list[Person]:
         return [Person(p.id, p.position[0], p.position[1], p.yaw) for p in self.world.people]
 
 
@@ -82,26 +84,26 @@ class MapSource:
     def __init__(self, bus: Bus, timeout_s: float = 2.0) -> None:
         self.bus, self.timeout_s = bus, timeout_s
 
-    def _query(self, key: str, reply: type, what: str):  # type: ignore[no-untyped-def]
+    def _query(self, key: str, reply: type, what: str, at_ns: int | None):  # type: ignore[no-untyped-def]
         try:
-            return self.bus.query(key, None, reply, self.timeout_s)
+            return self.bus.query(K.as_of(key, at_ns), None, reply, self.timeout_s)
         except BusError as exc:
             raise SourceError(f"{what} ({key}): {exc}") from None
 
-    def grid(self) -> Grid:
-        msg: OccupancyGrid = self._query(K.MAP_OCCUPANCY, OccupancyGrid, "occupancy")
+    def grid(self, at_ns: int | None = None) -> Grid:
+        msg: OccupancyGrid = self._query(K.MAP_OCCUPANCY, OccupancyGrid, "occupancy", at_ns)
         return Grid.from_map(msg)
 
-    def artifact_xy(self, artifact_id: str) -> tuple[float, float]:
-        e: MapEntity = self._query(K.map_artifact(artifact_id), MapEntity, artifact_id)
+    def artifact_xy(self, artifact_id: str, at_ns: int | None = None) -> tuple[float, float]:
+        e: MapEntity = self._query(K.map_artifact(artifact_id), MapEntity, artifact_id, at_ns)
         return e.position_in_world[0], e.position_in_world[1]
 
-    def person(self, person_id: str) -> Person:
-        e: MapEntity = self._query(K.map_person(person_id), MapEntity, person_id)
+    def person(self, person_id: str, at_ns: int | None = None) -> Person:
+        e: MapEntity = self._query(K.map_person(person_id), MapEntity, person_id, at_ns)
         return _person(e)
 
-    def people(self) -> list[Person]:
-        listing: MapListing = self._query(K.MAP_PEOPLE, MapListing, "people")
+    def people(self, at_ns: int | None = None) -> list[Person]:
+        listing: MapListing = self._query(K.MAP_PEOPLE, MapListing, "people", at_ns)
         return [_person(e) for e in listing.entities if e.missing_since_ns is None]
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from common.messages import as_numpy
+from common.messages import as_numpy, decoder
 from common.messages.semantic_map import MapFile, OccupancyGrid, Source
 from common.messages.world import Cuboid, WorldDescription
 from services.semantic_map.entities import Track
@@ -27,7 +27,7 @@ class MapFileError(ValueError):
 
 def read_map_file(path: Path) -> MapFile:
     try:
-        return msgspec.json.decode(path.read_bytes(), type=MapFile)
+        return decoder(MapFile, "json").decode(path.read_bytes())
     except FileNotFoundError:
         raise MapFileError(f"map file {path} does not exist") from None
     except msgspec.DecodeError as exc:

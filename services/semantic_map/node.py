@@ -3,11 +3,13 @@ persists every tick's changes before acknowledging it, serves the map and walks 
 mapping patrol.
 
 Per tick b (period and latency from `time.participants.semantic_map`): wait for
-perception's detections due by b (`UpstreamGate`), fuse every frame's detections whose
-stamp is complete (each configured camera's, or a later stamp, arrived; or two periods
-passed), step the patrol on the odom at b (`patrol_driver`: pose goals to navigation),
-commit the changes in one SQLite transaction, then ack b. Queryables run on their own
-threads under the map's lock.
+perception's detections due by b (`UpstreamGate`, and each fused camera's), fuse every
+frame's detections stamped at or before b − perception's latency, step the patrol on
+the odom at b (`patrol_driver`: pose goals to navigation),
+commit the changes in one SQLite transaction, keep the map's view after b (`views`),
+then ack b. Queryables run on their own threads; one with `at=<t>` (a lockstep
+consumer's tick) is answered from the view of the map's last tick that takes effect by
+t, so every run of a seed answers it alike; one without, from the map now.
 """
 
 from __future__ import annotations
@@ -52,8 +54,11 @@ from services.semantic_map.patrol_driver import PatrolDriver
 from services.semantic_map.rerun_log import MapLogger
 from services.semantic_map.startup import open_map, save_all
 from services.semantic_map.store import Grid, MapStore
+from services.semantic_map.views import ViewHistory, view_of
 
 NAME = "semantic_map"
+#: Wall seconds a tick waits for a due camera's detections (the other camera's are in).
+FRAME_WAIT_S = 2.0
 #: Sim seconds between the per-camera summaries of what was fused.
 SUMMARY_EVERY_S = 10.0
 log = logging.getLogger(f"dume.{NAME}")
@@ -74,6 +79,9 @@ class MapNode:
         self.smap: SemanticMap
         self.smap, how = open_map(self.cfg, self.store, self._world)
         log.info("%s", how)
+        latency = p.latency_s if p else self.period_ns / NS_PER_S
+        self.views = ViewHistory(self.period_ns, round(latency * NS_PER_S))
+        self.views.add(view_of(self.smap, -1, None))
         bus, keys = svc.bus, svc.keys
         self.det_fifo = bus.fifo(keys.detections, Detections, maxlen=512)
         self.det_latest = bus.latest(keys.detections, Detections, history=2)
@@ -83,7 +91,6 @@ class MapNode:
         }
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.pending: dict[int, dict[str, Detections]] = defaultdict(dict)
-        self.newest_det = -1
         self.patrol = PatrolDriver(bus, keys, self.cfg, NAME, svc.config.wbc.cmd_vel_source)
         self._supports: FloatArray | None = None
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
@@ -116,13 +123,21 @@ class MapNode:
     # -- queries (server threads) -----------------------------------------------------------
 
     def _q(self, fn, kind, selector):  # type: ignore[no-untyped-def]
+        selector, at = queries.split_at(selector)
+        view = self.views.at(at)
+        if view is not None:
+            return fn(view, kind, selector)
         with self.lock:
             return fn(self.smap, kind, selector)
 
     def _on_occupancy(self, _req: None, selector: str) -> OccupancyGrid:
+        selector, at = queries.split_at(selector)
         _key, params = queries.parse_selector(selector)
         if params:
             raise RequestError("invalid", f"dume/map/occupancy takes no parameters: {params}")
+        view = self.views.at(at)
+        if view is not None:
+            return view.grid()
         with self.lock:
             return self.smap.grid()
 
@@ -158,6 +173,8 @@ class MapNode:
             for tr in tracks_from_file(mf, "import"):
                 s.add(tr)
             save_all(s, self.store, {"static_source": s.static_source})
+            newest = self.views.newest
+            self.views.reset(view_of(s, newest.tick_ns if newest else -1, None))
             log.info("imported a map: %d entities", len(mf.entities))
             return self._summary()
 
@@ -241,10 +258,11 @@ class MapNode:
             if late:
                 log.warning("tick %.1f s: no detections from %s in time", b / NS_PER_S, late)
             with self.lock:
-                self._fuse_due(b)
+                self._fuse_due(b, gate)
                 self._step_patrol(b)
                 self._commit(b)
                 self.logger.log(b, self.smap)
+                self.views.add(view_of(self.smap, b, self.views.newest))
             ticker.ack(b)
 
     def _cameras(self) -> list[str]:
@@ -253,23 +271,39 @@ class MapNode:
         extra = self.cfg.patrol_cameras if self.patrol.arm_up else []
         return [*self.cfg.cameras, *(c for c in extra if c not in self.cfg.cameras)]
 
-    def _fuse_due(self, b: int) -> None:
-        cameras = self._cameras()
+    def _collect(self, cameras: list[str]) -> None:
         for dets in self.det_fifo.drain():
-            if dets.camera not in cameras:
-                continue
-            self.pending[dets.stamp_ns][dets.camera] = dets
-            self.newest_det = max(self.newest_det, dets.stamp_ns)
-        wanted = set(cameras)
+            if dets.camera in cameras:
+                self.pending[dets.stamp_ns][dets.camera] = dets
+
+    def _fuse_due(self, b: int, gate: UpstreamGate) -> None:
+        """Fuse every frame whose detections take effect by b (stamp ≤ b − perception's
+        latency), each camera's: one detections key carries both cameras, so the gate may
+        have been met by the other camera's message; the one due is waited for (bounded),
+        as every camera publishes at every tick (older stamps are complete: one key keeps
+        its order)."""
+        cameras = self._cameras()
+        self._collect(cameras)
+        schedule = gate.gate.schedules.get("perception")
+        due = b - gate.latency_ns("perception")
+        wait = schedule is not None and "perception" in gate.gate.alive and gate.lockstep
+        if wait and schedule is not None and due >= 0 and due % schedule.period_ns == 0:
+            deadline = time.monotonic() + FRAME_WAIT_S
+            while not set(cameras) <= set(self.pending.get(due, {})):
+                left = deadline - time.monotonic()
+                dets = self.det_fifo.pop(timeout_s=left) if left > 0 else None
+                if dets is None:
+                    log.warning("tick %.1f s: detections at %d missing", b / NS_PER_S, due)
+                    break
+                if dets.camera in cameras:
+                    self.pending[dets.stamp_ns][dets.camera] = dets
         for s in sorted(self.pending):
-            cams = self.pending[s]
-            complete = s < self.newest_det or wanted <= set(cams) or s <= b - 2 * self.period_ns
-            if s > b or not complete:
+            if s > due:
                 break
+            cams = self.pending.pop(s)
             for cam in cameras:
                 if cam in cams:
                     self._fuse(cams[cam])
-            del self.pending[s]
 
     def _frame(self, cam: str, s: int) -> CameraFrame | None:
         sub = self.frames.get(cam)

@@ -41,6 +41,8 @@ class Occupancy:
         shape = self.static.shape
         self.hits = np.zeros(shape, np.uint16) if hits is None else hits.astype(np.uint16)
         self.seen_free = np.zeros(shape, bool)
+        #: Counts the changes of `cells()`, so a reader can tell when the grid it holds is old.
+        self.version = 0
         if self.hits.shape != shape:
             raise ValueError(f"learned layer {self.hits.shape} does not match static {shape}")
 
@@ -72,8 +74,14 @@ class Occupancy:
         counts = self.hits.reshape(-1)
         counts[flat] = np.minimum(counts[flat].astype(np.int64) + 1, 60000).astype(np.uint16)
         floor = inside & (np.abs(z) < FLOOR_Z_M)
-        self.seen_free.reshape(-1)[np.unique(iy[floor] * nx + ix[floor])] = True
-        return int(self.learned_mask().sum() - before)
+        free = np.unique(iy[floor] * nx + ix[floor])
+        seen = self.seen_free.reshape(-1)
+        opened = bool(np.any(~seen[free] & (self.static.reshape(-1)[free] == UNKNOWN)))
+        seen[free] = True
+        learned = int(self.learned_mask().sum() - before)
+        if learned or opened:
+            self.version += 1
+        return learned
 
     def learned_mask(self) -> NDArray[np.bool_]:
         return (self.hits >= self.hits_needed) & (self.static != OCCUPIED)

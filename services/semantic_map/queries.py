@@ -4,16 +4,17 @@ A listing may be filtered with selector parameters (`dume/map/artifacts?class=bo
 `?missing=true`); an entity is named by the key's last chunk. Every bad query is a typed
 refusal: a wildcard or a malformed id is `invalid`, an id that is not in the map is
 `unknown_id` (the message lists the ids there are), an unknown parameter is `invalid`.
+Any of them may carry `at=<ns>` (`split_at`): the node answers from the map as of then.
 """
 
 from __future__ import annotations
 
 import re
+from typing import Protocol
 
 from common.bus import RequestError
 from common.messages.semantic_map import EntityKind, MapEntity, MapListing
 from services.semantic_map.entities import split_id
-from services.semantic_map.mapper import SemanticMap
 
 _CLASS = re.compile(r"^[a-z][a-z0-9]*$")
 PARAMS = ("class", "missing")
@@ -33,7 +34,29 @@ def parse_selector(selector: str) -> tuple[str, dict[str, str]]:
     return key, params
 
 
-def listing(smap: SemanticMap, kind: EntityKind, selector: str) -> MapListing:
+class MapReader(Protocol):
+    """What the queries read: the map now (`SemanticMap`) or as of a tick (`MapView`)."""
+
+    stamp_ns: int
+
+    def entities(self, kind: EntityKind) -> list[MapEntity]: ...
+    def entity(self, kind: EntityKind, entity_id: str) -> MapEntity | None: ...
+
+
+def split_at(selector: str) -> tuple[str, int | None]:
+    """The selector without its `at=<ns>` parameter (a lockstep consumer's sim time: the
+    map as of then, `common.keys.as_of`), and that time (None without one)."""
+    key, params = parse_selector(selector)
+    raw = params.pop("at", None)
+    if raw is None:
+        return selector, None
+    if not raw.isdigit():
+        raise RequestError("invalid", f"at={raw!r}: a sim time in integer nanoseconds")
+    rest = ";".join(f"{k}={v}" for k, v in params.items())
+    return (f"{key}?{rest}" if rest else key), int(raw)
+
+
+def listing(smap: MapReader, kind: EntityKind, selector: str) -> MapListing:
     _key, params = parse_selector(selector)
     unknown = sorted(set(params) - set(PARAMS))
     if unknown:
@@ -53,7 +76,7 @@ def listing(smap: SemanticMap, kind: EntityKind, selector: str) -> MapListing:
     return MapListing(stamp_ns=smap.stamp_ns, entities=entities)
 
 
-def one(smap: SemanticMap, kind: EntityKind, selector: str) -> MapEntity:
+def one(smap: MapReader, kind: EntityKind, selector: str) -> MapEntity:
     key, params = parse_selector(selector)
     if params:
         raise RequestError("invalid", f"{key} takes no parameters, got {sorted(params)}")

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from common.geometry import FloatArray
+from common.messages import decoder
 from common.messages.semantic_map import MapEntity
 
 SCHEMA = """
@@ -45,7 +46,7 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 """
 
 _ENC = msgspec.msgpack.Encoder()
-_DEC = msgspec.msgpack.Decoder(MapEntity)
+_DEC = decoder(MapEntity)
 
 
 @dataclass(frozen=True)

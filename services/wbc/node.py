@@ -5,7 +5,7 @@ one `JointCommand` with the state's stamp, and nothing else is waited for in bet
 cmd_vel, modes and arm goals are drained from their buffers without blocking. Per tick:
 
 1. inputs due at t: `wbc/mode` samples and cmd_vel of the obeyed source at stamp +
-   latency (`inputs`), arm goals accepted since the last tick (`arm_actions`);
+   latency (`inputs`), arm goals accepted whose `effective_ns` has come (`arm_actions`);
 2. the command: damping in `damp`; otherwise `WholeBodyController.step` with the gait
    command (walk only) and the arm references; a failed QP keeps the last torques for
    one tick, then the stand hold (`safety`) takes over until `recover_ticks` good solves;
@@ -130,7 +130,8 @@ class WbcNode:
         self.status_every = round(NS_PER_S / w.status_hz)
         self.log_every = round(NS_PER_S / w.log_hz)
         self._goal_lock = threading.Lock()
-        self._pending: deque[tuple[str, ArmGoal]] = deque()
+        #: Accepted goals waiting for their tick: (id, goal, effective stamp or -1).
+        self._pending: deque[tuple[str, ArmGoal, int]] = deque()
         self._goal_count = 0
         bus, keys = svc.bus, svc.keys
         self.states = bus.latest(keys.state, RobotState, history=4)
@@ -159,7 +160,8 @@ class WbcNode:
         with self._goal_lock:
             self._goal_count += 1
             goal_id = f"arm_{self._goal_count}"
-            self._pending.append((goal_id, goal))
+            effective = -1 if req.effective_ns is None else req.effective_ns
+            self._pending.append((goal_id, goal, effective))
         self.svc.log.info("arm goal %s accepted: %s", goal_id, type(goal).__name__)
         return ArmGoalReply(accepted=True, goal_id=goal_id)
 
@@ -241,11 +243,11 @@ class WbcNode:
             self._set_mode(mode_msg, t, state)
         for cmd in self.cmd_vel.drain():
             self.arbiter.push(cmd)
-        with self._goal_lock:
-            pending = list(self._pending)
-            self._pending.clear()
+        with self._goal_lock:  # goals start at their effective tick, in the order they came
+            due = [p for p in self._pending if p[2] <= t]
+            self._pending = deque(p for p in self._pending if p[2] > t)
         assert self.obs is not None  # set on the first tick
-        for goal_id, goal in pending:
+        for goal_id, goal, _effective in due:
             self.actions.start(goal_id, goal, t, self.obs, self.poses.at)
 
     def _set_mode(self, msg: WbcMode, t: int, state: WbcState) -> None:

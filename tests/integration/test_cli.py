@@ -31,15 +31,23 @@ def test_dume_world_prints_the_generated_world_as_json() -> None:
     assert again == world
 
 
-def test_a_request_without_a_mission_service_times_out_and_says_why(stack: StartStack) -> None:
+def test_a_request_without_a_mission_service_says_so_instead_of_waiting(stack: StartStack) -> None:
     s = stack([])
     out = dume(
-        "request", "bottle_1", "--to", "person_1", "--port", str(s.port), "--wait", "--timeout", "2"
+        "request",
+        "bottle_1",
+        "--to",
+        "person_1",
+        "--port",
+        str(s.port),
+        "--wait",
+        "--timeout",
+        "600",
     )
     assert out.returncode == 3
     last = json.loads(out.stdout.strip().splitlines()[-1])
-    assert last["outcome"] == "timeout"
-    assert "no mission service" in last["reason"]
+    assert last["outcome"] == "dependency_lost"
+    assert last["reason"] == "mission is not running"
 
 
 def test_commands_say_when_no_stack_answers() -> None:
@@ -103,7 +111,9 @@ def test_a_run_records_the_world_the_robot_and_both_cameras(
         assert entity in stats, entity
 
 
-DEMO_KEYS = {"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording"}
+DEMO_KEYS = {
+    "outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording", "digest"
+}  # fmt: skip
 
 
 def _last_json(out: subprocess.CompletedProcess[str]) -> dict[str, object]:
