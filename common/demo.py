@@ -72,7 +72,9 @@ def demo_overrides(args: argparse.Namespace, map_name: str) -> list[str]:
 
 
 def _show(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
-    t = f"t={clock.stamp_ns / 1e9:6.1f} s  rtf {clock.rtf:4.2f}"
+    # A change at the sim time it happened (the same in every run of the seed).
+    now = status.stamp_ns if changed and status is not None else clock.stamp_ns
+    t = f"t={now / 1e9:6.2f} s  rtf {clock.rtf:4.2f}"
     if status is None:
         print(f"  {t}  waiting for the mission's first status", file=sys.stderr)
         return
