@@ -14,7 +14,8 @@ says so and the sim's truth agrees (its `HandoverTaken` event: the object the re
 map id stands for in the requested person's hand); exit code 0 only then. The last line:
 `{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording",
 "digest"}`: the digest fingerprints the run (`common.eval_judge.run_digest`: the status
-timeline and the base's trajectory at 10 Hz), so two runs of one seed can be compared.
+timeline and the base's trajectory at 10 Hz), so two runs of one seed can be compared;
+`var/run/<run>-<port>/record.json` holds what it was made of.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ import json
 import sys
 import time
 from pathlib import Path
+
+import msgspec
 
 from common.bus import BusError
 from common.config import REPO_ROOT, resolve
@@ -101,6 +104,17 @@ def _ask(stack: Supervised, args: argparse.Namespace, result: WorldResult) -> st
     print(f"dume demo: asking for {pair.object} for {pair.person}{far}", file=sys.stderr)
     record = watch_mission(bus, keys, request, args.timeout, _show, start_gate=True)
     evaluate(result, record, world)
+    # What the digest is made of, to compare two runs sample by sample.
+    (stack.run_dir / "record.json").write_bytes(
+        msgspec.json.encode(
+            {
+                "digest": result.digest,
+                "changes": record.changes,
+                "trajectory": record.trajectory,
+                "events": record.events,
+            }
+        )
+    )
     return read_back(bus, keys, timeout_s=30.0)["locomotion"]
 
 

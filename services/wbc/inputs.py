@@ -1,10 +1,10 @@
 """The controller's slow inputs on sim time: cmd_vel arbitration, modes, base pose history.
 
 - `CmdVelArbiter`: every `cmd_vel` sample is pushed in; only the source that `wbc/mode`
-  names is obeyed (the others are counted and ignored). A sample from a source takes
-  effect at its stamp plus that source's configured latency (0 for a source that is not a
-  lockstep participant, e.g. a user script), so the same run gives the same commands; a
-  command older than `timeout_ns` means stop.
+  names is obeyed (the others are kept, counted as ignored, for when one is named). A
+  sample from a source takes effect at its stamp plus that source's configured latency
+  (0 for a source that is not a lockstep participant, e.g. a user script), so the same
+  run gives the same commands; a command older than `timeout_ns` means stop.
 - `ModeQueue`: `wbc/mode` samples take effect the same way (stamp + the mode source's
   latency), in order.
 - `PoseHistory`: the base pose at past ticks, so a goal in the base frame as of its
@@ -27,33 +27,39 @@ ZERO3: FloatArray = np.zeros(3)
 
 
 class CmdVelArbiter:
-    """The obeyed source's newest effective command; stop when it is stale or missing."""
+    """The obeyed source's newest effective command; stop when it is stale or missing.
+
+    Every source's recent samples are kept, whichever is obeyed: a switch of source takes
+    effect at a tick fixed by sim time, and the samples the new source sent before it
+    must be there whether or not they happened to arrive before the switch.
+    """
 
     def __init__(self, latency_ns: Mapping[str, int], timeout_ns: int, history: int = 64) -> None:
         self.latency_ns = dict(latency_ns)
         self.timeout_ns = timeout_ns
+        self.history = history
         self.source = ""
         self.ignored: dict[str, int] = {}
-        self._buf: deque[CmdVel] = deque(maxlen=history)
+        self._bufs: dict[str, deque[CmdVel]] = {}
         self.stale = False
 
     def select(self, source: str) -> None:
-        """Obey `source` from now on (its earlier samples are kept: they may be due)."""
-        if source != self.source:
-            self.source = source
-            self._buf.clear()
+        """Obey `source` from now on (its samples already in are kept: they may be due)."""
+        self.source = source
 
     def push(self, msg: CmdVel) -> None:
         if msg.source != self.source:
             self.ignored[msg.source] = self.ignored.get(msg.source, 0) + 1
-            return
-        self._buf.append(msg)
+        buf = self._bufs.get(msg.source)
+        if buf is None:
+            buf = self._bufs[msg.source] = deque(maxlen=self.history)
+        buf.append(msg)
 
     def command(self, t_ns: int) -> FloatArray:
         """(vx, vy, ωz) in effect at t; zeros when none is due or the newest is stale."""
         latency = self.latency_ns.get(self.source, 0)
         due = None
-        for msg in reversed(self._buf):
+        for msg in reversed(self._bufs.get(self.source, ())):
             if msg.stamp_ns + latency <= t_ns:
                 due = msg
                 break

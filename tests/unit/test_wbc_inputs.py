@@ -28,7 +28,18 @@ def test_only_the_source_named_by_the_mode_is_obeyed_and_the_others_are_counted(
     assert arb.command(10 * MS)[0] == 0.5
     assert arb.ignored == {"mission": 2}
     arb.select("mission")
-    assert arb.command(10 * MS)[0] == 0.0  # nothing from the mission since it was chosen
+    assert arb.command(10 * MS)[0] == -0.7  # its newest, sent before it was chosen
+
+
+def test_a_switch_of_source_obeys_the_same_samples_whenever_they_arrived() -> None:
+    early, late = CmdVelArbiter({}, 500 * MS), CmdVelArbiter({}, 500 * MS)
+    for arb in (early, late):
+        arb.select("navigation")
+    early.push(cmd(5, 0.4, source="mission"))  # arrived before the switch …
+    early.select("mission")
+    late.select("mission")
+    late.push(cmd(5, 0.4, source="mission"))  # … or after it
+    assert early.command(10 * MS)[0] == late.command(10 * MS)[0] == 0.4
 
 
 def test_a_command_takes_effect_at_its_stamp_plus_the_sources_latency() -> None:
