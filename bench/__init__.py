@@ -34,7 +34,7 @@ def _nav(overrides: Sequence[str]) -> dict[str, Any]:
     return bench_nav(overrides)
 
 
-#: `dume bench startup|decoders --rounds N`: how many stacks (processes) it starts.
+#: `dume bench startup|decoders|deadwatch --rounds N`: how many stacks (processes).
 STARTUP_ROUNDS = {"rounds": 10}
 
 
@@ -50,6 +50,12 @@ def _decoders(_overrides: Sequence[str]) -> dict[str, Any]:
     return bench_decoders(STARTUP_ROUNDS["rounds"])
 
 
+def _deadwatch(_overrides: Sequence[str]) -> dict[str, Any]:
+    from bench.deadwatch import bench_deadwatch
+
+    return bench_deadwatch(STARTUP_ROUNDS["rounds"])
+
+
 BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
     "sim": _sim,
     "wbc": _wbc,
@@ -57,8 +63,9 @@ BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
     "nav": _nav,
     "startup": _startup,
     "decoders": _decoders,
+    "deadwatch": _deadwatch,
 }
-#: What `dume bench all` runs (`startup` and `decoders` start processes in a loop: alone).
+#: What `dume bench all` runs (the others start stacks or processes in a loop: alone).
 ALL = ("sim", "wbc", "perception", "nav")
 
 

@@ -71,8 +71,11 @@ class TimeSettings(_Section):
     #: Wall seconds the sim waits at t = 0 for every participant to be alive.
     start_timeout_s: float = 120.0
     #: Wall seconds a live participant may take on one tick before the sim logs it as
-    #: stalled and steps without it (the robot's watchdog then acts, as on hardware).
-    stall_timeout_s: float = 2.0
+    #: stalled and steps without it (the robot's watchdog then acts, as on hardware). A
+    #: dead one is not waited for at all (its liveliness goes), so this only catches a
+    #: hung process; long enough that a slow tick on a loaded machine (a first plan,
+    #: two stacks on two cores) never breaks the run's determinism.
+    stall_timeout_s: float = 10.0
 
 
 class SimSettings(_Section):
@@ -342,6 +345,10 @@ class RecordingSettings(_Section):
 
 class LogSettings(_Section):
     level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    #: Log, every `trace_every_s` of sim time, a running digest of everything each
+    #: publisher sent (`common.bus.Publisher`): two runs of one seed that differ show in
+    #: the first service and key whose lines differ. 0: off.
+    trace_every_s: float = 0.0
 
 
 class Config(_Section):

@@ -232,9 +232,9 @@ def run_digest(record: MissionRecord) -> str:
     and the base's trajectory at 10 Hz up to the last change, bit for bit. Two runs of
     the same seed must print the same digest; one differing sample changes it."""
     until = record.changes[-1].stamp_ns if record.changes else record.end_ns
-    body = {
-        "request": msgspec.to_builtins(record.request),
-        "changes": [msgspec.to_builtins(c) for c in record.changes],
+    body = {  # the request's id is the client's name for it: not part of the run
+        "request": [record.request.object, record.request.person],
+        "changes": [{**msgspec.to_builtins(c), "request_id": ""} for c in record.changes],
         "trajectory": [p for p in record.trajectory if p[0] <= until],
     }
     return hashlib.sha256(msgspec.json.encode(body)).hexdigest()[:16]

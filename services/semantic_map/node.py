@@ -57,7 +57,8 @@ from services.semantic_map.store import Grid, MapStore
 from services.semantic_map.views import ViewHistory, view_of
 
 NAME = "semantic_map"
-#: Wall seconds a tick waits for a due camera's detections (the other camera's are in).
+#: Wall seconds a tick waits for a due camera's detections (the other camera's are in),
+#: or for the frame behind detections it fuses.
 FRAME_WAIT_S = 2.0
 #: Sim seconds between the per-camera summaries of what was fused.
 SUMMARY_EVERY_S = 10.0
@@ -312,8 +313,9 @@ class MapNode:
         frame = sub.at(s)
         if frame is None or frame.stamp_ns != s:
             try:
-                sub.wait_stamp(s, 0.5)
+                sub.wait_stamp(s, FRAME_WAIT_S)
             except WaitTimeout:
+                log.warning("no %s frame stamped %.3f s: detections fused without it", cam, s / 1e9)
                 return None
             frame = sub.at(s)
         return frame if frame is not None and frame.stamp_ns == s else None
