@@ -153,6 +153,12 @@ def test_a_watch_whose_mission_dies_ends_with_dependency_lost_instead_of_waiting
     (record,) = records
     assert record.ended == "dependency_lost: mission is gone", record.ended
     assert record.changes[-1].state == "running"
+    # Started again, the mission says it holds no request, so the client can send it again.
+    s.spawn("mission")
+    fresh = user.wait("", {"idle"}, 120.0)
+    assert fresh.stamp_ns > 0 and fresh.detail.startswith("mission started at t="), fresh
+    user.request({"request_id": "r2", "object": "bottle_1", "person": "person_1"})
+    assert user.wait("r2", {"accepted", "rejected"}, 60.0).state == "accepted"
 
 
 def test_a_cancel_mid_navigation_ends_cancelled_with_the_nav_goal_cancelled(
