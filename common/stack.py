@@ -69,6 +69,9 @@ def stack_env(
             # Every process of the stack (the router, supervisord's children, a test's
             # own) prints all threads' Python stacks on a native crash.
             "PYTHONFAULTHANDLER": "1",
+            # One string hash for every run: no set or dict of names iterates in an order
+            # that differs from run to run.
+            "PYTHONHASHSEED": "0",
         }
     )
     env.update(settings or {})
