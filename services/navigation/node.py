@@ -192,17 +192,21 @@ class NavNode:
         """Ask for the map at every `map_refresh_s`; the fetch to adopt at b, if any."""
         with self._ticked:
             fetch = self._fetch
-            if fetch is not None and b >= fetch[0] + round(MAP_ADOPT_S * NS_PER_S):
-                if fetch[1] is None and self.lockstep:  # every run adopts it at this tick
-                    self._ticked.wait_for(
-                        lambda: self._fetch is None or self._fetch[1] is not None,
-                        INPUT_TIMEOUT_S,
+            if fetch is None or b < fetch[0] + round(MAP_ADOPT_S * NS_PER_S):
+                fetch = None  # none in flight, or not due yet
+            elif fetch[1] is None and self.lockstep:  # every run adopts it at this tick
+                self._ticked.wait_for(
+                    lambda: self._fetch is None or self._fetch[1] is not None, INPUT_TIMEOUT_S
+                )
+                fetch = self._fetch
+                if fetch is not None and fetch[1] is None:
+                    self.svc.log.warning(
+                        "map fetch of t=%.2f s never came: dropped", fetch[0] / 1e9
                     )
-                    fetch = self._fetch
-                if fetch is not None and (fetch[1] is not None or not self.lockstep):
-                    self._fetch = None
+            if fetch is not None and (fetch[1] is not None or self.lockstep):
+                self._fetch = None  # adopted (or failed, or given up)
             else:
-                fetch = None
+                fetch = None  # realtime: adopted at the first tick after it is in
             if self._fetch is None and b % self.refresh_ns == 0:
                 self._fetch = (b, None)
                 self._fetch_due.set()
@@ -232,7 +236,7 @@ class NavNode:
         """The costmap and pose after navigation's tick one latency before `stamp_ns` (the
         sender's tick; it waited for that tick's output), or the newest without a stamp
         (or, with a warning, when that tick is not done within `INPUT_TIMEOUT_S`)."""
-        if stamp_ns is None:
+        if stamp_ns is None or not self.lockstep:
             return self.costmap, self._pose
         want = ((stamp_ns - self.latency_ns) // self.period_ns) * self.period_ns
         with self._ticked:

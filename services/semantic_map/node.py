@@ -81,7 +81,8 @@ class MapNode:
         self.smap, how = open_map(self.cfg, self.store, self._world)
         log.info("%s", how)
         latency = p.latency_s if p else self.period_ns / NS_PER_S
-        self.views = ViewHistory(self.period_ns, round(latency * NS_PER_S))
+        lockstep = svc.config.time.mode == "lockstep"
+        self.views = ViewHistory(self.period_ns, round(latency * NS_PER_S), wait=lockstep)
         self.views.add(view_of(self.smap, -1, None))
         bus, keys = svc.bus, svc.keys
         self.det_fifo = bus.fifo(keys.detections, Detections, maxlen=512)

@@ -66,8 +66,10 @@ def view_of(smap: SemanticMap, tick_ns: int, previous: MapView | None) -> MapVie
 class ViewHistory:
     """The last `KEPT` views, and which one answers a query as of a sim time."""
 
-    def __init__(self, period_ns: int, latency_ns: int) -> None:
+    def __init__(self, period_ns: int, latency_ns: int, wait: bool = True) -> None:
         self.period_ns, self.latency_ns = period_ns, latency_ns
+        #: Wait for the map to reach an asked time (lockstep); in real time, answer now.
+        self.wait = wait
         self._views: deque[MapView] = deque(maxlen=KEPT)
         self._cond = threading.Condition()
 
@@ -100,7 +102,8 @@ class ViewHistory:
             if at_ns is None or not self._views:
                 return self._views[-1] if self._views else None
             want = self.due_tick(at_ns)
-            self._cond.wait_for(lambda: self._views[-1].tick_ns >= want, timeout_s)
+            if self.wait:
+                self._cond.wait_for(lambda: self._views[-1].tick_ns >= want, timeout_s)
             for view in reversed(self._views):
                 if view.tick_ns <= want:
                     return view
