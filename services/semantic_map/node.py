@@ -93,7 +93,11 @@ class MapNode:
         }
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.pending: dict[int, dict[str, Detections]] = defaultdict(dict)
-        self.patrol = PatrolDriver(bus, keys, self.cfg, NAME, svc.config.wbc.cmd_vel_source)
+        participants = svc.config.time.participants
+        latencies = {n: round(q.latency_s * NS_PER_S) for n, q in participants.items()}
+        self.patrol = PatrolDriver(
+            bus, keys, self.cfg, NAME, svc.config.wbc.cmd_vel_source, latencies
+        )
         self._supports: FloatArray | None = None
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
         self.last_grid_save = 0

@@ -11,12 +11,15 @@ route with cmd_vel of source `semantic_map`. Before the first step the arm goes 
 camera cannot) and holds it while the robot walks and turns (its footprint is inside the
 stowed one); an arm that does not get there within `ARM_WAIT_S` leaves the patrol to the
 head camera. When done or stopped: zero velocity, the navigation goal cancelled, the arm
-sent back to `stow`, the WBC back to `stand`.
+sent back to `stow`, the WBC back to `stand`. Its goals and cancels carry the map's tick
+and take effect one map latency later, and it reads navigation's and the WBC's status as
+of the tick, as the mission does: a patrol in lockstep is as repeatable as a mission.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from typing import Literal
 
 from common.bus import Bus, NoReply, RemoteError
@@ -50,10 +53,22 @@ class PatrolDriver:
     """One patrol at a time; `state` and `reason` say where it stands."""
 
     def __init__(
-        self, bus: Bus, keys: RobotKeys, cfg: SemanticMapSettings, name: str, nav_source: str
+        self,
+        bus: Bus,
+        keys: RobotKeys,
+        cfg: SemanticMapSettings,
+        name: str,
+        nav_source: str,
+        latency_ns: Mapping[str, int] | None = None,
     ) -> None:
         self.bus, self.keys, self.cfg, self.name = bus, keys, cfg, name
         self.nav_source = nav_source
+        latency = latency_ns or {}
+        #: What it sends at the map's tick b takes effect at b + the map's latency; it reads
+        #: navigation's status as of b − navigation's latency (lockstep: the same run).
+        self.latency_ns = latency.get(name, 0)
+        self.nav_latency_ns = latency.get("navigation", 0)
+        self._t = 0
         self.cmd_vel = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self.mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self.cancel = bus.publisher(keys.nav_cancel, NavCancel, "control")
@@ -113,7 +128,12 @@ class PatrolDriver:
         at = w.viewpoint if isinstance(w, NavPatrol) else min(w.leg + 1, n)
         return at, n, w.travelled_m, w.skipped
 
+    @property
+    def _effective(self) -> int:
+        return self._t + self.latency_ns
+
     def step(self, b: int, odom: Odom | None) -> None:
+        self._t = b
         w = self.walker
         if w is None or not self.running:
             return
@@ -157,7 +177,10 @@ class PatrolDriver:
         if not self._arm_goal:
             try:
                 reply = self.bus.query(
-                    self.keys.arm_goal, ArmGoalRequest(goal=Posture(name=name)), ArmGoalReply, 5.0
+                    self.keys.arm_goal,
+                    ArmGoalRequest(goal=Posture(name=name), effective_ns=self._effective),
+                    ArmGoalReply,
+                    5.0,
                 )
             except RemoteError as exc:  # e.g. damped yet: ask again next tick
                 log.info("patrol: arm posture %s not taken yet: %s", name, exc)
@@ -172,7 +195,7 @@ class PatrolDriver:
                 return
             self._arm_goal = reply.goal_id
             return
-        st = self.wbc_status.get()
+        st = self.wbc_status.at(b - 1)
         goal = (
             None if st is None else next((g for g in st.goals if g.goal_id == self._arm_goal), None)
         )
@@ -191,7 +214,10 @@ class PatrolDriver:
             return
         try:
             reply = self.bus.query(
-                self.keys.arm_goal, ArmGoalRequest(goal=Posture(name="stow")), ArmGoalReply, 2.0
+                self.keys.arm_goal,
+                ArmGoalRequest(goal=Posture(name="stow"), effective_ns=self._effective),
+                ArmGoalReply,
+                2.0,
             )
         except (RemoteError, NoReply, PayloadError) as exc:
             log.warning("patrol: could not stow the arm: %s", exc)
@@ -201,7 +227,7 @@ class PatrolDriver:
 
     def _step_nav(self, b: int, w: NavPatrol) -> None:
         if w.goal_id:
-            st = self.nav_status.get()
+            st = self.nav_status.at(b - self.nav_latency_ns)
             if st is not None and st.goal_id == w.goal_id and st.state in TERMINAL:
                 ok = st.state == "succeeded"
                 if not ok:
@@ -219,7 +245,9 @@ class PatrolDriver:
                 yaw=goal.yaw,
                 position_tolerance_m=POSITION_TOLERANCE_M,
                 yaw_tolerance_rad=TURN_TOLERANCE_RAD,
-            )
+            ),
+            stamp_ns=b,
+            effective_ns=self._effective,
         )
         try:
             reply = self.bus.query(self.keys.nav_goal, req, NavGoalReply, 5.0)
@@ -242,7 +270,11 @@ class PatrolDriver:
         w = self.walker
         if isinstance(w, NavPatrol):
             if w.goal_id:
-                self.cancel.put(NavCancel(goal_id=w.goal_id, reason=f"patrol {state}"))
+                self.cancel.put(
+                    NavCancel(
+                        goal_id=w.goal_id, reason=f"patrol {state}", effective_ns=self._effective
+                    )
+                )
         else:
             self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
         self.mode.put(WbcMode(stamp_ns=b, mode="stand", cmd_vel_source=self.nav_source))

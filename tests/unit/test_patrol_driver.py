@@ -30,6 +30,9 @@ class _Latest:
     def get(self) -> Any:
         return self.value
 
+    def at(self, _stamp_ns: int) -> Any:
+        return self.value
+
 
 class _Publisher:
     def __init__(self) -> None:
