@@ -54,6 +54,7 @@ class Dependencies:
     ) -> None:
         self._lifelines = lifelines
         self._keys = {name: key_of(name) for name in names}
+        self.names = list(self._keys)
         self._armed: dict[str, int] = {}
 
     def missing(self) -> list[str]:

@@ -25,18 +25,20 @@ order across keys: a participant waits for each input stamped with the tick it n
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from common.bus import Bus, Latest, WaitTimeout
+from common.bus import AliveWatch, Bus, Latest, WaitTimeout
 from common.config import Config, Participant
 from common.keys import WORLD_CLOCK, RobotKeys
 from common.messages.sim import Ack, Clock
 
 NS_PER_S = 1_000_000_000
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -148,6 +150,28 @@ class PeriodicTicker:
         self._ack.put(Ack(service=self._name, stamp_ns=stamp_ns))
 
 
+#: Wall seconds a participant waits, at its first tick, to hear of the participants the
+#: sim already heard of (`hear_all`).
+HEAR_S = 10.0
+
+
+def hear_all(alive: AliveWatch, keys: set[str], timeout_s: float = HEAR_S) -> bool:
+    """At a participant's first tick: wait until it has heard that `keys` are alive.
+
+    The sim starts only once every configured participant is alive, but this process's
+    news of their liveliness can trail the clock (another key, another path), and a
+    participant that thinks a producer is not running does not wait for its outputs:
+    its first ticks would then depend on the machine's load. False (logged) when some
+    stay unheard of: then they are not running.
+    """
+    try:
+        alive.wait_for(keys, min(timeout_s, HEAR_S))
+    except WaitTimeout as exc:
+        log.warning("starting without hearing of every participant: %s", exc)
+        return False
+    return True
+
+
 class UpstreamGate:
     """A consumer's wait for the outputs of the periodic producers it applies in lockstep.
 
@@ -168,6 +192,7 @@ class UpstreamGate:
         self._alive = bus.watch_alive(keys.alive_all)
         self._alive_key = keys.alive
         self._version = -1
+        self._heard = False
 
     def watch(self, producer: str, output: Latest[Any]) -> None:
         p = self._participants.get(producer)
@@ -199,6 +224,9 @@ class UpstreamGate:
         """Wait until the outputs due by t are in; the producers still missing (if any)."""
         if not self.lockstep or not self._outputs:
             return []
+        if not self._heard:
+            self._heard = True
+            hear_all(self._alive, {self._alive_key(p) for p in self._outputs}, timeout_s)
         deadline = time.perf_counter() + timeout_s
         while True:
             self._refresh(t_ns)

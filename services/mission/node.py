@@ -35,7 +35,7 @@ import zenoh
 
 from common.bus import WaitTimeout
 from common.lifelines import Dependencies
-from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate
+from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate, hear_all
 from common.messages import encode
 from common.messages.mission import MissionReceipt, MissionRequest, MissionStatus
 from common.service import Service
@@ -132,6 +132,8 @@ class MissionNode:
 
     def _wait_inputs(self, b: int) -> None:
         timeout = self.svc.config.mission.input_timeout_s
+        if not self.started and self.gate.lockstep:  # its first tick: know who runs
+            hear_all(self.alive, {self.svc.keys.alive(n) for n in self.deps.names}, timeout)
         try:
             self.robot.odom.wait_stamp(b, timeout)
         except WaitTimeout:
