@@ -148,18 +148,24 @@ class MissionNode:
         if missing:
             self.svc.log.warning("t=%.2f s: no output of %s in time", b / NS_PER_S, missing)
         self.robot.begin(b)
+        self._wait_wrist(b, timeout)
+
+    def _wait_wrist(self, b: int, timeout: float) -> None:
+        """The wrist camera's detections due at b (the gate may have been met by the head
+        camera's: both share one key), when perception runs and publishes them."""
         perception = self.gate.gate.schedules.get("perception")
+        cfg = self.svc.config
         due = b - self.gate.latency_ns("perception")
+        publishes = WRIST in cfg.perception.cameras and WRIST in cfg.sim.cameras
         if (
-            perception is not None
-            and "perception" in self.gate.gate.alive
-            and self.gate.lockstep
-            and WRIST in self.svc.config.perception.cameras
-            and WRIST in self.svc.config.sim.cameras
-            and due >= 0
-            and due % perception.period_ns == 0
-            and not self.robot.wait_wrist(timeout)
+            perception is None
+            or "perception" not in self.gate.gate.alive
+            or not (self.gate.lockstep and publishes)
+            or due < 0
+            or due % perception.period_ns
         ):
+            return
+        if not self.robot.wait_wrist(timeout):
             self.svc.log.warning("t=%.2f s: no wrist detections stamped %d", b / NS_PER_S, due)
 
     # -- requests and cancels -------------------------------------------------------------
