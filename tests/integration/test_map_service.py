@@ -8,7 +8,7 @@ from __future__ import annotations
 import random
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +106,16 @@ class MapDriver:
         self.acks.wait(lambda a: a.stamp_ns >= t, timeout_s)
         self.t += PERIOD_NS
         return t
+
+    def step_until(
+        self, detections: list[Detection], done: Callable[[], bool], frames: int = 20
+    ) -> None:
+        """Step frames of `detections` until `done()`; fail after `frames` of them."""
+        for _ in range(frames):
+            self.step(detections)
+            if done():
+                return
+        raise AssertionError(f"not done after {frames} frames")
 
 
 # -- the tests ----------------------------------------------------------------------------
@@ -254,23 +264,25 @@ def test_ids_and_acknowledged_writes_survive_a_sigkill_in_the_middle_of_writes(
 def test_a_map_exported_then_imported_is_the_same_map(stack: StartStack, tmp_path: Path) -> None:
     s = stack(["semantic_map"], *map_settings(str(tmp_path / "map")))
     d = MapDriver(s)
-    # Four frames each: a frame is fused once a later one is in or two periods passed, and
-    # the last frame's detections may land after its clock tick (no order across keys).
-    for _ in range(4):
-        d.step([detection("bottle", [1.0, 1.0, 0.8]), detection("person", [0.0, 2.0, 1.0])])
-    exported = s.bus.query(MAP_EXPORT, None, MapFile, 5.0)
-    assert sorted(e.id for e in exported.entities) == ["bottle_1", "person_1"]
-    for _ in range(4):
-        d.step([detection("box", [3.0, 1.0, 0.8])])
-    assert len(_listing(s)) == 2
+
+    def export() -> MapFile:
+        return s.bus.query(MAP_EXPORT, None, MapFile, 5.0)
+
+    def ids() -> list[str]:
+        return sorted(e.id for e in _listing(s))
+
+    # A frame's detections may land after its clock tick (no order across keys; under load
+    # by several ticks): step until the map has made its entities, at most 20 frames.
+    seen = [detection("bottle", [1.0, 1.0, 0.8]), detection("person", [0.0, 2.0, 1.0])]
+    d.step_until(seen, lambda: sorted(e.id for e in export().entities) == ["bottle_1", "person_1"])
+    exported = export()
+    d.step_until([detection("box", [3.0, 1.0, 0.8])], lambda: len(_listing(s)) == 2)
     summary = s.bus.query(MAP_IMPORT, exported, MapSummary, 5.0)
     assert (summary.artifacts, summary.people) == (1, 1)
     arts = _listing(s)
     assert [e.id for e in arts] == ["bottle_1"] and arts[0].source == "import"
     # The counters came with the file: the next box is box_1, the next bottle bottle_2.
-    for _ in range(4):
-        d.step([detection("bottle", [2.0, 2.0, 0.8])])
-    assert sorted(e.id for e in _listing(s)) == ["bottle_1", "bottle_2"]
+    d.step_until([detection("bottle", [2.0, 2.0, 0.8])], lambda: ids() == ["bottle_1", "bottle_2"])
 
 
 def test_seed_from_world_uses_the_sims_ids_with_noise_and_its_floor_plan(
