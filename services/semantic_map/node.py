@@ -347,12 +347,23 @@ class MapNode:
             tr = self.smap.artifacts.by_id(entity_id) or self.smap.people.by_id(entity_id)
             if tr is not None:
                 log.info(
-                    "new %s at (%.2f, %.2f) from %s", entity_id, tr.xy[0], tr.xy[1], dets.camera
+                    "t=%.2f s: new %s at (%.2f, %.2f) from %s",
+                    dets.stamp_ns / NS_PER_S,
+                    entity_id,
+                    tr.xy[0],
+                    tr.xy[1],
+                    dets.camera,
                 )
         for entity_id in report.missing:
-            log.info("%s missing: looked at its place from %s, not seen", entity_id, dets.camera)
+            log.info(
+                "t=%.2f s: %s missing: looked at its place from %s, not seen",
+                dets.stamp_ns / NS_PER_S,
+                entity_id,
+                dets.camera,
+            )
         for entity_id, reason in report.dropped:
-            log.info("%s deleted from %s: %s", entity_id, dets.camera, reason)
+            t = dets.stamp_ns / NS_PER_S
+            log.info("t=%.2f s: %s deleted from %s: %s", t, entity_id, dets.camera, reason)
 
     def _step_patrol(self, b: int) -> None:
         if not self.patrol.running:
