@@ -22,15 +22,15 @@ import threading
 import time
 from typing import Any
 
+from bench.eval.judge import MissionRecord, WorldResult, evaluate
+from bench.eval.run import read_map, read_world, watch_mission
+from bench.eval.targets import demo_pair
 from common.bus import WaitTimeout
-from common.demo import SERVICES, demo_overrides
-from common.eval_judge import MissionRecord, WorldResult, evaluate
-from common.eval_run import read_map, read_world, watch_mission
-from common.eval_targets import demo_pair
 from common.keys import WORLD_CLOCK
 from common.messages.mission import MissionRequest
 from common.messages.sim import Clock
-from common.stack import ProcessStack, Supervised
+from deploy.demo import SERVICES, demo_overrides
+from deploy.stack import ProcessStack, Supervised
 
 #: Sim seconds into the run at which the mission is killed.
 KILL_AT_S = 0.5

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 from common.keys import CAMERAS, WORLD_CLOCK
 from common.messages.sim import CameraFrame, Clock
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 
 
 def commander(name: str, period_s: float) -> list[str]:

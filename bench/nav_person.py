@@ -29,7 +29,7 @@ from common.messages.navigation import NavGoalRequest, NavStatus, PoseGoal
 from common.messages.sim import Odom, PersonCommand, RobotContact, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from services.navigation.grid import Pose, distance_to_footprint
 
 SETTINGS = (

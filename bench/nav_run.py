@@ -30,7 +30,7 @@ from common.messages.navigation import NavGoalReply, NavGoalRequest, NavStatus, 
 from common.messages.sim import Odom, RobotContact, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 
 Corners = NDArray[np.float64]  # (4, 2) m, world, counter-clockwise
 

@@ -46,7 +46,7 @@ from common.messages import as_numpy, decode
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from services.perception import metrics
 from services.perception.geometry import backproject, transform
 from services.perception.pipeline import detect, frame_geometry

@@ -24,12 +24,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from bench.eval.run import read_map, watch_mission
+from bench.eval.targets import demo_pair
 from common.bus import BusError
-from common.demo import SERVICES, demo_overrides
-from common.eval_run import read_map, watch_mission
-from common.eval_targets import demo_pair
 from common.messages.mission import MissionRequest
-from common.stack import Supervised
+from deploy.demo import SERVICES, demo_overrides
+from deploy.stack import Supervised
 
 #: Sim seconds each round follows its request before stopping the stack.
 SIM_S = 6.0

@@ -28,7 +28,7 @@ from common.lockstep import NS_PER_S, PeriodicTicker
 from common.messages.sim import Odom, Push, RobotContact, WorldEvents
 from common.messages.wbc import ArmGoal, ArmGoalReply, ArmGoalRequest, CmdVel, WbcMode, WbcStatus
 from common.messages.wbc import GoalStatus as GoalState
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 
 NAME = "trial"
 PERIOD_S = 0.02

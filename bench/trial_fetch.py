@@ -44,7 +44,7 @@ from common.messages.sim import HandoverTaken, ObjectDropped, Odom, WorldEvents
 from common.messages.wbc import Grasp, Posture, Reach, Release, WbcMode, WbcModeName
 from common.messages.world import Cylinder, WorldDescription
 from common.robot import D_OPT_M, THETA_OPT_RAD, arm_plane
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from services.mission.approach import ApproachController, Sighting
 from services.mission.grasp_pose import GraspPoseError, grasp_from_detection, plan_error
 from services.mission.handover_feel import PullDetector

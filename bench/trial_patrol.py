@@ -25,7 +25,7 @@ from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, WORLD_CLOCK, WORLD_DESCRIPTIO
 from common.messages.semantic_map import MapEntity, MapListing, PatrolRequest, PatrolStatus
 from common.messages.sim import Clock
 from common.messages.world import WorldDescription
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 
 SERVICES = ["sim", "wbc", "perception", "semantic_map", "navigation"]
 #: A map entity further than this from every truth of its class is a false entry, m.

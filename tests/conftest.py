@@ -13,7 +13,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from common.config import REPO_ROOT
-from common.stack import MODULES, ProcessStack
+from deploy.stack import MODULES, ProcessStack
 
 StartStack = Callable[..., ProcessStack]
 
@@ -21,7 +21,7 @@ StartStack = Callable[..., ProcessStack]
 def dume(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     """Run the `dume` command line as a user would, from the repository."""
     return subprocess.run(
-        [sys.executable, "-m", "common.cli", *args],
+        [sys.executable, "-m", "deploy.cli", *args],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

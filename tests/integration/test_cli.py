@@ -12,7 +12,7 @@ import pytest
 
 from common.keys import WORLD_CLOCK
 from common.messages.sim import Clock, Odom
-from common.stack import free_port
+from deploy.stack import free_port
 from tests.conftest import HOLD_COMMANDER, StartStack, dume
 
 pytestmark = pytest.mark.integration

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from common.config import REPO_ROOT
-from common.demo import SERVICES
-from common.stack import SUPERVISORD_CONF, free_port, wait_until
+from deploy.demo import SERVICES
+from deploy.stack import SUPERVISORD_CONF, free_port, wait_until
 from tests.conftest import dume
 
 pytestmark = pytest.mark.integration
@@ -49,7 +49,7 @@ def test_dume_up_runs_the_stack_and_restarts_a_killed_sim(tmp_path: Path) -> Non
         [
             sys.executable,
             "-m",
-            "common.cli",
+            "deploy.cli",
             "up",
             "--port",
             str(port),

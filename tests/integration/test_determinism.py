@@ -18,13 +18,13 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from common.eval_judge import MissionRecord, run_digest
-from common.eval_run import read_map, watch_mission
-from common.eval_targets import seeded_pair
-from common.evaluate import SERVICES, world_overrides
+from bench.eval.evaluate import SERVICES, world_overrides
+from bench.eval.judge import MissionRecord, run_digest
+from bench.eval.run import read_map, watch_mission
+from bench.eval.targets import seeded_pair
 from common.messages.mission import STAGES, MissionRequest
 from common.messages.sim import HandoverTaken, ObjectDropped
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 

@@ -37,7 +37,7 @@ from common.messages.semantic_map import (
     PatrolStatus,
 )
 from common.messages.sim import Ack, Clock
-from common.stack import ProcessStack, wait_until
+from deploy.stack import ProcessStack, wait_until
 from services.semantic_map.store import MapStore
 from tests.conftest import HOLD_COMMANDER, StartStack
 

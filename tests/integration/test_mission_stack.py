@@ -13,14 +13,14 @@ from pathlib import Path
 
 import pytest
 
-from common.eval_judge import MissionRecord
-from common.eval_run import watch_mission
+from bench.eval.judge import MissionRecord
+from bench.eval.run import watch_mission
 from common.keys import WORLD_CLOCK
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.navigation import NavStatus
 from common.messages.sim import Clock
 from common.messages.wbc import WbcStatus
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from tests.conftest import HOLD_COMMANDER, StartStack
 
 pytestmark = pytest.mark.integration

@@ -27,7 +27,7 @@ from common.messages.navigation import (
     PoseGoal,
 )
 from common.messages.sim import Odom, RobotContact, WorldEvents
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from tests.conftest import StartStack
 
 pytestmark = pytest.mark.integration

@@ -25,7 +25,7 @@ from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.wbc import Posture
 from common.messages.world import Artifact, WorldDescription
 from common.robot import STANDOFF_DISTANCE_M
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from services.perception.geometry import backproject, transform
 from services.perception.pipeline import frame_geometry
 from services.sim.feasibility import standoff_pose_for

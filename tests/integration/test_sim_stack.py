@@ -14,7 +14,7 @@ from common.messages import as_numpy
 from common.messages.sim import CameraFrame, Clock, Odom, RobotDescription, RobotState
 from common.messages.sim import SegmentationTruth as SegTruth
 from common.messages.world import WorldDescription
-from common.stack import ProcessStack
+from deploy.stack import ProcessStack
 from tests.conftest import HOLD_COMMANDER, StartStack
 
 pytestmark = pytest.mark.integration

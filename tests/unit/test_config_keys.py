@@ -63,7 +63,7 @@ def test_keys_are_built_from_the_robot_namespace() -> None:
 
 
 def test_a_stack_of_some_services_waits_only_for_those() -> None:
-    from common.stack import only_started
+    from deploy.stack import only_started
 
     overrides = [
         "time.participants={}",

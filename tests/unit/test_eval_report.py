@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from common.eval_judge import (
+from bench.eval.judge import (
     MissionRecord,
     WorldResult,
     evaluate,
@@ -22,8 +22,8 @@ from common.eval_judge import (
     truth_object,
     truth_person,
 )
-from common.eval_report import summarize, write_report
-from common.eval_targets import TargetError, demo_pair, seeded_pair
+from bench.eval.report import summarize, write_report
+from bench.eval.targets import TargetError, demo_pair, seeded_pair
 from common.messages.mission import STAGES, MissionRequest, MissionState, MissionStatus
 from common.messages.semantic_map import MapEntity
 from common.messages.sim import HandoverTaken, ObjectDropped, RobotContact, WorldEvent
@@ -328,10 +328,10 @@ def test_the_report_and_plots_are_written_with_the_right_numbers(tmp_path: Path)
 
 
 def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run() -> None:
-    from common.cli import build_parser
+    from bench.eval.evaluate import world_overrides
     from common.config import load_config
-    from common.demo import demo_overrides
-    from common.evaluate import world_overrides
+    from deploy.cli import build_parser
+    from deploy.demo import demo_overrides
 
     args = build_parser().parse_args(
         ["eval", "--worlds", "2", "--world", "small", "--walking-people"]

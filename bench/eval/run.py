@@ -23,17 +23,17 @@ import time
 from collections.abc import Callable, Iterator
 from types import FrameType
 
-from common.bus import Bus, Fifo, Latest, WaitTimeout
-from common.eval_judge import (
+from bench.eval.judge import (
     TERMINAL,
     TRAJECTORY_EVERY_NS,
     MissionRecord,
     WorldResult,
     transitions,
 )
-from common.eval_judge import truth_object as match_object
-from common.eval_judge import truth_person as match_person
-from common.eval_targets import Pair
+from bench.eval.judge import truth_object as match_object
+from bench.eval.judge import truth_person as match_person
+from bench.eval.targets import Pair
+from common.bus import Bus, Fifo, Latest, WaitTimeout
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_PEOPLE,

@@ -49,7 +49,7 @@ def _client_config(args: argparse.Namespace) -> Config:
 
 def cmd_up(args: argparse.Namespace) -> int:
     from common.recording import new_run_id
-    from common.stack import SUPERVISORD_CONF, stack_env
+    from deploy.stack import SUPERVISORD_CONF, stack_env
 
     settings = [f"sim.world_seed={args.world_seed}", f'sim.world="{args.world}"', *args.set]
     if args.realtime:
@@ -216,28 +216,28 @@ def cmd_map(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from common.demo import run_demo
+    from deploy.demo import run_demo
 
     return run_demo(args)
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from common.evaluate import run_eval
+    from bench.eval.evaluate import run_eval
 
     return run_eval(args)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
     from bench import run_bench
-    from common.eval_run import sigterm_interrupts
+    from bench.eval.run import sigterm_interrupts
 
     with sigterm_interrupts():  # a killed bench still stops its stack
         return run_bench(args.which, args.set, args.rounds)
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
+    from bench.eval.run import sigterm_interrupts
     from bench.trials import run_trial
-    from common.eval_run import sigterm_interrupts
 
     options: dict[str, object] = {"world": args.world, "count": args.count, "yaw": args.yaw}
     if args.which == "goto":

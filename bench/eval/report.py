@@ -20,7 +20,7 @@ from typing import Any
 
 import msgspec
 
-from common.eval_judge import WorldResult
+from bench.eval.judge import WorldResult
 from common.messages.mission import STAGES
 
 PLOTS = ("stage_times.png", "outcomes.png")

@@ -203,7 +203,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
 
 @dataclass
 class MissionRecord:
-    """What was seen of one request on a live stack (`common.eval_run.watch_mission`).
+    """What was seen of one request on a live stack (`bench.eval.run.watch_mission`).
 
     start_ns: sim time when the request went out. end_ns: sim time when watching stopped.
     changes: the request's status changes (`transitions`). events: every world event

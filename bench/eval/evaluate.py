@@ -8,8 +8,8 @@ teardown is certain: the stack stops in a `finally`, on failure, on Ctrl-C and o
 SIGTERM (turned into the same interrupt). The map starts from the world's truth with
 noise (`seed-from-world`, noise seeded by the world seed, a fresh database per world),
 standing in for an earlier mapping run. The request is a random mapped artifact and
-person (`common.eval_targets.seeded_pair`, seeded by the world seed). Success is the
-truth's (`common.eval_judge`). The segmenter and the locomotion the report states are
+person (`bench.eval.targets.seeded_pair`, seeded by the world seed). Success is the
+truth's (`bench.eval.judge`). The segmenter and the locomotion the report states are
 read back from what the running stack publishes.
 
 Progress is one compact line per stage change and one per world on stderr, not a
@@ -27,12 +27,9 @@ import sys
 import time
 from typing import Any
 
-from common.bus import BusError
-from common.config import REPO_ROOT, ConfigError, resolve
-from common.demo import SERVICES
-from common.eval_judge import MissionRecord, WorldResult, evaluate
-from common.eval_report import json_safe, write_report
-from common.eval_run import (
+from bench.eval.judge import MissionRecord, WorldResult, evaluate
+from bench.eval.report import json_safe, write_report
+from bench.eval.run import (
     Progress,
     read_back,
     read_map,
@@ -42,11 +39,14 @@ from common.eval_run import (
     start_gate_overrides,
     watch_mission,
 )
-from common.eval_targets import TargetError, seeded_pair
+from bench.eval.targets import TargetError, seeded_pair
+from common.bus import BusError
+from common.config import REPO_ROOT, ConfigError, resolve
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
-from common.stack import ProcessStack
+from deploy.demo import SERVICES
+from deploy.stack import ProcessStack
 
 #: Wall seconds for a world's stack to come up (every service ready), and for each of
 #: its processes to exit when stopped (the sim may be flushing a recording).

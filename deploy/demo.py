@@ -1,7 +1,7 @@
 """`dume demo`: start a stack under supervisord, ask for an object, follow it, stop, and
 print one JSON line.
 
-The stack is every service (`SERVICES`) under supervisord (`common.stack.Supervised`),
+The stack is every service (`SERVICES`) under supervisord (`deploy.stack.Supervised`),
 lockstep, recording to `recordings/<run>/`. The semantic map starts from the world's
 truth positions with noise (`semantic_map.start = "seed-from-world"`), standing in for an
 earlier mapping run (`dume map --patrol`), or from a prior map file (`--map FILE`), in a
@@ -13,7 +13,7 @@ progress, sim time and real-time factor. The outcome is `succeeded` when the mis
 says so and the sim's truth agrees (its `HandoverTaken` event: the object the requested
 map id stands for in the requested person's hand); exit code 0 only then. The last line:
 `{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording",
-"digest"}`: the digest fingerprints the run (`common.eval_judge.run_digest`: the status
+"digest"}`: the digest fingerprints the run (`bench.eval.judge.run_digest`: the status
 timeline and the base's trajectory at 10 Hz), so two runs of one seed can be compared;
 `var/run/<run>-<port>/record.json` holds what it was made of.
 """
@@ -28,10 +28,8 @@ from pathlib import Path
 
 import msgspec
 
-from common.bus import BusError
-from common.config import REPO_ROOT, resolve
-from common.eval_judge import WorldResult, evaluate
-from common.eval_run import (
+from bench.eval.judge import WorldResult, evaluate
+from bench.eval.run import (
     DEPENDENCY_LOST,
     read_back,
     read_map,
@@ -41,12 +39,14 @@ from common.eval_run import (
     start_gate_overrides,
     watch_mission,
 )
-from common.eval_targets import TargetError, demo_pair
+from bench.eval.targets import TargetError, demo_pair
+from common.bus import BusError
+from common.config import REPO_ROOT, resolve
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
 from common.recording import new_run_id, run_dir
-from common.stack import Supervised
+from deploy.stack import Supervised
 
 #: The services `dume up` runs (supervisord's programs that start by default).
 SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation", "mission")
