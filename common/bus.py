@@ -28,6 +28,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any, Generic, Literal, TypeVar
 
+import msgspec
 import zenoh
 
 from common.config import Config, resolve
@@ -151,6 +152,12 @@ class OutputTrace:
         self._count += 1
 
 
+def _traced(msg: Any, payload: bytes) -> bytes:
+    """What a trace hashes: the payload, with its wall-clock fields zeroed."""
+    wall = getattr(msg, "WALL_CLOCK", ())
+    return encode(msgspec.structs.replace(msg, **dict.fromkeys(wall, 0))) if wall else payload
+
+
 class Publisher(Generic[T]):
     """A declared publisher of one message type."""
 
@@ -164,7 +171,7 @@ class Publisher(Generic[T]):
     def put(self, msg: T) -> None:
         payload = encode(msg)
         if self._trace is not None:
-            self._trace.add(payload, getattr(msg, "stamp_ns", None))
+            self._trace.add(_traced(msg, payload), getattr(msg, "stamp_ns", None))
         self._pub.put(payload)
 
     def put_raw(self, payload: bytes) -> None:
@@ -215,14 +222,25 @@ class _Subscription(ABC, Generic[T]):
 
 class Latest(_Subscription[T]):
     """The newest `history` samples. `get()` is the newest; `at(stamp_ns)` the newest at or
-    before a sim time (what a lockstep participant must use for its tick)."""
+    before a sim time (what a lockstep participant must use for its tick). With `where`,
+    only the samples it accepts (one producer's, on a key several publish on)."""
 
-    def __init__(self, session: zenoh.Session, key: str, type_: type[T], history: int) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        type_: type[T],
+        history: int,
+        where: Callable[[T], bool] | None = None,
+    ) -> None:
         self._buf: deque[T] = deque(maxlen=max(1, history))
+        self._where = where
         self.last_key = ""
         super().__init__(session, key, type_)
 
     def _store(self, msg: T, key: str) -> None:
+        if self._where is not None and not self._where(msg):
+            return
         self._buf.append(msg)
         self.last_key = key
 
@@ -442,8 +460,14 @@ class Bus:
         del type_  # for the reader and the type checker: what this publisher sends
         return Publisher(self.session, key, traffic, self.trace_every_ns)
 
-    def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
-        return Latest(self.session, key, type_, history)
+    def latest(
+        self,
+        key: str,
+        type_: type[T],
+        history: int = 1,
+        where: Callable[[T], bool] | None = None,
+    ) -> Latest[T]:
+        return Latest(self.session, key, type_, history, where)
 
     def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
         return Fifo(self.session, key, type_, maxlen)

@@ -28,7 +28,7 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -220,17 +220,22 @@ class UpstreamGate:
             if newest is not None:
                 self.gate.ack(p, newest.stamp_ns)
 
-    def wait(self, t_ns: int, timeout_s: float) -> list[str]:
-        """Wait until the outputs due by t are in; the producers still missing (if any)."""
+    def wait(
+        self, t_ns: int, timeout_s: float, producers: Collection[str] | None = None
+    ) -> list[str]:
+        """Wait until the outputs due by t are in (of `producers` only, when given); the
+        producers still missing (if any)."""
         if not self.lockstep or not self._outputs:
             return []
         if not self._heard:
             self._heard = True
-            hear_all(self._alive, {self._alive_key(p) for p in self._outputs}, timeout_s)
+            hear_all(self._alive, {self._alive_key(p) for p in self._outputs})
         deadline = time.perf_counter() + timeout_s
         while True:
             self._refresh(t_ns)
             missing = self.gate.blocking(t_ns)
+            if producers is not None:
+                missing = [p for p in missing if p in producers]
             if not missing or time.perf_counter() > deadline:
                 return missing
             need = self.gate.schedules[missing[0]].required_ack(t_ns)

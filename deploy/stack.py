@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from common.bus import Bus
+from common.bus import AliveWatch, Bus
 from common.config import REPO_ROOT, Config, load_config
 from common.keys import RobotKeys, service_of_alive_key
 from common.recording import new_run_id
@@ -101,16 +101,24 @@ class _Stack:
         self.config: Config = load_config(env=self.env)
         self.keys = RobotKeys(self.config.robot)
         self._bus: Bus | None = None
+        self._alive: AliveWatch | None = None
 
     @property
     def bus(self) -> Bus:
         """A client session on this stack (opened on first use)."""
         if self._bus is None:
             self._bus = Bus.open(self.config)
+            self._alive = self._bus.watch_alive(self.keys.alive_all)
         return self._bus
 
     def alive(self) -> set[str]:
-        return {service_of_alive_key(k) for k in self.bus.alive_now(self.keys.alive_all)}
+        """The services alive now. One is down only when both the session's liveliness
+        subscription and a liveliness query say so: under load a query can end with no
+        reply at all (a demo once reported every service down at its end)."""
+        bus = self.bus
+        assert self._alive is not None
+        keys = self._alive.alive() | bus.alive_now(self.keys.alive_all)
+        return {service_of_alive_key(k) for k in keys}
 
     def wait_ready(self, services: Sequence[str], timeout_s: float = 60.0) -> None:
         """Wait until `services` are alive.
@@ -130,6 +138,9 @@ class _Stack:
                 own.close()
 
     def close_bus(self) -> None:
+        if self._alive is not None:
+            self._alive.undeclare()
+            self._alive = None
         if self._bus is not None:
             self._bus.close()
             self._bus = None

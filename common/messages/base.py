@@ -34,9 +34,13 @@ NS_PER_S = 1_000_000_000
 
 
 class Message(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
-    """Base of every payload. `WIRE` says how it travels: msgpack, or JSON for users."""
+    """Base of every payload. `WIRE` says how it travels: msgpack, or JSON for users.
+    `WALL_CLOCK` names the fields that are wall-clock figures (for monitoring): they
+    differ between two runs of one seed by design, so a run's trace leaves them out.
+    """
 
     WIRE: ClassVar[Literal["msgpack", "json"]] = "msgpack"
+    WALL_CLOCK: ClassVar[tuple[str, ...]] = ()
 
 
 class Pose(Message, frozen=True):

@@ -86,6 +86,8 @@ class Detections(Message, frozen=True):
     process_ms: NonNegative = 0.0
     segment_ms: NonNegative = 0.0
 
+    WALL_CLOCK = ("process_ms", "segment_ms")
+
 
 class LocateRequest(Message, frozen=True):
     """`dume/<r>/perception/locate`: the best current instance of a class or map id.

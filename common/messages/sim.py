@@ -40,6 +40,8 @@ class Clock(Message, frozen=True):
     mode: TimeMode
     rtf: NonNegative = 0.0
 
+    WALL_CLOCK = ("rtf",)
+
 
 class RobotState(Message, frozen=True):
     """`dume/<r>/state`, 1 kHz: everything the whole-body controller needs.

@@ -127,3 +127,5 @@ class WbcStatus(Message, frozen=True):
     held: bool
     gripper_wrench: tuple[Finite, Finite, Finite, Finite, Finite, Finite]
     reason: str = ""
+
+    WALL_CLOCK = ("qp_time_us",)

@@ -5,7 +5,12 @@ one `JointCommand` with the state's stamp, and nothing else is waited for in bet
 cmd_vel, modes and arm goals are drained from their buffers without blocking. Per tick:
 
 1. inputs due at t: `wbc/mode` samples and cmd_vel of the obeyed source at stamp +
-   latency (`inputs`), arm goals accepted whose `effective_ns` has come (`arm_actions`);
+   latency (`inputs`), arm goals accepted whose `effective_ns` has come (`arm_actions`).
+   In lockstep the tick first waits (`UpstreamGate`, at most `UPSTREAM_WAIT_S` of wall
+   time) for the cmd_vel due now from the mode's source (the mission publishes one every
+   period, its modes just before) and then from the obeyed source: the sim stepped past
+   their tick once they acked it, but their ack can reach the sim before their cmd_vel
+   reaches us, and a command applied one period late is a different run;
 2. the command: damping in `damp`; otherwise `WholeBodyController.step` with the gait
    command (walk only) and the arm references; a failed QP keeps the last torques for
    one tick, then the stand hold (`safety`) takes over until `recover_ticks` good solves;
@@ -25,13 +30,14 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
 from common import robot
 from common.bus import RequestError, WaitTimeout
 from common.geometry import FloatArray
-from common.lockstep import NS_PER_S
+from common.lockstep import NS_PER_S, UpstreamGate
 from common.messages import Array, ArrayError, as_numpy
 from common.messages.sim import JointCommand, RobotState
 from common.messages.wbc import (
@@ -99,6 +105,14 @@ def joint_command(stamp_ns: int, cmd: WbcCommand) -> JointCommand:
     )
 
 
+#: How long a tick waits for an upstream cmd_vel (wall s) before it goes on without.
+UPSTREAM_WAIT_S = 0.5
+
+
+def _sent_by(source: str) -> Callable[[CmdVel], bool]:
+    return lambda msg: msg.source == source
+
+
 class WbcNode:
     """The service's loop and its bookkeeping (mode, fallback, goals, status)."""
 
@@ -136,6 +150,11 @@ class WbcNode:
         bus, keys = svc.bus, svc.keys
         self.states = bus.latest(keys.state, RobotState, history=4)
         self.cmd_vel = bus.fifo(keys.cmd_vel, CmdVel, maxlen=4096)
+        self.upstream = UpstreamGate(bus, keys, cfg)
+        self.mode_source = w.mode_source
+        for name in sorted(cfg.time.participants):  # any periodic one may send cmd_vel
+            self.upstream.watch(name, bus.latest(keys.cmd_vel, CmdVel, where=_sent_by(name)))
+        self.late_inputs = 0
         self.mode_in = bus.fifo(keys.wbc_mode, WbcMode, maxlen=256)
         self.commands = bus.publisher(keys.command, JointCommand, "control")
         self.status = bus.publisher(keys.wbc_status, WbcStatus, "data")
@@ -237,10 +256,12 @@ class WbcNode:
         )
 
     def _inputs(self, t: int, state: WbcState, msg: RobotState) -> None:
+        self._upstream(t, self.mode_source)
         for mode_msg in self.mode_in.drain():
             self.modes.push(mode_msg)
         for mode_msg in self.modes.due(t):
             self._set_mode(mode_msg, t, state)
+        self._upstream(t, self.arbiter.source)
         for cmd in self.cmd_vel.drain():
             self.arbiter.push(cmd)
         with self._goal_lock:  # goals start at their effective tick, in the order they came
@@ -249,6 +270,17 @@ class WbcNode:
         assert self.obs is not None  # set on the first tick
         for goal_id, goal, _effective in due:
             self.actions.start(goal_id, goal, t, self.obs, self.poses.at)
+
+    def _upstream(self, t: int, producer: str) -> None:
+        """Wait for `producer`'s cmd_vel due at t (lockstep; see the module's docstring)."""
+        if not self.upstream.wait(t, UPSTREAM_WAIT_S, (producer,)):
+            return
+        self.late_inputs += 1
+        if self.late_inputs in (1, 10, 100) or self.late_inputs % 1000 == 0:
+            self._say(
+                f"t={t / NS_PER_S:.3f} s: no cmd_vel from {producer} for its tick due now "
+                f"within {UPSTREAM_WAIT_S} s ({self.late_inputs} times): went on without it"
+            )
 
     def _set_mode(self, msg: WbcMode, t: int, state: WbcState) -> None:
         self.arbiter.select(msg.cmd_vel_source)

@@ -32,3 +32,17 @@ def test_the_same_outputs_log_the_same_lines_and_one_change_shows_from_its_perio
     other = _lines(caplog, changed)
     assert other[0] == same[0]  # before the change: the same
     assert other[1:] != same[1:]  # from its period on: not
+
+
+def test_a_trace_leaves_out_the_wall_clock_fields_and_nothing_else() -> None:
+    from common.bus import _traced
+    from common.messages import encode
+    from common.messages.sim import Clock
+
+    def traced(msg: Clock) -> bytes:
+        return _traced(msg, encode(msg))
+
+    fast = Clock(stamp_ns=MS, tick=1, mode="lockstep", rtf=2.0)
+    slow = Clock(stamp_ns=MS, tick=1, mode="lockstep", rtf=0.4)
+    assert encode(fast) != encode(slow) and traced(fast) == traced(slow)
+    assert traced(fast) != traced(Clock(stamp_ns=MS, tick=2, mode="lockstep", rtf=2.0))
