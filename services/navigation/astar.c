@@ -6,7 +6,8 @@
  * octile distance, consistent because every edge costs at least its step.
  * Returns the path length in cells written to path (goal first) or -1 (no path),
  * -2 (path longer than max_path), -3 (out of memory).
- * Built at run time by services/navigation/native.py; no Python headers needed.
+ * Built at install (setup.py) and loaded by services/navigation/native.py with ctypes;
+ * no Python headers needed.
  */
 #include <math.h>
 #include <stdlib.h>

@@ -1,27 +1,22 @@
-"""The grid search itself: A* in C (built at first use), or scipy's Dijkstra without a compiler.
+"""The grid search itself: A* in C (built at install), or scipy's Dijkstra without a compiler.
 
 `search(cost, start, goal, weight)` finds the cheapest 8-connected path on a cost grid
 (`cost < 0` lethal; an edge u→v costs step · (1 + weight · (c_u + c_v) / 2), step 1 or √2
 cells; no diagonal past a lethal cell). The C source (`astar.c`, plain C99, no Python
-headers) is compiled once with the system's C compiler into `var/build/` (keyed by the
-source's hash, so an edit rebuilds) and loaded with ctypes: a pure-Python A* is ~100×
-too slow for 640 k cells. Without a compiler the same graph goes to
-`scipy.sparse.csgraph.dijkstra` (exact, slower); `grid_graph` is also the independent
-reference the unit tests compare A* against.
+headers) is built by the install (`setup.py`: an optional setuptools extension,
+`services/navigation/_astar*.so`) and loaded with ctypes: a pure-Python A* is ~100×
+too slow for 640 k cells. Nothing compiles at run time. Without a compiler the same
+graph goes to `scipy.sparse.csgraph.dijkstra` (exact, slower); `grid_graph` is also the
+independent reference the unit tests compare A* against.
 """
 
 from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
+import importlib.util
 import logging
 import math
-import os
-import shutil
-import subprocess
-import tempfile
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -29,12 +24,8 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from common.config import REPO_ROOT
-
 log = logging.getLogger(__name__)
 
-SOURCE = Path(__file__).with_name("astar.c")
-BUILD_DIR = REPO_ROOT / "var" / "build"
 _OFFSETS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
 
 
@@ -49,25 +40,13 @@ class SearchResult(NamedTuple):
 
 @functools.cache
 def _library() -> ctypes.CDLL | None:
-    """The compiled search, or None when no C compiler is available (logged once)."""
-    source = SOURCE.read_bytes()
-    lib = BUILD_DIR / f"nav_astar_{hashlib.sha256(source).hexdigest()[:16]}.so"
-    if not lib.exists():
-        cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-        if cc is None:
-            log.warning("no C compiler: planning with scipy's Dijkstra (slower)")
-            return None
-        BUILD_DIR.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=BUILD_DIR, suffix=".so")
-        os.close(fd)
-        cmd = [cc, "-O3", "-shared", "-fPIC", "-o", tmp, str(SOURCE), "-lm"]
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if done.returncode != 0:
-            os.unlink(tmp)
-            log.warning("building %s failed (%s): using scipy", SOURCE.name, done.stderr[-500:])
-            return None
-        os.replace(tmp, lib)  # atomic: processes building at once do not see half a file
-    dll = ctypes.CDLL(str(lib))
+    """The compiled search, or None when the install built none (logged once)."""
+    spec = importlib.util.find_spec(f"{__package__}._astar")
+    if spec is None or spec.origin is None:
+        log.warning("the C grid search was not built at install: planning with scipy (slower)")
+        return None
+    lib = spec.origin
+    dll = ctypes.CDLL(lib)
     f = dll.astar
     f.restype = ctypes.c_long
     f.argtypes = [

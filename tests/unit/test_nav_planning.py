@@ -20,6 +20,11 @@ from services.sim.world import generate_world
 FP = Footprint.stowed()
 
 
+def test_the_install_built_the_c_search() -> None:
+    # `make install` builds it (setup.py); the scipy fallback is for machines without cc.
+    assert native.compiled()
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_astar_cost_equals_dijkstra_on_random_grids(seed: int) -> None:
     rng = np.random.default_rng(seed)
