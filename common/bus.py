@@ -222,25 +222,14 @@ class _Subscription(ABC, Generic[T]):
 
 class Latest(_Subscription[T]):
     """The newest `history` samples. `get()` is the newest; `at(stamp_ns)` the newest at or
-    before a sim time (what a lockstep participant must use for its tick). With `where`,
-    only the samples it accepts (one producer's, on a key several publish on)."""
+    before a sim time (what a lockstep participant must use for its tick)."""
 
-    def __init__(
-        self,
-        session: zenoh.Session,
-        key: str,
-        type_: type[T],
-        history: int,
-        where: Callable[[T], bool] | None = None,
-    ) -> None:
+    def __init__(self, session: zenoh.Session, key: str, type_: type[T], history: int) -> None:
         self._buf: deque[T] = deque(maxlen=max(1, history))
-        self._where = where
         self.last_key = ""
         super().__init__(session, key, type_)
 
     def _store(self, msg: T, key: str) -> None:
-        if self._where is not None and not self._where(msg):
-            return
         self._buf.append(msg)
         self.last_key = key
 
@@ -460,14 +449,8 @@ class Bus:
         del type_  # for the reader and the type checker: what this publisher sends
         return Publisher(self.session, key, traffic, self.trace_every_ns)
 
-    def latest(
-        self,
-        key: str,
-        type_: type[T],
-        history: int = 1,
-        where: Callable[[T], bool] | None = None,
-    ) -> Latest[T]:
-        return Latest(self.session, key, type_, history, where)
+    def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
+        return Latest(self.session, key, type_, history)
 
     def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
         return Fifo(self.session, key, type_, maxlen)

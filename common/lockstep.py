@@ -30,9 +30,9 @@ import threading
 import time
 from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
-from common.bus import AliveWatch, Bus, Latest, WaitTimeout
+from common.bus import AliveWatch, Bus, WaitTimeout
 from common.config import Config, Participant
 from common.keys import WORLD_CLOCK, RobotKeys
 from common.messages.sim import Ack, Clock
@@ -172,6 +172,15 @@ def hear_all(alive: AliveWatch, keys: set[str], timeout_s: float = HEAR_S) -> bo
     return True
 
 
+class Output(Protocol):
+    """A producer's output as a consumer holds it: a `Latest`, or the consumer's own store
+    (the gate must see the very samples the consumer will read, not a second copy)."""
+
+    def get(self) -> Any: ...
+
+    def wait_stamp(self, stamp_ns: int, timeout_s: float) -> Any: ...
+
+
 class UpstreamGate:
     """A consumer's wait for the outputs of the periodic producers it applies in lockstep.
 
@@ -188,13 +197,13 @@ class UpstreamGate:
         self._tick_ns = round(NS_PER_S / config.time.tick_hz)
         self.gate = AckGate({}, self._tick_ns)
         self.lockstep = config.time.mode == "lockstep"
-        self._outputs: dict[str, Latest[Any]] = {}
+        self._outputs: dict[str, Output] = {}
         self._alive = bus.watch_alive(keys.alive_all)
         self._alive_key = keys.alive
         self._version = -1
         self._heard = False
 
-    def watch(self, producer: str, output: Latest[Any]) -> None:
+    def watch(self, producer: str, output: Output) -> None:
         p = self._participants.get(producer)
         if p is None or p.role != "periodic":
             return  # not a periodic participant: its outputs apply on arrival

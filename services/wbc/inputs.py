@@ -55,6 +55,11 @@ class CmdVelArbiter:
             buf = self._bufs[msg.source] = deque(maxlen=self.history)
         buf.append(msg)
 
+    def newest(self, source: str) -> CmdVel | None:
+        """The newest sample `source` sent (obeyed or not)."""
+        buf = self._bufs.get(source)
+        return buf[-1] if buf else None
+
     def command(self, t_ns: int) -> FloatArray:
         """(vx, vy, ωz) in effect at t; zeros when none is due or the newest is stale."""
         latency = self.latency_ns.get(self.source, 0)

@@ -30,12 +30,11 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
 
 import numpy as np
 
 from common import robot
-from common.bus import RequestError, WaitTimeout
+from common.bus import Fifo, RequestError, WaitTimeout
 from common.geometry import FloatArray
 from common.lockstep import NS_PER_S, UpstreamGate
 from common.messages import Array, ArrayError, as_numpy
@@ -109,8 +108,30 @@ def joint_command(stamp_ns: int, cmd: WbcCommand) -> JointCommand:
 UPSTREAM_WAIT_S = 0.5
 
 
-def _sent_by(source: str) -> Callable[[CmdVel], bool]:
-    return lambda msg: msg.source == source
+class ArbiterFeed:
+    """One source's cmd_vel as the arbiter holds it: what `UpstreamGate` waits on. Reading
+    it moves what arrived into the arbiter (the WBC's thread only), so the gate is met by
+    the very samples the arbiter will use, never by a copy that arrived first."""
+
+    def __init__(self, fifo: Fifo[CmdVel], arbiter: CmdVelArbiter, source: str) -> None:
+        self.fifo, self.arbiter, self.source = fifo, arbiter, source
+
+    def get(self) -> CmdVel | None:
+        for cmd in self.fifo.drain():
+            self.arbiter.push(cmd)
+        return self.arbiter.newest(self.source)
+
+    def wait_stamp(self, stamp_ns: int, timeout_s: float) -> CmdVel:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            newest = self.get()
+            if newest is not None and newest.stamp_ns >= stamp_ns:
+                return newest
+            left = deadline - time.monotonic()
+            cmd = self.fifo.pop(timeout_s=left) if left > 0 else None
+            if cmd is None:
+                raise WaitTimeout(f"no cmd_vel from {self.source} stamped {stamp_ns}")
+            self.arbiter.push(cmd)
 
 
 class WbcNode:
@@ -153,7 +174,7 @@ class WbcNode:
         self.upstream = UpstreamGate(bus, keys, cfg)
         self.mode_source = w.mode_source
         for name in sorted(cfg.time.participants):  # any periodic one may send cmd_vel
-            self.upstream.watch(name, bus.latest(keys.cmd_vel, CmdVel, where=_sent_by(name)))
+            self.upstream.watch(name, ArbiterFeed(self.cmd_vel, self.arbiter, name))
         self.late_inputs = 0
         self.mode_in = bus.fifo(keys.wbc_mode, WbcMode, maxlen=256)
         self.commands = bus.publisher(keys.command, JointCommand, "control")
@@ -262,8 +283,6 @@ class WbcNode:
         for mode_msg in self.modes.due(t):
             self._set_mode(mode_msg, t, state)
         self._upstream(t, self.arbiter.source)
-        for cmd in self.cmd_vel.drain():
-            self.arbiter.push(cmd)
         with self._goal_lock:  # goals start at their effective tick, in the order they came
             due = [p for p in self._pending if p[2] <= t]
             self._pending = deque(p for p in self._pending if p[2] > t)

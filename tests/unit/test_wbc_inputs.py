@@ -114,3 +114,33 @@ def test_damped_least_squares_stays_finite_at_a_singular_jacobian() -> None:
     J[0, 0] = 1.0
     F = wrench_from_residual(J, np.ones(6), 0.02)
     assert np.all(np.isfinite(F))
+
+
+class _Fifo:
+    """The part of `common.bus.Fifo` the feed uses, filled by the test."""
+
+    def __init__(self, *msgs: CmdVel) -> None:
+        self.q = list(msgs)
+
+    def drain(self) -> list[CmdVel]:
+        out, self.q = self.q, []
+        return out
+
+    def pop(self, timeout_s: float = 0.0) -> CmdVel | None:
+        return self.q.pop(0) if self.q else None
+
+
+def test_the_gate_is_met_only_by_samples_the_arbiter_holds() -> None:
+    from common.bus import WaitTimeout
+    from services.wbc.node import ArbiterFeed
+
+    arb = CmdVelArbiter({"navigation": 50 * MS}, 500 * MS)
+    arb.select("navigation")
+    fifo = _Fifo(cmd(0, 0.1), cmd(0, 0.9, source="mission"))
+    feed = ArbiterFeed(fifo, arb, "navigation")  # type: ignore[arg-type]
+    assert feed.get() == cmd(0, 0.1) and arb.newest("mission") == cmd(0, 0.9, "mission")
+    with pytest.raises(WaitTimeout):
+        feed.wait_stamp(50 * MS, 0.01)
+    fifo.q.append(cmd(50, 0.3))
+    assert feed.wait_stamp(50 * MS, 0.01).vx == 0.3
+    assert arb.command(100 * MS)[0] == 0.3  # what met the gate is what the arbiter obeys
