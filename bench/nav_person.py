@@ -25,7 +25,7 @@ from bench.nav_run import nav_stack, odom_pose, send_goal
 from common.bus import Latest
 from common.config import REPO_ROOT
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS, WORLD_PEOPLE_COMMAND
-from common.messages.navigation import NavGoalRequest, NavStatus, PoseGoal
+from common.messages.navigation import NavStatus, PoseGoal
 from common.messages.sim import Odom, PersonCommand, RobotContact, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
@@ -100,7 +100,7 @@ def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
     odom = s.bus.fifo(s.keys.odom, Odom, maxlen=200_000)
     events = s.bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
     gx, gy = start.at(6.0, 0.0)
-    reply = send_goal(s, NavGoalRequest(goal=PoseGoal(x=gx, y=gy, yaw=start.yaw)))
+    reply = send_goal(s, PoseGoal(x=gx, y=gy, yaw=start.yaw))
     samples: list[Odom] = []
     legs: list[Leg] = []
     t_in = t_out = 0

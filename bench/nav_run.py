@@ -23,10 +23,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from common.bus import RemoteError
+from common.clients import NavClient, Refused
 from common.geometry import quat_xyzw_to_matrix, yaw_of
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
-from common.messages.navigation import NavGoalReply, NavGoalRequest, NavStatus, PoseGoal
+from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
 from common.messages.sim import Odom, RobotContact, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
@@ -119,16 +119,14 @@ def nav_stack(
     return ProcessStack(services, [*nav_settings(world, seed, db), *extra])
 
 
-def send_goal(stack: ProcessStack, req: NavGoalRequest, wait_s: float = 120.0) -> NavGoalReply:
-    """The goal's reply; while navigation waits for the map (`unavailable`), sent again."""
-    deadline = time.monotonic() + wait_s
-    while True:
-        try:
-            return stack.bus.query(stack.keys.nav_goal, req, NavGoalReply, 30.0)
-        except RemoteError as exc:
-            if exc.error.code != "unavailable" or time.monotonic() > deadline:
-                raise
-        time.sleep(0.5)
+def send_goal(stack: ProcessStack, goal: NavGoal) -> NavGoalReply:
+    """The goal's id, or the refusal's reason, as a reply (sent once: navigation takes a
+    goal sent before its map and resolves it when the map comes)."""
+    try:
+        goal_id = NavClient(stack.bus, stack.keys, 30.0).send(goal)
+        return NavGoalReply(accepted=True, goal_id=goal_id)
+    except Refused as exc:
+        return NavGoalReply(accepted=False, reason=str(exc))
 
 
 @dataclass
@@ -234,10 +232,9 @@ class NavRun:
         """Send one pose goal and follow it to its end (or `timeout_s` of wall time)."""
         g = GoalFigures((x, y, yaw))
         self._drain(None)
-        req = NavGoalRequest(goal=PoseGoal(x=x, y=y, yaw=yaw, position_tolerance_m=tol_m,
-                                           yaw_tolerance_rad=tol_rad))  # fmt: skip
+        goal = PoseGoal(x=x, y=y, yaw=yaw, position_tolerance_m=tol_m, yaw_tolerance_rad=tol_rad)
         wall0 = time.monotonic()
-        reply = send_goal(self.stack, req)
+        reply = send_goal(self.stack, goal)
         t0 = self.last.stamp_ns if self.last is not None else 0
         if not reply.accepted:
             g.reason = reply.reason

@@ -14,6 +14,7 @@ touched in the world (truth contact events, the floor aside) for every trial.
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 from collections.abc import Generator, Sequence
@@ -22,13 +23,16 @@ from typing import Any
 import numpy as np
 
 from common.bus import Bus
+from common.clients import ArmClient, Refused
 from common.geometry import FloatArray, quat_xyzw_to_matrix
 from common.keys import WORLD_EVENTS, WORLD_PUSH
 from common.lockstep import NS_PER_S, PeriodicTicker
 from common.messages.sim import Odom, Push, RobotContact, WorldEvents
-from common.messages.wbc import ArmGoal, ArmGoalReply, ArmGoalRequest, CmdVel, WbcMode, WbcStatus
+from common.messages.wbc import ArmGoal, CmdVel, WbcMode, WbcStatus
 from common.messages.wbc import GoalStatus as GoalState
 from deploy.stack import ProcessStack
+
+log = logging.getLogger(__name__)
 
 NAME = "trial"
 PERIOD_S = 0.02
@@ -88,6 +92,7 @@ class Driver:
         self._cmd = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self._mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self._push = bus.publisher(WORLD_PUSH, Push, "control")
+        self.arm = ArmClient(bus, keys, 5.0)
         self._events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
         self.contacts: dict[str, int] = {}  # what the robot touched (truth): other → count
         self.ticker = PeriodicTicker(bus, keys, NAME, PERIOD_S, self.stop)
@@ -120,8 +125,12 @@ class Driver:
         return stamp
 
     def goal(self, goal: ArmGoal) -> str:
-        reply = self.bus.query(self.keys.arm_goal, ArmGoalRequest(goal=goal), ArmGoalReply, 5.0)
-        return reply.goal_id
+        """The goal's id; "" when the controller refused it (logged)."""
+        try:
+            return self.arm.send(goal)
+        except Refused as exc:
+            log.warning("arm goal %s refused: %s", type(goal).__name__, exc)
+            return ""
 
     def goal_state(self, goal_id: str) -> GoalState | None:
         if self.status is None:

@@ -28,14 +28,12 @@ from typing import Any
 import numpy as np
 
 from bench.trial_driver import Driver, Script, trial_settings
-from common.bus import RemoteError
+from common.clients import ClientError, NavClient
 from common.geometry import FloatArray, quat_xyzw_to_matrix, wrap_angle
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.navigation import (
     ArtifactStandoff,
     NavGoal,
-    NavGoalReply,
-    NavGoalRequest,
     NavStatus,
     PersonHandover,
 )
@@ -102,6 +100,7 @@ class Rig:
         self.truth = next(a for a in self.world.artifacts if a.id == OBJECT)
         self._mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self.nav = bus.latest(keys.nav_status, NavStatus, history=8)
+        self.nav_goals = NavClient(bus, keys, 30.0)
         self.dets = bus.fifo(keys.detections, Detections, maxlen=1000)
         self.events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
         self.wrist: Detections | None = None
@@ -147,29 +146,16 @@ class Rig:
         return min(mine, key=lambda x: float(np.linalg.norm(np.array(x.axis_in_world[:2]) - there)))
 
     def go(self, goal: NavGoal, timeout_s: float, out: Figures, name: str) -> Script:
-        reply, end = None, self.d.t + 30.0
-        while reply is None:  # navigation answers `unavailable` until it has the map
-            try:
-                reply = self.d.bus.query(
-                    self.d.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, timeout_s=30.0
-                )
-            except RemoteError as exc:
-                if exc.error.code != "unavailable" or self.d.t > end:
-                    out["failed_at"] = f"{name}: {exc}"
-                    return
-                yield
-        if not reply.accepted:
-            out["failed_at"] = f"{name}: refused: {reply.reason}"
+        try:  # sent once: navigation takes a goal sent before its map
+            goal_id = self.nav_goals.send(goal)
+        except ClientError as exc:
+            out["failed_at"] = f"{name}: refused: {exc}"
             return
         self.mode("walk", "navigation")
         end = self.d.t + timeout_s
         while self.d.t < end:
             st = self.nav.get()
-            if (
-                st is not None
-                and st.goal_id == reply.goal_id
-                and st.state not in ("active", "idle")
-            ):
+            if st is not None and st.goal_id == goal_id and st.state not in ("active", "idle"):
                 if st.state != "succeeded":
                     out["failed_at"] = f"{name}: {st.state} {st.reason} {st.detail}"
                 return

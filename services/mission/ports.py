@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from typing import NamedTuple, Protocol
 
+from common.clients import ClientError, Refused, Unavailable
 from common.messages.base import Mat4
 from common.messages.navigation import NavGoal, NavStatus
 from common.messages.perception import Detection
@@ -31,24 +32,11 @@ class WristSighting(NamedTuple):
     T_world_base: Mat4
 
 
-class PortError(Exception):
-    """A request the robot's services did not serve: the reason, for a person, and the
-    service's typed code when it gave one (`ErrorCode`: `unavailable`, `busy`, …)."""
+__all__ = ["PortError", "Refused", "RobotPort", "Unavailable", "WristSighting"]
 
-    def __init__(self, message: str, code: str = "") -> None:
-        super().__init__(message)
-        self.code = code
-
-
-class Refused(PortError):
-    """The service answered and said no (its typed reason in the message)."""
-
-
-class Unavailable(PortError):
-    """Nobody answered within the timeout (the service is down or stalled)."""
-
-    def __init__(self, message: str, code: str = "unavailable") -> None:
-        super().__init__(message, code)
+#: A request the robot's services did not serve (the goal clients' errors, `Refused`
+#: and `Unavailable`, are the port's).
+PortError = ClientError
 
 
 class RobotPort(Protocol):

@@ -22,14 +22,12 @@ from collections import deque
 import numpy as np
 
 from common.bus import Bus, BusError, NoReply, RemoteError
+from common.clients import ArmClient, NavClient
 from common.geometry import quat_xyzw_to_matrix, yaw_of
 from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, RobotKeys, as_of, map_artifact, map_person
 from common.messages import PayloadError
 from common.messages.navigation import (
-    NavCancel,
     NavGoal,
-    NavGoalReply,
-    NavGoalRequest,
     NavStatus,
 )
 from common.messages.perception import Detections
@@ -37,8 +35,6 @@ from common.messages.semantic_map import MapEntity, MapListing
 from common.messages.sim import Odom
 from common.messages.wbc import (
     ArmGoal,
-    ArmGoalReply,
-    ArmGoalRequest,
     CmdVel,
     GoalStatus,
     WbcMode,
@@ -46,7 +42,7 @@ from common.messages.wbc import (
     WbcStatus,
 )
 from services.mission import targets
-from services.mission.ports import Refused, Unavailable, WristSighting
+from services.mission.ports import Unavailable, WristSighting
 
 log = logging.getLogger("dume.mission")
 
@@ -82,7 +78,8 @@ class BusRobot:
         # … and every frame, of which the wrist camera's are kept.
         self._frames_in = bus.fifo(keys.detections, Detections, maxlen=256)
         self._wrist: deque[Detections] = deque(maxlen=8)
-        self._cancel = bus.publisher(keys.nav_cancel, NavCancel, "data")
+        self._nav = NavClient(bus, keys, query_timeout_s)
+        self._arm = ArmClient(bus, keys, query_timeout_s)
         self._cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self._mode_pub = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self._t = 0
@@ -171,32 +168,14 @@ class BusRobot:
     # -- navigation -----------------------------------------------------------------------
 
     def send_nav_goal(self, goal: NavGoal) -> str:
-        request = NavGoalRequest(goal=goal, stamp_ns=self._t, effective_ns=self._effective)
-        return self._send_goal(self.keys.nav_goal, request, NavGoalReply)
-
-    def _send_goal(
-        self,
-        key: str,
-        request: NavGoalRequest | ArmGoalRequest,
-        reply_type: type[NavGoalReply] | type[ArmGoalReply],
-    ) -> str:
-        """A goal query: its id, `Refused` with the reason, or `Unavailable`."""
-        try:
-            reply = self.bus.query(key, request, reply_type, self.timeout_s)
-        except RemoteError as exc:
-            raise Refused(f"{exc.error.code}: {exc.error.message}", exc.error.code) from None
-        except (NoReply, PayloadError, BusError) as exc:
-            raise Unavailable(str(exc)) from None
-        if not reply.accepted:
-            raise Refused(reply.reason)
-        return reply.goal_id
+        return self._nav.send(goal, stamp_ns=self._t, effective_ns=self._effective)
 
     def nav_status(self, goal_id: str) -> NavStatus | None:
         status = self.nav.at(self._t - self.nav_latency_ns)
         return status if status is not None and status.goal_id == goal_id else None
 
     def cancel_nav(self, goal_id: str, reason: str) -> None:
-        self._cancel.put(NavCancel(goal_id=goal_id, reason=reason, effective_ns=self._effective))
+        self._nav.cancel(goal_id, reason, effective_ns=self._effective)
 
     # -- the whole-body controller --------------------------------------------------------
 
@@ -216,8 +195,7 @@ class BusRobot:
             self._mode = ("stand", "navigation")
 
     def send_arm_goal(self, goal: ArmGoal) -> str:
-        request = ArmGoalRequest(goal=goal, effective_ns=self._effective)
-        return self._send_goal(self.keys.arm_goal, request, ArmGoalReply)
+        return self._arm.send(goal, effective_ns=self._effective)
 
     def wbc_status(self) -> WbcStatus | None:
         # Stamped before the tick: the controller surely published it (lockstep) and the

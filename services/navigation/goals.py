@@ -18,10 +18,12 @@ free, the nearest free direction (by angle) around them.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from common import robot
+from common.messages.navigation import NavGoalRequest
 from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import Footprint, Pose
 from services.navigation.planner import pose_ok
@@ -34,6 +36,20 @@ MAX_RAY_M = 1.5
 
 class GoalError(ValueError):
     """No free goal pose: what was tried."""
+
+
+class GoalInvalid(ValueError):
+    """A goal that cannot be resolved (unknown id, no free pose, off the map): why."""
+
+
+@dataclass(frozen=True)
+class Queued:
+    """A goal taken before navigation had a map: resolved when the map is in."""
+
+    goal_id: str
+    request: NavGoalRequest
+    #: The first tick it waited at (ns; −1 before it).
+    since_ns: int = -1
 
 
 def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> np.ndarray:

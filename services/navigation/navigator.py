@@ -84,6 +84,8 @@ class Navigator:
     def __init__(self, fp: Footprint, p: NavParams, period_s: float) -> None:
         self.fp, self.p, self.dt = fp, p, period_s
         self.goal: GoalSpec | None = None
+        #: The goal the state is about: the active or last goal's, or a refused one's.
+        self.goal_id = ""
         self.state: NavState = "idle"
         self.reason: NavFailure = ""
         self.detail = ""
@@ -96,6 +98,7 @@ class Navigator:
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
+        self.goal_id = goal.goal_id
         self.t0 = t_ns
         self.plan = None
         self.follower = None
@@ -110,6 +113,14 @@ class Navigator:
         self.progress_ns = t_ns
         self.total_m = 0.0
         self.limit_rule = ""
+
+    def refuse(self, goal_id: str, detail: str, reason: NavFailure = "invalid_goal") -> None:
+        """A goal taken before it could be resolved (no map yet) that turned out invalid,
+        or whose map never came (`timeout`): it ends failed without ever starting."""
+        self.goal, self.goal_id = None, goal_id
+        self._finish("failed", reason, detail)
+        self.plan = self.follower = None
+        self.total_m = 0.0
 
     def cancel(self, reason: str) -> None:
         if self.state == "active":

@@ -4,8 +4,9 @@ Start-up: the map source (`navigation.map_source`): the sim's truth description 
 is read before ready; the semantic map is fetched every `map_refresh_s` of sim time on a
 thread of its own (grid and people as of that tick), adopted `MAP_ADOPT_S` later (waited
 for in lockstep, so every run adopts it at the same tick), and until its grid is in,
-navigation is ready but idle ("waiting for the map": zero cmd_vel, goals refused as
-unavailable). Each tick b (multiples of
+navigation is ready but idle ("waiting for the map": zero cmd_vel); a goal sent then is
+taken and queued (its status `active`, "waiting for the map") and resolved at the first
+tick with a map, against the map as fetched, so no client needs to retry. Each tick b (multiples of
 `time.participants.navigation.period_s`): the odom stamped b (waited for: odom is on a
 known 50 Hz schedule), the head camera's depth when a frame is due at b (10 Hz; marks
 and clears the short-lived layer), perception's person detections that apply by b (the
@@ -52,6 +53,7 @@ from services.navigation import goals
 from services.navigation.controller import ControllerParams
 from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
 from services.navigation.depth import Camera, DepthParams, obstacle_cells, seen_through
+from services.navigation.goals import GoalInvalid, Queued
 from services.navigation.grid import Footprint, Grid, Pose
 from services.navigation.nav_log import NavLogger
 from services.navigation.navigator import GoalSpec, Navigator, NavParams, TickOutput
@@ -65,6 +67,8 @@ NAME = "navigation"
 INPUT_TIMEOUT_S = 30.0
 #: Sim seconds from a map fetch's tick to the tick that adopts it.
 MAP_ADOPT_S = 0.25
+#: A goal taken before the map fails when the map has not come this long after, s.
+MAP_WAIT_S = 30.0
 #: Ticks of (costmap, pose) kept to resolve goals as of their sender's tick.
 HISTORY = 16
 
@@ -113,6 +117,8 @@ class NavNode:
         self.map_people: list[Person] = []
         self.seen = SeenPeople()
         self.costmap: Costmap | None = None
+        #: The sim time the map in use is as of (goals queued before it resolve against it).
+        self._map_at = 0
         self.period_ns = round(self.period_s * NS_PER_S)
         self.latency_ns = round((me.latency_s if me else self.period_s) * NS_PER_S)
         self.refresh_ns = round(n.map_refresh_s * NS_PER_S)
@@ -122,7 +128,7 @@ class NavNode:
         self._fetch: tuple[int, tuple[Grid, list[Person]] | str | None] | None = None
         self._fetch_due = threading.Event()
         if isinstance(self.source, WorldSource):  # truth: there at once, and static
-            self._adopt(self.source.grid(), self.source.people(), 0)
+            self._adopt(self.source.grid(), self.source.people(), 0, 0)
         self.nav = Navigator(self.fp, self.params, self.period_s)
         self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
         self.camera_period_ns = round(NS_PER_S / cfg.sim.camera_hz)
@@ -143,7 +149,8 @@ class NavNode:
         self._ticked = threading.Condition(self._lock)
         self._history: deque[tuple[int, Costmap | None, Pose | None]] = deque(maxlen=HISTORY)
         self._history.append((-1, self.costmap, None))  # before the first tick
-        self._pending: tuple[GoalSpec, int] | None = None
+        #: The goal to start at its effective tick (resolved, or queued before the map).
+        self._pending: tuple[GoalSpec | Queued, int] | None = None
         self._cancels: list[NavCancel] = []
         self._count = 0
         self._pose: Pose | None = None
@@ -188,8 +195,9 @@ class NavNode:
                     self._fetch = (b, got)
                     self._ticked.notify_all()
 
-    def _map_tick(self, b: int) -> tuple[Grid, list[Person]] | None:
-        """Ask for the map at every `map_refresh_s`; the fetch to adopt at b, if any."""
+    def _map_tick(self, b: int) -> tuple[Grid, list[Person], int] | None:
+        """Ask for the map at every `map_refresh_s`; the fetch to adopt at b, if any (grid,
+        people and the tick they are as of)."""
         with self._ticked:
             fetch = self._fetch
             if fetch is None or b < fetch[0] + round(MAP_ADOPT_S * NS_PER_S):
@@ -211,15 +219,16 @@ class NavNode:
                 self._fetch = (b, None)
                 self._fetch_due.set()
         got = None if fetch is None else fetch[1]
-        return got if isinstance(got, tuple) else None
+        return (*got, fetch[0]) if isinstance(got, tuple) and fetch is not None else None
 
-    def _adopt(self, grid: Grid, people: list[Person], t_ns: int) -> None:
+    def _adopt(self, grid: Grid, people: list[Person], as_of: int, t_ns: int) -> None:
+        """Take a map as of `as_of` (ns) at tick t."""
         if self.grid is None or self.grid.shape != grid.shape:
             self.svc.log.info(
                 "map from %s: %s cells of %.2f m", self.source.name, grid.shape, grid.resolution
             )
             self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
-        self.grid, self.map_people = grid, people
+        self.grid, self.map_people, self._map_at = grid, people, as_of
         self.people = self.seen.merge(people, t_ns)
         self.costmap = self._build(t_ns)
 
@@ -256,18 +265,40 @@ class NavNode:
         if req is None:
             raise RequestError("malformed", "a NavGoalRequest is needed")
         cm, pose = self._as_of(req.stamp_ns)
-        cfg, at = self.svc.config.navigation, req.stamp_ns
-        if cm is None:
-            raise RequestError("unavailable", f"no map yet from {self.source.name}")
-        g = req.goal
+        effective = -1 if req.effective_ns is None else req.effective_ns
+        if cm is None:  # no map yet: taken now, resolved at the first tick that has one
+            with self._lock:
+                self._count += 1
+                queued = Queued(f"nav_{self._count}", req)
+                self._pending = (queued, effective)
+            self.svc.log.info("goal %s queued until the map is in", queued.goal_id)
+            return NavGoalReply(accepted=True, goal_id=queued.goal_id)
+        try:
+            target, tol, tol_yaw, handover = self._resolve(req, cm, pose, req.stamp_ns)
+        except GoalInvalid as exc:
+            return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
+        with self._lock:
+            self._count += 1
+            spec = GoalSpec(f"nav_{self._count}", target, tol, tol_yaw, handover)
+            self._pending = (spec, effective)
+        self.svc.log.info(
+            "goal %s accepted: %s -> (%.2f, %.2f, %.2f)",
+            spec.goal_id,
+            type(req.goal).__name__,
+            *target,
+        )
+        return NavGoalReply(accepted=True, goal_id=spec.goal_id)
+
+    def _resolve(
+        self, req: NavGoalRequest, cm: Costmap, pose: Pose | None, at: int | None
+    ) -> tuple[Pose, float, float, str]:
+        """The goal's pose, tolerances and handover person against `cm` and the map's
+        data as of `at`; `GoalInvalid` with the reason."""
+        cfg, g = self.svc.config.navigation, req.goal
         try:
             if isinstance(g, PoseGoal):
-                target, tol, tol_yaw, handover = (
-                    Pose(g.x, g.y, g.yaw),
-                    g.position_tolerance_m,
-                    g.yaw_tolerance_rad,
-                    "",
-                )
+                target = Pose(g.x, g.y, g.yaw)
+                tol, tol_yaw, handover = g.position_tolerance_m, g.yaw_tolerance_rad, ""
             elif isinstance(g, ArtifactStandoff):
                 x, y = self.source.artifact_xy(g.artifact_id, at_ns=at)
                 target = goals.standoff_pose(cm, x, y, self.fp)
@@ -278,20 +309,32 @@ class NavNode:
                 here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
                 target = goals.handover_pose(cm, person, here, self.fp)
                 tol, tol_yaw, handover = cfg.goal_tolerance_m, cfg.goal_tolerance_rad, g.person_id
-        except SourceError as exc:
-            return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
-        except goals.GoalError as exc:
-            return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
+        except (SourceError, goals.GoalError) as exc:
+            raise GoalInvalid(str(exc)) from None
         if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
-            return NavGoalReply(accepted=False, reason=f"invalid_goal: {target} is off the map")
-        with self._lock:
-            self._count += 1
-            spec = GoalSpec(f"nav_{self._count}", target, tol, tol_yaw, handover)
-            self._pending = (spec, -1 if req.effective_ns is None else req.effective_ns)
-        self.svc.log.info(
-            "goal %s accepted: %s -> (%.2f, %.2f, %.2f)", spec.goal_id, type(g).__name__, *target
-        )
-        return NavGoalReply(accepted=True, goal_id=spec.goal_id)
+            raise GoalInvalid(f"{target} is off the map")
+        return target, tol, tol_yaw, handover
+
+    def _start(self, pending: GoalSpec | Queued, b: int) -> None:
+        """Start a goal at its tick; one queued before the map is resolved now (against
+        the map as fetched for the costmap in use: the same in every run)."""
+        if isinstance(pending, Queued):
+            assert self.costmap is not None  # the loop starts goals only with a costmap
+            try:
+                target, tol, tol_yaw, handover = self._resolve(
+                    pending.request, self.costmap, self._pose, self._map_at
+                )
+            except GoalInvalid as exc:
+                self.svc.log.info("goal %s refused once the map came: %s", pending.goal_id, exc)
+                self.nav.refuse(pending.goal_id, str(exc))
+                return
+            pending = GoalSpec(pending.goal_id, target, tol, tol_yaw, handover)
+            self.svc.log.info(
+                "goal %s resolved: (%.2f, %.2f, %.2f)", pending.goal_id, *pending.pose
+            )
+        if self.nav.state == "active" and self.nav.goal is not None:
+            self.svc.log.info("goal %s replaced by %s", self.nav.goal.goal_id, pending.goal_id)
+        self.nav.start(pending, b)
 
     # -- the loop -------------------------------------------------------------------------
 
@@ -354,33 +397,17 @@ class NavNode:
         elif seen_changed and self.grid is not None:
             self.people = self.seen.merge(self.map_people, b)
             changed = True
+        self._apply_cancels(b)
         if self.costmap is None:
-            self._publish(b, np.zeros(3), None, "waiting for the map")
+            self._publish(b, np.zeros(3), None, "waiting for the map", self._queued(b))
             self._done(b)
             return
-        with self._lock:
-            self._cancels.extend(self.cancels.drain())
-            due = [c for c in self._cancels if c.effective_ns is None or c.effective_ns <= b]
-            self._cancels = [c for c in self._cancels if c not in due]
-        for c in due:
-            if self.nav.state == "active" and c.goal_id in (
-                "",
-                self.nav.goal.goal_id if self.nav.goal else "",
-            ):
-                self.nav.cancel(c.reason or "cancelled")
-                self.svc.log.info(
-                    "goal %s cancelled: %s",
-                    self.nav.goal.goal_id if self.nav.goal else "",
-                    c.reason,
-                )
         with self._lock:
             pending = None
             if self._pending is not None and self._pending[1] <= b:
                 pending, self._pending = self._pending[0], None
         if pending is not None:
-            if self.nav.state == "active" and self.nav.goal is not None:
-                self.svc.log.info("goal %s replaced by %s", self.nav.goal.goal_id, pending.goal_id)
-            self.nav.start(pending, b)
+            self._start(pending, b)
         if changed:
             self.costmap = self._build(b)
         out = self.nav.tick(b, pose, self.costmap)
@@ -393,18 +420,59 @@ class NavNode:
         wz = odom.base_angular_velocity_in_base[2]
         self.log.tick(b, pose, self.nav, out, self.costmap, tick_ms, wz)
 
+    def _queued(self, b: int) -> str:
+        """The id of a goal waiting for the map ("" if none); one that waited
+        `MAP_WAIT_S` fails (`timeout`)."""
+        with self._lock:
+            pending, effective = self._pending or (None, -1)
+            if not isinstance(pending, Queued):
+                return ""
+            if pending.since_ns < 0:
+                self._pending = (Queued(pending.goal_id, pending.request, b), effective)
+            elif b - pending.since_ns >= MAP_WAIT_S * NS_PER_S:
+                self._pending = None
+                detail = f"no map from {self.source.name} within {MAP_WAIT_S:.0f} s"
+                self.svc.log.warning("goal %s failed: %s", pending.goal_id, detail)
+                self.nav.refuse(pending.goal_id, detail, "timeout")
+                return ""
+            return pending.goal_id
+
+    def _apply_cancels(self, b: int) -> None:
+        """The cancels due at b: of the active goal, or of one not started yet (an id of
+        "" cancels whichever)."""
+        with self._lock:
+            self._cancels.extend(self.cancels.drain())
+            due = [c for c in self._cancels if c.effective_ns is None or c.effective_ns <= b]
+            self._cancels = [c for c in self._cancels if c not in due]
+            for c in due:
+                if self._pending is not None and c.goal_id in ("", self._pending[0].goal_id):
+                    self.svc.log.info("goal %s cancelled before it started", c.goal_id)
+                    self._pending = None
+        for c in due:
+            if self.nav.state == "active" and c.goal_id in ("", self.nav.goal_id):
+                self.nav.cancel(c.reason or "cancelled")
+                self.svc.log.info("goal %s cancelled: %s", self.nav.goal_id, c.reason)
+
     def _done(self, b: int) -> None:
         with self._ticked:
             self._history.append((b, self.costmap, self._pose))
             self._ticked.notify_all()
 
-    def _publish(self, b: int, cmd: np.ndarray, out: TickOutput | None, detail: str = "") -> None:
+    def _publish(
+        self,
+        b: int,
+        cmd: np.ndarray,
+        out: TickOutput | None,
+        detail: str = "",
+        queued: str = "",
+    ) -> None:
+        """cmd_vel and the status; `queued`: a goal taken before the map (active, waiting)."""
         self.cmd_pub.put(
             CmdVel(stamp_ns=b, vx=float(cmd[0]), vy=float(cmd[1]), wz=float(cmd[2]), source=NAME)
         )
-        goal_id = self.nav.goal.goal_id if self.nav.goal else ""
+        goal_id = queued or self.nav.goal_id
         if out is None:
-            state = self.nav.state
+            state = "active" if queued else self.nav.state
             self.status_pub.put(NavStatus(stamp_ns=b, goal_id=goal_id, state=state, detail=detail))
             return
         if out.new_plan is not None:

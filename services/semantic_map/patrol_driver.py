@@ -3,8 +3,9 @@
 `PatrolDriver.step(b, odom)` runs in the map's lockstep tick. Through navigation
 (`semantic_map.patrol_via = "navigation"`, the default): the WBC is put in `walk` obeying
 navigation, each `NavPatrol` goal goes to `nav/goal` as a `PoseGoal` and the patrol moves
-on when `nav/status` reports that goal ended; a navigation that has no map yet is asked
-again for up to `NAV_WAIT_S` of sim time, one that does not answer fails the patrol.
+on when `nav/status` reports that goal ended (navigation takes a goal sent before its
+map and fails it `timeout` if the map never comes); one that does not answer fails the
+patrol. Goals go through `common.clients`.
 With `patrol_via = "cmd_vel"` (when no navigation runs) a `PatrolFollower` walks the
 route with cmd_vel of source `semantic_map`. Before the first step the arm goes to
 `patrol_arm_posture` (`look`: the wrist camera up, where it sees bench tops the head
@@ -22,23 +23,23 @@ import logging
 from collections.abc import Mapping
 from typing import Literal
 
-from common.bus import Bus, NoReply, RemoteError
+from common.bus import Bus
+from common.clients import ArmClient, ClientError, NavClient, Refused, Unavailable
 from common.config import SemanticMapSettings
 from common.geometry import quat_xyzw_to_matrix, yaw_of
 from common.keys import RobotKeys
 from common.lockstep import NS_PER_S
-from common.messages import PayloadError
-from common.messages.navigation import NavCancel, NavGoalReply, NavGoalRequest, NavStatus, PoseGoal
+from common.messages.navigation import NavStatus, PoseGoal
 from common.messages.semantic_map import PatrolState
 from common.messages.sim import Odom
-from common.messages.wbc import ArmGoalReply, ArmGoalRequest, CmdVel, Posture, WbcMode, WbcStatus
+from common.messages.wbc import CmdVel, Posture, WbcMode, WbcStatus
 from services.semantic_map.nav_patrol import NavPatrol, patrol_goals
 from services.semantic_map.patrol import PatrolFollower, Route
 
 log = logging.getLogger("dume.semantic_map.patrol")
 
-#: Sim seconds a patrol waits for navigation to have a map before it fails.
-NAV_WAIT_S = 30.0
+#: How long a goal query waits for navigation's or the WBC's answer, wall s.
+GOAL_TIMEOUT_S = 5.0
 #: How far navigation may move a viewpoint (walk) or a look-around turn to a pose its
 #: footprint fits, m: a viewpoint is only a place to look from (the hall patrol skipped
 #: two, "in an obstacle", at 0.3 m). One value, so the turns find the walk's pose again.
@@ -71,7 +72,8 @@ class PatrolDriver:
         self._t = 0
         self.cmd_vel = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self.mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
-        self.cancel = bus.publisher(keys.nav_cancel, NavCancel, "control")
+        self.nav = NavClient(bus, keys, GOAL_TIMEOUT_S)
+        self.arm = ArmClient(bus, keys, GOAL_TIMEOUT_S)
         self.nav_status = bus.latest(keys.nav_status, NavStatus, history=8)
         self.wbc_status = bus.latest(keys.wbc_status, WbcStatus, history=4)
         self.walker: NavPatrol | PatrolFollower | None = None
@@ -79,7 +81,6 @@ class PatrolDriver:
         self.reason = ""
         self._started = False
         self._stop = False
-        self._since_ns = 0
         #: Whether the arm is still to reach its patrol posture before walking (False
         #: once there or given up), and the WBC's goal id once sent.
         self._arm_pending = False
@@ -141,7 +142,7 @@ class PatrolDriver:
         if not self._started:
             source = self.nav_source if via_nav else self.name
             self.mode.put(WbcMode(stamp_ns=b, mode="walk", cmd_vel_source=source))
-            self._started, self._since_ns, self._arm_since_ns = True, b, b
+            self._started, self._arm_since_ns = True, b
         if self._stop or w.done:
             self._end(b, "stopped" if self._stop else "done")
             return
@@ -176,24 +177,16 @@ class PatrolDriver:
             return
         if not self._arm_goal:
             try:
-                reply = self.bus.query(
-                    self.keys.arm_goal,
-                    ArmGoalRequest(goal=Posture(name=name), effective_ns=self._effective),
-                    ArmGoalReply,
-                    5.0,
-                )
-            except RemoteError as exc:  # e.g. damped yet: ask again next tick
-                log.info("patrol: arm posture %s not taken yet: %s", name, exc)
-                return
-            except (NoReply, PayloadError) as exc:
+                self._arm_goal = self.arm.send(Posture(name=name), effective_ns=self._effective)
+            except Refused as exc:
+                if exc.code in ("unavailable", "busy"):  # the WBC not in walk yet: next tick
+                    log.info("patrol: arm posture %s not taken yet: %s", name, exc)
+                    return
+                log.warning("patrol: arm posture %s refused: %s: walking on", name, exc)
+                self._arm_pending = False
+            except Unavailable as exc:
                 log.warning("patrol: no arm posture (%s): walking on", exc)
                 self._arm_pending = False
-                return
-            if not reply.accepted:
-                log.warning("patrol: arm posture %s refused: %s: walking on", name, reply.reason)
-                self._arm_pending = False
-                return
-            self._arm_goal = reply.goal_id
             return
         st = self.wbc_status.at(b - 1)
         goal = (
@@ -213,17 +206,9 @@ class PatrolDriver:
         if self.cfg.patrol_arm_posture == "stow":
             return
         try:
-            reply = self.bus.query(
-                self.keys.arm_goal,
-                ArmGoalRequest(goal=Posture(name="stow"), effective_ns=self._effective),
-                ArmGoalReply,
-                2.0,
-            )
-        except (RemoteError, NoReply, PayloadError) as exc:
+            self.arm.send(Posture(name="stow"), effective_ns=self._effective)
+        except ClientError as exc:
             log.warning("patrol: could not stow the arm: %s", exc)
-            return
-        if not reply.accepted:
-            log.warning("patrol: could not stow the arm: %s", reply.reason)
 
     def _step_nav(self, b: int, w: NavPatrol) -> None:
         if w.goal_id:
@@ -238,43 +223,29 @@ class PatrolDriver:
         goal = w.current
         if goal is None:
             return
-        req = NavGoalRequest(
-            goal=PoseGoal(
-                x=goal.x,
-                y=goal.y,
-                yaw=goal.yaw,
-                position_tolerance_m=POSITION_TOLERANCE_M,
-                yaw_tolerance_rad=TURN_TOLERANCE_RAD,
-            ),
-            stamp_ns=b,
-            effective_ns=self._effective,
+        pose = PoseGoal(
+            x=goal.x,
+            y=goal.y,
+            yaw=goal.yaw,
+            position_tolerance_m=POSITION_TOLERANCE_M,
+            yaw_tolerance_rad=TURN_TOLERANCE_RAD,
         )
         try:
-            reply = self.bus.query(self.keys.nav_goal, req, NavGoalReply, 5.0)
-        except RemoteError as exc:
-            if exc.error.code == "unavailable" and b - self._since_ns < NAV_WAIT_S * NS_PER_S:
-                return  # navigation has no map yet: ask again next tick
-            self._end(b, "failed", f"navigation refused the patrol: {exc}")
-            return
-        except (NoReply, PayloadError) as exc:
+            w.sent(self.nav.send(pose, stamp_ns=b, effective_ns=self._effective))
+        except Refused as exc:
+            if exc.code:  # a typed error: navigation cannot take goals at all
+                self._end(b, "failed", f"navigation refused the patrol: {exc}")
+                return
+            log.info("patrol: viewpoint %d goal refused: %s", goal.viewpoint + 1, exc)
+            w.refused(str(exc))
+        except Unavailable as exc:
             self._end(b, "failed", f"navigation does not answer: {exc}")
-            return
-        if reply.accepted:
-            w.sent(reply.goal_id)
-            self._since_ns = b
-        else:
-            log.info("patrol: viewpoint %d goal refused: %s", goal.viewpoint + 1, reply.reason)
-            w.refused(reply.reason)
 
     def _end(self, b: int, state: Literal["done", "stopped", "failed"], reason: str = "") -> None:
         w = self.walker
         if isinstance(w, NavPatrol):
             if w.goal_id:
-                self.cancel.put(
-                    NavCancel(
-                        goal_id=w.goal_id, reason=f"patrol {state}", effective_ns=self._effective
-                    )
-                )
+                self.nav.cancel(w.goal_id, f"patrol {state}", effective_ns=self._effective)
         else:
             self.cmd_vel.put(CmdVel(stamp_ns=b, vx=0.0, vy=0.0, wz=0.0, source=self.name))
         self.mode.put(WbcMode(stamp_ns=b, mode="stand", cmd_vel_source=self.nav_source))

@@ -16,13 +16,11 @@ import numpy as np
 import pytest
 
 from bench import nav_person
-from common.bus import RemoteError
+from common.clients import NavClient
 from common.geometry import quat_xyzw_to_matrix, yaw_of
 from common.keys import WORLD_EVENTS
 from common.messages.navigation import (
     NavCancel,
-    NavGoalReply,
-    NavGoalRequest,
     NavStatus,
     PoseGoal,
 )
@@ -60,18 +58,8 @@ def _map_dir(tmp_path: Path) -> str:
 
 
 def _send(s: ProcessStack, goal: PoseGoal) -> str:
-    """The goal's id; while navigation waits for the map's first grid, sent again."""
-    deadline = time.monotonic() + 120.0
-    while True:
-        try:
-            reply = s.bus.query(s.keys.nav_goal, NavGoalRequest(goal=goal), NavGoalReply, 10.0)
-            break
-        except RemoteError as exc:
-            if exc.error.code != "unavailable" or time.monotonic() > deadline:
-                raise
-            time.sleep(0.5)
-    assert reply.accepted, reply.reason
-    return reply.goal_id
+    """The goal's id, sent once (the first often before navigation has its map: it waits)."""
+    return NavClient(s.bus, s.keys, 10.0).send(goal)
 
 
 def _wait_done(status: object, goal_id: str, timeout_s: float) -> NavStatus:

@@ -44,6 +44,8 @@ from services.mission.behaviours.base import Context
 from services.mission.ports import Refused, Unavailable, WristSighting
 
 TICK_NS = 50_000_000
+#: Navigation fails a goal whose map has not come in 30 s (`navigation.node.MAP_WAIT_S`).
+NAV_MAP_WAIT_TICKS = 600
 
 
 def entity(map_id: str, x: float, y: float, kind: str = "artifact") -> MapEntity:
@@ -105,7 +107,8 @@ class FakeRobot:
     #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
     drops: int = 0
     drop_after: int = 1
-    #: Goals refused as `unavailable` before navigation takes one (its map still coming).
+    #: Ticks the first goal waits for navigation's map (taken, `active`, not moving); a
+    #: goal that waits `NAV_MAP_WAIT_TICKS` fails `timeout`, as navigation's does.
     nav_not_ready: int = 0
     modes_work: bool = True
     map_up: bool = True
@@ -122,6 +125,7 @@ class FakeRobot:
     source: str = "navigation"
     _cmd: tuple[float, float, float] = (0.0, 0.0, 0.0)
     _nav: dict[str, tuple[int, str, str]] = field(default_factory=dict)
+    _nav_sent: dict[str, int] = field(default_factory=dict)
     _arm: dict[str, tuple[int, ArmGoal]] = field(default_factory=dict)
     _arm_state: dict[str, GoalStatus] = field(default_factory=dict)
     _pending_mode: tuple[WbcModeName, str] | None = None
@@ -191,18 +195,33 @@ class FakeRobot:
         kind = "artifact_standoff" if isinstance(goal, ArtifactStandoff) else "person_handover"
         if self.nav_fail.get(kind) == "refuse":
             raise Refused("invalid_goal: scripted refusal")
-        if self.nav_not_ready > 0:
-            self.nav_not_ready -= 1
-            raise Refused("unavailable: no map yet from semantic map", "unavailable")
         goal_id = f"nav_{len(self.nav_goals) + 1}"
         self.nav_goals.append((goal_id, goal))
-        self._nav[goal_id] = (self.t, kind, "active")
+        self._nav[goal_id] = (self.t + self.nav_not_ready * TICK_NS, kind, "active")
+        self._nav_sent[goal_id] = self.t
+        self.nav_not_ready = 0
         return goal_id
 
     def nav_status(self, goal_id: str) -> NavStatus | None:
         if goal_id not in self._nav:
             return None
         start, kind, state = self._nav[goal_id]
+        waited = self.t - self._nav_sent[goal_id]
+        if state == "active" and self.t < start:  # waiting for the map
+            if waited < NAV_MAP_WAIT_TICKS * TICK_NS:
+                return NavStatus(
+                    stamp_ns=self.t, goal_id=goal_id, state="active", detail="waiting for the map"
+                )
+            self._nav[goal_id] = (start, kind, "failed")
+            return NavStatus(
+                stamp_ns=self.t,
+                goal_id=goal_id,
+                state="failed",
+                reason="timeout",
+                detail="no map from semantic map within 30 s",
+            )
+        if state == "failed" and self.t < start:
+            return NavStatus(stamp_ns=self.t, goal_id=goal_id, state="failed", reason="timeout")
         if state == "active" and self.t - start >= self.nav_ticks * TICK_NS:
             failure = self.nav_fail.get(kind, "")
             state = "failed" if failure else "succeeded"

@@ -240,17 +240,17 @@ def test_settings_change_the_handover_patience() -> None:
     assert ticks_long - ticks_short == pytest.approx(40, abs=2)  # 2 s at 20 Hz
 
 
-def test_a_navigation_not_ready_yet_is_asked_again_until_it_takes_the_goal() -> None:
+def test_a_goal_sent_before_navigation_has_its_map_is_sent_once_and_waited_for() -> None:
     robot = small_world(nav_not_ready=5)
     assert run(mission(robot), robot).state == "succeeded"
-    assert robot.nav_not_ready == 0
+    assert robot.nav_goals[0][0] == "nav_1" and len(robot.nav_goals) == 2  # object, person
 
 
-def test_a_navigation_that_stays_unavailable_fails_the_mission_with_a_reason() -> None:
+def test_a_navigation_whose_map_never_comes_fails_the_mission_with_a_reason() -> None:
     robot = small_world(nav_not_ready=10_000)
     outcome = run(mission(robot), robot)
     assert (outcome.state, outcome.reason) == ("failed", "navigation_failed")
-    assert "no map yet" in outcome.detail
+    assert "no map" in outcome.detail and len(robot.nav_goals) == 1
 
 
 def test_a_grasp_that_does_not_hold_lets_go_on_the_spot_and_picks_again() -> None:

@@ -5,9 +5,8 @@
   mission latency after their stamp), fails `mode_timeout` after `mode_timeout_s`.
 - `NavigateTo("artifact" | "person")`: sends `ArtifactStandoff(target)` or
   `PersonHandover(person)` on start and watches `nav/status` for that goal id; a refusal
-  or a failed goal fails `navigation_failed` with navigation's reason (a goal refused as
-  `unavailable`, or not answered, is sent again each tick for `nav_status_timeout_s`:
-  navigation is ready before its first map). Carrying
+  or a failed goal fails `navigation_failed` with navigation's reason (the goal is sent
+  once: navigation takes one sent before its first map and waits for the map). Carrying
   (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
   (or failing while the goal is active) it cancels its goal.
 - `PersonAhead`: at the handover pose, stand `handover_check_s` (the head camera's
@@ -101,13 +100,6 @@ class NavigateTo(MissionBehaviour):
             self.error = exc
 
     def update(self) -> Status:
-        retry = self.elapsed_s() <= self.settings.nav_status_timeout_s
-        if self.error is not None and self.error.code == "unavailable" and retry:
-            # Navigation is up but not ready yet (its map is still coming): ask again.
-            self._send()
-            if self.error is not None:
-                self.feedback_message = f"navigation not ready: {self.error}"
-                return Status.RUNNING
         if self.error is not None:
             reason: MissionReason = (
                 "navigation_failed" if isinstance(self.error, Refused) else "unavailable"
