@@ -53,7 +53,7 @@ from services.perception.pipeline import detect, frame_geometry
 from services.perception.segmenter import Segmenter, TruthSegmenter
 from services.perception.self_filter import is_self
 from services.sim import feasibility as fz
-from services.sim import scene
+from services.sim import mjcf, scene
 from services.sim.cameras import CameraRig
 from services.sim.world import generate_world
 
@@ -109,7 +109,7 @@ def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, Segm
     rng = np.random.default_rng([seed, 0xBE7C])
     model = scene.compile_scene(world)
     data = mujoco.MjData(model)
-    qpos = robot.mj_indices(model).qpos
+    qpos = mjcf.mj_indices(model).qpos
     rig = CameraRig(model, 320, 240, world)
     try:
         for camera, pose, _ in _shots(world, rng):
@@ -118,7 +118,7 @@ def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, Segm
             q[2] += rng.uniform(-0.03, 0.03)
             tilt = rot_y(rng.uniform(-0.06, 0.06)) @ rot_x(rng.uniform(-0.03, 0.03))
             q[3:7] = matrix_to_quat_xyzw(rot_z(pose.yaw) @ tilt)
-            data.qpos[qpos] = robot.q_pin_to_mj(q)
+            data.qpos[qpos] = mjcf.q_pin_to_mj(q)
             mujoco.mj_kinematics(model, data)
             mujoco.mj_camlight(model, data)
             frame, truth = rig.capture(data, camera, 0)

@@ -33,7 +33,7 @@ import numpy as np
 from common import robot
 from common.geometry import FloatArray, quat_wxyz_to_xyzw, quat_xyzw_to_matrix, yaw_of
 from common.messages.world import Cylinder, RobotStart, WorldDescription
-from common.robot_mjcf import joints_mj_to_pin
+from services.sim import mjcf
 from services.sim.scene import compile_scene
 from services.sim.world import generate_world
 from services.wbc.controller import WbcCommand, WbcReferences, WbcState, WholeBodyController
@@ -47,7 +47,7 @@ FELL_TILT_RAD = math.radians(30.0)
 
 def floor_spec(payload_kg: float = 0.0) -> mujoco.MjSpec:
     """The robot standing on a plane, optionally with a payload fixed at gripper_tcp."""
-    spec = robot.robot_spec()
+    spec = mjcf.robot_spec()
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[50, 50, 0.1])
     spec.worldbody.first_body().pos = [0.0, 0.0, robot.STAND_BASE_HEIGHT_M]
     if payload_kg > 0.0:
@@ -70,12 +70,12 @@ def add_payload(spec: mujoco.MjSpec, mass_kg: float) -> None:
     )
 
 
-def read_state(model: mujoco.MjModel, data: mujoco.MjData, idx: robot.MjRobotIndices) -> WbcState:
+def read_state(model: mujoco.MjModel, data: mujoco.MjData, idx: mjcf.MjRobotIndices) -> WbcState:
     """The robot's state as `RobotState` carries it, from MuJoCo's qpos/qvel."""
     qpos, qvel = data.qpos[idx.qpos], data.qvel[idx.qvel]
     return WbcState(
-        q=joints_mj_to_pin(qpos[7:]),
-        v=joints_mj_to_pin(qvel[6:]),
+        q=mjcf.joints_mj_to_pin(qpos[7:]),
+        v=mjcf.joints_mj_to_pin(qvel[6:]),
         base_position_in_world=qpos[:3].copy(),
         base_orientation_xyzw=quat_wxyz_to_xyzw(qpos[3:7]),
         base_linear_velocity_in_world=qvel[:3].copy(),
@@ -84,7 +84,7 @@ def read_state(model: mujoco.MjModel, data: mujoco.MjData, idx: robot.MjRobotInd
 
 
 def apply_command(
-    data: mujoco.MjData, idx: robot.MjRobotIndices, state: WbcState, cmd: WbcCommand
+    data: mujoco.MjData, idx: mjcf.MjRobotIndices, state: WbcState, cmd: WbcCommand
 ) -> None:
     """τ = τ_ff + kp (q_des − q) + kd (v_des − v), clipped, into the actuators."""
     tau = cmd.tau_ff + cmd.kp * (cmd.q_des - state.q) + cmd.kd * (cmd.v_des - state.v)
@@ -92,8 +92,8 @@ def apply_command(
 
 
 def set_initial_pose(model: mujoco.MjModel, data: mujoco.MjData, q: FloatArray) -> None:
-    idx = robot.mj_indices(model)
-    data.qpos[idx.qpos] = robot.q_pin_to_mj(q)
+    idx = mjcf.mj_indices(model)
+    data.qpos[idx.qpos] = mjcf.q_pin_to_mj(q)
     mujoco.mj_forward(model, data)
 
 
@@ -122,7 +122,7 @@ def simulate(
     model: mujoco.MjModel, data: mujoco.MjData, seconds: float, refs_at: RefsAt
 ) -> tuple[Log, WholeBodyController, float]:
     """Run the loop; return the log, the controller and the wall time, s."""
-    idx = robot.mj_indices(model)
+    idx = mjcf.mj_indices(model)
     ctrl = WholeBodyController(clock=time.perf_counter)
     log = Log()
     dt = model.opt.timestep
@@ -145,7 +145,7 @@ def simulate(
 
 def summary(log: Log, wall_s: float, heading: FloatArray | None = None) -> Figures:
     pos, rpy = np.array(log.pos), np.array(log.rpy)
-    sim_s = len(log.t) * robot.TIMESTEP_S
+    sim_s = len(log.t) * mjcf.TIMESTEP_S
     tilt = np.max(np.abs(rpy[:, :2]))
     fell = bool(pos[:, 2].min() < FELL_HEIGHT_M or tilt > FELL_TILT_RAD)
     d = pos[-1, :2] - pos[0, :2]

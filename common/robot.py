@@ -4,30 +4,40 @@ its conventions.
 - Joints: `JOINT_NAMES` is pinocchio's model order: legs FL, FR, RL, RR (hip, thigh,
   calf), arm joint1..joint6, then the jaw `jointGripper` (0 closed, negative open). Every
   19-vector in dume (q, v, tau, limits, postures) uses it. MuJoCo orders the legs FR, FL,
-  RR, RL: cross with `q_mj_to_pin`, `v_mj_to_pin` (and back), `mj_indices(model).ctrl`.
+  RR, RL: the simulator crosses over with `services.sim.mjcf` (`q_mj_to_pin`,
+  `v_mj_to_pin` and back, `mj_indices(model).ctrl`).
 - State: pinocchio q (26) = [base position in world, base quaternion xyzw, joints];
   v (25) = [base linear, angular velocity, both in the base frame, joint velocities].
 - Frames: `base` (= trunk), feet `FL_foot`.. (sphere centres), `gripper_tcp` (x approach,
   z towards the moving jaw, y along the jaw pivot: see `T_STATOR_TCP`) and the cameras.
   Camera frames are OpenCV optical frames (z forward, x right, y down); MuJoCo's cameras
-  look down their -z with y up, and `robot_spec()` turns them.
+  look down their -z with y up, and `services.sim.mjcf.robot_spec()` turns them.
 - Standing, reaching and standoff numbers are computed below from the kinematics, each
   with how it was derived.
 
 The facts both models share (files, names, gripper boxes, camera mounts) are in
-`robot_description`, the MuJoCo model and its state maps in `robot_mjcf`; this module
-builds the pinocchio model and re-exports the rest, so import from here.
+`robot_description` and re-exported here, so import from here; the MuJoCo model and its
+state maps are the simulator's (`services.sim.mjcf`).
+
+Importing this module is cheap: it loads numpy and the description, not pinocchio, coal
+or MuJoCo, and computes nothing from the kinematics. The names, postures, the grasp and
+approach settings (`GRASP_*`, `APPROACH_MARGIN_M`, `PERSON_REACH_M`, `THETA_OPT_RAD`) are
+plain values. The joint limits, `FOOT_RADIUS_M`, `STAND_BASE_HEIGHT_M`, `ARM_REACH_M`,
+`D_OPT_M`, `STANDOFF_DISTANCE_M`, `HANDOVER_DISTANCE_M` and `FOOTPRINT*` need the pinocchio
+model, and the reach ones a scan of the arm's joint grid (~0.2 s): each is computed on its
+first access (`robot.D_OPT_M` or `from common.robot import D_OPT_M`, which is an access
+too), then kept as a plain module attribute. The functions (`load_pinocchio`,
+`standing_q`, `arm_plane`, `tcp_reach_gap`, `Footprint.stowed`) load pinocchio when called.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
 
-import coal
 import numpy as np
-import pinocchio as pin
 
 from common.geometry import FloatArray, rot_z
 from common.robot_description import (
@@ -53,18 +63,9 @@ from common.robot_description import (
     srdf_path,
     urdf_text,
 )
-from common.robot_mjcf import (
-    TIMESTEP_S,
-    MjRobotIndices,
-    mj_indices,
-    mj_joint_names,
-    q_mj_to_pin,
-    q_pin_to_mj,
-    robot_spec,
-    set_sim_options,
-    v_mj_to_pin,
-    v_pin_to_mj,
-)
+
+if TYPE_CHECKING:
+    import pinocchio as pin
 
 __all__ = [  # the description's names, re-exported, and this module's
     "APPROACH_MARGIN_M",
@@ -95,29 +96,40 @@ __all__ = [  # the description's names, re-exported, and this module's
     "STAND_BASE_HEIGHT_M",
     "TCP_FRAME",
     "THETA_OPT_RAD",
-    "TIMESTEP_S",
     "TORQUE_LIMITS",
     "T_STATOR_TCP",
     "VELOCITY_LIMITS",
     "CameraMount",
     "Footprint",
-    "MjRobotIndices",
     "arm_plane",
     "intrinsics",
     "joint_damping",
     "joint_frictionloss",
     "load_pinocchio",
-    "mj_indices",
-    "mj_joint_names",
-    "q_mj_to_pin",
-    "q_pin_to_mj",
-    "robot_spec",
-    "set_sim_options",
     "standing_q",
     "tcp_reach_gap",
-    "v_mj_to_pin",
-    "v_pin_to_mj",
 ]
+
+if TYPE_CHECKING:
+    # Computed on first access (see `_LAZY` at the end, and the module docstring); declared
+    # here so that type checkers see them.
+    POSITION_LOWER: FloatArray  # rad
+    POSITION_UPPER: FloatArray  # rad
+    VELOCITY_LIMITS: FloatArray  # rad/s
+    TORQUE_LIMITS: FloatArray  # N m, MuJoCo clips to these
+    FOOT_RADIUS_M: float
+    # Base height with the feet spheres resting on z = 0 in the `stand` legs.
+    STAND_BASE_HEIGHT_M: float
+    # See `_reach_and_standoff`.
+    ARM_REACH_M: float
+    D_OPT_M: float
+    STANDOFF_DISTANCE_M: float  # base origin to object, nav goal: D_OPT_M + APPROACH_MARGIN_M
+    # Base origin to the person: the TCP's reach in `handover` plus the person's own reach.
+    HANDOVER_DISTANCE_M: float
+    # (x_min, x_max, y_min, y_max) of the robot with the arm stowed: see `_footprint`.
+    FOOTPRINT_BOUNDS: tuple[float, float, float, float]
+    # Half-extents (x, y) of a base-centred rectangle holding the robot with the arm stowed.
+    FOOTPRINT: tuple[float, float]
 
 
 @functools.cache
@@ -129,6 +141,9 @@ def load_pinocchio() -> tuple[pin.Model, pin.GeometryModel]:
     `camera_wrist`. The collision model has the gripper boxes MuJoCo uses and the pairs
     MuJoCo checks: all, minus the SRDF's disabled ones and minus parent-child bodies.
     """
+    import coal
+    import pinocchio as pin
+
     model = pin.buildModelFromXML(urdf_text(), pin.JointModelFreeFlyer())
     armature = model.armature.copy()
     armature[6:] = joint_armature()
@@ -164,6 +179,8 @@ def load_pinocchio() -> tuple[pin.Model, pin.GeometryModel]:
 
 
 def _add_frame(model: pin.Model, name: str, parent_frame: int, T: FloatArray) -> None:
+    import pinocchio as pin
+
     parent = model.frames[parent_frame]
     placement = parent.placement * pin.SE3(T[:3, :3], T[:3, 3])
     model.addFrame(
@@ -177,15 +194,22 @@ def _readonly(x: FloatArray) -> FloatArray:
     return x
 
 
-_MODEL = load_pinocchio()[0]
-POSITION_LOWER: FloatArray = _readonly(_MODEL.lowerPositionLimit[7:])  # rad
-POSITION_UPPER: FloatArray = _readonly(_MODEL.upperPositionLimit[7:])  # rad
-VELOCITY_LIMITS: FloatArray = _readonly(_MODEL.velocityLimit[6:])  # rad/s
-TORQUE_LIMITS: FloatArray = _readonly(_MODEL.effortLimit[6:])  # N m, MuJoCo clips to these
-_GEOM = load_pinocchio()[1]
-FOOT_RADIUS_M: float = float(
-    _GEOM.geometryObjects[_GEOM.getGeometryId(f"{FOOT_FRAMES[0]}_0")].geometry.radius
-)
+@functools.cache
+def _joint_limits() -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """POSITION_LOWER, POSITION_UPPER, VELOCITY_LIMITS, TORQUE_LIMITS, from the model."""
+    model = load_pinocchio()[0]
+    return (
+        _readonly(model.lowerPositionLimit[7:]),
+        _readonly(model.upperPositionLimit[7:]),
+        _readonly(model.velocityLimit[6:]),
+        _readonly(model.effortLimit[6:]),
+    )
+
+
+@functools.cache
+def _foot_radius() -> float:
+    geom = load_pinocchio()[1]
+    return float(geom.geometryObjects[geom.getGeometryId(f"{FOOT_FRAMES[0]}_0")].geometry.radius)
 
 
 def intrinsics(mount: CameraMount) -> tuple[float, float, float, float]:
@@ -226,28 +250,35 @@ POSTURES: dict[str, FloatArray] = {
 
 
 def _frame_in_base(q_joints: FloatArray, frame: str) -> pin.SE3:
-    q = pin.neutral(_MODEL)
+    import pinocchio as pin
+
+    model = load_pinocchio()[0]
+    q = pin.neutral(model)
     q[7:] = q_joints
-    data = _MODEL.createData()
-    pin.framesForwardKinematics(_MODEL, data, q)
-    return data.oMf[_MODEL.getFrameId(frame)]
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return data.oMf[model.getFrameId(frame)]
 
 
-# Base height with the feet spheres resting on z = 0 in the `stand` legs.
-STAND_BASE_HEIGHT_M: float = FOOT_RADIUS_M - min(
-    float(_frame_in_base(POSTURES["stand"], f).translation[2]) for f in FOOT_FRAMES
-)
+@functools.cache
+def _stand_base_height() -> float:
+    """STAND_BASE_HEIGHT_M: the feet spheres rest on z = 0 in the `stand` legs."""
+    return _foot_radius() - min(
+        float(_frame_in_base(POSTURES["stand"], f).translation[2]) for f in FOOT_FRAMES
+    )
 
 
 def standing_q(
     posture: str = "stand", x: float = 0.0, y: float = 0.0, yaw: float = 0.0
 ) -> FloatArray:
     """Pinocchio q (26,) of the robot standing on z = 0 at (x, y, yaw) in `posture`."""
+    import pinocchio as pin
+
     if posture not in POSTURES:
         raise KeyError(f"unknown posture {posture!r}; postures are {sorted(POSTURES)}")
     R = rot_z(yaw)
     quat = pin.Quaternion(R).coeffs()  # xyzw
-    return np.concatenate([[x, y, STAND_BASE_HEIGHT_M], quat, POSTURES[posture]])
+    return np.concatenate([[x, y, _stand_base_height()], quat, POSTURES[posture]])
 
 
 # --- reach and standoff, from the arm's kinematics ------------------------------------------
@@ -257,6 +288,7 @@ COMFORT_MARGIN_RAD = 0.1  # a comfortable grasp stays this far inside every join
 COMFORT_STRETCH = 0.9  # ...with the wrist at most 90 % of its farthest from the shoulder
 APPROACH_MARGIN_M = 0.3  # navigation stops this far short of D_OPT; visual servoing closes it
 PERSON_REACH_M = 0.45  # a person's centre to the hand that takes the object
+THETA_OPT_RAD = 0.0  # the object straight ahead: the arm works in the base's x-z plane
 
 
 def _planar(theta: FloatArray, v: FloatArray) -> FloatArray:
@@ -272,21 +304,24 @@ def arm_plane() -> dict[str, FloatArray]:
     joint2..joint4 turn about parallel y axes, so the TCP is shoulder + R(a2) upper +
     R(a2 + a3) fore + R(a2 + a3 + a4) tool, with these (x, z) vectors read from FK at zero.
     """
-    ids = [_MODEL.getJointId(n) for n in ARM_JOINTS]
-    if any(_MODEL.joints[ids[k]].shortname() != "JointModelRY" for k in (1, 2, 3)):
+    import pinocchio as pin
+
+    model = load_pinocchio()[0]
+    ids = [model.getJointId(n) for n in ARM_JOINTS]
+    if any(model.joints[ids[k]].shortname() != "JointModelRY" for k in (1, 2, 3)):
         raise ValueError("joint2..joint4 are no longer parallel y axes: arm_plane() is wrong")
-    q = pin.neutral(_MODEL)
+    q = pin.neutral(model)
     q[7 + JOINT_NAMES.index("joint6")] = math.pi / 2
-    data = _MODEL.createData()
-    pin.framesForwardKinematics(_MODEL, data, q)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
     p = [data.oMi[i].translation[[0, 2]] for i in ids[1:4]]
-    tcp = data.oMf[_MODEL.getFrameId(TCP_FRAME)].translation
+    tcp = data.oMf[model.getFrameId(TCP_FRAME)].translation
     return {"shoulder": p[0], "upper": p[1] - p[0], "fore": p[2] - p[1], "tool": tcp[[0, 2]] - p[2]}
 
 
 def _arm_grid(margin: float, n: int = 241) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(a2, a3, wrist position) over a grid of joint2, joint3 inside the limits - margin."""
-    lo, hi = POSITION_LOWER, POSITION_UPPER
+    lo, hi, _, _ = _joint_limits()
     k2, k3 = JOINT_NAMES.index("joint2"), JOINT_NAMES.index("joint3")
     grid2, grid3 = np.meshgrid(
         np.linspace(lo[k2] + margin, hi[k2] - margin, n),
@@ -302,19 +337,23 @@ def _tcp_reachable(
     a2: FloatArray, a3: FloatArray, wrist: FloatArray, pitch: float, margin: float
 ) -> tuple[FloatArray, FloatArray]:
     """TCP (x, z) positions in the base frame with the tool at `pitch`, joint4 in limits."""
+    lo, hi, _, _ = _joint_limits()
     k4 = JOINT_NAMES.index("joint4")
     a4 = pitch - a2 - a3
-    ok = (a4 >= POSITION_LOWER[k4] + margin) & (a4 <= POSITION_UPPER[k4] - margin)
+    ok = (a4 >= lo[k4] + margin) & (a4 <= hi[k4] - margin)
     return wrist + _planar(np.full_like(a2, pitch), arm_plane()["tool"]), ok
 
 
 @functools.cache
 def _limit_grid() -> tuple[FloatArray, FloatArray, FloatArray, float]:
     """`_arm_grid` at the joint limits, and joint1's axis x in the base (at rest)."""
-    q = pin.neutral(_MODEL)
-    data = _MODEL.createData()
-    pin.forwardKinematics(_MODEL, data, q)
-    x1 = float(data.oMi[_MODEL.getJointId(ARM_JOINTS[0])].translation[0])
+    import pinocchio as pin
+
+    model = load_pinocchio()[0]
+    q = pin.neutral(model)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    x1 = float(data.oMi[model.getJointId(ARM_JOINTS[0])].translation[0])
     return (*_arm_grid(0.0), x1)
 
 
@@ -333,6 +372,7 @@ def tcp_reach_gap(p_base: FloatArray, pitch_rad: float) -> float:
     return float(np.min(np.hypot(tcp[ok, 0] - r, tcp[ok, 1] - float(p_base[2]))))
 
 
+@functools.cache
 def _reach_and_standoff() -> tuple[float, float]:
     """ARM_REACH_M: the farthest the TCP gets horizontally from the shoulder, any pitch.
 
@@ -353,7 +393,7 @@ def _reach_and_standoff() -> tuple[float, float]:
         xs = []
         for pitch in np.linspace(*GRASP_PITCH_RAD, 11):
             tcp, ok = _tcp_reachable(a2, a3, wrist, pitch, COMFORT_MARGIN_RAD)
-            hit = ok & comfy & (np.abs(tcp[:, 1] + STAND_BASE_HEIGHT_M - h) < 0.005)
+            hit = ok & comfy & (np.abs(tcp[:, 1] + _stand_base_height() - h) < 0.005)
             xs.extend(tcp[hit, 0])
         if not xs:
             raise ValueError(f"no comfortable side grasp reaches an object at {h:.2f} m")
@@ -364,8 +404,11 @@ def _reach_and_standoff() -> tuple[float, float]:
     return reach, 0.5 * (max(lows) + min(highs))
 
 
+@functools.cache
 def _footprint(posture: str) -> tuple[float, float, float, float]:
     """(x_min, x_max, y_min, y_max) in `base_yaw` of every collision geometry, standing."""
+    import pinocchio as pin
+
     model, geom = load_pinocchio()
     data, gdata = model.createData(), geom.createData()
     pin.updateGeometryPlacements(model, data, geom, gdata, standing_q(posture))
@@ -380,19 +423,9 @@ def _footprint(posture: str) -> tuple[float, float, float, float]:
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
-ARM_REACH_M, D_OPT_M = _reach_and_standoff()
-THETA_OPT_RAD = 0.0  # the object straight ahead: the arm works in the base's x-z plane
-STANDOFF_DISTANCE_M: float = D_OPT_M + APPROACH_MARGIN_M  # base origin to object, nav goal
-# Base origin to the person: the TCP's reach in `handover` plus the person's own reach.
-HANDOVER_DISTANCE_M: float = (
-    float(_frame_in_base(POSTURES["handover"], TCP_FRAME).translation[0]) + PERSON_REACH_M
-)
-FOOTPRINT_BOUNDS: tuple[float, float, float, float] = _footprint("stow")
-# Half-extents (x, y) of a base-centred rectangle holding the robot with the arm stowed.
-FOOTPRINT: tuple[float, float] = (
-    max(-FOOTPRINT_BOUNDS[0], FOOTPRINT_BOUNDS[1]),
-    max(-FOOTPRINT_BOUNDS[2], FOOTPRINT_BOUNDS[3]),
-)
+def _footprint_half_extents() -> tuple[float, float]:
+    x_min, x_max, y_min, y_max = _footprint("stow")
+    return max(-x_min, x_max), max(-y_min, y_max)
 
 
 class Footprint(NamedTuple):
@@ -405,10 +438,49 @@ class Footprint(NamedTuple):
     @classmethod
     def stowed(cls) -> Footprint:
         """The rectangle of `FOOTPRINT_BOUNDS`: the robot with its arm stowed."""
-        x_min, x_max, y_min, y_max = FOOTPRINT_BOUNDS
+        x_min, x_max, y_min, y_max = _footprint("stow")
         return cls(float(x_max), float(-x_min), float(max(-y_min, y_max)))
 
     @property
     def circumscribed(self) -> float:
         """The radius of the circle about the base origin that holds the rectangle, m."""
         return math.hypot(max(self.front, self.back), self.half_width)
+
+
+# --- computed on first access ---------------------------------------------------------------
+_LAZY: dict[str, Callable[[], object]] = {
+    "POSITION_LOWER": lambda: _joint_limits()[0],
+    "POSITION_UPPER": lambda: _joint_limits()[1],
+    "VELOCITY_LIMITS": lambda: _joint_limits()[2],
+    "TORQUE_LIMITS": lambda: _joint_limits()[3],
+    "FOOT_RADIUS_M": _foot_radius,
+    "STAND_BASE_HEIGHT_M": _stand_base_height,
+    "ARM_REACH_M": lambda: _reach_and_standoff()[0],
+    "D_OPT_M": lambda: _reach_and_standoff()[1],
+    "STANDOFF_DISTANCE_M": lambda: _reach_and_standoff()[1] + APPROACH_MARGIN_M,
+    "HANDOVER_DISTANCE_M": lambda: (
+        float(_frame_in_base(POSTURES["handover"], TCP_FRAME).translation[0]) + PERSON_REACH_M
+    ),
+    "FOOTPRINT_BOUNDS": lambda: _footprint("stow"),
+    "FOOTPRINT": _footprint_half_extents,
+}
+
+
+def _lazy(name: str) -> object:
+    """The value of the lazy module attribute `name`, computed now and kept as a global."""
+    make = _LAZY.get(name)
+    if make is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = make()
+    globals()[name] = value  # later accesses are plain attribute lookups
+    return value
+
+
+if not TYPE_CHECKING:  # hidden from mypy, which types the lazy names from their declarations
+
+    def __getattr__(name: str) -> object:  # PEP 562: called only for names not yet set
+        return _lazy(name)
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

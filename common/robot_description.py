@@ -1,8 +1,8 @@
 """The facts both robot models are built from: files, names, gripper and camera mounts.
 
 Everything here is plain data, with no pinocchio or MuJoCo: `common.robot` builds the
-pinocchio model and `common.robot_mjcf` the MuJoCo one from the same URDF text
-(`urdf_text()`), so the two cannot drift. That text is the example-robot-data URDF with
+pinocchio model and the simulator's `services.sim.mjcf` the MuJoCo one from the same URDF
+text (`urdf_text()`), so the two cannot drift. That text is the example-robot-data URDF with
 three edits: `package://` paths resolved, the base link's placeholder inertia (1e-6
 everywhere, not positive definite) made diagonal, and the Z1 gripper's two collision
 meshes removed — both models collide the gripper as the boxes in `GRIPPER_BOXES`, whose

@@ -33,7 +33,7 @@ from common.geometry import FloatArray, make_T, quat_wxyz_to_xyzw, quat_xyzw_to_
 from common.messages import Array
 from common.messages.sim import Locomotion, Odom, RobotState, WorldEvent
 from common.messages.world import WorldDescription
-from services.sim import scene
+from services.sim import mjcf, scene
 from services.sim.drive import JAW, N_JOINTS, CommandError, JointDrive, joint_addresses, validate
 from services.sim.events import ContactMonitor, DropMonitor
 from services.sim.handover import Handover
@@ -67,7 +67,7 @@ class SimCore:
         self.data = mujoco.MjData(self.model)
         self.dt = self.model.opt.timestep
         self.tick = 0
-        idx = robot.mj_indices(self.model)
+        idx = mjcf.mj_indices(self.model)
         self._base_q = np.asarray(idx.qpos[:7], dtype=np.intp)
         self._base_v = np.asarray(idx.qvel[:6], dtype=np.intp)
         self._base_xy = slice(int(idx.qpos[0]), int(idx.qpos[0]) + 2)
@@ -136,7 +136,7 @@ class SimCore:
 
     def reset_robot(self, x: float, y: float, yaw: float, posture: str = "stand") -> None:
         """Stand the robot still at (x, y, yaw) in `posture` (start-up and tests only)."""
-        self.data.qpos[self._robot_qpos] = robot.q_pin_to_mj(robot.standing_q(posture, x, y, yaw))
+        self.data.qpos[self._robot_qpos] = mjcf.q_pin_to_mj(robot.standing_q(posture, x, y, yaw))
         self.data.qvel[self._robot_qvel] = 0.0
         self._pose = (x, y, yaw)
         mujoco.mj_forward(self.model, self.data)

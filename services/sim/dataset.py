@@ -36,7 +36,7 @@ from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z
 from common.messages.arrays import as_numpy
 from common.messages.world import WorldDescription
 from services.sim import feasibility as fz
-from services.sim import scene
+from services.sim import mjcf, scene
 from services.sim.cameras import CameraRig
 from services.sim.world import generate_world
 
@@ -163,13 +163,13 @@ def render_seed(seed: int, world_name: str = "hall") -> tuple[dict[int, str], li
     rng = np.random.default_rng([seed, 0xD05E])
     model = scene.compile_scene(world, with_robot=True)
     data = mujoco.MjData(model)
-    qpos = robot.mj_indices(model).qpos
+    qpos = mjcf.mj_indices(model).qpos
     rig = CameraRig(model, WIDTH, HEIGHT, world)
     instances = dict(rig.instances)
     frames: list[Frame] = []
     try:
         for shot in plan_shots(world, rng):
-            data.qpos[qpos] = robot.q_pin_to_mj(_jittered_q(shot, rng))
+            data.qpos[qpos] = mjcf.q_pin_to_mj(_jittered_q(shot, rng))
             mujoco.mj_kinematics(model, data)
             mujoco.mj_camlight(model, data)
             frame, truth = rig.capture(data, shot.camera, 0)

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from common import robot
+from services.sim import mjcf
 from services.sim.standing import STAND_KD, STAND_KP, WATCHDOG_KD, WATCHDOG_KP
 
 N_JOINTS = len(robot.JOINT_NAMES)
@@ -86,7 +87,7 @@ def _problems(arrays: dict[str, ArrayLike], stamp_ns: int, now_ns: int) -> list[
 
 def joint_addresses(robot_addresses: NDArray[np.intp]) -> NDArray[np.intp]:
     """The 19 joints' addresses in `JOINT_NAMES` order from `MjRobotIndices.qpos`/`.qvel`."""
-    mj = robot.mj_joint_names()
+    mj = mjcf.mj_joint_names()
     order = [mj.index(name) for name in robot.JOINT_NAMES]
     start = len(robot_addresses) - N_JOINTS
     return np.asarray(robot_addresses[start:], dtype=np.intp)[order]
@@ -98,7 +99,7 @@ class JointDrive:
     def __init__(
         self,
         model: mujoco.MjModel,
-        indices: robot.MjRobotIndices,
+        indices: mjcf.MjRobotIndices,
         watchdog_ns: int,
         legs_held: bool,
     ) -> None:

@@ -2,13 +2,13 @@
 
 Every named thing in the world is one MuJoCo body named by its id: obstacles are static
 bodies (tables drawn as a top on four legs, the rest as solid boxes), artifacts are free
-bodies, people are mocap bodies, and the world is built into `common.robot.robot_spec()`,
+bodies, people are mocap bodies, and the world is built into `mjcf.robot_spec()`,
 so the robot keeps its unprefixed names, its root at the start pose. A geom's instance is
 its root body's name, which is how `segmentation_ids` labels pixels.
 
 Physics: timestep 1 ms with `implicitfast` (stable with the actuators' damping at no extra
 cost), elliptic friction cones with `impratio` 100 (the accurate cone for grasping: a
-pyramidal or soft cone lets objects creep out of a grip; `common.robot_mjcf` says why 100,
+pyramidal or soft cone lets objects creep out of a grip; `mjcf` says why 100,
 and sets them all in `set_sim_options`); artifacts have condim 4 (torsional friction, so a
 pinched object does not spin about the jaw axis) and friction 1.0.
 Sleeping islands are on (`SLEEP`): artifacts resting on tables drop out of the solver and
@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from common import robot
 from common.messages.world import Artifact, Cuboid, Light, Obstacle, Person, Rgba, WorldDescription
+from services.sim import mjcf
 
 #: Let resting artifacts sleep (MuJoCo's island sleeping).
 SLEEP = True
@@ -308,7 +309,7 @@ def _light(spec: mujoco.MjSpec, k: int, light: Light) -> None:
 
 def _options(spec: mujoco.MjSpec, world: WorldDescription) -> None:
     spec.modelname = f"dume_{world.name}_{world.seed}"
-    robot.set_sim_options(spec)
+    mjcf.set_sim_options(spec)
     if SLEEP:
         spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     spec.visual.global_.offwidth, spec.visual.global_.offheight = OFFSCREEN_SIZE
@@ -336,11 +337,11 @@ def _place_robot(spec: mujoco.MjSpec, world: WorldDescription) -> None:
 def build_scene(world: WorldDescription, *, with_robot: bool = True) -> mujoco.MjSpec:
     """The scene of a world: floor, obstacles, artifacts, people, lights and the robot.
 
-    With the robot, the world is built into `common.robot.robot_spec()` rather than the
+    With the robot, the world is built into `mjcf.robot_spec()` rather than the
     robot attached to it, so every robot name stays unprefixed and the robot's bodies come
     first; its root stands at the start pose.
     """
-    spec = robot.robot_spec() if with_robot else mujoco.MjSpec()
+    spec = mjcf.robot_spec() if with_robot else mujoco.MjSpec()
     if with_robot:
         _place_robot(spec, world)
     _options(spec, world)

@@ -20,7 +20,7 @@ import numpy as np
 
 from common import robot
 from common.messages.world import WorldDescription
-from services.sim import scene
+from services.sim import mjcf, scene
 from services.sim.feasibility import check_paths, standoff_pose
 
 MIN_VISIBLE_FRACTION = 0.5
@@ -39,7 +39,7 @@ def place_robot(
 ) -> None:
     """Put the robot standing at (x, y, yaw) in a named posture and run the kinematics."""
     q_pin = robot.standing_q(posture, x, y, yaw)
-    data.qpos[robot.mj_indices(model).qpos] = robot.q_pin_to_mj(q_pin)
+    data.qpos[mjcf.mj_indices(model).qpos] = mjcf.q_pin_to_mj(q_pin)
     mujoco.mj_kinematics(model, data)
     mujoco.mj_camlight(model, data)
 

@@ -18,6 +18,7 @@ from common import robot
 from common.geometry import inv_T, matrix_to_quat_xyzw, quat_xyzw_to_wxyz
 from common.messages import as_numpy
 from common.messages.sim import CameraFrame, SegmentationTruth
+from services.sim import mjcf
 from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.feasibility import standoff_pose
@@ -42,7 +43,7 @@ def box_scene() -> Iterator[tuple[mujoco.MjModel, mujoco.MjData, CameraRig]]:
     """The robot standing on a floor, a box square to camera_head's axis in front of it."""
     q = robot.standing_q("stand")
     T = camera_pose(q, "camera_head")
-    spec = robot.robot_spec()
+    spec = mjcf.robot_spec()
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[20, 20, 0.1])
     centre = T[:3, :3] @ [0.0, 0.0, BOX_DISTANCE_M + BOX_HALF_M] + T[:3, 3]
     body = spec.worldbody.add_body(
@@ -53,7 +54,7 @@ def box_scene() -> Iterator[tuple[mujoco.MjModel, mujoco.MjData, CameraRig]]:
     )
     model = spec.compile()
     data = mujoco.MjData(model)
-    data.qpos[:] = robot.q_pin_to_mj(q)
+    data.qpos[:] = mjcf.q_pin_to_mj(q)
     mujoco.mj_forward(model, data)
     rig = CameraRig(model, 320, 240)
     yield model, data, rig

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 import os
+import subprocess
+import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering, before mujoco is imported
 
@@ -12,7 +14,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from common import robot, robot_mjcf
+from common import robot
 from common.geometry import (
     make_T,
     matrix_to_quat_xyzw,
@@ -30,10 +32,11 @@ from common.robot_description import (
     gripper_stl_path,
     read_stl,
 )
+from services.sim import mjcf
 
 PinModels = tuple[pin.Model, pin.GeometryModel]
 MjRobot = tuple[mujoco.MjModel, mujoco.MjData]
-MjWorld = tuple[mujoco.MjModel, mujoco.MjData, robot.MjRobotIndices]
+MjWorld = tuple[mujoco.MjModel, mujoco.MjData, mjcf.MjRobotIndices]
 
 N_RANDOM = 20
 OPTICAL_FROM_MJ_CAMERA = np.diag([1.0, -1.0, -1.0])
@@ -46,7 +49,7 @@ def pin_model() -> PinModels:
 
 @pytest.fixture(scope="module")
 def mj_robot() -> MjRobot:
-    model = robot.robot_spec().compile()
+    model = mjcf.robot_spec().compile()
     return model, mujoco.MjData(model)
 
 
@@ -54,13 +57,13 @@ def mj_robot() -> MjRobot:
 def mj_world() -> MjWorld:
     """The robot attached into a world with a floor and a mocap bottle, as the sim does."""
     world = mujoco.MjSpec()
-    robot.set_sim_options(world)
+    mjcf.set_sim_options(world)
     world.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1])
     bottle = world.worldbody.add_body(name="bottle", mocap=True, pos=[5, 5, 5])
     bottle.add_geom(name="bottle", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.1])
-    world.attach(robot.robot_spec(), prefix="b1/", frame=world.worldbody.add_frame())
+    world.attach(mjcf.robot_spec(), prefix="b1/", frame=world.worldbody.add_frame())
     model = world.compile()
-    return model, mujoco.MjData(model), robot.mj_indices(model, prefix="b1/")
+    return model, mujoco.MjData(model), mjcf.mj_indices(model, prefix="b1/")
 
 
 def random_q(model: pin.Model, rng: np.random.Generator) -> np.ndarray:
@@ -72,8 +75,8 @@ def random_q(model: pin.Model, rng: np.random.Generator) -> np.ndarray:
 def set_mj(
     model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, v: np.ndarray | None = None
 ) -> None:
-    data.qpos[:] = robot.q_pin_to_mj(q)
-    data.qvel[:] = 0.0 if v is None else robot.v_pin_to_mj(v, q)
+    data.qpos[:] = mjcf.q_pin_to_mj(q)
+    data.qvel[:] = 0.0 if v is None else mjcf.v_pin_to_mj(v, q)
     mujoco.mj_forward(model, data)
 
 
@@ -89,21 +92,21 @@ def test_joint_order_is_pinocchios_model_order(pin_model: PinModels) -> None:
 
 def test_mujoco_orders_legs_differently_and_maps_by_name(mj_robot: MjRobot) -> None:
     model, _ = mj_robot
-    mj_names = robot.mj_joint_names()
+    mj_names = mjcf.mj_joint_names()
     assert tuple(model.joint(i).name for i in range(1, model.njnt)) == mj_names
     assert mj_names[:3] == ("FR_hip_joint", "FR_thigh_joint", "FR_calf_joint")
     assert mj_names != robot.JOINT_NAMES and sorted(mj_names) == sorted(robot.JOINT_NAMES)
     q = random_q(robot.load_pinocchio()[0], np.random.default_rng(0))
-    qpos = robot.q_pin_to_mj(q)
+    qpos = mjcf.q_pin_to_mj(q)
     for i, name in enumerate(mj_names):
         assert qpos[7 + i] == q[7 + robot.JOINT_NAMES.index(name)]
-    np.testing.assert_array_equal(robot.q_mj_to_pin(qpos), q)
+    np.testing.assert_array_equal(mjcf.q_mj_to_pin(qpos), q)
     np.testing.assert_array_equal(qpos[3:7], quat_xyzw_to_wxyz(q[3:7]))
 
 
 def test_actuators_are_motors_in_joint_order_clipped_at_urdf_effort(mj_robot: MjRobot) -> None:
     model, _ = mj_robot
-    ctrl = robot.mj_indices(model).ctrl
+    ctrl = mjcf.mj_indices(model).ctrl
     for k, name in enumerate(robot.JOINT_NAMES):
         act = model.actuator(int(ctrl[k]))
         assert act.name == name and model.joint(int(act.trnid[0])).name == name
@@ -114,7 +117,7 @@ def test_actuators_are_motors_in_joint_order_clipped_at_urdf_effort(mj_robot: Mj
     tau = np.linspace(-1.5, 1.5, 19) * robot.TORQUE_LIMITS
     data.ctrl[ctrl] = tau
     mujoco.mj_forward(model, data)
-    applied = robot_mjcf.joints_mj_to_pin(data.qfrc_actuator[6:])
+    applied = mjcf.joints_mj_to_pin(data.qfrc_actuator[6:])
     np.testing.assert_allclose(applied, np.clip(tau, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS))
 
 
@@ -133,7 +136,7 @@ def test_mass_matrix_and_bias_forces_agree_through_the_maps(
     pdata = pmodel.createData()
     model, data = mj_robot
     rng = np.random.default_rng(1)
-    perm = np.array([robot.JOINT_NAMES.index(n) for n in robot.mj_joint_names()])
+    perm = np.array([robot.JOINT_NAMES.index(n) for n in mjcf.mj_joint_names()])
     for _ in range(5):
         q, v = random_q(pmodel, rng), rng.normal(size=25)
         set_mj(model, data, q, v)
@@ -185,7 +188,7 @@ def test_velocity_maps_give_the_same_frame_velocities(
     for _ in range(N_RANDOM):
         q, v = random_q(pmodel, rng), rng.normal(size=25)
         set_mj(model, data, q, v)
-        np.testing.assert_allclose(robot.v_mj_to_pin(data.qvel, data.qpos), v, atol=1e-12)
+        np.testing.assert_allclose(mjcf.v_mj_to_pin(data.qvel, data.qpos), v, atol=1e-12)
         pin.forwardKinematics(pmodel, pdata, q, v)
         pin.updateFramePlacements(pmodel, pdata)
         for name in (robot.TCP_FRAME, *robot.FOOT_FRAMES):
@@ -210,9 +213,9 @@ def test_attached_into_a_world_the_indices_find_the_robot(
     pmodel, _ = pin_model
     pdata = pmodel.createData()
     q = robot.standing_q("look", x=1.0, y=-2.0, yaw=0.7)
-    data.qpos[idx.qpos] = robot.q_pin_to_mj(q)
+    data.qpos[idx.qpos] = mjcf.q_pin_to_mj(q)
     mujoco.mj_forward(model, data)
-    np.testing.assert_array_equal(robot.q_mj_to_pin(data.qpos[idx.qpos]), q)
+    np.testing.assert_array_equal(mjcf.q_mj_to_pin(data.qpos[idx.qpos]), q)
     pin.framesForwardKinematics(pmodel, pdata, q)
     np.testing.assert_allclose(
         data.site("b1/gripper_tcp").xpos,
@@ -236,7 +239,7 @@ def test_posture_has_no_self_contact_and_stands_on_its_feet(
 ) -> None:
     model, data, idx = mj_world
     q = robot.standing_q(posture)
-    data.qpos[idx.qpos] = robot.q_pin_to_mj(q)
+    data.qpos[idx.qpos] = mjcf.q_pin_to_mj(q)
     mujoco.mj_forward(model, data)
     assert non_foot_contacts(model, data) == []
     feet = [c for c in data.contact[: data.ncon] if "floor" in model.geom(c.geom1).name]
@@ -248,10 +251,10 @@ def test_posture_has_no_self_contact_and_stands_on_its_feet(
 
 
 def test_pinocchio_checks_every_pair_mujoco_checks(pin_model: PinModels) -> None:
-    model = robot.robot_spec().compile()
+    model = mjcf.robot_spec().compile()
     data = mujoco.MjData(model)
     model.geom_margin[:] = 5.0  # every pair MuJoCo does not filter out reports a contact
-    data.qpos[:] = robot.q_pin_to_mj(robot.standing_q("stand"))
+    data.qpos[:] = mjcf.q_pin_to_mj(robot.standing_q("stand"))
     mujoco.mj_forward(model, data)
     names = [
         tuple(sorted((model.geom(c.geom1).name, model.geom(c.geom2).name)))
@@ -279,7 +282,7 @@ def jaw_distances(model: mujoco.MjModel, data: mujoco.MjData, gripper: float) ->
     """Distance from a 6 cm bottle, centred on gripper_tcp along its y, to each gripper geom."""
     q = robot.standing_q("ready")
     q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = gripper
-    data.qpos[robot.mj_indices(model, "b1/").qpos] = robot.q_pin_to_mj(q)
+    data.qpos[mjcf.mj_indices(model, "b1/").qpos] = mjcf.q_pin_to_mj(q)
     mujoco.mj_forward(model, data)
     tcp = data.site("b1/gripper_tcp")
     data.mocap_pos[0] = tcp.xpos
@@ -311,7 +314,7 @@ def hold_bottle(seconds: float, shake_rad: float = 0.0) -> tuple[float, float]:
     6 cm, 400 g bottle closed on for 0.5 s, then left to gravity for `seconds` while the
     arm's first joint swings ±`shake_rad` at 1.5 Hz (a walk's sway, harder). Returns the
     bottle's slip from the TCP (m) and the jaw angle (rad) at the end."""
-    spec = robot.robot_spec()
+    spec = mjcf.robot_spec()
     spec.body("base").pos = [0.0, 0.0, robot.STAND_BASE_HEIGHT_M]
     spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1="base", objtype=mujoco.mjtObj.mjOBJ_BODY)
     body = spec.worldbody.add_body(name="bottle", gravcomp=1.0)  # floats until gripped
@@ -319,8 +322,8 @@ def hold_bottle(seconds: float, shake_rad: float = 0.0) -> tuple[float, float]:
     body.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.1], mass=0.4)
     model = spec.compile()
     data = mujoco.MjData(model)
-    idx = robot.mj_indices(model)
-    data.qpos[idx.qpos] = robot.q_pin_to_mj(robot.standing_q("ready"))
+    idx = mjcf.mj_indices(model)
+    data.qpos[idx.qpos] = mjcf.q_pin_to_mj(robot.standing_q("ready"))
     mujoco.mj_forward(model, data)
     tcp = data.site(robot.TCP_FRAME)
     R_tcp = tcp.xmat.reshape(3, 3)
@@ -337,8 +340,8 @@ def hold_bottle(seconds: float, shake_rad: float = 0.0) -> tuple[float, float]:
         target = robot.POSTURES["ready"].copy()
         if step > grip_steps:
             target[0] += shake_rad * math.sin(2 * math.pi * 1.5 * (step - grip_steps) * 1e-3)
-        q = robot.q_mj_to_pin(data.qpos[idx.qpos])
-        v = robot.v_mj_to_pin(data.qvel[idx.qvel], data.qpos[idx.qpos])
+        q = mjcf.q_mj_to_pin(data.qpos[idx.qpos])
+        v = mjcf.v_mj_to_pin(data.qvel[idx.qvel], data.qpos[idx.qpos])
         tau = kp * (target - q[7:]) - kd * v[6:]
         tau[-1] = 3.0  # positive closes the jaw
         data.ctrl[idx.ctrl] = tau
@@ -348,7 +351,7 @@ def hold_bottle(seconds: float, shake_rad: float = 0.0) -> tuple[float, float]:
         mujoco.mj_step(model, data)
     assert held is not None
     now = (data.body("bottle").xpos - tcp.xpos) @ tcp.xmat.reshape(3, 3)  # in the TCP frame
-    jaw = float(robot.q_mj_to_pin(data.qpos[idx.qpos])[-1])
+    jaw = float(mjcf.q_mj_to_pin(data.qpos[idx.qpos])[-1])
     return float(np.linalg.norm(now - held)), jaw
 
 
@@ -467,16 +470,33 @@ def test_reach_and_standoff_come_from_the_kinematics(pin_model: PinModels) -> No
     assert robot.FOOTPRINT[0] >= max(-robot.FOOTPRINT_BOUNDS[0], front)
 
 
+def test_importing_the_robot_loads_no_model_and_every_name_resolves() -> None:
+    """`import common.robot` is cheap (no pinocchio, coal or MuJoCo); the computed names
+    come on first access and then stay put as plain attributes."""
+    code = (
+        "import sys, common.robot as r\n"
+        "heavy = {'pinocchio', 'coal', 'mujoco'} & set(sys.modules)\n"
+        "assert not heavy, heavy\n"
+        "for name in r.__all__:\n"
+        "    getattr(r, name)\n"
+        "assert r.D_OPT_M is vars(r)['D_OPT_M'] and 'mujoco' not in sys.modules\n"
+        "assert set(r.__all__) <= set(dir(r))\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+    with pytest.raises(AttributeError):
+        _ = robot.NO_SUCH_NAME  # type: ignore[attr-defined]
+
+
 def test_intrinsics_match_mujocos_rendering(mj_world: MjWorld) -> None:
     """Render a small sphere off the optical axis and find its centre in the image."""
-    spec = robot.robot_spec()
+    spec = mjcf.robot_spec()
     mount = robot.CAMERA_MOUNTS["camera_head"]
     T = camera_pose("stand", mount.name)
     p = T.act(np.array([0.12, -0.05, 1.0]))
     spec.worldbody.add_geom(name="dot", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.02], pos=p)
     model = spec.compile()
     data = mujoco.MjData(model)
-    data.qpos[:] = robot.q_pin_to_mj(robot.standing_q("stand"))
+    data.qpos[:] = mjcf.q_pin_to_mj(robot.standing_q("stand"))
     mujoco.mj_forward(model, data)
     renderer = mujoco.Renderer(model, mount.height, mount.width)
     renderer.enable_segmentation_rendering()

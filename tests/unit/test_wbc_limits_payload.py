@@ -9,6 +9,7 @@ import numpy as np
 from bench.spike_wbc import floor_spec, read_state, set_initial_pose, simulate
 from common import robot
 from common.geometry import make_T, rot_z
+from services.sim import mjcf
 from services.wbc.controller import WbcReferences, WbcState
 from services.wbc.reach import PoseSegment
 
@@ -36,7 +37,7 @@ def hold_target(payload_kg: float, offset: np.ndarray, seconds: float) -> tuple[
     T1[:3, :3] = rot_z(0.3) @ T0[:3, :3]
     segment = PoseSegment(T0, T1, 1.0)
     past = np.zeros(6)
-    idx = robot.mj_indices(model)
+    idx = mjcf.mj_indices(model)
 
     def refs_at(t: float, state: WbcState) -> WbcReferences:
         s = segment.sample(t)

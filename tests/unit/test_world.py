@@ -19,7 +19,7 @@ from common import robot
 from common.messages.arrays import as_numpy
 from common.messages.world import OCCUPIED, Cuboid, Cylinder, Hall, Obstacle, WorldDescription
 from services.sim import feasibility as fz
-from services.sim import scene
+from services.sim import mjcf, scene
 from services.sim.visibility import (
     MIN_VISIBLE_FRACTION,
     check_visibility,
@@ -222,7 +222,7 @@ def test_scene_with_the_robot_keeps_robot_names_and_a_640x480_buffer() -> None:
     assert model.site("gripper_tcp").id >= 0 and model.site("person_1_hand").id >= 0
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    root = data.qpos[robot.mj_indices(model).qpos[:2]]
+    root = data.qpos[mjcf.mj_indices(model).qpos[:2]]
     assert root == pytest.approx([world.robot_start.x, world.robot_start.y])
 
 
