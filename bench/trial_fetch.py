@@ -42,6 +42,7 @@ from common.messages.sim import HandoverTaken, ObjectDropped, Odom, WorldEvents
 from common.messages.wbc import Grasp, Posture, Reach, Release, WbcMode, WbcModeName
 from common.messages.world import Cylinder, WorldDescription
 from common.robot import D_OPT_M, THETA_OPT_RAD, arm_plane
+from common.sightings import pick_detection
 from deploy.stack import ProcessStack
 from services.mission.approach import ApproachController, Sighting
 from services.mission.grasp_pose import GraspPoseError, grasp_from_detection, plan_error
@@ -134,16 +135,11 @@ class Rig:
         return self.wrist
 
     def target(self, dets: Detections | None) -> Detection | None:
-        """bottle_1 among the detections: by map id, else the nearest bottle to the map's."""
+        """bottle_1 among the detections: the bottle nearest its (truth) place."""
         if dets is None:
             return None
-        mine = [x for x in dets.detections if x.map_id == OBJECT]
-        if not mine:
-            mine = [x for x in dets.detections if x.class_name == "bottle"]
-        if not mine:
-            return None
-        there = np.array(self.truth.position[:2])  # stands in for the map's entry (seeded)
-        return min(mine, key=lambda x: float(np.linalg.norm(np.array(x.axis_in_world[:2]) - there)))
+        there = self.truth.position[:2]  # stands in for the map's entry (seeded)
+        return pick_detection(dets.detections, "bottle", (there[0], there[1]), math.inf)
 
     def go(self, goal: NavGoal, timeout_s: float, out: Figures, name: str) -> Script:
         try:  # sent once: navigation takes a goal sent before its map

@@ -41,7 +41,7 @@ from common.messages.wbc import (
     WbcModeName,
     WbcStatus,
 )
-from services.mission import targets
+from common.sightings import pick_detection
 from services.mission.ports import Unavailable, WristSighting
 
 log = logging.getLogger("dume.mission")
@@ -221,12 +221,9 @@ class BusRobot:
         frame = self._wrist_frame(due)
         if frame is None:
             return None
-        mine = next((d for d in frame.detections if d.map_id == map_id), None)
-        if mine is None:
-            free = [d for d in frame.detections if d.map_id is None]
-            mine = targets.pick_detection(
-                free, class_name, near_xy, self.sighting_gate_m, any_class
-            )
+        mine = pick_detection(
+            frame.detections, class_name, near_xy, self.sighting_gate_m, any_class
+        )
         return WristSighting(frame.stamp_ns, mine, frame.T_world_base) if mine else None
 
     def _wrist_frame(self, due_ns: int) -> Detections | None:

@@ -3,18 +3,16 @@
 A map id names one entity (or none: unknown). A class names every mapped, not missing
 artifact of that class, nearest to the robot first: the first is fetched, the rest are
 the candidates a recovery tries when the first is not where the map says. A person may
-be named by id, or as `person` (the nearest mapped person). `pick_detection` says which
-wrist detection is the target. Pure apart from the port's map queries, which raise
-`Unavailable` when the map does not answer.
+be named by id, or as `person` (the nearest mapped person). Which wrist detection is the
+target is `common.sightings.pick_detection`'s rule. Pure apart from the port's map
+queries, which raise `Unavailable` when the map does not answer.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
 
-from common.messages.perception import Detection
 from common.messages.semantic_map import MapEntity
 from services.mission.ports import RobotPort
 
@@ -49,36 +47,6 @@ def object_candidates(port: RobotPort, name: str) -> list[MapEntity]:
         return [] if entity is None else [entity]
     present = [e for e in port.artifacts_of_class(name) if e.missing_since_ns is None]
     return nearest_first(present, port.robot_xy())
-
-
-def pick_detection(
-    detections: Sequence[Detection],
-    class_name: str,
-    near_xy: tuple[float, float] | None,
-    gate_m: float,
-    any_class: bool = False,
-) -> Detection | None:
-    """The detection that is the target: of `class_name`, nearest to its mapped place
-    `near_xy` (world, horizontal) and within `gate_m` of it; with `any_class`, when none
-    of the class is there, any artifact there (the network reads a box 1.5 m away as a
-    can: where it is is all the approach needs). Without a mapped place, the nearest of
-    the class to the base. The gate keeps the approach off another thing in view (a
-    table edge the network read as a box, 0.6 m behind the box it missed for a frame,
-    drew the hall's box approaches back and forth)."""
-    same = [d for d in detections if d.class_name == class_name]
-    if near_xy is None:
-        return min(same, key=lambda d: d.d_obj, default=None)
-    x, y = near_xy
-
-    def off(d: Detection) -> float:
-        return math.hypot(d.centroid_in_world[0] - x, d.centroid_in_world[1] - y)
-
-    others = [d for d in detections if d.class_name not in (class_name, "person")]
-    for pool in (same, others if any_class else []):
-        best = min(pool, key=off, default=None)
-        if best is not None and off(best) <= gate_m:
-            return best
-    return None
 
 
 def person_named(port: RobotPort, name: str) -> MapEntity | None:

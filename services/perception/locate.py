@@ -4,18 +4,19 @@
 loop writes, the queryable's thread reads). `check_request` refuses what cannot be
 answered with a typed reason; `best_of_class` picks the highest score, then the most
 points, among detections no older than `max_age_s` behind the newest tick;
-`nearest_to` matches a mapped position to a detection of its class within a gate.
+`nearest_to` matches a mapped position to a detection of its class within a gate
+(`common.sightings`, the rule the mission's approach uses too).
 """
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Sequence
 
 from common.bus import RequestError
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detection, Detections, LocateRequest
+from common.sightings import pick_detection
 
 Candidate = tuple[str, int, Detection]  # camera, stamp_ns, detection
 
@@ -83,14 +84,7 @@ def best_of_class(candidates: Sequence[Candidate], class_name: str) -> Candidate
 def nearest_to(
     candidates: Sequence[Candidate], class_name: str, xy: tuple[float, float], gate_m: float
 ) -> Candidate | None:
-    """The detection of `class_name` whose axis is nearest `xy` (world), within `gate_m`."""
-    best: Candidate | None = None
-    best_d = gate_m
-    for c in candidates:
-        det = c[2]
-        if det.class_name != class_name:
-            continue
-        d = math.hypot(det.axis_in_world[0] - xy[0], det.axis_in_world[1] - xy[1])
-        if d <= best_d:
-            best, best_d = c, d
-    return best
+    """The mapped thing of `class_name` at `xy` (world) among the candidates, by
+    `common.sightings.pick_detection`'s rule."""
+    found = pick_detection([c[2] for c in candidates], class_name, xy, gate_m)
+    return next((c for c in candidates if c[2] is found), None)

@@ -8,6 +8,7 @@ import pytest
 from common.config import load_config
 from common.messages.mission import MissionRequest
 from common.messages.perception import Detection
+from common.sightings import pick_detection
 from services.mission.algorithms import default_algorithms
 from services.mission.requests import (
     Rejection,
@@ -16,7 +17,6 @@ from services.mission.requests import (
     parse_cancel,
     parse_request,
 )
-from services.mission.targets import pick_detection
 from tests.unit.mission_fakes import detection, entity, small_world
 
 

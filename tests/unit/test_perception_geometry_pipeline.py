@@ -101,7 +101,8 @@ def _dets(stamp_ns: int, camera: str, *items: tuple[str, float, int, float]) -> 
     dets = [
         Detection(
             **{f: getattr(base, f) for f in base.__struct_fields__ if f not in ("class_name",)}
-            | {"class_name": c, "score": sc, "n_points": n, "axis_in_world": (x, 0.0, 0.9)}
+            | {"class_name": c, "score": sc, "n_points": n}
+            | {"axis_in_world": (x, 0.0, 0.9), "centroid_in_world": (x - 0.03, 0.0, 0.9)}
         )
         for c, sc, n, x in items
     ]
