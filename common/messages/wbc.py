@@ -9,11 +9,23 @@ from common.messages.base import Finite, Mat4, Message, NonNegative, StampNs, Ve
 WbcModeName = Literal["damp", "stand", "walk", "manipulate"]
 
 
+class WbcMode(Message, frozen=True):
+    """`dume/<r>/wbc/mode`: the mode and which `cmd_vel` source to obey."""
+
+    stamp_ns: StampNs
+    mode: WbcModeName
+    cmd_vel_source: str = "navigation"
+
+
 class CmdVel(Message, frozen=True):
     """`dume/<r>/wbc/cmd_vel`: base velocity in `base_yaw`.
 
     vx, vy: m/s forward and left. wz: rad/s counter-clockwise.
-    source: who sends it; the WBC obeys only the source named by `wbc/mode`.
+    source: who sends it; the WBC obeys only the source named by the mode.
+    mode: a mode change the source asks for at this tick, applied like one on `wbc/mode`
+        (at its stamp plus the mode source's latency, obeyed or not). A lockstep source
+        sends its mode changes here: one key keeps the order of its mode and its velocity,
+        which two keys do not.
     """
 
     stamp_ns: StampNs
@@ -21,14 +33,7 @@ class CmdVel(Message, frozen=True):
     vy: Finite
     wz: Finite
     source: str
-
-
-class WbcMode(Message, frozen=True):
-    """`dume/<r>/wbc/mode`: the mode and which `cmd_vel` source to obey."""
-
-    stamp_ns: StampNs
-    mode: WbcModeName
-    cmd_vel_source: str = "navigation"
+    mode: WbcMode | None = None
 
 
 class Reach(Message, frozen=True, tag="reach"):

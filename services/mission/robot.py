@@ -8,9 +8,9 @@ Queries (map entries and listings, nav goals, arm goals) wait at most
 unknown id None. Map queries ask for the map as of the tick (`common.keys.as_of`); nav
 goals, nav cancels and arm goals carry the tick and take effect at the tick plus the
 mission's latency, so the same seed gives the same run. What the tree commands during a
-tick (cmd_vel, a mode) is published by `end(b)` stamped b: cmd_vel from source `mission`
-every tick (zero unless a behaviour set it), a mode only when asked for. Nav cancels go
-out at once.
+tick is published by `end(b)` stamped b: cmd_vel from source `mission` every tick (zero
+unless a behaviour set it), carrying the mode when one was asked for (one key: the WBC
+gets the mode no later than the velocity). Nav cancels go out at once.
 """
 
 from __future__ import annotations
@@ -81,7 +81,6 @@ class BusRobot:
         self._nav = NavClient(bus, keys, query_timeout_s)
         self._arm = ArmClient(bus, keys, query_timeout_s)
         self._cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
-        self._mode_pub = bus.publisher(keys.wbc_mode, WbcMode, "control")
         self._t = 0
         self._cmd = (0.0, 0.0, 0.0)
         self._mode: tuple[WbcModeName, str] | None = None
@@ -95,11 +94,12 @@ class BusRobot:
                 self._wrist.append(frame)
 
     def end(self, b: int) -> None:
+        change = None
         if self._mode is not None:
             mode, source = self._mode
-            self._mode_pub.put(WbcMode(stamp_ns=b, mode=mode, cmd_vel_source=source))
+            change = WbcMode(stamp_ns=b, mode=mode, cmd_vel_source=source)
         vx, vy, wz = self._cmd
-        self._cmd_pub.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=NAME))
+        self._cmd_pub.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=NAME, mode=change))
 
     @property
     def now_ns(self) -> int:

@@ -1,16 +1,16 @@
 """The whole-body controller service: the lockstep command participant around the WBC.
 
 Each state it must answer (stamps on its period, `time.participants.wbc.period_s`) gets
-one `JointCommand` with the state's stamp, and nothing else is waited for in between:
-cmd_vel, modes and arm goals are drained from their buffers without blocking. Per tick:
+one `JointCommand` with the state's stamp. Per tick:
 
-1. inputs due at t: `wbc/mode` samples and cmd_vel of the obeyed source at stamp +
-   latency (`inputs`), arm goals accepted whose `effective_ns` has come (`arm_actions`).
-   In lockstep the tick first waits (`UpstreamGate`, at most `UPSTREAM_WAIT_S` of wall
-   time) for the cmd_vel due now from the mode's source (the mission publishes one every
-   period, its modes just before) and then from the obeyed source: the sim stepped past
-   their tick once they acked it, but their ack can reach the sim before their cmd_vel
-   reaches us, and a command applied one period late is a different run;
+1. inputs due at t: modes (carried by a source's cmd_vel, or on `wbc/mode`) and cmd_vel
+   of the obeyed source at stamp + latency (`inputs`), arm goals accepted whose
+   `effective_ns` has come (`arm_actions`). In lockstep the tick first waits
+   (`UpstreamGate`, at most `UPSTREAM_WAIT_S` of wall time) for the cmd_vel due now from
+   the mode's source (the mission sends one every period, with its mode changes) and
+   then from the obeyed source: the sim stepped past their tick once they acked it, but
+   their ack can reach the sim before their cmd_vel reaches us, and a command applied
+   one period late is a different run. Nothing else is waited for;
 2. the command: damping in `damp`; otherwise `WholeBodyController.step` with the gait
    command (walk only) and the arm references; a failed QP keeps the last torques for
    one tick, then the stand hold (`safety`) takes over until `recover_ticks` good solves;
@@ -110,15 +110,27 @@ UPSTREAM_WAIT_S = 0.5
 
 class ArbiterFeed:
     """One source's cmd_vel as the arbiter holds it: what `UpstreamGate` waits on. Reading
-    it moves what arrived into the arbiter (the WBC's thread only), so the gate is met by
-    the very samples the arbiter will use, never by a copy that arrived first."""
+    it moves what arrived into the arbiter, and the modes they carry into `modes` (the
+    WBC's thread only), so the gate is met by the very samples the arbiter will use,
+    never by a copy that arrived first."""
 
-    def __init__(self, fifo: Fifo[CmdVel], arbiter: CmdVelArbiter, source: str) -> None:
-        self.fifo, self.arbiter, self.source = fifo, arbiter, source
+    def __init__(
+        self,
+        fifo: Fifo[CmdVel],
+        arbiter: CmdVelArbiter,
+        source: str,
+        modes: ModeQueue | None = None,
+    ) -> None:
+        self.fifo, self.arbiter, self.source, self.modes = fifo, arbiter, source, modes
+
+    def _take(self, cmd: CmdVel) -> None:
+        self.arbiter.push(cmd)
+        if cmd.mode is not None and self.modes is not None:
+            self.modes.push(cmd.mode)
 
     def get(self) -> CmdVel | None:
         for cmd in self.fifo.drain():
-            self.arbiter.push(cmd)
+            self._take(cmd)
         return self.arbiter.newest(self.source)
 
     def wait_stamp(self, stamp_ns: int, timeout_s: float) -> CmdVel:
@@ -131,7 +143,7 @@ class ArbiterFeed:
             cmd = self.fifo.pop(timeout_s=left) if left > 0 else None
             if cmd is None:
                 raise WaitTimeout(f"no cmd_vel from {self.source} stamped {stamp_ns}")
-            self.arbiter.push(cmd)
+            self._take(cmd)
 
 
 class WbcNode:
@@ -171,10 +183,12 @@ class WbcNode:
         bus, keys = svc.bus, svc.keys
         self.states = bus.latest(keys.state, RobotState, history=4)
         self.cmd_vel = bus.fifo(keys.cmd_vel, CmdVel, maxlen=4096)
+        #: cmd_vel into the arbiter, the modes they carry into the queue.
+        self.intake = ArbiterFeed(self.cmd_vel, self.arbiter, "", self.modes)
         self.upstream = UpstreamGate(bus, keys, cfg)
         self.mode_source = w.mode_source
         for name in sorted(cfg.time.participants):  # any periodic one may send cmd_vel
-            self.upstream.watch(name, ArbiterFeed(self.cmd_vel, self.arbiter, name))
+            self.upstream.watch(name, ArbiterFeed(self.cmd_vel, self.arbiter, name, self.modes))
         self.late_inputs = 0
         self.mode_in = bus.fifo(keys.wbc_mode, WbcMode, maxlen=256)
         self.commands = bus.publisher(keys.command, JointCommand, "control")
@@ -278,11 +292,13 @@ class WbcNode:
 
     def _inputs(self, t: int, state: WbcState, msg: RobotState) -> None:
         self._upstream(t, self.mode_source)
+        self.intake.get()  # whatever came (realtime: nothing was waited for)
         for mode_msg in self.mode_in.drain():
             self.modes.push(mode_msg)
         for mode_msg in self.modes.due(t):
             self._set_mode(mode_msg, t, state)
         self._upstream(t, self.arbiter.source)
+        self.intake.get()
         with self._goal_lock:  # goals start at their effective tick, in the order they came
             due = [p for p in self._pending if p[2] <= t]
             self._pending = deque(p for p in self._pending if p[2] > t)

@@ -136,9 +136,13 @@ def test_the_gate_is_met_only_by_samples_the_arbiter_holds() -> None:
 
     arb = CmdVelArbiter({"navigation": 50 * MS}, 500 * MS)
     arb.select("navigation")
-    fifo = _Fifo(cmd(0, 0.1), cmd(0, 0.9, source="mission"))
-    feed = ArbiterFeed(fifo, arb, "navigation")  # type: ignore[arg-type]
-    assert feed.get() == cmd(0, 0.1) and arb.newest("mission") == cmd(0, 0.9, "mission")
+    modes = ModeQueue(50 * MS)
+    walk = WbcMode(stamp_ns=0, mode="walk", cmd_vel_source="navigation")
+    with_mode = CmdVel(stamp_ns=0, vx=0.9, vy=0.0, wz=0.0, source="mission", mode=walk)
+    fifo = _Fifo(cmd(0, 0.1), with_mode)
+    feed = ArbiterFeed(fifo, arb, "navigation", modes)  # type: ignore[arg-type]
+    assert feed.get() == cmd(0, 0.1) and arb.newest("mission") == with_mode
+    assert modes.due(49 * MS) == [] and modes.due(50 * MS) == [walk]  # the mode it carried
     with pytest.raises(WaitTimeout):
         feed.wait_stamp(50 * MS, 0.01)
     fifo.q.append(cmd(50, 0.3))
