@@ -1,7 +1,10 @@
-"""Settings: defaults in `deploy/config.toml`, then `DUME_*` environment variables, then flags.
+"""Settings: the Structs below, then `deploy/config.toml`, then `DUME_*` variables, then flags.
 
 The schema is a tree of msgspec Structs that forbid unknown fields, so a misspelt key in
-the file, the environment or a flag fails at start-up with the key's path. Overrides:
+the file, the environment or a flag fails at start-up with the key's path. The Structs
+are the one source of every setting's default, unit and range (`Annotated` with
+`msgspec.Meta`: checked as the settings load); `deploy/config.toml` holds only what a
+deployment decides (the robot, the router's address, the lockstep participants). Overrides:
 
 - environment: `DUME_<SECTION>_<KEY>=value`, e.g. `DUME_ZENOH_PORT=7450`,
   `DUME_SIM_WORLD_SEED=3`, `DUME_TIME_MODE=realtime`; `DUME_CONFIG` names another file.
@@ -19,7 +22,7 @@ import os
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import msgspec
 
@@ -28,6 +31,14 @@ DEFAULT_CONFIG = REPO_ROOT / "deploy" / "config.toml"
 ENV_PREFIX = "DUME_"
 #: Environment variables that are not settings.
 ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG", "DUME_SET", "DUME_PYTHON", "DUME_RUN_DIR"})
+
+
+#: Ranges a setting's type carries (msgspec checks them as the settings load).
+Port = Annotated[int, msgspec.Meta(ge=1, le=65535, description="a TCP port")]
+Positive = Annotated[float, msgspec.Meta(gt=0)]
+NonNegative = Annotated[float, msgspec.Meta(ge=0)]
+#: (vx m/s, vy m/s, wz rad/s) limits, or their rates of change per s.
+Limits3 = Annotated[list[Positive], msgspec.Meta(min_length=3, max_length=3)]
 
 
 class ConfigError(ValueError):
@@ -42,7 +53,7 @@ class ZenohSettings(_Section):
     """The router's address. Services are clients of one router per stack."""
 
     host: str = "127.0.0.1"
-    port: int = 7447
+    port: Port = 7447
     router_config: str = "deploy/zenoh/router.json5"
     client_config: str = "deploy/zenoh/client.json5"
 
@@ -60,22 +71,24 @@ class Participant(_Section):
     """
 
     role: Literal["command", "periodic", "start"] = "periodic"
-    period_s: float = 0.1
-    latency_s: float = 0.05
+    period_s: Positive = 0.1
+    latency_s: NonNegative = 0.05
 
 
 class TimeSettings(_Section):
+    #: `lockstep` (the sim steps when every participant has caught up: deterministic) or
+    #: `realtime` (paced to the wall clock, nobody waited for).
     mode: Literal["lockstep", "realtime"] = "lockstep"
-    tick_hz: float = 1000.0
+    tick_hz: Positive = 1000.0
     participants: dict[str, Participant] = msgspec.field(default_factory=dict)
     #: Wall seconds the sim waits at t = 0 for every participant to be alive.
-    start_timeout_s: float = 120.0
+    start_timeout_s: Positive = 120.0
     #: Wall seconds a live participant may take on one tick before the sim logs it as
     #: stalled and steps without it (the robot's watchdog then acts, as on hardware). A
     #: dead one is not waited for at all (its liveliness goes), so this only catches a
     #: hung process; long enough that a slow tick on a loaded machine (a first plan,
     #: two stacks on two cores) never breaks the run's determinism.
-    stall_timeout_s: float = 10.0
+    stall_timeout_s: Positive = 10.0
 
 
 class SimSettings(_Section):
@@ -86,8 +99,8 @@ class SimSettings(_Section):
     #: Stop after this much sim time (0: run until stopped).
     duration_s: float = 0.0
     watchdog_ms: float = 20.0
-    odom_hz: float = 50.0
-    camera_hz: float = 10.0
+    odom_hz: Positive = 50.0
+    camera_hz: Positive = 10.0
     camera_width: int = 320
     camera_height: int = 240
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
@@ -107,17 +120,17 @@ class WbcSettings(_Section):
     #: Who publishes `wbc/mode` (its participant latency applies to modes).
     mode_source: str = "mission"
     #: A cmd_vel older than this (sim time) means stop.
-    cmd_vel_timeout_s: float = 0.5
+    cmd_vel_timeout_s: Positive = 0.5
     #: Base velocity limits (vx m/s, vy m/s, wz rad/s) and acceleration limits (per s).
-    cmd_vel_max: list[float] = msgspec.field(default_factory=lambda: [0.8, 0.4, 1.0])
-    cmd_vel_accel_max: list[float] = msgspec.field(default_factory=lambda: [1.0, 1.0, 2.0])
+    cmd_vel_max: Limits3 = msgspec.field(default_factory=lambda: [0.8, 0.4, 1.0])
+    cmd_vel_accel_max: Limits3 = msgspec.field(default_factory=lambda: [1.0, 1.0, 2.0])
     #: Braking limits (|v| decreasing), per s: harder than speeding up, so stops are short.
-    cmd_vel_decel_max: list[float] = msgspec.field(default_factory=lambda: [2.0, 2.0, 3.0])
+    cmd_vel_decel_max: Limits3 = msgspec.field(default_factory=lambda: [2.0, 2.0, 3.0])
     #: A gap in the state's stamps longer than this stops the robot.
     stale_state_s: float = 0.05
     #: `wbc/status` rate and rerun time-series rate, Hz of sim time.
-    status_hz: float = 50.0
-    log_hz: float = 25.0
+    status_hz: Positive = 50.0
+    log_hz: Positive = 25.0
     #: Torque cap of Grasp goals, N·m (a goal's max_effort is clipped to it).
     grip_effort_max_nm: float = 5.0
     #: Good QP solves in a row before leaving the fallback stand hold.
@@ -141,7 +154,7 @@ class PerceptionSettings(_Section):
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
     #: Wall seconds to wait for a camera's frame stamped at a tick before publishing an
     #: empty `Detections` with the reason.
-    frame_timeout_s: float = 2.0
+    frame_timeout_s: Positive = 2.0
     #: Locate by map id: a detection of the entity's class within this distance of its
     #: mapped position (m, horizontal) is that entity.
     locate_gate_m: float = 0.5
@@ -168,13 +181,16 @@ class SemanticMapSettings(_Section):
     name: str = "default"
     #: Folder of the databases (`<dir>/<name>.sqlite`), relative to the repository root.
     dir: str = "var/map"
+    #: True: start over whatever the database holds.
     reset: bool = False
     prior_file: str = ""
     seed_noise_m: float = 0.05
     seed_noise_seed: int = 0
     floor_plan: Literal["world", "none"] = "world"
-    #: Cameras whose detections are fused.
-    cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
+    #: Cameras whose detections are fused: the head camera. The wrist camera, away from a
+    #: table, sees the robot's own legs and the floor at close range (false people); the
+    #: mission reads its close-up views itself.
+    cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head"])
     #: Measurement noise of a detection's horizontal position: sigma0 + per_m × range, m.
     sigma0_m: float = 0.02
     sigma_per_m: float = 0.02
@@ -250,8 +266,8 @@ class NavigationSettings(_Section):
     obstacle_camera: str = "camera_head"
     obstacle_ttl_s: float = 3.0
     #: Base velocity (vx, vy, wz) and acceleration limits of the path follower.
-    v_max: list[float] = msgspec.field(default_factory=lambda: [0.5, 0.3, 0.8])
-    a_max: list[float] = msgspec.field(default_factory=lambda: [0.8, 0.8, 1.5])
+    v_max: Limits3 = msgspec.field(default_factory=lambda: [0.5, 0.3, 0.8])
+    a_max: Limits3 = msgspec.field(default_factory=lambda: [0.8, 0.8, 1.5])
     lookahead_m: float = 0.6
     #: Tolerances of the standoff and handover goals (a PoseGoal carries its own).
     goal_tolerance_m: float = 0.08
@@ -268,8 +284,8 @@ class NavigationSettings(_Section):
     handover_speed: float = 0.15
     people_in_costmap: bool = True
     replan_s: float = 1.0
-    blocked_timeout_s: float = 3.0
-    goal_timeout_s: float = 180.0
+    blocked_timeout_s: Positive = 3.0
+    goal_timeout_s: Positive = 180.0
     #: How often the semantic map's occupancy and people are fetched (map source), s.
     map_refresh_s: float = 1.0
 
@@ -285,40 +301,41 @@ class MissionSettings(_Section):
     #: A status goes out on every change and at least this often.
     status_every_s: float = 1.0
     #: Wall seconds a query may take (map, nav goal, arm goal) before it counts as no answer.
-    query_timeout_s: float = 2.0
+    query_timeout_s: Positive = 2.0
     #: Wall seconds to wait for the odom stamped at a tick before ticking without it.
-    input_timeout_s: float = 30.0
+    input_timeout_s: Positive = 30.0
     #: The whole-body controller must report a requested mode within this.
-    mode_timeout_s: float = 2.0
+    mode_timeout_s: Positive = 2.0
     #: A navigation goal that reports no status this long after it was sent fails.
-    nav_status_timeout_s: float = 5.0
+    nav_status_timeout_s: Positive = 5.0
     #: Arm goals: how long each may stay active before it counts as failed.
-    posture_timeout_s: float = 12.0
-    reach_timeout_s: float = 20.0
+    posture_timeout_s: Positive = 12.0
+    reach_timeout_s: Positive = 20.0
     #: A grasp's Reach that gives up farther than this from its goal met something solid
     #: or is out of reach: `grasp_pose_failed`, not re-picked (m).
     reach_miss_max_m: float = 0.06
-    grasp_timeout_s: float = 8.0
-    release_timeout_s: float = 5.0
+    grasp_timeout_s: Positive = 8.0
+    release_timeout_s: Positive = 5.0
     #: After the grasp, the object is lifted this far straight up before stowing, m.
     lift_m: float = 0.10
     #: The whole visual approach (the controller re-acquires and fails by itself sooner).
-    approach_timeout_s: float = 90.0
+    approach_timeout_s: Positive = 90.0
     #: Pose estimation: stand still this long, then wait this long for a detection.
     settle_s: float = 0.5
-    detection_timeout_s: float = 3.0
+    detection_timeout_s: Positive = 3.0
     #: Wrist detections older than this (sim time, behind the tick) are not a sighting.
     sighting_max_age_s: float = 0.5
     #: A wrist detection is the target only this close to its mapped place, m.
     sighting_gate_m: float = 0.35
     #: The handover: how long to wait for the pull; the back-off after the release.
-    handover_timeout_s: float = 60.0
+    handover_timeout_s: Positive = 60.0
     #: The object leaving the jaws this soon after a pull was felt was taken, not lost (s).
     handover_taken_window_s: float = 0.5
     #: At the handover pose: look this long, then walk again if the person's mapped place
     #: is farther than this from straight ahead at the handover distance (m).
     handover_check_s: float = 1.0
     handover_tol_m: float = 0.12
+    #: After the release: walk backwards at this speed (m/s) for this long.
     back_off_speed: float = 0.15
     back_off_s: float = 1.0
     #: Recovery: re-picks after a grasp lost or failed; instances tried for a class request.
@@ -434,34 +451,16 @@ def load_config(
 
 
 def _check(config: Config) -> None:
-    if not 1 <= config.zenoh.port <= 65535:
-        raise ConfigError(f"zenoh.port {config.zenoh.port} is not a TCP port")
-    if config.time.tick_hz <= 0:
-        raise ConfigError(f"time.tick_hz must be positive, got {config.time.tick_hz}")
+    """What a setting's type cannot say: periods in whole ticks."""
     tick = 1.0 / config.time.tick_hz
     for name, p in config.time.participants.items():
-        if p.period_s < tick - 1e-12 or p.latency_s < 0:
+        if p.period_s < tick - 1e-12:
             raise ConfigError(
-                f"time.participants.{name}: period_s {p.period_s} must be ≥ one tick ({tick}) "
-                f"and latency_s {p.latency_s} ≥ 0"
+                f"time.participants.{name}: period_s {p.period_s} must be ≥ one tick ({tick})"
             )
         ticks = p.period_s * config.time.tick_hz
         if abs(ticks - round(ticks)) > 1e-6:
             raise ConfigError(f"time.participants.{name}.period_s must be whole ticks")
-    for key in ("cmd_vel_max", "cmd_vel_accel_max", "cmd_vel_decel_max"):
-        limits = getattr(config.wbc, key)
-        if len(limits) != 3 or min(limits) <= 0:
-            raise ConfigError(f"wbc.{key} must be 3 positive numbers (vx, vy, wz), got {limits}")
-    _check_navigation(config.navigation)
-
-
-def _check_navigation(nav: NavigationSettings) -> None:
-    for key in ("v_max", "a_max"):
-        limits = getattr(nav, key)
-        if len(limits) != 3 or min(limits) <= 0:
-            raise ConfigError(
-                f"navigation.{key} must be 3 positive numbers (vx, vy, wz), got {limits}"
-            )
 
 
 def resolve(path: str) -> Path:

@@ -13,6 +13,32 @@ def test_defaults_load_from_the_deploy_file() -> None:
     assert config.robot == "b1"
     assert config.time.mode == "lockstep"
     assert config.time.tick_hz == 1000.0
+    assert config.time.participants["wbc"].role == "command"  # the deployment's
+
+
+def test_the_deploy_file_holds_no_default_again() -> None:
+    """Every setting's default lives in its Struct; the file sets what a deployment
+    decides (the robot, the router's address, the participants), nothing else."""
+    import tomllib
+
+    import msgspec
+
+    from common.config import DEFAULT_CONFIG, Config
+
+    def leaves(tree: dict[str, object], path: str = "") -> dict[str, object]:
+        out: dict[str, object] = {}
+        for k, v in tree.items():
+            if isinstance(v, dict) and k != "participants":
+                out |= leaves(v, f"{path}{k}.")
+            else:
+                out[f"{path}{k}"] = v
+        return out
+
+    defaults = leaves(msgspec.to_builtins(Config()))
+    written = leaves(tomllib.loads(DEFAULT_CONFIG.read_text()))
+    deployment = {"robot", "zenoh.host", "zenoh.port"}
+    again = [k for k, v in written.items() if defaults.get(k) == v and k not in deployment]
+    assert not again, again
 
 
 def test_environment_then_flags_override_the_file() -> None:
@@ -36,7 +62,10 @@ def test_dume_set_carries_nested_overrides() -> None:
         (["sim.world=moon"], {}, "$.sim.world"),
         (["sim.world_seed=abc"], {}, "$.sim.world_seed"),
         ([], {"DUME_NOPE_X": "1"}, "no section 'nope'"),
-        (["zenoh.port=0"], {}, "not a TCP port"),
+        (["zenoh.port=0"], {}, "$.zenoh.port"),
+        (["navigation.v_max=[0.5, 0.3]"], {}, "$.navigation.v_max"),
+        (["wbc.cmd_vel_max=[0.5, 0.0, 1.0]"], {}, "$.wbc.cmd_vel_max"),
+        (["mission.query_timeout_s=-1"], {}, "$.mission.query_timeout_s"),
         (["time.participants.p.period_s=0.0015"], {}, "whole ticks"),
         (["nonsense"], {}, "section.key=value"),
     ],
