@@ -6,13 +6,12 @@
   the whole-body controller's `Reach`; `GraspPoseError` when none is possible);
 - the felt handover (`handover_feel.PullDetector` on `wbc/status`).
 
-`default_algorithms(settings)` binds the real ones (imported when the service starts,
-with the config's overrides of their defaults); unit tests pass scripted stand-ins.
+`default_algorithms(settings)` binds the real ones (with the config's overrides of their
+defaults); unit tests pass scripted stand-ins.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -21,16 +20,22 @@ from common.config import MissionSettings
 from common.geometry import FloatArray
 from common.messages.perception import Detection
 from common.messages.wbc import Reach, WbcStatus
+from services.mission import approach, grasp_pose, handover_feel
 
 
 class ApproachStep(Protocol):
     """One approach command: base velocity in base_yaw and the controller's state."""
 
-    vx: float
-    vy: float
-    wz: float
-    state: str  # tracking | reacquiring | arrived | failed
-    reason: str
+    @property
+    def vx(self) -> float: ...
+    @property
+    def vy(self) -> float: ...
+    @property
+    def wz(self) -> float: ...
+    @property
+    def state(self) -> str: ...  # tracking | reacquiring | arrived | failed
+    @property
+    def reason(self) -> str: ...
 
 
 class Approacher(Protocol):
@@ -40,7 +45,8 @@ class Approacher(Protocol):
 
 
 class GraspPlanLike(Protocol):
-    kind: str
+    @property
+    def kind(self) -> str: ...
 
     def reach(self) -> Reach: ...
 
@@ -69,11 +75,8 @@ class Algorithms:
 
 def default_algorithms(settings: MissionSettings) -> Algorithms:
     """The real algorithms, with `approach_gains` and `pull_detector` from the config."""
-    approach: Any = importlib.import_module("services.mission.approach")
-    grasp: Any = importlib.import_module("services.mission.grasp_pose")
-    feel: Any = importlib.import_module("services.mission.handover_feel")
     gains = dict(settings.approach_gains)
-    pull = dict(settings.pull_detector)
+    pull: dict[str, Any] = dict(settings.pull_detector)
 
     def approacher() -> Approacher:
         if gains:
@@ -86,23 +89,7 @@ def default_algorithms(settings: MissionSettings) -> Algorithms:
     return Algorithms(
         approacher=approacher,
         sighting=sighting,
-        grasp_from_detection=grasp.grasp_from_detection,
-        grasp_error=grasp.GraspPoseError,
-        pull_detector=lambda: feel.PullDetector(**pull),
-    )
-
-
-def missing_algorithms(why: str) -> Algorithms:
-    """Stand-ins that raise when used: the service still validates requests and reports
-    a mission that reaches them as failed (`internal`), instead of not starting."""
-
-    def unavailable(*_args: object) -> Any:
-        raise RuntimeError(f"the mission's algorithms are not installed: {why}")
-
-    return Algorithms(
-        approacher=unavailable,
-        sighting=unavailable,
-        grasp_from_detection=unavailable,
-        grasp_error=RuntimeError,
-        pull_detector=unavailable,
+        grasp_from_detection=grasp_pose.grasp_from_detection,
+        grasp_error=grasp_pose.GraspPoseError,
+        pull_detector=lambda: handover_feel.PullDetector(**pull),
     )

@@ -39,7 +39,7 @@ from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate, hear_all
 from common.messages import encode
 from common.messages.mission import MissionReceipt, MissionRequest, MissionStatus
 from common.service import Service
-from services.mission.algorithms import Algorithms, default_algorithms, missing_algorithms
+from services.mission.algorithms import default_algorithms
 from services.mission.behaviours.abort import halt
 from services.mission.behaviours.base import Context
 from services.mission.mission_log import MissionLogger
@@ -80,14 +80,6 @@ class RawInbox:
         return out
 
 
-def _algorithms(svc: Service) -> Algorithms:
-    try:
-        return default_algorithms(svc.config.mission)
-    except ImportError as exc:
-        svc.log.error("mission algorithms unavailable (%s): missions will fail", exc)
-        return missing_algorithms(str(exc))
-
-
 class MissionNode:
     """The loop and what it keeps between ticks; see the module docstring."""
 
@@ -113,7 +105,7 @@ class MissionNode:
         self.cancels = RawInbox(bus.session, keys.mission_cancel)
         self.status_pub = bus.publisher(keys.mission_status, MissionStatus, "data")
         self.log = MissionLogger(svc.rec, svc.log)
-        ctx = Context(self.robot, m, _algorithms(svc), self.log.decision)
+        ctx = Context(self.robot, m, default_algorithms(m), self.log.decision)
         self.tree = MissionTree(ctx)
         self.board = StatusBoard(round(m.status_every_s * NS_PER_S))
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)

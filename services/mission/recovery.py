@@ -36,7 +36,7 @@ class Recover(py_trees.decorators.Decorator):
         self.reasons, self.budget, self.decide = reasons, budget, decide
         self.prepare = prepare
         self.used = 0
-        self.bb = blackboard(name)
+        self.bb = blackboard(name, (FAILURE,))
 
     def initialise(self) -> None:
         self.used = 0

@@ -77,7 +77,7 @@ def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
 def build_tree(ctx: Context) -> Sequence:
     """The tree of the module docstring, its leaves bound to `ctx`."""
     s = ctx.settings
-    bb = blackboard("recovery")
+    bb = blackboard("recovery", (CANDIDATE, GRASP_PLAN, DETECTION, TARGET))
 
     def next_candidate(_failure: Failure) -> bool:
         candidates = read(bb, CANDIDATES) or []
@@ -218,7 +218,7 @@ class MissionTree:
         self.ctx = ctx
         reset_blackboard()
         self.root = build_tree(ctx)
-        self.bb = blackboard("mission_tree")
+        self.bb = blackboard("mission_tree", (REQUEST,))
         self.request: MissionRequest | None = None
 
     @property

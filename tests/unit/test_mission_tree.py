@@ -372,3 +372,24 @@ def test_a_lost_dependency_fails_the_mission_halted_with_its_reason() -> None:
     assert_halted(robot)
     assert not tree.busy
     assert tree.fail("dependency_lost", "again") is None  # nothing runs now
+
+
+def test_a_leaf_writes_only_the_blackboard_keys_it_declares() -> None:
+    from py_trees.common import Status
+
+    from services.mission.behaviours.base import PERSON, MissionBehaviour, read
+
+    class Sneaky(MissionBehaviour):
+        def update(self) -> Status:
+            self.set(PERSON, "person_9")
+            return Status.SUCCESS
+
+    class Declared(Sneaky):
+        WRITES = (PERSON,)
+
+    ctx = context(small_world())
+    with pytest.raises(AttributeError):
+        Sneaky("sneaky", ctx, "navigate_to_object").update()
+    Declared("declared", ctx, "navigate_to_object").update()
+    assert read(Declared("reader", ctx, "x").bb, PERSON) == "person_9"
+    assert Sneaky("failing", ctx, "x").fail("internal", "a reason") == Status.FAILURE

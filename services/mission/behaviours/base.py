@@ -13,9 +13,9 @@ recovery decorators decide and `abort` reports. Time is the port's sim time.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import py_trees
 from py_trees.common import Access, Status
@@ -75,11 +75,12 @@ class Context:
     decide: Decide = field(default=lambda text: logging.getLogger("dume.mission").info(text))
 
 
-def blackboard(name: str, write: bool = True) -> py_trees.blackboard.Client:
-    """A client of every mission key (read, and write unless told)."""
+def blackboard(name: str, writes: Sequence[str] = ()) -> py_trees.blackboard.Client:
+    """A client that reads every mission key and writes only `writes` (py_trees refuses
+    a write to any other: who changes what is declared, and checked)."""
     client = py_trees.blackboard.Client(name=name, namespace=NAMESPACE)
     for key in ALL_KEYS:
-        client.register_key(key=key, access=Access.WRITE if write else Access.READ)
+        client.register_key(key=key, access=Access.WRITE if key in writes else Access.READ)
     return client
 
 
@@ -95,7 +96,10 @@ def read(client: py_trees.blackboard.Client, key: str, default: Any = None) -> A
 
 
 class MissionBehaviour(py_trees.behaviour.Behaviour):
-    """Base of the mission's leaves (see the module docstring)."""
+    """Base of the mission's leaves (see the module docstring). Every leaf may write
+    `FAILURE` (`fail`); the keys it writes besides are its `WRITES`."""
+
+    WRITES: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, name: str, ctx: Context, stage: str) -> None:
         super().__init__(name=name)
@@ -104,7 +108,7 @@ class MissionBehaviour(py_trees.behaviour.Behaviour):
         self.settings = ctx.settings
         self.stage = stage
         self.fraction = 0.0
-        self.bb = blackboard(name)
+        self.bb = blackboard(name, (FAILURE, *self.WRITES))
         self.started_ns = 0
 
     def initialise(self) -> None:

@@ -84,6 +84,8 @@ class Approach(MissionBehaviour):
 
 
 class EstimateGrasp(MissionBehaviour):
+    WRITES = (DETECTION, GRASP_PLAN)
+
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("estimate_grasp", ctx, stage)
 

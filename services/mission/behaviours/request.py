@@ -40,6 +40,8 @@ class WaitForRequest(MissionBehaviour):
 
 
 class SelectTarget(MissionBehaviour):
+    WRITES = (CANDIDATES, TARGET)
+
     def __init__(self, ctx: Context) -> None:
         super().__init__("select_target", ctx, stage="navigate_to_object")
 
@@ -82,6 +84,8 @@ class SelectTarget(MissionBehaviour):
 
 
 class ResolvePerson(MissionBehaviour):
+    WRITES = (PERSON,)
+
     def __init__(self, ctx: Context) -> None:
         super().__init__("resolve_person", ctx, stage="bring_to_user")
 
