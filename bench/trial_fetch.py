@@ -175,7 +175,7 @@ class Rig:
 
     def truth_grasp(self, T_world_base: FloatArray) -> FloatArray:
         """The side grasp of the true bottle: on its axis at 3/8 of its height, from the
-        shoulder's side (what `bench.spike_wbc.grasp_plan` holds, seen from here)."""
+        shoulder's side (what `bench.wbc_harness.grasp_plan` holds, seen from here)."""
         shape = self.truth.shape
         h = shape.height if isinstance(shape, Cylinder) else 2 * shape.half_size[2]
         centre = np.array(self.truth.position) + np.array([0.0, 0.0, 0.375 * h])

@@ -1,7 +1,7 @@
 """The `pick` trial: walk to the table, pick the bottle by its truth pose, stow, walk with it.
 
 The truth pose of the world's bottle (`dume/world/description`, truth: perception comes
-later) gives the stance across the nearest table edge (`bench.spike_wbc.grasp_plan`). The
+later) gives the stance across the nearest table edge (`bench.wbc_harness.grasp_plan`). The
 robot walks there on proportional commands; when the straight line crosses the table
 (the stance is on its far side, e.g. the small world's seed 0), it goes round it: via
 the corners of the table's footprint grown by `CLEARANCE_M`, the shortest way that
@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.spike_wbc import grasp_plan
 from bench.trial_driver import Driver, Script
+from bench.wbc_harness import grasp_plan
 from common.geometry import FloatArray, wrap_angle
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.sim import ObjectDropped, WorldEvents

@@ -24,7 +24,7 @@ import numpy as np
 
 from bench.lockstep import commander, lockstep_rate
 from bench.sim import bare_loop
-from bench.spike_wbc import floor_spec, set_initial_pose, simulate
+from bench.wbc_harness import floor_spec, set_initial_pose, simulate
 from common import robot
 from services.wbc.controller import WbcReferences, WbcState
 

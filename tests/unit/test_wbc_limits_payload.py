@@ -6,7 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from bench.spike_wbc import floor_spec, read_state, set_initial_pose, simulate
+from bench.wbc_harness import floor_spec, read_state, set_initial_pose, simulate
 from common import robot
 from common.geometry import make_T, rot_z
 from services.sim import mjcf

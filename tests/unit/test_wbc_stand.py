@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from bench.spike_wbc import (
+from bench.wbc_harness import (
     Figures,
     floor_spec,
     run_grasp,

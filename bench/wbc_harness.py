@@ -1,6 +1,7 @@
-"""Spike: the whole-body controller driving the MuJoCo robot in one process, no Zenoh.
+"""The whole-body controller driving the MuJoCo robot in one process, no Zenoh: the
+harness `dume bench wbc`, `dume trial pick` and the controller's unit tests build on.
 
-Each 1 ms physics step reads the state through `common.robot`'s maps, runs one
+Each 1 ms physics step reads the state through `services.sim.mjcf`'s maps, runs one
 controller tick, applies τ = τ_ff + kp (q_des − q) + kd (v_des − v) clipped to the URDF
 limits (as the sim will) and calls `mj_step`. Modes:
 
@@ -13,7 +14,7 @@ limits (as the sim will) and calls `mj_step`. Modes:
 
 The last line printed is a JSON object of figures (fell, distance, drift, base height and
 attitude stats, controller tick p50/p99 in µs split by phase, real-time factor).
-Usage: python -m bench.spike_wbc {stand,trot,turn,grasp} [--seconds S] [--seed N]
+Usage: python -m bench.wbc_harness {stand,trot,turn,grasp} [--seconds S] [--seed N]
 """
 
 from __future__ import annotations
