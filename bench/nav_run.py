@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from common.clients import NavClient, Refused
-from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
 from common.messages.sim import Odom, RobotContact, WorldEvents
@@ -89,7 +89,7 @@ def obstacle_boxes(world: WorldDescription) -> list[tuple[str, Corners]]:
 
 def odom_pose(odom: Odom) -> tuple[float, float, float]:
     p = odom.base_position_in_world
-    return p[0], p[1], yaw_of(quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw)))
+    return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
 
 def nav_settings(world: str, seed: int, db_dir: str) -> list[str]:

@@ -40,15 +40,15 @@ import numpy as np
 import zenoh
 
 from common import robot
+from common.camera import backproject
 from common.config import load_config, resolve
-from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z
+from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z, transform_points
 from common.messages import as_numpy, decode
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
 from deploy.stack import ProcessStack
 from services.perception import metrics
-from services.perception.geometry import backproject, transform
 from services.perception.pipeline import detect, frame_geometry
 from services.perception.segmenter import Segmenter, TruthSegmenter
 from services.perception.self_filter import is_self
@@ -172,7 +172,8 @@ def _errors(
             figures["missed"] = 1.0
         else:
             d = det[0].detection
-            visible = transform(T_world_camera, backproject(depth, t.mask, geo.K)).mean(axis=0)
+            pts = backproject(depth, geo.camera, mask=t.mask)
+            visible = transform_points(T_world_camera, pts).mean(axis=0)
             err = float(np.linalg.norm(np.array(d.centroid_in_world) - visible))
             figures["centroid_error_m"] = err
             figures[f"{cls}_centroid_error_m"] = err

@@ -26,7 +26,8 @@ from common.bus import Bus
 from common.clients import ArmClient, Refused
 from common.geometry import FloatArray, quat_xyzw_to_matrix
 from common.keys import WORLD_EVENTS, WORLD_PUSH
-from common.lockstep import NS_PER_S, PeriodicTicker
+from common.lockstep import PeriodicTicker
+from common.messages.base import NS_PER_S
 from common.messages.sim import Odom, Push, RobotContact, WorldEvents
 from common.messages.wbc import ArmGoal, CmdVel, WbcMode, WbcStatus
 from common.messages.wbc import GoalStatus as GoalState

@@ -31,6 +31,7 @@ from bench.trial_driver import Driver, Script, trial_settings
 from common.clients import ClientError, NavClient
 from common.geometry import FloatArray, quat_xyzw_to_matrix, wrap_angle
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
+from common.messages.base import NS_PER_S
 from common.messages.navigation import (
     ArtifactStandoff,
     NavGoal,
@@ -50,7 +51,7 @@ from services.mission.handover_feel import PullDetector
 from services.wbc.reach import side_grasp
 
 Figures = dict[str, Any]
-NS = 1_000_000_000
+
 CAMERA = "camera_wrist"
 CAMERA_PERIOD_NS = 100_000_000
 OBJECT, PERSON = "bottle_1", "person_1"
@@ -228,7 +229,7 @@ def approach(d: Driver, rig: Rig, out: Figures) -> Script:
         det = rig.target(rig.wrist_detections())
         seen = None
         if det is not None and rig.wrist is not None:
-            seen = Sighting(det.d_obj, det.theta_obj, rig.wrist.stamp_ns / NS)
+            seen = Sighting(det.d_obj, det.theta_obj, rig.wrist.stamp_ns / NS_PER_S)
             seen_frames += d.t_ns % CAMERA_PERIOD_NS == 0
         cmd = ctrl.step(d.t, seen)
         d.cmd(cmd.vx, cmd.vy, cmd.wz)
@@ -257,7 +258,7 @@ def pick(d: Driver, rig: Rig, out: Figures) -> Script:
     det = None
     while det is None or rig.wrist is None or rig.wrist.stamp_ns < settled:
         det = rig.target(rig.wrist_detections())
-        if d.t_ns > settled + 2 * NS:
+        if d.t_ns > settled + 2 * NS_PER_S:
             out["failed_at"] = "pose_estimation: no fresh detection of the bottle"
             return
         yield
@@ -328,11 +329,11 @@ def handover(d: Driver, rig: Rig, out: Figures, samples: list[dict[str, Any]]) -
             break
     taken = rig.taken
     out["handover"] = {
-        "pull_felt_s": None if felt_ns is None else round(felt_ns / NS, 3),
-        "taken_s": None if taken is None else round(taken.stamp_ns / NS, 3),
+        "pull_felt_s": None if felt_ns is None else round(felt_ns / NS_PER_S, 3),
+        "taken_s": None if taken is None else round(taken.stamp_ns / NS_PER_S, 3),
         "felt_after_taken_s": None
         if felt_ns is None or taken is None
-        else round((felt_ns - taken.stamp_ns) / NS, 3),
+        else round((felt_ns - taken.stamp_ns) / NS_PER_S, 3),
         "baseline_force_n": [round(float(x), 2) for x in feel.baseline[0]],
         "pull_n": round(feel.pull_n, 2),
     }

@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.trial_driver import Driver, Script
 from bench.wbc_harness import grasp_plan
-from common.geometry import FloatArray, wrap_angle
+from common.geometry import FloatArray, wrap_angle, yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.sim import ObjectDropped, WorldEvents
 from common.messages.wbc import Grasp, Posture, Reach
@@ -159,7 +159,7 @@ def pick(d: Driver, out: Figures, walk_s: float = 20.0) -> Script:
     out["route"] = [[round(float(x), 2) for x in wp] for wp in route]
     for wp in route[:-1]:
         yield from go_to(d, wp, None, 30.0, tol_m=0.1, stop=False)
-    yield from go_to(d, q0[:2], 2 * math.atan2(q0[5], q0[6]), 30.0)
+    yield from go_to(d, q0[:2], yaw_of_quat_xyzw(q0[3:7]), 30.0)
     p, _ = d.base()
     out["stance_error_m"] = round(float(np.linalg.norm(p - q0[:2])), 3)
     d.mode("manipulate")

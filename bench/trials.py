@@ -38,11 +38,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from bench.trial_driver import Driver, Script, rpy, start_stack
+from bench.trial_driver import Driver, Script, start_stack
 from bench.trial_pick import pick
 from bench.trial_random import random_walk
 from common import robot
-from common.geometry import wrap_angle
+from common.geometry import rpy_of_quat_xyzw, wrap_angle
 from common.messages.wbc import Posture, Reach
 
 NAV_TRIALS = ("goto", "goals", "person")
@@ -113,7 +113,8 @@ def _after_push(d: Driver, seconds: float, lateral: np.ndarray) -> Generator[Non
     while d.t < end and not d.fell:
         assert d.odom is not None
         low = min(low, d.odom.base_position_in_world[2])
-        tilt = max(tilt, float(np.degrees(np.max(np.abs(rpy(d.odom.base_orientation_xyzw)[:2])))))
+        roll_pitch = rpy_of_quat_xyzw(d.odom.base_orientation_xyzw)[:2]
+        tilt = max(tilt, float(np.degrees(np.max(np.abs(roll_pitch)))))
         side = max(side, abs(float((d.base()[0] - p0) @ lateral)))
         yield
     return {

@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 
 from common import robot
-from common.geometry import FloatArray, quat_wxyz_to_xyzw, quat_xyzw_to_matrix, yaw_of
+from common.geometry import FloatArray, quat_wxyz_to_xyzw, rpy_of_quat_xyzw, yaw_of_quat_xyzw
 from common.messages.world import Cylinder, RobotStart, WorldDescription
 from services.sim import mjcf
 from services.sim.scene import compile_scene
@@ -109,13 +109,6 @@ class Log:
     qp_fail: int = 0
 
 
-def rpy_of(quat_xyzw: FloatArray) -> FloatArray:
-    R = quat_xyzw_to_matrix(quat_xyzw)
-    roll = math.atan2(R[2, 1], R[2, 2])
-    pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
-    return np.array([roll, pitch, math.atan2(R[1, 0], R[0, 0])])
-
-
 RefsAt = Callable[[float, WbcState], WbcReferences]
 
 
@@ -136,7 +129,7 @@ def simulate(
         mujoco.mj_step(model, data)
         log.t.append(k * dt)
         log.pos.append(state.base_position_in_world)
-        log.rpy.append(rpy_of(state.base_orientation_xyzw))
+        log.rpy.append(rpy_of_quat_xyzw(state.base_orientation_xyzw))
         log.timing.append(ctrl.last_timing)
         if state.base_position_in_world[2] < FELL_HEIGHT_M:
             break
@@ -291,9 +284,7 @@ class GraspScript:
 def run_grasp(seed: int) -> Figures:
     world = generate_world(seed, "small")
     plan = grasp_plan(world)
-    start = RobotStart(
-        float(plan.q0[0]), float(plan.q0[1]), yaw_of(quat_xyzw_to_matrix(plan.q0[3:7]))
-    )
+    start = RobotStart(float(plan.q0[0]), float(plan.q0[1]), yaw_of_quat_xyzw(plan.q0[3:7]))
     model = compile_scene(msgspec.structs.replace(world, robot_start=start))
     data = mujoco.MjData(model)
     set_initial_pose(model, data, plan.q0)

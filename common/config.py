@@ -26,6 +26,8 @@ from typing import Annotated, Any, Literal
 
 import msgspec
 
+from common.messages.base import NS_PER_S
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "config.toml"
 ENV_PREFIX = "DUME_"
@@ -89,6 +91,23 @@ class TimeSettings(_Section):
     #: hung process; long enough that a slow tick on a loaded machine (a first plan,
     #: two stacks on two cores) never breaks the run's determinism.
     stall_timeout_s: Positive = 10.0
+
+    def period_of(self, name: str, default_s: float) -> float:
+        """`name`'s lockstep period, s; `default_s` when it is not a participant."""
+        p = self.participants.get(name)
+        return p.period_s if p is not None else default_s
+
+    def period_ns_of(self, name: str, default_s: float) -> int:
+        return round(self.period_of(name, default_s) * NS_PER_S)
+
+    def latency_ns_of(self, name: str, default_s: float) -> int:
+        """`name`'s lockstep latency, ns; `default_s` when it is not a participant."""
+        p = self.participants.get(name)
+        return round((p.latency_s if p is not None else default_s) * NS_PER_S)
+
+    def latencies_ns(self) -> dict[str, int]:
+        """Every participant's latency, ns: what a consumer adds to a producer's stamp."""
+        return {n: round(p.latency_s * NS_PER_S) for n, p in self.participants.items()}
 
 
 class SimSettings(_Section):

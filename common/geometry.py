@@ -2,7 +2,11 @@
 
 Conventions: rotation matrices act on column vectors (`p_a = R_ab @ p_b`), homogeneous
 transforms are 4x4 `T_a_b` (frame b expressed in frame a), quaternions in messages are
-`xyzw` (pinocchio, rerun, ROS) and MuJoCo's are `wxyz`; only these two helpers convert.
+`xyzw` (pinocchio, rerun, ROS, scipy) and MuJoCo's are `wxyz`; only the two `quat_*_to_*`
+shuffles convert between them (at the sim boundary). Angles are in radians. Roll, pitch
+and yaw are the fixed-axis x-y-z angles: `R = rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)`.
+Quaternion and Euler conversions go through `scipy.spatial.transform.Rotation`, imported
+on first use (importing `scipy.spatial` takes about 0.2 s).
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 
 
 def quat_wxyz_to_xyzw(q: npt.ArrayLike) -> FloatArray:
@@ -26,36 +31,31 @@ def quat_xyzw_to_wxyz(q: npt.ArrayLike) -> FloatArray:
 
 
 def quat_xyzw_to_matrix(q: npt.ArrayLike) -> FloatArray:
-    """Rotation matrix of a unit quaternion (x, y, z, w); the quaternion is normalised."""
-    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """Rotation matrix (3, 3) of a quaternion (x, y, z, w), normalised first; (N, 4) → (N, 3, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_quat(np.asarray(q, dtype=float)).as_matrix())
 
 
 def matrix_to_quat_xyzw(R: npt.ArrayLike) -> FloatArray:
-    """Unit quaternion (x, y, z, w), w >= 0, of a rotation matrix (Shepperd's method)."""
-    R = np.asarray(R, dtype=float)
-    t = np.trace(R)
-    if t > 0.0:
-        s = 2.0 * np.sqrt(1.0 + t)
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [s / 4, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = [(R[0, 1] + R[1, 0]) / s, s / 4, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4, (R[1, 0] - R[0, 1]) / s]
-    out = np.array(q)
-    out /= np.linalg.norm(out)
-    return -out if out[3] < 0.0 else out
+    """Unit quaternion (x, y, z, w), w >= 0, of a rotation matrix (3, 3); (N, 3, 3) → (N, 4)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_matrix(np.asarray(R, dtype=float)).as_quat(canonical=True))
+
+
+def yaw_of_quat_xyzw(q: npt.ArrayLike) -> float:
+    """Heading (rad, `yaw_of`) of the frame a quaternion (x, y, z, w) rotates to, e.g. the
+    base's yaw in the world from `Odom.base_orientation_xyzw`."""
+    return yaw_of(quat_xyzw_to_matrix(q))
+
+
+def rpy_of_quat_xyzw(q: npt.ArrayLike) -> FloatArray:
+    """(roll, pitch, yaw) in rad of a quaternion (x, y, z, w): R = Rz(yaw) Ry(pitch) Rx(roll),
+    pitch in [-pi/2, pi/2]. (N, 4) → (N, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_quat(np.asarray(q, dtype=float)).as_euler("xyz"))
 
 
 def rot_x(angle: float) -> FloatArray:
@@ -93,6 +93,13 @@ def inv_T(T: npt.ArrayLike) -> FloatArray:
     out[:3, :3] = T[:3, :3].T
     out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
     return out
+
+
+def transform_points(T: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:
+    """Points (N, 3) (or one (3,)) in frame b → (N, 3) in frame a, with the 4x4 `T_a_b`."""
+    T = np.asarray(T, dtype=float)
+    p = np.atleast_2d(np.asarray(points, dtype=float))
+    return np.asarray(p @ T[:3, :3].T + T[:3, 3])
 
 
 def yaw_of(R: npt.ArrayLike) -> float:

@@ -35,9 +35,9 @@ from typing import Any, Protocol
 from common.bus import AliveWatch, Bus, WaitTimeout
 from common.config import Config, Participant
 from common.keys import WORLD_CLOCK, RobotKeys
+from common.messages.base import NS_PER_S
 from common.messages.sim import Ack, Clock
 
-NS_PER_S = 1_000_000_000
 log = logging.getLogger(__name__)
 
 

@@ -47,6 +47,7 @@ from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
 from common.recording import new_run_id, run_dir
 from deploy.stack import Supervised
+from services.semantic_map.store import database_path, remove_database
 
 #: The services `dume up` runs (supervisord's programs that start by default).
 SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation", "mission")
@@ -161,9 +162,7 @@ def run_demo(args: argparse.Namespace) -> int:
             # supervisord stops the services one by one and the sim flushes its recording:
             # under load that takes longer than `Supervised.stop`'s default wait.
             stack.stop(timeout_s=STOP_TIMEOUT_S)
-            for suffix in ("", "-wal", "-shm"):
-                db = resolve(stack.config.semantic_map.dir) / f"{map_name}.sqlite{suffix}"
-                db.unlink(missing_ok=True)
+            remove_database(database_path(stack.config.semantic_map, map_name))
     outcome, reason = _verdict(result)
     if result.services_down:
         outcome, reason = "failed", f"{reason}; services down at the end: {result.services_down}"

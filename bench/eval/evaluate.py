@@ -47,6 +47,7 @@ from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
 from deploy.demo import SERVICES
 from deploy.stack import ProcessStack
+from services.semantic_map.store import database_path, remove_database
 
 #: Wall seconds for a world's stack to come up (every service ready), and for each of
 #: its processes to exit when stopped (the sim may be flushing a recording).
@@ -124,10 +125,7 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
             n for n, p in stack.procs.items() if n != "router" and p.poll() is not None
         )
         stack.stop(timeout_s=STOP_TIMEOUT_S)
-        for suffix in ("", "-wal", "-shm"):
-            (resolve(stack.config.semantic_map.dir) / f"{map_name}.sqlite{suffix}").unlink(
-                missing_ok=True
-            )
+        remove_database(database_path(stack.config.semantic_map, map_name))
     if args.record:
         folder = resolve(stack.config.recording.dir) / stack.run_id
         result.recording = str(

@@ -30,6 +30,7 @@ QuatXYZW = tuple[Finite, Finite, Finite, Finite]
 #: A 4×4 homogeneous transform, row-major.
 Mat4 = Annotated[tuple[Finite, ...], msgspec.Meta(min_length=16, max_length=16)]
 
+#: Nanoseconds per second (sim time is integer ns): the one definition, import it from here.
 NS_PER_S = 1_000_000_000
 
 

@@ -33,9 +33,8 @@ import math
 import numpy as np
 
 from common.geometry import FloatArray
+from common.messages.base import NS_PER_S
 from common.messages.wbc import WbcStatus
-
-NS = 1_000_000_000
 
 
 class PullDetector:
@@ -98,7 +97,7 @@ class PullDetector:
         """Feed the next status; True once a pull has been felt (see the module docstring)."""
         if self.tripped:
             return True
-        if (status.stamp_ns - self._t0_ns) / NS < self.baseline_s:
+        if (status.stamp_ns - self._t0_ns) / NS_PER_S < self.baseline_s:
             self._add_baseline(status)
             return False
         F = np.asarray(status.gripper_wrench[:3], dtype=float)
@@ -120,11 +119,11 @@ class PullDetector:
             return False
         if self._since_ns is None:
             self._since_ns = status.stamp_ns
-        if (status.stamp_ns - self._since_ns) / NS >= self.debounce_s:
+        if (status.stamp_ns - self._since_ns) / NS_PER_S >= self.debounce_s:
             self.tripped, self.tripped_at_ns = True, status.stamp_ns
         return self.tripped
 
     def pulled_within(self, t_ns: int, window_s: float) -> bool:
         """Whether a pull of at least half `force_n` was felt in the `window_s` before t."""
         last = self.last_pull_ns
-        return last is not None and 0 <= t_ns - last <= window_s * NS
+        return last is not None and 0 <= t_ns - last <= window_s * NS_PER_S

@@ -16,10 +16,9 @@ from collections.abc import Callable
 
 import rerun as rr
 
+from common.messages.base import NS_PER_S
 from common.messages.mission import MissionStatus
 from common.recording import is_recording, stamp
-
-NS_PER_S = 1_000_000_000
 
 
 class MissionLogger:

@@ -35,8 +35,9 @@ import zenoh
 
 from common.bus import WaitTimeout
 from common.lifelines import Dependencies
-from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate, hear_all
+from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
 from common.messages import encode
+from common.messages.base import NS_PER_S
 from common.messages.mission import MissionReceipt, MissionRequest, MissionStatus
 from common.service import Service
 from services.mission.algorithms import default_algorithms
@@ -86,9 +87,8 @@ class MissionNode:
     def __init__(self, svc: Service) -> None:
         self.svc, cfg = svc, svc.config
         m = cfg.mission
-        me = cfg.time.participants.get(NAME)
-        self.period_s = me.period_s if me else 0.05
-        latency = {n: round(p.latency_s * NS_PER_S) for n, p in cfg.time.participants.items()}
+        self.period_s = cfg.time.period_of(NAME, 0.05)
+        latency = cfg.time.latencies_ns()
         bus, keys = svc.bus, svc.keys
         self.robot = BusRobot(bus, keys, m.query_timeout_s, latency, m.sighting_gate_m)
         self.gate = UpstreamGate(bus, keys, cfg)

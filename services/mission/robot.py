@@ -19,11 +19,9 @@ import logging
 import time
 from collections import deque
 
-import numpy as np
-
 from common.bus import Bus, BusError, NoReply, RemoteError
 from common.clients import ArmClient, NavClient
-from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.geometry import yaw_of_quat_xyzw
 from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, RobotKeys, as_of, map_artifact, map_person
 from common.messages import PayloadError
 from common.messages.navigation import (
@@ -163,7 +161,7 @@ class BusRobot:
         odom = self.odom.at(self._t)
         if odom is None:
             return None
-        return yaw_of(quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw)))
+        return yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
     # -- navigation -----------------------------------------------------------------------
 

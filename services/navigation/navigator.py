@@ -28,6 +28,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
 from services.navigation.controller import ControllerParams, Follower
 from services.navigation.costmap import Costmap
@@ -35,7 +36,6 @@ from services.navigation.grid import Footprint, Pose
 from services.navigation.people import NO_LIMIT, PeopleParams, SpeedLimit, people_limit
 from services.navigation.planner import Plan, PlanError, PlanParams, plan
 
-NS = 1_000_000_000
 Recovery = Literal["", "clear", "rotate", "backoff"]
 
 
@@ -177,14 +177,15 @@ class Navigator:
             self.cmd = np.zeros(3)
             return self._out()
         g = self.goal
-        if t_ns - self.t0 > self.p.timeout_s * NS:
+        if t_ns - self.t0 > self.p.timeout_s * NS_PER_S:
             self._finish("failed", "timeout", f"not there after {self.p.timeout_s:.0f} s")
             return self._out()
         new_plan = None
         if self.recovery:
             return self._recover(t_ns, pose, cm)
         blocked_path = self.plan is not None and self._path_blocked(cm)
-        if self.plan is None or blocked_path or t_ns - self.last_plan_ns >= self.p.replan_s * NS:
+        due = t_ns - self.last_plan_ns >= self.p.replan_s * NS_PER_S
+        if self.plan is None or blocked_path or due:
             new_plan = self._replan(t_ns, pose, cm)
             if self.state != "active":
                 return self._out()
@@ -215,7 +216,7 @@ class Navigator:
             self.best_remaining = min(self.best_remaining, out.remaining_m)
             self.best_yaw_error = yaw_error
             self.progress_ns = t_ns
-        if limit.rule == "stop" or t_ns - self.progress_ns > self.p.blocked_timeout_s * NS:
+        if limit.rule == "stop" or t_ns - self.progress_ns > self.p.blocked_timeout_s * NS_PER_S:
             return self._blocked(t_ns, pose, cm, limit, new_plan)
         self.blocked_since = None
         return self._out(limit, new_plan)
@@ -225,7 +226,7 @@ class Navigator:
     ) -> TickOutput:
         if self.blocked_since is None:
             self.blocked_since = t_ns
-        if t_ns - self.blocked_since < self.p.blocked_timeout_s * NS:
+        if t_ns - self.blocked_since < self.p.blocked_timeout_s * NS_PER_S:
             return self._out(limit, new_plan)
         if not self.recoveries:
             reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
@@ -234,7 +235,7 @@ class Navigator:
         self.recovery = self.recoveries.pop(0)
         self.blocked_since = None
         span = {"clear": 0.0, "rotate": self.p.rotate_s, "backoff": self.p.backoff_s}
-        self.recovery_until = t_ns + round(span[self.recovery] * NS)
+        self.recovery_until = t_ns + round(span[self.recovery] * NS_PER_S)
         self.detail = f"recovery: {self.recovery}"
         return self._out(limit, new_plan)
 

@@ -33,9 +33,11 @@ from collections import deque
 import numpy as np
 
 from common.bus import RequestError, WaitTimeout
-from common.geometry import quat_xyzw_to_matrix, yaw_of
-from common.lockstep import NS_PER_S, PeriodicTicker
+from common.camera import PinholeCamera
+from common.geometry import yaw_of_quat_xyzw
+from common.lockstep import PeriodicTicker
 from common.messages import as_numpy, to_wire
+from common.messages.base import NS_PER_S
 from common.messages.navigation import (
     ArtifactStandoff,
     NavCancel,
@@ -52,7 +54,7 @@ from common.service import Service
 from services.navigation import goals
 from services.navigation.controller import ControllerParams
 from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
-from services.navigation.depth import Camera, DepthParams, obstacle_cells, seen_through
+from services.navigation.depth import DepthParams, obstacle_cells, seen_through
 from services.navigation.goals import GoalInvalid, Queued
 from services.navigation.grid import Footprint, Grid, Pose
 from services.navigation.nav_log import NavLogger
@@ -74,9 +76,8 @@ HISTORY = 16
 
 
 def odom_pose(odom: Odom) -> Pose:
-    R = quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw))
     p = odom.base_position_in_world
-    return Pose(p[0], p[1], yaw_of(R))
+    return Pose(p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw))
 
 
 class NavNode:
@@ -85,8 +86,7 @@ class NavNode:
     def __init__(self, svc: Service) -> None:
         self.svc, cfg = svc, svc.config
         n = cfg.navigation
-        me = cfg.time.participants.get(NAME)
-        self.period_s = me.period_s if me else 0.05
+        self.period_s = cfg.time.period_of(NAME, 0.05)
         self.fp = Footprint.stowed()
         self.cost_params = CostParams(obstacle_ttl_s=n.obstacle_ttl_s)
         self.params = NavParams(
@@ -120,7 +120,7 @@ class NavNode:
         #: The sim time the map in use is as of (goals queued before it resolve against it).
         self._map_at = 0
         self.period_ns = round(self.period_s * NS_PER_S)
-        self.latency_ns = round((me.latency_s if me else self.period_s) * NS_PER_S)
+        self.latency_ns = cfg.time.latency_ns_of(NAME, self.period_s)
         self.refresh_ns = round(n.map_refresh_s * NS_PER_S)
         self.lockstep = cfg.time.mode == "lockstep"
         #: The map fetch in flight: (its tick, the result once in: grid and people, or the
@@ -360,7 +360,9 @@ class NavNode:
         if f is None or f.stamp_ns != b:
             return False
         T = np.array(f.T_world_base).reshape(4, 4) @ np.array(f.T_base_camera).reshape(4, 4)
-        cam = Camera(f.fx, f.fy, f.cx, f.cy, T, np.asarray(as_numpy(f.depth), dtype=np.float32))
+        cam = PinholeCamera(
+            f.fx, f.fy, f.cx, f.cy, T, np.asarray(as_numpy(f.depth), dtype=np.float32)
+        )
         iy, ix = np.nonzero(self.layer.active(b))
         through = seen_through(cam, self.grid, iy, ix, self.depth_params)
         self.layer.clear(iy[through], ix[through])

@@ -23,11 +23,10 @@ import math
 from dataclasses import dataclass
 
 from common.grid import occupied_near
+from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
 from services.navigation.costmap import Person
 from services.navigation.grid import Grid
-
-NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -76,7 +75,7 @@ class SeenPeople:
         self._seen = kept + [(dets.stamp_ns, f) for f in fresh]
 
     def active(self, t_ns: int) -> list[Person]:
-        ttl = round(self.p.ttl_s * NS)
+        ttl = round(self.p.ttl_s * NS_PER_S)
         self._seen = [(t, q) for t, q in self._seen if t_ns - t <= ttl]
         return [q for _, q in self._seen]
 

@@ -22,8 +22,8 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from common.geometry import FloatArray
-from services.perception.geometry import MAD_TO_SIGMA, BoolArray, Shape, thin
+from common.geometry import BoolArray, FloatArray
+from services.perception.geometry import MAD_TO_SIGMA, Shape, thin
 
 #: Height of the slabs of a surface-of-revolution fit, m.
 SLAB_M = 0.01

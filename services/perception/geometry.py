@@ -1,8 +1,7 @@
-"""RGB-D geometry of one segmented instance: eq. 1 back-projection, frames, centroid.
+"""RGB-D geometry of one segmented instance: frames, centroid, heading.
 
-- `backproject`: the paper's eq. 1, `t_p = K⁻¹ [u v 1]ᵀ d`, for every masked pixel with a
-  depth return (d along the optical axis, pixel centres at integer coordinates; OpenCV
-  optical frame: z forward, x right, y down). `project` is its inverse, for the tests.
+- Eq. 1 (`t_p = K⁻¹ [u v 1]ᵀ d` for every masked pixel with a depth return) is
+  `common.camera.backproject`, shared with navigation and the map.
 - The points go to `base` with the full `T_base_camera` (rotation included), then to
   `base_yaw` (the base's origin and heading, z up) and to the world with `T_world_base`.
 - `robust_centroid`: the mean of the points depth-connected to the median depth (no gap
@@ -18,14 +17,13 @@ Pure numpy: values in, values out; `node.py` does the transport.
 from __future__ import annotations
 
 import math
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
 
-from common.geometry import FloatArray, inv_T, yaw_only
+from common.geometry import BoolArray, FloatArray, inv_T, yaw_only
 
-BoolArray = npt.NDArray[np.bool_]
 Shape = Literal["cylinder", "box", "centroid"]
 
 #: Which fit each class gets; unknown classes get the centroid alone.
@@ -38,59 +36,6 @@ GAP_REL = 0.02
 #: Statistics and fits use at most this many points (an even stride through them): the
 #: geometry of a near object is over-sampled and the budget is milliseconds.
 MAX_FIT_POINTS = 1500
-
-
-class Intrinsics(NamedTuple):
-    """Pinhole intrinsics in pixels (fx, fy focal lengths; cx, cy principal point)."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-
-def backproject(
-    depth: npt.NDArray[np.floating],
-    mask: BoolArray | None,
-    K: Intrinsics,
-    origin: tuple[int, int] = (0, 0),
-) -> FloatArray:
-    """Eq. 1: (N, 3) points in the camera's optical frame of the masked pixels with depth.
-
-    depth: (h, w) m along the optical axis, 0 (or non-finite) = no return. mask: (h, w)
-    bool or None for every pixel. origin: (u0, v0) of depth[0, 0] in the full image, for
-    crops.
-    """
-    d = np.asarray(depth, dtype=np.float64)
-    valid = np.isfinite(d) & (d > 0.0)
-    if mask is not None:
-        if mask.shape != d.shape:
-            raise ValueError(f"mask shape {mask.shape} differs from depth shape {d.shape}")
-        valid &= mask.astype(bool)
-    v, u = np.nonzero(valid)
-    return unproject(np.column_stack([u + origin[0], v + origin[1]]), d[v, u], K)
-
-
-def unproject(uv: npt.ArrayLike, depth: npt.ArrayLike, K: Intrinsics) -> FloatArray:
-    """Eq. 1 for pixels (N, 2) at depths (N,): (N, 3) points in the optical frame."""
-    uv = np.atleast_2d(np.asarray(uv, dtype=float))
-    z = np.asarray(depth, dtype=float).reshape(-1)
-    return np.column_stack([(uv[:, 0] - K.cx) / K.fx * z, (uv[:, 1] - K.cy) / K.fy * z, z])
-
-
-def project(points_camera: npt.ArrayLike, K: Intrinsics) -> tuple[FloatArray, FloatArray]:
-    """Pixel coordinates (u, v) and depths d of camera-frame points (eq. 1 inverted)."""
-    p = np.atleast_2d(np.asarray(points_camera, dtype=float))
-    d = p[:, 2]
-    uv = np.column_stack([K.fx * p[:, 0] / d + K.cx, K.fy * p[:, 1] / d + K.cy])
-    return uv, d
-
-
-def transform(T: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:
-    """Points (N, 3) in frame b → frame a with the 4×4 `T_a_b`."""
-    T = np.asarray(T, dtype=float)
-    p = np.atleast_2d(np.asarray(points, dtype=float))
-    return np.asarray(p @ T[:3, :3].T + T[:3, 3])
 
 
 def T_base_yaw_base(T_world_base: npt.ArrayLike) -> FloatArray:

@@ -1,12 +1,13 @@
 """One instance's measurement: masked depth → points → frames → centroid, d_obj, θ_obj, axis.
 
 `measure(frame_geometry, depth, mask, origin, class_name)` chains `geometry`: eq. 1 in the
-camera frame, the outlier gate there (depth bleed shows along the optical axis), then the
-inliers through `T_base_camera` to `base` and `base_yaw`, where, for upright objects
-(bottles, cans, boxes), the mask's bleed onto their support is dropped (`support`); the
-centroid of what is left gives eq. 2 (d_obj, θ_obj) and, through `T_world_base`, the
-world position, and the class's upright fit in `base_yaw` (z up) is carried to the world.
-`FrameGeometry` holds what a `CameraFrame` says about its geometry, as numpy.
+camera frame (`common.camera.backproject`), the outlier gate there (depth bleed shows
+along the optical axis), then the inliers through `T_base_camera` to `base` and
+`base_yaw`, where, for upright objects (bottles, cans, boxes), the mask's bleed onto their
+support is dropped (`support`); the centroid of what is left gives eq. 2 (d_obj, θ_obj)
+and, through `T_world_base`, the world position, and the class's upright fit in
+`base_yaw` (z up) is carried to the world. `FrameGeometry` holds what a `CameraFrame`
+says about its geometry, as numpy.
 """
 
 from __future__ import annotations
@@ -16,18 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from common.geometry import FloatArray, wrap_angle, yaw_only
+from common.camera import PinholeCamera, backproject
+from common.geometry import BoolArray, FloatArray, transform_points, wrap_angle, yaw_of, yaw_only
 from services.perception.fits import UprightFit, fit_upright
 from services.perception.geometry import (
     CLASS_SHAPES,
-    BoolArray,
-    Intrinsics,
     T_base_yaw_base,
-    backproject,
     depth_inliers,
     heading,
     robust_inliers,
-    transform,
 )
 from services.perception.support import support_inliers
 
@@ -39,9 +37,12 @@ GATE_ROUNDS = 3
 
 @dataclass(frozen=True)
 class FrameGeometry:
-    """A camera frame's geometry: intrinsics and the frames at capture (4×4 arrays)."""
+    """A camera frame's geometry: intrinsics and the frames at capture (4×4 arrays).
 
-    K: Intrinsics
+    camera: the intrinsics (its pose is not read: the two frames below place the camera).
+    """
+
+    camera: PinholeCamera
     T_base_camera: FloatArray
     T_world_base: FloatArray
 
@@ -91,7 +92,7 @@ def object_inliers(pts_cam: FloatArray, T_base_yaw_camera: FloatArray, upright: 
         idx = np.flatnonzero(keep)
         ok = depth_inliers(pts_cam[idx, 2])
         kept = pts_cam[idx[ok]]
-        on_object = support_inliers(transform(T_base_yaw_camera, kept), kept[:, 2])
+        on_object = support_inliers(transform_points(T_base_yaw_camera, kept), kept[:, 2])
         if on_object.sum() >= MIN_POINTS:  # else too little is left to judge: gap only
             ok[ok] = on_object
         keep[idx[~ok]] = False
@@ -109,31 +110,31 @@ def measure(
 ) -> Measurement | None:
     """The instance's geometry from its mask over `depth` (a crop at `origin`), or None
     when fewer than `MIN_POINTS` pixels have depth."""
-    pts_cam = backproject(depth, mask, geo.K, origin)
+    pts_cam = backproject(depth, geo.camera, mask=mask, origin=origin)
     if len(pts_cam) < MIN_POINTS:
         return None
     T_by_c = geo.T_base_yaw_camera
     T_w_by = geo.T_world_base_yaw
     shape = CLASS_SHAPES.get(class_name, "centroid")
     keep = object_inliers(pts_cam, T_by_c, shape != "centroid")
-    pts_by = transform(T_by_c, pts_cam[keep])
+    pts_by = transform_points(T_by_c, pts_cam[keep])
     centroid_cam = pts_cam[keep].mean(axis=0)
     centroid_by = pts_by.mean(axis=0)
     d_obj, theta_obj = heading(centroid_by)
     eye_by = T_by_c[:3, 3]
     fit = fit_upright(pts_by, eye_by, shape)
-    base_yaw_in_world = float(np.arctan2(T_w_by[1, 0], T_w_by[0, 0]))
+    base_yaw_in_world = yaw_of(T_w_by[:3, :3])
     return Measurement(
         centroid_camera=centroid_cam,
         centroid_base_yaw=centroid_by,
-        centroid_world=transform(T_w_by, centroid_by)[0],
+        centroid_world=transform_points(T_w_by, centroid_by)[0],
         d_obj=d_obj,
         theta_obj=theta_obj,
         fit_base_yaw=fit,
         axis_base_yaw=fit.axis,
-        axis_world=transform(T_w_by, fit.axis)[0],
+        axis_world=transform_points(T_w_by, fit.axis)[0],
         yaw_world=wrap_angle(fit.yaw + base_yaw_in_world),
-        points_world=transform(T_w_by, pts_by),
+        points_world=transform_points(T_w_by, pts_by),
         n_points=int(keep.sum()),
         n_outliers=int((~keep).sum()),
     )

@@ -24,8 +24,9 @@ import numpy as np
 from common.bus import Latest, NoReply, RemoteError, RequestError, WaitTimeout
 from common.config import ConfigError, PerceptionSettings, resolve
 from common.keys import map_artifact, map_person
-from common.lockstep import NS_PER_S, PeriodicTicker
+from common.lockstep import PeriodicTicker
 from common.messages.arrays import ArrayError, as_numpy
+from common.messages.base import NS_PER_S
 from common.messages.perception import Detections, LocateReply, LocateRequest
 from common.messages.semantic_map import MapEntity
 from common.messages.sim import CameraFrame, SegmentationTruth
@@ -65,14 +66,12 @@ class PerceptionNode:
         self.svc = svc
         cfg = svc.config
         self.settings = cfg.perception
-        part = cfg.time.participants.get(NAME)
-        period_s = part.period_s if part is not None else 1.0 / cfg.sim.camera_hz
-        self.period_ns = round(period_s * NS_PER_S)
+        self.period_ns = cfg.time.period_ns_of(NAME, 1.0 / cfg.sim.camera_hz)
         camera_ns = round(NS_PER_S / cfg.sim.camera_hz)
         if self.period_ns % camera_ns:
             raise ConfigError(
-                f"perception's period {period_s} s is not a multiple of the cameras' "
-                f"{camera_ns / NS_PER_S} s: it would wait for frames that never come"
+                f"perception's period {self.period_ns / NS_PER_S} s is not a multiple of the "
+                f"cameras' {camera_ns / NS_PER_S} s: it would wait for frames that never come"
             )
         self.cameras = [c for c in self.settings.cameras if c in cfg.sim.cameras]
         self.truth = self.settings.segmenter == "truth"
@@ -99,7 +98,7 @@ class PerceptionNode:
         )
         self.publisher = bus.publisher(keys.detections, Detections, "data")
         self.recent = RecentDetections()
-        self.ticker = PeriodicTicker(bus, keys, NAME, period_s, svc.stop)
+        self.ticker = PeriodicTicker(bus, keys, NAME, self.period_ns / NS_PER_S, svc.stop)
         self.logger = PerceptionLogger(svc.rec, cfg.recording.depth_every)
         self._seen: dict[str, tuple[str, ...]] = {}
         self._reasons: dict[str, str] = {}

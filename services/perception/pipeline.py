@@ -17,10 +17,11 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from common.camera import PinholeCamera
+from common.geometry import BoolArray
 from common.messages import as_numpy, to_wire
 from common.messages.perception import Detection
 from common.messages.sim import CameraFrame
-from services.perception.geometry import BoolArray, Intrinsics
 from services.perception.measure import FrameGeometry, Measurement, measure
 
 #: The classes perception reports (the network's, and what truth labels are mapped to).
@@ -41,7 +42,7 @@ class Segmented(Protocol):
 def frame_geometry(frame: CameraFrame) -> FrameGeometry:
     """The frame's intrinsics and transforms as numpy."""
     return FrameGeometry(
-        K=Intrinsics(frame.fx, frame.fy, frame.cx, frame.cy),
+        camera=PinholeCamera(frame.fx, frame.fy, frame.cx, frame.cy),
         T_base_camera=np.asarray(frame.T_base_camera, dtype=float).reshape(4, 4),
         T_world_base=np.asarray(frame.T_world_base, dtype=float).reshape(4, 4),
     )

@@ -22,8 +22,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from common.geometry import FloatArray
-from services.perception.geometry import BoolArray, depth_inliers
+from common.geometry import BoolArray, FloatArray
+from services.perception.geometry import depth_inliers
 
 #: Points within this height of the low end are the band tested against the footprint, m.
 SUPPORT_BAND_M = 0.01

@@ -11,49 +11,33 @@ it missing since that frame's stamp; a detection clears it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-from numpy.typing import NDArray
 
-from common.geometry import FloatArray, inv_T
-
-
-@dataclass(frozen=True)
-class View:
-    """One camera frame's geometry: T_world_camera (4×4), intrinsics, size, depth (m, 0 = no
-    return) or None when the depth image is not at hand."""
-
-    T_world_camera: FloatArray
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-    depth: NDArray[np.float32] | None = None
+from common.camera import PinholeCamera
+from common.geometry import FloatArray
 
 
 def looks_at(
-    view: View,
+    camera: PinholeCamera,
     p_world: FloatArray,
     max_range_m: float,
     margin_px: int = 8,
     occluder_m: float = 0.15,
 ) -> bool:
-    """Whether this frame would have seen an object at `p_world` (see the module doc)."""
-    p = inv_T(view.T_world_camera) @ np.append(np.asarray(p_world, float), 1.0)
+    """Whether this frame (the camera with its depth image) would have seen an object at
+    `p_world` (see the module doc)."""
+    depth = camera.depth_image()
+    p = camera.to_camera(p_world)[0]
     z = float(p[2])
-    if z < 0.2 or float(np.linalg.norm(p[:3])) > max_range_m:
+    if z < 0.2 or float(np.linalg.norm(p)) > max_range_m:
         return False
-    u = view.fx * p[0] / z + view.cx
-    v = view.fy * p[1] / z + view.cy
-    if not (margin_px <= u < view.width - margin_px and margin_px <= v < view.height - margin_px):
+    uv, _ = camera.project(p)
+    u, v = float(uv[0, 0]), float(uv[0, 1])
+    h, w = depth.shape
+    if not (margin_px <= u < w - margin_px and margin_px <= v < h - margin_px):
         return False
-    if view.depth is None:
-        return True
     iu, iv = round(u), round(v)
-    patch = view.depth[max(iv - 2, 0) : iv + 3, max(iu - 2, 0) : iu + 3]
+    patch = depth[max(iv - 2, 0) : iv + 3, max(iu - 2, 0) : iu + 3]
     valid = patch[patch > 0]
     if valid.size == 0:
         return True  # no return at all: nothing in front, and nothing there either

@@ -37,6 +37,7 @@ from typing import Literal
 
 import numpy as np
 
+from common.camera import PinholeCamera
 from common.geometry import FloatArray
 from common.grid import occupied_near
 from common.messages import as_numpy, to_wire
@@ -46,12 +47,16 @@ from common.messages.sim import CameraFrame
 from services.semantic_map.appearance import colour_histogram
 from services.semantic_map.artifacts import ArtifactTracker, FusionParams
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
-from services.semantic_map.looks import View, looks_at
-from services.semantic_map.occupancy import Occupancy, depth_points_world
+from services.semantic_map.looks import looks_at
+from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.people import PeopleParams, PeopleTracker, merge_split_people
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
 SELF_RADIUS_M = 0.7
+#: The learned obstacles' depth points: every LEARN_STRIDE-th pixel, with a depth strictly
+#: between LEARN_DEPTH_M (m).
+LEARN_STRIDE = 4
+LEARN_DEPTH_M = (0.05, 6.0)
 #: Person detections of one frame closer than this are one person, m.
 PERSON_MERGE_M = 0.4
 #: A person is looked for at this height above their floor point, m (the chest).
@@ -262,22 +267,22 @@ class SemanticMap:
             report.dropped += self._delete(merged)
             seen = {i for i, tr in enumerate(self.artifacts.tracks) if tr.last_seen_ns == t}
         if frame is not None and not dets.reason:  # a frame perception did process
-            view = View(
-                _mat(dets.T_world_base) @ _mat(frame.T_base_camera),
+            cam = PinholeCamera(
                 frame.fx,
                 frame.fy,
                 frame.cx,
                 frame.cy,
-                frame.width,
-                frame.height,
+                _mat(dets.T_world_base) @ _mat(frame.T_base_camera),
                 np.asarray(as_numpy(frame.depth), np.float32),
             )
-            report.missing, dropped = self._look(t, view, seen)
+            report.missing, dropped = self._look(t, cam, seen)
             report.dropped += dropped
-            report.learned_cells = self._learn(dets, frame, view)
+            report.learned_cells = self._learn(dets, cam)
         return report
 
-    def _look(self, t: int, view: View, seen: set[int]) -> tuple[list[str], list[tuple[str, str]]]:
+    def _look(
+        self, t: int, cam: PinholeCamera, seen: set[int]
+    ) -> tuple[list[str], list[tuple[str, str]]]:
         """Count a miss for each entity this frame looked at and did not see; after
         `missing_after_frames` of them an artifact is missing; a false entry is deleted.
         Returns the newly missing ids and the (id, reason) of the deleted ones."""
@@ -287,7 +292,7 @@ class SemanticMap:
         for i, tr in enumerate(self.artifacts.tracks):
             if tr.id is None or i in seen:
                 continue
-            if not self._missed(tr, view, tr.z, p.look_range_m):
+            if not self._missed(tr, cam, tr.z, p.look_range_m):
                 continue
             if self.is_false_entry(tr):
                 dropped.append((tr, self._false_entry_reason(tr)))
@@ -298,7 +303,7 @@ class SemanticMap:
         for tr in self.people.tracks:  # only false entries: people move, nobody is missing
             if tr.id is None or tr.last_seen_ns == t or not self.is_false_entry(tr):
                 continue
-            if self._missed(tr, view, PERSON_LOOK_HEIGHT_M, p.person_look_range_m):
+            if self._missed(tr, cam, PERSON_LOOK_HEIGHT_M, p.person_look_range_m):
                 dropped.append((tr, self._false_entry_reason(tr)))
         return newly, self._delete(dropped)
 
@@ -320,10 +325,10 @@ class SemanticMap:
             f"{loser.class_name} {loser.near_hits} time(s)"
         )
 
-    def _missed(self, tr: Track, view: View, z: float, range_m: float) -> bool:
+    def _missed(self, tr: Track, cam: PinholeCamera, z: float, range_m: float) -> bool:
         """Count a miss if this frame looked at the entity's place (at height z); whether
         it has now been missed `missing_after_frames` times in a row."""
-        if not looks_at(view, np.array([tr.xy[0], tr.xy[1], z]), range_m):
+        if not looks_at(cam, np.array([tr.xy[0], tr.xy[1], z]), range_m):
             return False
         tr.misses += 1
         return tr.misses >= self.params.missing_after_frames
@@ -335,16 +340,19 @@ class SemanticMap:
             f"looks at its place"
         )
 
-    def _learn(self, dets: Detections, frame: CameraFrame, view: View) -> int:
+    def _learn(self, dets: Detections, cam: PinholeCamera) -> int:
         """Obstacles seen in this frame's depth, leaving out people and the robot."""
-        assert view.depth is not None
-        exclude = np.zeros(view.depth.shape, bool)
+        shape = cam.depth_image().shape
+        exclude = np.zeros(shape, bool)
         for det in dets.detections:
-            if det.class_name == "person" and _mask_fits(det, view.depth.shape):
+            if det.class_name == "person" and _mask_fits(det, shape):
                 u0, v0, u1, v1 = det.bbox
                 exclude[v0:v1, u0:u1] |= np.asarray(as_numpy(det.mask)) > 0
-        pts = depth_points_world(
-            view.depth, frame.fx, frame.fy, frame.cx, frame.cy, view.T_world_camera, exclude=exclude
+        pts = cam.points_world(
+            stride=LEARN_STRIDE,
+            mask=~exclude,
+            min_depth_m=LEARN_DEPTH_M[0],
+            max_depth_m=LEARN_DEPTH_M[1],
         )
         base = _mat(dets.T_world_base)[:2, 3]
         pts = pts[np.linalg.norm(pts[:, :2] - base, axis=1) > SELF_RADIUS_M]

@@ -20,8 +20,7 @@ import time
 from collections import defaultdict
 
 from common.bus import NoReply, RemoteError, RequestError, WaitTimeout
-from common.config import resolve
-from common.geometry import FloatArray, quat_xyzw_to_matrix, yaw_of
+from common.geometry import FloatArray, yaw_of_quat_xyzw
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_ARTIFACTS_ONE,
@@ -32,8 +31,9 @@ from common.keys import (
     MAP_PEOPLE_ONE,
     WORLD_DESCRIPTION,
 )
-from common.lockstep import NS_PER_S, PeriodicTicker, UpstreamGate
+from common.lockstep import PeriodicTicker, UpstreamGate
 from common.messages import PayloadError
+from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
 from common.messages.semantic_map import (
     MapFile,
@@ -53,7 +53,7 @@ from services.semantic_map.patrol import coverage_route, support_targets
 from services.semantic_map.patrol_driver import PatrolDriver
 from services.semantic_map.rerun_log import MapLogger
 from services.semantic_map.startup import open_map, save_all
-from services.semantic_map.store import Grid, MapStore
+from services.semantic_map.store import Grid, MapStore, database_path, remove_database
 from services.semantic_map.views import ViewHistory, view_of
 
 NAME = "semantic_map"
@@ -69,20 +69,18 @@ class MapNode:
     def __init__(self, svc: Service) -> None:
         self.svc = svc
         self.cfg = svc.config.semantic_map
-        p = svc.config.time.participants.get(NAME)
-        self.period_ns = round((p.period_s if p else 0.1) * NS_PER_S)
-        path = resolve(self.cfg.dir) / f"{self.cfg.name}.sqlite"
+        self.period_ns = svc.config.time.period_ns_of(NAME, 0.1)
+        path = database_path(self.cfg)
         if self.cfg.reset:
-            for suffix in ("", "-wal", "-shm"):
-                path.with_name(path.name + suffix).unlink(missing_ok=True)
+            remove_database(path)
         self.store = MapStore(path)
         self.lock = threading.RLock()
         self.smap: SemanticMap
         self.smap, how = open_map(self.cfg, self.store, self._world)
         log.info("%s", how)
-        latency = p.latency_s if p else self.period_ns / NS_PER_S
+        latency_ns = svc.config.time.latency_ns_of(NAME, self.period_ns / NS_PER_S)
         lockstep = svc.config.time.mode == "lockstep"
-        self.views = ViewHistory(self.period_ns, round(latency * NS_PER_S), wait=lockstep)
+        self.views = ViewHistory(self.period_ns, latency_ns, wait=lockstep)
         self.views.add(view_of(self.smap, -1, None))
         bus, keys = svc.bus, svc.keys
         self.det_fifo = bus.fifo(keys.detections, Detections, maxlen=512)
@@ -93,10 +91,13 @@ class MapNode:
         }
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.pending: dict[int, dict[str, Detections]] = defaultdict(dict)
-        participants = svc.config.time.participants
-        latencies = {n: round(q.latency_s * NS_PER_S) for n, q in participants.items()}
         self.patrol = PatrolDriver(
-            bus, keys, self.cfg, NAME, svc.config.wbc.cmd_vel_source, latencies
+            bus,
+            keys,
+            self.cfg,
+            NAME,
+            svc.config.wbc.cmd_vel_source,
+            svc.config.time.latencies_ns(),
         )
         self._supports: FloatArray | None = None
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
@@ -230,7 +231,7 @@ class MapNode:
                 )
                 if not route.viewpoints:
                     raise RequestError("unavailable", "no free space to patrol in the grid")
-                self.patrol.start(route, yaw_of(quat_xyzw_to_matrix(odom.base_orientation_xyzw)))
+                self.patrol.start(route, yaw_of_quat_xyzw(odom.base_orientation_xyzw))
                 log.info("patrol: %d viewpoints via %s", len(route.viewpoints), self.cfg.patrol_via)
             elif req.action == "stop":
                 self.patrol.stop()

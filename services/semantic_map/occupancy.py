@@ -99,26 +99,3 @@ class Occupancy:
         out = np.ones(len(ix), bool)
         out[inside] = grid[iy[inside], ix[inside]] == OCCUPIED
         return out
-
-
-def depth_points_world(
-    depth: NDArray[np.float32],
-    fx: float,
-    fy: float,
-    cx: float,
-    cy: float,
-    T_world_camera: FloatArray,
-    stride: int = 4,
-    exclude: NDArray[np.bool_] | None = None,
-    max_range_m: float = 6.0,
-) -> FloatArray:
-    """Every `stride`-th pixel's point in the world (eq. 1 with the camera pose), leaving out
-    pixels with no return, beyond `max_range_m`, or set in `exclude` (H, W)."""
-    d = depth[::stride, ::stride].astype(float)
-    v, u = np.mgrid[0 : depth.shape[0] : stride, 0 : depth.shape[1] : stride]
-    keep = (d > 0.05) & (d < max_range_m)
-    if exclude is not None:
-        keep &= ~exclude[::stride, ::stride]
-    d, u, v = d[keep], u[keep], v[keep]
-    pc = np.stack([(u - cx) * d / fx, (v - cy) * d / fy, d, np.ones_like(d)])
-    return (T_world_camera @ pc)[:3].T

@@ -26,9 +26,9 @@ from typing import Literal
 from common.bus import Bus
 from common.clients import ArmClient, ClientError, NavClient, Refused, Unavailable
 from common.config import SemanticMapSettings
-from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.geometry import yaw_of_quat_xyzw
 from common.keys import RobotKeys
-from common.lockstep import NS_PER_S
+from common.messages.base import NS_PER_S
 from common.messages.navigation import NavStatus, PoseGoal
 from common.messages.semantic_map import PatrolState
 from common.messages.sim import Odom
@@ -161,7 +161,7 @@ class PatrolDriver:
             w.moved_to(x, y)
             self._step_nav(b, w)
         else:
-            yaw = yaw_of(quat_xyzw_to_matrix(odom.base_orientation_xyzw))
+            yaw = yaw_of_quat_xyzw(odom.base_orientation_xyzw)
             vx, vy, wz = w.step(x, y, yaw, b)
             self.cmd_vel.put(CmdVel(stamp_ns=b, vx=vx, vy=vy, wz=wz, source=self.name))
         if w.done:

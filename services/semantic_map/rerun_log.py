@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from common.lockstep import NS_PER_S
+from common.messages.base import NS_PER_S
 from common.recording import is_recording
 from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.patrol import Route

@@ -20,6 +20,7 @@ import msgspec
 import numpy as np
 from numpy.typing import NDArray
 
+from common.config import SemanticMapSettings, resolve
 from common.geometry import FloatArray
 from common.messages import decoder
 from common.messages.semantic_map import MapEntity
@@ -47,6 +48,18 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 
 _ENC = msgspec.msgpack.Encoder()
 _DEC = decoder(MapEntity)
+
+
+def database_path(settings: SemanticMapSettings, name: str | None = None) -> Path:
+    """The file of map `name` (the settings' own by default): `<dir>/<name>.sqlite`."""
+    return resolve(settings.dir) / f"{name or settings.name}.sqlite"
+
+
+def remove_database(path: Path) -> None:
+    """Delete a map's database with its WAL and shared-memory files (none may have it
+    open: a stopped stack, or a map starting over)."""
+    for suffix in ("", "-wal", "-shm"):
+        path.with_name(path.name + suffix).unlink(missing_ok=True)
 
 
 @dataclass(frozen=True)

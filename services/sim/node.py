@@ -25,8 +25,9 @@ import numpy as np
 from common import keys as K
 from common import robot
 from common.bus import Fifo, Latest, Publisher
-from common.lockstep import NS_PER_S, AckGate
+from common.lockstep import AckGate
 from common.messages import as_numpy
+from common.messages.base import NS_PER_S
 from common.messages.sim import (
     Ack,
     CameraFrame,
@@ -260,7 +261,8 @@ class SimNode:
         if self.core.locomotion != "kinematic":
             return
         msg = self.io.cmd_vel.at(t_ns)
-        fresh = msg is not None and t_ns - msg.stamp_ns <= NS_PER_S // 2
+        timeout_ns = round(self.svc.config.wbc.cmd_vel_timeout_s * NS_PER_S)  # as the WBC's
+        fresh = msg is not None and t_ns - msg.stamp_ns <= timeout_ns
         if msg is not None and fresh:
             self.core.set_cmd_vel(msg.vx, msg.vy, msg.wz)
         else:

@@ -13,7 +13,7 @@ import logging
 
 from common import keys as K
 from common.bus import Bus
-from common.lockstep import NS_PER_S
+from common.messages.base import NS_PER_S
 from common.messages.sim import PersonCommand
 from services.sim.people import People
 

@@ -34,12 +34,12 @@ import pinocchio as pin
 
 from common import robot
 from common.geometry import FloatArray
+from common.messages.base import NS_PER_S
 from common.messages.wbc import ArmGoal, GoalState, GoalStatus, Grasp, Posture, Reach, Release
 from services.wbc.gait import quintic
 from services.wbc.grasp import GraspDetector, GraspParams
 from services.wbc.reach import PoseSample, PoseSegment, pregrasp
 
-NS = 1_000_000_000
 ARM = slice(12, 18)
 
 
@@ -205,7 +205,7 @@ class ArmActions:
             speed = p.approach_speed_m_s if k == 1 else p.reach_speed_m_s
             duration = max(dist / speed, angle / p.reach_rate_rad_s, p.min_segment_s)
             self._segments.append((t0, PoseSegment(T_prev, T, duration)))
-            t0 += round(duration * NS)
+            t0 += round(duration * NS_PER_S)
             T_prev = T
         self.T_goal, self._T_hold = H, None
         if self.jaw != "grip":
@@ -223,7 +223,7 @@ class ArmActions:
         if self.active is not None and self.active.state == "active":
             self._end("cancelled", reason)
         if self._segments:
-            end_ns = self._segments[-1][0] + round(self._segments[-1][1].duration * NS)
+            end_ns = self._segments[-1][0] + round(self._segments[-1][1].duration * NS_PER_S)
             if now_ns < end_ns:  # mid-motion: freeze where the reference is
                 self._T_hold = self._sample_pose(now_ns).T
                 self._segments = []
@@ -259,11 +259,11 @@ class ArmActions:
         for start, s in self._segments:
             if now_ns >= start:
                 t0, seg = start, s
-        return seg.sample((now_ns - t0) / NS)
+        return seg.sample((now_ns - t0) / NS_PER_S)
 
     def update(self, now_ns: int, obs: ArmObservation) -> ArmReferences:
         """The references for this tick; advances the active goal's state."""
-        dt = 0.0 if self._last_ns is None else (now_ns - self._last_ns) / NS
+        dt = 0.0 if self._last_ns is None else (now_ns - self._last_ns) / NS_PER_S
         self._last_ns = now_ns
         closing = self.jaw == "grip"
         self.detector.update(
@@ -276,7 +276,7 @@ class ArmActions:
             T, twist, acc = sample.T, sample.twist, sample.acceleration
         elif self._T_hold is not None:
             T, twist, acc = self._T_hold, np.zeros(6), np.zeros(6)
-        s, _, _ = quintic((now_ns - self._q_t0) / NS / self._q_dur)
+        s, _, _ = quintic((now_ns - self._q_t0) / NS_PER_S / self._q_dur)
         posture = self._q_from + s * (self._q_to - self._q_from)
         return ArmReferences(
             T_world_tcp=T,
@@ -291,10 +291,10 @@ class ArmActions:
         goal, p = self.active, self.params
         if goal is None:
             return
-        elapsed = (now_ns - goal.start_ns) / NS
+        elapsed = (now_ns - goal.start_ns) / NS_PER_S
         if goal.kind == "reach" and self.T_goal is not None and self._segments:
             t_end, seg = self._segments[-1]
-            motion_s = (t_end - goal.start_ns) / NS + seg.duration
+            motion_s = (t_end - goal.start_ns) / NS_PER_S + seg.duration
             dist, angle = pose_error(obs.T_world_tcp, self.T_goal)
             gripping = self.jaw == "grip"
             tol_m = p.held_tol_m if gripping else p.reach_tol_m

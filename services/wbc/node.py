@@ -36,8 +36,9 @@ import numpy as np
 from common import robot
 from common.bus import Fifo, RequestError, WaitTimeout
 from common.geometry import FloatArray
-from common.lockstep import NS_PER_S, UpstreamGate
+from common.lockstep import UpstreamGate
 from common.messages import Array, ArrayError, as_numpy
+from common.messages.base import NS_PER_S
 from common.messages.sim import JointCommand, RobotState
 from common.messages.wbc import (
     ArmGoal,
@@ -152,9 +153,8 @@ class WbcNode:
     def __init__(self, svc: Service) -> None:
         self.svc, cfg = svc, svc.config
         w = cfg.wbc
-        me = cfg.time.participants.get(NAME)
-        self.period_ns = round((me.period_s if me else 1.0 / cfg.time.tick_hz) * NS_PER_S)
-        latency = {n: round(p.latency_s * NS_PER_S) for n, p in cfg.time.participants.items()}
+        self.period_ns = cfg.time.period_ns_of(NAME, 1.0 / cfg.time.tick_hz)
+        latency = cfg.time.latencies_ns()
         gait = GaitParams(
             v_max=tuple(w.cmd_vel_max),  # type: ignore[arg-type]
             a_max=tuple(w.cmd_vel_accel_max),  # type: ignore[arg-type]

@@ -12,12 +12,11 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from bench import nav_person
 from common.clients import NavClient
-from common.geometry import quat_xyzw_to_matrix, yaw_of
+from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_EVENTS
 from common.messages.navigation import (
     NavCancel,
@@ -74,7 +73,7 @@ def _wait_done(status: object, goal_id: str, timeout_s: float) -> NavStatus:
 
 def _pose(odom: Odom) -> tuple[float, float, float]:
     p = odom.base_position_in_world
-    return p[0], p[1], yaw_of(quat_xyzw_to_matrix(np.array(odom.base_orientation_xyzw)))
+    return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
 
 def test_three_goals_in_the_small_world_are_reached_without_touching_obstacles(

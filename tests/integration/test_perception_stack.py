@@ -17,7 +17,8 @@ import pytest
 
 from bench.trial_driver import Driver, trial_settings
 from common.bus import Fifo, RemoteError
-from common.geometry import wrap_angle
+from common.camera import backproject
+from common.geometry import transform_points, wrap_angle
 from common.keys import WORLD_DESCRIPTION
 from common.messages import as_numpy
 from common.messages.perception import Detection, Detections, LocateReply, LocateRequest
@@ -26,7 +27,6 @@ from common.messages.wbc import Posture
 from common.messages.world import Artifact, WorldDescription
 from common.robot import STANDOFF_DISTANCE_M
 from deploy.stack import ProcessStack
-from services.perception.geometry import backproject, transform
 from services.perception.pipeline import frame_geometry
 from services.sim.feasibility import standoff_pose_for
 from tests.conftest import StartStack
@@ -210,8 +210,9 @@ def test_the_wrist_camera_in_look_at_the_standoff_measures_bottle_1_within_toler
             label = next(k for k, v in truth.instances.items() if v == "bottle_1")
             mask = np.asarray(as_numpy(truth.labels)) == label
             geo = frame_geometry(frame)
-            pts = backproject(np.asarray(as_numpy(frame.depth)), mask, geo.K)
-            visible = transform(geo.T_world_base_yaw @ geo.T_base_yaw_camera, pts).mean(axis=0)
+            pts = backproject(np.asarray(as_numpy(frame.depth)), geo.camera, mask=mask)
+            T_world_camera = geo.T_world_base_yaw @ geo.T_base_yaw_camera
+            visible = transform_points(T_world_camera, pts).mean(axis=0)
             seen.extend((x, visible) for x in det.detections if x.class_name == "bottle")
             yield from d.wait(0.1)
 

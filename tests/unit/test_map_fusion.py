@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
+from common.camera import PinholeCamera
 from common.geometry import make_T
 from common.messages import as_numpy
 from services.semantic_map.artifacts import ArtifactTracker, FusionParams
 from services.semantic_map.entities import IdBook, Observation
-from services.semantic_map.looks import View, looks_at
+from services.semantic_map.looks import looks_at
 from services.semantic_map.mapfile import seed_from_world
 from services.semantic_map.occupancy import OCCUPIED, Occupancy
 from services.semantic_map.patrol import PatrolFollower, coverage_route
@@ -52,7 +53,7 @@ def test_the_missing_test_sees_in_front_within_range_and_not_behind_an_occluder(
     # Camera at the origin looking along world +x (optical z = world x).
     R = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
     depth = np.full((240, 320), 5.0, np.float32)
-    view = View(make_T(R, [0, 0, 0]), 200.0, 200.0, 159.5, 119.5, 320, 240, depth)
+    view = PinholeCamera(200.0, 200.0, 159.5, 119.5, make_T(R, [0, 0, 0]), depth)
     assert looks_at(view, np.array([2.0, 0.0, 0.0]), 3.0)
     assert not looks_at(view, np.array([4.0, 0.0, 0.0]), 3.0)  # beyond range
     assert not looks_at(view, np.array([-2.0, 0.0, 0.0]), 3.0)  # behind

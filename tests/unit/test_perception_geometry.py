@@ -12,30 +12,25 @@ import math
 import numpy as np
 import pytest
 
-from common.geometry import FloatArray, inv_T, make_T, rot_x, rot_y, rot_z
+from common.camera import PinholeCamera, backproject
+from common.geometry import FloatArray, inv_T, make_T, rot_x, rot_y, rot_z, transform_points
 from common.robot_description import R_FORWARD_OPTICAL
 from services.perception.fits import fit_box, fit_cylinder
-from services.perception.geometry import (
-    Intrinsics,
-    backproject,
-    heading,
-    project,
-    robust_centroid,
-    transform,
-    unproject,
-)
+from services.perception.geometry import heading, robust_centroid
 from services.perception.measure import FrameGeometry, measure
 from tests.unit.perception_raycast import Plane, Shape, UprightBox, UprightCylinder, render
 
 W, H = 320, 240
-K = Intrinsics(216.5, 216.5, (W - 1) / 2, (H - 1) / 2)
+#: fx, fy, cx, cy (px), as the ray caster takes them.
+K = (216.5, 216.5, (W - 1) / 2, (H - 1) / 2)
+CAMERA = PinholeCamera(*K)
 #: The trunk: at (1, 2) facing 30°, pitched 6° nose-down and rolled 3°, 0.55 m up.
 T_WORLD_BASE = make_T(
     rot_z(math.radians(30)) @ rot_y(math.radians(6)) @ rot_x(math.radians(3)), (1.0, 2.0, 0.55)
 )
 #: A camera 0.3 m ahead of the trunk and 0.4 m up, looking along +x pitched 25° down.
 T_BASE_CAMERA = make_T(rot_y(math.radians(25)) @ R_FORWARD_OPTICAL, (0.3, 0.0, 0.4))
-GEO = FrameGeometry(K, T_BASE_CAMERA, T_WORLD_BASE)
+GEO = FrameGeometry(CAMERA, T_BASE_CAMERA, T_WORLD_BASE)
 T_WORLD_CAMERA = T_WORLD_BASE @ T_BASE_CAMERA
 
 
@@ -49,30 +44,32 @@ def ahead(distance: float, lateral: float = 0.0) -> tuple[float, float]:
 
 def test_a_world_point_projects_to_a_pixel_and_back_to_the_same_point() -> None:
     p_world = np.array([*ahead(1.2, 0.1), 0.8])
-    p_cam = transform(inv_T(T_WORLD_CAMERA), p_world)
-    uv, d = project(p_cam, K)
+    p_cam = transform_points(inv_T(T_WORLD_CAMERA), p_world)
+    uv, d = CAMERA.project(p_cam)
     u, v = uv[0]
     assert 0 <= u < W and 0 <= v < H and d[0] > 0
     # the same pixel and depth, back through eq. 1 and the frames, land on the point
-    back_world = transform(T_WORLD_CAMERA, unproject(uv, d, K))[0]
+    back_world = transform_points(T_WORLD_CAMERA, CAMERA.unproject(uv, d))[0]
     np.testing.assert_allclose(back_world, p_world, atol=1e-9)
 
 
 def test_a_rendered_pixel_back_projects_onto_the_surface_the_ray_hit() -> None:
     depth, _, points = _plane_scene()
     v, u = 117, 151
-    back = transform(T_WORLD_CAMERA, backproject(depth[v : v + 1, u : u + 1], None, K, (u, v)))
+    back = transform_points(
+        T_WORLD_CAMERA, backproject(depth[v : v + 1, u : u + 1], CAMERA, origin=(u, v))
+    )
     np.testing.assert_allclose(back[0], points[v, u], atol=1e-9)
 
 
 def test_optical_frame_conventions_left_is_small_u_up_is_small_v() -> None:
-    level = FrameGeometry(K, make_T(R_FORWARD_OPTICAL, (0, 0, 0)), np.eye(4))
+    level = FrameGeometry(CAMERA, make_T(R_FORWARD_OPTICAL, (0, 0, 0)), np.eye(4))
     T_c_b = inv_T(level.T_base_camera)
-    centre, _ = project(transform(T_c_b, [2.0, 0.0, 0.0]), K)
-    left, _ = project(transform(T_c_b, [2.0, 0.3, 0.0]), K)
-    up, _ = project(transform(T_c_b, [2.0, 0.0, 0.3]), K)
-    np.testing.assert_allclose(centre[0], [K.cx, K.cy])
-    assert left[0, 0] < K.cx and up[0, 1] < K.cy
+    centre, _ = CAMERA.project(transform_points(T_c_b, [2.0, 0.0, 0.0]))
+    left, _ = CAMERA.project(transform_points(T_c_b, [2.0, 0.3, 0.0]))
+    up, _ = CAMERA.project(transform_points(T_c_b, [2.0, 0.0, 0.3]))
+    np.testing.assert_allclose(centre[0], [CAMERA.cx, CAMERA.cy])
+    assert left[0, 0] < CAMERA.cx and up[0, 1] < CAMERA.cy
 
 
 def test_heading_is_measured_in_base_yaw_so_trunk_pitch_does_not_change_it() -> None:
@@ -80,8 +77,8 @@ def test_heading_is_measured_in_base_yaw_so_trunk_pitch_does_not_change_it() -> 
     p_world = np.array([x, y, 0.9])
     for pitch in (-0.1, 0.0, 0.15):
         T_wb = make_T(rot_z(math.radians(30)) @ rot_y(pitch), (1.0, 2.0, 0.55))
-        geo = FrameGeometry(K, T_BASE_CAMERA, T_wb)
-        p_by = transform(inv_T(geo.T_world_base_yaw), p_world)[0]
+        geo = FrameGeometry(CAMERA, T_BASE_CAMERA, T_wb)
+        p_by = transform_points(inv_T(geo.T_world_base_yaw), p_world)[0]
         d_obj, theta = heading(p_by)
         assert d_obj == pytest.approx(math.hypot(1.0, 0.2), abs=1e-9)
         assert theta == pytest.approx(math.atan2(0.2, 1.0), abs=1e-9)
@@ -108,8 +105,8 @@ def test_eq1_centroid_of_a_plane_patch_is_within_a_millimetre() -> None:
 
 def test_crops_give_the_same_points_as_the_full_image() -> None:
     depth, mask, _ = _plane_scene()
-    full = backproject(depth, mask, K)
-    crop = backproject(depth[90:150, 120:200], mask[90:150, 120:200], K, origin=(120, 90))
+    full = backproject(depth, CAMERA, mask=mask)
+    crop = backproject(depth[90:150, 120:200], CAMERA, mask=mask[90:150, 120:200], origin=(120, 90))
     np.testing.assert_allclose(np.sort(full, axis=0), np.sort(crop, axis=0))
 
 
@@ -164,7 +161,7 @@ def test_eq1_cylinder_centroid_within_1_mm_and_axis_within_2_mm(
     assert np.hypot(m.axis_world[0] - x, m.axis_world[1] - y) < 2e-3
     assert not m.fit_base_yaw.fallback
     assert m.fit_base_yaw.radius == pytest.approx(0.03, abs=2e-3)
-    d_obj, theta = heading(transform(inv_T(GEO.T_world_base_yaw), truth)[0])
+    d_obj, theta = heading(transform_points(inv_T(GEO.T_world_base_yaw), truth)[0])
     assert m.d_obj == pytest.approx(d_obj, abs=1e-3)
     assert m.theta_obj == pytest.approx(theta, abs=1e-3)
 

@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
-from common.geometry import FloatArray
-from services.perception.geometry import transform
+from common.camera import backproject
+from common.geometry import FloatArray, transform_points
 from services.perception.measure import measure, object_inliers
 from services.perception.support import footprint_hull, outside_hull_m, support_inliers
 from tests.unit.perception_raycast import Plane, Shape, UprightBox, UprightCylinder, render
@@ -107,9 +107,7 @@ def test_a_dilated_box_mask_gives_its_centroid_within_1_mm() -> None:
 
 def test_the_gates_drop_nothing_of_a_clean_mask() -> None:
     depth, labels, _ = render(_scene(_bottle(1.0, 0.1), 0.6), T_WORLD_CAMERA, K, W, H)
-    from services.perception.geometry import backproject
-
-    pts = backproject(depth, labels == 3, K)
+    pts = backproject(depth, GEO.camera, mask=labels == 3)
     assert object_inliers(pts, GEO.T_base_yaw_camera, True).all()
 
 
@@ -118,9 +116,7 @@ def test_without_the_support_gate_the_table_pulls_the_centroid_down() -> None:
     depth, labels, points = render(_scene(_bottle(0.7, 0.0), 0.55), T_WORLD_CAMERA, K, W, H)
     truth = labels == 3
     mask = _dilated(truth, 2)
-    from services.perception.geometry import backproject
-
-    pts = backproject(depth, mask, K)
+    pts = backproject(depth, GEO.camera, mask=mask)
     gap_only = object_inliers(pts, GEO.T_base_yaw_camera, False)
-    centroid: FloatArray = transform(T_WORLD_CAMERA, pts[gap_only]).mean(axis=0)
+    centroid: FloatArray = transform_points(T_WORLD_CAMERA, pts[gap_only]).mean(axis=0)
     assert points[truth].mean(axis=0)[2] - centroid[2] > 2e-3

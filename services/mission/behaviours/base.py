@@ -21,11 +21,11 @@ import py_trees
 from py_trees.common import Access, Status
 
 from common.config import MissionSettings
+from common.messages.base import NS_PER_S
 from common.messages.mission import MissionReason
 from services.mission.algorithms import Algorithms
 from services.mission.ports import RobotPort
 
-NS_PER_S = 1_000_000_000
 NAMESPACE = "/mission"
 
 
