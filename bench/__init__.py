@@ -7,28 +7,31 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from common.config import Overrides
 
 
-def _sim(overrides: Sequence[str]) -> dict[str, Any]:
+def _sim(overrides: Overrides) -> dict[str, Any]:
     from bench.sim import bench_sim
 
     return bench_sim(overrides)
 
 
-def _wbc(overrides: Sequence[str]) -> dict[str, Any]:
+def _wbc(overrides: Overrides) -> dict[str, Any]:
     from bench.wbc import bench_wbc
 
     return bench_wbc(overrides)
 
 
-def _perception(overrides: Sequence[str]) -> dict[str, Any]:
+def _perception(overrides: Overrides) -> dict[str, Any]:
     from bench.perception import bench_perception
 
     return bench_perception(overrides)
 
 
-def _nav(overrides: Sequence[str]) -> dict[str, Any]:
+def _nav(overrides: Overrides) -> dict[str, Any]:
     from bench.nav import bench_nav
 
     return bench_nav(overrides)
@@ -38,25 +41,25 @@ def _nav(overrides: Sequence[str]) -> dict[str, Any]:
 STARTUP_ROUNDS = {"rounds": 10}
 
 
-def _startup(overrides: Sequence[str]) -> dict[str, Any]:
+def _startup(overrides: Overrides) -> dict[str, Any]:
     from bench.startup import bench_startup
 
     return bench_startup(overrides, STARTUP_ROUNDS["rounds"])
 
 
-def _decoders(_overrides: Sequence[str]) -> dict[str, Any]:
+def _decoders(_overrides: Overrides) -> dict[str, Any]:
     from bench.decoder_race import bench_decoders
 
     return bench_decoders(STARTUP_ROUNDS["rounds"])
 
 
-def _deadwatch(_overrides: Sequence[str]) -> dict[str, Any]:
+def _deadwatch(_overrides: Overrides) -> dict[str, Any]:
     from bench.deadwatch import bench_deadwatch
 
     return bench_deadwatch(STARTUP_ROUNDS["rounds"])
 
 
-BENCHES: dict[str, Callable[[Sequence[str]], dict[str, Any]]] = {
+BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "sim": _sim,
     "wbc": _wbc,
     "perception": _perception,
@@ -78,8 +81,12 @@ TRIALS = (
 
 
 def run_bench(which: str, overrides: Sequence[str] = (), rounds: int = 10) -> int:
+    """Run a bench (or `all`) with the `--set` flags; print its figures (JSON)."""
+    from common.config import parse_overrides
+
     STARTUP_ROUNDS["rounds"] = rounds
     names = list(ALL) if which == "all" else [which]
-    results = {name: BENCHES[name](overrides) for name in names}
+    settings = parse_overrides(overrides)
+    results = {name: BENCHES[name](settings) for name in names}
     print(json.dumps(results if which == "all" else results[which]))
     return 0

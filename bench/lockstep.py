@@ -4,37 +4,34 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
+from common.config import Overrides, merged
 from common.keys import CAMERAS, WORLD_CLOCK
 from common.messages.sim import CameraFrame, Clock
 from deploy.stack import ProcessStack
 
 
-def commander(name: str, period_s: float) -> list[str]:
+def commander(name: str, period_s: float) -> dict[str, Any]:
     """Settings that make `name` the only lockstep participant, the joint commander."""
-    return [
-        "time.participants={}",
-        f'time.participants.{name}.role="command"',
-        f"time.participants.{name}.period_s={period_s}",
-        f"time.participants.{name}.latency_s=0.0",
-    ]
+    return {
+        "time.participants": {name: {"role": "command", "period_s": period_s, "latency_s": 0.0}}
+    }
 
 
 def lockstep_rate(
-    services: Sequence[str], settings: Sequence[str], sim_s: float, cameras: bool
+    services: Sequence[str], settings: Overrides, sim_s: float, cameras: bool
 ) -> float:
     """Ticks per wall second over `sim_s` of sim time in the small world.
 
     With `cameras`, this process subscribes to both cameras, as perception would: the
     sim renders only the cameras someone watches (or records).
     """
-    all_settings = [
-        'sim.world="small"',
-        "recording.enabled=false",
-        f"sim.duration_s={sim_s + 2.0}",
-        *([] if cameras else ["sim.cameras=[]"]),
-        *settings,
-    ]
+    all_settings = merged(
+        {"sim.world": "small", "recording.enabled": False, "sim.duration_s": sim_s + 2.0},
+        {} if cameras else {"sim.cameras": []},
+        settings,
+    )
     with ProcessStack(list(services), all_settings) as stack:
         watchers = (
             [stack.bus.latest(stack.keys.camera_rgbd(c), CameraFrame) for c in CAMERAS]

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from common.config import Overrides
 from services.navigation import native
 from services.navigation.costmap import CostParams, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
@@ -41,7 +41,7 @@ def warehouse(seed: int = 0) -> Grid:
     return Grid(occ, RES, (0.0, 0.0))
 
 
-def bench_nav(overrides: Sequence[str] = (), pairs: int = 30, seed: int = 0) -> dict[str, Any]:
+def bench_nav(overrides: Overrides | None = None, pairs: int = 30, seed: int = 0) -> dict[str, Any]:
     del overrides
     fp = Footprint.stowed()
     grid = warehouse(seed)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from bench.nav_run import nav_stack, odom_pose, send_goal
 from common.bus import Latest
-from common.config import REPO_ROOT
+from common.config import REPO_ROOT, Overrides, merged
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS, WORLD_PEOPLE_COMMAND
 from common.messages.navigation import NavStatus, PoseGoal
 from common.messages.sim import Odom, PersonCommand, RobotContact, WorldEvents
@@ -32,13 +32,13 @@ from common.robot import Footprint
 from deploy.stack import ProcessStack
 from services.navigation.grid import Pose, distance_to_footprint
 
-SETTINGS = (
-    'sim.world="hall"',
-    "sim.world_seed=3",
-    'perception.segmenter="truth"',  # the ablation: this is about navigation
-    'perception.cameras=["camera_head"]',
-    'semantic_map.cameras=["camera_head"]',
-)
+SETTINGS = {
+    "sim.world": "hall",
+    "sim.world_seed": 3,
+    "perception.segmenter": "truth",  # the ablation: this is about navigation
+    "perception.cameras": ["camera_head"],
+    "semantic_map.cameras": ["camera_head"],
+}
 WALK_MPS = 1.0
 WINDOW = 25  # odom samples: 0.5 s at 50 Hz
 Leg = Callable[[int], tuple[float, float] | None]
@@ -161,10 +161,10 @@ def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
     return f
 
 
-def person_trial(overrides: Sequence[str] = ()) -> dict[str, Any]:
+def person_trial(overrides: Overrides | None = None) -> dict[str, Any]:
     """`dume trial person`: the scenario on a fresh stack (hall, seed 3); its figures."""
     wall0 = time.monotonic()
-    with nav_stack("hall", 3, [*SETTINGS, *overrides], perception=True) as stack:
+    with nav_stack("hall", 3, merged(SETTINGS, overrides or {}), perception=True) as stack:
         f = person_step_in(stack)
         logs = str(stack.run_dir.relative_to(REPO_ROOT))
     out = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in asdict(f).items()}

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from common.clients import NavClient, Refused
+from common.config import Overrides, merged
 from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
@@ -92,31 +92,31 @@ def odom_pose(odom: Odom) -> tuple[float, float, float]:
     return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
 
-def nav_settings(world: str, seed: int, db_dir: str) -> list[str]:
-    return [
-        f'sim.world="{world}"',
-        f"sim.world_seed={seed}",
-        'sim.locomotion="dynamic"',
-        'sim.cameras=["camera_head"]',
-        'time.mode="lockstep"',
-        'semantic_map.start="seed-from-world"',
-        "semantic_map.reset=true",
-        f'semantic_map.dir="{db_dir}"',
-        'semantic_map.name="trial"',
-        'navigation.map_source="map"',
-        'wbc.initial_mode="walk"',
-        "recording.enabled=false",
-    ]
+def nav_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
+    return {
+        "sim.world": world,
+        "sim.world_seed": seed,
+        "sim.locomotion": "dynamic",
+        "sim.cameras": ["camera_head"],
+        "time.mode": "lockstep",
+        "semantic_map.start": "seed-from-world",
+        "semantic_map.reset": True,
+        "semantic_map.dir": db_dir,
+        "semantic_map.name": "trial",
+        "navigation.map_source": "map",
+        "wbc.initial_mode": "walk",
+        "recording.enabled": False,
+    }
 
 
 def nav_stack(
-    world: str, seed: int, extra: Sequence[str] = (), perception: bool = False
+    world: str, seed: int, extra: Overrides | None = None, perception: bool = False
 ) -> ProcessStack:
     db = tempfile.mkdtemp(prefix="dume-nav-trial-")
     services = ["sim", "wbc", "semantic_map", "navigation"]
     if perception:
         services.insert(2, "perception")
-    return ProcessStack(services, [*nav_settings(world, seed, db), *extra])
+    return ProcessStack(services, merged(nav_settings(world, seed, db), extra or {}))
 
 
 def send_goal(stack: ProcessStack, goal: NavGoal) -> NavGoalReply:

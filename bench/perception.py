@@ -41,7 +41,7 @@ import zenoh
 
 from common import robot
 from common.camera import backproject
-from common.config import load_config, resolve
+from common.config import Overrides, load_config, merged, resolve
 from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z, transform_points
 from common.messages import as_numpy, decode
 from common.messages.perception import Detections
@@ -295,24 +295,23 @@ def _forward_ms(net: Segmenter, frames: Sequence[CameraFrame]) -> list[float]:
 
 
 def live(
-    overrides: Sequence[str], segmenter: str, sim_s: float, net: Segmenter | None
+    overrides: Overrides, segmenter: str, sim_s: float, net: Segmenter | None
 ) -> dict[str, Any]:
     """The pipeline's timing in a running stack (see the module docstring)."""
-    settings = [
-        'sim.world="hall"',
-        "sim.world_seed=0",
-        "time.participants={}",
-        'time.participants.wbc.role="command"',
-        "time.participants.wbc.period_s=0.002",
-        "time.participants.wbc.latency_s=0.0",
-        'time.participants.perception.role="periodic"',
-        "time.participants.perception.period_s=0.1",
-        "time.participants.perception.latency_s=0.1",
-        f'perception.segmenter="{segmenter}"',
-        "recording.enabled=false",
-        f"sim.duration_s={sim_s + 60.0}",
-        *overrides,
-    ]
+    settings = merged(
+        {
+            "sim.world": "hall",
+            "sim.world_seed": 0,
+            "time.participants": {
+                "wbc": {"role": "command", "period_s": 0.002, "latency_s": 0.0},
+                "perception": {"role": "periodic", "period_s": 0.1, "latency_s": 0.1},
+            },
+            "perception.segmenter": segmenter,
+            "recording.enabled": False,
+            "sim.duration_s": sim_s + 60.0,
+        },
+        overrides,
+    )
     start_ns, end_ns = 1_000_000_000, round((1.0 + sim_s) * 1e9)
     with ProcessStack(["sim", "wbc", "perception"], settings) as stack:
         cams = stack.config.perception.cameras
@@ -362,7 +361,8 @@ def _unseen(seeds: Sequence[int], model: Path) -> list[int]:
     return [s for s in seeds if not any(lo <= s <= hi for lo, hi in ranges)]
 
 
-def bench_perception(overrides: Sequence[str] = (), sim_s: float = 8.0) -> dict[str, Any]:
+def bench_perception(overrides: Overrides | None = None, sim_s: float = 8.0) -> dict[str, Any]:
+    overrides = overrides or {}
     settings = load_config(overrides).perception
     model = resolve(settings.model)
     # the reference forward with the service's thread count, so that the ratio is fair

@@ -13,12 +13,12 @@ from __future__ import annotations
 import logging
 import statistics
 import time
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from bench.lockstep import commander, lockstep_rate
+from common.config import Overrides, merged
 from common.messages import as_numpy
 from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
@@ -83,13 +83,14 @@ def bare_loop(sim_s: float, world_name: str = "small") -> float:
     return ticks / (time.perf_counter() - t0)
 
 
-def lockstep_loop(sim_s: float, overrides: Sequence[str], cameras: bool) -> float:
+def lockstep_loop(sim_s: float, overrides: Overrides, cameras: bool) -> float:
     """Ticks per wall second of sim + hold over Zenoh."""
-    settings = [*commander("hold", 0.001), *overrides]
+    settings = merged(commander("hold", 0.001), overrides)
     return lockstep_rate(["sim", "hold"], settings, sim_s, cameras)
 
 
-def bench_sim(overrides: Sequence[str] = (), sim_s: float = 5.0) -> dict[str, Any]:
+def bench_sim(overrides: Overrides | None = None, sim_s: float = 5.0) -> dict[str, Any]:
+    overrides = overrides or {}
     result: dict[str, Any] = {"bench": "sim"}
     for world in ("small", "hall"):
         cost = step_cost(world)

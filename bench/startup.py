@@ -20,13 +20,13 @@ import argparse
 import re
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from bench.eval.run import read_map, watch_mission
 from bench.eval.targets import demo_pair
 from common.bus import BusError
+from common.config import Overrides, merged
 from common.messages.mission import MissionRequest
 from deploy.demo import SERVICES, demo_overrides
 from deploy.stack import Supervised
@@ -52,9 +52,9 @@ def crashes_in(run_dir: Path) -> list[dict[str, str]]:
     return found
 
 
-def one_round(index: int, overrides: Sequence[str]) -> dict[str, Any]:
-    args = argparse.Namespace(world="small", world_seed=0, map=None, set=list(overrides))
-    stack = Supervised(demo_overrides(args, f"bench-startup-{index}"))
+def one_round(index: int, overrides: Overrides) -> dict[str, Any]:
+    args = argparse.Namespace(world="small", world_seed=0, map=None, set=[])
+    stack = Supervised(merged(demo_overrides(args, f"bench-startup-{index}"), overrides))
     wall0 = time.perf_counter()
     error = ""
     try:
@@ -82,7 +82,7 @@ def one_round(index: int, overrides: Sequence[str]) -> dict[str, Any]:
     }
 
 
-def bench_startup(overrides: Sequence[str], rounds: int = 10) -> dict[str, Any]:
+def bench_startup(overrides: Overrides, rounds: int = 10) -> dict[str, Any]:
     results = []
     for i in range(rounds):
         r = one_round(i, overrides)

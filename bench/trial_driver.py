@@ -24,6 +24,7 @@ import numpy as np
 
 from common.bus import Bus
 from common.clients import ArmClient, Refused
+from common.config import Overrides, merged
 from common.geometry import FloatArray, quat_xyzw_to_matrix
 from common.keys import WORLD_EVENTS, WORLD_PUSH
 from common.lockstep import PeriodicTicker
@@ -42,30 +43,29 @@ FELL_TILT_DEG = 30.0
 Script = Generator[None, None, None]
 
 
-def trial_settings(world: str, seed: int, wbc_period_s: float) -> list[str]:
+def trial_settings(world: str, seed: int, wbc_period_s: float) -> dict[str, Any]:
     """Stack settings of a trial: lockstep, dynamic, no cameras, wbc + the driver."""
-    return [
-        f'sim.world="{world}"',
-        f"sim.world_seed={seed}",
-        'sim.locomotion="dynamic"',
-        "sim.cameras=[]",
-        'time.mode="lockstep"',
-        "time.participants={}",
-        'time.participants.wbc.role="command"',
-        f"time.participants.wbc.period_s={wbc_period_s}",
-        "time.participants.wbc.latency_s=0.0",
-        f'time.participants.{NAME}.role="periodic"',
-        f"time.participants.{NAME}.period_s={PERIOD_S}",
-        f"time.participants.{NAME}.latency_s={PERIOD_S}",
-        f'wbc.cmd_vel_source="{NAME}"',
-        "recording.enabled=false",
-    ]
+    return {
+        "sim.world": world,
+        "sim.world_seed": seed,
+        "sim.locomotion": "dynamic",
+        "sim.cameras": [],
+        "time.mode": "lockstep",
+        "time.participants": {
+            "wbc": {"role": "command", "period_s": wbc_period_s, "latency_s": 0.0},
+            NAME: {"role": "periodic", "period_s": PERIOD_S, "latency_s": PERIOD_S},
+        },
+        "wbc.cmd_vel_source": NAME,
+        "recording.enabled": False,
+    }
 
 
 def start_stack(
-    world: str, seed: int, wbc_period_s: float, extra: Sequence[str] = ()
+    world: str, seed: int, wbc_period_s: float, extra: Overrides | None = None
 ) -> ProcessStack:
-    return ProcessStack(["sim", "wbc"], [*trial_settings(world, seed, wbc_period_s), *extra])
+    return ProcessStack(
+        ["sim", "wbc"], merged(trial_settings(world, seed, wbc_period_s), extra or {})
+    )
 
 
 def rpy(quat_xyzw: Sequence[float]) -> FloatArray:

@@ -29,6 +29,7 @@ import numpy as np
 
 from bench.trial_driver import Driver, Script, trial_settings
 from common.clients import ClientError, NavClient
+from common.config import Overrides, merged
 from common.geometry import FloatArray, quat_xyzw_to_matrix, wrap_angle
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.base import NS_PER_S
@@ -58,30 +59,31 @@ OBJECT, PERSON = "bottle_1", "person_1"
 SERVICES = ["sim", "wbc", "perception", "semantic_map", "navigation"]
 
 
-def fetch_settings(seed: int, db_dir: str) -> list[str]:
+def fetch_settings(seed: int, db_dir: str) -> dict[str, Any]:
     participants = {"perception": 0.1, "semantic_map": 0.1, "navigation": 0.05}
-    extra = [
-        'sim.cameras=["camera_head", "camera_wrist"]',
-        'semantic_map.start="seed-from-world"',
-        "semantic_map.reset=true",
-        f'semantic_map.dir="{db_dir}"',
-        'semantic_map.name="fetch"',
-        # The map stays as seeded: the network segmenter calls the robot's own arm (and
-        # bits of tables) a person in both cameras, and the map would fuse those into
-        # people (new ones that navigation keeps clear of, and person_1 moved onto them).
-        "semantic_map.cameras=[]",
-        'navigation.map_source="map"',
-        'wbc.mode_source="trial"',
-        'wbc.cmd_vel_source="navigation"',
-    ]
-    for name, period in participants.items():
-        extra += [
-            f'time.participants.{name}.role="periodic"',
-            f"time.participants.{name}.period_s={period}",
-            f"time.participants.{name}.latency_s={period}",
-        ]
-    settings = [s for s in trial_settings("small", seed, 0.002) if "cmd_vel_source" not in s]
-    return [*settings, *extra]
+    settings = trial_settings("small", seed, 0.002)
+    settings["time.participants"] |= {
+        name: {"role": "periodic", "period_s": period, "latency_s": period}
+        for name, period in participants.items()
+    }
+    return merged(
+        settings,
+        {
+            "sim.cameras": ["camera_head", "camera_wrist"],
+            "semantic_map.start": "seed-from-world",
+            "semantic_map.reset": True,
+            "semantic_map.dir": db_dir,
+            "semantic_map.name": "fetch",
+            # The map stays as seeded: the network segmenter calls the robot's own arm
+            # (and bits of tables) a person in both cameras, and the map would fuse those
+            # into people (new ones that navigation keeps clear of, and person_1 moved
+            # onto them).
+            "semantic_map.cameras": [],
+            "navigation.map_source": "map",
+            "wbc.mode_source": "trial",
+            "wbc.cmd_vel_source": "navigation",
+        },
+    )
 
 
 def _T(odom: Odom) -> FloatArray:
@@ -352,7 +354,7 @@ def handover(d: Driver, rig: Rig, out: Figures, samples: list[dict[str, Any]]) -
 
 def run_fetch(
     seed: int = 1,
-    overrides: list[str] | None = None,
+    overrides: Overrides | None = None,
     samples_path: Path | None = None,
     world_plan: bool = True,
 ) -> Figures:
@@ -362,7 +364,7 @@ def run_fetch(
     out["grasp_frame"] = "world" if world_plan else "base"
     samples: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="dume-fetch-") as db:
-        settings = [*fetch_settings(seed, db), *(overrides or [])]
+        settings = merged(fetch_settings(seed, db), overrides or {})
         with ProcessStack(SERVICES, settings) as stack:
             d = Driver(stack)
             d.start()

@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from bench.nav_run import NavRun, nav_stack
-from common.config import REPO_ROOT
+from common.config import REPO_ROOT, Overrides
 from common.messages.world import WorldDescription
 from services.navigation.costmap import CostParams, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
@@ -64,7 +63,7 @@ def draw_goals(
 
 
 def goals_trial(
-    count: int = 10, world: str = "hall", seed: int = 3, overrides: Sequence[str] = ()
+    count: int = 10, world: str = "hall", seed: int = 3, overrides: Overrides | None = None
 ) -> dict[str, Any]:
     wall0 = time.monotonic()
     per_goal: list[dict[str, Any]] = []

@@ -10,11 +10,10 @@ approach of the footprint to static obstacles and to people, contacts.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
 from typing import Any
 
 from bench.nav_run import NavRun, nav_stack
-from common.config import REPO_ROOT
+from common.config import REPO_ROOT, Overrides
 
 
 def goto(
@@ -23,7 +22,7 @@ def goto(
     yaw: float = 0.0,
     world: str = "hall",
     seed: int = 3,
-    overrides: Sequence[str] = (),
+    overrides: Overrides | None = None,
 ) -> dict[str, Any]:
     wall0 = time.monotonic()
     with nav_stack(world, seed, overrides) as stack:

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from common.config import Overrides, merged
 from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, WORLD_CLOCK, WORLD_DESCRIPTION
 from common.messages.semantic_map import MapEntity, MapListing, PatrolRequest, PatrolStatus
 from common.messages.sim import Clock
@@ -33,18 +34,18 @@ MATCH_M = 0.5
 PERSON_MATCH_M = 1.0
 
 
-def patrol_settings(world: str, seed: int, db_dir: str) -> list[str]:
-    return [
-        f'sim.world="{world}"',
-        f"sim.world_seed={seed}",
-        'sim.locomotion="dynamic"',
-        f'semantic_map.dir="{db_dir}"',
-        'semantic_map.name="patrol"',
-        "semantic_map.reset=true",
-        'semantic_map.start="empty"',
-        'semantic_map.floor_plan="world"',
-        'navigation.map_source="map"',
-    ]
+def patrol_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
+    return {
+        "sim.world": world,
+        "sim.world_seed": seed,
+        "sim.locomotion": "dynamic",
+        "semantic_map.dir": db_dir,
+        "semantic_map.name": "patrol",
+        "semantic_map.reset": True,
+        "semantic_map.start": "empty",
+        "semantic_map.floor_plan": "world",
+        "navigation.map_source": "map",
+    }
 
 
 def _match(
@@ -103,7 +104,7 @@ def score(
 def patrol_run(
     world: str = "hall",
     seed: int = 0,
-    overrides: Sequence[str] = (),
+    overrides: Overrides | None = None,
     spacing_m: float = 0.0,
     timeout_s: float = 7200.0,
     db_dir: str | None = None,
@@ -113,7 +114,7 @@ def patrol_run(
     if db_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="dume-patrol-")
         db_dir = tmp.name
-    settings = [*patrol_settings(world, seed, db_dir), *overrides]
+    settings = merged(patrol_settings(world, seed, db_dir), overrides or {})
     out: dict[str, Any] = {"trial": "patrol", "world": world, "world_seed": seed}
     s = ProcessStack(SERVICES, settings)
     try:

@@ -42,6 +42,7 @@ from bench.trial_driver import Driver, Script, start_stack
 from bench.trial_pick import pick
 from bench.trial_random import random_walk
 from common import robot
+from common.config import Overrides
 from common.geometry import rpy_of_quat_xyzw, wrap_angle
 from common.messages.wbc import Posture, Reach
 
@@ -230,7 +231,7 @@ def run_trial(
     name: str,
     world_seed: int | None = None,
     wbc_period_s: float = 0.002,
-    overrides: list[str] | None = None,
+    overrides: Overrides | None = None,
     options: dict[str, Any] | None = None,
 ) -> Figures:
     """Run one trial on a fresh stack; its figures. `options`: the navigation trials'
@@ -238,19 +239,19 @@ def run_trial(
     world, seed = WORLDS.get(name, DEFAULT_WORLD)
     seed = seed if world_seed is None else world_seed
     if name in NAV_TRIALS:
-        return _nav_trial(name, seed, overrides or [], dict(options or {}), world)
+        return _nav_trial(name, seed, overrides or {}, dict(options or {}), world)
     if name == "patrol":  # the semantic map's mapping patrol from an empty map
         from bench.trial_patrol import patrol_run
 
         world = (options or {}).get("world") or "hall"
-        return patrol_run(world, 0 if world_seed is None else world_seed, overrides or [])
+        return patrol_run(world, 0 if world_seed is None else world_seed, overrides)
     if name == "fetch":  # the mission's manipulation algorithms over the full stack
         from bench.trial_fetch import run_fetch
 
         return run_fetch(seed, overrides)
     out: Figures = {"trial": name, "world": world, "world_seed": seed}
     out["wbc_period_s"] = wbc_period_s
-    with start_stack(world, seed, wbc_period_s, overrides or []) as stack:
+    with start_stack(world, seed, wbc_period_s, overrides) as stack:
         d = Driver(stack)
         d.start()
         figures: Figures = {}
@@ -259,7 +260,7 @@ def run_trial(
 
 
 def _nav_trial(
-    name: str, seed: int, overrides: list[str], opts: dict[str, Any], world: str
+    name: str, seed: int, overrides: Overrides, opts: dict[str, Any], world: str
 ) -> Figures:
     world = opts.pop("world", None) or world
     if name == "goto":

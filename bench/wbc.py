@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import gc
 import os
-from collections.abc import Sequence
 from typing import Any
 
 import mujoco
@@ -26,6 +25,7 @@ from bench.lockstep import commander, lockstep_rate
 from bench.sim import bare_loop
 from bench.wbc_harness import floor_spec, set_initial_pose, simulate
 from common import robot
+from common.config import Overrides, merged
 from services.wbc.controller import WbcReferences, WbcState
 
 
@@ -54,14 +54,15 @@ def _us(x: np.ndarray, q: float) -> float:
 
 
 def wbc_lockstep_rate(
-    period_s: float, sim_s: float, overrides: Sequence[str], cameras: bool = False
+    period_s: float, sim_s: float, overrides: Overrides, cameras: bool = False
 ) -> float:
     """Ticks per wall second of sim + wbc in lockstep (the controller standing)."""
-    settings = [*commander("wbc", period_s), *overrides]
+    settings = merged(commander("wbc", period_s), overrides)
     return lockstep_rate(["sim", "wbc"], settings, sim_s, cameras)
 
 
-def bench_wbc(overrides: Sequence[str] = (), sim_s: float = 5.0) -> dict[str, Any]:
+def bench_wbc(overrides: Overrides | None = None, sim_s: float = 5.0) -> dict[str, Any]:
+    overrides = overrides or {}
     result: dict[str, Any] = {"bench": "wbc"}
     for name, cmd in (("stand", (0.0, 0.0, 0.0)), ("trot", (0.5, 0.0, 0.0))):
         t = tick_times(3.0, cmd)

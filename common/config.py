@@ -8,12 +8,15 @@ deployment decides (the robot, the router's address, the lockstep participants).
 
 - environment: `DUME_<SECTION>_<KEY>=value`, e.g. `DUME_ZENOH_PORT=7450`,
   `DUME_SIM_WORLD_SEED=3`, `DUME_TIME_MODE=realtime`; `DUME_CONFIG` names another file.
-- `DUME_SET`: newline-separated `section.key=value` overrides of any depth (what a stack
-  launcher hands to every process), applied after the variables above.
-- flags: `--set section.key=value` (any depth, e.g. `time.participants.wbc.period_s=0.002`).
+- `DUME_SETTINGS`: a JSON file of overrides as data, `{"section.key": value}` with keys of
+  any depth (what a stack launcher writes once per run for every process), applied after
+  the variables above.
+- overrides given to `load_config`: data (`{"sim.world": "small"}`, the launchers' and
+  tests' way), or flags, `--set section.key=value` strings of any depth (e.g.
+  `time.participants.wbc.period_s=0.002`), parsed once by `parse_overrides`.
 
-Values are parsed as TOML literals (`3`, `0.5`, `true`, `"text"`, `[1, 2]`); anything
-that is not a literal is taken as a string.
+A flag's value is parsed as a TOML literal (`3`, `0.5`, `true`, `"text"`, `[1, 2]`);
+anything that is not a literal is taken as a string.
 """
 
 from __future__ import annotations
@@ -32,7 +35,9 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "config.toml"
 ENV_PREFIX = "DUME_"
 #: Environment variables that are not settings.
-ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG", "DUME_SET", "DUME_PYTHON", "DUME_RUN_DIR"})
+ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG", "DUME_SETTINGS", "DUME_PYTHON", "DUME_RUN_DIR"})
+#: Overrides as data: a dotted key path (`"time.participants.wbc.period_s"`) → its value.
+Overrides = Mapping[str, Any]
 
 
 #: Ranges a setting's type carries (msgspec checks them as the settings load).
@@ -438,14 +443,39 @@ def _env_overrides(env: Mapping[str, str]) -> list[tuple[list[str], Any]]:
     return out
 
 
+def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """`section.key=value` flags as data (values parsed as TOML literals), in order."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"override {item!r} is not of the form section.key=value")
+        out.pop(key.strip(), None)  # a later flag wins, and keeps its place in the order
+        out[key.strip()] = _literal(text.strip())
+    return out
+
+
+def merged(*layers: Overrides) -> dict[str, Any]:
+    """Overrides one after the other (a later key wins, and applies after the earlier)."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for key, value in layer.items():
+            out.pop(key, None)
+            out[key] = value
+    return out
+
+
 def load_config(
-    overrides: Sequence[str] = (),
+    overrides: Overrides | Sequence[str] = (),
     *,
     path: str | Path | None = None,
     env: Mapping[str, str] | None = None,
 ) -> Config:
-    """Defaults from the file, then the environment, then `key.path=value` overrides."""
+    """Defaults from the Structs, then the file, the environment, the run's settings file
+    (`DUME_SETTINGS`), then `overrides` (data, or `section.key=value` flags)."""
     env = os.environ if env is None else env
+    if not isinstance(overrides, Mapping):
+        overrides = parse_overrides(overrides)
     file = Path(path or env.get("DUME_CONFIG") or DEFAULT_CONFIG)
     try:
         tree: dict[str, Any] = tomllib.loads(file.read_text())
@@ -455,18 +485,31 @@ def load_config(
         raise ConfigError(f"config file {file}: {exc}") from None
     for keys, value in _env_overrides(env):
         _set_path(tree, keys, value)
-    env_set = [line for line in env.get("DUME_SET", "").splitlines() if line.strip()]
-    for item in [*env_set, *overrides]:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"override {item!r} is not of the form section.key=value")
-        _set_path(tree, key.strip().split("."), _literal(text.strip()))
+    for key, value in [*_settings_file(env).items(), *overrides.items()]:
+        _set_path(tree, key.split("."), value)
     try:
         config = msgspec.convert(tree, Config, strict=False)
     except msgspec.ValidationError as exc:
         raise ConfigError(f"configuration ({file} + environment + flags): {exc}") from None
     _check(config)
     return config
+
+
+def _settings_file(env: Mapping[str, str]) -> dict[str, Any]:
+    """The run's overrides as data (`DUME_SETTINGS`: a JSON object), or none."""
+    name = env.get("DUME_SETTINGS", "")
+    if not name:
+        return {}
+    try:
+        data = msgspec.json.decode(Path(name).read_bytes(), type=dict[str, Any])
+    except (OSError, msgspec.DecodeError) as exc:
+        raise ConfigError(f"DUME_SETTINGS={name}: {exc}") from None
+    return data
+
+
+def write_settings(path: Path, overrides: Overrides) -> None:
+    """Write overrides as the run's settings file (`DUME_SETTINGS`), in order."""
+    path.write_bytes(msgspec.json.encode(dict(overrides)))
 
 
 def _check(config: Config) -> None:

@@ -29,11 +29,12 @@ import sys
 import time
 import uuid
 from collections.abc import Sequence
+from typing import Any
 
 import msgspec
 
 from common.bus import Bus, NoRouter, WaitTimeout
-from common.config import REPO_ROOT, Config, ConfigError, load_config
+from common.config import REPO_ROOT, Config, ConfigError, load_config, merged, parse_overrides
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.lifelines import Dependencies
 from common.messages import encode
@@ -44,18 +45,24 @@ CONNECT_TIMEOUT_S = 3.0
 
 
 def _client_config(args: argparse.Namespace) -> Config:
-    return load_config([*args.set, *([f"zenoh.port={args.port}"] if args.port else [])])
+    return load_config(merged(parse_overrides(args.set), _port(args)))
+
+
+def _port(args: argparse.Namespace) -> dict[str, Any]:
+    return {"zenoh.port": args.port} if args.port else {}
 
 
 def cmd_up(args: argparse.Namespace) -> int:
     from common.recording import new_run_id
-    from deploy.stack import SUPERVISORD_CONF, stack_env
+    from deploy.stack import SUPERVISORD_CONF, settings_env, stack_env
 
-    settings = [f"sim.world_seed={args.world_seed}", f'sim.world="{args.world}"', *args.set]
-    if args.realtime:
-        settings.append('time.mode="realtime"')
-    if args.port:
-        settings.append(f"zenoh.port={args.port}")
+    realtime = {"time.mode": "realtime"} if args.realtime else {}
+    settings = merged(
+        {"sim.world_seed": args.world_seed, "sim.world": args.world},
+        parse_overrides(args.set),
+        realtime,
+        _port(args),
+    )
     config = load_config(settings)
     run_id = new_run_id()
     run_dir = REPO_ROOT / "var" / "run" / run_id
@@ -64,7 +71,7 @@ def cmd_up(args: argparse.Namespace) -> int:
         port=config.zenoh.port,
         run_id=run_id,
         run_dir=run_dir,
-        settings={"DUME_SET": "\n".join(settings)},
+        settings=settings_env(run_dir, settings),
     )
     exe = os.path.join(os.path.dirname(sys.executable), "supervisord")
     print(
@@ -246,7 +253,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
             return 2
         options |= {"x": args.xy[0], "y": args.xy[1]}
     with sigterm_interrupts():  # a killed trial still stops its stack
-        result = run_trial(args.which, args.world_seed, args.wbc_period, args.set, options)
+        settings = parse_overrides(args.set)
+        result = run_trial(args.which, args.world_seed, args.wbc_period, settings, options)
     print(json.dumps(result))
     return 0
 

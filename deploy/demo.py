@@ -25,6 +25,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
@@ -41,7 +42,7 @@ from bench.eval.run import (
 )
 from bench.eval.targets import TargetError, demo_pair
 from common.bus import BusError
-from common.config import REPO_ROOT, resolve
+from common.config import REPO_ROOT, merged, parse_overrides, resolve
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
@@ -56,23 +57,24 @@ READY_TIMEOUT_S = 300.0
 STOP_TIMEOUT_S = 180.0
 
 
-def demo_overrides(args: argparse.Namespace, map_name: str) -> list[str]:
+def demo_overrides(args: argparse.Namespace, map_name: str) -> dict[str, Any]:
     """The demo stack's settings: the world, the recording, a fresh map of its own."""
-    start = (
-        ['semantic_map.start="prior"', f'semantic_map.prior_file="{resolve(args.map)}"']
+    start: dict[str, Any] = (
+        {"semantic_map.start": "prior", "semantic_map.prior_file": str(resolve(args.map))}
         if args.map
-        else ['semantic_map.start="seed-from-world"']
+        else {"semantic_map.start": "seed-from-world"}
     )
-    return [
-        f"sim.world_seed={args.world_seed}",
-        f'sim.world="{args.world}"',
-        "recording.enabled=true",
-        *start,
-        f'semantic_map.name="{map_name}"',
-        "semantic_map.reset=true",
-        *start_gate_overrides(),
-        *args.set,
-    ]
+    return merged(
+        {
+            "sim.world_seed": args.world_seed,
+            "sim.world": args.world,
+            "recording.enabled": True,
+        },
+        start,
+        {"semantic_map.name": map_name, "semantic_map.reset": True},
+        start_gate_overrides(),
+        parse_overrides(args.set),
+    )
 
 
 def _show(status: MissionStatus | None, clock: Clock, changed: bool) -> None:

@@ -1,10 +1,12 @@
 """Start and stop a dume stack: supervisord for users, plain processes for tests.
 
-Both put a run's settings in the environment (`DUME_*`, see `common.config`) so every
-process of the stack reads the same configuration: the Zenoh port, the run id, the
-world, the time mode. `Supervised` runs `supervisord -c deploy/supervisord.conf`, which
-restarts a service that dies; `ProcessStack` starts the router and any subset of services
-as child processes, so a test can kill one and watch what the others do.
+Both hand a run's settings to every process of the stack, so each reads the same
+configuration: the Zenoh port, the run id and the run's folder in the environment
+(`DUME_*`), and the overrides, given as data (`{"sim.world": "small"}`), written once to
+`<run dir>/settings.json` (`DUME_SETTINGS`, see `common.config`). `Supervised` runs
+`supervisord -c deploy/supervisord.conf`, which restarts a service that dies;
+`ProcessStack` starts the router and any subset of services as child processes, so a
+test can kill one and watch what the others do.
 """
 
 from __future__ import annotations
@@ -19,9 +21,12 @@ import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
+
+import msgspec
 
 from common.bus import AliveWatch, Bus
-from common.config import REPO_ROOT, Config, load_config
+from common.config import REPO_ROOT, Config, Overrides, load_config, merged, write_settings
 from common.keys import RobotKeys, service_of_alive_key
 from common.recording import new_run_id
 
@@ -78,25 +83,28 @@ def stack_env(
     return env
 
 
-def _settings_env(overrides: Sequence[str]) -> dict[str, str]:
-    """`section.key=value` overrides for every process of the stack (`DUME_SET`)."""
-    return {"DUME_SET": "\n".join(overrides)} if overrides else {}
+def settings_env(run_dir: Path, overrides: Overrides) -> dict[str, str]:
+    """The overrides of every process of a stack: written to the run's settings file,
+    named by `DUME_SETTINGS`."""
+    path = run_dir / "settings.json"
+    write_settings(path, overrides)
+    return {"DUME_SETTINGS": str(path)}
 
 
 class _Stack:
     """What both kinds of stack share: config, a client bus, readiness."""
 
-    def __init__(self, overrides: Sequence[str], port: int | None, run_id: str | None) -> None:
+    def __init__(self, overrides: Overrides, port: int | None, run_id: str | None) -> None:
         self.port = port or free_port()
         self.run_id = run_id or new_run_id()
         self.run_dir = REPO_ROOT / "var" / "run" / f"{self.run_id}-{self.port}"
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        self.overrides = list(overrides)
+        self.overrides = dict(overrides)
         self.env = stack_env(
             port=self.port,
             run_id=self.run_id,
             run_dir=self.run_dir,
-            settings=_settings_env(self.overrides),
+            settings=settings_env(self.run_dir, self.overrides),
         )
         self.config: Config = load_config(env=self.env)
         self.keys = RobotKeys(self.config.robot)
@@ -146,7 +154,7 @@ class _Stack:
             self._bus = None
 
 
-def only_started(services: Sequence[str], overrides: Sequence[str]) -> list[str]:
+def only_started(services: Sequence[str], overrides: Overrides) -> dict[str, Any]:
     """Overrides that drop the lockstep participants of dume services not started.
 
     The sim waits at t = 0 for every configured participant; a stack that runs a subset
@@ -156,15 +164,8 @@ def only_started(services: Sequence[str], overrides: Sequence[str]) -> list[str]
     participants = load_config(overrides).time.participants
     kept = {n: p for n, p in participants.items() if n in services or n not in MODULES}
     if kept.keys() == participants.keys():
-        return []
-    out = ["time.participants={}"]
-    for name, p in kept.items():
-        out += [
-            f'time.participants.{name}.role="{p.role}"',
-            f"time.participants.{name}.period_s={p.period_s}",
-            f"time.participants.{name}.latency_s={p.latency_s}",
-        ]
-    return out
+        return {}
+    return {"time.participants": {n: msgspec.to_builtins(p) for n, p in kept.items()}}
 
 
 class ProcessStack(_Stack):
@@ -176,13 +177,14 @@ class ProcessStack(_Stack):
     def __init__(
         self,
         services: Sequence[str],
-        overrides: Sequence[str] = (),
+        overrides: Overrides | None = None,
         *,
         port: int | None = None,
         run_id: str | None = None,
     ) -> None:
         names = [n for n in services if n in MODULES]
-        super().__init__([*overrides, *only_started(names, overrides)], port, run_id)
+        overrides = overrides or {}
+        super().__init__(merged(overrides, only_started(names, overrides)), port, run_id)
         self.services = list(services)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 
@@ -249,9 +251,13 @@ class Supervised(_Stack):
     """`supervisord -c deploy/supervisord.conf` with the run's environment."""
 
     def __init__(
-        self, overrides: Sequence[str] = (), *, port: int | None = None, run_id: str | None = None
+        self,
+        overrides: Overrides | None = None,
+        *,
+        port: int | None = None,
+        run_id: str | None = None,
     ) -> None:
-        super().__init__(overrides, port, run_id)
+        super().__init__(overrides or {}, port, run_id)
         self.proc: subprocess.Popen[bytes] | None = None
 
     def command(self) -> list[str]:

@@ -12,7 +12,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from common.config import REPO_ROOT
+from common.config import REPO_ROOT, Overrides, merged, parse_overrides
 from deploy.stack import MODULES, ProcessStack
 
 StartStack = Callable[..., ProcessStack]
@@ -49,16 +49,16 @@ def stack(tmp_path: Path) -> Iterator[StartStack]:
 
     def start(
         services: list[str],
-        *overrides: str,
+        *overrides: str | Overrides,
         record: bool = False,
         timeout_s: float = 90.0,
         wait_for: list[str] | None = None,
     ) -> ProcessStack:
-        settings = [
-            f'recording.dir="{tmp_path / "recordings"}"',
-            f"recording.enabled={'true' if record else 'false'}",
-            *overrides,
-        ]
+        """`overrides`: data, or `section.key=value` flags as a user would type them."""
+        settings = merged(
+            {"recording.dir": str(tmp_path / "recordings"), "recording.enabled": record},
+            *(parse_overrides([o]) if isinstance(o, str) else o for o in overrides),
+        )
         s = ProcessStack(services, settings)
         started.append(s)
         s.spawn("router")

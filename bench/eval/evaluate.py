@@ -41,7 +41,7 @@ from bench.eval.run import (
 )
 from bench.eval.targets import TargetError, seeded_pair
 from common.bus import BusError
-from common.config import REPO_ROOT, ConfigError, resolve
+from common.config import REPO_ROOT, ConfigError, merged, parse_overrides, resolve
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
@@ -59,21 +59,23 @@ def scenario_of(walking: bool) -> str:
     return "walking people" if walking else "standing people"
 
 
-def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> list[str]:
+def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> dict[str, Any]:
     """The settings of world `seed`'s stack."""
-    return [
-        f'sim.world="{args.world}"',
-        f"sim.world_seed={seed}",
-        f"sim.walking_people={'true' if args.walking_people else 'false'}",
-        'sim.locomotion="dynamic"',
-        'semantic_map.start="seed-from-world"',
-        f'semantic_map.name="{map_name}"',
-        "semantic_map.reset=true",
-        f"semantic_map.seed_noise_seed={seed}",
-        f"recording.enabled={'true' if args.record else 'false'}",
-        *start_gate_overrides(),
-        *args.set,
-    ]
+    return merged(
+        {
+            "sim.world": args.world,
+            "sim.world_seed": seed,
+            "sim.walking_people": bool(args.walking_people),
+            "sim.locomotion": "dynamic",
+            "semantic_map.start": "seed-from-world",
+            "semantic_map.name": map_name,
+            "semantic_map.reset": True,
+            "semantic_map.seed_noise_seed": seed,
+            "recording.enabled": bool(args.record),
+        },
+        start_gate_overrides(),
+        parse_overrides(args.set),
+    )
 
 
 def _say(text: str) -> None:

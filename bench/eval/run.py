@@ -22,6 +22,7 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from types import FrameType
+from typing import Any
 
 from bench.eval.judge import (
     TERMINAL,
@@ -129,10 +130,10 @@ def request_result(
     return base
 
 
-def start_gate_overrides() -> list[str]:
+def start_gate_overrides() -> dict[str, Any]:
     """The stack settings that let `watch_mission(start_gate=True)` start the run: the sim
     waits at t = 0 for the `START_GATE` client too."""
-    return [f'time.participants.{START_GATE}.role="start"']
+    return {f"time.participants.{START_GATE}.role": "start"}
 
 
 def watch_mission(

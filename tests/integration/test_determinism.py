@@ -31,11 +31,10 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 def bring_me(tmp_path: Path, run: int) -> MissionRecord:
     args = argparse.Namespace(world="small", walking_people=False, record=True, set=[])
-    overrides = [
-        *world_overrides(args, 0, f"determinism-{run}"),
-        f'semantic_map.dir="{tmp_path / f"map-{run}"}"',
-        f'recording.dir="{tmp_path / f"recordings-{run}"}"',
-    ]
+    overrides = world_overrides(args, 0, f"determinism-{run}") | {
+        "semantic_map.dir": str(tmp_path / f"map-{run}"),
+        "recording.dir": str(tmp_path / f"recordings-{run}"),
+    }
     with ProcessStack(list(SERVICES), overrides) as s:
         arts, people = read_map(s.bus)
         pair = seeded_pair(arts, people, 0)

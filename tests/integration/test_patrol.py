@@ -22,7 +22,7 @@ def test_a_patrol_of_the_small_world_maps_the_bottle_within_10_cm_and_the_person
     tmp_path: Path,
 ) -> None:
     out = patrol_run(
-        "small", 0, ["recording.enabled=false"], timeout_s=3600.0, db_dir=str(tmp_path)
+        "small", 0, {"recording.enabled": False}, timeout_s=3600.0, db_dir=str(tmp_path)
     )
     assert out["patrol_state"] == "done", out
     assert out["artifacts_found"] == out["artifacts_total"] == 1, out

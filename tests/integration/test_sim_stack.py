@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from common import robot
+from common.config import parse_overrides
 from common.keys import WORLD_CLOCK, WORLD_DESCRIPTION
 from common.messages import as_numpy
 from common.messages.sim import CameraFrame, Clock, Odom, RobotDescription, RobotState
@@ -52,7 +53,9 @@ def _trajectory(seconds: float, tmp: str) -> tuple[np.ndarray, np.ndarray]:
         "time.participants.wiggle.latency_s=0.01",
     ]
     settings = [*SMALL, *NO_CAMERAS, *participants, f"sim.duration_s={seconds + 0.5}"]
-    s = ProcessStack([], [*settings, "recording.enabled=false", f'recording.dir="{tmp}"'])
+    s = ProcessStack(
+        [], parse_overrides([*settings, "recording.enabled=false", f'recording.dir="{tmp}"'])
+    )
     try:
         s.spawn("router")
         # subscribe before anything runs, so the trajectory starts at t = 0

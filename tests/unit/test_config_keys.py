@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
-from common.config import ConfigError, load_config
+from common.config import ConfigError, load_config, merged, parse_overrides
 from common.keys import RobotKeys, map_artifact
 
 
@@ -49,10 +51,10 @@ def test_environment_then_flags_override_the_file() -> None:
     assert config.sim.world_seed == 5
 
 
-def test_dume_set_carries_nested_overrides() -> None:
-    env = {"DUME_SET": 'time.participants.nav.role="periodic"\ntime.participants.nav.period_s=0.05'}
-    config = load_config(env=env)
-    assert config.time.participants["nav"].period_s == 0.05
+def test_flags_parse_once_into_data_and_a_later_one_wins() -> None:
+    data = parse_overrides(['sim.world="small"', "sim.world_seed=3", "sim.world=hall"])
+    assert data == {"sim.world_seed": 3, "sim.world": "hall"}
+    assert load_config(data, env={}).sim.world == "hall"
 
 
 @pytest.mark.parametrize(
@@ -94,15 +96,31 @@ def test_keys_are_built_from_the_robot_namespace() -> None:
 def test_a_stack_of_some_services_waits_only_for_those() -> None:
     from deploy.stack import only_started
 
-    overrides = [
-        "time.participants={}",
-        'time.participants.wbc.role="command"',
-        "time.participants.wbc.period_s=0.002",
-        'time.participants.navigation.role="periodic"',
-        'time.participants.mine.role="periodic"',
-    ]
+    overrides = {
+        "time.participants": {},
+        "time.participants.wbc.role": "command",
+        "time.participants.wbc.period_s": 0.002,
+        "time.participants.navigation.role": "periodic",
+        "time.participants.mine.role": "periodic",
+    }
     extra = only_started(["sim", "wbc"], overrides)
-    participants = load_config([*overrides, *extra], env={}).time.participants
+    participants = load_config(merged(overrides, extra), env={}).time.participants
     assert set(participants) == {"wbc", "mine"}  # navigation is not started; `mine` is a test's
     assert participants["wbc"].period_s == 0.002
-    assert only_started(["sim", "wbc", "navigation"], overrides) == []
+    assert only_started(["sim", "wbc", "navigation"], overrides) == {}
+
+
+def test_a_stack_hands_its_settings_to_every_process_as_data(tmp_path: Path) -> None:
+    from deploy.stack import settings_env
+
+    settings = {
+        "sim.world": "small",
+        "time.participants.nav.period_s": 0.05,
+        "semantic_map.name": 'a "b"',
+    }
+    env = settings_env(tmp_path, settings)
+    config = load_config(env=env)
+    assert config.sim.world == "small" and config.semantic_map.name == 'a "b"'  # no quoting
+    assert config.time.participants["nav"].period_s == 0.05
+    flags = load_config(["sim.world=small"], env=env)  # flags still apply after the file
+    assert flags.sim.world == "small"
