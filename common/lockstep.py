@@ -18,8 +18,11 @@ order across keys: a participant waits for each input stamped with the tick it n
 `UpstreamGate`, for that output stamped with the producer's tick that takes effect now
 (producers publish every period, so the sample always comes).
 
-`AckGate` is the bookkeeping (unit-tested without Zenoh), used by the sim and by
-`UpstreamGate`; `PeriodicTicker` is a participant's side.
+The whole protocol is in this module: `AckGate` is the bookkeeping (unit-tested without
+Zenoh), used by the sim's `SimGate` and by `UpstreamGate`; `SimGate` is the sim's side (the
+start gate at t = 0, "may the sim publish at t?", "the command for t", stalls and
+liveliness); `PeriodicTicker` is a periodic participant's side, `UpstreamGate` a
+consumer's.
 """
 
 from __future__ import annotations
@@ -30,15 +33,18 @@ import threading
 import time
 from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Generic, Protocol, TypeVar
 
 from common.bus import AliveWatch, Bus, WaitTimeout
-from common.config import Config, Participant
-from common.keys import WORLD_CLOCK, RobotKeys
+from common.config import Config, Participant, TimeSettings
+from common.keys import WORLD_CLOCK, RobotKeys, service_of_alive_key
 from common.messages.base import NS_PER_S
 from common.messages.sim import Ack, Clock
 
 log = logging.getLogger(__name__)
+
+#: The sim publishes the clock at least this often (ns), for services that only watch time.
+CLOCK_EVERY_NS = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -109,6 +115,204 @@ class AckGate:
         if t_ns % every_ns == 0:
             return True
         return any(t_ns % s.period_ns == 0 for s in self.schedules.values())
+
+
+T_co = TypeVar("T_co", covariant=True)
+
+
+class Stamped(Protocol):
+    """A message stamped with sim time, ns (a `JointCommand` with the state's it answers)."""
+
+    @property
+    def stamp_ns(self) -> int: ...
+
+
+C = TypeVar("C", bound=Stamped)
+
+
+class Inbox(Protocol[T_co]):
+    """Samples of one key in arrival order, filled by another thread: a `Fifo`."""
+
+    def pop(self, timeout_s: float = 0.0) -> T_co | None: ...
+
+    def drain(self) -> Iterator[T_co]: ...
+
+    def wait(self, timeout_s: float) -> bool: ...
+
+
+class Liveliness(Protocol):
+    """Who is alive, kept current by another thread: an `AliveWatch`."""
+
+    @property
+    def version(self) -> int: ...
+
+    def alive(self) -> set[str]: ...
+
+    def wait_for(self, keys: set[str], timeout_s: float) -> None: ...
+
+
+#: Wall seconds the sim blocks on one look for an ack or a command before it looks again
+#: at liveliness, its stall deadline and whether it is stopping.
+POLL_S = 0.05
+
+
+class SimGate(Generic[C]):
+    """The sim's half of lockstep: whom it waits for, when it may publish, what it steps with.
+
+    Per tick t (sim ns), from the sim's loop thread only (the inboxes and the liveliness
+    watch are filled by Zenoh's threads): `refresh(t)` takes liveliness joins and leaves;
+    in lockstep `wait_acks(t)` returns once the sim may publish at t (every live periodic
+    participant acked its ticks whose outputs take effect by t; in realtime `drain_acks(t)`
+    only books the acks); after publishing, `command(t)` is what to step with. Before the
+    first tick `start()` is the start gate. Waits are bounded in wall seconds: a
+    participant whose liveliness goes is no longer waited for, one that stalls past
+    `time.stall_timeout_s` is logged (`log`, the sim's logger), counted in `stalls` and
+    stepped without until it answers again.
+
+    `alive_key(name)` is a participant's liveliness key; a key's last segment is its
+    service's name. `now` is the wall clock (s) the deadlines read.
+    """
+
+    def __init__(
+        self,
+        settings: TimeSettings,
+        *,
+        alive: Liveliness,
+        acks: Inbox[Ack],
+        commands: Inbox[C],
+        alive_key: Callable[[str], str],
+        stop: threading.Event,
+        log: logging.Logger,
+        now: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        self.settings = settings
+        self.lockstep = settings.mode == "lockstep"
+        self.tick_ns = round(NS_PER_S / settings.tick_hz)
+        self.acks = AckGate(settings.participants, self.tick_ns)
+        commanders = [n for n, p in settings.participants.items() if p.role == "command"]
+        if len(commanders) > 1:
+            raise ValueError(f"at most one command participant, got {commanders}")
+        #: The command participant (the sim waits for its answer to every state), or None.
+        self.commander = commanders[0] if commanders else None
+        #: The state goes out (and a command is due) at each multiple of this, ns.
+        self.command_period_ns = (
+            round(settings.participants[self.commander].period_s * NS_PER_S)
+            if self.commander
+            else self.tick_ns
+        )
+        #: Services alive now, by name (every service, not only participants).
+        self.alive_names: set[str] = set()
+        #: Stalls logged: a periodic participant's once until it acks again, the
+        #: commander's once per state it left unanswered.
+        self.stalls = 0
+        self._alive = alive
+        self._alive_version = -1
+        self._ack_inbox = acks
+        self._commands = commands
+        self._alive_key = alive_key
+        self._stop = stop
+        self._log = log
+        self._now = now
+
+    def start(self) -> None:
+        """The start gate, before the first tick (lockstep with participants only): wait up
+        to `start_timeout_s` until every configured participant (every role: the `start`
+        ones are waited for here and never again) is alive; else log and start anyway."""
+        if not (self.lockstep and self.settings.participants):
+            return
+        wanted = {self._alive_key(n) for n in self.settings.participants}
+        self._log.info("lockstep: waiting for %s", sorted(self.settings.participants))
+        try:
+            self._alive.wait_for(wanted, self.settings.start_timeout_s)
+        except Exception as exc:
+            self._log.error("starting without every participant: %s", exc)
+
+    def state_due(self, t_ns: int) -> bool:
+        """Publish the state at t? When the commander answers it (every tick without one)."""
+        return t_ns % self.command_period_ns == 0
+
+    def clock_due(self, t_ns: int) -> bool:
+        """Publish the clock at t? At every participant boundary and every 10 ms."""
+        return self.acks.clock_due(t_ns, CLOCK_EVERY_NS)
+
+    def refresh(self, t_ns: int) -> None:
+        """Take the liveliness changes (if any) as of sim time t: joins and leaves, logged."""
+        if self._alive.version == self._alive_version:
+            return
+        self._alive_version = self._alive.version
+        names = {service_of_alive_key(k) for k in self._alive.alive()}
+        for name in sorted(names - self.alive_names):
+            self._log.info("%s is alive at t=%.3f s", name, t_ns / NS_PER_S)
+            self.acks.join(name, t_ns)
+        for name in sorted(self.alive_names - names):
+            self._log.warning("%s is gone at t=%.3f s: no longer waited for", name, t_ns / NS_PER_S)
+            self.acks.leave(name)
+        self.alive_names = names
+
+    def drain_acks(self, t_ns: int) -> None:
+        """Book the acks that arrived; a stalled participant that acks again rejoins at t."""
+        for ack in self._ack_inbox.drain():
+            stalled = ack.service in self.acks.schedules and ack.service not in self.acks.alive
+            if stalled and ack.service in self.alive_names:  # a stalled participant is back
+                self._log.info("%s answers again", ack.service)
+                self.acks.join(ack.service, t_ns)
+            self.acks.ack(ack.service, ack.stamp_ns)
+
+    def wait_acks(self, t_ns: int) -> None:
+        """Return once the sim may publish at t (lockstep): no live periodic participant
+        owes an ack due by t, or the sim is stopping, or `stall_timeout_s` (wall) passed:
+        then each participant still owing is logged, counted and left until it acks."""
+        deadline = self._now() + self.settings.stall_timeout_s
+        while True:
+            self.drain_acks(t_ns)
+            blocking = self.acks.blocking(t_ns)
+            if not blocking or self._stop.is_set():
+                return
+            if self._now() > deadline:
+                for name in blocking:
+                    self._log.error(
+                        "%s stalled: no ack for t=%.3f s within %.1f s; stepping without it",
+                        name,
+                        t_ns / NS_PER_S,
+                        self.settings.stall_timeout_s,
+                    )
+                    self.acks.leave(name)
+                    self.stalls += 1
+                return
+            self._ack_inbox.wait(timeout_s=POLL_S)  # wakes on the next ack
+            self.refresh(t_ns)
+
+    def command(self, t_ns: int) -> C | None:
+        """What to step with after publishing at t: in lockstep the commander's answer to
+        the state at t (`wait_command`), in realtime the newest command that arrived."""
+        if self.lockstep:
+            return self.wait_command(t_ns)
+        latest = None
+        for latest in self._commands.drain():  # noqa: B007 - newest wins
+            pass
+        return latest
+
+    def wait_command(self, t_ns: int) -> C | None:
+        """The command answering the state at t (lockstep), or None if none is due/alive.
+
+        Answers to older states are dropped (superseded). None, too, when the commander
+        is gone, the sim is stopping, or `stall_timeout_s` (wall) passed (logged, counted).
+        """
+        if self.commander is None or t_ns % self.command_period_ns:
+            return None
+        deadline = self._now() + self.settings.stall_timeout_s
+        while self.commander in self.alive_names and not self._stop.is_set():
+            cmd = self._commands.pop(timeout_s=POLL_S)
+            if cmd is not None:
+                if cmd.stamp_ns == t_ns:
+                    return cmd
+                continue  # an answer to an older state: superseded
+            if self._now() > deadline:
+                self._log.error("%s stalled at t=%.3f s", self.commander, t_ns / NS_PER_S)
+                self.stalls += 1
+                return None
+            self.refresh(t_ns)
+        return None
 
 
 def _at_or_after(stamp_ns: int) -> Callable[[Clock], bool]:

@@ -24,65 +24,44 @@ Each tick b (multiples of `time.participants.mission.period_s`):
 A mission that (re)starts says so: its first status is `idle` with no request and the
 sim time it started at, so a client whose request was in progress knows it was lost and
 can send it again.
+
+This module is wiring only: the parts are `inbox` (requests and cancels as they arrive),
+`inputs` (step 1), `desk` (steps 2–3 and the status of step 4), `robot` (`BusRobot`: the
+bus as the behaviours see it, and the tick's cmd_vel) and `tree`.
 """
 
 from __future__ import annotations
 
-import threading
-from collections import deque
-
 import zenoh
 
-from common.bus import WaitTimeout
+from common.bus import Bus
 from common.lifelines import Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
-from common.messages import encode
 from common.messages.base import NS_PER_S
-from common.messages.mission import MissionReceipt, MissionRequest, MissionStatus
+from common.messages.mission import MissionRequest, MissionStatus
 from common.service import Service
 from services.mission.algorithms import default_algorithms
-from services.mission.behaviours.abort import halt
 from services.mission.behaviours.base import Context
+from services.mission.desk import Desk
+from services.mission.inbox import Inbox, RequestInbox
+from services.mission.inputs import TickInputs
 from services.mission.mission_log import MissionLogger
-from services.mission.requests import (
-    Rejection,
-    StatusBoard,
-    check_request,
-    parse_cancel,
-    parse_request,
-)
+from services.mission.requests import StatusBoard
 from services.mission.robot import WRIST, BusRobot
-from services.mission.tree import MissionTree, Outcome
+from services.mission.tree import MissionTree
 
 NAME = "mission"
 #: The services a running mission depends on (those that are lockstep participants).
 DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map")
 
 
-class RawInbox:
-    """Payloads of one key, kept raw for the loop (Zenoh's thread only appends)."""
-
-    def __init__(self, session: zenoh.Session, key: str, maxlen: int = 256) -> None:
-        self._q: deque[bytes] = deque(maxlen=maxlen)
-        self._lock = threading.Lock()
-        self._sub = session.declare_subscriber(key, self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        self.push(sample.payload.to_bytes())
-
-    def push(self, payload: bytes) -> None:
-        with self._lock:
-            self._q.append(payload)
-
-    def drain(self) -> list[bytes]:
-        with self._lock:
-            out = list(self._q)
-            self._q.clear()
-        return out
+def subscribe(bus: Bus, key: str, inbox: Inbox) -> zenoh.Subscriber[None]:
+    """Every sample of `key` into `inbox`, raw (on Zenoh's thread)."""
+    return bus.session.declare_subscriber(key, lambda s: inbox.push(s.payload.to_bytes()))
 
 
 class MissionNode:
-    """The loop and what it keeps between ticks; see the module docstring."""
+    """The parts, wired from the config and the bus, and the loop; see the module docstring."""
 
     def __init__(self, svc: Service) -> None:
         self.svc, cfg = svc, svc.config
@@ -95,19 +74,41 @@ class MissionNode:
         self.gate.watch("navigation", self.robot.nav)
         self.gate.watch("perception", self.robot.detections)
         self.alive = bus.watch_alive(keys.alive_all)
-        self.wbc_alive_key = keys.alive("wbc")
         needed = [n for n in DEPENDENCIES if n in cfg.time.participants]
         self.deps = Dependencies(self.alive.lifelines, needed, keys.alive)
-        self.started = False
-        self.status_period_ns = round(NS_PER_S / cfg.wbc.status_hz)
-        self.requests = RawInbox(bus.session, keys.mission_request)
-        bus.serve(keys.mission_submit, MissionRequest, self._on_submit)
-        self.cancels = RawInbox(bus.session, keys.mission_cancel)
+        heard = {keys.alive(n) for n in self.deps.names}
+        self.inputs = TickInputs(
+            self.robot,
+            self.gate,
+            self.alive.alive,
+            lambda: hear_all(self.alive, heard, m.input_timeout_s),
+            keys.alive("wbc"),
+            round(NS_PER_S / cfg.wbc.status_hz),
+            WRIST in cfg.perception.cameras and WRIST in cfg.sim.cameras,
+            m.input_timeout_s,
+            svc.log,
+        )
+        self.requests = RequestInbox()
+        self._subs = [subscribe(bus, keys.mission_request, self.requests)]
+        bus.serve(keys.mission_submit, MissionRequest, self.requests.submit)
+        self.cancels = Inbox()
+        self._subs.append(subscribe(bus, keys.mission_cancel, self.cancels))
         self.status_pub = bus.publisher(keys.mission_status, MissionStatus, "data")
         self.log = MissionLogger(svc.rec, svc.log)
         ctx = Context(self.robot, m, default_algorithms(m), self.log.decision)
         self.tree = MissionTree(ctx)
-        self.board = StatusBoard(round(m.status_every_s * NS_PER_S))
+        board = StatusBoard(round(m.status_every_s * NS_PER_S))
+        self.desk = Desk(
+            self.tree,
+            self.robot,
+            self.deps,
+            board,
+            self.requests,
+            self.cancels,
+            self.log,
+            self.status_pub.put,
+            svc.log,
+        )
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
 
     def run(self) -> None:
@@ -120,168 +121,12 @@ class MissionNode:
             finally:
                 self.ticker.ack(b)
 
-    # -- inputs ---------------------------------------------------------------------------
-
-    def _wait_inputs(self, b: int) -> None:
-        timeout = self.svc.config.mission.input_timeout_s
-        if not self.started and self.gate.lockstep:  # its first tick: know who runs
-            hear_all(self.alive, {self.svc.keys.alive(n) for n in self.deps.names}, timeout)
-        try:
-            self.robot.odom.wait_stamp(b, timeout)
-        except WaitTimeout:
-            self.svc.log.warning("no odom for t=%.2f s", b / NS_PER_S)
-        if b > 0 and self.wbc_alive_key in self.alive.alive():
-            need = ((b - 1) // self.status_period_ns) * self.status_period_ns
-            try:
-                self.robot.wbc.wait_stamp(need, timeout)
-            except WaitTimeout:
-                self.svc.log.warning("no wbc/status for t=%.2f s", need / NS_PER_S)
-        missing = self.gate.wait(b, timeout)
-        if missing:
-            self.svc.log.warning("t=%.2f s: no output of %s in time", b / NS_PER_S, missing)
-        self.robot.begin(b)
-        self._wait_wrist(b, timeout)
-
-    def _wait_wrist(self, b: int, timeout: float) -> None:
-        """The wrist camera's detections due at b (the gate may have been met by the head
-        camera's: both share one key), when perception runs and publishes them."""
-        perception = self.gate.gate.schedules.get("perception")
-        cfg = self.svc.config
-        due = b - self.gate.latency_ns("perception")
-        publishes = WRIST in cfg.perception.cameras and WRIST in cfg.sim.cameras
-        if (
-            perception is None
-            or "perception" not in self.gate.gate.alive
-            or not (self.gate.lockstep and publishes)
-            or due < 0
-            or due % perception.period_ns
-        ):
-            return
-        if not self.robot.wait_wrist(timeout):
-            self.svc.log.warning("t=%.2f s: no wrist detections stamped %d", b / NS_PER_S, due)
-
-    # -- requests and cancels -------------------------------------------------------------
-
-    def _on_submit(self, request: MissionRequest | None, _selector: str) -> MissionReceipt:
-        """A request by query (the server's thread): in the inbox before the reply goes."""
-        assert request is not None  # served with a request type: Server decoded it
-        self.requests.push(encode(request))
-        return MissionReceipt(request_id=request.request_id)
-
-    def _publish(self, status: MissionStatus) -> None:
-        self.status_pub.put(status)
-        self.log.status(status)
-
-    def _reject(self, b: int, rejection: Rejection) -> None:
-        self.log.request(
-            f"request {rejection.request_id or '(no id)'} rejected: "
-            f"{rejection.reason}: {rejection.detail}",
-            warn=True,
-        )
-        self._publish(
-            MissionStatus(
-                stamp_ns=b,
-                request_id=rejection.request_id,
-                state="rejected",
-                reason=rejection.reason,
-                detail=rejection.detail,
-            )
-        )
-
-    def _requests(self, b: int) -> None:
-        for payload in self.requests.drain():
-            parsed = parse_request(payload)
-            if isinstance(parsed, Rejection):
-                self._reject(b, parsed)
-                continue
-            self.log.request(f"request {parsed.request_id}: {parsed.object} to {parsed.person}")
-            if self.tree.busy:
-                running = self.tree.request.request_id if self.tree.request else ""
-                self._reject(
-                    b, Rejection(parsed.request_id, "busy", f"mission {running} is running")
-                )
-                continue
-            down = self.deps.missing()
-            refused = (
-                Rejection(parsed.request_id, "unavailable", f"not running: {', '.join(down)}")
-                if down
-                else check_request(parsed, self.robot)
-            )
-            if refused is not None:
-                self._reject(b, refused)
-                continue
-            self._start(b, parsed)
-
-    def _start(self, b: int, request: MissionRequest) -> None:
-        self.tree.start(request)
-        self.deps.arm()
-        self.board.update(b, request.request_id, "accepted", detail="checked against the map")
-        self._publish(self.board.sent(b))
-
-    def _cancels(self) -> Outcome | None:
-        outcome = None
-        for payload in self.cancels.drain():
-            cancel = parse_cancel(payload)
-            current = self.tree.request
-            if cancel is None:
-                self.log.request(f"cancel ignored: not a MissionCancel: {payload[:200]!r}", True)
-            elif current is None or cancel.request_id != current.request_id:
-                running = current.request_id if current else "none"
-                self.log.request(
-                    f"cancel of {cancel.request_id} ignored: the running mission is {running}",
-                    True,
-                )
-            else:
-                self.log.request(f"cancel of {cancel.request_id}: {cancel.reason}")
-                outcome = self.tree.cancel(cancel.reason or "cancelled by the user")
-        return outcome
-
-    # -- the tick -------------------------------------------------------------------------
-
     def tick(self, b: int) -> None:
-        self._wait_inputs(b)
-        self.log.at(b)
-        if not self.started:  # (re)started: no request is in progress, and clients hear it
-            self.started = True
-            self.board.update(b, "", "idle", detail=f"mission started at t={b / NS_PER_S:.2f} s")
-        self._requests(b)
-        request = self.tree.request
-        outcome = self._cancels()
-        lost = self.deps.lost() if outcome is None and request is not None else None
-        if lost is not None:
-            self.svc.log.error("t=%.2f s: %s: the mission fails", b / NS_PER_S, lost)
-            outcome = self.tree.fail("dependency_lost", lost)
-        if outcome is None:
-            try:
-                outcome = self.tree.tick()
-            except Exception:
-                self.svc.log.exception("the tree failed at t=%.2f s", b / NS_PER_S)
-                if self.tree.cancel("internal error") is None:
-                    halt(self.robot, "internal error")
-                outcome = Outcome("failed", "internal", "a behaviour raised: see the log")
-        self.log.tree(self.tree.statuses(), self.tree.text)
-        if outcome is not None and request is not None:
-            self.deps.disarm()
-            done = 1.0 if outcome.state == "succeeded" else self.board.status.progress
-            changed = self.board.update(
-                b,
-                request.request_id,
-                outcome.state,
-                self.board.status.behaviour,
-                done,
-                outcome.reason,
-                outcome.detail,
-            )
-        elif self.tree.request is not None:
-            stage, leaf, progress = self.tree.where()
-            changed = self.board.update(
-                b, self.tree.request.request_id, "running", stage, progress, detail=leaf
-            )
-        else:
-            changed = False
+        """Inputs as of b, the desk's step, the robot's outputs, then the status."""
+        self.inputs.wait(b, first=not self.desk.started)
+        changed = self.desk.step(b)
         self.robot.end(b)
-        if changed or self.board.due(b):
-            self._publish(self.board.sent(b))
+        self.desk.flush(b, changed)
 
 
 def main(svc: Service) -> None:

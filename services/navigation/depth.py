@@ -7,16 +7,29 @@ mark their cells, except cells already in the static map and those under the rob
 footprint. Clearing: a marked cell whose centre (at two heights) projects into the image
 with a measured depth beyond it by `see_through_m` has been seen through, and is
 forgotten.
+
+`DepthFeed.update(b, …)` applies the camera's frame stamped b to the layer, at the ticks
+that are multiples of the camera's period (ns of sim time): it waits for that frame up to
+`timeout_s` wall seconds (a frame that does not come is logged and skipped), clears the
+active cells the frame sees through, then marks what it shows. It runs on navigation's
+loop thread only.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from common.bus import WaitTimeout
 from common.camera import PinholeCamera
+from common.messages import as_numpy
+from common.messages.base import NS_PER_S
+from common.messages.sim import CameraFrame
+from services.navigation.costmap import ObstacleLayer
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
 
 
@@ -65,3 +78,51 @@ def seen_through(
         measured[visible] = depth[v[visible], u[visible]]
         through &= visible & (measured > z + p.see_through_m)
     return through
+
+
+class Frames(Protocol):
+    """A camera's newest frames (`common.bus.Latest`)."""
+
+    def wait_stamp(self, stamp_ns: int, timeout_s: float) -> CameraFrame: ...
+    def at(self, stamp_ns: int) -> CameraFrame | None: ...
+
+
+class DepthFeed:
+    """One depth camera's frames into the short-lived layer; see the module docstring."""
+
+    def __init__(
+        self,
+        frames: Frames,
+        camera: str,
+        period_ns: int,
+        fp: Footprint,
+        log: logging.Logger,
+        timeout_s: float,
+        p: DepthParams = DepthParams(),
+    ) -> None:
+        self.frames, self.camera, self.period_ns = frames, camera, period_ns
+        self.fp, self.log, self.timeout_s, self.p = fp, log, timeout_s, p
+
+    def update(self, b: int, pose: Pose, grid: Grid | None, layer: ObstacleLayer) -> bool:
+        """Clear and mark `layer` from the frame stamped b; whether it touched a cell
+        (or held any active one)."""
+        if grid is None or b % self.period_ns:
+            return False
+        try:
+            self.frames.wait_stamp(b, self.timeout_s)
+        except WaitTimeout:
+            self.log.warning("no %s frame for t=%.2f s", self.camera, b / NS_PER_S)
+            return False
+        f = self.frames.at(b)
+        if f is None or f.stamp_ns != b:
+            return False
+        T = np.array(f.T_world_base).reshape(4, 4) @ np.array(f.T_base_camera).reshape(4, 4)
+        cam = PinholeCamera(
+            f.fx, f.fy, f.cx, f.cy, T, np.asarray(as_numpy(f.depth), dtype=np.float32)
+        )
+        iy, ix = np.nonzero(layer.active(b))
+        through = seen_through(cam, grid, iy, ix, self.p)
+        layer.clear(iy[through], ix[through])
+        my, mx = obstacle_cells(cam, grid, pose, self.fp, self.p)
+        layer.mark(my, mx, b)
+        return bool(len(my) or through.any() or len(iy))

@@ -28,6 +28,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from common.config import NavigationSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
 from services.navigation.controller import ControllerParams, Follower
@@ -53,6 +54,28 @@ class NavParams:
     controller: ControllerParams = field(default_factory=ControllerParams)
     planner: PlanParams = field(default_factory=PlanParams)
     people: PeopleParams = field(default_factory=PeopleParams)
+
+
+def nav_params(n: NavigationSettings) -> NavParams:
+    """The navigator's parameters from the navigation settings."""
+    return NavParams(
+        replan_s=n.replan_s,
+        blocked_timeout_s=n.blocked_timeout_s,
+        timeout_s=n.goal_timeout_s,
+        controller=ControllerParams(
+            v_max=(n.v_max[0], n.v_max[1], n.v_max[2]),
+            a_max=(n.a_max[0], n.a_max[1], n.a_max[2]),
+            lookahead_m=n.lookahead_m,
+        ),
+        planner=PlanParams(cost_weight=n.cost_weight, goal_tolerance_m=n.goal_search_m),
+        people=PeopleParams(
+            slow_radius_m=n.slow_radius_m,
+            slow_speed=n.slow_speed,
+            stop_distance_m=n.stop_distance_m,
+            handover_speed=n.handover_speed,
+            ramp_top_mps=max(n.v_max[0], n.v_max[1]),
+        ),
+    )
 
 
 @dataclass(frozen=True)

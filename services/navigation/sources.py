@@ -11,6 +11,7 @@ Both raise `SourceError` with a sentence when something is missing.
 from __future__ import annotations
 
 import logging
+import threading
 from typing import Protocol
 
 from common import keys as K
@@ -74,6 +75,18 @@ class WorldSource:
 
     def people(self, at_ns: int | None = None) -> list[Person]:
         return [Person(p.id, p.position[0], p.position[1], p.yaw) for p in self.world.people]
+
+
+def wait_for_world(bus: Bus, stop: threading.Event, log: logging.Logger) -> WorldSource:
+    """The truth description, asked for until the sim answers (`SourceError` once `stop`
+    is set)."""
+    while True:
+        try:
+            return WorldSource(bus, timeout_s=5.0)
+        except SourceError as exc:
+            log.info("waiting for the sim: %s", exc)
+            if stop.wait(0.5):
+                raise
 
 
 class MapSource:

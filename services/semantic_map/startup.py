@@ -4,18 +4,24 @@ A database that holds a map is resumed (entities with their ids and histograms, 
 counters, the static and learned occupancy layers) whatever the start mode, unless
 `reset`. An empty one starts from a prior map file, from the sim's truth with noise, or
 empty; the static layer comes from the file, or else from the floor plan (the sim's grid)
-when `floor_plan = "world"`, or is unknown.
+when `floor_plan = "world"`, or is unknown. `world_description` asks the sim for its
+world (what `open_map` and the patrol's floor plan read), waiting a bounded time.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
 
+from common.bus import Bus, NoReply, RemoteError
 from common.config import SemanticMapSettings, resolve
+from common.keys import WORLD_DESCRIPTION
+from common.messages import PayloadError
 from common.messages.world import WorldDescription
 from services.semantic_map.artifacts import FusionParams
 from services.semantic_map.entities import Track
@@ -32,6 +38,23 @@ from services.semantic_map.people import PeopleParams
 from services.semantic_map.store import Grid, MapStore
 
 log = logging.getLogger(__name__)
+#: The service's logger (its lines go to rerun too), for the wait for the world.
+service_log = logging.getLogger("dume.semantic_map")
+
+
+def world_description(
+    bus: Bus, stop: threading.Event, wait_s: float = 30.0
+) -> WorldDescription | None:
+    """The sim's world description (`dume/world/description`), asked for again every 0.5 s
+    until it answers, `stop` is set or `wait_s` wall seconds passed (then None)."""
+    deadline = time.monotonic() + wait_s
+    while not stop.is_set() and time.monotonic() < deadline:
+        try:
+            return bus.query(WORLD_DESCRIPTION, None, WorldDescription, 5.0)
+        except (NoReply, RemoteError, PayloadError) as exc:
+            service_log.info("waiting for the world description: %s", exc)
+            time.sleep(0.5)
+    return None
 
 
 def map_params(s: SemanticMapSettings) -> MapParams:

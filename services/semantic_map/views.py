@@ -85,6 +85,16 @@ class ViewHistory:
             self._views.append(view)
             self._cond.notify_all()
 
+    def record(self, smap: SemanticMap, tick_ns: int) -> None:
+        """Keep the map's view after its tick at `tick_ns` (−1: before the first)."""
+        self.add(view_of(smap, tick_ns, self.newest))
+
+    def restart(self, smap: SemanticMap) -> None:
+        """The map changed outside its ticks (an import): its view now, as of the newest
+        tick, is the only one left."""
+        newest = self.newest
+        self.reset(view_of(smap, newest.tick_ns if newest else -1, None))
+
     @property
     def newest(self) -> MapView | None:
         with self._cond:

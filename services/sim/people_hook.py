@@ -16,25 +16,18 @@ from common.bus import Bus
 from common.messages.base import NS_PER_S
 from common.messages.sim import PersonCommand
 from services.sim.people import People
+from services.sim.stamped_hook import StampedHook, late_note
 
 
-class PeopleHook:
+class PeopleHook(StampedHook[PersonCommand]):
     """The pending people commands; `apply(t_ns, people)` before every step."""
 
     def __init__(self, bus: Bus, log: logging.Logger) -> None:
-        self._fifo = bus.fifo(K.WORLD_PEOPLE_COMMAND, PersonCommand, maxlen=64)
-        self._pending: list[PersonCommand] = []
-        self.log = log
-        self.applied = 0
+        super().__init__(bus.fifo(K.WORLD_PEOPLE_COMMAND, PersonCommand, maxlen=64), log)
 
     def apply(self, t_ns: int, people: People) -> None:
         """Apply the commands stamped at or before t, in stamp order."""
-        self._pending.extend(self._fifo.drain())
-        if not self._pending:
-            return
-        due = sorted((c for c in self._pending if c.stamp_ns <= t_ns), key=lambda c: c.stamp_ns)
-        self._pending = [c for c in self._pending if c.stamp_ns > t_ns]
-        for c in due:
+        for c in sorted(self._due(t_ns), key=lambda c: c.stamp_ns):
             try:
                 people.command(
                     c.person_id,
@@ -48,7 +41,6 @@ class PeopleHook:
                 self.log.warning("people command refused at t=%.3f s: %s", t_ns / NS_PER_S, exc)
                 continue
             self.applied += 1
-            late_ms = (t_ns - c.stamp_ns) / 1e6
             self.log.info(
                 "people command at t=%.3f s: %s to %s, walk %s at %.2f m/s%s%s",
                 t_ns / NS_PER_S,
@@ -57,5 +49,5 @@ class PeopleHook:
                 [tuple(round(v, 2) for v in p) for p in c.walk_to],
                 c.speed,
                 ", ignoring the robot" if c.ignore_robot else "",
-                f" ({late_ms:.0f} ms late: it arrived after its stamp)" if late_ms > 0 else "",
+                late_note(t_ns, c.stamp_ns),
             )

@@ -39,8 +39,7 @@ from common.messages.wbc import ArmGoal, GoalState, GoalStatus, Grasp, Posture, 
 from services.wbc.gait import quintic
 from services.wbc.grasp import GraspDetector, GraspParams
 from services.wbc.reach import PoseSample, PoseSegment, pregrasp
-
-ARM = slice(12, 18)
+from services.wbc.values import ARM
 
 
 class GoalRefused(Exception):

@@ -9,17 +9,21 @@
   latency), in order.
 - `PoseHistory`: the base pose at past ticks, so a goal in the base frame as of its
   stamp is fixed in the world from the pose the base had then.
+- `ArbiterFeed`: one source's cmd_vel subscription as the arbiter holds it, what the
+  lockstep `UpstreamGate` waits on (wall time).
 
-Pure bookkeeping: the node drains its subscriptions into these each tick.
+Bookkeeping on the WBC's thread: the node drains its subscriptions into these each tick.
 """
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from collections.abc import Mapping
 
 import numpy as np
 
+from common.bus import Fifo, WaitTimeout
 from common.geometry import FloatArray
 from common.messages.wbc import CmdVel, WbcMode
 
@@ -114,3 +118,41 @@ class PoseHistory:
             if t <= stamp_ns:
                 return T
         return None
+
+
+class ArbiterFeed:
+    """One source's cmd_vel as the arbiter holds it: what `UpstreamGate` waits on. Reading
+    it moves what arrived into the arbiter, and the modes they carry into `modes` (the
+    WBC's thread only), so the gate is met by the very samples the arbiter will use,
+    never by a copy that arrived first."""
+
+    def __init__(
+        self,
+        fifo: Fifo[CmdVel],
+        arbiter: CmdVelArbiter,
+        source: str,
+        modes: ModeQueue | None = None,
+    ) -> None:
+        self.fifo, self.arbiter, self.source, self.modes = fifo, arbiter, source, modes
+
+    def _take(self, cmd: CmdVel) -> None:
+        self.arbiter.push(cmd)
+        if cmd.mode is not None and self.modes is not None:
+            self.modes.push(cmd.mode)
+
+    def get(self) -> CmdVel | None:
+        for cmd in self.fifo.drain():
+            self._take(cmd)
+        return self.arbiter.newest(self.source)
+
+    def wait_stamp(self, stamp_ns: int, timeout_s: float) -> CmdVel:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            newest = self.get()
+            if newest is not None and newest.stamp_ns >= stamp_ns:
+                return newest
+            left = deadline - time.monotonic()
+            cmd = self.fifo.pop(timeout_s=left) if left > 0 else None
+            if cmd is None:
+                raise WaitTimeout(f"no cmd_vel from {self.source} stamped {stamp_ns}")
+            self._take(cmd)

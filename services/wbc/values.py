@@ -2,7 +2,8 @@
 
 They mirror the bus messages field by field (`common.messages.sim.RobotState`,
 `JointCommand`), so the service maps them one to one; joints are in
-`common.robot.JOINT_NAMES` order.
+`common.robot.JOINT_NAMES` order. The index constants map joint names to positions in
+those vectors and in pinocchio's q and v.
 """
 
 from __future__ import annotations
@@ -14,8 +15,18 @@ import numpy as np
 from common import robot
 from common.geometry import FloatArray
 
+#: Joint indices into the 19-vectors (`JOINT_NAMES` order): the jaw, the six arm joints.
 JAW = robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)
-ARM = slice(12, 18)
+ARM = slice(
+    robot.JOINT_NAMES.index(robot.ARM_JOINTS[0]), robot.JOINT_NAMES.index(robot.ARM_JOINTS[-1]) + 1
+)
+#: pinocchio's q (26,) and v (25,) start with the free-flyer base (position and quaternion
+#: xyzw: 7; linear and angular velocity: 6); the joints follow in `JOINT_NAMES` order.
+Q_BASE, V_BASE = 7, 6
+#: The arm joints in pinocchio's q and v, and the jaw's velocity in its v.
+Q_ARM = slice(Q_BASE + ARM.start, Q_BASE + ARM.stop)
+V_ARM = slice(V_BASE + ARM.start, V_BASE + ARM.stop)
+V_JAW = V_BASE + JAW
 
 
 @dataclass

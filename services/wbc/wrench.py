@@ -19,10 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from common.geometry import FloatArray
+from services.wbc.values import ARM, V_ARM
 
 #: Rows of v (pinocchio) and columns of the 19-joint vectors for the six arm joints.
-ARM_V = slice(18, 24)
-ARM_J = slice(12, 18)
+ARM_V, ARM_J = V_ARM, ARM
 
 
 def wrench_from_residual(J_arm: FloatArray, residual: FloatArray, damping: float) -> FloatArray:

@@ -44,7 +44,7 @@ from services.mission.behaviours.base import Context
 from services.mission.ports import Refused, Unavailable, WristSighting
 
 TICK_NS = 50_000_000
-#: Navigation fails a goal whose map has not come in 30 s (`navigation.node.MAP_WAIT_S`).
+#: Navigation fails a goal whose map has not come in 30 s (`navigation.intake.MAP_WAIT_S`).
 NAV_MAP_WAIT_TICKS = 600
 
 

@@ -132,7 +132,7 @@ class _Fifo:
 
 def test_the_gate_is_met_only_by_samples_the_arbiter_holds() -> None:
     from common.bus import WaitTimeout
-    from services.wbc.node import ArbiterFeed
+    from services.wbc.inputs import ArbiterFeed
 
     arb = CmdVelArbiter({"navigation": 50 * MS}, 500 * MS)
     arb.select("navigation")

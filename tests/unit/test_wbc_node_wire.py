@@ -1,4 +1,4 @@
-"""The WBC node's fast wire conversions agree with `as_numpy`/`to_wire` and refuse bad arrays."""
+"""The WBC's fast wire conversions agree with `as_numpy`/`to_wire` and refuse bad arrays."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 from common import robot
 from common.messages import Array, ArrayError, as_numpy, decode, encode, to_wire
 from common.messages.sim import JointCommand, RobotState
-from services.wbc.node import joint_command, wbc_state
 from services.wbc.values import WbcCommand
+from services.wbc.wire import joint_command, wbc_state
 
 N = len(robot.JOINT_NAMES)
 

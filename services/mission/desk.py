@@ -1,0 +1,189 @@
+"""One mission tick's work once its inputs are in: requests, cancels, the tree, the status.
+
+`Desk.step(b)` (the loop's thread, sim time b in ns), in this order:
+
+1. the first step (since the mission started) sets the status `idle` with no request and
+   the sim time it started at, so a client whose request was in progress hears it lost;
+2. requests drained from the inbox: parsed, refused at once (a `rejected` status
+   published stamped b) when malformed, when a mission runs (`busy`), when a dependency
+   is not running (`unavailable`) or when the map does not know the object or the person
+   (`check_request`); else the tree starts, the dependencies are armed and `accepted` is
+   published;
+3. cancels drained from the inbox: one of the running request stops the tree
+   (`MissionTree.cancel`); others are logged and ignored;
+4. a dependency that went away or restarted since the running request started
+   (`Dependencies.lost`) fails it `dependency_lost`; else the tree ticks once (a
+   behaviour that raises is logged, the robot halted, the mission failed `internal`);
+5. the outcome, or the running stage and progress, becomes the status
+   (`StatusBoard.update`): `step` returns whether it changed.
+
+`flush(b, changed)` then publishes the status stamped b when it changed or the periodic
+repeat is due (the node calls it after the robot's own outputs for b are out).
+
+No Zenoh and no lock: everything here runs on the loop's thread; the inboxes are the
+only things other threads touch. `send` publishes a status; `errors` is the service's
+logger (the mission's tree and requests are told through `MissionLogger`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+from common.lifelines import Dependencies
+from common.messages.base import NS_PER_S
+from common.messages.mission import MissionRequest, MissionStatus
+from services.mission.behaviours.abort import halt
+from services.mission.inbox import Inbox
+from services.mission.mission_log import MissionLogger
+from services.mission.ports import RobotPort
+from services.mission.requests import (
+    Rejection,
+    StatusBoard,
+    check_request,
+    parse_cancel,
+    parse_request,
+)
+from services.mission.tree import MissionTree, Outcome
+
+
+class Desk:
+    """Requests in, the tree driven, the status out (see the module docstring)."""
+
+    def __init__(
+        self,
+        tree: MissionTree,
+        robot: RobotPort,
+        deps: Dependencies,
+        board: StatusBoard,
+        requests: Inbox,
+        cancels: Inbox,
+        log: MissionLogger,
+        send: Callable[[MissionStatus], None],
+        errors: logging.Logger,
+    ) -> None:
+        self.tree, self.robot, self.deps, self.board = tree, robot, deps, board
+        self.requests, self.cancels = requests, cancels
+        self.log, self.send, self.errors = log, send, errors
+        #: Whether the first step ran (the `idle` status of a (re)start is set).
+        self.started = False
+
+    # -- the status -----------------------------------------------------------------------
+
+    def _publish(self, status: MissionStatus) -> None:
+        self.send(status)
+        self.log.status(status)
+
+    def flush(self, b: int, changed: bool) -> None:
+        """Publish the status stamped b when it changed or the periodic repeat is due."""
+        if changed or self.board.due(b):
+            self._publish(self.board.sent(b))
+
+    # -- requests and cancels -------------------------------------------------------------
+
+    def _reject(self, b: int, rejection: Rejection) -> None:
+        self.log.request(
+            f"request {rejection.request_id or '(no id)'} rejected: "
+            f"{rejection.reason}: {rejection.detail}",
+            warn=True,
+        )
+        self._publish(
+            MissionStatus(
+                stamp_ns=b,
+                request_id=rejection.request_id,
+                state="rejected",
+                reason=rejection.reason,
+                detail=rejection.detail,
+            )
+        )
+
+    def _requests(self, b: int) -> None:
+        for payload in self.requests.drain():
+            parsed = parse_request(payload)
+            if isinstance(parsed, Rejection):
+                self._reject(b, parsed)
+                continue
+            self.log.request(f"request {parsed.request_id}: {parsed.object} to {parsed.person}")
+            if self.tree.busy:
+                running = self.tree.request.request_id if self.tree.request else ""
+                self._reject(
+                    b, Rejection(parsed.request_id, "busy", f"mission {running} is running")
+                )
+                continue
+            down = self.deps.missing()
+            refused = (
+                Rejection(parsed.request_id, "unavailable", f"not running: {', '.join(down)}")
+                if down
+                else check_request(parsed, self.robot)
+            )
+            if refused is not None:
+                self._reject(b, refused)
+                continue
+            self._start(b, parsed)
+
+    def _start(self, b: int, request: MissionRequest) -> None:
+        self.tree.start(request)
+        self.deps.arm()
+        self.board.update(b, request.request_id, "accepted", detail="checked against the map")
+        self._publish(self.board.sent(b))
+
+    def _cancels(self) -> Outcome | None:
+        outcome = None
+        for payload in self.cancels.drain():
+            cancel = parse_cancel(payload)
+            current = self.tree.request
+            if cancel is None:
+                self.log.request(f"cancel ignored: not a MissionCancel: {payload[:200]!r}", True)
+            elif current is None or cancel.request_id != current.request_id:
+                running = current.request_id if current else "none"
+                self.log.request(
+                    f"cancel of {cancel.request_id} ignored: the running mission is {running}",
+                    True,
+                )
+            else:
+                self.log.request(f"cancel of {cancel.request_id}: {cancel.reason}")
+                outcome = self.tree.cancel(cancel.reason or "cancelled by the user")
+        return outcome
+
+    # -- the step -------------------------------------------------------------------------
+
+    def step(self, b: int) -> bool:
+        """Tick b's requests, cancels and tree; whether the status changed."""
+        self.log.at(b)
+        if not self.started:  # (re)started: no request is in progress, and clients hear it
+            self.started = True
+            self.board.update(b, "", "idle", detail=f"mission started at t={b / NS_PER_S:.2f} s")
+        self._requests(b)
+        request = self.tree.request
+        outcome = self._cancels()
+        lost = self.deps.lost() if outcome is None and request is not None else None
+        if lost is not None:
+            self.errors.error("t=%.2f s: %s: the mission fails", b / NS_PER_S, lost)
+            outcome = self.tree.fail("dependency_lost", lost)
+        if outcome is None:
+            try:
+                outcome = self.tree.tick()
+            except Exception:
+                self.errors.exception("the tree failed at t=%.2f s", b / NS_PER_S)
+                if self.tree.cancel("internal error") is None:
+                    halt(self.robot, "internal error")
+                outcome = Outcome("failed", "internal", "a behaviour raised: see the log")
+        self.log.tree(self.tree.statuses(), self.tree.text)
+        if outcome is not None and request is not None:
+            self.deps.disarm()
+            done = 1.0 if outcome.state == "succeeded" else self.board.status.progress
+            return self.board.update(
+                b,
+                request.request_id,
+                outcome.state,
+                self.board.status.behaviour,
+                done,
+                outcome.reason,
+                outcome.detail,
+            )
+        if self.tree.request is not None:
+            stage, leaf, progress = self.tree.where()
+            return self.board.update(
+                b, self.tree.request.request_id, "running", stage, progress, detail=leaf
+            )
+        return False

@@ -1,0 +1,238 @@
+"""Goal intake: goals and cancels, taken on the queryable's thread, started by the loop.
+
+Times are ns of sim time (a tick b, a request's `stamp_ns` and `effective_ns`); poses
+are the base's in the world frame (m, rad; `grid.Pose`).
+
+On the `nav/goal` queryable's thread, `on_goal` resolves a request against the costmap
+and pose as of the sender's tick (`as_of`: navigation's tick one latency before
+`stamp_ns`, which the sender waited for, looked up in the last `HISTORY` ticks and, in
+lockstep, waited for up to `timeout_s` wall seconds, else the newest tick done; the
+newest, `now()`, without a stamp or in realtime) and the map's data as of that tick:
+accepted with an id, or refused with the reason (`invalid_goal: …`). With no costmap yet
+it is taken and queued (`Queued`) to be resolved once the map is in. Either way it is
+pending until its `effective_ns`; a newer goal replaces a pending one.
+
+On the loop's thread, each tick b: `apply_cancels(b)` (the cancels due at b: of the
+pending goal or of the active one; an id of "" cancels whichever); then, while there is
+no costmap, `queued(b)` (the id of the goal waiting for the map, reported `active`; it
+fails `timeout` after `MAP_WAIT_S` of sim time), else `start_due(b, …)` (the pending goal
+whose tick has come is started; a queued one is resolved now, against the map as fetched,
+so the same in every run); last, `done(b, …)` records the tick's costmap and pose and
+wakes `as_of`.
+
+Locks: `cond` (the node's one condition, shared with `map_feed.MapFeed`) guards the
+pending goal, the cancels, the goal count and the history; the navigator is touched by the
+loop's thread only; `now()` and the map's data (`Source`) are read without it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import deque
+from collections.abc import Callable, Iterable
+
+from common.bus import RequestError
+from common.messages.base import NS_PER_S
+from common.messages.navigation import (
+    ArtifactStandoff,
+    NavCancel,
+    NavGoalReply,
+    NavGoalRequest,
+    PersonHandover,
+    PoseGoal,
+)
+from services.navigation import goals
+from services.navigation.costmap import Costmap
+from services.navigation.goals import GoalInvalid, Queued
+from services.navigation.grid import Footprint, Pose
+from services.navigation.navigator import GoalSpec, Navigator
+from services.navigation.sources import Source, SourceError
+
+#: A goal taken before the map fails when the map has not come this long after, s.
+MAP_WAIT_S = 30.0
+#: Ticks of (costmap, pose) kept to resolve goals as of their sender's tick.
+HISTORY = 16
+
+
+class GoalIntake:
+    """The pending goal, the cancels and the tick history; see the module docstring.
+
+    `tolerance`: (m, rad) of the standoff and handover goals (a `PoseGoal` carries its
+    own); `now`: the newest costmap and pose; `cancels`: the cancels received since.
+    """
+
+    def __init__(
+        self,
+        nav: Navigator,
+        source: Source,
+        cond: threading.Condition,
+        now: Callable[[], tuple[Costmap | None, Pose | None]],
+        cancels: Callable[[], Iterable[NavCancel]],
+        log: logging.Logger,
+        *,
+        fp: Footprint,
+        tolerance: tuple[float, float],
+        lockstep: bool,
+        period_ns: int,
+        latency_ns: int,
+        timeout_s: float,
+        costmap: Costmap | None,
+    ) -> None:
+        self.nav, self.source, self.fp, self.tolerance = nav, source, fp, tolerance
+        self.now, self.cancels, self.log = now, cancels, log
+        self.lockstep, self.period_ns, self.latency_ns = lockstep, period_ns, latency_ns
+        self.timeout_s = timeout_s
+        #: Navigation's ticks done, with their costmap and pose (goals resolve against them).
+        self._ticked = cond
+        self._history: deque[tuple[int, Costmap | None, Pose | None]] = deque(maxlen=HISTORY)
+        self._history.append((-1, costmap, None))  # before the first tick
+        #: The goal to start at its effective tick (resolved, or queued before the map).
+        self._pending: tuple[GoalSpec | Queued, int] | None = None
+        self._cancels: list[NavCancel] = []
+        self._count = 0
+
+    # -- the queryable's thread -----------------------------------------------------------
+
+    def as_of(self, stamp_ns: int | None) -> tuple[Costmap | None, Pose | None]:
+        """The costmap and pose after navigation's tick one latency before `stamp_ns` (the
+        sender's tick; it waited for that tick's output), or the newest (`now()`) without a
+        stamp or in realtime. When that tick is not done within `timeout_s`, the newest
+        tick done (the history always holds one, so the second warning below is not
+        reached); for a tick older than the history, `now()` with a warning."""
+        if stamp_ns is None or not self.lockstep:
+            return self.now()
+        want = ((stamp_ns - self.latency_ns) // self.period_ns) * self.period_ns
+        with self._ticked:
+            done = self._ticked.wait_for(
+                lambda: bool(self._history) and self._history[-1][0] >= want, self.timeout_s
+            )
+            for b, cm, pose in reversed(self._history):
+                if b <= want:
+                    return cm, pose
+        if done:  # older than the history: the oldest kept is the best guess
+            self.log.warning("goal stamped %d: tick %d is out of the history", stamp_ns, want)
+        else:
+            self.log.warning("goal stamped %d: navigation has not done tick %d", stamp_ns, want)
+        return self.now()
+
+    def on_goal(self, req: NavGoalRequest | None, _selector: str) -> NavGoalReply:
+        if req is None:
+            raise RequestError("malformed", "a NavGoalRequest is needed")
+        cm, pose = self.as_of(req.stamp_ns)
+        effective = -1 if req.effective_ns is None else req.effective_ns
+        if cm is None:  # no map yet: taken now, resolved at the first tick that has one
+            with self._ticked:
+                self._count += 1
+                queued = Queued(f"nav_{self._count}", req)
+                self._pending = (queued, effective)
+            self.log.info("goal %s queued until the map is in", queued.goal_id)
+            return NavGoalReply(accepted=True, goal_id=queued.goal_id)
+        try:
+            target, tol, tol_yaw, handover = self.resolve(req, cm, pose, req.stamp_ns)
+        except GoalInvalid as exc:
+            return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
+        with self._ticked:
+            self._count += 1
+            spec = GoalSpec(f"nav_{self._count}", target, tol, tol_yaw, handover)
+            self._pending = (spec, effective)
+        self.log.info(
+            "goal %s accepted: %s -> (%.2f, %.2f, %.2f)",
+            spec.goal_id,
+            type(req.goal).__name__,
+            *target,
+        )
+        return NavGoalReply(accepted=True, goal_id=spec.goal_id)
+
+    def resolve(
+        self, req: NavGoalRequest, cm: Costmap, pose: Pose | None, at: int | None
+    ) -> tuple[Pose, float, float, str]:
+        """The goal's pose, tolerances and handover person against `cm` and the map's
+        data as of `at`; `GoalInvalid` with the reason."""
+        g = req.goal
+        try:
+            if isinstance(g, PoseGoal):
+                target = Pose(g.x, g.y, g.yaw)
+                tol, tol_yaw, handover = g.position_tolerance_m, g.yaw_tolerance_rad, ""
+            elif isinstance(g, ArtifactStandoff):
+                x, y = self.source.artifact_xy(g.artifact_id, at_ns=at)
+                target = goals.standoff_pose(cm, x, y, self.fp)
+                tol, tol_yaw, handover = *self.tolerance, ""
+            else:
+                assert isinstance(g, PersonHandover)
+                person = self.source.person(g.person_id, at_ns=at)
+                here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
+                target = goals.handover_pose(cm, person, here, self.fp)
+                tol, tol_yaw, handover = *self.tolerance, g.person_id
+        except (SourceError, goals.GoalError) as exc:
+            raise GoalInvalid(str(exc)) from None
+        if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
+            raise GoalInvalid(f"{target} is off the map")
+        return target, tol, tol_yaw, handover
+
+    # -- the loop's thread ----------------------------------------------------------------
+
+    def apply_cancels(self, b: int) -> None:
+        """The cancels due at b: of the active goal, or of one not started yet (an id of
+        "" cancels whichever)."""
+        with self._ticked:
+            self._cancels.extend(self.cancels())
+            due = [c for c in self._cancels if c.effective_ns is None or c.effective_ns <= b]
+            self._cancels = [c for c in self._cancels if c not in due]
+            for c in due:
+                if self._pending is not None and c.goal_id in ("", self._pending[0].goal_id):
+                    self.log.info("goal %s cancelled before it started", c.goal_id)
+                    self._pending = None
+        for c in due:
+            if self.nav.state == "active" and c.goal_id in ("", self.nav.goal_id):
+                self.nav.cancel(c.reason or "cancelled")
+                self.log.info("goal %s cancelled: %s", self.nav.goal_id, c.reason)
+
+    def queued(self, b: int) -> str:
+        """The id of a goal waiting for the map ("" if none); one that waited
+        `MAP_WAIT_S` fails (`timeout`)."""
+        with self._ticked:
+            pending, effective = self._pending or (None, -1)
+            if not isinstance(pending, Queued):
+                return ""
+            if pending.since_ns < 0:
+                self._pending = (Queued(pending.goal_id, pending.request, b), effective)
+            elif b - pending.since_ns >= MAP_WAIT_S * NS_PER_S:
+                self._pending = None
+                detail = f"no map from {self.source.name} within {MAP_WAIT_S:.0f} s"
+                self.log.warning("goal %s failed: %s", pending.goal_id, detail)
+                self.nav.refuse(pending.goal_id, detail, "timeout")
+                return ""
+            return pending.goal_id
+
+    def start_due(self, b: int, costmap: Costmap, pose: Pose | None, map_at: int) -> None:
+        """Start the pending goal whose tick has come; one queued before the map is
+        resolved now against `costmap` and the map's data as of `map_at` (the map as
+        fetched for the costmap in use: the same in every run)."""
+        with self._ticked:
+            pending = None
+            if self._pending is not None and self._pending[1] <= b:
+                pending, self._pending = self._pending[0], None
+        if pending is None:
+            return
+        if isinstance(pending, Queued):
+            try:
+                target, tol, tol_yaw, handover = self.resolve(
+                    pending.request, costmap, pose, map_at
+                )
+            except GoalInvalid as exc:
+                self.log.info("goal %s refused once the map came: %s", pending.goal_id, exc)
+                self.nav.refuse(pending.goal_id, str(exc))
+                return
+            pending = GoalSpec(pending.goal_id, target, tol, tol_yaw, handover)
+            self.log.info("goal %s resolved: (%.2f, %.2f, %.2f)", pending.goal_id, *pending.pose)
+        if self.nav.state == "active" and self.nav.goal is not None:
+            self.log.info("goal %s replaced by %s", self.nav.goal.goal_id, pending.goal_id)
+        self.nav.start(pending, b)
+
+    def done(self, b: int, costmap: Costmap | None, pose: Pose | None) -> None:
+        """Tick b is done with this costmap and pose (wakes `as_of`)."""
+        with self._ticked:
+            self._history.append((b, costmap, pose))
+            self._ticked.notify_all()

@@ -1,0 +1,93 @@
+"""The map navigation plans on: the grid in use, its layers, and the costmap built from them.
+
+Times are ns of sim time; positions m in the world frame. `adopt` takes a grid and the
+map's people as of a sim time (a new grid shape starts an empty short-lived layer); the
+short-lived depth layer (`layer`, marked and cleared by `depth.DepthFeed`) and the people
+layer (`people`: the map's people with those perception sees over them, `SeenPeople`;
+in the costmap when `people_in_costmap`, always in `Costmap.people` for the speed rules)
+are combined by `build` (`costmap.build_costmap`). `costmap` is None until a grid is in;
+`map_at` is the sim time the map in use is as of (goals queued before it resolve against
+it).
+
+Threads: the loop's only; the goal queryable's thread reads `costmap` (a new object on
+every rebuild, never changed in place) without a lock.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from common.messages.perception import Detections
+from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
+from services.navigation.grid import Footprint, Grid
+from services.navigation.seen_people import SeenPeople
+
+
+class NavMap:
+    """The map in use and its layers; see the module docstring."""
+
+    def __init__(
+        self,
+        fp: Footprint,
+        cost_params: CostParams,
+        ttl_ns: int,
+        people_in_costmap: bool,
+        source_name: str,
+        log: logging.Logger,
+    ) -> None:
+        self.fp, self.cost_params, self.ttl_ns = fp, cost_params, ttl_ns
+        self.people_in_costmap, self.source_name, self.log = people_in_costmap, source_name, log
+        self.grid: Grid | None = None
+        self.layer = ObstacleLayer((1, 1), self.ttl_ns)
+        self.people: list[Person] = []
+        self.map_people: list[Person] = []
+        self.seen = SeenPeople()
+        self.costmap: Costmap | None = None
+        #: The sim time the map in use is as of (goals queued before it resolve against it).
+        self.map_at = 0
+
+    def adopt(self, grid: Grid, people: list[Person], as_of: int, t_ns: int) -> None:
+        """Take a map as of `as_of` (ns) at tick t."""
+        if self.grid is None or self.grid.shape != grid.shape:
+            self.log.info(
+                "map from %s: %s cells of %.2f m", self.source_name, grid.shape, grid.resolution
+            )
+            self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
+        self.grid, self.map_people, self.map_at = grid, people, as_of
+        self.people = self.seen.merge(people, t_ns)
+        self.costmap = self.build(t_ns)
+
+    def build(self, t_ns: int) -> Costmap:
+        assert self.grid is not None  # called once a grid is in
+        people = self.people if self.people_in_costmap else []
+        cm = build_costmap(self.grid, self.fp, self.cost_params, self.layer.active(t_ns), people)
+        # The speed rules always see every person, whether or not the plan avoids them.
+        return Costmap(cm.grid, cm.cost, cm.occupied, cm.clearance, tuple(self.people))
+
+    def see(self, due: list[Detections], b: int) -> bool:
+        """The head camera's people detections due by b; whether the people seen changed."""
+        before = self.seen.active(b)
+        for d in due:
+            self.seen.update(d, self.grid)
+        return self.seen.active(b) != before
+
+    def take(
+        self, fresh: tuple[Grid, list[Person], int] | None, seen_changed: bool, b: int
+    ) -> bool:
+        """Adopt the map `fresh` (grid, people, as of) at tick b if one came, else put the
+        people seen over the map's when they changed; whether the people layer changed
+        without a rebuild (the costmap is to be rebuilt)."""
+        if fresh is not None:
+            self.adopt(*fresh, b)
+        elif seen_changed and self.grid is not None:
+            self.people = self.seen.merge(self.map_people, b)
+            return True
+        return False
+
+    def rebuild(self, t_ns: int) -> None:
+        self.costmap = self.build(t_ns)
+
+    def clear(self, t_ns: int) -> None:
+        """The `clear` recovery: forget the short-lived layer and rebuild."""
+        self.layer.clear_all()
+        self.costmap = self.build(t_ns)

@@ -1,0 +1,158 @@
+"""What the sim gives out: the robot's description, and everything stamped with sim time.
+
+`SimOutputs.publish(t)` puts out, in this order, all stamped t (ns): the state (when the
+commander answers it; every tick without one), odom at `sim.odom_hz`, each camera's RGB-D
+frame and truth segmentation at `sim.camera_hz` (rendered only for someone who looks: a
+subscriber or the recording), the recording's poses every 40 ms, and last the clock (when
+due), so a participant woken by the clock finds its inputs as of t in. `events` puts out a
+step's world events. The recording (rerun) is logged alongside. Called from the sim's loop
+thread only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from common import robot
+from common.bus import Bus
+from common.config import Config
+from common.keys import WORLD_CLOCK, WORLD_EVENTS, RobotKeys
+from common.messages.base import NS_PER_S
+from common.messages.sim import (
+    CameraFrame,
+    CameraInfo,
+    Clock,
+    Odom,
+    RobotDescription,
+    RobotState,
+    SegmentationTruth,
+    WorldEvent,
+    WorldEvents,
+)
+from common.messages.world import WorldDescription
+from common.recording import stamp
+from services.sim.cameras import CameraRig
+from services.sim.core import SimCore
+from services.sim.rerun_scene import SceneLogger
+from services.sim.sim_log import SimLogger
+
+#: The recording's body poses are logged this often, ns of sim time.
+POSES_EVERY_NS = 40_000_000
+
+
+def robot_description(config: Config, core: SimCore, rig: CameraRig) -> RobotDescription:
+    """`dume/<r>/description`: joints, limits, frames, cameras, tick rate and time mode."""
+    cams = []
+    for name in config.sim.cameras:
+        mount = robot.CAMERA_MOUNTS[name]
+        fx, fy, cx, cy = rig.intrinsics(name)
+        cams.append(
+            CameraInfo(
+                name=name,
+                parent_frame=mount.parent_frame,
+                T_parent_camera=tuple(float(x) for x in np.asarray(mount.T_parent_camera).ravel()),
+                width=rig.width,
+                height=rig.height,
+                fx=fx,
+                fy=fy,
+                cx=cx,
+                cy=cy,
+                rate_hz=config.sim.camera_hz,
+            )
+        )
+    return RobotDescription(
+        robot=config.robot,
+        joint_names=robot.JOINT_NAMES,
+        lower=tuple(float(x) for x in robot.POSITION_LOWER),
+        upper=tuple(float(x) for x in robot.POSITION_UPPER),
+        velocity=tuple(float(x) for x in robot.VELOCITY_LIMITS),
+        effort=tuple(float(x) for x in robot.TORQUE_LIMITS),
+        frames=(robot.BASE_FRAME, *robot.FOOT_FRAMES, robot.TCP_FRAME, *robot.CAMERA_MOUNTS),
+        cameras=tuple(cams),
+        tick_hz=config.time.tick_hz,
+        locomotion=core.locomotion,
+        mode=config.time.mode,
+    )
+
+
+class SimOutputs:
+    """The sim's publishers and recording, reading a `SimCore` and its `CameraRig`."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        keys: RobotKeys,
+        config: Config,
+        core: SimCore,
+        rig: CameraRig,
+        rec: rr.RecordingStream,
+    ) -> None:
+        self.config = config
+        self.core = core
+        self.rig = rig
+        self.rec = rec
+        cameras = config.sim.cameras
+        self.clock = bus.publisher(WORLD_CLOCK, Clock, "control")
+        self.state = bus.publisher(keys.state, RobotState, "control")
+        self.odom = bus.publisher(keys.odom, Odom, "control")
+        self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
+        self.rgbd = {c: bus.publisher(keys.camera_rgbd(c), CameraFrame, "bulk") for c in cameras}
+        self.truth = {
+            c: bus.publisher(keys.camera_segmentation_truth(c), SegmentationTruth, "bulk")
+            for c in cameras
+        }
+        self.odom_period_ns = round(NS_PER_S / config.sim.odom_hz)
+        self.camera_period_ns = round(NS_PER_S / config.sim.camera_hz)
+        self.scene_log = SceneLogger(rec, core.model, groups={0, 1, 2})
+        self.sim_log = SimLogger(
+            rec, cameras, config.recording.camera_every, config.recording.depth_every
+        )
+
+    def begin(self, world: WorldDescription) -> None:
+        """The recording at t = 0: the scene's geometry and the world's layout."""
+        stamp(self.rec, 0)
+        self.scene_log.log_geometry(self.core.data)
+        self.sim_log.world(world)
+
+    def publish(
+        self, t_ns: int, tick: int, wall_rtf: float, *, state_due: bool, clock_due: bool
+    ) -> None:
+        """Everything stamped t: state (`state_due`), odom, cameras, then the clock
+        (`clock_due`, with the wall real-time factor `wall_rtf`)."""
+        # The state goes out when the commander answers it (every tick without one).
+        state = None
+        if state_due:
+            state = self.core.robot_state(tick)
+            self.state.put(state)
+        if t_ns % self.odom_period_ns == 0:
+            self.odom.put(self.core.odom())
+            if self.sim_log.enabled:
+                self.sim_log.state(t_ns, state or self.core.robot_state(tick))
+        if t_ns % self.camera_period_ns == 0:
+            for cam in self.config.sim.cameras:
+                # Rendering is the sim's dearest work: only for someone who looks.
+                rgbd, truth_pub = self.rgbd[cam], self.truth[cam]
+                if not (
+                    self.sim_log.enabled or rgbd.has_subscribers() or truth_pub.has_subscribers()
+                ):
+                    continue
+                frame, truth = self.rig.capture(self.core.data, cam, t_ns)
+                rgbd.put(frame)
+                if self.config.sim.segmentation_truth:
+                    truth_pub.put(truth)
+                self.sim_log.camera(t_ns, frame, truth)
+        if t_ns % POSES_EVERY_NS == 0:
+            stamp(self.rec, t_ns)
+            self.scene_log.log_poses(self.core.data)
+        # The clock goes last: a participant woken by it finds its inputs as of t in.
+        if clock_due:
+            self.clock.put(
+                Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf)
+            )
+
+    def events(self, stamp_ns: int, events: list[WorldEvent]) -> None:
+        """A step's world events (none: nothing goes out), stamped at the new time."""
+        if events:
+            self.world_events.put(WorldEvents(stamp_ns=stamp_ns, events=events))
+            self.sim_log.events(stamp_ns, events)

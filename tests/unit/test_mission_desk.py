@@ -1,0 +1,195 @@
+"""The mission's desk and inbox without Zenoh: requests in, the tree driven, statuses out.
+
+A `Desk` over the scripted robot (`mission_fakes`), liveliness fed by hand
+(`common.lifelines`), statuses collected from its `send`: what a client of
+`mission/submit`, `mission/request` and `mission/cancel` sees on `mission/status`.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+import rerun as rr
+
+from common.lifelines import Dependencies, Lifelines
+from common.messages import encode
+from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+from services.mission.desk import Desk
+from services.mission.inbox import Inbox, RequestInbox
+from services.mission.mission_log import MissionLogger
+from services.mission.node import DEPENDENCIES
+from services.mission.requests import StatusBoard
+from services.mission.tree import MissionTree
+from tests.unit.mission_fakes import TICK_NS, FakeRobot, context, small_world
+
+REQUEST = MissionRequest(request_id="r1", object="bottle_1", person="person_1")
+LOG = logging.getLogger("test.mission.desk")
+
+
+def key_of(name: str) -> str:
+    return f"dume/alive/b1/{name}"
+
+
+class Rig:
+    """A desk, its inboxes, the liveliness it watches and every status it sent."""
+
+    def __init__(self, robot: FakeRobot | None = None, every_s: float = 100.0) -> None:
+        self.robot = robot or small_world()
+        self.lifelines = Lifelines()
+        for name in DEPENDENCIES:
+            self.lifelines.up(key_of(name))
+        self.tree = MissionTree(context(self.robot))
+        self.requests, self.cancels = RequestInbox(), Inbox()
+        self.sent: list[MissionStatus] = []
+        self.desk = Desk(
+            self.tree,
+            self.robot,
+            Dependencies(self.lifelines, DEPENDENCIES, key_of),
+            StatusBoard(round(every_s * 1e9)),
+            self.requests,
+            self.cancels,
+            MissionLogger(rr.RecordingStream("test", default_enabled=False), LOG),
+            self.sent.append,
+            LOG,
+        )
+
+    def tick(self, n: int = 1) -> list[MissionStatus]:
+        """n ticks as the node runs them; the statuses they sent."""
+        before = len(self.sent)
+        for _ in range(n):
+            b = self.robot.now_ns
+            changed = self.desk.step(b)
+            self.robot.advance()  # the robot's outputs of tick b
+            self.desk.flush(b, changed)
+        return self.sent[before:]
+
+    def running(self) -> None:
+        """r1 submitted and walking to the object."""
+        self.tick()
+        self.requests.submit(REQUEST, "")
+        self.tick(10)
+        assert self.sent[-1].state == "running"
+
+
+def test_the_first_tick_says_the_mission_started_with_no_request() -> None:
+    rig = Rig()
+    rig.robot.t = 3 * TICK_NS
+    (status,) = rig.tick()
+    assert (status.request_id, status.state, status.stamp_ns) == ("", "idle", 3 * TICK_NS)
+    assert status.detail == "mission started at t=0.15 s"
+    assert rig.tick(5) == []  # nothing changed, the periodic repeat is not due
+
+
+def test_a_request_submitted_by_query_is_in_the_inbox_before_the_reply_goes() -> None:
+    inbox = RequestInbox()
+    receipt = inbox.submit(REQUEST, "")
+    assert inbox.drain() == [encode(REQUEST)]  # held when the receipt is handed back
+    assert receipt.request_id == "r1"
+    assert inbox.drain() == []
+
+
+def test_an_inbox_keeps_the_arrival_order_and_drops_the_oldest_when_full() -> None:
+    inbox = Inbox(maxlen=3)
+    for k in range(5):
+        inbox.push(bytes([k]))
+    assert inbox.drain() == [b"\x02", b"\x03", b"\x04"]
+
+
+def test_a_submitted_request_is_accepted_then_runs() -> None:
+    rig = Rig()
+    rig.tick()
+    rig.requests.submit(REQUEST, "")
+    accepted, running = rig.tick()
+    assert (accepted.request_id, accepted.state) == ("r1", "accepted")
+    assert accepted.detail == "checked against the map"
+    assert (running.state, running.behaviour) == ("running", "navigate_to_object")
+    assert rig.tree.request == REQUEST
+
+
+def test_a_dependency_that_goes_down_fails_the_running_request_and_refuses_new_ones() -> None:
+    rig = Rig()
+    rig.running()
+    rig.lifelines.down(key_of("navigation"))
+    (failed,) = rig.tick()
+    assert (failed.request_id, failed.state, failed.reason) == ("r1", "failed", "dependency_lost")
+    assert failed.detail == "navigation is gone"
+    assert rig.robot.cmds[-1] == (0.0, 0.0, 0.0)  # halted
+    assert "" in rig.robot.nav_cancels
+    assert not rig.tree.busy
+    rig.requests.push(encode(MissionRequest(request_id="r2", object="bottle_1", person="person_1")))
+    (refused,) = rig.tick()
+    assert (refused.request_id, refused.state, refused.reason) == ("r2", "rejected", "unavailable")
+    assert refused.detail == "not running: navigation"
+
+
+def test_a_dependency_that_restarted_fails_the_running_request() -> None:
+    rig = Rig()
+    rig.running()
+    rig.lifelines.down(key_of("perception"))
+    rig.lifelines.up(key_of("perception"))
+    (failed,) = rig.tick()
+    assert (failed.reason, failed.detail) == ("dependency_lost", "perception restarted")
+    rig.requests.push(encode(REQUEST))
+    assert rig.tick()[0].state == "accepted"  # alive again: a new request may start
+
+
+def test_a_request_while_one_runs_is_busy_and_a_malformed_one_keeps_its_id() -> None:
+    rig = Rig()
+    rig.running()
+    rig.requests.push(encode(MissionRequest(request_id="r2", object="bottle_1", person="person_1")))
+    rig.requests.push(b'{"request_id": "r3", "object": 7}')
+    busy, malformed = rig.tick()
+    assert (busy.request_id, busy.reason, busy.detail) == ("r2", "busy", "mission r1 is running")
+    assert (malformed.request_id, malformed.state, malformed.reason) == (
+        "r3",
+        "rejected",
+        "malformed",
+    )
+    assert rig.tree.request == REQUEST
+
+
+def test_an_unknown_object_is_refused_before_the_robot_moves() -> None:
+    rig = Rig()
+    rig.tick()
+    rig.requests.submit(MissionRequest(request_id="r1", object="cup_9", person="person_1"), "")
+    (refused,) = rig.tick()
+    assert (refused.state, refused.reason) == ("rejected", "unknown_object")
+    assert rig.robot.nav_goals == []
+
+
+def test_only_a_cancel_of_the_running_request_stops_it() -> None:
+    rig = Rig()
+    rig.running()
+    rig.cancels.push(encode(MissionCancel(request_id="other")))
+    rig.cancels.push(b"not json")
+    assert rig.tick() == []  # both ignored: still running, nothing changed
+    rig.cancels.push(encode(MissionCancel(request_id="r1", reason="changed my mind")))
+    (cancelled,) = rig.tick()
+    assert (cancelled.state, cancelled.reason, cancelled.detail) == (
+        "cancelled",
+        "cancelled",
+        "changed my mind",
+    )
+    assert not rig.tree.busy
+
+
+def test_a_behaviour_that_raises_fails_the_mission_internal_and_halts(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rig = Rig()
+    rig.running()
+
+    def boom() -> None:
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(rig.tree, "tick", boom)
+    (failed,) = rig.tick()
+    assert (failed.state, failed.reason) == ("failed", "internal")
+    assert rig.robot.cmds[-1] == (0.0, 0.0, 0.0)
+    assert not rig.tree.busy
+
+
+def test_the_status_repeats_every_period_while_nothing_changes() -> None:
+    rig = Rig(every_s=0.2)
+    assert [s.stamp_ns for s in rig.tick(9)] == [0, 4 * TICK_NS, 8 * TICK_NS]
