@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from common.config import Overrides
+from common.config import Overrides, PlannerSettings
 from services.navigation import native
 from services.navigation.costmap import CostParams, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
-from services.navigation.planner import PlanParams, plan
+from services.navigation.planner import plan
 
 SIZE_M, RES = 40.0, 0.05
 
@@ -50,7 +50,7 @@ def bench_nav(overrides: Overrides | None = None, pairs: int = 30, seed: int = 0
     costmap_ms = (time.perf_counter() - t0) * 1e3
     rng = np.random.default_rng(seed + 1)
     free = np.argwhere(cm.cost == 0)
-    params = PlanParams()
+    params = PlannerSettings()
     native.search(cm.cost, tuple(free[0]), tuple(free[1]), params.cost_weight)  # build/load
     plan_ms: list[float] = []
     plan_cpu_ms: list[float] = []

@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 
 from bench.nav_run import NavRun, nav_stack
-from common.config import REPO_ROOT, Overrides
+from common.config import REPO_ROOT, Overrides, PlannerSettings
 from common.messages.world import WorldDescription
 from services.navigation.costmap import CostParams, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
-from services.navigation.planner import PlanError, PlanParams, plan
+from services.navigation.planner import PlanError, plan
 
 
 def draw_goals(
@@ -54,7 +54,7 @@ def draw_goals(
             continue
         goal = Pose(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
         try:
-            plan(cm, here, goal, fp, PlanParams())
+            plan(cm, here, goal, fp, PlannerSettings())
         except PlanError:
             continue
         goals.append((round(goal.x, 3), round(goal.y, 3), round(goal.yaw, 3)))

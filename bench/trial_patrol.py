@@ -1,14 +1,16 @@
 """`dume trial patrol`: a mapping patrol from an empty map, scored against the sim's truth.
 
-`patrol_run` starts router + sim + wbc + perception + semantic_map + navigation as
-processes (lockstep, dynamic locomotion, the network segmenter unless overridden), the map
-empty in a fresh database with the world's floor plan, navigation on the map's occupancy.
-It asks the map for a patrol (`dume/<r>/map/patrol`), waits for it to end, and reads the
-map's artifacts and people. `score` matches them to the world description (truth, for
-evaluation only) one to one by class and nearest position within `MATCH_M`: artifacts
-found / total with their horizontal position errors (median, max; the acceptance is every
-artifact within 10 cm), people found / in the world, false entries (map entities matching
-nothing), the ids given, patrol sim time, wall time and the real-time factor.
+`patrol_run` starts router + sim + wbc + perception + semantic_map + navigation +
+mission as processes (lockstep, dynamic locomotion, the network segmenter unless
+overridden), the map empty in a fresh database with the world's floor plan, navigation on
+the map's occupancy. It asks the mission for a patrol (`dume/<r>/mission/patrol`; the
+mission walks it through navigation, the map fuses what perception sees), waits for it to
+end, and reads the map's artifacts and people. `score` matches them to the world
+description (truth, for evaluation only) one to one by class and nearest position within
+`MATCH_M`: artifacts found / total with their horizontal position errors (median, max;
+the acceptance is every artifact within 10 cm), people found / in the world, false
+entries (map entities matching nothing), the ids given, patrol sim time, wall time and
+the real-time factor.
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ import numpy as np
 
 from common.config import Overrides, merged
 from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, WORLD_CLOCK, WORLD_DESCRIPTION
-from common.messages.semantic_map import MapEntity, MapListing, PatrolRequest, PatrolStatus
+from common.messages.mission import PatrolRequest, PatrolStatus
+from common.messages.semantic_map import MapEntity, MapListing
 from common.messages.sim import Clock
 from common.messages.world import WorldDescription
 from deploy.stack import ProcessStack
 
-SERVICES = ["sim", "wbc", "perception", "semantic_map", "navigation"]
+SERVICES = ["sim", "wbc", "perception", "semantic_map", "navigation", "mission"]
 #: A map entity further than this from every truth of its class is a false entry, m.
 MATCH_M = 0.5
 PERSON_MATCH_M = 1.0
@@ -123,7 +126,7 @@ def patrol_run(
         clock = s.bus.latest(WORLD_CLOCK, Clock)
         clock.wait(lambda c: c.stamp_ns > 0, 120.0)
         start = s.bus.query(
-            s.keys.map_patrol,
+            s.keys.mission_patrol,
             PatrolRequest(action="start", spacing_m=spacing_m),
             PatrolStatus,
             30.0,
@@ -134,7 +137,7 @@ def patrol_run(
         while status.state == "running" and time.monotonic() < deadline:
             time.sleep(2.0)
             status = s.bus.query(
-                s.keys.map_patrol, PatrolRequest(action="status"), PatrolStatus, 30.0
+                s.keys.mission_patrol, PatrolRequest(action="status"), PatrolStatus, 30.0
             )
         wall = time.perf_counter() - t0_wall
         sim_s = (clock.get().stamp_ns - t0_sim) / 1e9  # type: ignore[union-attr]
@@ -147,6 +150,7 @@ def patrol_run(
     out |= {
         "patrol_state": status.state,
         "patrol_reason": status.reason,
+        "patrol_detail": status.detail,
         "viewpoints": status.waypoints,
         "travelled_m": round(status.travelled_m, 2),
         **score(truth, artifacts, people),

@@ -240,7 +240,7 @@ def run_trial(
     seed = seed if world_seed is None else world_seed
     if name in NAV_TRIALS:
         return _nav_trial(name, seed, overrides or {}, dict(options or {}), world)
-    if name == "patrol":  # the semantic map's mapping patrol from an empty map
+    if name == "patrol":  # the mission's mapping patrol from an empty map
         from bench.trial_patrol import patrol_run
 
         world = (options or {}).get("world") or "hall"

@@ -1,8 +1,8 @@
 """Goal clients: the one way to send navigation and arm goals and to cancel them.
 
-Every caller (the mission's robot port, the map's patrol, trials and benches) goes
-through `NavClient` and `ArmClient`, so a goal is sent, refused and reported the same way
-everywhere:
+Every caller (the mission's robot port, for its fetch and its patrol; trials and benches)
+goes through `NavClient` and `ArmClient`, so a goal is sent, refused and reported the same
+way everywhere:
 
 - `send` asks the goal queryable once and returns the goal's id. The server's typed
   refusal (an `ErrorReply`, or a reply with `accepted=False`) raises `Refused` with its

@@ -7,7 +7,9 @@ are the one source of every setting's default, unit and range (`Annotated` with
 deployment decides (the robot, the router's address, the lockstep participants). Overrides:
 
 - environment: `DUME_<SECTION>_<KEY>=value`, e.g. `DUME_ZENOH_PORT=7450`,
-  `DUME_SIM_WORLD_SEED=3`, `DUME_TIME_MODE=realtime`; `DUME_CONFIG` names another file.
+  `DUME_SIM_WORLD_SEED=3`, `DUME_TIME_MODE=realtime`, and for a key of a nested section
+  `DUME_<SECTION>_<SUB>_<KEY>`, e.g. `DUME_NAVIGATION_CONTROLLER_V_MAX="[0.4, 0.3, 0.8]"`;
+  `DUME_CONFIG` names another file.
 - `DUME_SETTINGS`: a JSON file of overrides as data, `{"section.key": value}` with keys of
   any depth (what a stack launcher writes once per run for every process), applied after
   the variables above.
@@ -131,6 +133,17 @@ class SimSettings(_Section):
     segmentation_truth: bool = True
 
 
+class GaitSettings(_Section):
+    """The trot's command shaping (`services/wbc/gait.py`): every cmd_vel obeyed is clamped
+    to `v_max` and moved towards at most `a_max` per s (`d_max` while |v| decreases)."""
+
+    #: Base velocity limits (vx m/s, vy m/s, ωz rad/s) and acceleration limits (per s).
+    v_max: Limits3 = msgspec.field(default_factory=lambda: [0.8, 0.4, 1.0])
+    a_max: Limits3 = msgspec.field(default_factory=lambda: [1.0, 1.0, 2.0])
+    #: Braking limits (|v| decreasing), per s: harder than speeding up, so stops are short.
+    d_max: Limits3 = msgspec.field(default_factory=lambda: [2.0, 2.0, 3.0])
+
+
 class WbcSettings(_Section):
     """The whole-body controller service (`services/wbc`).
 
@@ -145,11 +158,7 @@ class WbcSettings(_Section):
     mode_source: str = "mission"
     #: A cmd_vel older than this (sim time) means stop.
     cmd_vel_timeout_s: Positive = 0.5
-    #: Base velocity limits (vx m/s, vy m/s, wz rad/s) and acceleration limits (per s).
-    cmd_vel_max: Limits3 = msgspec.field(default_factory=lambda: [0.8, 0.4, 1.0])
-    cmd_vel_accel_max: Limits3 = msgspec.field(default_factory=lambda: [1.0, 1.0, 2.0])
-    #: Braking limits (|v| decreasing), per s: harder than speeding up, so stops are short.
-    cmd_vel_decel_max: Limits3 = msgspec.field(default_factory=lambda: [2.0, 2.0, 3.0])
+    gait: GaitSettings = msgspec.field(default_factory=GaitSettings)
     #: A gap in the state's stamps longer than this stops the robot.
     stale_state_s: float = 0.05
     #: `wbc/status` rate and rerun time-series rate, Hz of sim time.
@@ -194,9 +203,9 @@ class SemanticMapSettings(_Section):
 
     start: how an empty database is filled — `prior` (the map file `prior_file`),
     `seed-from-world` (the sim's truth ids at truth positions plus Gaussian noise of
-    `seed_noise_m`: sim truth, for experiments), `empty` (then `dume map --patrol`). A
-    database that already holds a map is resumed whatever `start` says (ids are stable
-    across restarts) unless `reset` is true.
+    `seed_noise_m`: sim truth, for experiments), `empty` (then `dume map --patrol`, the
+    mission's mapping patrol). A database that already holds a map is resumed whatever
+    `start` says (ids are stable across restarts) unless `reset` is true.
     floor_plan: the static occupancy layer when the start mode brings none (`world`: the
     simulator's grid, the building's floor plan; `none`).
     """
@@ -254,26 +263,46 @@ class SemanticMapSettings(_Section):
     #: Grid extent when no floor plan gives one (a square about the origin), m.
     grid_half_extent_m: float = 15.0
     grid_resolution_m: float = 0.05
-    #: The patrol: viewpoint spacing, clearance kept from obstacles, speeds, look-around.
-    patrol_spacing_m: float = 2.5
-    patrol_clearance_m: float = 0.7
-    patrol_speed: float = 0.5
-    patrol_turn_rate: float = 0.6
-    patrol_look_around: bool = True
-    #: The floor plan's tables and benches are seen from a viewpoint within this, m (the
-    #: network finds a can on a bench from 2 m with the arm in `look`).
-    patrol_see_m: float = 1.6
-    #: Cameras also fused while a patrol holds the arm in `look`.
+    #: Cameras also fused while the mission's patrol holds the arm in `look` (its
+    #: `mission/patrol/status` says so).
     patrol_cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_wrist"])
-    #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
-    #: looking ahead and down) where it sees the tops of benches that the head camera,
-    #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.
-    patrol_arm_posture: Literal["look", "stow"] = "look"
-    #: How the patrol walks: pose goals to navigation, or its own cmd_vel (no navigation).
-    patrol_via: Literal["navigation", "cmd_vel"] = "navigation"
     #: Sim seconds between rerun logs of the entities and of the grid.
     log_every_s: float = 1.0
     grid_log_every_s: float = 5.0
+
+
+class ControllerSettings(_Section):
+    """Navigation's path follower (`services/navigation/controller.py`): pure pursuit."""
+
+    #: Base velocity limits (vx m/s, vy m/s, ωz rad/s) and acceleration limits (per s).
+    v_max: Limits3 = msgspec.field(default_factory=lambda: [0.5, 0.3, 0.8])
+    a_max: Limits3 = msgspec.field(default_factory=lambda: [0.8, 0.8, 1.5])
+    #: How far along the path the point pursued lies, m.
+    lookahead_m: Positive = 0.6
+
+
+class PlannerSettings(_Section):
+    """Navigation's global planner (`services/navigation/planner.py`, A* on the costmap)."""
+
+    #: How many metres one metre at cost 1 is worth, on top of itself (an edge costs
+    #: length · (1 + cost_weight · cost)).
+    cost_weight: NonNegative = 4.0
+    #: How far a goal in an obstacle may move to the nearest free pose (same yaw), m.
+    goal_search_m: NonNegative = 0.5
+
+
+class PeopleSettings(_Section):
+    """Navigation's speed rules around people (`services/navigation/people.py`).
+
+    Distances m from the robot's footprint, speeds m/s: the cap within `slow_radius_m` of
+    anyone (`slow_speed`) or of the person handed over to (`handover_speed`), and the
+    distance at which a person in the direction of travel stops the robot.
+    """
+
+    slow_radius_m: NonNegative = 2.0
+    slow_speed: NonNegative = 0.3
+    stop_distance_m: NonNegative = 0.6
+    handover_speed: NonNegative = 0.15
 
 
 class NavigationSettings(_Section):
@@ -286,27 +315,20 @@ class NavigationSettings(_Section):
     """
 
     map_source: Literal["map", "world"] = "map"
-    #: The depth camera of the short-lived obstacle layer ("" for none).
+    #: The depth camera of the short-lived obstacle layer ("" for none), and how long a
+    #: cell it saw occupied stays so.
     obstacle_camera: str = "camera_head"
     obstacle_ttl_s: float = 3.0
-    #: Base velocity (vx, vy, wz) and acceleration limits of the path follower.
-    v_max: Limits3 = msgspec.field(default_factory=lambda: [0.5, 0.3, 0.8])
-    a_max: Limits3 = msgspec.field(default_factory=lambda: [0.8, 0.8, 1.5])
-    lookahead_m: float = 0.6
-    #: Tolerances of the standoff and handover goals (a PoseGoal carries its own).
+    controller: ControllerSettings = msgspec.field(default_factory=ControllerSettings)
+    planner: PlannerSettings = msgspec.field(default_factory=PlannerSettings)
+    #: Arrival tolerances of the standoff and handover goals (a PoseGoal carries its own).
     goal_tolerance_m: float = 0.08
     goal_tolerance_rad: float = 0.1
-    #: How far a goal in an obstacle may move to the nearest free pose.
-    goal_search_m: float = 0.5
-    cost_weight: float = 4.0
-    #: People: the speed cap within `slow_radius_m`, the stop distance in the direction
-    #: of travel, the cap near the person handed over to; `people_in_costmap` plans
-    #: around them (off: only the speed rules act).
-    slow_radius_m: float = 2.0
-    slow_speed: float = 0.3
-    stop_distance_m: float = 0.6
-    handover_speed: float = 0.15
+    people: PeopleSettings = msgspec.field(default_factory=PeopleSettings)
+    #: People in the costmap: plans go around them (off: only the speed rules act).
     people_in_costmap: bool = True
+    #: A goal: replanned every `replan_s`; blocked (no plan, or no progress) this long
+    #: starts the next recovery, and after the last fails it; `goal_timeout_s` fails it.
     replan_s: float = 1.0
     blocked_timeout_s: Positive = 3.0
     goal_timeout_s: Positive = 180.0
@@ -368,6 +390,18 @@ class MissionSettings(_Section):
     #: Overrides of `ApproachGains` fields and of `PullDetector` arguments, by name.
     approach_gains: dict[str, float] = msgspec.field(default_factory=dict)
     pull_detector: dict[str, float] = msgspec.field(default_factory=dict)
+    #: The mapping patrol (`dume map --patrol`): viewpoint spacing and the clearance kept
+    #: from obstacles, m; a look-around (three turns on the spot) at every viewpoint.
+    patrol_spacing_m: Positive = 2.5
+    patrol_clearance_m: NonNegative = 0.7
+    patrol_look_around: bool = True
+    #: The floor plan's tables and benches are seen from a viewpoint within this, m (the
+    #: network finds a can on a bench from 2 m with the arm in `look`).
+    patrol_see_m: NonNegative = 1.6
+    #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
+    #: looking ahead and down) where it sees the tops of benches that the head camera,
+    #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.
+    patrol_arm_posture: Literal["look", "stow"] = "look"
 
 
 class RecordingSettings(_Section):
@@ -439,8 +473,29 @@ def _env_overrides(env: Mapping[str, str]) -> list[tuple[list[str], Any]]:
                 f"environment variable {name}: no section {rest.split('_')[0]!r}; "
                 f"sections are {sorted(sections)} (or DUME_ROBOT)"
             )
-        out.append(([section, rest[len(section) + 1 :]], _literal(text)))
+        out.append((_env_path(section, rest[len(section) + 1 :]), _literal(text)))
     return out
+
+
+def _env_path(section: str, key: str) -> list[str]:
+    """A variable's key in `section` as a path: a nested section's name and `_` descend
+    into it (`DUME_NAVIGATION_CONTROLLER_V_MAX` → navigation.controller.v_max)."""
+    path = [section]
+    fields = _fields(_fields(msgspec.inspect.type_info(Config))[section])
+    while key not in fields:
+        sub = next((f for f in fields if key.startswith(f + "_") and _fields(fields[f])), None)
+        if sub is None:
+            break
+        path.append(sub)
+        key, fields = key[len(sub) + 1 :], _fields(fields[sub])
+    return [*path, key]
+
+
+def _fields(node: msgspec.inspect.Type) -> dict[str, msgspec.inspect.Type]:
+    """A Struct's fields by name (none for any other type)."""
+    if not isinstance(node, msgspec.inspect.StructType):
+        return {}
+    return {f.name: f.type for f in node.fields}
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, Any]:

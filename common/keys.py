@@ -28,6 +28,8 @@ WORLD_PEOPLE_COMMAND = f"{ROOT}/world/people_command"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
 MAP_PEOPLE = f"{ROOT}/map/people"
 MAP_OCCUPANCY = f"{ROOT}/map/occupancy"
+#: Queryable: the floor plan's tables and benches (`SupportListing`), what a patrol must see.
+MAP_SUPPORTS = f"{ROOT}/map/supports"
 #: Queryables: the whole map as a `MapFile` (export), and a `MapFile` to load (import).
 MAP_EXPORT = f"{ROOT}/map/export"
 MAP_IMPORT = f"{ROOT}/map/import"
@@ -104,11 +106,6 @@ class RobotKeys:
     def locate(self) -> str:
         return f"{self.prefix}/perception/locate"
 
-    # semantic map (the patrol drives this robot)
-    @property
-    def map_patrol(self) -> str:
-        return f"{self.prefix}/map/patrol"
-
     # navigation
     @property
     def nav_goal(self) -> str:
@@ -160,6 +157,17 @@ class RobotKeys:
     @property
     def mission_status(self) -> str:
         return f"{self.prefix}/mission/status"
+
+    @property
+    def mission_patrol(self) -> str:
+        """The mapping patrol's requests (query, JSON): `PatrolRequest` → `PatrolStatus`."""
+        return f"{self.prefix}/mission/patrol"
+
+    @property
+    def mission_patrol_status(self) -> str:
+        """The patrol's `PatrolStatus` at every mission tick (JSON): the map reads whether
+        the patrol holds the arm up."""
+        return f"{self.prefix}/mission/patrol/status"
 
     # lockstep and liveliness
     def ack(self, service: str) -> str:

@@ -183,13 +183,8 @@ def cmd_map(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from common.keys import MAP_ARTIFACTS, MAP_EXPORT, MAP_IMPORT, MAP_PEOPLE
-    from common.messages.semantic_map import (
-        MapFile,
-        MapListing,
-        MapSummary,
-        PatrolRequest,
-        PatrolStatus,
-    )
+    from common.messages.mission import PatrolRequest, PatrolStatus
+    from common.messages.semantic_map import MapFile, MapListing, MapSummary
     from services.semantic_map.mapfile import read_map_file, write_map_file
 
     config = _client_config(args)
@@ -204,21 +199,32 @@ def cmd_map(args: argparse.Namespace) -> int:
             summary = bus.query(MAP_IMPORT, read_map_file(Path(args.import_)), MapSummary, 10.0)
             print(json.dumps(msgspec.to_builtins(summary)))
             return 0
-        if args.patrol:
+
+        def listings() -> dict[str, list[Any]]:
+            return {
+                kind: bus.query(key, None, MapListing, 5.0).entities
+                for kind, key in (("artifacts", MAP_ARTIFACTS), ("people", MAP_PEOPLE))
+            }
+
+        if args.patrol:  # the mission walks it; the map's counts beside its status
             req = PatrolRequest(action="start", spacing_m=args.spacing)
-            status = bus.query(keys.map_patrol, req, PatrolStatus, 30.0)
+            status = bus.query(keys.mission_patrol, req, PatrolStatus, 30.0)
             deadline = time.monotonic() + args.timeout
             while status.state == "running" and time.monotonic() < deadline:
                 time.sleep(2.0)
-                status = bus.query(keys.map_patrol, PatrolRequest(action="status"), PatrolStatus)
-                print(json.dumps(msgspec.to_builtins(status)), file=sys.stderr, flush=True)
+                status = bus.query(
+                    keys.mission_patrol, PatrolRequest(action="status"), PatrolStatus
+                )
+                counts = {kind: len(es) for kind, es in listings().items()}
+                line = msgspec.to_builtins(status) | counts
+                print(json.dumps(line), file=sys.stderr, flush=True)
             if status.state == "running":
-                bus.query(keys.map_patrol, PatrolRequest(action="stop"), PatrolStatus)
-        listings = {
-            kind: bus.query(key, None, MapListing, 5.0).entities
-            for kind, key in (("artifacts", MAP_ARTIFACTS), ("people", MAP_PEOPLE))
-        }
-    print(json.dumps({k: [msgspec.to_builtins(e) for e in v] for k, v in listings.items()}))
+                status = bus.query(keys.mission_patrol, PatrolRequest(action="stop"), PatrolStatus)
+            if status.state == "rejected":
+                print(json.dumps(msgspec.to_builtins(status)))
+                return 1
+        mapped = listings()
+    print(json.dumps({k: [msgspec.to_builtins(e) for e in v] for k, v in mapped.items()}))
     return 0
 
 
@@ -327,7 +333,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("map", "the semantic map: walk the mapping patrol, export, import; lists it")
     what = p.add_mutually_exclusive_group()
-    what.add_argument("--patrol", action="store_true", help="walk a coverage route, map it")
+    what.add_argument(
+        "--patrol", action="store_true", help="the mission walks a coverage route; the map maps it"
+    )
     what.add_argument("--export", metavar="FILE", help="write the map as JSON")
     what.add_argument("--import", dest="import_", metavar="FILE", help="replace the map")
     p.add_argument("--spacing", type=float, default=0.0, help="patrol viewpoint spacing, m")

@@ -1,4 +1,5 @@
-"""The user-facing mission API. These travel as JSON so any Zenoh client can use them."""
+"""The user-facing mission API: the fetch (requests, cancels, statuses) and the mapping
+patrol. These travel as JSON so any Zenoh client can use them."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from common.messages.base import Message, StampNs, Unit
+from common.messages.base import Message, NonNegative, StampNs, Unit
 
 RequestId = Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
 #: A map id (`bottle_1`) or a class (`bottle`: the nearest mapped one).
@@ -47,7 +48,7 @@ MissionReason = Literal[
     "",
     # a request refused before it starts (state `rejected`)
     "malformed",  # not JSON, not an object, a field missing or of the wrong type
-    "busy",  # another mission is running: one at a time
+    "busy",  # another mission or the mapping patrol is running: one job at a time
     "unknown_object",  # no mapped artifact has that id, or none of that class
     "unknown_person",  # no mapped person has that id
     "unavailable",  # a service the mission needs did not answer (the map, navigation, wbc)
@@ -92,4 +93,56 @@ class MissionStatus(Message, frozen=True):
     behaviour: str = ""
     progress: Unit = 0.0
     reason: MissionReason = ""
+    detail: str = ""
+
+
+PatrolState = Literal["idle", "running", "done", "failed", "stopped", "rejected"]
+
+#: Every typed reason a patrol status may carry (`detail` has the sentence).
+PatrolReason = Literal[
+    "",
+    # a start refused (state `rejected`)
+    "busy",  # a fetch or another patrol is running: one job at a time
+    "unavailable",  # no odometry, the map's grid did not come, or a service is not running
+    "no_route",  # the map's grid has no free space reachable from the robot
+    # a patrol that ran and failed (state `failed`)
+    "navigation_failed",  # navigation refused the patrol's goals altogether
+    "dependency_lost",  # a service it depends on went away or restarted while it ran
+    "internal",  # a bug: logged with its traceback; the service kept running
+]
+
+
+class PatrolRequest(Message, frozen=True):
+    """`dume/<r>/mission/patrol` (query): start or stop the mapping patrol, or ask its
+    state: `{"action": "start"}`.
+
+    spacing_m: distance between the route's viewpoints (start only; 0: the configured
+    `mission.patrol_spacing_m`).
+    """
+
+    WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
+    action: Literal["start", "stop", "status"]
+    spacing_m: NonNegative = 0.0
+
+
+class PatrolStatus(Message, frozen=True):
+    """The patrol's state: the reply to `dume/<r>/mission/patrol`, and published on
+    `dume/<r>/mission/patrol/status` at every mission tick.
+
+    waypoint, waypoints: the viewpoint being walked to or looked around at, of how many.
+    travelled_m: path length walked so far. arm_look: the patrol holds the arm in `look`
+    now (the wrist camera sees bench tops: the map fuses `semantic_map.patrol_cameras`
+    too). reason: typed (`PatrolReason`), for a start refused (`rejected`, only in that
+    reply) or a patrol failed; detail: a sentence for a person (skipped viewpoints, why
+    it stopped).
+    """
+
+    WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
+    stamp_ns: StampNs
+    state: PatrolState
+    waypoint: int = 0
+    waypoints: int = 0
+    travelled_m: NonNegative = 0.0
+    arm_look: bool = False
+    reason: PatrolReason = ""
     detail: str = ""

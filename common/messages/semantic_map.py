@@ -1,5 +1,5 @@
 """The semantic map's payloads: artifacts and people with ids, the occupancy grid, the
-mapping patrol and the map file (JSON export/import).
+floor plan's supports and the map file (JSON export/import).
 
 Positions are in the `world` frame. `source` says where an entity's id came from:
 `prior` (a map file loaded at start), `seed-from-world` (the simulator's truth ids and
@@ -15,6 +15,7 @@ import msgspec
 
 from common.messages.arrays import Array
 from common.messages.base import ClassName, EntityId, Finite, Message, NonNegative, StampNs, Vec3
+from common.messages.world import SupportSurface
 
 Source = Literal["prior", "seed-from-world", "perception", "import"]
 EntityKind = Literal["artifact", "person"]
@@ -97,32 +98,11 @@ class MapSummary(Message, frozen=True):
     missing: int
 
 
-PatrolState = Literal["idle", "running", "done", "failed", "stopped"]
-
-
-class PatrolRequest(Message, frozen=True):
-    """`dume/<r>/map/patrol` (query): start or stop the mapping patrol, or ask its state.
-
-    spacing_m: distance between the route's viewpoints (start only; 0: the configured one).
-    """
-
-    action: Literal["start", "stop", "status"]
-    spacing_m: NonNegative = 0.0
-
-
-class PatrolStatus(Message, frozen=True):
-    """The patrol's state (reply to `dume/<r>/map/patrol`).
-
-    waypoint, waypoints: the viewpoint being walked to, of how many. travelled_m: path
-    length walked so far. artifacts, people: entities in the map now. reason: why it
-    failed or stopped, for a person.
+class SupportListing(Message, frozen=True):
+    """`dume/map/supports`: the floor plan's tables and benches, where artifacts stand
+    (what the mapping patrol must see from near). Empty when the map has no floor plan
+    (`semantic_map.floor_plan = "none"`).
     """
 
     stamp_ns: StampNs
-    state: PatrolState
-    waypoint: int = 0
-    waypoints: int = 0
-    travelled_m: NonNegative = 0.0
-    artifacts: int = 0
-    people: int = 0
-    reason: str = ""
+    surfaces: list[SupportSurface] = msgspec.field(default_factory=list)

@@ -5,8 +5,9 @@
 1. the first step (since the mission started) sets the status `idle` with no request and
    the sim time it started at, so a client whose request was in progress hears it lost;
 2. requests drained from the inbox: parsed, refused at once (a `rejected` status
-   published stamped b) when malformed, when a mission runs (`busy`), when a dependency
-   is not running (`unavailable`) or when the map does not know the object or the person
+   published stamped b) when malformed, when a mission or the mapping patrol runs
+   (`busy`; `busy_with` names the patrol), when a dependency is not running
+   (`unavailable`) or when the map does not know the object or the person
    (`check_request`); else the tree starts, the dependencies are armed and `accepted` is
    published;
 3. cancels drained from the inbox: one of the running request stops the tree
@@ -61,10 +62,13 @@ class Desk:
         log: MissionLogger,
         send: Callable[[MissionStatus], None],
         errors: logging.Logger,
+        busy_with: Callable[[], str] = lambda: "",
     ) -> None:
         self.tree, self.robot, self.deps, self.board = tree, robot, deps, board
         self.requests, self.cancels = requests, cancels
         self.log, self.send, self.errors = log, send, errors
+        #: What else runs that a request must wait for (the patrol), "" when nothing.
+        self.busy_with = busy_with
         #: Whether the first step ran (the `idle` status of a (re)start is set).
         self.started = False
 
@@ -109,6 +113,10 @@ class Desk:
                 self._reject(
                     b, Rejection(parsed.request_id, "busy", f"mission {running} is running")
                 )
+                continue
+            other = self.busy_with()
+            if other:
+                self._reject(b, Rejection(parsed.request_id, "busy", other))
                 continue
             down = self.deps.missing()
             refused = (

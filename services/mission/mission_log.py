@@ -7,6 +7,8 @@
   text document, each time any node's status changed.
 - `mission/status`: the published status, each time it changed; `mission/progress` as a
   scalar.
+- `mission/patrol`: the mapping patrol's requests, decisions and end; its route as
+  `world/mission/patrol` (paths) and `world/mission/patrol/viewpoints`.
 """
 
 from __future__ import annotations
@@ -14,11 +16,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
+import numpy as np
 import rerun as rr
 
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionStatus
 from common.recording import is_recording, stamp
+from services.mission.coverage import Route
 
 
 class MissionLogger:
@@ -65,3 +69,22 @@ class MissionLogger:
         self._say("mission/status", logging.WARNING if failed else logging.INFO, text)
         if self.on:
             self.rec.log("mission/progress", rr.Scalars(status.progress))
+
+    def patrol(self, text: str, warn: bool = False) -> None:
+        self._say("mission/patrol", logging.WARNING if warn else logging.INFO, text)
+
+    def route(self, route: Route) -> None:
+        """The patrol's route: its paths and viewpoints, a little above the floor."""
+        if not self.on:
+            return
+        self.rec.log(
+            "world/mission/patrol",
+            rr.LineStrips3D(
+                [np.column_stack([p, np.full(len(p), 0.05)]) for p in route.paths],
+                colors=(200, 60, 200),
+            ),
+        )
+        self.rec.log(
+            "world/mission/patrol/viewpoints",
+            rr.Points3D([(v[0], v[1], 0.05) for v in route.viewpoints], radii=0.08),
+        )

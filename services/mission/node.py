@@ -1,4 +1,5 @@
-"""The mission service: a 20 Hz lockstep participant that ticks the bring-me tree.
+"""The mission service: a 20 Hz lockstep participant that ticks the bring-me tree and
+walks the mapping patrol, one job at a time.
 
 Requests and cancels arrive as raw JSON (so a malformed one can still be answered with
 its `request_id`) and wait in a queue for the loop; a request can also come as a query
@@ -8,26 +9,33 @@ Each tick b (multiples of `time.participants.mission.period_s`):
 1. inputs as of b: the odom stamped b (50 Hz, waited for), the `wbc/status` stamped
    before b (waited for while the controller is alive), and the outputs of navigation
    and perception that take effect by b (`UpstreamGate`);
-2. requests: parsed, refused at once when malformed, when a mission runs (`busy`), when
-   a service it depends on is not running (`unavailable`) or when the map does not know
-   the object or the person; else the tree starts; cancels of the running request stop
-   the tree (`MissionTree.cancel`);
+2. requests: parsed, refused at once when malformed, when a mission or the patrol runs
+   (`busy`), when a service it depends on is not running (`unavailable`) or when the map
+   does not know the object or the person; else the tree starts; cancels of the running
+   request stop the tree (`MissionTree.cancel`);
 3. a dependency (the WBC, navigation, perception, the map: those of `time.participants`)
    that went away or restarted since the request started fails it `dependency_lost`
    (nobody waits for the dead); else the tree ticks once; its outcome, stage and
    progress become the status;
-4. published stamped b: cmd_vel from source `mission` (zero unless a behaviour drives),
-   a wbc mode when asked for, the status on change and every `status_every_s`; then the
-   ack. A bug in a behaviour is logged with its traceback, the robot halted and the
-   mission failed `internal`; the loop goes on.
+4. the patrol (`patrol_desk`): its requests (`mission/patrol`, a query answered once the
+   loop took it; a start refused `busy` while a fetch runs), then one step of a running
+   patrol (`patrol.PatrolRunner`: walk obeying navigation, the arm in `look`, pose goals
+   to navigation);
+5. published stamped b: cmd_vel from source `mission` (zero unless a behaviour drives),
+   a wbc mode when asked for (by the tree or the patrol), the status on change and every
+   `status_every_s`, the patrol's status (every tick, even after a failed one: the map
+   waits for it, and fuses the wrist camera while it says `arm_look`); then the ack. A
+   bug in a behaviour is logged with its traceback, the robot halted and the mission
+   failed `internal`; the loop goes on.
 
 A mission that (re)starts says so: its first status is `idle` with no request and the
 sim time it started at, so a client whose request was in progress knows it was lost and
 can send it again.
 
 This module is wiring only: the parts are `inbox` (requests and cancels as they arrive),
-`inputs` (step 1), `desk` (steps 2–3 and the status of step 4), `robot` (`BusRobot`: the
-bus as the behaviours see it, and the tick's cmd_vel) and `tree`.
+`inputs` (step 1), `desk` (steps 2–3 and the status of step 5), `patrol_desk` (step 4),
+`robot` (`BusRobot`: the bus as the behaviours and the patrol see it, and the tick's
+cmd_vel) and `tree`.
 """
 
 from __future__ import annotations
@@ -38,7 +46,7 @@ from common.bus import Bus
 from common.lifelines import Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
 from common.messages.base import NS_PER_S
-from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.mission import MissionRequest, MissionStatus, PatrolRequest, PatrolStatus
 from common.service import Service
 from services.mission.algorithms import default_algorithms
 from services.mission.behaviours.base import Context
@@ -46,6 +54,8 @@ from services.mission.desk import Desk
 from services.mission.inbox import Inbox, RequestInbox
 from services.mission.inputs import TickInputs
 from services.mission.mission_log import MissionLogger
+from services.mission.patrol import PatrolRunner
+from services.mission.patrol_desk import PatrolDesk
 from services.mission.requests import StatusBoard
 from services.mission.robot import WRIST, BusRobot
 from services.mission.tree import MissionTree
@@ -97,6 +107,16 @@ class MissionNode:
         self.log = MissionLogger(svc.rec, svc.log)
         ctx = Context(self.robot, m, default_algorithms(m), self.log.decision)
         self.tree = MissionTree(ctx)
+        self.patrol = PatrolDesk(
+            PatrolRunner(self.robot, m, self.log.patrol),
+            self.robot,
+            m,
+            Dependencies(self.alive.lifelines, needed, keys.alive),
+            self.log,
+            svc.log,
+        )
+        bus.serve(keys.mission_patrol, PatrolRequest, self.patrol.ask)
+        self.patrol_pub = bus.publisher(keys.mission_patrol_status, PatrolStatus, "data")
         board = StatusBoard(round(m.status_every_s * NS_PER_S))
         self.desk = Desk(
             self.tree,
@@ -108,6 +128,7 @@ class MissionNode:
             self.log,
             self.status_pub.put,
             svc.log,
+            self.patrol.busy_with,
         )
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
 
@@ -119,12 +140,15 @@ class MissionNode:
             except Exception:  # a bug: say it, stop the robot, keep serving
                 self.svc.log.exception("mission tick at t=%.2f s failed", b / NS_PER_S)
             finally:
+                self.patrol_pub.put(self.patrol.published(b))  # every tick: the map waits
                 self.ticker.ack(b)
 
     def tick(self, b: int) -> None:
-        """Inputs as of b, the desk's step, the robot's outputs, then the status."""
+        """Inputs as of b, the desks' steps, the robot's outputs, then the status."""
         self.inputs.wait(b, first=not self.desk.started)
         changed = self.desk.step(b)
+        request = self.tree.request
+        self.patrol.step(b, f"mission {request.request_id} is running" if request else "")
         self.robot.end(b)
         self.desk.flush(b, changed)
 

@@ -1,11 +1,12 @@
 """What the mission's behaviours may ask of the robot: one small interface, no transport.
 
-Every bus interaction a behaviour needs goes through a `RobotPort`: the Zenoh client
-(`services.mission.robot.BusRobot`) in the service, a scripted fake in the unit tests.
-Reads are of the inputs as of the current tick (the node refreshes them before it ticks
-the tree); commands are either short queries with a timeout (a goal sent, a map entry
-read) or values the node publishes after the tick (cmd_vel, the wbc mode). Nothing here
-blocks for longer than one query: goals are sent, then watched over later ticks.
+Every bus interaction a behaviour (or the mapping patrol, `patrol`) needs goes through
+a `RobotPort`: the Zenoh client (`services.mission.robot.BusRobot`) in the service, a
+scripted fake in the unit tests. Reads are of the inputs as of the current tick (the
+node refreshes them before it ticks the tree); commands are either short queries with a
+timeout (a goal sent, a map entry read) or values the node publishes after the tick
+(cmd_vel, the wbc mode). Nothing here blocks for longer than one query: goals are sent,
+then watched over later ticks.
 
 Failures the behaviours must handle are typed: `Refused` (the service answered no, with
 its reason) and `Unavailable` (nobody answered in time).
@@ -19,8 +20,9 @@ from common.clients import ClientError, Refused, Unavailable
 from common.messages.base import Mat4
 from common.messages.navigation import NavGoal, NavStatus
 from common.messages.perception import Detection
-from common.messages.semantic_map import MapEntity
+from common.messages.semantic_map import MapEntity, OccupancyGrid
 from common.messages.wbc import ArmGoal, GoalStatus, WbcModeName, WbcStatus
+from common.messages.world import SupportSurface
 
 
 class WristSighting(NamedTuple):
@@ -63,6 +65,16 @@ class RobotPort(Protocol):
 
     def people(self) -> list[MapEntity]:
         """Every mapped person."""
+        ...
+
+    def occupancy(self) -> OccupancyGrid:
+        """The map's occupancy grid as of this tick (what the patrol plans its route on);
+        `Unavailable` if the map does not answer."""
+        ...
+
+    def floor_supports(self) -> list[SupportSurface]:
+        """The floor plan's tables and benches (empty without a floor plan), which the
+        patrol must see from near; `Unavailable` if the map does not answer."""
         ...
 
     def robot_xy(self) -> tuple[float, float] | None:

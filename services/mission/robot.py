@@ -1,16 +1,19 @@
-"""`BusRobot`: the `RobotPort` over Zenoh — every bus interaction the behaviours need.
+"""`BusRobot`: the `RobotPort` over Zenoh — every bus interaction the behaviours (and the
+mapping patrol) need.
 
 Inputs are kept in `Latest` buffers and read as of the tick being processed (`begin(b)`):
 odom, `wbc/status`, `nav/status`, perception's detections (the wrist camera's newest
 frame that takes effect by b, i.e. stamped at or before b − perception's latency).
-Queries (map entries and listings, nav goals, arm goals) wait at most
-`query_timeout_s`; a typed refusal becomes `Refused`, no answer `Unavailable`, an
-unknown id None. Map queries ask for the map as of the tick (`common.keys.as_of`); nav
-goals, nav cancels and arm goals carry the tick and take effect at the tick plus the
-mission's latency, so the same seed gives the same run. What the tree commands during a
-tick is published by `end(b)` stamped b: cmd_vel from source `mission` every tick (zero
-unless a behaviour set it), carrying the mode when one was asked for (one key: the WBC
-gets the mode no later than the velocity). Nav cancels go out at once.
+Queries (map entries and listings, the occupancy grid, nav goals, arm goals) wait at
+most `query_timeout_s` (the floor plan's supports `SUPPORTS_TIMEOUT_S`: the map may
+fetch them from the sim first); a typed refusal becomes `Refused`, no answer
+`Unavailable`, an unknown id None. Map queries ask for the map as of the tick
+(`common.keys.as_of`); nav goals, nav cancels and arm goals carry the tick and take
+effect at the tick plus the mission's latency, so the same seed gives the same run. What
+the tree (or the patrol) commands during a tick is published by `end(b)` stamped b:
+cmd_vel from source `mission` every tick (zero unless a behaviour set it), carrying the
+mode when one was asked for (one key: the WBC gets the mode no later than the velocity).
+Nav cancels go out at once.
 """
 
 from __future__ import annotations
@@ -22,14 +25,23 @@ from collections import deque
 from common.bus import Bus, BusError, NoReply, RemoteError
 from common.clients import ArmClient, NavClient
 from common.geometry import yaw_of_quat_xyzw
-from common.keys import MAP_ARTIFACTS, MAP_PEOPLE, RobotKeys, as_of, map_artifact, map_person
+from common.keys import (
+    MAP_ARTIFACTS,
+    MAP_OCCUPANCY,
+    MAP_PEOPLE,
+    MAP_SUPPORTS,
+    RobotKeys,
+    as_of,
+    map_artifact,
+    map_person,
+)
 from common.messages import PayloadError
 from common.messages.navigation import (
     NavGoal,
     NavStatus,
 )
 from common.messages.perception import Detections
-from common.messages.semantic_map import MapEntity, MapListing
+from common.messages.semantic_map import MapEntity, MapListing, OccupancyGrid, SupportListing
 from common.messages.sim import Odom
 from common.messages.wbc import (
     ArmGoal,
@@ -39,6 +51,7 @@ from common.messages.wbc import (
     WbcModeName,
     WbcStatus,
 )
+from common.messages.world import SupportSurface
 from common.sightings import pick_detection
 from services.mission.ports import Unavailable, WristSighting
 
@@ -48,6 +61,8 @@ NAME = "mission"
 WRIST = "camera_wrist"
 #: Refusals that mean "no such thing" rather than "cannot answer now".
 _NOT_FOUND = ("unknown_id", "invalid")
+#: Wall seconds the floor plan's supports may take (the map's first answer asks the sim).
+SUPPORTS_TIMEOUT_S = 10.0
 
 
 class BusRobot:
@@ -124,9 +139,15 @@ class BusRobot:
 
     # -- the semantic map -----------------------------------------------------------------
 
-    def _query_map(self, key: str, type_: type[MapEntity] | type[MapListing]) -> object | None:
+    def _query_map(
+        self,
+        key: str,
+        type_: type[MapEntity] | type[MapListing] | type[OccupancyGrid] | type[SupportListing],
+        timeout_s: float | None = None,
+    ) -> object | None:
+        timeout = self.timeout_s if timeout_s is None else timeout_s
         try:  # the map as of this tick: the same answer in every run
-            return self.bus.query(as_of(key, self._t), None, type_, self.timeout_s)
+            return self.bus.query(as_of(key, self._t), None, type_, timeout)
         except RemoteError as exc:
             if exc.error.code in _NOT_FOUND:
                 return None
@@ -149,6 +170,18 @@ class BusRobot:
     def people(self) -> list[MapEntity]:
         found = self._query_map(MAP_PEOPLE, MapListing)
         return list(found.entities) if isinstance(found, MapListing) else []
+
+    def occupancy(self) -> OccupancyGrid:
+        found = self._query_map(MAP_OCCUPANCY, OccupancyGrid)
+        if not isinstance(found, OccupancyGrid):
+            raise Unavailable(f"{MAP_OCCUPANCY}: no grid")
+        return found
+
+    def floor_supports(self) -> list[SupportSurface]:
+        found = self._query_map(MAP_SUPPORTS, SupportListing, SUPPORTS_TIMEOUT_S)
+        if not isinstance(found, SupportListing):
+            raise Unavailable(f"{MAP_SUPPORTS}: no listing")
+        return list(found.surfaces)
 
     def robot_xy(self) -> tuple[float, float] | None:
         odom = self.odom.at(self._t)

@@ -1,23 +1,24 @@
 """Omnidirectional regulated pure pursuit: a path and the base pose in, cmd_vel out.
 
-Each tick (`Follower.step`): the closest path pose ahead of the last one (the progress
-never goes back), a lookahead point `lookahead_m` further along it, and a velocity in the
-world towards that point whose speed is regulated down by (the minimum of) the limit
-`v_max[0]`, the costmap cost at the robot (`cost_slowdown`: near obstacles it walks
-slower), the path's turn within the lookahead, the remaining distance (it can stop:
-v ≤ √(2 a d)) and the caller's cap (people). The heading follows the path's direction
-(the B1 walks forward faster than sideways) and turns to the goal's yaw over the last
-`heading_blend_m`; a large heading error holds translation back until the robot has
-turned. The velocity goes to `base_yaw` (vx, vy scaled together to their limits, so the
-direction is kept) and through per-axis acceleration limits.
+Each tick (`Follower.step`; `navigation.controller` holds the limits and the lookahead):
+the closest path pose ahead of the last one (the progress never goes back), a lookahead
+point `lookahead_m` further along it, and a velocity in the world towards that point
+whose speed is regulated down by (the minimum of) the limit `v_max[0]`, the costmap
+cost at the robot (`COST_SLOWDOWN`: near obstacles it walks slower), the path's turn
+within the lookahead, the remaining distance (it can stop: v ≤ √(2 a d)) and the
+caller's cap (people). The heading follows the path's direction (the B1 walks forward
+faster than sideways) and turns to the goal's yaw over the last `HEADING_BLEND_M`; a
+large heading error holds translation back until the robot has turned. The velocity
+goes to `base_yaw` (vx, vy scaled together to their limits, so the direction is kept)
+and through per-axis acceleration limits.
 
 The final align: once inside the position tolerance the follower latches `aligning`
-(released if the base drifts `align_release_m` beyond the tolerance, or out of it with
+(released if the base drifts `ALIGN_RELEASE_M` beyond the tolerance, or out of it with
 the heading already aligned, so that it walks back in): translation
 stops and the heading goes to the goal's yaw itself — not the blend, whose path
 direction is meaningless a few cm from the goal (it held the robot at a fixed 0.15 rad
 off the goal's yaw, a stall only the recoveries broke) — at a rate of at least
-`min_turn_rate` while the error exceeds half the tolerance (a trot turns poorly at
+`MIN_TURN_RATE` while the error exceeds half the tolerance (a trot turns poorly at
 tiny rates, and a proportional command fades as the error shrinks). `arrived` once both
 tolerances hold and the base is slow.
 """
@@ -25,32 +26,28 @@ tolerances hold and the base is slow.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from common.config import ControllerSettings
 from services.navigation.grid import Pose
 
 Vec3 = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
-class ControllerParams:
-    """v_max, a_max: (vx m/s, vy m/s, ωz rad/s) and per second; the rest in m, rad, 1/s."""
-
-    v_max: tuple[float, float, float] = (0.6, 0.3, 0.8)
-    a_max: tuple[float, float, float] = (0.8, 0.8, 1.5)
-    lookahead_m: float = 0.6
-    k_heading: float = 1.5
-    heading_blend_m: float = 0.8
-    turn_first_rad: float = 1.0
-    cost_slowdown: float = 0.5
-    min_speed: float = 0.05
-    k_position: float = 1.2
-    min_turn_rate: float = 0.25
-    align_release_m: float = 0.05
+#: Not settings: the follower's gains and thresholds, tuned with the trot (the settings,
+#: limits and lookahead, are `ControllerSettings`, `navigation.controller`).
+K_HEADING = 1.5  # 1/s, heading error → ωz
+HEADING_BLEND_M = 0.8  # m before the goal over which the heading turns to its yaw
+TURN_FIRST_RAD = 1.0  # heading error beyond which translation is held back
+COST_SLOWDOWN = 0.5  # the speed's fraction lost at cost 1
+MIN_SPEED = 0.05  # m/s, the least speed commanded while following
+K_POSITION = 1.2  # 1/s, distance to the goal → speed on the last poses
+MIN_TURN_RATE = 0.25  # rad/s, the least ωz while aligning
+ALIGN_RELEASE_M = 0.05  # m beyond the tolerance that releases the align
 
 
 class FollowOutput(NamedTuple):
@@ -68,7 +65,7 @@ class FollowOutput(NamedTuple):
     yaw_error: float = 0.0
 
 
-def limit_accel(prev: Vec3, want: Vec3, a_max: tuple[float, float, float], dt: float) -> Vec3:
+def limit_accel(prev: Vec3, want: Vec3, a_max: Sequence[float], dt: float) -> Vec3:
     """`want` moved no further from `prev` than a_max · dt per axis."""
     step = np.asarray(a_max) * dt
     out: Vec3 = prev + np.clip(want - prev, -step, step)
@@ -89,7 +86,7 @@ def scale_to_limits(vx: float, vy: float, vx_max: float, vy_max: float) -> tuple
 class Follower:
     """Follows one path; `step` once per tick (see the module docstring)."""
 
-    def __init__(self, poses: NDArray[np.float64], p: ControllerParams) -> None:
+    def __init__(self, poses: NDArray[np.float64], p: ControllerSettings) -> None:
         self.p = p
         self.set_path(poses)
         self.cmd: Vec3 = np.zeros(3)
@@ -138,17 +135,17 @@ class Follower:
         goal_err = math.remainder(yaw_goal - pose.yaw, math.tau)
         if to_goal <= tol_xy:
             self.aligning = True
-        elif to_goal > tol_xy + p.align_release_m or abs(goal_err) <= 0.5 * tol_yaw:
+        elif to_goal > tol_xy + ALIGN_RELEASE_M or abs(goal_err) <= 0.5 * tol_yaw:
             self.aligning = False  # drifted out while turning: walk back in
         inside = self.aligning
-        blend = min(1.0, remaining / p.heading_blend_m) if p.heading_blend_m > 0 else 0.0
+        blend = min(1.0, remaining / HEADING_BLEND_M)
         if inside:
             blend = 0.0
         yaw_ref = yaw_goal + blend * math.remainder(path_yaw - yaw_goal, math.tau)
         yaw_err = math.remainder(yaw_ref - pose.yaw, math.tau)
-        wz = float(np.clip(p.k_heading * yaw_err, -p.v_max[2], p.v_max[2]))
+        wz = float(np.clip(K_HEADING * yaw_err, -p.v_max[2], p.v_max[2]))
         if inside and abs(yaw_err) > 0.5 * tol_yaw:  # a gait turns poorly at tiny rates
-            wz = math.copysign(max(abs(wz), p.min_turn_rate), yaw_err)
+            wz = math.copysign(max(abs(wz), MIN_TURN_RATE), yaw_err)
         direction: tuple[float, float] | None = None
         vx = vy = 0.0
         if not inside:
@@ -159,16 +156,16 @@ class Follower:
                 turn = abs(math.remainder(float(target[2]) - path_yaw, math.tau))
                 speed = min(
                     p.v_max[0],
-                    p.v_max[0] * (1.0 - p.cost_slowdown * max(cost_here, 0.0)),
+                    p.v_max[0] * (1.0 - COST_SLOWDOWN * max(cost_here, 0.0)),
                     p.v_max[0] / (1.0 + 1.5 * turn),
                     math.sqrt(2.0 * p.a_max[0] * 0.7 * remaining),
-                    p.k_position * to_goal if self.index >= len(self.poses) - 2 else math.inf,
+                    K_POSITION * to_goal if self.index >= len(self.poses) - 2 else math.inf,
                     speed_cap,
                 )
-                if abs(yaw_err) > p.turn_first_rad and blend > 0.5:
-                    speed *= max(0.0, 1.0 - (abs(yaw_err) - p.turn_first_rad) / 0.5)
+                if abs(yaw_err) > TURN_FIRST_RAD and blend > 0.5:
+                    speed *= max(0.0, 1.0 - (abs(yaw_err) - TURN_FIRST_RAD) / 0.5)
                 if speed_cap > 0:
-                    speed = max(speed, min(p.min_speed, speed_cap))
+                    speed = max(speed, min(MIN_SPEED, speed_cap))
                 vx, vy = to_base((speed * direction[0], speed * direction[1]), pose.yaw)
                 vx, vy = scale_to_limits(vx, vy, p.v_max[0], p.v_max[1])
         want = np.array([vx, vy, wz])

@@ -9,8 +9,8 @@ go there: it walks along its path, so its width is what must fit), then the cost
 exponentially until `inflation_m`. The static and short-lived layers are inflated
 together; a person is a disc, lethal within `person_lethal_m` of the base origin, with a
 cost that falls to zero at `person_cost_m`. The short-lived layer remembers when each cell
-was last seen occupied (`ObstacleLayer`): marks expire after `obstacle_ttl_s`, and a cell
-seen through (`clear`) is forgotten at once.
+was last seen occupied (`ObstacleLayer`): marks expire after `navigation.obstacle_ttl_s`,
+and a cell seen through (`clear`) is forgotten at once.
 """
 
 from __future__ import annotations
@@ -29,14 +29,14 @@ LETHAL = np.float32(-1.0)
 
 @dataclass(frozen=True)
 class CostParams:
-    """Inflation and layers; see the module docstring. Distances in m, times in s."""
+    """Inflation and the people layer (see the module docstring), distances in m, decay
+    per m. Not settings: the costmap's shape, tuned with the footprint and the planner."""
 
     lethal_margin_m: float = 0.06
     inflation_m: float = 1.0
     decay_per_m: float = 4.0
     person_lethal_m: float = 0.85
     person_cost_m: float = 2.0
-    obstacle_ttl_s: float = 3.0
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,9 @@ from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprin
 
 @dataclass(frozen=True)
 class DepthParams:
+    """What of a depth image marks and clears cells (see the module docstring; m, pixels).
+    Not settings: tuned with the head camera and the footprint."""
+
     stride: int = 4
     min_height_m: float = 0.08
     max_height_m: float = 1.8

@@ -26,7 +26,7 @@ from common import robot
 from common.messages.navigation import NavGoalRequest
 from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import Footprint, Pose
-from services.navigation.planner import pose_ok
+from services.navigation.planner import GOAL_MARGIN_M, pose_ok
 
 RAY_STEP_RAD = math.radians(1.0)
 #: Rays leaving within this much of the shortest exit are averaged into the normal, m.
@@ -67,7 +67,7 @@ def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> 
 
 
 def standoff_pose(
-    costmap: Costmap, x: float, y: float, fp: Footprint, margin: float = 0.03
+    costmap: Costmap, x: float, y: float, fp: Footprint, margin: float = GOAL_MARGIN_M
 ) -> Pose:
     """A free pose facing the artifact at (x, y), `STANDOFF_DISTANCE_M` away."""
     angles = np.arange(0.0, 2 * math.pi, RAY_STEP_RAD)
@@ -89,7 +89,7 @@ def handover_pose(
     person: Person,
     robot_xy: tuple[float, float],
     fp: Footprint,
-    margin: float = 0.03,
+    margin: float = GOAL_MARGIN_M,
 ) -> Pose:
     """A free pose facing the person at `HANDOVER_DISTANCE_M` (see the module docstring)."""
     if person.yaw is not None:

@@ -1,8 +1,9 @@
 """One goal's life: plan, follow, replan, recover, succeed or fail — pure, on sim time.
 
 `Navigator.tick(t, pose, world)` runs once per period with the costmap and people of the
-tick and returns the cmd_vel and the status. Per goal:
-- (re)plan at start, every `replan_s`, and when the path ahead (`blocked_lookahead_m`) crosses
+tick and returns the cmd_vel and the status. Its settings are `NavigationSettings` (the
+follower's `controller`, the planner's `planner`, the people rules' `people`). Per goal:
+- (re)plan at start, every `replan_s`, and when the path ahead (`BLOCKED_LOOKAHEAD_M`) crosses
   a lethal cell; a plan that fails while a path is held keeps the old one until
   `blocked_timeout_s`; a goal in an obstacle fails `invalid_goal` only on its first plan:
   later, what covers it is the short-lived layers (depth, people), so it counts as
@@ -12,17 +13,17 @@ tick and returns the cmd_vel and the status. Per goal:
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
   follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad;
 - when blocked for `blocked_timeout_s` (no plan, or no progress), recoveries in order:
-  clear the short-lived layer, rotate in place (`rotate_s`), back off (`backoff_s`), each
+  clear the short-lived layer, rotate in place (`ROTATE_S`), back off (`BACKOFF_S`), each
   followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
   ever found);
-- `timeout_s` of sim time on one goal: `failed: timeout`.
+- `goal_timeout_s` of sim time on one goal: `failed: timeout`.
 `cancel` brings the command to zero at once (the WBC's own acceleration limits shape it).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -31,51 +32,22 @@ from numpy.typing import NDArray
 from common.config import NavigationSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
-from services.navigation.controller import ControllerParams, Follower
+from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
 from services.navigation.grid import Footprint, Pose
-from services.navigation.people import NO_LIMIT, PeopleParams, SpeedLimit, people_limit
-from services.navigation.planner import Plan, PlanError, PlanParams, plan
+from services.navigation.people import NO_LIMIT, SpeedLimit, people_limit
+from services.navigation.planner import Plan, PlanError, plan
 
 Recovery = Literal["", "clear", "rotate", "backoff"]
 
 
-@dataclass(frozen=True)
-class NavParams:
-    """Replanning and recovery times in s of sim time, distances in m."""
-
-    replan_s: float = 1.0
-    blocked_lookahead_m: float = 1.5
-    blocked_timeout_s: float = 3.0
-    rotate_s: float = 3.0
-    backoff_s: float = 1.5
-    backoff_speed: float = 0.15
-    timeout_s: float = 180.0
-    controller: ControllerParams = field(default_factory=ControllerParams)
-    planner: PlanParams = field(default_factory=PlanParams)
-    people: PeopleParams = field(default_factory=PeopleParams)
-
-
-def nav_params(n: NavigationSettings) -> NavParams:
-    """The navigator's parameters from the navigation settings."""
-    return NavParams(
-        replan_s=n.replan_s,
-        blocked_timeout_s=n.blocked_timeout_s,
-        timeout_s=n.goal_timeout_s,
-        controller=ControllerParams(
-            v_max=(n.v_max[0], n.v_max[1], n.v_max[2]),
-            a_max=(n.a_max[0], n.a_max[1], n.a_max[2]),
-            lookahead_m=n.lookahead_m,
-        ),
-        planner=PlanParams(cost_weight=n.cost_weight, goal_tolerance_m=n.goal_search_m),
-        people=PeopleParams(
-            slow_radius_m=n.slow_radius_m,
-            slow_speed=n.slow_speed,
-            stop_distance_m=n.stop_distance_m,
-            handover_speed=n.handover_speed,
-            ramp_top_mps=max(n.v_max[0], n.v_max[1]),
-        ),
-    )
+#: Not settings (the navigator's are in `NavigationSettings`): how far ahead a lethal cell
+#: on the path means a replan (m), how long the rotate and back-off recoveries last (s),
+#: and the back-off's speed (m/s).
+BLOCKED_LOOKAHEAD_M = 1.5
+ROTATE_S = 3.0
+BACKOFF_S = 1.5
+BACKOFF_SPEED = 0.15
 
 
 @dataclass(frozen=True)
@@ -104,8 +76,10 @@ class TickOutput(NamedTuple):
 class Navigator:
     """The active goal's state machine (see the module docstring)."""
 
-    def __init__(self, fp: Footprint, p: NavParams, period_s: float) -> None:
-        self.fp, self.p, self.dt = fp, p, period_s
+    def __init__(self, fp: Footprint, n: NavigationSettings, period_s: float) -> None:
+        self.fp, self.n, self.dt = fp, n, period_s
+        #: The base's top speed: a people ramp's cap at or above it is no cap.
+        self.top_mps = max(n.controller.v_max[0], n.controller.v_max[1])
         self.goal: GoalSpec | None = None
         #: The goal the state is about: the active or last goal's, or a refused one's.
         self.goal_id = ""
@@ -169,7 +143,7 @@ class Navigator:
         self.last_plan_ns = t_ns
         first, self.planned_once = not self.planned_once, True
         try:
-            new = plan(cm, pose, self.goal.pose, self.fp, self.p.planner)
+            new = plan(cm, pose, self.goal.pose, self.fp, self.n.planner)
         except PlanError as exc:
             self.detail = str(exc)
             if exc.reason == "invalid_goal" and first:
@@ -177,7 +151,7 @@ class Navigator:
             return None
         self.plan = new
         if self.follower is None:
-            self.follower = Follower(new.poses, self.p.controller)
+            self.follower = Follower(new.poses, self.n.controller)
             self.total_m = new.length_m
         else:
             self.follower.set_path(new.poses)
@@ -188,7 +162,7 @@ class Navigator:
         if self.follower is None:
             return True
         f = self.follower
-        end = int(np.searchsorted(f.s, f.s[f.index] + self.p.blocked_lookahead_m)) + 1
+        end = int(np.searchsorted(f.s, f.s[f.index] + BLOCKED_LOOKAHEAD_M)) + 1
         ahead = f.poses[f.index + 1 : end, :2]
         if not len(ahead):
             return False
@@ -200,14 +174,14 @@ class Navigator:
             self.cmd = np.zeros(3)
             return self._out()
         g = self.goal
-        if t_ns - self.t0 > self.p.timeout_s * NS_PER_S:
-            self._finish("failed", "timeout", f"not there after {self.p.timeout_s:.0f} s")
+        if t_ns - self.t0 > self.n.goal_timeout_s * NS_PER_S:
+            self._finish("failed", "timeout", f"not there after {self.n.goal_timeout_s:.0f} s")
             return self._out()
         new_plan = None
         if self.recovery:
             return self._recover(t_ns, pose, cm)
         blocked_path = self.plan is not None and self._path_blocked(cm)
-        due = t_ns - self.last_plan_ns >= self.p.replan_s * NS_PER_S
+        due = t_ns - self.last_plan_ns >= self.n.replan_s * NS_PER_S
         if self.plan is None or blocked_path or due:
             new_plan = self._replan(t_ns, pose, cm)
             if self.state != "active":
@@ -222,8 +196,8 @@ class Navigator:
         probe = f.poses[min(f.index + 10, len(f.poses) - 1), :2] - np.array([pose.x, pose.y])
         norm = float(np.hypot(*probe))
         direction = (probe[0] / norm, probe[1] / norm) if norm > 1e-3 else None
-        limit = people_limit(pose, direction, cm.people, self.fp, self.p.people, g.handover_id,
-                             self.limit_rule == "stop")  # fmt: skip
+        limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
+                             g.handover_id, self.limit_rule == "stop")  # fmt: skip
         self.limit_rule = limit.rule
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
                      g.tol_xy, g.tol_yaw)  # fmt: skip
@@ -239,7 +213,7 @@ class Navigator:
             self.best_remaining = min(self.best_remaining, out.remaining_m)
             self.best_yaw_error = yaw_error
             self.progress_ns = t_ns
-        if limit.rule == "stop" or t_ns - self.progress_ns > self.p.blocked_timeout_s * NS_PER_S:
+        if limit.rule == "stop" or t_ns - self.progress_ns > self.n.blocked_timeout_s * NS_PER_S:
             return self._blocked(t_ns, pose, cm, limit, new_plan)
         self.blocked_since = None
         return self._out(limit, new_plan)
@@ -249,7 +223,7 @@ class Navigator:
     ) -> TickOutput:
         if self.blocked_since is None:
             self.blocked_since = t_ns
-        if t_ns - self.blocked_since < self.p.blocked_timeout_s * NS_PER_S:
+        if t_ns - self.blocked_since < self.n.blocked_timeout_s * NS_PER_S:
             return self._out(limit, new_plan)
         if not self.recoveries:
             reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
@@ -257,7 +231,7 @@ class Navigator:
             return self._out(limit, new_plan)
         self.recovery = self.recoveries.pop(0)
         self.blocked_since = None
-        span = {"clear": 0.0, "rotate": self.p.rotate_s, "backoff": self.p.backoff_s}
+        span = {"clear": 0.0, "rotate": ROTATE_S, "backoff": BACKOFF_S}
         self.recovery_until = t_ns + round(span[self.recovery] * NS_PER_S)
         self.detail = f"recovery: {self.recovery}"
         return self._out(limit, new_plan)
@@ -281,6 +255,6 @@ class Navigator:
                 pose.x - 0.3 * math.cos(pose.yaw), pose.y - 0.3 * math.sin(pose.yaw), pose.yaw
             )
             free = cm.cost_at(back.x, back.y) >= 0
-            self.cmd = np.array([-self.p.backoff_speed if free else 0.0, 0.0, 0.0])
+            self.cmd = np.array([-BACKOFF_SPEED if free else 0.0, 0.0, 0.0])
         out = self._out()
         return out._replace(recovery=rec)

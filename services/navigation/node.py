@@ -45,7 +45,7 @@ from services.navigation.intake import GoalIntake
 from services.navigation.map_feed import MapFeed
 from services.navigation.nav_log import NavLogger
 from services.navigation.nav_map import NavMap
-from services.navigation.navigator import Navigator, TickOutput, nav_params
+from services.navigation.navigator import Navigator, TickOutput
 from services.navigation.perceived import PerceptionFeed
 from services.navigation.sources import MapSource, Source, WorldSource, wait_for_world
 
@@ -73,8 +73,7 @@ class NavNode:
             wait_for_world(bus, svc.stop, log) if n.map_source == "world" else MapSource(bus)
         )
         ttl_ns = round(n.obstacle_ttl_s * NS_PER_S)
-        cost_params = CostParams(obstacle_ttl_s=n.obstacle_ttl_s)
-        self.map = NavMap(self.fp, cost_params, ttl_ns, n.people_in_costmap, self.source.name, log)
+        self.map = NavMap(self.fp, CostParams(), ttl_ns, n.people_in_costmap, self.source.name, log)
         period_ns = round(self.period_s * NS_PER_S)
         lockstep = cfg.time.mode == "lockstep"
         #: One lock for the goal intake and the map feed (the queryable's, the fetch's and
@@ -89,7 +88,7 @@ class NavNode:
             )  # fmt: skip
         if isinstance(self.source, WorldSource):  # truth: there at once, and static
             self.map.adopt(self.source.grid(), self.source.people(), 0, 0)
-        self.nav = Navigator(self.fp, nav_params(n), self.period_s)
+        self.nav = Navigator(self.fp, n, self.period_s)
         self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.depth: DepthFeed | None = None

@@ -1,49 +1,43 @@
 """Speed and separation monitoring around people (in the spirit of ISO/TS 15066).
 
 Distances are from the robot's footprint (arm stowed) to a person's floor position.
-`people_limit` gives the speed cap of one tick: `stop` when a person is within
-`stop_distance_m` in the direction of travel (ahead of the footprint along the commanded
-velocity, within ±`travel_half_angle_rad`); `handover_speed` within `slow_radius_m` of
-the person being handed over to; `slow_speed` within `slow_radius_m` of anyone else;
-otherwise no cap. The caps are met at their boundaries, not only inside them: the
-command goes through acceleration limits and a period of latency, so each cap is
-approached on a braking ramp `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (`brake_decel`,
-`brake_lead_m`): the robot enters the slow zone at the slow speed, and a person ahead
-brings it to rest at the stop distance plus the lead (`stop` from there) rather than
-through it; a stop holds until the person is `resume_margin_m` further. The node logs every
-change of the active rule.
+`people_limit` gives the speed cap of one tick (`navigation.people`): `stop` when a person
+is within `stop_distance_m` in the direction of travel (ahead of the footprint along the
+commanded velocity, within ±`TRAVEL_HALF_ANGLE_RAD`); `handover_speed` within
+`slow_radius_m` of the person being handed over to; `slow_speed` within `slow_radius_m`
+of anyone else; otherwise no cap. The caps are met at their boundaries, not only inside
+them: the command goes through acceleration limits and a period of latency, so each cap
+is approached on a braking ramp `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (`BRAKE_DECEL`,
+`BRAKE_LEAD_M`; no cap where that is at or above the base's top speed): the robot enters
+the slow zone at the slow speed, and a person ahead brings it to rest at the stop
+distance plus the lead (`stop` from there) rather than through it; a stop holds until
+the person is `RESUME_MARGIN_M` further. The node logs every change of the active rule.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numpy as np
 
+from common.config import PeopleSettings
 from services.navigation.costmap import Person
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
 
 Rule = Literal["", "slow", "handover", "stop"]
 
 
-@dataclass(frozen=True)
-class PeopleParams:
-    """Speeds in m/s, distances in m (from the footprint), angle in rad."""
-
-    slow_radius_m: float = 2.0
-    slow_speed: float = 0.3
-    stop_distance_m: float = 0.6
-    handover_speed: float = 0.15
-    travel_half_angle_rad: float = math.radians(60.0)
-    brake_decel: float = 0.5
-    brake_lead_m: float = 0.1
-    resume_margin_m: float = 0.15
-    #: The caps are commanded this fraction below the limits: the trot overshoots a
-    #: commanded speed by up to 13 % over 0.5 s (0.306 m/s for 0.27, `dume trial person`).
-    tracking_margin: float = 0.2
-    ramp_top_mps: float = 0.6  # a ramp's cap at or above this is no cap (the base's top speed)
+#: Not settings (those are `PeopleSettings`, `navigation.people`): the half angle of the
+#: direction of travel (rad), the braking ramps' deceleration (m/s²) and lead (m), how much
+#: further a person must be to release a stop (m).
+TRAVEL_HALF_ANGLE_RAD = math.radians(60.0)
+BRAKE_DECEL = 0.5
+BRAKE_LEAD_M = 0.1
+RESUME_MARGIN_M = 0.15
+#: The caps are commanded this fraction below the limits: the trot overshoots a commanded
+#: speed by up to 13 % over 0.5 s (0.306 m/s for 0.27, `dume trial person`).
+TRACKING_MARGIN = 0.2
 
 
 class SpeedLimit(NamedTuple):
@@ -64,14 +58,16 @@ def people_limit(
     direction_world: tuple[float, float] | None,
     people: tuple[Person, ...] | list[Person],
     fp: Footprint,
-    p: PeopleParams,
+    p: PeopleSettings,
+    top_mps: float,
     handover_id: str = "",
     stopped: bool = False,
 ) -> SpeedLimit:
     """The tightest cap that people impose now; `direction_world` the intended travel
-    direction (unit, world; None when not translating). `stopped`: the last cap was a
-    stop, which then holds until the person is `resume_margin_m` further away (their
-    position jitters from frame to frame: no creeping on and off)."""
+    direction (unit, world; None when not translating). `top_mps`: the base's top speed
+    (a ramp's cap at or above it is no cap). `stopped`: the last cap was a stop, which
+    then holds until the person is `RESUME_MARGIN_M` further away (their position
+    jitters from frame to frame: no creeping on and off)."""
     if not people:
         return NO_LIMIT
     pts = np.array([[q.x, q.y] for q in people])
@@ -79,15 +75,16 @@ def people_limit(
     best = NO_LIMIT
     for person, d in zip(people, dist.tolist(), strict=True):
         handing = person.id == handover_id
-        zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - p.tracking_margin)
-        speed = _ramp(zone_speed, d - p.slow_radius_m, p)
+        zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - TRACKING_MARGIN)
+        speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps)
         if not math.isfinite(speed):
             continue
         ahead = direction_world is not None and _ahead(
-            pose, fp, (person.x, person.y), direction_world, p.travel_half_angle_rad
+            pose, fp, (person.x, person.y), direction_world, TRAVEL_HALF_ANGLE_RAD
         )
         if ahead:
-            to_stop = _ramp(0.0, d - p.stop_distance_m - (p.resume_margin_m if stopped else 0), p)
+            beyond = d - p.stop_distance_m - (RESUME_MARGIN_M if stopped else 0)
+            to_stop = _ramp(0.0, beyond, top_mps)
             if to_stop <= 0.0:  # within the stop distance and the lead: at rest
                 return SpeedLimit(0.0, "stop", person.id, d)
             speed = min(speed, to_stop)
@@ -97,14 +94,14 @@ def people_limit(
     return best
 
 
-def _ramp(v_cap: float, beyond_m: float, p: PeopleParams) -> float:
+def _ramp(v_cap: float, beyond_m: float, top_mps: float) -> float:
     """The speed from which the robot can brake to `v_cap` within `beyond_m` (less the
-    lead); inf when that is above any speed it walks at."""
-    room = beyond_m - p.brake_lead_m
+    lead); inf when that is at or above `top_mps`, the base's top speed."""
+    room = beyond_m - BRAKE_LEAD_M
     if room <= 0.0:
         return v_cap
-    v = math.sqrt(v_cap * v_cap + 2.0 * p.brake_decel * room)
-    return v if v < p.ramp_top_mps else math.inf
+    v = math.sqrt(v_cap * v_cap + 2.0 * BRAKE_DECEL * room)
+    return v if v < top_mps else math.inf
 
 
 def _ahead(

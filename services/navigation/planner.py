@@ -1,8 +1,8 @@
 """Global planning on the costmap: goal checks, A*, smoothing, headings.
 
-`plan(costmap, start, goal, params)`:
-1. the goal: its footprint (grown by `goal_margin_m`) must be free and its cell not
-   lethal; if not, the nearest pose within `goal_tolerance_m` that is (same yaw) replaces
+`plan(costmap, start, goal, fp, settings)` (`navigation.planner`):
+1. the goal: its footprint (grown by `GOAL_MARGIN_M`) must be free and its cell not
+   lethal; if not, the nearest pose within `goal_search_m` that is (same yaw) replaces
    it, else `PlanError("invalid_goal")`;
 2. the start: a robot standing in the inflated zone (pushed, or a goal near a wall) may
    leave it: lethal inflation around the start becomes expensive instead of forbidden;
@@ -11,35 +11,29 @@
 4. smoothing: greedy string pulling — a shortcut replaces a stretch of the path when the
    straight segment crosses no lethal cell and no cell costlier than the stretch's own
    worst, so smoothing never takes the robot closer to obstacles or people;
-5. poses every `spacing_m` along the polyline, yaw along the path, the goal's at the end.
+5. poses every `SPACING_M` along the polyline, yaw along the path, the goal's at the end.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from common.config import PlannerSettings
 from common.messages.navigation import NavFailure
 from services.navigation import native
 from services.navigation.costmap import LETHAL, Costmap
 from services.navigation.grid import Footprint, Pose, footprint_free
 
-
-@dataclass(frozen=True)
-class PlanParams:
-    """cost_weight: how many metres one metre at cost 1 is worth (on top of itself).
-    goal_tolerance_m: how far an unreachable goal may move to a free pose.
-    goal_margin_m: clearance around the footprint at the goal. spacing_m: pose spacing."""
-
-    cost_weight: float = 4.0
-    goal_tolerance_m: float = 0.5
-    goal_margin_m: float = 0.03
-    spacing_m: float = 0.05
-    start_escape_cost: float = 3.0
+#: Not settings (those are `PlannerSettings`, `navigation.planner`): the clearance kept
+#: around the footprint at the goal (m), the spacing of the poses (m), and what a lethal
+#: inflated cell around the start costs instead (`_escape_start`).
+GOAL_MARGIN_M = 0.03
+SPACING_M = 0.05
+START_ESCAPE_COST = 3.0
 
 
 class Plan(NamedTuple):
@@ -70,16 +64,16 @@ def pose_ok(costmap: Costmap, pose: Pose, fp: Footprint, margin: float) -> bool:
 
 
 def nearest_free_pose(
-    costmap: Costmap, pose: Pose, fp: Footprint, tolerance_m: float, margin: float
+    costmap: Costmap, pose: Pose, fp: Footprint, search_m: float, margin: float
 ) -> Pose | None:
-    """The pose closest to `pose` (same yaw, within tolerance) that `pose_ok` accepts."""
+    """The pose closest to `pose` (same yaw, within `search_m`) that `pose_ok` accepts."""
     if pose_ok(costmap, pose, fp, margin):
         return pose
     grid = costmap.grid
-    r = math.ceil(tolerance_m / grid.resolution)
+    r = math.ceil(search_m / grid.resolution)
     dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
     d = np.hypot(dx, dy) * grid.resolution
-    keep = d <= tolerance_m
+    keep = d <= search_m
     order = np.argsort(d[keep], kind="stable")
     for oy, ox in zip(dy[keep][order], dx[keep][order], strict=True):
         cand = Pose(pose.x + ox * grid.resolution, pose.y + oy * grid.resolution, pose.yaw)
@@ -89,7 +83,7 @@ def nearest_free_pose(
 
 
 def _escape_start(
-    cost: NDArray[np.float32], costmap: Costmap, cell: tuple[int, int], p: PlanParams, fp: Footprint
+    cost: NDArray[np.float32], costmap: Costmap, cell: tuple[int, int], fp: Footprint
 ) -> NDArray[np.float32]:
     """Lethal inflation near the start becomes costly but passable (real obstacles stay)."""
     out = cost.copy()
@@ -97,19 +91,19 @@ def _escape_start(
     iy0, ix0 = max(0, cell[0] - r), max(0, cell[1] - r)
     window = out[iy0 : cell[0] + r + 1, ix0 : cell[1] + r + 1]
     occ = costmap.occupied[iy0 : cell[0] + r + 1, ix0 : cell[1] + r + 1]
-    window[(window < 0) & ~occ] = p.start_escape_cost
+    window[(window < 0) & ~occ] = START_ESCAPE_COST
     return out
 
 
-def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlanParams) -> Plan:
+def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlannerSettings) -> Plan:
     """The path from start to goal, or `PlanError` (see the module docstring)."""
     grid = costmap.grid
-    target = nearest_free_pose(costmap, goal, fp, p.goal_tolerance_m, p.goal_margin_m)
+    target = nearest_free_pose(costmap, goal, fp, p.goal_search_m, GOAL_MARGIN_M)
     if target is None:
         raise PlanError(
             "invalid_goal",
             f"goal ({goal.x:.2f}, {goal.y:.2f}, {goal.yaw:.2f}) is in an obstacle and no free "
-            f"pose lies within {p.goal_tolerance_m:.2f} m",
+            f"pose lies within {p.goal_search_m:.2f} m",
         )
     s_cell, g_cell = grid.cell(start.x, start.y), grid.cell(target.x, target.y)
     if s_cell is None:
@@ -117,7 +111,7 @@ def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlanParams
     assert g_cell is not None  # pose_ok checked it
     cost = costmap.cost
     if cost[s_cell] < 0:
-        cost = _escape_start(cost, costmap, s_cell, p, fp)
+        cost = _escape_start(cost, costmap, s_cell, fp)
         if cost[s_cell] < 0:
             raise PlanError("no_path", f"start ({start.x:.2f}, {start.y:.2f}) is in an obstacle")
     found = native.search(cost, s_cell, g_cell, p.cost_weight)
@@ -131,7 +125,7 @@ def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlanParams
     xy = grid.centres(found.cells[keep])
     xy[0] = (start.x, start.y)
     xy[-1] = (target.x, target.y)
-    poses = resample(xy, p.spacing_m, target.yaw)
+    poses = resample(xy, SPACING_M, target.yaw)
     length = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))) if len(poses) > 1 else 0.0
     return Plan(poses, target, length, found.cost, found.expanded)
 
@@ -196,4 +190,4 @@ def resample(xy: NDArray[np.float64], spacing: float, goal_yaw: float) -> NDArra
     return np.stack([x, y, yaw], axis=1)
 
 
-__all__ = ["LETHAL", "Plan", "PlanError", "PlanParams", "nearest_free_pose", "plan", "pose_ok"]
+__all__ = ["GOAL_MARGIN_M", "LETHAL", "Plan", "PlanError", "nearest_free_pose", "plan", "pose_ok"]

@@ -31,6 +31,9 @@ from services.navigation.grid import Grid
 
 @dataclass(frozen=True)
 class SeenParams:
+    """Which people detections count and for how long (see the module docstring). Not
+    settings: tuned with the head camera and the network."""
+
     #: s: long enough to remember a person beside the robot, out of the head camera's view
     #: while it walks round them (the map may have lost them meanwhile).
     ttl_s: float = 30.0

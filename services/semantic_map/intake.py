@@ -10,7 +10,10 @@ perception's latency); later ones wait for a later tick. When `period_ns` is giv
 waits, at most `wait_s` wall seconds in all, until every fused camera's frame at
 `due_ns` is in: the gate may have been met by another camera's message, and older
 stamps are complete (one key keeps its order). `frame(cam, s)` is the camera image
-behind detections stamped s (waited for, bounded; None without one).
+behind detections stamped s (waited for, bounded; None without one). Which cameras are
+fused is `fused_cameras`: the wrist camera joins while the mission's patrol says it
+holds the arm in `look` (`patrol_holds_look`), which the map learns from the mission's
+patrol status, not from driving anything.
 
 Only the map's tick thread calls it, with the map's lock held; it takes no lock of its
 own (the subscriptions it reads have theirs). It needs no bus: any `DetectionSource` and
@@ -28,6 +31,7 @@ from typing import Protocol
 from common.bus import WaitTimeout
 from common.lockstep import UpstreamGate
 from common.messages.base import NS_PER_S
+from common.messages.mission import PatrolStatus
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame
 
@@ -58,6 +62,12 @@ def fused_cameras(cameras: list[str], patrol_cameras: list[str], arm_up: bool) -
     arm in `look` (the wrist camera then sees bench tops; stowed, it sees the legs)."""
     extra = patrol_cameras if arm_up else []
     return [*cameras, *(c for c in extra if c not in cameras)]
+
+
+def patrol_holds_look(status: PatrolStatus | None) -> bool:
+    """Whether the mission's patrol status (`mission/patrol/status`) says a running patrol
+    holds the arm in `look` (None: no status, no mission: no)."""
+    return status is not None and status.state == "running" and status.arm_look
 
 
 def perception_due(b: int, gate: UpstreamGate) -> tuple[int, int | None]:

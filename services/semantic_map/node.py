@@ -1,16 +1,19 @@
 """The semantic map service: a lockstep participant that fuses detections into the map,
-persists every tick's changes before acknowledging it, serves the map and walks the
-mapping patrol. This module only wires the parts to the bus and runs the tick.
+persists every tick's changes before acknowledging it and serves the map; it drives
+nothing (the mapping patrol is the mission's). This module only wires the parts to the
+bus and runs the tick.
 
 Per tick b (period and latency from `time.participants.semantic_map`): wait for
-perception's detections due by b (`UpstreamGate`); under the map's lock, fuse the frames
-`intake` releases (each fused camera's stamped at or before b − perception's latency;
-`fusion_log`), step the patrol on the odom at b (`patrol_control`), commit the tick in
-one SQLite transaction (`commit`), keep the map's view after b (`views`); then ack b.
-Queryables run on their own threads (`patrol_control` answers the patrol's requests):
-one with `at=<t>` (a lockstep consumer's tick) is answered from the view of the map's last
-tick that takes effect by t, so every run of a seed answers it alike; one without, from
-the map now (`queries`; export and import: `exchange`).
+perception's detections and the mission's patrol status due by b (`UpstreamGate`); under
+the map's lock, fuse the frames `intake` releases (each fused camera's stamped at or
+before b − perception's latency; `fusion_log`): the head camera, and `patrol_cameras`
+too while the mission's patrol status due by b says it holds the arm in `look`
+(`intake.patrol_holds_look`); commit the tick in one SQLite transaction (`commit`), keep
+the map's view after b (`views`); then ack b.
+Queryables run on their own threads: one with `at=<t>` (a lockstep consumer's tick) is
+answered from the view of the map's last tick that takes effect by t, so every run of a
+seed answers it alike; one without, from the map now (`queries`; export and import:
+`exchange`; the floor plan's supports: `supports`).
 """
 
 from __future__ import annotations
@@ -28,32 +31,32 @@ from common.keys import (
     MAP_OCCUPANCY,
     MAP_PEOPLE,
     MAP_PEOPLE_ONE,
+    MAP_SUPPORTS,
 )
 from common.lockstep import PeriodicTicker, UpstreamGate
 from common.messages import PayloadError
 from common.messages.base import NS_PER_S
+from common.messages.mission import PatrolStatus
 from common.messages.perception import Detections
-from common.messages.semantic_map import (
-    MapFile,
-    MapSummary,
-    OccupancyGrid,
-    PatrolRequest,
-    PatrolStatus,
-)
-from common.messages.sim import CameraFrame, Odom
+from common.messages.semantic_map import MapFile, MapSummary, OccupancyGrid, SupportListing
+from common.messages.sim import CameraFrame
 from common.recording import stamp
 from common.service import Service
 from services.semantic_map import queries
 from services.semantic_map.commit import TickCommitter
 from services.semantic_map.exchange import check_import, export_map, import_map
 from services.semantic_map.fusion_log import FusionLog
-from services.semantic_map.intake import DetectionIntake, fused_cameras, perception_due
+from services.semantic_map.intake import (
+    DetectionIntake,
+    fused_cameras,
+    patrol_holds_look,
+    perception_due,
+)
 from services.semantic_map.mapper import SemanticMap
-from services.semantic_map.patrol_control import PatrolControl
-from services.semantic_map.patrol_driver import PatrolDriver
 from services.semantic_map.rerun_log import MapLogger
 from services.semantic_map.startup import open_map, world_description
 from services.semantic_map.store import MapStore, database_path, remove_database
+from services.semantic_map.supports import FloorPlanSupports
 from services.semantic_map.views import ViewHistory
 
 NAME = "semantic_map"
@@ -86,16 +89,9 @@ class MapNode:
             for cam in self.cfg.cameras
         }
         self.intake = DetectionIntake(det_fifo, frames)
-        odom = bus.latest(keys.odom, Odom, history=16)
-        driver = PatrolDriver(
-            bus,
-            keys,
-            self.cfg,
-            NAME,
-            svc.config.wbc.cmd_vel_source,
-            svc.config.time.latencies_ns(),
-        )
-        self.patrol = PatrolControl(driver, odom, self.cfg, world)
+        #: The mission's patrol, as it says (published every mission tick).
+        self.patrol = bus.latest(keys.mission_patrol_status, PatrolStatus, history=8)
+        self.supports = FloorPlanSupports(self.cfg.floor_plan, world)
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
         self.committer = TickCommitter(self.store)
         self.fusion_log = FusionLog()
@@ -106,7 +102,7 @@ class MapNode:
         bus.serve(MAP_OCCUPANCY, None, self._on_occupancy)
         bus.serve(MAP_EXPORT, None, self._on_export)
         bus.serve(MAP_IMPORT, MapFile, self._on_import)
-        bus.serve(keys.map_patrol, PatrolRequest, self._on_patrol)
+        bus.serve(MAP_SUPPORTS, None, self._on_supports)
 
     # -- queries (server threads) -----------------------------------------------------------
 
@@ -139,11 +135,11 @@ class MapNode:
         with self.lock:
             return import_map(mf, self.smap, self.store, self.views)
 
-    def _on_patrol(self, req: PatrolRequest | None, _selector: str) -> PatrolStatus:
-        assert req is not None
-        targets = self.patrol.support_targets() if req.action == "start" else None
+    def _on_supports(self, _req: None, _selector: str) -> SupportListing:
+        surfaces = self.supports.surfaces()  # may wait for the sim: not under the lock
         with self.lock:
-            return self.patrol.request(req, targets, self.smap)
+            stamp_ns = self.smap.stamp_ns
+        return SupportListing(stamp_ns=stamp_ns, surfaces=surfaces)
 
     # -- the tick --------------------------------------------------------------------------
 
@@ -152,18 +148,16 @@ class MapNode:
         ticker = PeriodicTicker(svc.bus, svc.keys, NAME, self.period_ns / NS_PER_S, svc.stop)
         gate = UpstreamGate(svc.bus, svc.keys, svc.config)
         gate.watch("perception", self.det_latest)
+        gate.watch("mission", self.patrol)
         stall = svc.config.time.stall_timeout_s
         svc.ready()
         for b in ticker.ticks():
             stamp(svc.rec, b)
             late = gate.wait(b, stall)
             if late:
-                log.warning("tick %.1f s: no detections from %s in time", b / NS_PER_S, late)
+                log.warning("tick %.1f s: no output of %s in time", b / NS_PER_S, late)
             with self.lock:
                 self._fuse_due(b, gate)
-                route = self.patrol.step(b)
-                if route is not None:
-                    self.logger.patrol(b, route)
                 self.committer.commit(self.smap, b)
                 self.logger.log(b, self.smap)
                 self.views.record(self.smap, b)
@@ -171,9 +165,11 @@ class MapNode:
 
     def _fuse_due(self, b: int, gate: UpstreamGate) -> None:
         """Fuse every frame `intake` releases at b: perception's due then (b − its
-        latency), waited for when perception is a live lockstep producer."""
+        latency), waited for when perception is a live lockstep producer; the patrol's
+        cameras too while the mission's patrol status due at b holds the arm up."""
         cfg = self.cfg
-        cameras = fused_cameras(cfg.cameras, cfg.patrol_cameras, self.patrol.driver.arm_up)
+        arm_up = patrol_holds_look(self.patrol.at(b - gate.latency_ns("mission")))
+        cameras = fused_cameras(cfg.cameras, cfg.patrol_cameras, arm_up)
         for dets in self.intake.release(b, cameras, *perception_due(b, gate)):
             frame = self.intake.frame(dets.camera, dets.stamp_ns)
             try:

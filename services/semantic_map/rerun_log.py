@@ -1,6 +1,6 @@
 """What the map shows in rerun: entities as labelled points sized by their uncertainty,
 missing artifacts in red, the occupancy grid's occupied cells (static grey, learned
-orange), and the patrol's route."""
+orange). The patrol's route is the mission's (`mission_log`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import rerun as rr
 from common.messages.base import NS_PER_S
 from common.recording import is_recording
 from services.semantic_map.mapper import SemanticMap
-from services.semantic_map.patrol import Route
 
 ARTIFACT = (40, 160, 255)
 PERSON = (60, 200, 90)
@@ -22,7 +21,6 @@ class MapLogger:
         self.rec = rec
         self.every_ns = round(every_s * NS_PER_S)
         self.grid_every_ns = round(grid_every_s * NS_PER_S)
-        self._route_logged: int | None = None
 
     def log(self, t_ns: int, smap: SemanticMap) -> None:
         if not is_recording(self.rec):
@@ -63,19 +61,3 @@ class MapLogger:
                     f"world/map/occupancy/{name}",
                     rr.Points3D(xyz, radii=occ.resolution_m / 2, colors=colour),
                 )
-
-    def patrol(self, t_ns: int, route: Route) -> None:
-        if not is_recording(self.rec) or self._route_logged == id(route):
-            return
-        self._route_logged = id(route)
-        self.rec.log(
-            "world/map/patrol",
-            rr.LineStrips3D(
-                [np.column_stack([p, np.full(len(p), 0.05)]) for p in route.paths],
-                colors=(200, 60, 200),
-            ),
-        )
-        self.rec.log(
-            "world/map/patrol/viewpoints",
-            rr.Points3D([(v[0], v[1], 0.05) for v in route.viewpoints], radii=0.08),
-        )

@@ -5,7 +5,8 @@ counters, the static and learned occupancy layers) whatever the start mode, unle
 `reset`. An empty one starts from a prior map file, from the sim's truth with noise, or
 empty; the static layer comes from the file, or else from the floor plan (the sim's grid)
 when `floor_plan = "world"`, or is unknown. `world_description` asks the sim for its
-world (what `open_map` and the patrol's floor plan read), waiting a bounded time.
+world (what `open_map` and the floor plan's supports, `supports`, read), waiting a
+bounded time.
 """
 
 from __future__ import annotations

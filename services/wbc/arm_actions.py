@@ -13,7 +13,7 @@ reached (a frozen pose or joint target), so Grasp after Reach keeps the gripper 
   controller's model does not know the payload; its integral action takes the sag out
   within about a second, not at once), fails after `settle_s` more. Reach opens the jaw
   unless it is gripping.
-- Grasp: close under min(max_effort, `grip_effort_max_nm`) until `GraspDetector` says held
+- Grasp: close under min(max_effort, `wbc.grip_effort_max_nm`) until `GraspDetector` says held
   (succeeded) or the jaw closes on nothing or `grasp_timeout_s` passes (failed).
 - Release: open the jaw; succeeded once open (or after `release_s`).
 - Posture(name): the arm joints move to `common.robot.POSTURES[name]` on a quintic; the
@@ -33,6 +33,7 @@ import numpy as np
 import pinocchio as pin
 
 from common import robot
+from common.config import WbcSettings
 from common.geometry import FloatArray
 from common.messages.base import NS_PER_S
 from common.messages.wbc import ArmGoal, GoalState, GoalStatus, Grasp, Posture, Reach, Release
@@ -48,7 +49,8 @@ class GoalRefused(Exception):
 
 @dataclass(frozen=True)
 class ArmParams:
-    """Speeds (m/s, rad/s), tolerances, timeouts (s) and the grip torque cap (N·m)."""
+    """Speeds (m/s, rad/s), tolerances and timeouts (s). Not settings: tuned with the arm
+    and the gripper (the grip torque cap is `wbc.grip_effort_max_nm`)."""
 
     reach_speed_m_s: float = 0.4
     reach_rate_rad_s: float = 1.5
@@ -62,7 +64,6 @@ class ArmParams:
     posture_tol_rad: float = 0.05
     held_posture_tol_rad: float = 0.15
     settle_s: float = 2.0
-    grip_effort_max_nm: float = 5.0
     grasp_timeout_s: float = 3.0
     release_s: float = 1.5
     grasp: GraspParams = field(default_factory=GraspParams)
@@ -131,7 +132,10 @@ def check_reach(goal: Reach) -> None:
 class ArmActions:
     """Goals in, arm references out; `statuses()` for `wbc/status`."""
 
-    def __init__(self, params: ArmParams | None = None, keep: int = 8) -> None:
+    def __init__(
+        self, settings: WbcSettings, params: ArmParams | None = None, keep: int = 8
+    ) -> None:
+        self.settings = settings
         self.params = p = params or ArmParams()
         self.detector = GraspDetector(p.grasp)
         self._keep = keep
@@ -170,7 +174,7 @@ class ArmActions:
         if isinstance(goal, Reach):
             self._start_reach(goal, now_ns, obs, T_world_base_at)
         elif isinstance(goal, Grasp):
-            self.jaw, self._grip_nm = "grip", min(goal.max_effort, self.params.grip_effort_max_nm)
+            self.jaw, self._grip_nm = "grip", min(goal.max_effort, self.settings.grip_effort_max_nm)
             self.detector.reset()
         elif isinstance(goal, Release):
             self.jaw, self._jaw_angle = "open", robot.GRIPPER_OPEN

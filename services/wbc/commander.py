@@ -33,10 +33,9 @@ from common.messages.base import NS_PER_S
 from common.messages.sim import RobotState
 from common.messages.wbc import WbcMode, WbcModeName, WbcStatus
 from common.robot_description import joint_damping, joint_frictionloss
-from services.wbc.arm_actions import ArmActions, ArmObservation, ArmParams
+from services.wbc.arm_actions import ArmActions, ArmObservation
 from services.wbc.controller import WbcCommand, WbcReferences, WbcState, WholeBodyController
 from services.wbc.fallback import QpFallback
-from services.wbc.gait import GaitParams
 from services.wbc.goals import GoalIntake
 from services.wbc.inputs import CmdVelArbiter, ModeQueue, PoseHistory
 from services.wbc.safety import damp_command
@@ -63,13 +62,8 @@ class WbcCommander:
         log: logging.Logger,
     ) -> None:
         self.log, self.period_ns = log, period_ns
-        gait = GaitParams(
-            v_max=tuple(w.cmd_vel_max),  # type: ignore[arg-type]
-            a_max=tuple(w.cmd_vel_accel_max),  # type: ignore[arg-type]
-            d_max=tuple(w.cmd_vel_decel_max),  # type: ignore[arg-type]
-        )
-        self.ctrl = WholeBodyController(gait_params=gait, clock=time.perf_counter)
-        self.actions = ArmActions(ArmParams(grip_effort_max_nm=w.grip_effort_max_nm))
+        self.ctrl = WholeBodyController(gait=w.gait, clock=time.perf_counter)
+        self.actions = ArmActions(w)
         self.arbiter = CmdVelArbiter(latency, round(w.cmd_vel_timeout_s * NS_PER_S))
         self.arbiter.select(w.cmd_vel_source)
         self.modes = ModeQueue(latency.get(w.mode_source, 0))

@@ -27,10 +27,11 @@ import numpy as np
 import pinocchio as pin
 
 from common import robot
+from common.config import GaitSettings
 from common.geometry import FloatArray, wrap_angle, yaw_of
 from common.robot import joint_damping, joint_frictionloss
 from services.wbc import constraints as cons
-from services.wbc.gait import GaitParams, TrotGait
+from services.wbc.gait import TrotGait
 from services.wbc.model import RobotModel
 from services.wbc.qp import (
     QpParams,
@@ -66,13 +67,13 @@ class WholeBodyController:
         self,
         gains: WbcGains | None = None,
         qp_params: QpParams | None = None,
-        gait_params: GaitParams | None = None,
+        gait: GaitSettings | None = None,
         clock: Callable[[], float] | None = None,
     ) -> None:
         self.gains = g = gains or WbcGains()
         self.qp_params = qp_params or QpParams()
         self.model = RobotModel()
-        self.gait = TrotGait(gait_params)
+        self.gait = TrotGait(gait or GaitSettings())
         self.clock = clock
         self.last_timing: dict[str, float] = {}
         self.com_task = ComTask(g.com_kp, g.com_kd, np.array([g.com_w, g.com_w, 0.0]))
@@ -125,7 +126,7 @@ class WholeBodyController:
     def reset(self, state: WbcState) -> None:
         """Hold the current pose: references from the state, gait standing."""
         self.ref_yaw = yaw_of(_rotation(state.base_orientation_xyzw))
-        self.gait = TrotGait(self.gait.params)
+        self.gait = TrotGait(self.gait.limits)
         self._initialised = True
         self._update_model(state, tcp=True)
         self.ref_xy = self.model.com[:2].copy()

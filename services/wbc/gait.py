@@ -1,6 +1,7 @@
 """Trot: schedule, velocity shaping, footholds and swing trajectories.
 
-- `shape_velocity` clamps a (vx, vy, ωz) command to the limits and rate-limits it.
+- `shape_velocity` clamps a (vx, vy, ωz) command to the limits and rate-limits it
+  (`GaitSettings`, `wbc.gait`).
 - `TrotGait` alternates the diagonal pairs (FL+RR, then FR+RL) with half a period each,
   swing and stance of equal length. It starts on the first nonzero command and stops at
   the end of a half-cycle once the shaped command is back near zero, so a stop always
@@ -9,7 +10,7 @@
   stance's travel v_cmd T_st / 2, plus √(z/g) (v − v_cmd), which steps into a push.
   They are replanned every tick while the foot is in the air.
 - Swing: xy blends from lift-off to the foothold with a quintic s(τ); z rises by
-  `step_height` as 64 τ³(1 − τ)³, zero velocity and acceleration at both ends.
+  `STEP_HEIGHT_M` as 64 τ³(1 − τ)³, zero velocity and acceleration at both ends.
 
 Everything is in world coordinates on the plane z = 0; the gait holds only its phase,
 lift-off points and the shaped command, and takes the time step from its caller.
@@ -18,11 +19,12 @@ lift-off points and the shaped command, and takes the time step from its caller.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from common import robot
+from common.config import GaitSettings
 from common.geometry import FloatArray
 
 GRAVITY = 9.81
@@ -30,33 +32,27 @@ GRAVITY = 9.81
 PAIRS: tuple[tuple[int, ...], tuple[int, ...]] = ((0, 3), (1, 2))
 
 
-@dataclass(frozen=True)
-class GaitParams:
-    """Trot timing, step geometry and command limits (SI units, rad)."""
-
-    period_s: float = 0.5
-    step_height_m: float = 0.08
-    v_max: tuple[float, float, float] = (0.8, 0.4, 1.0)
-    a_max: tuple[float, float, float] = (1.0, 1.0, 2.0)
-    #: Braking (|v| decreasing) may be harder than speeding up: a stop comes sooner.
-    d_max: tuple[float, float, float] = (2.0, 2.0, 3.0)
-    stop_threshold: float = 0.02
-    max_step_m: float = 0.25  # foothold offset from the hip, per axis
-    hip_offsets: FloatArray = field(
-        default_factory=lambda: np.array(
-            [[0.3455, 0.19875], [0.3455, -0.19875], [-0.3455, 0.19875], [-0.3455, -0.19875]]
-        )
-    )
+#: Not settings (the command limits are `GaitSettings`, `wbc.gait`): the trot's period
+#: (s), its step height (m), the shaped command below which it stops (m/s, rad/s), the
+#: foothold's largest offset from the hip per axis (m) and the hips' (x, y) in the base (m).
+TROT_PERIOD_S = 0.5
+STEP_HEIGHT_M = 0.08
+STOP_THRESHOLD = 0.02
+MAX_STEP_M = 0.25
+HIP_OFFSETS = np.array(
+    [[0.3455, 0.19875], [0.3455, -0.19875], [-0.3455, 0.19875], [-0.3455, -0.19875]]
+)
+HIP_OFFSETS.flags.writeable = False
 
 
 def shape_velocity(
-    cmd: FloatArray, previous: FloatArray, dt: float, params: GaitParams
+    cmd: FloatArray, previous: FloatArray, dt: float, limits: GaitSettings
 ) -> FloatArray:
     """The command clamped to ±v_max, moved from `previous` by at most a_max dt per axis
     (d_max dt while it slows down)."""
     out = np.empty(3)
     for i, (c, prev, vmax, amax, dmax) in enumerate(
-        zip(cmd.tolist(), previous.tolist(), params.v_max, params.a_max, params.d_max, strict=True)
+        zip(cmd.tolist(), previous.tolist(), limits.v_max, limits.a_max, limits.d_max, strict=True)
     ):
         target = min(max(c, -vmax), vmax)
         step = (dmax if prev * (target - prev) < 0.0 else amax) * dt
@@ -97,8 +93,8 @@ class SwingTarget:
 class TrotGait:
     """The trot's state machine. `update` once per tick; read `stance` and `swing`."""
 
-    def __init__(self, params: GaitParams | None = None) -> None:
-        self.params = params or GaitParams()
+    def __init__(self, limits: GaitSettings) -> None:
+        self.limits = limits
         self.cmd = np.zeros(3)  # shaped (vx, vy, ωz) in base_yaw
         self.walking = False
         self.phase = 0.0  # time into the current half-cycle, s
@@ -109,7 +105,7 @@ class TrotGait:
 
     @property
     def half_period(self) -> float:
-        return 0.5 * self.params.period_s
+        return 0.5 * TROT_PERIOD_S
 
     def update(
         self,
@@ -122,9 +118,8 @@ class TrotGait:
         feet: FloatArray,
     ) -> None:
         """Advance by dt. feet: (4, 3) foot positions now (world); velocities are world."""
-        p = self.params
-        self.cmd = shape_velocity(cmd_vel, self.cmd, dt, p)
-        eps = p.stop_threshold
+        self.cmd = shape_velocity(cmd_vel, self.cmd, dt, self.limits)
+        eps = STOP_THRESHOLD
         cx, cy, cz = cmd_vel.tolist()
         sx, sy, sz = self.cmd.tolist()
         moving = max(abs(cx), abs(cy), abs(cz), abs(sx), abs(sy), abs(sz)) > eps
@@ -167,7 +162,6 @@ class TrotGait:
     def _foothold(
         self, k: int, bx: float, by: float, yaw: float, vcx: float, vcy: float, z: float
     ) -> tuple[float, float, float]:
-        p = self.params
         remaining = max(self.half_period - self.phase, 0.0)
         sx, sy, sz = self.cmd.tolist()
         c, s = math.cos(yaw), math.sin(yaw)
@@ -175,10 +169,10 @@ class TrotGait:
         vy = s * sx + c * sy
         yaw_td = yaw + sz * (remaining + 0.5 * self.half_period)
         c, s = math.cos(yaw_td), math.sin(yaw_td)
-        hx, hy = p.hip_offsets[k].tolist()
+        hx, hy = HIP_OFFSETS[k].tolist()
         k_cp = math.sqrt(max(z, 0.0) / GRAVITY)
         half_stance = 0.5 * self.half_period
-        lim = p.max_step_m
+        lim = MAX_STEP_M
         ox = min(max(vx * half_stance + k_cp * (vcx - vx), -lim), lim)
         oy = min(max(vy * half_stance + k_cp * (vcy - vy), -lim), lim)
         return (
@@ -194,7 +188,7 @@ class TrotGait:
         tau = self.phase / T
         s, ds, dds = quintic(tau)
         b, db, ddb = bump(tau)
-        h = self.params.step_height_m
+        h = STEP_HEIGHT_M
         ds, dds, db, ddb = ds / T, dds / (T * T), db / T, ddb / (T * T)
         bx, by = base_xy.tolist()
         vcx, vcy = float(com_velocity[0]), float(com_velocity[1])

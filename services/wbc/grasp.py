@@ -19,7 +19,7 @@ from common import robot
 
 @dataclass(frozen=True)
 class GraspParams:
-    """Thresholds of the detector (rad, rad/s, N·m, s)."""
+    """Thresholds of the detector (rad, rad/s, N·m, s). Not settings: tuned with the jaw."""
 
     short_of_closed_rad: float = 0.05
     still_rad_s: float = 0.05

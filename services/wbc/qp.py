@@ -39,7 +39,8 @@ _ACCEPTED = (1, 2)
 
 @dataclass(frozen=True)
 class QpParams:
-    """Constraint and regularisation parameters.
+    """Constraint and regularisation parameters. Not settings: tuned with the model and
+    the sim's contacts.
 
     mu: friction coefficient of the linearised cone (below the sim's 0.9 for margin).
     f_min, f_max: normal force bounds of a stance foot, N. k_slip: 1/s, stance foot

@@ -21,11 +21,13 @@ from common.keys import (
     MAP_IMPORT,
     MAP_OCCUPANCY,
     MAP_PEOPLE,
+    MAP_SUPPORTS,
     WORLD_CLOCK,
     map_artifact,
     map_person,
 )
 from common.messages import to_wire
+from common.messages.mission import PatrolRequest
 from common.messages.perception import Detection, Detections
 from common.messages.semantic_map import (
     MapEntity,
@@ -33,8 +35,7 @@ from common.messages.semantic_map import (
     MapListing,
     MapSummary,
     OccupancyGrid,
-    PatrolRequest,
-    PatrolStatus,
+    SupportListing,
 )
 from common.messages.sim import Ack, Clock
 from deploy.stack import ProcessStack, wait_until
@@ -183,9 +184,8 @@ def test_malformed_and_unknown_queries_get_typed_errors(stack: StartStack, tmp_p
     with pytest.raises(RemoteError) as err:  # a PatrolRequest where a MapFile is due
         s.bus.query(MAP_IMPORT, PatrolRequest(action="start"), MapSummary, 5.0)
     assert err.value.error.code == "malformed"
-    with pytest.raises(RemoteError) as err:
-        s.bus.query(s.keys.map_patrol, PatrolRequest(action="start"), PatrolStatus, 5.0)
-    assert err.value.error.code == "unavailable"  # no odometry: no sim here
+    # No floor plan here: no supports (the mission's patrol plans on the lattice alone).
+    assert s.bus.query(MAP_SUPPORTS, None, SupportListing, 5.0).surfaces == []
     # The service is still there and still right.
     assert [e.id for e in _listing(s)] == ["bottle_1"]
 

@@ -1,13 +1,16 @@
 """The mapping patrol end to end: the small world mapped from an empty map.
 
-sim + wbc + perception (the network) + semantic_map + navigation, lockstep, dynamic
-locomotion: `dume/<r>/map/patrol` walks the coverage route through navigation, and the map
-it builds is scored against the world description (truth, evaluation only) by
-`bench.trial_patrol.score`.
+sim + wbc + perception (the network) + semantic_map + navigation + mission, lockstep,
+dynamic locomotion: the mission's patrol (`dume/<r>/mission/patrol`) walks the coverage
+route through navigation, the map fuses what perception sees (the wrist camera too while
+the patrol's status says the arm is in `look`), and the map it builds is scored against
+the world description (truth, evaluation only) by `bench.trial_patrol.score`; the figures
+are printed (`pytest -rP` shows them).
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -24,6 +27,7 @@ def test_a_patrol_of_the_small_world_maps_the_bottle_within_10_cm_and_the_person
     out = patrol_run(
         "small", 0, {"recording.enabled": False}, timeout_s=3600.0, db_dir=str(tmp_path)
     )
+    print(json.dumps(out))
     assert out["patrol_state"] == "done", out
     assert out["artifacts_found"] == out["artifacts_total"] == 1, out
     assert out["artifacts_within_10cm"] == 1, out

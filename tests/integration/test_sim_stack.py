@@ -33,8 +33,13 @@ def test_a_pd_hold_in_another_process_keeps_the_robot_standing(stack: StartStack
     s = stack(["sim", "hold"], *HOLD_COMMANDER, *SMALL, *NO_CAMERAS, "sim.duration_s=11")
     odom = s.bus.fifo(s.keys.odom, Odom, maxlen=100_000)
     wait_clock(s, 10.0)
-    heights = np.array([o.base_position_in_world[2] for o in odom.drain()])
-    assert len(heights) > 400  # 50 Hz over 10 s, minus what passed before we subscribed
+    samples = list(odom.drain())
+    heights = np.array([o.base_position_in_world[2] for o in samples])
+    # The sim may run ahead of this process's subscription (a loaded machine): what
+    # counts is that the samples since then are all there and span seconds of standing.
+    span_s = (samples[-1].stamp_ns - samples[0].stamp_ns) / 1e9 if samples else 0.0
+    assert span_s >= 5.0, span_s
+    assert len(samples) == round(span_s * 50) + 1  # 50 Hz, none lost
     assert np.all(np.abs(heights - robot.STAND_BASE_HEIGHT_M) < 0.02), (
         heights.min(),
         heights.max(),

@@ -1,15 +1,18 @@
-"""A scripted robot and scripted algorithms for the mission tree's unit tests (no Zenoh).
+"""A scripted robot and scripted algorithms for the mission's unit tests (no Zenoh).
 
-`FakeRobot` implements `RobotPort`: a map of artifacts and people, a navigation that
-finishes a goal after `nav_ticks` ticks (or fails it, as scripted per goal kind), a
-whole-body controller whose modes take effect on the next tick and whose arm goals
-finish after `arm_ticks` (or fail, as scripted per kind), a grasp detector that holds
-after a Grasp and can be made to let go while carrying, and a wrist camera that sees the
-artifacts listed in `visible`. Everything the tree asked for is recorded.
+`FakeRobot` implements `RobotPort`: a map of artifacts and people (and an occupancy grid
+and floor plan's supports for the patrol), a navigation that finishes a goal after
+`nav_ticks` ticks (or fails it, as scripted per goal kind; a pose goal leaves the robot
+at the pose; `nav_refuse` refuses chosen goals), a whole-body controller whose modes
+take effect on the next tick and whose arm goals finish after `arm_ticks` (or fail, as
+scripted per kind), a grasp detector that holds after a Grasp and can be made to let go
+while carrying, and a wrist camera that sees the artifacts listed in `visible`.
+Everything the tree (or the patrol) asked for is recorded.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal, cast
 
@@ -25,9 +28,10 @@ from common.messages.navigation import (
     NavState,
     NavStatus,
     PersonHandover,
+    PoseGoal,
 )
 from common.messages.perception import Detection
-from common.messages.semantic_map import MapEntity
+from common.messages.semantic_map import MapEntity, OccupancyGrid
 from common.messages.wbc import (
     ArmGoal,
     GoalState,
@@ -38,6 +42,7 @@ from common.messages.wbc import (
     WbcModeName,
     WbcStatus,
 )
+from common.messages.world import SupportSurface
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.algorithms import Algorithms
 from services.mission.behaviours.base import Context
@@ -92,8 +97,14 @@ class FakeRobot:
     looked_near: list[tuple[float, float] | None] = field(default_factory=list)
     nav_ticks: int = 3
     arm_ticks: int = 2
-    #: Goal kind (`artifact_standoff`, `person_handover`) → "refuse" or a NavFailure.
+    #: Goal kind (`artifact_standoff`, `person_handover`, `pose`) → "refuse" or a NavFailure.
     nav_fail: dict[str, str] = field(default_factory=dict)
+    #: Goals navigation refuses (no typed code: this goal only), when given.
+    nav_refuse: Callable[[NavGoal], bool] | None = None
+    #: The map's occupancy grid (None: 8 × 8 m of free floor about the origin) and the
+    #: floor plan's supports.
+    grid: OccupancyGrid | None = None
+    supports: list[SupportSurface] = field(default_factory=list)
     #: Arm goal kind (`posture`, `reach`, `grasp`, `release`) → "refuse" or a reason.
     arm_fail: dict[str, str] = field(default_factory=dict)
     #: Grasps that close on nothing before one holds.
@@ -183,6 +194,19 @@ class FakeRobot:
         self._map()
         return list(self.people_.values())
 
+    def occupancy(self) -> OccupancyGrid:
+        self._map()
+        if self.grid is not None:
+            return self.grid
+        cells = np.zeros((80, 80), np.uint8)
+        return OccupancyGrid(
+            stamp_ns=self.t, resolution_m=0.1, origin_xy=(-4.0, -4.0), cells=to_wire(cells)
+        )
+
+    def floor_supports(self) -> list[SupportSurface]:
+        self._map()
+        return list(self.supports)
+
     def robot_xy(self) -> tuple[float, float] | None:
         return self.xy
 
@@ -192,8 +216,14 @@ class FakeRobot:
     # -- navigation -----------------------------------------------------------------------
 
     def send_nav_goal(self, goal: NavGoal) -> str:
-        kind = "artifact_standoff" if isinstance(goal, ArtifactStandoff) else "person_handover"
-        if self.nav_fail.get(kind) == "refuse":
+        kind = (
+            "artifact_standoff"
+            if isinstance(goal, ArtifactStandoff)
+            else "person_handover"
+            if isinstance(goal, PersonHandover)
+            else "pose"
+        )
+        if self.nav_fail.get(kind) == "refuse" or (self.nav_refuse and self.nav_refuse(goal)):
             raise Refused("invalid_goal: scripted refusal")
         goal_id = f"nav_{len(self.nav_goals) + 1}"
         self.nav_goals.append((goal_id, goal))
@@ -228,6 +258,10 @@ class FakeRobot:
             self._nav[goal_id] = (start, kind, state)
             if state == "succeeded" and kind == "person_handover":
                 self._arrive_at_person(goal_id)
+            if state == "succeeded" and kind == "pose":
+                pose = next(g for i, g in self.nav_goals if i == goal_id)
+                assert isinstance(pose, PoseGoal)
+                self.xy, self.yaw = (pose.x, pose.y), pose.yaw
         reason = self.nav_fail.get(kind, "") if state == "failed" else ""
         progress = min(1.0, (self.t - start) / (self.nav_ticks * TICK_NS))
         return NavStatus(

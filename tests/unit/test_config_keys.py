@@ -51,6 +51,20 @@ def test_environment_then_flags_override_the_file() -> None:
     assert config.sim.world_seed == 5
 
 
+def test_a_nested_section_takes_flags_and_variables_by_its_path() -> None:
+    env = {
+        "DUME_NAVIGATION_CONTROLLER_V_MAX": "[0.4, 0.3, 0.8]",
+        "DUME_WBC_GAIT_D_MAX": "[1, 1, 1]",
+    }
+    config = load_config(["navigation.people.slow_speed=0.2"], env=env)
+    assert config.navigation.controller.v_max == [0.4, 0.3, 0.8]
+    assert config.wbc.gait.d_max == [1.0, 1.0, 1.0]
+    assert config.navigation.people.slow_speed == 0.2
+    # A key whose name starts like a nested section's is still the section's own.
+    env = {"DUME_NAVIGATION_PEOPLE_IN_COSTMAP": "false"}
+    assert load_config(env=env).navigation.people_in_costmap is False
+
+
 def test_flags_parse_once_into_data_and_a_later_one_wins() -> None:
     data = parse_overrides(['sim.world="small"', "sim.world_seed=3", "sim.world=hall"])
     assert data == {"sim.world_seed": 3, "sim.world": "hall"}
@@ -65,8 +79,10 @@ def test_flags_parse_once_into_data_and_a_later_one_wins() -> None:
         (["sim.world_seed=abc"], {}, "$.sim.world_seed"),
         ([], {"DUME_NOPE_X": "1"}, "no section 'nope'"),
         (["zenoh.port=0"], {}, "$.zenoh.port"),
-        (["navigation.v_max=[0.5, 0.3]"], {}, "$.navigation.v_max"),
-        (["wbc.cmd_vel_max=[0.5, 0.0, 1.0]"], {}, "$.wbc.cmd_vel_max"),
+        (["navigation.controller.v_max=[0.5, 0.3]"], {}, "$.navigation.controller.v_max"),
+        (["navigation.v_max=[0.5, 0.3, 0.8]"], {}, "unknown field `v_max`"),
+        (["wbc.gait.v_max=[0.5, 0.0, 1.0]"], {}, "$.wbc.gait.v_max"),
+        ([], {"DUME_NAVIGATION_PLANNER_GOAL_SEARCH_M": "-1"}, "$.navigation.planner"),
         (["mission.query_timeout_s=-1"], {}, "$.mission.query_timeout_s"),
         (["time.participants.p.period_s=0.0015"], {}, "whole ticks"),
         (["nonsense"], {}, "section.key=value"),

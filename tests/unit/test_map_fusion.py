@@ -1,4 +1,4 @@
-"""Artifact fusion, the missing test, the database, the map file and the patrol route."""
+"""Artifact fusion, the missing test, the database and the map file."""
 
 from __future__ import annotations
 
@@ -8,13 +8,11 @@ import numpy as np
 
 from common.camera import PinholeCamera
 from common.geometry import make_T
-from common.messages import as_numpy
 from services.semantic_map.artifacts import ArtifactTracker, FusionParams
 from services.semantic_map.entities import IdBook, Observation
 from services.semantic_map.looks import looks_at
 from services.semantic_map.mapfile import seed_from_world
 from services.semantic_map.occupancy import OCCUPIED, Occupancy
-from services.semantic_map.patrol import PatrolFollower, coverage_route
 from services.semantic_map.store import Grid, MapStore
 from services.sim.world import generate_world
 
@@ -86,25 +84,6 @@ def test_the_store_keeps_what_was_committed(tmp_path: Path) -> None:
     assert snap.entities[0][0].source == "seed-from-world"
     assert snap.counters == {"bottle": 1, "person": 1}
     assert np.array_equal(snap.grids["learned"].cells, np.eye(3))
-
-
-def test_the_patrol_route_reaches_viewpoints_over_the_small_world() -> None:
-    w = generate_world(0, "small")
-    g = w.occupancy
-    cells = np.asarray(as_numpy(g.cells), np.uint8)
-    route = coverage_route(
-        cells, g.resolution, g.origin, (w.robot_start.x, w.robot_start.y), 2.5, 0.7
-    )
-    assert len(route.viewpoints) >= 3
-    occ = Occupancy(cells, g.resolution, g.origin)
-    for path in route.paths:  # every path point keeps off the obstacles
-        assert not occ.occupied_at(path).any()
-    f = PatrolFollower(route)
-    x, y, yaw, t = w.robot_start.x, w.robot_start.y, w.robot_start.yaw, 0
-    while not f.done and t < 600 * 10**9:
-        vx, _vy, wz = f.step(x, y, yaw, t)
-        x, y, yaw, t = x + 0.1 * vx * np.cos(yaw), y + 0.1 * vx * np.sin(yaw), yaw + 0.1 * wz, t + S
-    assert f.done and f.skipped == 0
 
 
 def _seen(

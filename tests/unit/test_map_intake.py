@@ -1,6 +1,7 @@
 """The map's intake (`services.semantic_map.intake`) on fake subscriptions: detections
 are kept per stamp and camera, released for fusion in stamp order once due, and at a
-perception tick only when every fused camera's frame due then is in (bounded)."""
+perception tick only when every fused camera's frame due then is in (bounded); the wrist
+camera is fused while the mission's patrol status says it holds the arm in `look`."""
 
 from __future__ import annotations
 
@@ -14,9 +15,15 @@ import pytest
 
 from common.bus import WaitTimeout
 from common.lockstep import Schedule
+from common.messages.mission import PatrolStatus
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame
-from services.semantic_map.intake import DetectionIntake, fused_cameras, perception_due
+from services.semantic_map.intake import (
+    DetectionIntake,
+    fused_cameras,
+    patrol_holds_look,
+    perception_due,
+)
 
 MS = 1_000_000
 PERIOD = 100 * MS
@@ -106,6 +113,13 @@ def test_only_fused_cameras_are_kept_and_released_in_their_order() -> None:
 def test_the_wrist_camera_is_fused_only_while_a_patrol_holds_the_arm_up() -> None:
     assert fused_cameras(["head"], ["wrist", "head"], arm_up=False) == ["head"]
     assert fused_cameras(["head"], ["wrist", "head"], arm_up=True) == ["head", "wrist"]
+
+
+def test_the_missions_patrol_status_says_when_the_arm_is_up() -> None:
+    assert not patrol_holds_look(None)  # no mission, or nothing from it yet
+    assert patrol_holds_look(PatrolStatus(stamp_ns=0, state="running", arm_look=True))
+    assert not patrol_holds_look(PatrolStatus(stamp_ns=0, state="running", arm_look=False))
+    assert not patrol_holds_look(PatrolStatus(stamp_ns=0, state="done", arm_look=True))
 
 
 def test_perception_is_waited_for_only_as_a_live_periodic_producer_in_lockstep() -> None:

@@ -11,11 +11,18 @@ import math
 import numpy as np
 import pytest
 
-from services.navigation.controller import ControllerParams, Follower
+from common.config import ControllerSettings, NavigationSettings, PeopleSettings
+from services.navigation.controller import Follower
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
-from services.navigation.navigator import GoalSpec, Navigator, NavParams
-from services.navigation.people import PeopleParams, SpeedLimit, people_limit
+from services.navigation.navigator import GoalSpec, Navigator
+from services.navigation.people import (
+    BRAKE_LEAD_M,
+    RESUME_MARGIN_M,
+    TRACKING_MARGIN,
+    SpeedLimit,
+    people_limit,
+)
 
 DT = 0.05
 FP = Footprint.stowed()
@@ -52,7 +59,7 @@ def _follow(f: Follower, pose: Pose, ticks: int, dead_band: float = 0.0) -> tupl
 
 def test_inside_the_position_tolerance_the_heading_goes_to_the_goal_yaw_not_the_path() -> None:
     # 7 cm short of the goal, beside the path: the blend's path direction points sideways.
-    f = Follower(_path(2.0, math.pi / 2), ControllerParams())
+    f = Follower(_path(2.0, math.pi / 2), ControllerSettings())
     f.index = len(f.poses) - 3
     pose = Pose(1.95, 0.05, math.pi / 2 - 0.25)
     out = f.step(pose, DT, 0.0, math.inf, 0.1, 0.1)
@@ -66,7 +73,7 @@ def test_inside_the_position_tolerance_the_heading_goes_to_the_goal_yaw_not_the_
 @pytest.mark.parametrize("yaw_off", [0.12, -0.2, 0.6, -2.5])
 def test_the_final_align_finishes_through_a_turning_dead_band(yaw_off: float) -> None:
     """A base that ignores |ωz| < 0.15 rad/s still reaches a 0.1 rad tolerance."""
-    f = Follower(_path(1.0, 0.0), ControllerParams())
+    f = Follower(_path(1.0, 0.0), ControllerSettings())
     f.index = len(f.poses) - 1
     arrived, end = _follow(f, Pose(1.0, 0.02, yaw_off), 400, dead_band=0.15)
     assert arrived, end
@@ -74,7 +81,7 @@ def test_the_final_align_finishes_through_a_turning_dead_band(yaw_off: float) ->
 
 
 def test_the_align_latch_holds_translation_while_the_base_drifts_a_little() -> None:
-    f = Follower(_path(1.0, 0.0), ControllerParams())
+    f = Follower(_path(1.0, 0.0), ControllerSettings())
     f.index = len(f.poses) - 1
     f.step(Pose(0.95, 0.0, 1.0), DT, 0.0, math.inf, 0.1, 0.1)
     out = f.step(Pose(0.88, 0.0, 1.0), DT, 0.0, math.inf, 0.1, 0.1)  # 12 cm: still latched
@@ -105,7 +112,7 @@ def _run(nav: Navigator, pose: Pose, cm_for_t, ticks: int):  # type: ignore[no-u
 
 def test_a_goal_behind_the_robot_is_reached_without_any_recovery() -> None:
     cm = build_costmap(_open_floor(), FP, CostParams())
-    nav = Navigator(FP, NavParams(), DT)
+    nav = Navigator(FP, NavigationSettings(), DT)
     nav.start(GoalSpec("g", Pose(3.0, 1.0, -2.0), 0.1, 0.1), 0)
     outs = _run(nav, Pose(2.0, 0.0, math.pi), lambda _t, _p: cm, 2000)
     assert outs[-1][2].state == "succeeded", outs[-1][2]
@@ -116,7 +123,7 @@ def test_a_person_ahead_slows_then_stops_the_robot_short_of_them() -> None:
     person = Person("person_1", 4.0, 0.0, math.pi)
     cm = build_costmap(_open_floor(), FP, CostParams(), people=[])
     cm = type(cm)(cm.grid, cm.cost, cm.occupied, cm.clearance, (person,))
-    nav = Navigator(FP, NavParams(), DT)
+    nav = Navigator(FP, NavigationSettings(), DT)
     nav.start(GoalSpec("g", Pose(5.5, 0.0, 0.0), 0.1, 0.1), 0)
     outs = _run(nav, Pose(0.0, 0.0, 0.0), lambda _t, _p: cm, 400)
     gap = [person.x - p.x - FP.front for _, p, _ in outs]
@@ -128,7 +135,7 @@ def test_a_person_ahead_slows_then_stops_the_robot_short_of_them() -> None:
 
 
 def test_a_base_that_drifted_out_while_turning_walks_back_in_and_arrives() -> None:
-    f = Follower(_path(1.0, 0.0), ControllerParams())
+    f = Follower(_path(1.0, 0.0), ControllerSettings())
     f.index = len(f.poses) - 1
     f.step(Pose(0.95, 0.0, 0.5), DT, 0.0, math.inf, 0.1, 0.1)  # latched, turning
     out = f.step(Pose(0.88, 0.0, 0.02), DT, 0.0, math.inf, 0.1, 0.1)  # turned, 12 cm out
@@ -138,22 +145,22 @@ def test_a_base_that_drifted_out_while_turning_walks_back_in_and_arrives() -> No
 
 
 def test_the_people_caps_are_met_at_their_boundaries_on_a_braking_ramp() -> None:
-    p = PeopleParams()
+    p, top = PeopleSettings(), 0.6  # a base whose top speed is 0.6 m/s
     pose = Pose(0.0, 0.0, 0.0)
 
     def cap(gap: float, direction: tuple[float, float] | None = (1.0, 0.0)) -> SpeedLimit:
-        return people_limit(pose, direction, [Person("person_1", FP.front + gap, 0.0)], FP, p)
+        return people_limit(pose, direction, [Person("person_1", FP.front + gap, 0.0)], FP, p, top)
 
     assert cap(4.0).rule == ""  # far: no cap below the top speed
     assert 0.3 < cap(2.3).speed < 0.6  # braking towards the slow zone
-    slow = 0.3 * (1.0 - p.tracking_margin)
-    assert cap(2.0 + p.brake_lead_m).speed == pytest.approx(slow)  # in it at the slow speed
+    slow = 0.3 * (1.0 - TRACKING_MARGIN)
+    assert cap(2.0 + BRAKE_LEAD_M).speed == pytest.approx(slow)  # in it at the slow speed
     assert cap(1.5, None).speed == pytest.approx(slow)  # not moving towards them: just slow
     assert cap(0.75).speed < slow  # ahead: braking towards the stop distance
-    assert cap(p.stop_distance_m + p.brake_lead_m - 1e-6).rule == "stop"
-    held = p.stop_distance_m + p.brake_lead_m + 0.5 * p.resume_margin_m
+    assert cap(p.stop_distance_m + BRAKE_LEAD_M - 1e-6).rule == "stop"
+    held = p.stop_distance_m + BRAKE_LEAD_M + 0.5 * RESUME_MARGIN_M
     assert cap(held).rule == "slow"
-    assert people_limit(pose, (1.0, 0.0), [Person("p", FP.front + held, 0.0)], FP, p,
+    assert people_limit(pose, (1.0, 0.0), [Person("p", FP.front + held, 0.0)], FP, p, top,
                         stopped=True).rule == "stop"  # fmt: skip
 
 
@@ -163,7 +170,7 @@ def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid()
     iy, ix = _open_floor().cell(3.0, 0.0) or (0, 0)
     blob[iy - 9 : iy + 10, ix - 9 : ix + 10] = True  # a depth blob on the goal and the way
     covered = build_costmap(_open_floor(), FP, CostParams(), obstacles=blob)
-    nav = Navigator(FP, NavParams(), DT)
+    nav = Navigator(FP, NavigationSettings(), DT)
     nav.start(GoalSpec("g", Pose(3.0, 0.0, 0.0), 0.1, 0.1), 0)
     outs = _run(nav, Pose(1.6, 0.0, 0.0), lambda t, _p: free if t == 0 else covered, 40)
     assert all(o.reason != "invalid_goal" for _, _, o in outs)

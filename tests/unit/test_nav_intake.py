@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from common.bus import RequestError
+from common.config import NavigationSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import (
     ArtifactStandoff,
@@ -21,7 +22,7 @@ from common.messages.navigation import (
 from services.navigation.costmap import Costmap, CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
 from services.navigation.intake import MAP_WAIT_S, GoalIntake
-from services.navigation.navigator import Navigator, NavParams
+from services.navigation.navigator import Navigator
 from services.navigation.sources import SourceError
 
 FP = Footprint.stowed()
@@ -60,7 +61,7 @@ class _Rig:
     """An intake with a real navigator, a fake map source and a list of cancels."""
 
     def __init__(self, lockstep: bool = True, costmap: Costmap | None = None) -> None:
-        self.nav = Navigator(FP, NavParams(), PERIOD / NS_PER_S)
+        self.nav = Navigator(FP, NavigationSettings(), PERIOD / NS_PER_S)
         self.source = _Source()
         self.costmap, self.pose = costmap, Pose(1.0, 1.0, 0.0)
         self.inbox: list[NavCancel] = []

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
+from common.config import NavigationSettings, PeopleSettings, PlannerSettings
 from services.navigation import native
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.goals import GoalError, handover_pose, standoff_pose
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint, footprint_free
-from services.navigation.people import PeopleParams, people_limit
-from services.navigation.planner import PlanError, PlanParams, plan, pose_ok
+from services.navigation.people import TRACKING_MARGIN, people_limit
+from services.navigation.planner import PlanError, plan, pose_ok
 from services.sim import feasibility as fz
 from services.sim.world import generate_world
 
@@ -53,13 +54,13 @@ def _room(walls: list[tuple[slice, slice]]) -> Grid:
 def test_a_goal_behind_a_closed_wall_is_refused_with_no_path() -> None:
     cm = build_costmap(_room([(slice(None), slice(78, 82))]), FP, CostParams())
     with pytest.raises(PlanError) as err:
-        plan(cm, Pose(1.5, 3.0, 0.0), Pose(6.5, 3.0, 0.0), FP, PlanParams())
+        plan(cm, Pose(1.5, 3.0, 0.0), Pose(6.5, 3.0, 0.0), FP, PlannerSettings())
     assert err.value.reason == "no_path"
 
 
 def test_a_plan_goes_around_a_wall_through_its_gap() -> None:
     cm = build_costmap(_room([(slice(0, 80), slice(78, 82))]), FP, CostParams())
-    result = plan(cm, Pose(1.5, 1.5, 0.0), Pose(6.5, 1.5, 0.0), FP, PlanParams())
+    result = plan(cm, Pose(1.5, 1.5, 0.0), Pose(6.5, 1.5, 0.0), FP, PlannerSettings())
     assert result.poses[:, 1].max() > 4.0  # through the gap at y > 4 m
     iy, ix, _ = cm.grid.cells(result.poses[:, :2])
     assert np.all(cm.cost[iy, ix] >= 0)
@@ -68,12 +69,12 @@ def test_a_plan_goes_around_a_wall_through_its_gap() -> None:
 def test_a_goal_in_an_obstacle_moves_to_the_nearest_free_pose() -> None:
     cm = build_costmap(_room([(slice(50, 70), slice(70, 90))]), FP, CostParams())
     goal = Pose(4.0, 3.0, 0.0)  # the block's centre
-    result = plan(cm, Pose(1.5, 3.0, 0.0), goal, FP, PlanParams(goal_tolerance_m=1.5))
+    result = plan(cm, Pose(1.5, 3.0, 0.0), goal, FP, PlannerSettings(goal_search_m=1.5))
     moved = math.hypot(result.goal.x - goal.x, result.goal.y - goal.y)
     assert 0.0 < moved <= 1.5
     assert footprint_free(cm.occupied, cm.grid, result.goal, FP, 0.03)
     with pytest.raises(PlanError) as err:
-        plan(cm, Pose(1.5, 3.0, 0.0), goal, FP, PlanParams(goal_tolerance_m=0.2))
+        plan(cm, Pose(1.5, 3.0, 0.0), goal, FP, PlannerSettings(goal_search_m=0.2))
     assert err.value.reason == "invalid_goal"
 
 
@@ -127,29 +128,27 @@ def test_a_handover_pose_near_a_wall_is_one_the_planner_accepts(seed: int) -> No
 
 
 def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
-    p = PeopleParams()
+    p, top = PeopleSettings(), 0.6  # a base whose top speed is 0.6 m/s
     pose = Pose(0.0, 0.0, 0.0)
     ahead = lambda x: [Person("person_1", x, 0.0)]  # noqa: E731
-    assert people_limit(pose, (1.0, 0.0), ahead(5.0), FP, p).rule == ""
-    slow = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.5), FP, p)
-    assert slow.rule == "slow" and slow.speed == pytest.approx(
-        p.slow_speed * (1 - p.tracking_margin)
-    )
-    stop = people_limit(pose, (1.0, 0.0), ahead(FP.front + 0.5), FP, p)
+    assert people_limit(pose, (1.0, 0.0), ahead(5.0), FP, p, top).rule == ""
+    slow = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.5), FP, p, top)
+    assert slow.rule == "slow" and slow.speed == pytest.approx(p.slow_speed * (1 - TRACKING_MARGIN))
+    stop = people_limit(pose, (1.0, 0.0), ahead(FP.front + 0.5), FP, p, top)
     assert stop.rule == "stop" and stop.speed == 0.0
-    leaving = people_limit(pose, (-1.0, 0.0), ahead(FP.front + 0.5), FP, p)
+    leaving = people_limit(pose, (-1.0, 0.0), ahead(FP.front + 0.5), FP, p, top)
     assert leaving.rule == "slow"
-    handing = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.0), FP, p, "person_1")
+    handing = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.0), FP, p, top, "person_1")
     assert handing.rule == "handover"
-    assert handing.speed == pytest.approx(p.handover_speed * (1 - p.tracking_margin))
+    assert handing.speed == pytest.approx(p.handover_speed * (1 - TRACKING_MARGIN))
     d = distance_to_footprint(pose, FP, np.array([[FP.front + 0.5, 0.0]]))
     assert d[0] == pytest.approx(0.5)
 
 
 def test_an_idle_navigator_ticks_at_rest_without_a_goal() -> None:
-    from services.navigation.navigator import Navigator, NavParams
+    from services.navigation.navigator import Navigator
 
-    nav = Navigator(FP, NavParams(), 0.05)
+    nav = Navigator(FP, NavigationSettings(), 0.05)
     cm = build_costmap(_room([]), FP, CostParams())
     out = nav.tick(0, Pose(1.0, 1.0, 0.0), cm)
     assert out.state == "idle"

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from common import robot
+from common.config import WbcSettings
 from common.geometry import make_T
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from services.wbc.arm_actions import ArmActions, ArmObservation, GoalRefused, check_reach
@@ -41,7 +42,7 @@ def reach_goal(H: np.ndarray, frame: str = "world", stamp_ns: int = 0, pre: floa
 
 
 def test_a_reach_succeeds_once_the_tcp_is_at_the_goal_after_the_motion() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     goal_T = make_T(np.eye(3), np.array([0.6, 0.0, 0.9]))
     a.start("g1", reach_goal(goal_T), 0, obs(make_T(np.eye(3), [0.3, 0.0, 0.8])), no_pose)
     refs = a.update(10 * MS, obs(make_T(np.eye(3), [0.3, 0.0, 0.8])))
@@ -54,7 +55,7 @@ def test_a_reach_succeeds_once_the_tcp_is_at_the_goal_after_the_motion() -> None
 
 
 def test_a_reach_goes_through_the_pregrasp_pose_on_the_approach_axis() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     goal_T = make_T(np.eye(3), np.array([0.6, 0.0, 0.9]))
     start = make_T(np.eye(3), np.array([0.6, 0.0, 0.5]))
     a.start("g1", reach_goal(goal_T, pre=0.1), 0, obs(start), no_pose)
@@ -65,7 +66,7 @@ def test_a_reach_goes_through_the_pregrasp_pose_on_the_approach_axis() -> None:
 
 
 def test_a_base_frame_reach_is_fixed_in_the_world_from_the_pose_at_its_stamp() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     T_wb = make_T(np.eye(3), np.array([2.0, 1.0, 0.5]))
     H = make_T(np.eye(3), np.array([0.5, 0.0, 0.3]))
     a.start("g1", reach_goal(H, "base", 5 * MS, 0.0), 9 * MS, obs(), lambda t: T_wb)
@@ -74,14 +75,14 @@ def test_a_base_frame_reach_is_fixed_in_the_world_from_the_pose_at_its_stamp() -
 
 
 def test_a_reach_without_a_base_pose_at_its_stamp_fails_with_a_reason() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", reach_goal(np.eye(4), "base"), 0, obs(), no_pose)
     status = a.statuses()[0]
     assert status.state == "failed" and "base pose" in status.reason
 
 
 def test_a_reach_that_never_gets_there_fails_and_says_how_far() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", reach_goal(make_T(np.eye(3), [0.6, 0.0, 0.9]), pre=0.0), 0, obs(), no_pose)
     a.update(60_000 * MS, obs(make_T(np.eye(3), [0.6, 0.0, 0.85])))
     status = a.statuses()[0]
@@ -90,7 +91,7 @@ def test_a_reach_that_never_gets_there_fails_and_says_how_far() -> None:
 
 
 def test_a_new_goal_preempts_the_active_one_and_the_arm_holds_its_reference() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", reach_goal(make_T(np.eye(3), [0.6, 0.0, 0.9]), pre=0.0), 0, obs(), no_pose)
     mid = a.update(200 * MS, obs()).T_world_tcp
     a.start("g2", Grasp(), 200 * MS, obs(), no_pose)
@@ -101,17 +102,17 @@ def test_a_new_goal_preempts_the_active_one_and_the_arm_holds_its_reference() ->
 
 
 def test_a_grasp_succeeds_when_the_jaw_stops_short_of_closed_with_effort() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", Grasp(max_effort=20.0), 0, obs(), no_pose)
     refs = a.update(1 * MS, obs(angle=-0.6, velocity=1.0))
-    assert refs.gripper_effort == a.params.grip_effort_max_nm  # the cap applies
+    assert refs.gripper_effort == a.settings.grip_effort_max_nm  # the cap applies
     for k in range(2, 200):
         a.update(k * MS, obs(angle=-0.4, velocity=0.0, effort=4.0))
     assert state_of(a, "g1") == "succeeded" and a.held
 
 
 def test_a_grasp_on_nothing_fails_and_the_jaw_holds_closed() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", Grasp(), 0, obs(), no_pose)
     for k in range(1, 200):
         a.update(k * MS, obs(angle=0.0, velocity=0.0, effort=5.0))
@@ -120,7 +121,7 @@ def test_a_grasp_on_nothing_fails_and_the_jaw_holds_closed() -> None:
 
 
 def test_release_opens_the_jaw_and_drops_the_held_flag() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", Grasp(), 0, obs(), no_pose)
     for k in range(1, 200):
         a.update(k * MS, obs(angle=-0.4, effort=4.0))
@@ -133,7 +134,7 @@ def test_release_opens_the_jaw_and_drops_the_held_flag() -> None:
 
 
 def test_a_posture_moves_the_arm_smoothly_and_keeps_a_held_object_gripped() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g0", Grasp(), 0, obs(), no_pose)
     for k in range(1, 200):
         a.update(k * MS, obs(angle=-0.4, effort=4.0))
@@ -149,7 +150,7 @@ def test_a_posture_moves_the_arm_smoothly_and_keeps_a_held_object_gripped() -> N
 
 
 def test_leaving_manipulate_drops_the_tcp_target_and_holds_the_joints() -> None:
-    a = ArmActions()
+    a = ArmActions(WbcSettings())
     a.start("g1", reach_goal(make_T(np.eye(3), [0.6, 0.0, 0.9])), 0, obs(), no_pose)
     q_now = robot.POSTURES["ready"][ARM]
     a.cancel("mode manipulate -> walk", 100 * MS, obs(q_arm=q_now), drop_pose=True)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from common import robot
-from services.wbc.gait import GaitParams, TrotGait, bump, quintic, shape_velocity
+from common.config import GaitSettings
+from services.wbc.gait import TrotGait, bump, quintic, shape_velocity
 
 FEET = np.array(
     [
@@ -19,7 +20,7 @@ FEET = np.array(
 
 
 def test_velocity_shaping_clamps_to_limits_and_acceleration() -> None:
-    p = GaitParams()
+    p = GaitSettings()
     v = np.zeros(3)
     for _ in range(5000):
         v = shape_velocity(np.array([5.0, -5.0, 5.0]), v, 0.001, p)
@@ -49,7 +50,7 @@ def run(gait: TrotGait, cmd: np.ndarray, seconds: float) -> list[np.ndarray]:
 
 
 def test_trot_alternates_diagonal_pairs_and_stops_with_all_feet_down() -> None:
-    gait = TrotGait()
+    gait = TrotGait(GaitSettings())
     assert not gait.walking and gait.stance.sum() == 4
     stances = run(gait, np.array([0.3, 0.0, 0.0]), 1.0)
     swings = {tuple(s) for s in stances}
@@ -59,7 +60,7 @@ def test_trot_alternates_diagonal_pairs_and_stops_with_all_feet_down() -> None:
 
 
 def test_footholds_step_ahead_when_walking_forward_and_into_a_push() -> None:
-    gait = TrotGait()
+    gait = TrotGait(GaitSettings())
     run(gait, np.array([0.5, 0.0, 0.0]), 0.6)
     still = gait.foothold(0, np.zeros(2), 0.0, np.array([0.5, 0.0, 0.0]), 0.5)
     assert still[0] > FEET[0, 0] + 0.05 and abs(still[1] - FEET[0, 1]) < 0.02
@@ -69,7 +70,7 @@ def test_footholds_step_ahead_when_walking_forward_and_into_a_push() -> None:
 
 
 def test_braking_is_harder_than_speeding_up() -> None:
-    p = GaitParams(a_max=(1.0, 1.0, 2.0), d_max=(2.0, 2.0, 3.0))
+    p = GaitSettings(a_max=[1.0, 1.0, 2.0], d_max=[2.0, 2.0, 3.0])
     dt = 0.002
     v = np.zeros(3)
     t_up = 0

@@ -1,4 +1,4 @@
-"""The mapping patrol through navigation: a coverage route as a sequence of pose goals.
+"""The mapping patrol's goals: a coverage route as a sequence of navigation pose goals.
 
 `patrol_goals(route, start_yaw, turns)` turns a `Route` into navigation pose goals: for
 each viewpoint, a walk there (facing along the last stretch of the route's path to it),
@@ -7,7 +7,8 @@ circle (a turn is a pose goal at the same place with the next yaw: navigation tu
 place). `NavPatrol` steps through them on the answers it is given: a goal sent, refused,
 or finished (succeeded or not). A walk goal that is refused or fails skips its
 viewpoint (its look-around too) and is counted; a failed turn is passed over. No
-transport and no clock here: the node sends the goals and feeds the answers back.
+transport and no clock here: the patrol (`services.mission.patrol`) sends the goals and
+feeds the answers back.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.geometry import wrap_angle
-from services.semantic_map.patrol import Route
+from services.mission.coverage import Route
 
 
 @dataclass(frozen=True)

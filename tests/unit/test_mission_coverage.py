@@ -1,5 +1,6 @@
-"""The patrol through navigation: the pose goals of a coverage route and how the patrol
-moves on when navigation answers; the viewpoints the floor plan's tables and benches add."""
+"""The mapping patrol's route (`services.mission.coverage`) and its pose goals
+(`services.mission.patrol_goals`): how the patrol moves on when navigation answers, the
+viewpoints the floor plan's tables and benches add, a route over the small world."""
 
 from __future__ import annotations
 
@@ -8,10 +9,12 @@ import math
 
 import numpy as np
 
-from common.messages.world import SupportSurface
-from services.semantic_map.nav_patrol import NavPatrol, patrol_goals
-from services.semantic_map.occupancy import OCCUPIED
-from services.semantic_map.patrol import Route, coverage_route, support_targets
+from common.grid import occupied_near
+from common.messages import as_numpy
+from common.messages.world import OCCUPIED, SupportSurface
+from services.mission.coverage import Route, coverage_route, support_targets
+from services.mission.patrol_goals import NavPatrol, patrol_goals
+from services.sim.world import generate_world
 
 
 def _route() -> Route:
@@ -80,3 +83,19 @@ def test_a_top_the_lattice_leaves_too_far_gets_a_viewpoint_within_see_m() -> Non
     # every path still ends at its viewpoint and starts where the last one ended
     for a, b in zip(route.paths, route.paths[1:], strict=False):
         assert np.allclose(a[-1], b[0])
+
+
+def test_the_route_over_the_small_world_keeps_off_obstacles_and_joins_up() -> None:
+    w = generate_world(0, "small")
+    g = w.occupancy
+    cells = np.asarray(as_numpy(g.cells), np.uint8)
+    start = (w.robot_start.x, w.robot_start.y)
+    route = coverage_route(cells, g.resolution, g.origin, start, 2.5, 0.7)
+    assert len(route.viewpoints) >= 3
+    occupied = cells == OCCUPIED
+    for path, vp in zip(route.paths, route.viewpoints, strict=True):
+        assert not occupied_near(occupied, g.resolution, g.origin, path, 0.0).any()
+        assert np.allclose(path[-1], vp)
+    for a, b in itertools.pairwise(route.paths):
+        assert np.allclose(a[-1], b[0])
+    assert float(np.hypot(*(route.paths[0][0] - np.array(start)))) < 0.2

@@ -1,7 +1,4 @@
-"""The mapping patrol: a coverage route over the occupancy grid, and a follower that walks
-it with `cmd_vel` itself, looking around at every viewpoint (`patrol_via = "cmd_vel"`, for
-a stack without navigation; the default walks the route through navigation:
-`nav_patrol`).
+"""The mapping patrol's route: viewpoints covering the free space of an occupancy grid.
 
 `coverage_route` puts viewpoints on a lattice of `spacing_m` over the free space that
 keeps `clearance_m` from every obstacle and is connected to the start, visits them
@@ -11,17 +8,17 @@ tables and benches, `support_targets`: the network finds a can there from 2 m, a
 lattice leaves bench tops 2.2-2.3 m from every viewpoint in the hall): each target the
 lattice leaves farther gets the reachable cell nearest to it as a viewpoint of its own,
 when that cell is within `see_m`.
-`PatrolFollower.step(pose, t)` is a pure-pursuit controller along that path (turn in
-place when the heading error is large) and, at each viewpoint, a full turn on the spot so
-the head camera sweeps the surroundings. A viewpoint not reached within `stuck_ns` of
-no progress is skipped and counted.
+
+Pure: the grid is the semantic map's (`dume/map/occupancy`, cells 0 free, 100 occupied,
+255 unknown), the targets its floor plan's supports (`dume/map/supports`); the patrol
+(`services.mission.patrol`) walks the route through navigation (`patrol_goals`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,9 +26,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from common.geometry import FloatArray, wrap_angle
-from common.messages.world import SupportSurface
-from services.semantic_map.occupancy import OCCUPIED
+from common.geometry import FloatArray
+from common.messages.world import OCCUPIED, SupportSurface
 
 PLAN_RES_M = 0.1
 
@@ -157,76 +153,3 @@ def _viewpoints_for(
             added.append((int(reachable[k][0]), int(reachable[k][1])))
             seen_from.append(cells_xy[k])
     return added
-
-
-@dataclass
-class PatrolFollower:
-    """Walk a `Route`: follow each path, then turn once on the spot; see the module doc."""
-
-    route: Route
-    speed: float = 0.5
-    turn_rate: float = 0.6
-    look_around: bool = True
-    lookahead_m: float = 0.6
-    reach_m: float = 0.3
-    stuck_ns: int = 30_000_000_000
-    leg: int = 0
-    phase: str = "walk"
-    skipped: int = 0
-    travelled_m: float = 0.0
-    _turned: float = 0.0
-    _last_yaw: float | None = None
-    _last_xy: FloatArray | None = None
-    _best: float = math.inf
-    _progress_ns: int = 0
-    _i: int = 0
-    log: list[str] = field(default_factory=list)
-
-    @property
-    def done(self) -> bool:
-        return self.leg >= len(self.route.paths)
-
-    def step(self, x: float, y: float, yaw: float, t_ns: int) -> tuple[float, float, float]:
-        """(vx, vy, ωz) in base_yaw for the pose at t; zeros once done."""
-        pos = np.array([x, y])
-        if self._last_xy is not None:
-            self.travelled_m += float(np.linalg.norm(pos - self._last_xy))
-        self._last_xy = pos
-        if self.done:
-            return 0.0, 0.0, 0.0
-        if self.phase == "look":
-            if self._last_yaw is not None:
-                self._turned += abs(wrap_angle(yaw - self._last_yaw))
-            self._last_yaw = yaw
-            if self._turned >= 2 * math.pi:
-                self._next_leg(t_ns)
-                return self.step(x, y, yaw, t_ns)
-            return 0.0, 0.0, self.turn_rate
-        path = self.route.paths[self.leg]
-        goal = path[-1]
-        d_goal = float(np.linalg.norm(goal - pos))
-        if d_goal < self._best - 0.05:
-            self._best, self._progress_ns = d_goal, t_ns
-        if d_goal < self.reach_m:
-            if self.look_around:
-                self.phase, self._turned, self._last_yaw = "look", 0.0, yaw
-                return 0.0, 0.0, self.turn_rate
-            self._next_leg(t_ns)
-            return self.step(x, y, yaw, t_ns)
-        if t_ns - self._progress_ns > self.stuck_ns:
-            self.skipped += 1
-            self.log.append(f"viewpoint {self.leg + 1} not reached: skipped")
-            self._next_leg(t_ns)
-            return self.step(x, y, yaw, t_ns)
-        d = np.linalg.norm(path - pos, axis=1)
-        self._i = max(self._i, int(np.argmin(d[self._i :])) + self._i)
-        ahead = np.nonzero(d[self._i :] >= self.lookahead_m)[0]
-        target = path[self._i + int(ahead[0])] if len(ahead) else goal
-        err = wrap_angle(math.atan2(target[1] - y, target[0] - x) - yaw)
-        wz = float(np.clip(2.0 * err, -self.turn_rate, self.turn_rate))
-        vx = self.speed * max(0.0, math.cos(err)) ** 2 if abs(err) < 0.8 else 0.0
-        return vx, 0.0, wz
-
-    def _next_leg(self, t_ns: int) -> None:
-        self.leg += 1
-        self.phase, self._i, self._best, self._progress_ns = "walk", 0, math.inf, t_ns
