@@ -23,6 +23,7 @@ anything that is not a literal is taken as a string.
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -336,12 +337,71 @@ class NavigationSettings(_Section):
     map_refresh_s: float = 1.0
 
 
+class ApproachSettings(_Section):
+    """The mission's visual approach (`services/mission/approach.py`, eq. 3): gains (1/s),
+    limits (m/s, rad/s, m/s², rad/s²), tolerances (m, rad), times (s of sim time). The
+    optimum (d_opt, θ_opt) is the robot's (`common.robot.D_OPT_M`, `THETA_OPT_RAD`)."""
+
+    #: vx per m of distance error, ωz per rad of heading error.
+    k_d: Positive = 0.8
+    k_theta: Positive = 1.2
+    vx_max: Positive = 0.25
+    wz_max: Positive = 0.5
+    ax_max: Positive = 0.5
+    az_max: Positive = 1.0
+    tol_d_m: Positive = 0.03
+    tol_theta_rad: Positive = 0.05
+    #: Both errors within tolerance this long: arrived.
+    settle_s: Positive = 0.6
+    #: A sighting older than this no longer drives the base; none this long: re-acquire.
+    max_age_s: Positive = 0.35
+    lost_after_s: Positive = 1.0
+    #: Re-acquiring this long without a sighting: failed.
+    reacquire_s: Positive = 5.0
+    #: Turn rate toward the last seen bearing, and how far past its error to turn.
+    reacquire_wz: Positive = 0.3
+    reacquire_turn_margin_rad: Positive = 0.15
+    #: Backwards speed while re-acquiring, and the distance after which backing off stops.
+    back_off_speed: float = 0.08
+    back_off_max_m: float = 0.3
+    #: No arrival this long after the approach starts: failed.
+    timeout_s: Positive = 40.0
+
+    def __post_init__(self) -> None:
+        positive = {
+            k: getattr(self, k)
+            for k in self.__struct_fields__
+            if k not in ("back_off_speed", "back_off_max_m")
+        }
+        bad = {k: v for k, v in positive.items() if not (math.isfinite(v) and v > 0.0)}
+        if bad:
+            raise ValueError(f"approach gains must be finite and positive: {bad}")
+        if not (self.max_age_s < self.lost_after_s):
+            raise ValueError(
+                f"max_age_s ({self.max_age_s}) must be shorter than lost_after_s "
+                f"({self.lost_after_s})"
+            )
+
+
+class PullSettings(_Section):
+    """The felt handover (`services/mission/handover_feel.py`): the pull along the
+    direction to the person that trips it (N), the jaw effort change that counts with
+    half of it (N·m), how long it must hold (s of sim time), the baseline's averaging
+    time (s), and the absolute force that trips it alone (N)."""
+
+    force_n: Positive = 4.0
+    effort_nm: Positive = 0.5
+    debounce_s: Positive = 0.2
+    baseline_s: NonNegative = 0.3
+    absolute_n: Positive = 8.0
+
+
 class MissionSettings(_Section):
     """The mission service (`services/mission`); its rate is its lockstep participant's
     `period_s` (`time.participants.mission`). Times are s of sim time unless named wall.
 
-    The algorithms' own numbers (approach gains, pull threshold) are defaults in their
-    modules; `approach_gains` and `pull_detector` override them by name.
+    The visual approach's gains are `approach_gains` (`ApproachSettings`), the felt
+    handover's thresholds `pull_detector` (`PullSettings`).
     """
 
     #: A status goes out on every change and at least this often.
@@ -387,9 +447,8 @@ class MissionSettings(_Section):
     #: Recovery: re-picks after a grasp lost or failed; instances tried for a class request.
     repick_budget: int = 2
     max_candidates: int = 3
-    #: Overrides of `ApproachGains` fields and of `PullDetector` arguments, by name.
-    approach_gains: dict[str, float] = msgspec.field(default_factory=dict)
-    pull_detector: dict[str, float] = msgspec.field(default_factory=dict)
+    approach_gains: ApproachSettings = msgspec.field(default_factory=ApproachSettings)
+    pull_detector: PullSettings = msgspec.field(default_factory=PullSettings)
     #: The mapping patrol (`dume map --patrol`): viewpoint spacing and the clearance kept
     #: from obstacles, m; a look-around (three turns on the spot) at every viewpoint.
     patrol_spacing_m: Positive = 2.5

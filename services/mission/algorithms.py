@@ -6,8 +6,8 @@
   the whole-body controller's `Reach`; `GraspPoseError` when none is possible);
 - the felt handover (`handover_feel.PullDetector` on `wbc/status`).
 
-`default_algorithms(settings)` binds the real ones (with the config's overrides of their
-defaults); unit tests pass scripted stand-ins.
+`default_algorithms(settings)` binds the real ones (with the settings' approach gains and
+pull thresholds); unit tests pass scripted stand-ins.
 """
 
 from __future__ import annotations
@@ -75,13 +75,9 @@ class Algorithms:
 
 def default_algorithms(settings: MissionSettings) -> Algorithms:
     """The real algorithms, with `approach_gains` and `pull_detector` from the config."""
-    gains = dict(settings.approach_gains)
-    pull: dict[str, Any] = dict(settings.pull_detector)
 
     def approacher() -> Approacher:
-        if gains:
-            return approach.ApproachController(approach.ApproachGains(**gains))
-        return approach.ApproachController()
+        return approach.ApproachController(settings.approach_gains)
 
     def sighting(d_obj: float, theta_obj: float, stamp_s: float) -> Any:
         return approach.Sighting(d_obj=d_obj, theta_obj=theta_obj, stamp_s=stamp_s)
@@ -91,5 +87,5 @@ def default_algorithms(settings: MissionSettings) -> Algorithms:
         sighting=sighting,
         grasp_from_detection=grasp_pose.grasp_from_detection,
         grasp_error=grasp_pose.GraspPoseError,
-        pull_detector=lambda: handover_feel.PullDetector(**pull),
+        pull_detector=lambda: handover_feel.PullDetector(settings.pull_detector),
     )

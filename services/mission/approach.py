@@ -4,7 +4,8 @@
 from the wrist camera, toward (`D_OPT_M`, `THETA_OPT_RAD`) of `common.robot`: vx from the
 distance error (slowed while the heading is off, so the robot turns first), ωz from the
 heading error, vy zero. Commands are clipped to speed limits and rate-limited to
-acceleration limits. The states:
+acceleration limits. The gains, limits and times are settings (`ApproachSettings`,
+`mission.approach_gains`). The states:
 
 - tracking: a sighting no older than `max_age_s` drives the controllers; between
   `max_age_s` and `lost_after_s` without one the base slows to a stop and waits.
@@ -25,6 +26,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from common.config import ApproachSettings
 from common.robot import D_OPT_M, THETA_OPT_RAD
 
 ApproachState = Literal["tracking", "reacquiring", "arrived", "failed"]
@@ -37,46 +39,6 @@ class Sighting:
     d_obj: float
     theta_obj: float
     stamp_s: float
-
-
-@dataclass(frozen=True)
-class ApproachGains:
-    """Gains (1/s), limits (m/s, rad/s, m/s², rad/s²), tolerances (m, rad), times (s)."""
-
-    k_d: float = 0.8  # vx per m of distance error
-    k_theta: float = 1.2  # ωz per rad of heading error
-    d_opt_m: float = D_OPT_M
-    theta_opt_rad: float = THETA_OPT_RAD
-    vx_max: float = 0.25
-    wz_max: float = 0.5
-    ax_max: float = 0.5
-    az_max: float = 1.0
-    tol_d_m: float = 0.03
-    tol_theta_rad: float = 0.05
-    settle_s: float = 0.6  # both errors within tolerance this long: arrived
-    max_age_s: float = 0.35  # a sighting older than this no longer drives the base
-    lost_after_s: float = 1.0  # no sighting this long: re-acquire
-    reacquire_s: float = 5.0  # re-acquiring this long without a sighting: failed
-    reacquire_wz: float = 0.3  # turn rate toward the last seen bearing
-    reacquire_turn_margin_rad: float = 0.15  # turn this much past the last bearing error
-    back_off_speed: float = 0.08  # m/s backwards while re-acquiring
-    back_off_max_m: float = 0.3  # backing off stops after this distance
-    timeout_s: float = 40.0  # no arrival this long after reset: failed
-
-    def __post_init__(self) -> None:
-        positive = {
-            k: v
-            for k, v in vars(self).items()
-            if k not in ("d_opt_m", "theta_opt_rad", "back_off_speed", "back_off_max_m")
-        }
-        bad = {k: v for k, v in positive.items() if not (math.isfinite(v) and v > 0.0)}
-        if bad:
-            raise ValueError(f"approach gains must be finite and positive: {bad}")
-        if not (self.max_age_s < self.lost_after_s):
-            raise ValueError(
-                f"max_age_s ({self.max_age_s}) must be shorter than lost_after_s "
-                f"({self.lost_after_s})"
-            )
 
 
 @dataclass(frozen=True)
@@ -105,8 +67,8 @@ def _wrap(angle: float) -> float:
 class ApproachController:
     """See the module docstring: `reset(t)` at the start, then `step(t, sighting)` each tick."""
 
-    def __init__(self, gains: ApproachGains | None = None) -> None:
-        self.gains = gains or ApproachGains()
+    def __init__(self, gains: ApproachSettings | None = None) -> None:
+        self.gains = gains or ApproachSettings()
         self.reset(0.0)
 
     def reset(self, t_s: float) -> None:
@@ -129,8 +91,7 @@ class ApproachController:
         """(d_obj − d_opt m, θ_obj − θ_opt rad) of the newest sighting, if any."""
         if self._last is None:
             return None
-        g = self.gains
-        return self._last.d_obj - g.d_opt_m, _wrap(self._last.theta_obj - g.theta_opt_rad)
+        return self._last.d_obj - D_OPT_M, _wrap(self._last.theta_obj - THETA_OPT_RAD)
 
     def step(self, t_s: float, seen: Sighting | None) -> ApproachCommand:
         """The command at sim time `t_s` (s), given the newest sighting (None: none)."""
@@ -165,8 +126,8 @@ class ApproachController:
 
     def _on_new_sighting(self, seen: Sighting) -> None:
         g = self.gains
-        e_d = seen.d_obj - g.d_opt_m
-        e_t = _wrap(seen.theta_obj - g.theta_opt_rad)
+        e_d = seen.d_obj - D_OPT_M
+        e_t = _wrap(seen.theta_obj - THETA_OPT_RAD)
         within = abs(e_d) <= g.tol_d_m and abs(e_t) <= g.tol_theta_rad
         if not within:
             self._in_tol_since = None
@@ -175,8 +136,8 @@ class ApproachController:
 
     def _track(self, seen: Sighting, dt: float) -> ApproachCommand:
         g = self.gains
-        e_d = seen.d_obj - g.d_opt_m
-        e_t = _wrap(seen.theta_obj - g.theta_opt_rad)
+        e_d = seen.d_obj - D_OPT_M
+        e_t = _wrap(seen.theta_obj - THETA_OPT_RAD)
         vx = g.k_d * e_d * max(0.0, math.cos(e_t)) ** 2  # turn first when far off
         wz = g.k_theta * e_t
         return self._ramp(vx, wz, dt, "tracking", self._error_text())
@@ -194,7 +155,7 @@ class ApproachController:
                 "failed",
                 f"lost the object: {what}; re-acquiring for {lost_for:.1f} s found nothing",
             )
-        bearing = 0.0 if self._last is None else _wrap(self._last.theta_obj - g.theta_opt_rad)
+        bearing = 0.0 if self._last is None else _wrap(self._last.theta_obj - THETA_OPT_RAD)
         turn_s = (abs(bearing) + g.reacquire_turn_margin_rad) / g.reacquire_wz
         wz = math.copysign(g.reacquire_wz, bearing) if abs(bearing) > g.tol_theta_rad else 0.0
         if lost_for > turn_s:
@@ -202,7 +163,7 @@ class ApproachController:
         # Last seen beyond d_opt: creep toward it (the segmenter is surest up close: a box
         # seen at 0.95 m and lost, then backed away from, was never seen again at 1.25 m);
         # nearer, or never seen: back off to get it into view.
-        ahead = 0.0 if self._last is None else self._last.d_obj - g.d_opt_m - g.tol_d_m
+        ahead = 0.0 if self._last is None else self._last.d_obj - D_OPT_M - g.tol_d_m
         creep_m = min(max(ahead, 0.0), g.back_off_max_m)
         if ahead > 0.0:
             vx = g.back_off_speed if self._backed_m < creep_m else 0.0

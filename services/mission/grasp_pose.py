@@ -64,8 +64,11 @@ class GraspPoseError(Exception):
 
 @dataclass(frozen=True)
 class GraspParams:
-    """pitch_rad: side grasps' least nose-down pitch, raised (within GRASP_PITCH_RAD)
-    until the arm alone reaches the grasp within comfort_gap_m (`common.robot.
+    """Not settings (no `MissionSettings` field mirrors them): the grasp geometry's own
+    numbers, overridden only by tests and benches.
+
+    pitch_rad: side grasps' least nose-down pitch, raised (within GRASP_PITCH_RAD) until
+    the arm alone reaches the grasp within comfort_gap_m (`common.robot.
     tcp_reach_gap`: the whole-body controller stoops the trunk for the rest);
     top_tilt_rad: top grasps' tilt from vertical toward the robot; clearance_m: the TCP
     at least this far above the visible bottom (the gripper reaches 4 cm below its TCP);

@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from common.config import PullSettings
 from common.geometry import FloatArray
 from common.messages.base import NS_PER_S
 from common.messages.wbc import WbcStatus
@@ -42,13 +43,14 @@ class PullDetector:
 
     def __init__(
         self,
-        force_n: float = 4.0,
-        effort_nm: float = 0.5,
-        debounce_s: float = 0.2,
-        baseline_s: float = 0.3,
+        settings: PullSettings | None = None,
         toward: tuple[float, float, float] = (1.0, 0.0, 0.0),
-        absolute_n: float = 8.0,
     ) -> None:
+        """Thresholds from `settings` (`mission.pull_detector`). Not settings: `toward`,
+        the direction from the robot to the person in the base frame."""
+        s = settings or PullSettings()
+        force_n, effort_nm, debounce_s = s.force_n, s.effort_nm, s.debounce_s
+        baseline_s, absolute_n = s.baseline_s, s.absolute_n
         thresholds = (force_n, effort_nm, debounce_s, absolute_n)
         if not all(math.isfinite(x) and x > 0 for x in thresholds):
             raise ValueError(

@@ -6,7 +6,7 @@ shrinks P. One frame's detections are matched to the artifacts of their class gr
 distance, each artifact taking at most one detection, inside a gate of
 max(gate_min, gate_sigmas × √(σ_track² + σ_meas²)). A detection that matches nothing
 starts a tentative track; the second hit gives it the next `<class>_<n>`. Tentative tracks
-not seen again within `tentative_ttl_ns` are dropped (a one-frame false positive never
+not seen again within `TENTATIVE_TTL_NS` are dropped (a one-frame false positive never
 gets an id). An artifact moved elsewhere shows up as a new artifact while the old one is
 found missing at its place (`missing`); a false entry the map made itself, from a few
 detections, is dropped instead (`drop`; the rule is the map's, see `mapper`).
@@ -14,7 +14,7 @@ One object under two classes: the network may call a can on a bench a box from 3
 can from 1.5 m, which makes two artifacts at one place (their axis points within
 `class_merge_m`, closer than two real objects' centres can be). `class_conflicts()`
 pairs such perception-made artifacts as (loser, winner): the class seen more often whole
-(its mask off the image border) from within `near_m` (where the network tells the
+(its mask off the image border) from within `class_near_m` (where the network tells the
 classes apart) wins, then the one with more
 detections; two seen from near fewer than `confirm_hits` times are left alone. A
 tentative track that would give way to a confirmed artifact this way gets no id (it stays
@@ -25,29 +25,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from common.config import SemanticMapSettings
 from services.semantic_map.entities import IdBook, Observation, Track
 
-
-@dataclass(frozen=True)
-class FusionParams:
-    gate_min_m: float = 0.25
-    gate_sigmas: float = 3.0
-    confirm_hits: int = 2
-    tentative_ttl_ns: int = 3_000_000_000
-    near_m: float = 2.0
-    class_merge_m: float = 0.05
+#: Not settings (those are `SemanticMapSettings`: `gate_min_m`, `gate_sigmas`,
+#: `confirm_hits`, `class_near_m`, `class_merge_m`): how long a tentative track lives
+#: unseen, ns.
+TENTATIVE_TTL_NS = 3_000_000_000
 
 
 class ArtifactTracker:
     """Every artifact; `update(stamp, observations)` fuses one frame's detections."""
 
-    def __init__(self, ids: IdBook, params: FusionParams) -> None:
+    def __init__(self, ids: IdBook, settings: SemanticMapSettings) -> None:
         self.ids = ids
-        self.params = params
+        self.settings = settings
         self.tracks: list[Track] = []
 
     @property
@@ -69,7 +64,7 @@ class ArtifactTracker:
 
     def gate(self, track: Track, obs: Observation) -> float:
         spread = np.sqrt(track.sigma_m**2 + obs.sigma_m**2)
-        return max(self.params.gate_min_m, self.params.gate_sigmas * float(spread))
+        return max(self.settings.gate_min_m, self.settings.gate_sigmas * float(spread))
 
     def update(
         self, stamp_ns: int, observations: list[Observation]
@@ -95,7 +90,7 @@ class ArtifactTracker:
             used_o.add(j)
             tr = self.tracks[i]
             self._fuse(tr, observations[j], stamp_ns)
-            if not tr.confirmed and tr.hits >= self.params.confirm_hits:
+            if not tr.confirmed and tr.hits >= self.settings.confirm_hits:
                 self._confirm(tr)
             if tr.confirmed:
                 changed.append(tr)
@@ -114,7 +109,7 @@ class ArtifactTracker:
                 hits=1,
                 near_hits=int(self._near(obs)),
             )
-            if self.params.confirm_hits <= 1:
+            if self.settings.confirm_hits <= 1:
                 self._confirm(tr)
                 if tr.confirmed:
                     changed.append(tr)
@@ -137,8 +132,8 @@ class ArtifactTracker:
         tr.missing_since_ns = None
 
     def _near(self, obs: Observation) -> bool:
-        """A detection whose class counts: whole in its image and within `near_m`."""
-        return obs.whole and obs.range_m <= self.params.near_m
+        """A detection whose class counts: whole in its image and within `class_near_m`."""
+        return obs.whole and obs.range_m <= self.settings.class_near_m
 
     def class_conflicts(self, fused: Sequence[Track] | None = None) -> list[tuple[Track, Track]]:
         """(loser, winner) for each perception-made artifact that is another class's
@@ -164,7 +159,7 @@ class ArtifactTracker:
         """Of two perception-made artifacts of different classes at one place, the one
         whose class gives way (a tie goes against `new`); None when they are not one
         object or neither was seen from near `confirm_hits` times."""
-        p = self.params
+        p = self.settings
         if (
             new.class_name == old.class_name
             or new.source != "perception"
@@ -185,5 +180,5 @@ class ArtifactTracker:
         tr.id = self.ids.next_id(tr.class_name)
 
     def _expire(self, stamp_ns: int) -> None:
-        ttl = self.params.tentative_ttl_ns
+        ttl = TENTATIVE_TTL_NS
         self.tracks = [t for t in self.tracks if t.confirmed or stamp_ns - t.last_seen_ns <= ttl]

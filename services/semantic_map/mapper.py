@@ -38,6 +38,7 @@ from typing import Literal
 import numpy as np
 
 from common.camera import PinholeCamera
+from common.config import SemanticMapSettings
 from common.geometry import FloatArray
 from common.grid import occupied_near
 from common.messages import as_numpy, to_wire
@@ -45,11 +46,11 @@ from common.messages.perception import Detection, Detections
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
 from common.messages.sim import CameraFrame
 from services.semantic_map.appearance import colour_histogram
-from services.semantic_map.artifacts import ArtifactTracker, FusionParams
+from services.semantic_map.artifacts import ArtifactTracker
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
 from services.semantic_map.looks import looks_at
 from services.semantic_map.occupancy import Occupancy
-from services.semantic_map.people import PeopleParams, PeopleTracker, merge_split_people
+from services.semantic_map.people import PeopleTracker, merge_split_people
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
 SELF_RADIUS_M = 0.7
@@ -65,20 +66,6 @@ PERSON_LOOK_HEIGHT_M = 1.0
 #: within 8 m, and a depth read through to the background (a person "143 m" away, seen in
 #: the hall) must not move an entity across the map.
 MAX_RANGE_M = 8.0
-
-
-@dataclass(frozen=True)
-class MapParams:
-    sigma0_m: float = 0.02
-    sigma_per_m: float = 0.02
-    min_score: float = 0.5
-    missing_after_frames: int = 5
-    look_range_m: float = 2.0
-    person_look_range_m: float = 6.0
-    person_obstacle_margin_m: float = 0.1
-    drop_below_observations: int = 10
-    fusion: FusionParams = field(default_factory=FusionParams)
-    people: PeopleParams = field(default_factory=PeopleParams)
 
 
 @dataclass
@@ -102,11 +89,13 @@ def _mat(values: tuple[float, ...]) -> FloatArray:
 class SemanticMap:
     """Artifacts, people and occupancy; see the module docstring."""
 
-    def __init__(self, params: MapParams, occupancy: Occupancy, counters: dict[str, int]) -> None:
-        self.params = params
+    def __init__(
+        self, settings: SemanticMapSettings, occupancy: Occupancy, counters: dict[str, int]
+    ) -> None:
+        self.settings = settings
         self.ids = IdBook(counters)
-        self.artifacts = ArtifactTracker(self.ids, params.fusion)
-        self.people = PeopleTracker(self.ids, params.people)
+        self.artifacts = ArtifactTracker(self.ids, settings)
+        self.people = PeopleTracker(self.ids, settings)
         self.occupancy = occupancy
         self.stamp_ns = 0
         #: Where the static occupancy layer came from: world, file or none.
@@ -170,12 +159,12 @@ class SemanticMap:
 
     def is_false_entry(self, tr: Track) -> bool:
         """An entity the map made itself from too few detections to be trusted missing."""
-        return tr.source == "perception" and tr.hits < self.params.drop_below_observations
+        return tr.source == "perception" and tr.hits < self.settings.drop_below_observations
 
     # -- fusion --------------------------------------------------------------------------
 
     def observation(self, det: Detection, rgb: np.ndarray | None) -> Observation:
-        p = self.params
+        p = self.settings
         sigma = measurement_sigma(det.d_obj, p.sigma0_m, p.sigma_per_m)
         axis = np.asarray(det.axis_in_world, float)
         centroid = np.asarray(det.centroid_in_world, float)
@@ -200,7 +189,7 @@ class SemanticMap:
 
     def _plausible(self, people: list[Observation], report: IngestReport) -> list[Observation]:
         """The people observations not on a static obstacle (module docstring)."""
-        inside = self._near_static(people, self.params.person_obstacle_margin_m)
+        inside = self._near_static(people, self.settings.person_obstacle_margin_m)
         report.ignored += sum(inside)
         return [o for o, bad in zip(people, inside, strict=True) if not bad]
 
@@ -229,7 +218,7 @@ class SemanticMap:
         people: list[Observation] = []
         for det in dets.detections:
             if (
-                det.score < self.params.min_score
+                det.score < self.settings.min_score
                 or not _mask_fits(det)
                 or not 0.0 < det.d_obj <= MAX_RANGE_M
             ):
@@ -286,7 +275,7 @@ class SemanticMap:
         """Count a miss for each entity this frame looked at and did not see; after
         `missing_after_frames` of them an artifact is missing; a false entry is deleted.
         Returns the newly missing ids and the (id, reason) of the deleted ones."""
-        p = self.params
+        p = self.settings
         newly: list[str] = []
         dropped: list[tuple[Track, str]] = []
         for i, tr in enumerate(self.artifacts.tracks):
@@ -321,7 +310,7 @@ class SemanticMap:
     def _class_reason(self, loser: Track, winner: Track) -> str:
         return (
             f"the same object as {winner.id}, seen as a {winner.class_name} from within "
-            f"{self.params.fusion.near_m:g} m {winner.near_hits} time(s) and as a "
+            f"{self.settings.class_near_m:g} m {winner.near_hits} time(s) and as a "
             f"{loser.class_name} {loser.near_hits} time(s)"
         )
 
@@ -331,12 +320,12 @@ class SemanticMap:
         if not looks_at(cam, np.array([tr.xy[0], tr.xy[1], z]), range_m):
             return False
         tr.misses += 1
-        return tr.misses >= self.params.missing_after_frames
+        return tr.misses >= self.settings.missing_after_frames
 
     def _false_entry_reason(self, tr: Track) -> str:
         return (
             f"a false entry: made from {tr.hits} detection(s) (fewer than "
-            f"{self.params.drop_below_observations}), then not seen in {tr.misses} "
+            f"{self.settings.drop_below_observations}), then not seen in {tr.misses} "
             f"looks at its place"
         )
 

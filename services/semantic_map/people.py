@@ -2,29 +2,28 @@
 survive walking, passing each other and short occlusions.
 
 Each frame every person is predicted to the frame's stamp (state x, y, vx, vy; white
-acceleration noise σ_a). A person unseen for `coast_ns` stops being extrapolated: the
-velocity is reset to zero with a covariance of (v_max)², so the position's uncertainty
+acceleration noise σ_a). A person unseen for `COAST_NS` stops being extrapolated: the
+velocity is reset to zero with a covariance of (V_MAX)², so the position's uncertainty
 then grows like a walker's reach instead of drifting along an old heading. Detections are
 assigned to people by the Hungarian method on a cost that adds the Mahalanobis distance
-of the innovation (gated at χ²₂ 99.9 %, or within `gate_min_m`; never beyond
-`max_gate_m`) and the Bhattacharyya
+of the innovation (gated at χ²₂ 99.9 %, or within `GATE_MIN_M`; never beyond
+`MAX_GATE_M`) and the Bhattacharyya
 distance of the colour histograms: two people crossing are told apart by their clothes
-where their positions are ambiguous. The colours veto a match (beyond `max_appearance`)
+where their positions are ambiguous. The colours veto a match (beyond `MAX_APPEARANCE`)
 only when the detection is not where the person is expected (outside χ²₂ 95 %): a person
 standing where they were, seen from behind or under another light, is still them (the
 small-world patrol gave one standing person four ids when the colours vetoed). A detection left over
 starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
-unless it lies within `min_separation_m` of a person (then it is a piece of that body,
+unless it lies within `MIN_SEPARATION_M` of a person (then it is a piece of that body,
 e.g. legs whose colours did not match the shirt).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from common.config import SemanticMapSettings
 from common.geometry import FloatArray
 from services.semantic_map.appearance import bhattacharyya, blend
 from services.semantic_map.entities import IdBook, Observation, Track
@@ -34,29 +33,28 @@ CHI2_2D_95 = 5.99
 _BIG = 1e6
 
 
-@dataclass(frozen=True)
-class PeopleParams:
-    accel_sigma: float = 1.5
-    appearance_weight: float = 4.0
-    max_appearance: float = 0.6
-    gate_min_m: float = 0.4
-    confirm_hits: int = 2
-    tentative_ttl_ns: int = 2_000_000_000
-    coast_ns: int = 2_000_000_000
-    v_max: float = 1.5
-    #: The position's σ never grows past this, m: a person long unseen is gated within
-    #: about 3.7 m of where they were last seen, so a stray detection far away (a false
-    #: positive) never drags them across the hall; one back after a long walk unseen gets
-    #: a new id instead.
-    max_sigma_m: float = 1.0
-    #: Never farther than this from where a person is predicted, m, whatever the σ: a
-    #: seeded or prior person has no colours yet, and a table or pallet the segmenter
-    #: read as a person 1.6-2.6 m away once pulled one 3.7 m off in a hall eval. A
-    #: walker's prediction carries their velocity, so the innovation stays small.
-    max_gate_m: float = 1.2
-    #: A detection left over this close to a person is a piece of them, never a new
-    #: person (two bodies do not overlap), m.
-    min_separation_m: float = 0.35
+#: Not settings (those are `SemanticMapSettings`: `person_accel_sigma`, `appearance_weight`,
+#: `confirm_hits`): the colour distance beyond which appearance vetoes a match away from
+#: where the person is expected; the gate's floor, m; how long a tentative person lives
+#: unseen and how long an unseen person is extrapolated, ns; a walker's top speed, m/s.
+MAX_APPEARANCE = 0.6
+GATE_MIN_M = 0.4
+TENTATIVE_TTL_NS = 2_000_000_000
+COAST_NS = 2_000_000_000
+V_MAX = 1.5
+#: The position's σ never grows past this, m: a person long unseen is gated within
+#: about 3.7 m of where they were last seen, so a stray detection far away (a false
+#: positive) never drags them across the hall; one back after a long walk unseen gets
+#: a new id instead.
+MAX_SIGMA_M = 1.0
+#: Never farther than this from where a person is predicted, m, whatever the σ: a
+#: seeded or prior person has no colours yet, and a table or pallet the segmenter
+#: read as a person 1.6-2.6 m away once pulled one 3.7 m off in a hall eval. A
+#: walker's prediction carries their velocity, so the innovation stays small.
+MAX_GATE_M = 1.2
+#: A detection left over this close to a person is a piece of them, never a new
+#: person (two bodies do not overlap), m.
+MIN_SEPARATION_M = 0.35
 
 
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
@@ -93,9 +91,9 @@ def _Q(dt: float, sigma_a: float) -> FloatArray:
 class PeopleTracker:
     """Every person; `update(stamp, observations)` predicts, associates and fuses."""
 
-    def __init__(self, ids: IdBook, params: PeopleParams) -> None:
+    def __init__(self, ids: IdBook, settings: SemanticMapSettings) -> None:
         self.ids = ids
-        self.params = params
+        self.settings = settings
         self.tracks: list[Track] = []
 
     @property
@@ -125,23 +123,23 @@ class PeopleTracker:
             tr.P[2:, 2:] = tr.vel_cov
 
     def predict(self, stamp_ns: int) -> None:
-        p = self.params
+        s = self.settings
         for tr in self.tracks:
             last = tr.stamp_ns
             if stamp_ns <= last:
                 continue
             assert tr.P is not None
-            if tr.last_seen_ns and stamp_ns - tr.last_seen_ns > p.coast_ns and tr.velocity.any():
+            if tr.last_seen_ns and stamp_ns - tr.last_seen_ns > COAST_NS and tr.velocity.any():
                 tr.velocity = np.zeros(2)
                 tr.P[2:, :] = 0.0
                 tr.P[:, 2:] = 0.0
-                tr.P[2:, 2:] = np.eye(2) * p.v_max**2
+                tr.P[2:, 2:] = np.eye(2) * V_MAX**2
             dt = (stamp_ns - last) * 1e-9
             x = np.concatenate([tr.xy, tr.velocity])
             F = _F(dt)
             x = F @ x
-            P = F @ tr.P @ F.T + _Q(dt, p.accel_sigma)
-            cap = p.max_sigma_m**2
+            P = F @ tr.P @ F.T + _Q(dt, s.person_accel_sigma)
+            cap = MAX_SIGMA_M**2
             if P[0, 0] > cap or P[1, 1] > cap:
                 # Long unseen: somewhere within the capped σ, at an unknown walking
                 # velocity, the two uncorrelated. Scaling the position block alone left
@@ -149,7 +147,7 @@ class PeopleTracker:
                 # the next detection then flung the velocity (and the person) away.
                 P[:2, :2] *= cap / max(P[0, 0], P[1, 1])
                 P[:2, 2:] = P[2:, :2] = 0.0
-                P[2:, 2:] = np.eye(2) * p.v_max**2
+                P[2:, 2:] = np.eye(2) * V_MAX**2
             self._set(tr, x, P)
             tr.stamp_ns = stamp_ns
 
@@ -162,20 +160,20 @@ class PeopleTracker:
 
     def cost(self, tr: Track, obs: Observation) -> float:
         """Association cost, or `_BIG` outside the gates."""
-        p = self.params
+        s = self.settings
         assert tr.P is not None
         S = tr.P[:2, :2] + np.eye(2) * obs.sigma_m**2
         nu = obs.xy - tr.xy
         d2 = float(nu @ np.linalg.solve(S, nu))
         dist = float(np.linalg.norm(nu))
-        if dist > p.max_gate_m or (d2 > CHI2_2D_999 and dist > p.gate_min_m):
+        if dist > MAX_GATE_M or (d2 > CHI2_2D_999 and dist > GATE_MIN_M):
             return _BIG
         app = 0.0
         if tr.appearance is not None and obs.appearance is not None:
             app = bhattacharyya(tr.appearance, obs.appearance)
-            if app > p.max_appearance and d2 > CHI2_2D_95:
+            if app > MAX_APPEARANCE and d2 > CHI2_2D_95:
                 return _BIG  # unlike, and not where they are expected: somebody else
-        return min(d2, CHI2_2D_999) / CHI2_2D_999 + p.appearance_weight * app
+        return min(d2, CHI2_2D_999) / CHI2_2D_999 + s.appearance_weight * app
 
     def update(self, stamp_ns: int, observations: list[Observation]) -> list[Track]:
         """Fuse one frame's person detections; the confirmed people updated."""
@@ -191,11 +189,11 @@ class PeopleTracker:
                 tr = self.tracks[i]
                 self._fuse(tr, observations[j], stamp_ns)
                 used.add(int(j))
-                if not tr.confirmed and tr.hits >= self.params.confirm_hits:
+                if not tr.confirmed and tr.hits >= self.settings.confirm_hits:
                     tr.id = self.ids.next_id("person")
                 if tr.confirmed:
                     changed.append(tr)
-        sep = self.params.min_separation_m
+        sep = MIN_SEPARATION_M
         for j, obs in enumerate(observations):
             if j in used or any(float(np.linalg.norm(t.xy - obs.xy)) < sep for t in self.tracks):
                 continue
@@ -211,12 +209,12 @@ class PeopleTracker:
                 appearance=None if obs.appearance is None else obs.appearance.copy(),
                 hits=1,
             )
-            tr.vel_cov = np.eye(2) * self.params.v_max**2
+            tr.vel_cov = np.eye(2) * V_MAX**2
             self.add(tr, stamp_ns)
-            if self.params.confirm_hits <= 1:
+            if self.settings.confirm_hits <= 1:
                 tr.id = self.ids.next_id("person")
                 changed.append(tr)
-        ttl = self.params.tentative_ttl_ns
+        ttl = TENTATIVE_TTL_NS
         self.tracks = [t for t in self.tracks if t.confirmed or stamp_ns - t.last_seen_ns <= ttl]
         return changed
 

@@ -24,7 +24,6 @@ from common.config import SemanticMapSettings, resolve
 from common.keys import WORLD_DESCRIPTION
 from common.messages import PayloadError
 from common.messages.world import WorldDescription
-from services.semantic_map.artifacts import FusionParams
 from services.semantic_map.entities import Track
 from services.semantic_map.mapfile import (
     occupancy_from_grid,
@@ -33,9 +32,8 @@ from services.semantic_map.mapfile import (
     seed_from_world,
     tracks_from_file,
 )
-from services.semantic_map.mapper import MapParams, SemanticMap
+from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import Occupancy
-from services.semantic_map.people import PeopleParams
 from services.semantic_map.store import Grid, MapStore
 
 log = logging.getLogger(__name__)
@@ -58,31 +56,6 @@ def world_description(
     return None
 
 
-def map_params(s: SemanticMapSettings) -> MapParams:
-    return MapParams(
-        sigma0_m=s.sigma0_m,
-        sigma_per_m=s.sigma_per_m,
-        min_score=s.min_score,
-        missing_after_frames=s.missing_after_frames,
-        look_range_m=s.look_range_m,
-        person_look_range_m=s.person_look_range_m,
-        person_obstacle_margin_m=s.person_obstacle_margin_m,
-        drop_below_observations=s.drop_below_observations,
-        fusion=FusionParams(
-            gate_min_m=s.gate_min_m,
-            gate_sigmas=s.gate_sigmas,
-            confirm_hits=s.confirm_hits,
-            near_m=s.class_near_m,
-            class_merge_m=s.class_merge_m,
-        ),
-        people=PeopleParams(
-            accel_sigma=s.person_accel_sigma,
-            appearance_weight=s.appearance_weight,
-            confirm_hits=s.confirm_hits,
-        ),
-    )
-
-
 def open_map(
     s: SemanticMapSettings,
     store: MapStore,
@@ -90,10 +63,9 @@ def open_map(
 ) -> tuple[SemanticMap, str]:
     """The map and a sentence saying where it came from. `world()` fetches the sim's
     description (None when there is none); it is called only when needed."""
-    params = map_params(s)
     occ_kw = dict(hits_needed=s.obstacle_hits, z_range=tuple(s.obstacle_z_m))
     if not store.is_empty():
-        return _resume(s, store, params, occ_kw)
+        return _resume(s, store, occ_kw)
     tracks: list[Track] = []
     occ: Occupancy | None = None
     source: Literal["world", "file", "none"] = "none"
@@ -119,7 +91,7 @@ def open_map(
             log.warning("no world description: the static occupancy layer is unknown")
     if occ is None:
         occ = Occupancy.unknown(s.grid_half_extent_m, s.grid_resolution_m, **occ_kw)
-    smap = SemanticMap(params, occ, counters)
+    smap = SemanticMap(s, occ, counters)
     smap.static_source = source
     for tr in tracks:
         smap.add(tr)
@@ -148,7 +120,7 @@ def _static_source(text: str) -> Literal["world", "file", "none"]:
 
 
 def _resume(
-    s: SemanticMapSettings, store: MapStore, params: MapParams, occ_kw: dict[str, object]
+    s: SemanticMapSettings, store: MapStore, occ_kw: dict[str, object]
 ) -> tuple[SemanticMap, str]:
     snap = store.load()
     g = snap.grids.get("static")
@@ -163,7 +135,7 @@ def _resume(
             hits=None if hits is None else hits.cells.astype(np.uint16),
             **occ_kw,  # type: ignore[arg-type]
         )
-    smap = SemanticMap(params, occ, snap.counters)
+    smap = SemanticMap(s, occ, snap.counters)
     for entity, app in snap.entities:
         smap.add(Track.from_message(entity, app))
     smap.take_changes()

@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 
 from common.bus import RequestError
+from common.config import SemanticMapSettings
 from common.messages.base import NS_PER_S
 from common.messages.semantic_map import MapFile
 from services.semantic_map.commit import TickCommitter
 from services.semantic_map.entities import Track
 from services.semantic_map.exchange import check_import, export_map, import_map
-from services.semantic_map.mapper import MapParams, SemanticMap
+from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import OCCUPIED, Occupancy
 from services.semantic_map.startup import save_all
 from services.semantic_map.store import MapStore
@@ -32,7 +33,7 @@ def _map(obstacle: tuple[int, int] | None = None) -> SemanticMap:
     if obstacle is not None:
         static[obstacle] = OCCUPIED
     occ = Occupancy(static, 0.5, (-5.0, -5.0), hits_needed=1)
-    return SemanticMap(MapParams(), occ, {})
+    return SemanticMap(SemanticMapSettings(), occ, {})
 
 
 def _track(entity_id: str, class_name: str, x: float) -> Track:

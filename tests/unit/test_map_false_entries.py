@@ -9,13 +9,14 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from common.config import SemanticMapSettings
 from common.geometry import make_T
 from common.messages import to_wire
 from common.messages.perception import Detection, Detections
 from common.messages.sim import CameraFrame
 from common.robot_description import R_FORWARD_OPTICAL
 from services.semantic_map.entities import Track
-from services.semantic_map.mapper import IngestReport, MapParams, SemanticMap
+from services.semantic_map.mapper import IngestReport, SemanticMap
 from services.semantic_map.occupancy import OCCUPIED, Occupancy
 from services.semantic_map.store import MapStore
 
@@ -74,7 +75,7 @@ def _ingest(smap: SemanticMap, t: int, *dets: Detection) -> IngestReport:
 
 def _map(drop_below: int = 5) -> SemanticMap:
     occ = Occupancy(np.zeros((20, 20), np.uint8), 0.5, (-5.0, -5.0), hits_needed=3)
-    return SemanticMap(MapParams(drop_below_observations=drop_below), occ, {})
+    return SemanticMap(SemanticMapSettings(drop_below_observations=drop_below), occ, {})
 
 
 def _seeded_bottle() -> Track:
@@ -156,7 +157,7 @@ def test_a_deleted_entry_is_gone_from_the_database_and_its_id_is_never_reused(
     assert stored["can_1"].missing_since_ns is not None
     assert snap.counters["box"] == 1
     # a restarted map gives the next box a new number
-    again = SemanticMap(MapParams(), smap.occupancy, snap.counters)
+    again = SemanticMap(SemanticMapSettings(), smap.occupancy, snap.counters)
     for e, app in snap.entities:
         again.add(Track.from_message(e, app))
     for k in (20, 21):
@@ -231,7 +232,7 @@ def test_a_person_on_a_static_obstacle_is_not_a_person_and_hides_no_artifact() -
     person half a metre in front of the bench is."""
     static = np.zeros((40, 40), np.uint8)
     static[18:22, 24:28] = OCCUPIED  # a bench: x 1.0–2.0 (res 0.25, origin −5), y −0.5–0.5
-    smap = SemanticMap(MapParams(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
+    smap = SemanticMap(SemanticMapSettings(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
     for k in range(1, 4):
         _ingest(smap, k * S, _det("person", (1.5, 0.0)), _det("can", (1.45, 0.05)),
                 _det("person", (0.5, 2.0)))  # fmt: skip
@@ -246,7 +247,7 @@ def test_a_person_beside_a_bench_hides_no_artifact_on_it_but_clothes_stay_droppe
     detection on a person standing in the open is still dropped."""
     static = np.zeros((40, 40), np.uint8)
     static[18:22, 24:28] = OCCUPIED  # a bench: x 1.0–2.0, y −0.5–0.5
-    smap = SemanticMap(MapParams(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
+    smap = SemanticMap(SemanticMapSettings(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
     for k in range(1, 4):
         _ingest(smap, k * S, _det("person", (0.7, 0.0)), _det("can", (1.1, 0.0)),
                 _det("person", (-1.0, 1.0)), _det("box", (-1.0, 1.1)))  # fmt: skip

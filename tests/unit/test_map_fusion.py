@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from common.camera import PinholeCamera
+from common.config import SemanticMapSettings
 from common.geometry import make_T
-from services.semantic_map.artifacts import ArtifactTracker, FusionParams
+from services.semantic_map.artifacts import ArtifactTracker
 from services.semantic_map.entities import IdBook, Observation
 from services.semantic_map.looks import looks_at
 from services.semantic_map.mapfile import seed_from_world
@@ -21,7 +22,7 @@ S = 100_000_000
 
 def test_repeated_noisy_detections_converge_and_noise_grows_with_range() -> None:
     rng = np.random.default_rng(0)
-    tracker = ArtifactTracker(IdBook(), FusionParams())
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
     truth = np.array([2.0, 1.0])
     for k in range(30):
         sigma = 0.02 + 0.02 * 3.0
@@ -34,7 +35,7 @@ def test_repeated_noisy_detections_converge_and_noise_grows_with_range() -> None
 
 
 def test_a_detection_outside_the_gate_or_of_another_class_is_a_new_artifact() -> None:
-    tracker = ArtifactTracker(IdBook({"bottle": 4}), FusionParams())
+    tracker = ArtifactTracker(IdBook({"bottle": 4}), SemanticMapSettings())
     for k in range(2):
         tracker.update(
             k * S,
@@ -94,7 +95,7 @@ def _seen(
 
 def test_one_object_under_two_classes_keeps_the_class_seen_from_near() -> None:
     # A can on a bench: a box from 3 m (many times), a can from 1.5 m (a few times).
-    tracker = ArtifactTracker(IdBook(), FusionParams())
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
     for k in range(10):
         _seen(tracker, k, "box", (2.0, 1.0), 3.0)
     assert tracker.class_conflicts() == []  # one class only
@@ -106,7 +107,7 @@ def test_one_object_under_two_classes_keeps_the_class_seen_from_near() -> None:
 
 
 def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> None:
-    tracker = ArtifactTracker(IdBook(), FusionParams())
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
     for k in range(4):
         _seen(tracker, k, "box", (2.0, 1.0), 3.0)
         _seen(tracker, k, "can", (2.0, 1.01), 2.5)  # both from far: no evidence
@@ -114,7 +115,7 @@ def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> 
     for k in range(4, 8):
         _seen(tracker, k, "bottle", (2.08, 1.0), 1.0)  # near, but 8 cm away: two objects
     assert tracker.class_conflicts() == []
-    prior = ArtifactTracker(IdBook(), FusionParams())
+    prior = ArtifactTracker(IdBook(), SemanticMapSettings())
     for k in range(4):
         _seen(prior, k, "can", (0.0, 0.0), 1.0)
     prior.tracks[0].source = "prior"
@@ -124,7 +125,7 @@ def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> 
 
 
 def test_a_class_that_gives_way_spends_no_id_until_it_has_the_better_evidence() -> None:
-    tracker = ArtifactTracker(IdBook(), FusionParams())
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
     for k in range(3):
         _seen(tracker, k, "bottle", (1.0, 0.0), 1.5)  # bottle_1, three near views
     for k in range(3, 6):
@@ -138,7 +139,7 @@ def test_a_class_that_gives_way_spends_no_id_until_it_has_the_better_evidence() 
 
 def test_a_view_cut_by_the_image_border_is_no_evidence_of_the_class() -> None:
     # The head camera sees a bottle's lower half 1.5 m away and calls it a can.
-    tracker = ArtifactTracker(IdBook(), FusionParams())
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
     for k in range(5):
         _seen(tracker, k, "bottle", (2.0, 1.0), 2.5)  # whole, from far
         tracker.update(

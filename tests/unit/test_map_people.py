@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.config import SemanticMapSettings
 from services.semantic_map.appearance import SIZE, bhattacharyya, colour_histogram
 from services.semantic_map.entities import IdBook, Observation, Track
-from services.semantic_map.people import PeopleParams, PeopleTracker
+from services.semantic_map.people import PeopleTracker
 
 DT_NS = 100_000_000  # 10 Hz frames
 
@@ -26,7 +27,7 @@ def _run_crossing(lateral_m: float, occlude: bool, seed: int = 0) -> dict[str, l
     """Two people walk towards each other 1 m/s each, `lateral_m` apart sideways; returns
     the ids given to each one's detections, frame by frame."""
     rng = np.random.default_rng(seed)
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     looks = {"red": _hist(2, rng), "blue": _hist(30, rng)}
     paths = {
         "red": ((-5.0, 0.0), (1.0, 0.0)),
@@ -71,7 +72,7 @@ def test_ids_survive_one_person_hidden_behind_the_other_while_they_cross() -> No
 
 def test_a_person_walking_out_of_view_and_back_keeps_the_id() -> None:
     rng = np.random.default_rng(2)
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     look = _hist(10, rng)
     for k in range(30):
         if 10 <= k < 20:  # not seen for a second while walking on
@@ -84,7 +85,7 @@ def test_a_person_walking_out_of_view_and_back_keeps_the_id() -> None:
 
 
 def test_a_one_frame_false_positive_never_gets_an_id() -> None:
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     tracker.update(0, [Observation("person", np.array([1.0, 1.0]), 0.0, 0.05)])
     for k in range(1, 40):
         tracker.update(k * DT_NS, [])
@@ -111,7 +112,7 @@ def test_the_colour_histogram_tells_two_shirts_apart_and_matches_one_shirt() -> 
 
 def test_a_stray_detection_far_away_never_drags_a_long_unseen_person() -> None:
     rng = np.random.default_rng(3)
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     look = _hist(2, rng)
     for k in range(5):  # person_1 seen standing at the origin, then not for a minute
         tracker.update(k * DT_NS, [Observation("person", np.zeros(2), 0.0, 0.05, appearance=look)])
@@ -127,7 +128,7 @@ def test_a_stray_detection_far_away_never_drags_a_long_unseen_person() -> None:
 def test_a_seeded_person_is_not_pulled_to_a_false_detection_nearby() -> None:
     """A person from the seed (no colours yet) unseen for 30 s, and a pallet read as a
     person 1.6 m away for two seconds: the pallet is somebody else, the person stays."""
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     seeded = Track(
         class_name="person",
         kind="person",
@@ -149,7 +150,7 @@ def test_a_seeded_person_is_not_pulled_to_a_false_detection_nearby() -> None:
 def test_a_standing_person_seen_in_other_colours_where_they_stand_keeps_the_id() -> None:
     """From behind, under another light: the colours differ, the place does not."""
     rng = np.random.default_rng(4)
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     front, back = np.full(SIZE, 1e-3), np.full(SIZE, 1e-3)
     front[5], back[40] = 1.0, 1.0
     front, back = front / front.sum(), back / back.sum()
@@ -171,7 +172,7 @@ def test_a_standing_person_seen_in_other_colours_where_they_stand_keeps_the_id()
 def test_a_long_unseen_person_seen_again_is_not_flung_by_a_stale_velocity() -> None:
     """Seen walking, unseen for a minute, seen again where they stopped: the first
     detection after the gap must not give them a large velocity."""
-    tracker = PeopleTracker(IdBook(), PeopleParams())
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
     for k in range(10):
         xy = np.array([0.5 * k * 0.1, 0.0])
         tracker.update(k * DT_NS, [Observation("person", xy, 0.0, 0.05)])

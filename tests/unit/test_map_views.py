@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from common.bus import RequestError
+from common.config import SemanticMapSettings
 from common.keys import as_of
 from services.semantic_map import queries
 from services.semantic_map.entities import Track
-from services.semantic_map.mapper import MapParams, SemanticMap
+from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import OCCUPIED, Occupancy
 from services.semantic_map.views import KEPT, ViewHistory, view_of
 
@@ -18,7 +19,7 @@ MS = 1_000_000
 
 def _map() -> SemanticMap:
     occ = Occupancy(np.zeros((20, 20), np.uint8), 0.5, (-5.0, -5.0), hits_needed=1)
-    return SemanticMap(MapParams(), occ, {})
+    return SemanticMap(SemanticMapSettings(), occ, {})
 
 
 def _bottle() -> Track:

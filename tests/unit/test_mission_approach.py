@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
+from common.config import ApproachSettings
+from common.robot import D_OPT_M, THETA_OPT_RAD
 from services.mission.approach import (
     ApproachCommand,
     ApproachController,
-    ApproachGains,
     Sighting,
 )
 
@@ -78,19 +79,19 @@ STARTS = [
 def test_the_controller_converges_to_d_opt_and_theta_opt_from_many_starts(
     start: tuple[float, float, float],
 ) -> None:
-    gains = ApproachGains()
+    gains = ApproachSettings()
     ctrl = ApproachController(gains)
     plant = Plant(*start)
     cmds = run(ctrl, plant, 30.0)
     assert cmds[-1].state == "arrived", cmds[-1]
     final = plant.sense(0.0)
-    assert abs(final.d_obj - gains.d_opt_m) <= gains.tol_d_m + 0.005
-    assert abs(final.theta_obj - gains.theta_opt_rad) <= gains.tol_theta_rad + 0.01
+    assert abs(final.d_obj - D_OPT_M) <= gains.tol_d_m + 0.005
+    assert abs(final.theta_obj - THETA_OPT_RAD) <= gains.tol_theta_rad + 0.01
     assert (cmds[-1].vx, cmds[-1].vy, cmds[-1].wz) == (0.0, 0.0, 0.0)
 
 
 def test_commands_respect_the_speed_and_acceleration_limits() -> None:
-    gains = ApproachGains()
+    gains = ApproachSettings()
     ctrl = ApproachController(gains)
     cmds = run(ctrl, Plant(-2.5, 1.0, 0.8), 30.0)
     vx = np.array([c.vx for c in cmds])
@@ -108,7 +109,7 @@ def test_a_vanished_object_is_reacquired_by_turning_toward_it_and_moving_then_fa
 ) -> None:
     """Last seen nearer than d_opt: back off to get it into view; beyond: creep toward it,
     no farther than it was beyond."""
-    gains = ApproachGains()
+    gains = ApproachSettings()
     ctrl = ApproachController(gains)
     ctrl.reset(0.0)
     seen = Sighting(d_obj=last_d, theta_obj=0.3, stamp_s=0.0)
@@ -129,12 +130,12 @@ def test_a_vanished_object_is_reacquired_by_turning_toward_it_and_moving_then_fa
     assert any(c.wz > 0.1 for _, c in reacq)  # toward the last bearing (+0.3 rad: left)
     assert all(c.wz >= 0.0 for _, c in reacq)
     moved = sum(c.vx * DT for _, c in reacq)
-    if last_d < gains.d_opt_m:
+    if last_d < D_OPT_M:
         assert any(c.vx < -0.05 for _, c in reacq)  # backs off
         assert -gains.back_off_max_m - 0.05 < moved < -0.1
     else:
         assert all(c.vx >= 0.0 for _, c in reacq)  # creeps toward where it was
-        assert 0.1 < moved <= last_d - gains.d_opt_m + 0.02
+        assert 0.1 < moved <= last_d - D_OPT_M + 0.02
     last_t, last = cmds[-1]
     assert last.state == "failed" and "lost the object" in last.reason
     assert last_t == pytest.approx(gains.lost_after_s + gains.reacquire_s, abs=2 * DT)
@@ -151,7 +152,7 @@ def test_a_sighting_during_reacquire_returns_to_tracking() -> None:
 
 
 def test_never_seeing_the_object_fails_with_a_reason_instead_of_freezing() -> None:
-    gains = ApproachGains()
+    gains = ApproachSettings()
     ctrl = ApproachController(gains)
     cmds = run(ctrl, Plant(-1.0, 0.0, 0.0), 30.0, visible=False)
     assert cmds[-1].state == "failed"
@@ -160,7 +161,7 @@ def test_never_seeing_the_object_fails_with_a_reason_instead_of_freezing() -> No
 
 
 def test_an_approach_that_cannot_settle_times_out() -> None:
-    gains = ApproachGains(timeout_s=5.0)
+    gains = ApproachSettings(timeout_s=5.0)
     ctrl = ApproachController(gains)
     ctrl.reset(0.0)
     t, cmd = 0.0, None
@@ -213,6 +214,6 @@ def test_noisy_sightings_still_arrive_and_never_give_nan() -> None:
 
 def test_gains_refuse_nonsense() -> None:
     with pytest.raises(ValueError, match="positive"):
-        ApproachGains(k_d=-1.0)
+        ApproachSettings(k_d=-1.0)
     with pytest.raises(ValueError, match="lost_after_s"):
-        ApproachGains(max_age_s=2.0, lost_after_s=1.0)
+        ApproachSettings(max_age_s=2.0, lost_after_s=1.0)

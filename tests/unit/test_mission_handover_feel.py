@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from common.config import PullSettings
 from common.messages.wbc import WbcStatus
 from services.mission.handover_feel import PullDetector
 
@@ -123,7 +124,7 @@ def test_non_finite_samples_are_ignored() -> None:
 
 def test_bad_thresholds_are_refused() -> None:
     with pytest.raises(ValueError, match="positive"):
-        PullDetector(force_n=0.0)
+        PullDetector(PullSettings(force_n=0.0))
     with pytest.raises(ValueError, match="direction"):
         PullDetector(toward=(0.0, 0.0, 0.0))
 

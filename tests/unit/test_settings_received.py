@@ -1,5 +1,6 @@
-"""Navigation and the WBC take their settings Structs directly: with the default config they
-receive exactly what the hand-glued `*Params` of 30b18ef gave them.
+"""Navigation, the WBC, the semantic map and the mission take their settings Structs
+directly: with the default config they receive exactly what the hand-glued `*Params` of
+30b18ef (navigation, WBC) and of 2d70322 (map, mission) gave them.
 
 The old values are computed here from literals copied from that commit: its settings'
 defaults (`common/config.py`), the Params' defaults and the glue that joined them
@@ -14,11 +15,18 @@ import logging
 import math
 from typing import Any
 
+from common import robot
 from common.config import load_config
+from services.mission import approach, grasp_pose, handover_feel
+from services.mission.algorithms import default_algorithms
 from services.navigation import controller, navigator, people, planner
 from services.navigation.costmap import CostParams
 from services.navigation.grid import Footprint
 from services.navigation.navigator import Navigator
+from services.semantic_map import artifacts
+from services.semantic_map import people as map_people
+from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.occupancy import Occupancy
 from services.wbc import gait
 from services.wbc.commander import WbcCommander
 
@@ -241,3 +249,153 @@ def test_the_wbc_receives_what_its_params_held() -> None:
     core = WbcCommander(config.wbc, config.time.latencies_ns(), 2_000_000, logging.getLogger("t"))
     assert _typed(received_wbc(core)) == _typed(old_wbc(OLD_WBC))
     assert core.ctrl.gait.half_period == 0.25
+
+
+#: HEAD's (2d70322) SemanticMapSettings defaults that its `startup.map_params` read.
+OLD_SEMANTIC_MAP: dict[str, Any] = {
+    "sigma0_m": 0.02,
+    "sigma_per_m": 0.02,
+    "gate_min_m": 0.25,
+    "gate_sigmas": 3.0,
+    "confirm_hits": 2,
+    "class_near_m": 2.0,
+    "class_merge_m": 0.05,
+    "min_score": 0.5,
+    "missing_after_frames": 5,
+    "look_range_m": 2.0,
+    "person_look_range_m": 6.0,
+    "person_obstacle_margin_m": 0.1,
+    "drop_below_observations": 10,
+    "person_accel_sigma": 1.5,
+    "appearance_weight": 4.0,
+}
+
+
+def old_semantic_map(s: dict[str, Any]) -> dict[str, Any]:
+    """HEAD's `map_params(s)` (MapParams, FusionParams, PeopleParams), the Params' other
+    fields at their defaults."""
+    return {
+        "sigma0_m": s["sigma0_m"],
+        "sigma_per_m": s["sigma_per_m"],
+        "min_score": s["min_score"],
+        "missing_after_frames": s["missing_after_frames"],
+        "look_range_m": s["look_range_m"],
+        "person_look_range_m": s["person_look_range_m"],
+        "person_obstacle_margin_m": s["person_obstacle_margin_m"],
+        "drop_below_observations": s["drop_below_observations"],
+        "fusion.gate_min_m": s["gate_min_m"],
+        "fusion.gate_sigmas": s["gate_sigmas"],
+        "fusion.confirm_hits": s["confirm_hits"],
+        "fusion.tentative_ttl_ns": 3_000_000_000,
+        "fusion.near_m": s["class_near_m"],
+        "fusion.class_merge_m": s["class_merge_m"],
+        "people.accel_sigma": s["person_accel_sigma"],
+        "people.appearance_weight": s["appearance_weight"],
+        "people.max_appearance": 0.6,
+        "people.gate_min_m": 0.4,
+        "people.confirm_hits": s["confirm_hits"],
+        "people.tentative_ttl_ns": 2_000_000_000,
+        "people.coast_ns": 2_000_000_000,
+        "people.v_max": 1.5,
+        "people.max_sigma_m": 1.0,
+        "people.max_gate_m": 1.2,
+        "people.min_separation_m": 0.35,
+    }
+
+
+def received_semantic_map(smap: SemanticMap) -> dict[str, Any]:
+    s, f, p = smap.settings, smap.artifacts.settings, smap.people.settings
+    return {
+        "sigma0_m": s.sigma0_m,
+        "sigma_per_m": s.sigma_per_m,
+        "min_score": s.min_score,
+        "missing_after_frames": s.missing_after_frames,
+        "look_range_m": s.look_range_m,
+        "person_look_range_m": s.person_look_range_m,
+        "person_obstacle_margin_m": s.person_obstacle_margin_m,
+        "drop_below_observations": s.drop_below_observations,
+        "fusion.gate_min_m": f.gate_min_m,
+        "fusion.gate_sigmas": f.gate_sigmas,
+        "fusion.confirm_hits": f.confirm_hits,
+        "fusion.tentative_ttl_ns": artifacts.TENTATIVE_TTL_NS,
+        "fusion.near_m": f.class_near_m,
+        "fusion.class_merge_m": f.class_merge_m,
+        "people.accel_sigma": p.person_accel_sigma,
+        "people.appearance_weight": p.appearance_weight,
+        "people.max_appearance": map_people.MAX_APPEARANCE,
+        "people.gate_min_m": map_people.GATE_MIN_M,
+        "people.confirm_hits": p.confirm_hits,
+        "people.tentative_ttl_ns": map_people.TENTATIVE_TTL_NS,
+        "people.coast_ns": map_people.COAST_NS,
+        "people.v_max": map_people.V_MAX,
+        "people.max_sigma_m": map_people.MAX_SIGMA_M,
+        "people.max_gate_m": map_people.MAX_GATE_M,
+        "people.min_separation_m": map_people.MIN_SEPARATION_M,
+    }
+
+
+def test_the_map_receives_what_its_params_held() -> None:
+    config = load_config(env={})
+    smap = SemanticMap(config.semantic_map, Occupancy.unknown(1.0, 0.5), {})
+    old = old_semantic_map(OLD_SEMANTIC_MAP)
+    assert _typed(received_semantic_map(smap)) == _typed(old)
+
+
+#: HEAD's `ApproachGains` and `PullDetector` defaults (MissionSettings' `approach_gains`
+#: and `pull_detector` overrides were empty); d_opt_m / θ_opt were `common.robot`'s.
+OLD_APPROACH: dict[str, Any] = {
+    "k_d": 0.8,
+    "k_theta": 1.2,
+    "vx_max": 0.25,
+    "wz_max": 0.5,
+    "ax_max": 0.5,
+    "az_max": 1.0,
+    "tol_d_m": 0.03,
+    "tol_theta_rad": 0.05,
+    "settle_s": 0.6,
+    "max_age_s": 0.35,
+    "lost_after_s": 1.0,
+    "reacquire_s": 5.0,
+    "reacquire_wz": 0.3,
+    "reacquire_turn_margin_rad": 0.15,
+    "back_off_speed": 0.08,
+    "back_off_max_m": 0.3,
+    "timeout_s": 40.0,
+}
+OLD_PULL: dict[str, Any] = {
+    "force_n": 4.0,
+    "effort_nm": 0.5,
+    "debounce_s": 0.2,
+    "baseline_s": 0.3,
+    "absolute_n": 8.0,
+    "toward": (1.0, 0.0, 0.0),
+}
+
+
+def test_the_mission_receives_what_its_params_held() -> None:
+    config = load_config(env={})
+    algorithms = default_algorithms(config.mission)
+    ctrl = algorithms.approacher()
+    assert isinstance(ctrl, approach.ApproachController)
+    g = ctrl.gains
+    received = {k: getattr(g, k) for k in OLD_APPROACH}
+    assert _typed(received) == _typed(OLD_APPROACH)
+    assert _typed((approach.D_OPT_M, approach.THETA_OPT_RAD)) == _typed((robot.D_OPT_M, 0.0))
+    pull = algorithms.pull_detector()
+    assert isinstance(pull, handover_feel.PullDetector)
+    got = {k: getattr(pull, k) for k in OLD_PULL if k != "toward"}
+    got["toward"] = tuple(pull.toward.tolist())
+    assert _typed(got) == _typed(OLD_PULL)
+    # grasp_pose.GraspParams mirrors no setting: its defaults are HEAD's
+    assert grasp_pose.GraspParams() == grasp_pose.GraspParams(
+        pitch_rad=0.0,
+        comfort_gap_m=0.02,
+        top_tilt_rad=0.3,
+        clearance_m=0.05,
+        top_depth_m=0.03,
+        pregrasp_m=0.12,
+        max_width_m=0.075,
+        width_slack_m=0.015,
+        reach_slack_m=0.06,
+        box_side_max_off_rad=math.radians(45.0),
+    )
