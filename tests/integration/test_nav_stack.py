@@ -131,7 +131,7 @@ def test_a_cancel_brings_the_base_to_rest_within_half_a_second(
 
 HALL_PERSON = (
     *NAV,
-    *nav_person.SETTINGS,
+    nav_person.SETTINGS,
     'time.participants.perception.role="periodic"',
     "time.participants.perception.period_s=0.1",
     "time.participants.perception.latency_s=0.1",

@@ -178,12 +178,12 @@ def _approach(d: Driver, xy: np.ndarray, yaw: float, timeout_s: float) -> Genera
 def test_the_wrist_camera_in_look_at_the_standoff_measures_bottle_1_within_tolerance(
     stack: StartStack,
 ) -> None:
-    settings = [
-        *trial_settings("small", 1, 0.002),  # seed 1: the standoff is straight ahead
+    s = stack(
+        ["sim", "wbc", "perception"],
+        trial_settings("small", 1, 0.002),  # seed 1: the standoff is straight ahead
         'sim.cameras=["camera_head", "camera_wrist"]',
         *PERCEPTION,
-    ]
-    s = stack(["sim", "wbc", "perception"], *settings)
+    )
     world = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 10.0)
     bottle = next(a for a in world.artifacts if a.id == "bottle_1")
     surface = next(x for x in world.surfaces if x.id == bottle.surface_id)
