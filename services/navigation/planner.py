@@ -95,6 +95,20 @@ def _escape_start(
     return out
 
 
+#: A failed plan names the people within this of the start, m: their lethal discs may be
+#: what encloses the robot.
+PEOPLE_NEAR_M = 2.5
+
+
+def _people_near(costmap: Costmap, start: Pose) -> str:
+    near = sorted(
+        (math.hypot(q.x - start.x, q.y - start.y), q.id)
+        for q in costmap.people
+        if math.hypot(q.x - start.x, q.y - start.y) <= PEOPLE_NEAR_M
+    )
+    return "; people near: " + ", ".join(f"{i} at {d:.2f} m" for d, i in near) if near else ""
+
+
 def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlannerSettings) -> Plan:
     """The path from start to goal, or `PlanError` (see the module docstring)."""
     grid = costmap.grid
@@ -119,7 +133,7 @@ def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlannerSet
         raise PlanError(
             "no_path",
             f"no path from ({start.x:.2f}, {start.y:.2f}) to ({target.x:.2f}, {target.y:.2f}) "
-            f"({found.expanded} cells searched)",
+            f"({found.expanded} cells searched{_people_near(costmap, start)})",
         )
     keep = smooth(cost, found.cells)
     xy = grid.centres(found.cells[keep])

@@ -58,6 +58,17 @@ def test_a_goal_behind_a_closed_wall_is_refused_with_no_path() -> None:
     assert err.value.reason == "no_path"
 
 
+def test_a_gap_closed_by_a_person_fails_naming_the_people_near() -> None:
+    walled = _room([(slice(0, 80), slice(78, 82))])  # the gap is at the room's top
+    free = build_costmap(walled, FP, CostParams())
+    plan(free, Pose(1.5, 3.0, 0.0), Pose(6.5, 3.0, 0.0), FP, PlannerSettings())
+    person = Person("person_9", 4.0, 5.0)  # standing in the gap
+    blocked = build_costmap(walled, FP, CostParams(), people=[person])
+    with pytest.raises(PlanError) as err:
+        plan(blocked, Pose(3.2, 4.4, 0.0), Pose(6.5, 3.0, 0.0), FP, PlannerSettings())
+    assert err.value.reason == "no_path" and "people near: person_9 at 1.00 m" in str(err.value)
+
+
 def test_a_plan_goes_around_a_wall_through_its_gap() -> None:
     cm = build_costmap(_room([(slice(0, 80), slice(78, 82))]), FP, CostParams())
     result = plan(cm, Pose(1.5, 1.5, 0.0), Pose(6.5, 1.5, 0.0), FP, PlannerSettings())
