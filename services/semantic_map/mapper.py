@@ -28,6 +28,10 @@ person: ignored, and it hides no artifact (the hall patrol lost cans on benches 
 way); nor does any "person" hide an artifact that stands on a static obstacle (the wrist
 camera reads a bench's front as a person 15-35 cm from the can on it, outside the
 margin). Only the static layer counts: a learned cell may be a person perception missed.
+Nor is a "person" within `SELF_MARGIN_M` of the robot's own footprint (`common.robot`'s,
+arm stowed) at capture: that is the robot itself, seen by its own cameras (in hall seed 4
+such detections moved a false person onto the robot during the pick, and its lethal disc
+in navigation's costmap then enclosed the robot).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from typing import Literal
 
 import numpy as np
 
+from common import robot
 from common.camera import PinholeCamera
 from common.config import SemanticMapSettings
 from common.geometry import FloatArray
@@ -66,6 +71,9 @@ PERSON_LOOK_HEIGHT_M = 1.0
 #: within 8 m, and a depth read through to the background (a person "143 m" away, seen in
 #: the hall) must not move an entity across the map.
 MAX_RANGE_M = 8.0
+#: A person observed within this of the robot's own footprint at capture is the robot
+#: (its arm, or a leg, read as a person): nobody stands inside it, m (a person's radius).
+SELF_MARGIN_M = 0.2
 
 
 @dataclass
@@ -84,6 +92,22 @@ class IngestReport:
 
 def _mat(values: tuple[float, ...]) -> FloatArray:
     return np.asarray(values, dtype=float).reshape(4, 4)
+
+
+def on_footprint(
+    observations: list[Observation], T_world_base: FloatArray, margin_m: float
+) -> list[bool]:
+    """Whether each observation's place lies within `margin_m` of the robot's footprint
+    (its rectangle with the arm stowed, in the base frame at capture)."""
+    if not observations:
+        return []
+    x0, x1, y0, y1 = robot.FOOTPRINT_BOUNDS
+    R, p = T_world_base[:2, :2], T_world_base[:2, 3]
+    local = (np.array([o.xy for o in observations]) - p) @ R  # world → base, horizontal
+    return [
+        bool(x0 - margin_m <= x <= x1 + margin_m and y0 - margin_m <= y <= y1 + margin_m)
+        for x, y in local
+    ]
 
 
 class SemanticMap:
@@ -187,11 +211,16 @@ class SemanticMap:
             whole=not cut,
         )
 
-    def _plausible(self, people: list[Observation], report: IngestReport) -> list[Observation]:
-        """The people observations not on a static obstacle (module docstring)."""
+    def _plausible(
+        self, people: list[Observation], report: IngestReport, T_world_base: FloatArray
+    ) -> list[Observation]:
+        """The people observations not on a static obstacle and not on the robot itself
+        (module docstring)."""
         inside = self._near_static(people, self.settings.person_obstacle_margin_m)
-        report.ignored += sum(inside)
-        return [o for o, bad in zip(people, inside, strict=True) if not bad]
+        on_robot = on_footprint(people, T_world_base, SELF_MARGIN_M)
+        bad = [a or b for a, b in zip(inside, on_robot, strict=True)]
+        report.ignored += sum(bad)
+        return [o for o, b in zip(people, bad, strict=True) if not b]
 
     def _near_static(self, observations: list[Observation], margin_m: float) -> list[bool]:
         """Whether each observation's place is within `margin_m` of a static obstacle cell
@@ -226,7 +255,9 @@ class SemanticMap:
                 continue
             obs = self.observation(det, rgb)
             (people if obs.class_name == "person" else arts).append(obs)
-        people = self._plausible(merge_split_people(people, PERSON_MERGE_M), report)
+        people = self._plausible(
+            merge_split_people(people, PERSON_MERGE_M), report, _mat(dets.T_world_base)
+        )
         # A person's clothes are not artifacts: an artifact detection on a person is dropped,
         # unless it stands on a static obstacle (a table, a bench) where nobody stands.
         near = [

@@ -249,7 +249,7 @@ def test_a_person_beside_a_bench_hides_no_artifact_on_it_but_clothes_stay_droppe
     static[18:22, 24:28] = OCCUPIED  # a bench: x 1.0–2.0, y −0.5–0.5
     smap = SemanticMap(SemanticMapSettings(), Occupancy(static, 0.25, (-5.0, -5.0)), {})
     for k in range(1, 4):
-        _ingest(smap, k * S, _det("person", (0.7, 0.0)), _det("can", (1.1, 0.0)),
+        _ingest(smap, k * S, _det("person", (0.8, 0.0)), _det("can", (1.1, 0.0)),
                 _det("person", (-1.0, 1.0)), _det("box", (-1.0, 1.1)))  # fmt: skip
     assert [e.id for e in smap.entities("artifact")] == ["can_1"]
     assert len(smap.entities("person")) == 2
@@ -289,3 +289,16 @@ def test_a_detection_cut_by_the_image_border_does_not_decide_the_class() -> None
     assert [e.id for e in smap.entities("artifact")] == ["box_1"]
     (can,) = [t for t in smap.artifacts.tracks if t.class_name == "can"]
     assert (can.id, can.hits, can.near_hits) == (None, 3, 0)
+
+
+def test_a_person_on_the_robot_itself_is_not_fused() -> None:
+    """The robot's own arm or leg read as a person: inside its footprint at capture (with
+    a person's radius of margin) it is the robot; a person a step away is kept."""
+    smap = _map()
+    on_robot = _det("person", (0.3, 0.1))  # over the base, in front of the hips
+    beside = _det("person", (0.0, 0.9))
+    for k in range(1, 4):
+        report = _ingest(smap, k * S, on_robot, beside)
+        assert report.ignored >= 1
+    people = [tr for tr in smap.tracks() if tr.class_name == "person"]
+    assert len(people) == 1 and float(np.hypot(*(people[0].xy - (0.0, 0.9)))) < 0.2
