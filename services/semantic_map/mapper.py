@@ -29,9 +29,8 @@ way); nor does any "person" hide an artifact that stands on a static obstacle (t
 camera reads a bench's front as a person 15-35 cm from the can on it, outside the
 margin). Only the static layer counts: a learned cell may be a person perception missed.
 Nor is a "person" within `SELF_MARGIN_M` of the robot's own footprint (`common.robot`'s,
-arm stowed) at capture: that is the robot itself, seen by its own cameras (in hall seed 4
-such detections moved a false person onto the robot during the pick, and its lethal disc
-in navigation's costmap then enclosed the robot).
+arm stowed) at capture: that is the robot itself, seen by its own cameras (nobody stands
+inside the robot; a person there would give navigation a lethal disc around the robot).
 """
 
 from __future__ import annotations
