@@ -80,6 +80,8 @@ class Track:
     stamp_ns: int = 0
     #: People: the (4, 4) covariance of (x, y, vx, vy); `cov` is its position block.
     P: FloatArray | None = None
+    #: People: the velocity at the last sighting was sure (extrapolated while unseen).
+    moving: bool = False
 
     @property
     def confirmed(self) -> bool:

@@ -2,12 +2,16 @@
 survive walking, passing each other and short occlusions.
 
 Each frame every person is predicted to the frame's stamp (state x, y, vx, vy; white
-acceleration noise σ_a). A person unseen for `COAST_NS` stops being extrapolated: the
-velocity is reset to zero with a covariance of (V_MAX)², so the position's uncertainty
-then grows like a walker's reach instead of drifting along an old heading. Detections are
-assigned to people by the Hungarian method on a cost that adds the Mahalanobis distance
-of the innovation (gated at χ²₂ 99.9 %, or within `GATE_MIN_M`; never beyond
-`MAX_GATE_M`) and the Bhattacharyya
+acceleration noise σ_a). A person missed in a frame is extrapolated only along a
+velocity the filter was sure of at the last sighting (vᵀ Σv⁻¹ v ≥ χ²₂ 95 %: a walker
+tracked for a second at a walking pace); an unsure velocity (a person of a few
+detections, or one standing still, whose jitter reads as motion) is taken as zero, its
+covariance kept, so nobody drifts along a velocity that is noise. A person unseen for
+`COAST_NS` stops being extrapolated at all: the velocity is reset to zero with a
+covariance of (V_MAX)², so the position's uncertainty then grows like a walker's reach
+instead of drifting along an old heading. Detections are assigned to people by the
+Hungarian method on a cost that adds the Mahalanobis distance of the innovation (gated
+at χ²₂ 99.9 %, or within `GATE_MIN_M`; never beyond `MAX_GATE_M`) and the Bhattacharyya
 distance of the colour histograms: two people crossing are told apart by their clothes
 where their positions are ambiguous. The colours veto a match (beyond `MAX_APPEARANCE`)
 only when the detection is not where the person is expected (outside χ²₂ 95 %): a person
@@ -76,6 +80,15 @@ def merge_split_people(observations: list[Observation], radius_m: float) -> list
     return out
 
 
+def sure_velocity(tr: Track) -> bool:
+    """Whether the track's velocity differs from standing still beyond its own
+    uncertainty (χ²₂ 95 %)."""
+    v = tr.velocity
+    if not v.any():
+        return False
+    return float(v @ np.linalg.solve(tr.vel_cov, v)) >= CHI2_2D_95
+
+
 def _F(dt: float) -> FloatArray:
     F = np.eye(4)
     F[0, 2] = F[1, 3] = dt
@@ -134,6 +147,8 @@ class PeopleTracker:
                 tr.P[2:, :] = 0.0
                 tr.P[:, 2:] = 0.0
                 tr.P[2:, 2:] = np.eye(2) * V_MAX**2
+            elif last > tr.last_seen_ns and not tr.moving and tr.velocity.any():
+                tr.velocity = np.zeros(2)  # missed, and the velocity was not sure
             dt = (stamp_ns - last) * 1e-9
             x = np.concatenate([tr.xy, tr.velocity])
             F = _F(dt)
@@ -232,6 +247,7 @@ class PeopleTracker:
         if obs.appearance is not None:
             tr.appearance = blend(tr.appearance, obs.appearance)
         tr.hits += 1
+        tr.moving = sure_velocity(tr)
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None

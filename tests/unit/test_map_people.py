@@ -183,3 +183,28 @@ def test_a_long_unseen_person_seen_again_is_not_flung_by_a_stale_velocity() -> N
         (person,) = tracker.confirmed
         assert np.linalg.norm(person.velocity) < 2.0, person.velocity
     assert np.linalg.norm(person.xy - [1.0, 0.3]) < 0.1
+
+
+def test_a_person_of_two_detections_does_not_coast_along_their_jitter() -> None:
+    """Two detections 0.08 m apart a frame apart read as 0.7 m/s; unseen for two seconds,
+    the person stays where they were seen instead of walking that velocity off (onto
+    whatever lies that way: the robot, in a hall eval)."""
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    for k, xy in enumerate(([-3.73, 0.26], [-3.78, 0.33])):
+        tracker.update(k * DT_NS, [Observation("person", np.array(xy), 0.0, 0.06)])
+    (person,) = tracker.confirmed
+    assert np.linalg.norm(person.velocity) > 0.3, "the filter does read the jitter as motion"
+    for k in range(2, 22):
+        tracker.update(k * DT_NS, [])
+    assert np.linalg.norm(person.xy - [-3.78, 0.33]) < 0.1, person.xy
+
+
+def test_a_walker_tracked_for_a_second_coasts_on_while_out_of_view() -> None:
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    for k in range(15):
+        xy = np.array([1.0 * k * 0.1, 0.0])
+        tracker.update(k * DT_NS, [Observation("person", xy, 0.0, 0.05)])
+    (person,) = tracker.confirmed
+    for k in range(15, 25):  # a second unseen
+        tracker.update(k * DT_NS, [])
+    assert abs(person.xy[0] - 2.4) < 0.3, person.xy
