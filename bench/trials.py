@@ -25,8 +25,9 @@ Navigation's trials run over the full navigation stack instead (`bench.nav_run`)
 - goals: `count` random goals in a row across the world (`bench.trial_goals`).
 - person: a person steps into the path (hall, seed 3; `bench.nav_person`).
 
-- fetch: the mission's manipulation algorithms (approach, grasp pose, felt handover) in a
-  scripted bring-me over the full stack, judged from the sim's truth (`bench.trial_fetch`).
+- fetch: one bring-me by the real mission over the full stack, its manipulation measured
+  against the sim's truth (approach error, where the jaws closed, pull felt against taken;
+  `bench.trial_fetch`).
 """
 
 from __future__ import annotations
@@ -245,7 +246,7 @@ def run_trial(
 
         world = (options or {}).get("world") or "hall"
         return patrol_run(world, 0 if world_seed is None else world_seed, overrides)
-    if name == "fetch":  # the mission's manipulation algorithms over the full stack
+    if name == "fetch":  # the real mission over the full stack, with truth probes
         from bench.trial_fetch import run_fetch
 
         return run_fetch(seed, overrides)

@@ -249,7 +249,9 @@ POSTURES: dict[str, FloatArray] = {
 }
 
 
-def _frame_in_base(q_joints: FloatArray, frame: str) -> pin.SE3:
+def frame_in_base(q_joints: FloatArray, frame: str) -> pin.SE3:
+    """`frame`'s pose in the base frame at the joint positions `q_joints` ((19,), the
+    order of `RobotState.q`)."""
     import pinocchio as pin
 
     model = load_pinocchio()[0]
@@ -264,7 +266,7 @@ def _frame_in_base(q_joints: FloatArray, frame: str) -> pin.SE3:
 def _stand_base_height() -> float:
     """STAND_BASE_HEIGHT_M: the feet spheres rest on z = 0 in the `stand` legs."""
     return _foot_radius() - min(
-        float(_frame_in_base(POSTURES["stand"], f).translation[2]) for f in FOOT_FRAMES
+        float(frame_in_base(POSTURES["stand"], f).translation[2]) for f in FOOT_FRAMES
     )
 
 
@@ -459,7 +461,7 @@ _LAZY: dict[str, Callable[[], object]] = {
     "D_OPT_M": lambda: _reach_and_standoff()[1],
     "STANDOFF_DISTANCE_M": lambda: _reach_and_standoff()[1] + APPROACH_MARGIN_M,
     "HANDOVER_DISTANCE_M": lambda: (
-        float(_frame_in_base(POSTURES["handover"], TCP_FRAME).translation[0]) + PERSON_REACH_M
+        float(frame_in_base(POSTURES["handover"], TCP_FRAME).translation[0]) + PERSON_REACH_M
     ),
     "FOOTPRINT_BOUNDS": lambda: _footprint("stow"),
     "FOOTPRINT": _footprint_half_extents,
