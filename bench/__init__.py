@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -37,26 +38,43 @@ def _nav(overrides: Overrides) -> dict[str, Any]:
     return bench_nav(overrides)
 
 
-#: `dume bench startup|decoders|deadwatch --rounds N`: how many stacks (processes).
-STARTUP_ROUNDS = {"rounds": 10}
+@dataclass(frozen=True)
+class BenchOptions:
+    """The command line's bench options: `rounds` (startup, decoders, deadwatch: how
+    many stacks or processes); `sim_s` and `full` (stack: how long it measures)."""
+
+    rounds: int = 10
+    sim_s: float = 60.0
+    full: bool = False
+
+
+#: The options of the bench being run (set by `run_bench`).
+OPTIONS = {"now": BenchOptions()}
 
 
 def _startup(overrides: Overrides) -> dict[str, Any]:
     from bench.startup import bench_startup
 
-    return bench_startup(overrides, STARTUP_ROUNDS["rounds"])
+    return bench_startup(overrides, OPTIONS["now"].rounds)
 
 
 def _decoders(_overrides: Overrides) -> dict[str, Any]:
     from bench.decoder_race import bench_decoders
 
-    return bench_decoders(STARTUP_ROUNDS["rounds"])
+    return bench_decoders(OPTIONS["now"].rounds)
 
 
 def _deadwatch(_overrides: Overrides) -> dict[str, Any]:
     from bench.deadwatch import bench_deadwatch
 
-    return bench_deadwatch(STARTUP_ROUNDS["rounds"])
+    return bench_deadwatch(OPTIONS["now"].rounds)
+
+
+def _stack(overrides: Overrides) -> dict[str, Any]:
+    from bench.stack import bench_stack
+
+    opts = OPTIONS["now"]
+    return bench_stack(overrides, opts.sim_s, opts.full)
 
 
 BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
@@ -67,6 +85,7 @@ BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "startup": _startup,
     "decoders": _decoders,
     "deadwatch": _deadwatch,
+    "stack": _stack,
 }
 #: What `dume bench all` runs (the others start stacks or processes in a loop: alone).
 ALL = ("sim", "wbc", "perception", "nav")
@@ -80,11 +99,13 @@ TRIALS = (
 )  # fmt: skip
 
 
-def run_bench(which: str, overrides: Sequence[str] = (), rounds: int = 10) -> int:
+def run_bench(
+    which: str, overrides: Sequence[str] = (), options: BenchOptions = BenchOptions()
+) -> int:
     """Run a bench (or `all`) with the `--set` flags; print its figures (JSON)."""
     from common.config import parse_overrides
 
-    STARTUP_ROUNDS["rounds"] = rounds
+    OPTIONS["now"] = options
     names = list(ALL) if which == "all" else [which]
     settings = parse_overrides(overrides)
     results = {name: BENCHES[name](settings) for name in names}

@@ -87,6 +87,11 @@ class RobotKeys:
     def command(self) -> str:
         return f"{self.prefix}/command"
 
+    @property
+    def sim_stats(self) -> str:
+        """Where the sim's wall time went (`SimStats`), for the stack bench."""
+        return f"{self.prefix}/sim/stats"
+
     def camera_rgbd(self, camera: str) -> str:
         return f"{self.prefix}/camera/{_camera(camera)}/rgbd"
 

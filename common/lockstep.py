@@ -205,6 +205,8 @@ class SimGate(Generic[C]):
         #: Stalls logged: a periodic participant's once until it acks again, the
         #: commander's once per state it left unanswered.
         self.stalls = 0
+        #: Wall seconds waited per participant, booked to the one that answered last.
+        self.waited_s: dict[str, float] = {}
         self._alive = alive
         self._alive_version = -1
         self._ack_inbox = acks
@@ -262,12 +264,16 @@ class SimGate(Generic[C]):
         """Return once the sim may publish at t (lockstep): no live periodic participant
         owes an ack due by t, or the sim is stopping, or `stall_timeout_s` (wall) passed:
         then each participant still owing is logged, counted and left until it acks."""
-        deadline = self._now() + self.settings.stall_timeout_s
+        start = self._now()
+        deadline = start + self.settings.stall_timeout_s
+        last: list[str] = []
         while True:
             self.drain_acks(t_ns)
             blocking = self.acks.blocking(t_ns)
             if not blocking or self._stop.is_set():
+                self._book(last, start)
                 return
+            last = blocking
             if self._now() > deadline:
                 for name in blocking:
                     self._log.error(
@@ -300,11 +306,13 @@ class SimGate(Generic[C]):
         """
         if self.commander is None or t_ns % self.command_period_ns:
             return None
-        deadline = self._now() + self.settings.stall_timeout_s
+        start = self._now()
+        deadline = start + self.settings.stall_timeout_s
         while self.commander in self.alive_names and not self._stop.is_set():
             cmd = self._commands.pop(timeout_s=POLL_S)
             if cmd is not None:
                 if cmd.stamp_ns == t_ns:
+                    self._book([self.commander], start)
                     return cmd
                 continue  # an answer to an older state: superseded
             if self._now() > deadline:
@@ -313,6 +321,14 @@ class SimGate(Generic[C]):
                 return None
             self.refresh(t_ns)
         return None
+
+    def _book(self, names: list[str], start: float) -> None:
+        """Book the wall time since `start` to `names` (split evenly), if any."""
+        if not names:
+            return
+        share = (self._now() - start) / len(names)
+        for name in names:
+            self.waited_s[name] = self.waited_s.get(name, 0.0) + share
 
 
 def _at_or_after(stamp_ns: int) -> Callable[[Clock], bool]:

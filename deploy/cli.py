@@ -8,7 +8,7 @@
     dume map [--patrol | --export FILE | --import FILE]     the semantic map (JSON)
     dume demo [--world-seed N] [--object ID --person ID]    bring an object, print a JSON line
     dume eval --worlds N --seed S --out DIR                 N worlds judged from truth: a report
-    dume bench sim|wbc|nav|all                              print figures (JSON last line)
+    dume bench sim|wbc|nav|stack|all                        print figures (JSON last line)
     dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
     dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
     dume trial goals [--count 10] | person             random goals; a person stepping in (JSON)
@@ -241,11 +241,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from bench import run_bench
+    from bench import BenchOptions, run_bench
     from bench.eval.run import sigterm_interrupts
 
     with sigterm_interrupts():  # a killed bench still stops its stack
-        return run_bench(args.which, args.set, args.rounds)
+        return run_bench(args.which, args.set, BenchOptions(args.rounds, args.sim_s, args.full))
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
@@ -380,6 +380,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p.add_argument("which", choices=[*BENCHES, "all"])
     p.add_argument("--rounds", type=int, default=10, help="startup, decoders: rounds")
+    p.add_argument("--sim-s", type=float, default=60.0, help="stack: sim seconds measured")
+    p.add_argument("--full", action="store_true", help="stack: the whole demo request")
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")

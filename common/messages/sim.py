@@ -43,6 +43,30 @@ class Clock(Message, frozen=True):
     WALL_CLOCK = ("rtf",)
 
 
+class SimStats(Message, frozen=True):
+    """`dume/<r>/sim/stats`, every sim second: where the sim's wall time went, cumulative
+    from its first tick (for `dume bench stack`; nothing in the robot's loop reads it).
+
+    ticks: physics steps taken. wall_s: the loop's wall seconds. step_s: in the physics
+    step (contacts, people and handover included). render_s, captures: per camera, the
+    wall seconds rendering and how many captures. publish_s: putting out everything else
+    stamped (state, odom, frames' encoding and sending, clock, recording). waited_s: per
+    lockstep participant, the wall seconds the sim waited for it (a wait is booked to the
+    participant that answered last, the one the sim was blocked on).
+    """
+
+    stamp_ns: StampNs
+    ticks: int
+    wall_s: NonNegative
+    step_s: NonNegative
+    render_s: dict[str, NonNegative]
+    captures: dict[str, int]
+    publish_s: NonNegative
+    waited_s: dict[str, NonNegative]
+
+    WALL_CLOCK = ("wall_s", "step_s", "render_s", "publish_s", "waited_s")
+
+
 class RobotState(Message, frozen=True):
     """`dume/<r>/state`, 1 kHz: everything the whole-body controller needs.
 

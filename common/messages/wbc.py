@@ -112,6 +112,8 @@ class WbcStatus(Message, frozen=True):
 
     base_error_m, gripper_error_m, gripper_error_rad: tracking errors now.
     qp_time_us: the last tick's build + solve time, µs (wall clock, for monitoring).
+    tick_us: the last tick's whole compute, state in to command out, µs (wall clock; the
+    waits for upstream inputs left out).
     contacts: FL, FR, RL, RR in stance. held: the grasp detector says an object is held.
     gripper_wrench: (6,) force N and torque N·m felt at gripper_tcp, in the base frame.
     reason: the last mode change or failure, for a person.
@@ -132,5 +134,6 @@ class WbcStatus(Message, frozen=True):
     held: bool
     gripper_wrench: tuple[Finite, Finite, Finite, Finite, Finite, Finite]
     reason: str = ""
+    tick_us: NonNegative = 0.0
 
-    WALL_CLOCK = ("qp_time_us",)
+    WALL_CLOCK = ("qp_time_us", "tick_us")

@@ -10,7 +10,8 @@ updates the scene once from the camera and renders RGB, depth and segmentation:
   people and obstacles of the world, the robot; 0 for the floor and the sky);
 - intrinsics are `common.robot.intrinsics` at the rig's resolution; `T_base_camera`
   (OpenCV optical frame) and `T_world_base` come from the same kinematics the image shows.
-`render_ms` keeps each camera's last capture time.
+`render_ms` keeps each camera's last capture time; `render_s` and `captures` the wall
+seconds spent and the captures made, per camera, since the rig was made.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ class CameraRig:
         self._base = model.body(robot.BASE_FRAME).id
         self._far = float(model.vis.map.zfar * model.stat.extent)
         self.render_ms: dict[str, float] = {}
+        self.render_s: dict[str, float] = {}
+        self.captures: dict[str, int] = {}
 
     def intrinsics(self, camera: str) -> tuple[float, float, float, float]:
         """(fx, fy, cx, cy) in pixels of `camera` at this rig's resolution."""
@@ -81,7 +84,10 @@ class CameraRig:
         labels = scene.label_image(r.render(), self.table)
         r.disable_segmentation_rendering()
         depth[depth >= self._far * (1.0 - 1e-4)] = 0.0
-        self.render_ms[camera] = (time.perf_counter() - t0) * 1e3
+        spent = time.perf_counter() - t0
+        self.render_ms[camera] = spent * 1e3
+        self.render_s[camera] = self.render_s.get(camera, 0.0) + spent
+        self.captures[camera] = self.captures.get(camera, 0) + 1
 
         cam = self.model.camera(camera).id
         T_world_camera = make_T(

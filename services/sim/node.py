@@ -88,7 +88,7 @@ class SimNode:
         )
         wall0 = time.perf_counter()
         rtf_mark = (wall0, 0)
-        rtf = 0.0
+        rtf = step_s = publish_s = 0.0
         tick = 0
         while not svc.stopping and (
             self.duration_ns == 0 or tick * self.tick_ns < self.duration_ns
@@ -100,22 +100,30 @@ class SimNode:
             else:
                 self._pace(wall0, t_ns)
                 gate.drain_acks(t_ns)
+            t0 = time.perf_counter()
             self.out.publish(
                 t_ns, tick, rtf, state_due=gate.state_due(t_ns), clock_due=gate.clock_due(t_ns)
             )
+            t1 = time.perf_counter()
             self.intake.apply(gate.command(t_ns))
             self.intake.apply_cmd_vel(t_ns)
             self.push_hook.apply(t_ns, self.core)
             self.people_hook.apply(t_ns, self.core.people)
+            t2 = time.perf_counter()
             events = self.core.step()
+            now = time.perf_counter()
+            publish_s += t1 - t0
+            step_s += now - t2
             tick += 1
             self.out.events(tick * self.tick_ns, events)
             if tick % 1000 == 0:
-                now = time.perf_counter()
                 sim_s = (tick - rtf_mark[1]) * self.tick_ns / NS_PER_S
                 rtf = sim_s / max(now - rtf_mark[0], 1e-9)
                 rtf_mark = (now, tick)
                 self.out.sim_log.rtf(tick * self.tick_ns, rtf)
+                self.out.stats(
+                    tick * self.tick_ns, tick, now - wall0, step_s, publish_s, gate.waited_s
+                )
         wall = time.perf_counter() - wall0
         svc.log.info(
             "stopped at t=%.3f s after %.1f s wall (rtf %.2f): %d commands, %d rejected, "

@@ -27,6 +27,7 @@ from common.messages.sim import (
     RobotDescription,
     RobotState,
     SegmentationTruth,
+    SimStats,
     WorldEvent,
     WorldEvents,
 )
@@ -97,6 +98,7 @@ class SimOutputs:
         self.state = bus.publisher(keys.state, RobotState, "control")
         self.odom = bus.publisher(keys.odom, Odom, "control")
         self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
+        self.sim_stats = bus.publisher(keys.sim_stats, SimStats, "data")
         self.rgbd = {c: bus.publisher(keys.camera_rgbd(c), CameraFrame, "bulk") for c in cameras}
         self.truth = {
             c: bus.publisher(keys.camera_segmentation_truth(c), SegmentationTruth, "bulk")
@@ -150,6 +152,21 @@ class SimOutputs:
             self.clock.put(
                 Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf)
             )
+
+    def stats(
+        self, t_ns: int, ticks: int, wall_s: float, step_s: float, publish_s: float,
+        waited_s: dict[str, float],
+    ) -> None:  # fmt: skip
+        """Where the wall time went so far (`SimStats`; rendering from the rig)."""
+        rig = self.rig
+        self.sim_stats.put(
+            SimStats(
+                stamp_ns=t_ns, ticks=ticks, wall_s=wall_s, step_s=step_s,
+                render_s=dict(rig.render_s), captures=dict(rig.captures),
+                publish_s=max(0.0, publish_s - sum(rig.render_s.values())),
+                waited_s=dict(waited_s),
+            )
+        )  # fmt: skip
 
     def events(self, stamp_ns: int, events: list[WorldEvent]) -> None:
         """A step's world events (none: nothing goes out), stamped at the new time."""

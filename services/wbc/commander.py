@@ -170,8 +170,9 @@ class WbcCommander:
         """Base error m, gripper_tcp error m and rad (0 unless a pose is tracked)."""
         return tracking_errors(self.ctrl, self.actions.tracking_pose and self.mode != "damp")
 
-    def status(self, t: int, msg: RobotState) -> WbcStatus:
-        """`wbc/status` at t; updates the TCP wrench estimate from the state's torques."""
+    def status(self, t: int, msg: RobotState, tick_us: float = 0.0) -> WbcStatus:
+        """`wbc/status` at t (`tick_us`: the tick's compute, µs); updates the TCP wrench
+        estimate from the state's torques."""
         m = self.ctrl.model
         wrench = self.wrench.update(
             m.h,
@@ -197,4 +198,5 @@ class WbcCommander:
             held=self.actions.held,
             gripper_wrench=tuple(float(x) for x in wrench),  # type: ignore[arg-type]
             reason=self.reason,
+            tick_us=tick_us,
         )

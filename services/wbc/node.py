@@ -62,6 +62,8 @@ class WbcNode:
         latency = cfg.time.latencies_ns()
         self.core = core = WbcCommander(w, latency, self.period_ns, svc.log)
         self.tick_us = 0.0
+        #: Wall seconds this tick waited for upstream inputs (not compute).
+        self._waited_s = 0.0
         self.status_every = round(NS_PER_S / w.status_hz)
         self.log_every = round(NS_PER_S / w.log_hz)
         bus, keys = svc.bus, svc.keys
@@ -122,6 +124,7 @@ class WbcNode:
             core.say(f"state at t={t / NS_PER_S:.3f} s has NaN: damping")
             return
         dt = core.begin(t, state, msg)
+        self._waited_s = 0.0
         # The inputs due at t: the mode source's, its modes, then the obeyed source's.
         self._upstream(t, self.mode_source)
         self.intake.get()  # whatever came (realtime: nothing was waited for)
@@ -133,11 +136,11 @@ class WbcNode:
         core.start_goals(t)
         cmd = core.command(t, state, dt)
         self.commands.put(joint_command(t, cmd))
-        self.tick_us = (time.perf_counter() - t0) * 1e6
+        self.tick_us = (time.perf_counter() - t0 - self._waited_s) * 1e6
         # Off the critical path: the sim is stepping now.
         core.end(t, msg)
         if t % self.status_every == 0:
-            self.status.put(core.status(t, msg))
+            self.status.put(core.status(t, msg, self.tick_us))
         if t % self.log_every == 0:
             T_goal = core.actions.T_goal
             self.logger.log(
@@ -146,7 +149,10 @@ class WbcNode:
 
     def _upstream(self, t: int, producer: str) -> None:
         """Wait for `producer`'s cmd_vel due at t (lockstep; see the module's docstring)."""
-        if not self.upstream.wait(t, UPSTREAM_WAIT_S, (producer,)):
+        t0 = time.perf_counter()
+        late = self.upstream.wait(t, UPSTREAM_WAIT_S, (producer,))
+        self._waited_s += time.perf_counter() - t0
+        if not late:
             return
         self.late_inputs += 1
         if self.late_inputs in (1, 10, 100) or self.late_inputs % 1000 == 0:
