@@ -470,11 +470,15 @@ class RecordingSettings(_Section):
     run_id: str = ""
     #: gRPC address of a live viewer (`rerun+http://127.0.0.1:9876/proxy`), empty for none.
     viewer: str = ""
-    #: Log every n-th camera frame (images dominate the recording's size).
-    camera_every: int = 1
+    #: Log every n-th camera frame, by its stamp (images dominate the recording's size).
+    camera_every: int = 2
     #: Of the logged frames, log depth and segmentation with every n-th (they do not
     #: compress like RGB's JPEG).
     depth_every: int = 10
+    #: Wall seconds the recording batches rows before writing them: fewer, larger chunks
+    #: (each chunk carries its own schema: at 0.2 s, a pose a chunk, they were most of
+    #: the file); a live viewer lags by as much.
+    flush_s: Positive = 2.0
 
 
 class LogSettings(_Section):

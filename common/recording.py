@@ -25,6 +25,9 @@ import rerun.blueprint as rrb
 from common.config import RecordingSettings, resolve
 
 APP_ID = "dume"
+#: A batch is written when it reaches this many bytes or rows, or `flush_s` passed.
+BATCH_BYTES = 16 << 20
+BATCH_ROWS = 1 << 20
 log = logging.getLogger(__name__)
 
 
@@ -47,7 +50,12 @@ def open_recording(
     """
     run_id = settings.run_id or os.environ.get("DUME_RECORDING_RUN_ID") or new_run_id()
     rec_id = uuid.uuid5(uuid.NAMESPACE_URL, f"dume/{run_id}")
-    rec = rr.RecordingStream(APP_ID, recording_id=rec_id, default_enabled=settings.enabled)
+    batching = rr.ChunkBatcherConfig(
+        flush_tick=settings.flush_s, flush_num_bytes=BATCH_BYTES, flush_num_rows=BATCH_ROWS
+    )
+    rec = rr.RecordingStream(
+        APP_ID, recording_id=rec_id, default_enabled=settings.enabled, batcher_config=batching
+    )
     if not settings.enabled:
         return rec
     folder = run_dir(settings, run_id)
@@ -64,6 +72,24 @@ def open_recording(
 def is_recording(rec: rr.RecordingStream) -> bool:
     """Whether `rec` keeps what is logged (recording off: every log call is skipped)."""
     return bool(rr.is_enabled(recording=rec))
+
+
+class FrameSelector:
+    """Which camera frames the recording keeps, by their stamps, so that every service
+    logs the same ones (the sim's image, perception's boxes over it): every
+    `camera_every`-th frame of the camera's period, and of those every `dense_every`-th
+    with the dense layers (depth, segmentation, masks)."""
+
+    def __init__(self, camera_hz: float, camera_every: int, dense_every: int) -> None:
+        self.period_ns = max(1, round(1e9 / camera_hz))
+        self.every = max(1, camera_every)
+        self.dense = self.every * max(1, dense_every)
+
+    def logged(self, stamp_ns: int) -> bool:
+        return (stamp_ns // self.period_ns) % self.every == 0
+
+    def dense_logged(self, stamp_ns: int) -> bool:
+        return (stamp_ns // self.period_ns) % self.dense == 0
 
 
 def stamp(rec: rr.RecordingStream, stamp_ns: int) -> None:

@@ -22,6 +22,7 @@ from common.messages.base import NS_PER_S
 from common.messages.perception import Detections, LocateRequest
 from common.messages.semantic_map import MapEntity
 from common.messages.sim import CameraFrame, SegmentationTruth
+from common.recording import FrameSelector
 from common.service import Service
 from services.perception.frames import FrameProcessor
 from services.perception.locate import RecentDetections
@@ -84,7 +85,10 @@ class PerceptionNode:
         self.publisher = bus.publisher(keys.detections, Detections, "data")
         self.recent = RecentDetections()
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_ns / NS_PER_S, svc.stop)
-        logger = PerceptionLogger(svc.rec, cfg.recording.depth_every)
+        r = cfg.recording
+        logger = PerceptionLogger(
+            svc.rec, FrameSelector(cfg.sim.camera_hz, r.camera_every, r.depth_every)
+        )
         self.processor = FrameProcessor(
             self.settings, frames, truths, network, unavailable, self._publish, logger.frame
         )

@@ -1,11 +1,12 @@
 """What perception shows in rerun, on the sim-time timeline.
 
-Per camera and frame: boxes with `class score` labels over the image
-(`camera/<cam>/perception/boxes`), and with every `recording.depth_every`-th frame the
-instance masks (`camera/<cam>/perception/masks`, label k = the k-th detection). In the
-world: each instance's inlier points (thinned), its centroid with `class d θ`, and its
-axis as a vertical segment over the fitted height (`world/perception/<cam>/…`).
-Plots: detections per frame and processing time (`plots/perception/…`).
+Per camera, on the frames the sim keeps the image of (`common.recording.FrameSelector`):
+boxes with `class score` labels over the image (`camera/<cam>/perception/boxes`), and
+with the dense ones the instance masks (`camera/<cam>/perception/masks`, label k = the
+k-th detection). In the world: each instance's inlier points (thinned), its centroid with
+`class d θ`, and its axis as a vertical segment over the fitted height
+(`world/perception/<cam>/…`).
+Plots, every frame: detections and processing time (`plots/perception/…`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy as np
 import rerun as rr
 
 from common.messages.perception import Detection, Detections
-from common.recording import is_recording, stamp
+from common.recording import FrameSelector, is_recording, stamp
 from services.perception.pipeline import Detected, mask_of
 
 #: Points logged per instance at most.
@@ -35,11 +36,10 @@ def _axis_segment(d: Detection) -> list[tuple[float, float, float]]:
 
 
 class PerceptionLogger:
-    def __init__(self, rec: rr.RecordingStream, dense_every: int) -> None:
+    def __init__(self, rec: rr.RecordingStream, frames: FrameSelector) -> None:
         self.rec = rec
         self.enabled = is_recording(rec)
-        self.dense_every = max(1, dense_every)
-        self._frames: dict[str, int] = {}
+        self.frames = frames
 
     def frame(
         self, msg: Detections, detected: list[Detected], image_shape: tuple[int, int]
@@ -47,9 +47,11 @@ class PerceptionLogger:
         if not self.enabled:
             return
         cam = msg.camera
-        k = self._frames.get(cam, 0)
-        self._frames[cam] = k + 1
         stamp(self.rec, msg.stamp_ns)
+        self.rec.log(f"plots/perception/{cam}/detections", rr.Scalars(len(detected)))
+        self.rec.log(f"plots/perception/{cam}/process_ms", rr.Scalars(msg.process_ms))
+        if not self.frames.logged(msg.stamp_ns):  # the sim keeps no image of it
+            return
         dets = [d.detection for d in detected]
         colours = _PALETTE[np.arange(len(dets)) % len(_PALETTE)]
         labels = [f"{d.class_name} {d.score:.2f}" for d in dets]
@@ -62,7 +64,7 @@ class PerceptionLogger:
                 colors=colours,
             ),
         )
-        if k % self.dense_every == 0:
+        if self.frames.dense_logged(msg.stamp_ns):
             ids = np.zeros(image_shape, dtype=np.uint8)
             for i, d in enumerate(dets[:255]):
                 ids[mask_of(d, image_shape)] = i + 1
@@ -102,5 +104,3 @@ class PerceptionLogger:
                 radii=0.003,
             ),
         )
-        self.rec.log(f"plots/perception/{cam}/detections", rr.Scalars(len(dets)))
-        self.rec.log(f"plots/perception/{cam}/process_ms", rr.Scalars(msg.process_ms))

@@ -1,8 +1,9 @@
-"""The robot's RGB-D cameras: one offscreen renderer, three passes per capture.
+"""The robot's RGB-D cameras: one offscreen renderer, two or three passes per capture.
 
 `CameraRig(model, width, height)` holds one `mujoco.Renderer` for its resolution (every
 robot camera shares it) with shadows, reflections and multisampling off. A capture
-updates the scene once from the camera and renders RGB, depth and segmentation:
+updates the scene once from the camera and renders RGB and depth (`capture_frame`) and,
+when someone needs them, the segmentation labels (`capture_labels`; `capture` does all):
 - depth is MuJoCo's linearised z-buffer, i.e. the distance along the optical axis (not
   along the pixel's ray; `tests/unit/test_cameras.py` checks both against geometry),
   float32 metres, 0 where nothing is drawn (the far plane);
@@ -72,6 +73,12 @@ class CameraRig:
         self, data: mujoco.MjData, camera: str, stamp_ns: int
     ) -> tuple[CameraFrame, SegmentationTruth]:
         """RGB-D and instance labels of `camera` as `data` stands now, stamped `stamp_ns`."""
+        frame = self.capture_frame(data, camera, stamp_ns)
+        return frame, self.capture_labels(camera, stamp_ns)
+
+    def capture_frame(self, data: mujoco.MjData, camera: str, stamp_ns: int) -> CameraFrame:
+        """RGB-D of `camera` as `data` stands now (two passes; `capture_labels` right after
+        renders the third from the same scene)."""
         mount = self._mount(camera)
         t0 = time.perf_counter()
         r = self.renderer
@@ -80,14 +87,8 @@ class CameraRig:
         r.enable_depth_rendering()
         depth = r.render()
         r.disable_depth_rendering()
-        r.enable_segmentation_rendering()
-        labels = scene.label_image(r.render(), self.table)
-        r.disable_segmentation_rendering()
         depth[depth >= self._far * (1.0 - 1e-4)] = 0.0
-        spent = time.perf_counter() - t0
-        self.render_ms[camera] = spent * 1e3
-        self.render_s[camera] = self.render_s.get(camera, 0.0) + spent
-        self.captures[camera] = self.captures.get(camera, 0) + 1
+        self._spent(camera, t0, capture=True)
 
         cam = self.model.camera(camera).id
         T_world_camera = make_T(
@@ -95,7 +96,7 @@ class CameraRig:
         )
         T_world_base = make_T(data.xmat[self._base].reshape(3, 3), data.xpos[self._base])
         fx, fy, cx, cy = robot.intrinsics(mount)
-        frame = CameraFrame(
+        return CameraFrame(
             stamp_ns=stamp_ns,
             camera=camera,
             width=self.width,
@@ -109,10 +110,24 @@ class CameraRig:
             T_base_camera=_row_major(inv_T(T_world_base) @ T_world_camera),
             T_world_base=_row_major(T_world_base),
         )
-        truth = SegmentationTruth(
+
+    def capture_labels(self, camera: str, stamp_ns: int) -> SegmentationTruth:
+        """The instance labels of the scene `capture_frame` last set up (for `camera`)."""
+        t0 = time.perf_counter()
+        r = self.renderer
+        r.enable_segmentation_rendering()
+        labels = scene.label_image(r.render(), self.table)
+        r.disable_segmentation_rendering()
+        self._spent(camera, t0, capture=False)
+        return SegmentationTruth(
             stamp_ns=stamp_ns, camera=camera, labels=to_wire(labels), instances=self.instances
         )
-        return frame, truth
+
+    def _spent(self, camera: str, t0: float, capture: bool) -> None:
+        spent = time.perf_counter() - t0
+        self.render_ms[camera] = spent * 1e3 + (0.0 if capture else self.render_ms[camera])
+        self.render_s[camera] = self.render_s.get(camera, 0.0) + spent
+        self.captures[camera] = self.captures.get(camera, 0) + capture
 
     def close(self) -> None:
         """Free the renderer's GL context."""

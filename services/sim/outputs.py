@@ -1,12 +1,12 @@
 """What the sim gives out: the robot's description, and everything stamped with sim time.
 
 `SimOutputs.publish(t)` puts out, in this order, all stamped t (ns): the state (when the
-commander answers it; every tick without one), odom at `sim.odom_hz`, each camera's RGB-D
-frame and truth segmentation at `sim.camera_hz` (rendered only for someone who looks: a
-subscriber or the recording), the recording's poses every 40 ms, and last the clock (when
-due), so a participant woken by the clock finds its inputs as of t in. `events` puts out a
-step's world events. The recording (rerun) is logged alongside. Called from the sim's loop
-thread only.
+commander answers it; every tick without one), odom at `sim.odom_hz`, each camera's
+RGB-D frame at `sim.camera_hz` and its truth segmentation (`sim.segmentation_truth`)
+(each rendered only for someone who looks: a subscriber or the recording's kept frames),
+the recording's poses every 40 ms, and last the clock (when due), so a participant woken
+by the clock finds its inputs as of t in. `events` puts out a step's world events. The
+recording (rerun) is logged alongside. Called from the sim's loop thread only.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from common.messages.sim import (
     WorldEvents,
 )
 from common.messages.world import WorldDescription
-from common.recording import stamp
+from common.recording import FrameSelector, stamp
 from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.rerun_scene import SceneLogger
@@ -107,8 +107,9 @@ class SimOutputs:
         self.odom_period_ns = round(NS_PER_S / config.sim.odom_hz)
         self.camera_period_ns = round(NS_PER_S / config.sim.camera_hz)
         self.scene_log = SceneLogger(rec, core.model, groups={0, 1, 2})
+        r = config.recording
         self.sim_log = SimLogger(
-            rec, cameras, config.recording.camera_every, config.recording.depth_every
+            rec, FrameSelector(config.sim.camera_hz, r.camera_every, r.depth_every)
         )
 
     def begin(self, world: WorldDescription) -> None:
@@ -135,13 +136,16 @@ class SimOutputs:
             for cam in self.config.sim.cameras:
                 # Rendering is the sim's dearest work: only for someone who looks.
                 rgbd, truth_pub = self.rgbd[cam], self.truth[cam]
-                if not (
-                    self.sim_log.enabled or rgbd.has_subscribers() or truth_pub.has_subscribers()
-                ):
+                logged = self.sim_log.keeps(t_ns)
+                labels = (
+                    self.config.sim.segmentation_truth and truth_pub.has_subscribers()
+                ) or self.sim_log.keeps_dense(t_ns)
+                if not (logged or labels or rgbd.has_subscribers()):
                     continue
-                frame, truth = self.rig.capture(self.core.data, cam, t_ns)
+                frame = self.rig.capture_frame(self.core.data, cam, t_ns)
+                truth = self.rig.capture_labels(cam, t_ns) if labels else None
                 rgbd.put(frame)
-                if self.config.sim.segmentation_truth:
+                if truth is not None and self.config.sim.segmentation_truth:
                     truth_pub.put(truth)
                 self.sim_log.camera(t_ns, frame, truth)
         if t_ns % POSES_EVERY_NS == 0:

@@ -24,18 +24,14 @@ from common.messages.sim import (
     WorldEvent,
 )
 from common.messages.world import WorldDescription
-from common.recording import is_recording, stamp
+from common.recording import FrameSelector, is_recording, stamp
 
 
 class SimLogger:
-    def __init__(
-        self, rec: rr.RecordingStream, cameras: list[str], camera_every: int, dense_every: int
-    ) -> None:
+    def __init__(self, rec: rr.RecordingStream, frames: FrameSelector) -> None:
         self.rec = rec
         self.enabled = is_recording(rec)
-        self.camera_every = max(1, camera_every)
-        self.dense_every = max(1, dense_every)
-        self._frames: dict[str, int] = {c: 0 for c in cameras}
+        self.frames = frames
         self._annotated: set[str] = set()
 
     def world(self, world: WorldDescription) -> None:
@@ -89,12 +85,19 @@ class SimLogger:
         stamp(self.rec, t_ns)
         self.rec.log("plots/sim/real_time_factor", rr.Scalars(rtf))
 
-    def camera(self, t_ns: int, frame: CameraFrame, truth: SegmentationTruth) -> None:
+    def keeps(self, t_ns: int) -> bool:
+        """Whether the recording keeps the camera frames stamped t."""
+        return self.enabled and self.frames.logged(t_ns)
+
+    def keeps_dense(self, t_ns: int) -> bool:
+        """Whether it keeps their depth and segmentation too."""
+        return self.enabled and self.frames.dense_logged(t_ns)
+
+    def camera(self, t_ns: int, frame: CameraFrame, truth: SegmentationTruth | None) -> None:
         if not self.enabled:
             return
         cam = frame.camera
-        self._frames[cam] = self._frames.get(cam, 0) + 1
-        if (self._frames[cam] - 1) % self.camera_every:
+        if not self.frames.logged(t_ns):
             return
         stamp(self.rec, t_ns)
         path = f"camera/{cam}"
@@ -107,14 +110,14 @@ class SimLogger:
             ),
         )
         self.rec.log(f"{path}/rgb", rr.Image(as_numpy(frame.rgb)).compress(jpeg_quality=80))
-        if cam not in self._annotated:  # the label table is the same for every frame
+        if truth is not None and cam not in self._annotated:  # the same for every frame
             self.rec.log(
                 f"{path}/segmentation_truth",
                 rr.AnnotationContext([(int(k), v) for k, v in sorted(truth.instances.items())]),
                 static=True,
             )
             self._annotated.add(cam)
-        if (self._frames[cam] - 1) % (self.camera_every * self.dense_every):
+        if truth is None or not self.frames.dense_logged(t_ns):
             return
         # depth in mm and labels in 8 bits where they fit: a recording stays ~1 MB/s
         depth_mm = np.round(as_numpy(frame.depth).astype(np.float32) * 1000.0).astype(np.uint16)
