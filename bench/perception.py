@@ -5,8 +5,9 @@ under the whole-body controller, both cameras at 320 × 240): per frame, the wal
 perception spends from the frame's arrival to its `Detections` (`process_ms`: decode,
 segment, geometry, publish), p50/p95, and the end-to-end latency the bench sees between a
 frame's arrival and its `Detections`' arrival; throughput in frames per wall second; and,
-in the same run while the stack still runs, the raw `cv2.dnn` forward of the network on
-frames of that run, with the ratio pipeline p50 / forward p50.
+in the same run while the stack still runs, the raw forward of the network on frames of
+that run (onnxruntime, the segmenter's runtime, and OpenCV DNN on the same file and
+threads, the reference), with the ratios pipeline p50 / forward p50 and OpenCV / ours.
 
 Accuracy (in process, renders of seeds the network never saw): the robot stands at
 standoff poses in `look` facing each artifact (wrist camera) and 1-3 m away (head camera),
@@ -35,6 +36,7 @@ from typing import Any
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import cv2
 import mujoco
 import numpy as np
 import zenoh
@@ -283,19 +285,31 @@ class _Arrivals:
             sub.undeclare()
 
 
-def _forward_ms(net: Segmenter, frames: Sequence[CameraFrame]) -> list[float]:
-    times = []
+def _forward_ms(
+    net: Segmenter, frames: Sequence[CameraFrame], model: Path, threads: int
+) -> tuple[list[float], list[float]]:
+    """The network's forward per frame, ms: through the segmenter's runtime
+    (onnxruntime), and through OpenCV DNN on the same file and thread budget (the
+    reference it replaced), interleaved frame by frame so both see the same load."""
+    cv2.setNumThreads(threads)
+    reference = cv2.dnn.readNetFromONNX(str(model))
+    ours, theirs = [], []
     for frame in frames:
         rgb = np.asarray(as_numpy(frame.rgb), dtype=np.uint8)
         blob = net.blob(rgb, np.asarray(as_numpy(frame.depth), dtype=np.float32))
         t0 = time.perf_counter()
         net.forward(blob)
-        times.append((time.perf_counter() - t0) * 1e3)
-    return times
+        t1 = time.perf_counter()
+        reference.setInput(blob)
+        reference.forward()
+        t2 = time.perf_counter()
+        ours.append((t1 - t0) * 1e3)
+        theirs.append((t2 - t1) * 1e3)
+    return ours, theirs
 
 
 def live(
-    overrides: Overrides, segmenter: str, sim_s: float, net: Segmenter | None
+    overrides: Overrides, segmenter: str, sim_s: float, net: Segmenter | None, model: Path
 ) -> dict[str, Any]:
     """The pipeline's timing in a running stack (see the module docstring)."""
     settings = merged(
@@ -321,7 +335,10 @@ def live(
         t0 = time.perf_counter()
         last.wait(lambda m: m.stamp_ns >= end_ns, 1200.0)
         wall = time.perf_counter() - t0
-        forward = _forward_ms(net, arrivals.kept) if net is not None else []
+        threads = stack.config.perception.dnn_threads or os.cpu_count() or 1
+        forward, opencv = (
+            _forward_ms(net, arrivals.kept, model, threads) if net is not None else ([], [])
+        )
         arrivals.close()
     process, e2e, reasons = [], [], set()
     for (cam, stamp), (t_det, msg) in arrivals.detections.items():
@@ -341,10 +358,14 @@ def live(
         **_stats("pipeline_ms", process),
         **_stats("end_to_end_ms", e2e),
         **_stats("dnn_forward_ms", forward),
+        **_stats("opencv_dnn_forward_ms", opencv),
     }
     if forward and process:
         result["pipeline_over_forward_p50"] = round(
             statistics.median(process) / statistics.median(forward), 2
+        )
+        result["opencv_over_onnxruntime_p50"] = round(
+            statistics.median(opencv) / statistics.median(forward), 2
         )
     if reasons:
         result["live_reasons"] = sorted(reasons)
@@ -369,7 +390,7 @@ def bench_perception(overrides: Overrides | None = None, sim_s: float = 8.0) -> 
     net = Segmenter(model, threads=settings.dnn_threads or None) if model.exists() else None
     segmenter = "network" if net is not None else "truth"
     result: dict[str, Any] = {"bench": "perception", "network": net is not None}
-    result.update(live(overrides, segmenter, sim_s, net))
+    result.update(live(overrides, segmenter, sim_s, net, model))
     result.update(accuracy(_unseen(EVAL_SEEDS, model), net))
     for key, value in result.items():
         print(f"{key:40s} {value}")

@@ -1,4 +1,4 @@
-"""Instance segmentation at run time: the shipped ONNX network through OpenCV DNN.
+"""Instance segmentation at run time: the shipped ONNX network through onnxruntime.
 
 `Segmenter(model).segment(rgb, depth)` → `Instance`s (class, score, full-frame mask, box).
 The network (`services.perception.training.model`) labels every pixel with a class; the
@@ -27,6 +27,8 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from services.perception.onnx_net import OnnxError, OnnxNet
 
 BoolArray = NDArray[np.bool_]
 #: The model the repository ships.
@@ -163,7 +165,7 @@ def _split(
 
 
 class Segmenter:
-    """The ONNX network through `cv2.dnn` plus instance separation (see the module)."""
+    """The ONNX network (`OnnxNet`) plus instance separation (see the module)."""
 
     def __init__(
         self,
@@ -185,11 +187,9 @@ class Segmenter:
         except (OSError, KeyError, TypeError, ValueError) as exc:
             raise SegmenterError(f"model sidecar {meta_path} unusable: {exc}") from exc
         try:
-            self.net = cv2.dnn.readNetFromONNX(str(model))
-        except cv2.error as exc:
-            raise SegmenterError(f"cannot load {model}: {exc}") from exc
-        if threads is not None:
-            cv2.setNumThreads(threads)
+            self.net = OnnxNet(model, threads)
+        except OnnxError as exc:
+            raise SegmenterError(str(exc)) from exc
         self.min_area, self.min_score = min_area, min_score
         # People apart; the artifact classes pooled, so that one object read partly as a can
         # and partly as a bottle stays one instance (of the class most of it voted for).
@@ -227,9 +227,11 @@ class Segmenter:
         return out
 
     def forward(self, blob: NDArray[np.float32]) -> NDArray[np.float32]:
-        """Raw class logits (C, h, w) of one input blob: the part that `cv2.dnn` runs."""
-        self.net.setInput(blob)
-        out = np.asarray(self.net.forward(), dtype=np.float32)
+        """Raw class logits (C, h, w) of one input blob: the network's part."""
+        try:
+            out = self.net.run(blob)[0]
+        except OnnxError as exc:
+            raise SegmenterError(str(exc)) from exc
         if out.ndim != 4 or out.shape[1] != len(self.classes):
             raise SegmenterError(f"model output {out.shape} is not (1, {len(self.classes)}, h, w)")
         return out[0]

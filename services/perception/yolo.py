@@ -10,7 +10,7 @@ NMS (`cv2.dnn.NMSBoxesBatched`), forms each mask as sigmoid(coefficients · prot
 crops it to its box, scales it back through the letterbox to the original image and
 thresholds it: the same `Instance`s as the sim-trained segmenter. `YoloSegmenter` wraps
 the network, the letterbox and `decode`; class names come from the caller or from the
-model's `names` metadata (which needs the `onnx` package).
+model's `names` metadata.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from services.perception.onnx_net import OnnxError, OnnxNet
 from services.perception.segmenter import Instance, SegmenterError
 
 N_MASK_COEFFS = 32
@@ -119,21 +120,16 @@ def decode(
     return found
 
 
-def names_from_onnx(model: Path) -> list[str]:
-    """Class names from an ultralytics export's `names` metadata (needs the `onnx` package)."""
-    try:
-        import onnx  # optional: only to read the metadata
-    except ImportError as exc:
-        raise SegmenterError("reading class names from the model needs `onnx`; pass names") from exc
-    props = {p.key: p.value for p in onnx.load(str(model), load_external_data=False).metadata_props}
-    if "names" not in props:
+def names_from_metadata(net: OnnxNet, model: Path) -> list[str]:
+    """Class names from an ultralytics export's `names` metadata."""
+    if "names" not in net.metadata:
         raise SegmenterError(f"{model} has no `names` metadata; pass names")
-    table: Any = ast.literal_eval(props["names"])
+    table: Any = ast.literal_eval(net.metadata["names"])
     return [str(table[k]) for k in sorted(table)]
 
 
 class YoloSegmenter:
-    """An ultralytics YOLOv8-seg ONNX model through `cv2.dnn`: `segment(rgb, depth)`."""
+    """An ultralytics YOLOv8-seg ONNX model (`OnnxNet`): `segment(rgb, depth)`."""
 
     def __init__(
         self,
@@ -144,11 +140,11 @@ class YoloSegmenter:
         iou_threshold: float = 0.45,
     ) -> None:
         model = Path(model)
-        self.names = list(names) if names is not None else names_from_onnx(model)
         try:
-            self.net = cv2.dnn.readNetFromONNX(str(model))
-        except cv2.error as exc:
-            raise SegmenterError(f"cannot load {model}: {exc}") from exc
+            self.net = OnnxNet(model)
+        except OnnxError as exc:
+            raise SegmenterError(str(exc)) from exc
+        self.names = list(names) if names is not None else names_from_metadata(self.net, model)
         self.input_size = input_size
         self.conf_threshold, self.iou_threshold = conf_threshold, iou_threshold
 
@@ -160,8 +156,10 @@ class YoloSegmenter:
         if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
             raise SegmenterError(f"rgb must be (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
         blob, box = letterbox(rgb, self.input_size)
-        self.net.setInput(blob)
-        outs = self.net.forward(self.net.getUnconnectedOutLayersNames())
+        try:
+            outs = self.net.run(blob)
+        except OnnxError as exc:
+            raise SegmenterError(str(exc)) from exc
         # (1, C, N) before (1, 32, h, w), whatever order the model lists them in
-        output0, protos = (np.asarray(a, np.float32) for a in sorted(outs, key=np.ndim))
+        output0, protos = sorted(outs, key=np.ndim)
         return decode(output0, protos, self.names, box, self.conf_threshold, self.iou_threshold)

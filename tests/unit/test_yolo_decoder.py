@@ -1,5 +1,5 @@
 """The YOLOv8-seg decoder: known tensors give known boxes, classes, scores and masks; a
-synthetic ONNX model of an ultralytics export's shapes runs through `cv2.dnn`."""
+synthetic ONNX model of an ultralytics export's shapes runs through onnxruntime."""
 
 from __future__ import annotations
 
@@ -123,7 +123,7 @@ def test_the_shipped_synthetic_model_is_what_the_builder_makes(tmp_path: Path) -
     assert (tmp_path / "m.onnx").read_bytes() == SYNTHETIC.read_bytes()
 
 
-def test_a_synthetic_export_runs_through_opencv_dnn() -> None:
+def test_a_synthetic_export_runs_through_onnxruntime() -> None:
     seg = yolo.YoloSegmenter(SYNTHETIC, names=NAMES, input_size=SIZE)
     found = seg.segment(np.full((SIZE, SIZE, 3), 80, np.uint8))
     assert [(i.class_name, round(i.score, 3)) for i in found] == [("bottle", 0.9), ("person", 0.7)]
@@ -131,4 +131,5 @@ def test_a_synthetic_export_runs_through_opencv_dnn() -> None:
 
 
 def test_class_names_come_from_the_models_metadata() -> None:
-    assert yolo.names_from_onnx(SYNTHETIC) == NAMES
+    seg = yolo.YoloSegmenter(SYNTHETIC, input_size=SIZE)
+    assert seg.names == NAMES

@@ -6,7 +6,7 @@ separation included) and is matched against `TruthSegmenter` instances of its la
   pixels (the close-up views the grasp relies on), and over every bottle with ≥ 50 pixels;
 - person recall over people with ≥ 500 truth pixels within 8 m (`metrics.person_recall`);
 - mean IoU per class; predicted instances matching no truth, per frame;
-- the `cv2.dnn` forward pass and the whole `segment` call, ms p50/p95.
+- the network's forward pass (onnxruntime) and the whole `segment` call, ms p50/p95.
 """
 
 from __future__ import annotations
