@@ -476,9 +476,9 @@ class RecordingSettings(_Section):
     #: compress like RGB's JPEG).
     depth_every: int = 10
     #: Wall seconds the recording batches rows before writing them: fewer, larger chunks
-    #: (each chunk carries its own schema: at 0.2 s, a pose a chunk, they were most of
-    #: the file); a live viewer lags by as much.
-    flush_s: Positive = 2.0
+    #: (a chunk per entity per flush, each with its ~2 KB schema: at rerun's 0.2 s they
+    #: were most of the file); a live viewer lags by as much.
+    flush_s: Positive = 5.0
 
 
 class LogSettings(_Section):

@@ -17,8 +17,9 @@ pending goal or of the active one; an id of "" cancels whichever); then, while t
 no costmap, `queued(b)` (the id of the goal waiting for the map, reported `active`; it
 fails `timeout` after `MAP_WAIT_S` of sim time), else `start_due(b, …)` (the pending goal
 whose tick has come is started; a queued one is resolved now, against the map as fetched,
-so the same in every run); last, `done(b, …)` records the tick's costmap and pose and
-wakes `as_of`.
+so the same in every run); at each map adopted, `follow_person` (a handover goal's pose
+is chosen again once its person is `RETARGET_M` from where it was chosen); last,
+`done(b, …)` records the tick's costmap and pose and wakes `as_of`.
 
 Locks: `cond` (the node's one condition, shared with `map_feed.MapFeed`) guards the
 pending goal, the cancels, the goal count and the history; the navigator is touched by the
@@ -32,6 +33,7 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 
 from common.bus import RequestError
 from common.messages.base import NS_PER_S
@@ -44,7 +46,7 @@ from common.messages.navigation import (
     PoseGoal,
 )
 from services.navigation import goals
-from services.navigation.costmap import Costmap
+from services.navigation.costmap import Costmap, Person
 from services.navigation.goals import GoalInvalid, Queued
 from services.navigation.grid import Footprint, Pose
 from services.navigation.navigator import GoalSpec, Navigator
@@ -52,6 +54,8 @@ from services.navigation.sources import Source, SourceError
 
 #: A goal taken before the map fails when the map has not come this long after, s.
 MAP_WAIT_S = 30.0
+#: A handover goal's person this far (m) from where its pose was chosen: chosen again.
+RETARGET_M = 0.05
 #: Ticks of (costmap, pose) kept to resolve goals as of their sender's tick.
 HISTORY = 16
 
@@ -130,12 +134,13 @@ class GoalIntake:
             self.log.info("goal %s queued until the map is in", queued.goal_id)
             return NavGoalReply(accepted=True, goal_id=queued.goal_id)
         try:
-            target, tol, tol_yaw, handover = self.resolve(req, cm, pose, req.stamp_ns)
+            resolved = self.resolve(req, cm, pose, req.stamp_ns)
         except GoalInvalid as exc:
             return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
         with self._ticked:
             self._count += 1
-            spec = GoalSpec(f"nav_{self._count}", target, tol, tol_yaw, handover)
+            spec = replace(resolved, goal_id=f"nav_{self._count}")
+            target = spec.pose
             self._pending = (spec, effective)
         self.log.info(
             "goal %s accepted: %s -> (%.2f, %.2f, %.2f)",
@@ -146,11 +151,12 @@ class GoalIntake:
         return NavGoalReply(accepted=True, goal_id=spec.goal_id)
 
     def resolve(
-        self, req: NavGoalRequest, cm: Costmap, pose: Pose | None, at: int | None
-    ) -> tuple[Pose, float, float, str]:
+        self, req: NavGoalRequest, cm: Costmap, pose: Pose | None, at: int | None, goal_id: str = ""
+    ) -> GoalSpec:
         """The goal's pose, tolerances and handover person against `cm` and the map's
         data as of `at`; `GoalInvalid` with the reason."""
         g = req.goal
+        person_xy = None
         try:
             if isinstance(g, PoseGoal):
                 target = Pose(g.x, g.y, g.yaw)
@@ -165,11 +171,34 @@ class GoalIntake:
                 here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
                 target = goals.handover_pose(cm, person, here, self.fp)
                 tol, tol_yaw, handover = *self.tolerance, g.person_id
+                person_xy = (person.x, person.y)
         except (SourceError, goals.GoalError) as exc:
             raise GoalInvalid(str(exc)) from None
         if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
             raise GoalInvalid(f"{target} is off the map")
-        return target, tol, tol_yaw, handover
+        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy)
+
+    def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
+        """A handover goal follows its person: once the map has them `RETARGET_M` from
+        where the pose was chosen, the pose is chosen again from there (the estimate of
+        a person far away firms up as the robot comes near; a person may step aside)."""
+        g = self.nav.goal
+        if self.nav.state != "active" or g is None or not g.handover_id or g.person_xy is None:
+            return
+        person = next((q for q in people if q.id == g.handover_id), None)
+        if person is None or math.hypot(person.x - g.person_xy[0],
+                                        person.y - g.person_xy[1]) < RETARGET_M:  # fmt: skip
+            return
+        try:
+            target = goals.handover_pose(cm, person, (pose.x, pose.y), self.fp)
+        except goals.GoalError as exc:
+            self.log.info("goal %s keeps its pose: %s", g.goal_id, exc)
+            return
+        self.log.info(
+            "goal %s follows %s to (%.2f, %.2f): (%.2f, %.2f, %.2f)",
+            g.goal_id, person.id, person.x, person.y, *target,
+        )  # fmt: skip
+        self.nav.retarget(target, (person.x, person.y), b)
 
     # -- the loop's thread ----------------------------------------------------------------
 
@@ -218,14 +247,11 @@ class GoalIntake:
             return
         if isinstance(pending, Queued):
             try:
-                target, tol, tol_yaw, handover = self.resolve(
-                    pending.request, costmap, pose, map_at
-                )
+                pending = self.resolve(pending.request, costmap, pose, map_at, pending.goal_id)
             except GoalInvalid as exc:
                 self.log.info("goal %s refused once the map came: %s", pending.goal_id, exc)
                 self.nav.refuse(pending.goal_id, str(exc))
                 return
-            pending = GoalSpec(pending.goal_id, target, tol, tol_yaw, handover)
             self.log.info("goal %s resolved: (%.2f, %.2f, %.2f)", pending.goal_id, *pending.pose)
         if self.nav.state == "active" and self.nav.goal is not None:
             self.log.info("goal %s replaced by %s", self.nav.goal.goal_id, pending.goal_id)

@@ -16,14 +16,15 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   clear the short-lived layer, rotate in place (`ROTATE_S`), back off (`BACKOFF_S`), each
   followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
   ever found);
-- `goal_timeout_s` of sim time on one goal: `failed: timeout`.
+- `goal_timeout_s` of sim time on one goal: `failed: timeout`;
+- `retarget` moves the goal's pose (a handover whose person's estimate moved): replan.
 `cancel` brings the command to zero at once (the WBC's own acceleration limits shape it).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -59,6 +60,8 @@ class GoalSpec:
     tol_xy: float
     tol_yaw: float
     handover_id: str = ""
+    #: Where the person handed over to was when the pose was chosen (m, world).
+    person_xy: tuple[float, float] | None = None
 
 
 class TickOutput(NamedTuple):
@@ -110,6 +113,16 @@ class Navigator:
         self.progress_ns = t_ns
         self.total_m = 0.0
         self.limit_rule = ""
+
+    def retarget(self, pose: Pose, person_xy: tuple[float, float], t_ns: int) -> None:
+        """The active goal's pose moves (a handover: the person's estimate moved); the
+        next tick replans to it, and progress is measured afresh."""
+        if self.state != "active" or self.goal is None:
+            return
+        self.goal = replace(self.goal, pose=pose, person_xy=person_xy)
+        self.last_plan_ns = -(10**18)
+        self.best_remaining = self.best_yaw_error = math.inf
+        self.progress_ns = t_ns
 
     def refuse(self, goal_id: str, detail: str, reason: NavFailure = "invalid_goal") -> None:
         """A goal taken before it could be resolved (no map yet) that turned out invalid,

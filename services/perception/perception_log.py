@@ -21,7 +21,7 @@ from common.recording import FrameSelector, is_recording, stamp
 from services.perception.pipeline import Detected, mask_of
 
 #: Points logged per instance at most.
-MAX_LOG_POINTS = 300
+MAX_LOG_POINTS = 120
 _PALETTE = np.array(
     [[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48], [145, 30, 180]],
     dtype=np.uint8,

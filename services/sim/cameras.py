@@ -55,10 +55,7 @@ class CameraRig:
             flags[flag] = False
         self.table = scene.segmentation_ids(model, world)
         self.instances = {k: v for k, v in self.table.labels.items() if k != scene.BACKGROUND_LABEL}
-        self.mounts = {
-            name: dataclasses.replace(mount, width=width, height=height)
-            for name, mount in robot.CAMERA_MOUNTS.items()
-        }
+        self.mounts = {name: self.mount(name, width, height) for name in robot.CAMERA_MOUNTS}
         self._base = model.body(robot.BASE_FRAME).id
         self._far = float(model.vis.map.zfar * model.stat.extent)
         self.render_ms: dict[str, float] = {}
@@ -68,6 +65,13 @@ class CameraRig:
     def intrinsics(self, camera: str) -> tuple[float, float, float, float]:
         """(fx, fy, cx, cy) in pixels of `camera` at this rig's resolution."""
         return robot.intrinsics(self._mount(camera))
+
+    @staticmethod
+    def mount(camera: str, width: int, height: int) -> robot.CameraMount:
+        """`camera`'s mount rendered at width × height (KeyError: no such camera)."""
+        if camera not in robot.CAMERA_MOUNTS:
+            raise KeyError(f"no camera {camera!r}; the robot has {sorted(robot.CAMERA_MOUNTS)}")
+        return dataclasses.replace(robot.CAMERA_MOUNTS[camera], width=width, height=height)
 
     def capture(
         self, data: mujoco.MjData, camera: str, stamp_ns: int

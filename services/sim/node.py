@@ -9,7 +9,8 @@ answer to the state at t, in realtime the newest); apply it, the kinematic base'
 cmd_vel, and the pushes and people commands due at t; step the physics to t + 1 ms and
 publish the step's world events. The protocol's waits (the start gate, acks, commands,
 stalls, liveliness) are `common.lockstep.SimGate`'s; the physics, people, handover and
-events `SimCore`'s; the cameras `CameraRig`'s; this module wires them and keeps time.
+events `SimCore`'s; the cameras are rendered beside the loop, from a snapshot of tick t
+(`RenderWorker`); this module wires them and keeps time.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from common.messages.sim import Ack, JointCommand
 from common.messages.world import WorldDescription
 from common.recording import default_blueprint
 from common.service import Service
-from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.intake import CommandIntake
 from services.sim.outputs import SimOutputs, robot_description
@@ -47,14 +47,11 @@ class SimNode:
             watchdog_ms=cfg.sim.watchdog_ms,
             walking_people=cfg.sim.walking_people,
         )
-        self.rig = CameraRig(
-            self.core.model, cfg.sim.camera_width, cfg.sim.camera_height, world=world
-        )
         self.duration_ns = round(cfg.sim.duration_s * NS_PER_S)
         bus, keys = svc.bus, svc.keys
         # Declared in this order: the publishers, then the commands, acks, cmd_vel, pushes,
         # people commands and liveliness.
-        self.out = SimOutputs(bus, keys, cfg, self.core, self.rig, svc.rec)
+        self.out = SimOutputs(bus, keys, cfg, self.core, world, svc.rec)
         commands = bus.fifo(keys.command, JointCommand, maxlen=256)
         acks = bus.fifo(keys.ack_all, Ack, maxlen=4096)
         self.intake = CommandIntake(bus, keys, self.core, cfg.wbc.cmd_vel_timeout_s, svc.log)
@@ -70,7 +67,7 @@ class SimNode:
             log=svc.log,
         )
         self.tick_ns = self.gate.tick_ns
-        self.description = robot_description(cfg, self.core, self.rig)
+        self.description = robot_description(cfg, self.core)
         bus.serve(keys.description, None, lambda _req, _sel: self.description)
         bus.serve(K.WORLD_DESCRIPTION, None, lambda _req, _sel: self.world)
 
@@ -124,6 +121,7 @@ class SimNode:
                 self.out.stats(
                     tick * self.tick_ns, tick, now - wall0, step_s, publish_s, gate.waited_s
                 )
+        self.out.close()
         wall = time.perf_counter() - wall0
         svc.log.info(
             "stopped at t=%.3f s after %.1f s wall (rtf %.2f): %d commands, %d rejected, "

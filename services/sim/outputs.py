@@ -35,6 +35,7 @@ from common.messages.world import WorldDescription
 from common.recording import FrameSelector, stamp
 from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
+from services.sim.render_worker import RenderWorker, Shot
 from services.sim.rerun_scene import SceneLogger
 from services.sim.sim_log import SimLogger
 
@@ -42,19 +43,20 @@ from services.sim.sim_log import SimLogger
 POSES_EVERY_NS = 40_000_000
 
 
-def robot_description(config: Config, core: SimCore, rig: CameraRig) -> RobotDescription:
+def robot_description(config: Config, core: SimCore) -> RobotDescription:
     """`dume/<r>/description`: joints, limits, frames, cameras, tick rate and time mode."""
     cams = []
+    w, h = config.sim.camera_width, config.sim.camera_height
     for name in config.sim.cameras:
-        mount = robot.CAMERA_MOUNTS[name]
-        fx, fy, cx, cy = rig.intrinsics(name)
+        mount = CameraRig.mount(name, w, h)
+        fx, fy, cx, cy = robot.intrinsics(mount)
         cams.append(
             CameraInfo(
                 name=name,
                 parent_frame=mount.parent_frame,
                 T_parent_camera=tuple(float(x) for x in np.asarray(mount.T_parent_camera).ravel()),
-                width=rig.width,
-                height=rig.height,
+                width=w,
+                height=h,
                 fx=fx,
                 fy=fy,
                 cx=cx,
@@ -78,7 +80,8 @@ def robot_description(config: Config, core: SimCore, rig: CameraRig) -> RobotDes
 
 
 class SimOutputs:
-    """The sim's publishers and recording, reading a `SimCore` and its `CameraRig`."""
+    """The sim's publishers and recording, reading a `SimCore`; its cameras rendered by a
+    `RenderWorker` (frames published from the render thread). `close()` when done."""
 
     def __init__(
         self,
@@ -86,12 +89,11 @@ class SimOutputs:
         keys: RobotKeys,
         config: Config,
         core: SimCore,
-        rig: CameraRig,
+        world: WorldDescription,
         rec: rr.RecordingStream,
     ) -> None:
         self.config = config
         self.core = core
-        self.rig = rig
         self.rec = rec
         cameras = config.sim.cameras
         self.clock = bus.publisher(WORLD_CLOCK, Clock, "control")
@@ -111,6 +113,8 @@ class SimOutputs:
         self.sim_log = SimLogger(
             rec, FrameSelector(config.sim.camera_hz, r.camera_every, r.depth_every)
         )
+        s = config.sim
+        self.render = RenderWorker(core.model, s.camera_width, s.camera_height, world, self._put)
 
     def begin(self, world: WorldDescription) -> None:
         """The recording at t = 0: the scene's geometry and the world's layout."""
@@ -133,21 +137,7 @@ class SimOutputs:
             if self.sim_log.enabled:
                 self.sim_log.state(t_ns, state or self.core.robot_state(tick))
         if t_ns % self.camera_period_ns == 0:
-            for cam in self.config.sim.cameras:
-                # Rendering is the sim's dearest work: only for someone who looks.
-                rgbd, truth_pub = self.rgbd[cam], self.truth[cam]
-                logged = self.sim_log.keeps(t_ns)
-                labels = (
-                    self.config.sim.segmentation_truth and truth_pub.has_subscribers()
-                ) or self.sim_log.keeps_dense(t_ns)
-                if not (logged or labels or rgbd.has_subscribers()):
-                    continue
-                frame = self.rig.capture_frame(self.core.data, cam, t_ns)
-                truth = self.rig.capture_labels(cam, t_ns) if labels else None
-                rgbd.put(frame)
-                if truth is not None and self.config.sim.segmentation_truth:
-                    truth_pub.put(truth)
-                self.sim_log.camera(t_ns, frame, truth)
+            self.render.submit(t_ns, self.core.data, self._shots(t_ns))
         if t_ns % POSES_EVERY_NS == 0:
             stamp(self.rec, t_ns)
             self.scene_log.log_poses(self.core.data)
@@ -157,18 +147,40 @@ class SimOutputs:
                 Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf)
             )
 
+    def _shots(self, t_ns: int) -> list[Shot]:
+        """The cameras to render at t: only for someone who looks (a subscriber, the
+        recording's kept frames); with labels for a subscriber to them or a dense frame."""
+        shots = []
+        for cam in self.config.sim.cameras:
+            truth_pub = self.truth[cam]
+            labels = (
+                self.config.sim.segmentation_truth and truth_pub.has_subscribers()
+            ) or self.sim_log.keeps_dense(t_ns)
+            if labels or self.sim_log.keeps(t_ns) or self.rgbd[cam].has_subscribers():
+                shots.append(Shot(cam, labels))
+        return shots
+
+    def _put(self, frame: CameraFrame, truth: SegmentationTruth | None) -> None:
+        """A rendered frame out (on the render thread)."""
+        self.rgbd[frame.camera].put(frame)
+        if truth is not None and self.config.sim.segmentation_truth:
+            self.truth[frame.camera].put(truth)
+        self.sim_log.camera(frame.stamp_ns, frame, truth)
+
+    def close(self) -> None:
+        """Render and publish what is waiting; stop the render thread."""
+        self.render.close()
+
     def stats(
         self, t_ns: int, ticks: int, wall_s: float, step_s: float, publish_s: float,
         waited_s: dict[str, float],
     ) -> None:  # fmt: skip
-        """Where the wall time went so far (`SimStats`; rendering from the rig)."""
-        rig = self.rig
+        """Where the wall time went so far (`SimStats`; rendering on its own thread)."""
         self.sim_stats.put(
             SimStats(
                 stamp_ns=t_ns, ticks=ticks, wall_s=wall_s, step_s=step_s,
-                render_s=dict(rig.render_s), captures=dict(rig.captures),
-                publish_s=max(0.0, publish_s - sum(rig.render_s.values())),
-                waited_s=dict(waited_s),
+                render_s=self.render.render_s, captures=self.render.captures,
+                publish_s=publish_s, waited_s=dict(waited_s),
             )
         )  # fmt: skip
 

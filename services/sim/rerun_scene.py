@@ -79,6 +79,8 @@ class SceneLogger:
             (static if is_static else moving).append(b)
         self.static_bodies = static
         self.moving_bodies = np.array(moving, dtype=np.intp)
+        #: The last pose logged per moving body (x y z, qw qx qy qz); NaN: none yet.
+        self._logged = np.full((len(moving), 7), np.nan)
 
     def log_geometry(self, data: mujoco.MjData) -> None:
         """Every visible geom, static, in its body's frame; static bodies' poses."""
@@ -103,15 +105,26 @@ class SceneLogger:
             self.rec.log(self.paths[b], self._pose(data, b), static=True)
 
     def log_poses(self, data: mujoco.MjData) -> None:
-        """The world pose of every body that can move (robot, artifacts, people)."""
+        """The world pose of every body that can move (robot, artifacts, people) and has
+        since it was last logged (`POSE_MOVED`): an artifact on its table or a person
+        standing costs nothing until they move."""
         if not is_recording(self.rec):
             return
-        for b in self.moving_bodies:
-            self.rec.log(self.paths[b], self._pose(data, int(b)))
+        b = self.moving_bodies
+        now = np.hstack([data.xpos[b], data.xquat[b]])
+        moved = ~(np.abs(now - self._logged) <= POSE_MOVED).all(axis=1)  # NaN: never logged
+        for k in np.flatnonzero(moved):
+            self.rec.log(self.paths[b[k]], self._pose(data, int(b[k])))
+        self._logged[moved] = now[moved]
 
     @staticmethod
     def _pose(data: mujoco.MjData, body: int) -> rr.Transform3D:
         return rr.Transform3D(translation=data.xpos[body], quaternion=_xyzw(data.xquat[body]))
+
+
+#: A body is logged again once a coordinate of its position moved this much (m) or a
+#: component of its unit quaternion (about half the angle in rad, for small turns).
+POSE_MOVED = 1e-3
 
 
 def _xyzw(wxyz: NDArray[np.float64]) -> rr.Quaternion:
