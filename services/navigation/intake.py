@@ -55,9 +55,7 @@ from services.navigation.sources import Source, SourceError
 #: A goal taken before the map fails when the map has not come this long after, s.
 MAP_WAIT_S = 30.0
 #: A handover goal's person this far (m) from where its pose was chosen: chosen again.
-#: Twice the wander of a standing person's estimate as the robot walks up (its visible
-#: side changes): a goal moved by less would have the robot shuffle in front of them.
-RETARGET_M = 0.10
+RETARGET_M = 0.05
 #: Ticks of (costmap, pose) kept to resolve goals as of their sender's tick.
 HISTORY = 16
 
