@@ -177,7 +177,7 @@ def test_the_watchdog_holds_the_robot_when_the_controller_dies(stack: StartStack
 
 
 def test_the_sim_describes_the_robot_and_the_world(stack: StartStack) -> None:
-    s = stack(["sim"], *SMALL, "time.participants={}", "sim.duration_s=2")
+    s = stack(["sim"], *SMALL, "time.participants={}", "sim.duration_s=30")
     desc = s.bus.query(s.keys.description, None, RobotDescription, timeout_s=10)
     assert desc.joint_names == robot.JOINT_NAMES
     assert {c.name for c in desc.cameras} == {"camera_head", "camera_wrist"}
