@@ -153,6 +153,9 @@ class WbcSettings(_Section):
 
     #: The mode at start-up: damp, stand, walk or manipulate.
     initial_mode: Literal["damp", "stand", "walk", "manipulate"] = "stand"
+    #: SCHED_FIFO priority of the controller's threads (`common.sched`; 0: the normal
+    #: scheduler). Where the OS refuses it the controller says so and runs as normal.
+    realtime_priority: Annotated[int, msgspec.Meta(ge=0, le=99)] = 10
     #: The `cmd_vel` source obeyed until a `wbc/mode` names another.
     cmd_vel_source: str = "navigation"
     #: Who publishes `wbc/mode` (its participant latency applies to modes).

@@ -41,6 +41,7 @@ from common.messages import ArrayError
 from common.messages.base import NS_PER_S
 from common.messages.sim import JointCommand, RobotState
 from common.messages.wbc import ArmGoalReply, ArmGoalRequest, CmdVel, WbcMode, WbcStatus
+from common.sched import make_realtime
 from common.service import Service
 from services.wbc.commander import WbcCommander
 from services.wbc.inputs import ArbiterFeed
@@ -95,6 +96,11 @@ class WbcNode:
         # milliseconds in the middle of a tick.
         gc.collect()
         gc.freeze()
+        prio = svc.config.wbc.realtime_priority
+        if prio and (why := make_realtime(prio)):
+            svc.log.warning("%s: the controller runs under the normal scheduler", why)
+        elif prio:
+            svc.log.info("the controller runs SCHED_FIFO %d", prio)
         svc.ready()
         last = -1
 
