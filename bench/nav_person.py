@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.nav_run import nav_stack, odom_pose, send_goal
+from bench.nav_run import nav_stack, send_goal
 from common.bus import Latest
 from common.config import REPO_ROOT, Overrides, merged
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS, WORLD_PEOPLE_COMMAND
@@ -85,7 +85,7 @@ class PersonFigures:
 
 
 def _pose(m: Odom) -> Pose:
-    return Pose(*odom_pose(m))
+    return Pose.of_odom(m)
 
 
 def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:

@@ -24,13 +24,13 @@ from numpy.typing import NDArray
 
 from common.clients import NavClient, Refused
 from common.config import Overrides, merged
-from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
 from common.messages.sim import Odom, RobotContact, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
 from deploy.stack import ProcessStack
+from services.navigation.grid import Pose
 
 Corners = NDArray[np.float64]  # (4, 2) m, world, counter-clockwise
 
@@ -85,11 +85,6 @@ def obstacle_boxes(world: WorldDescription) -> list[tuple[str, Corners]]:
         )
         for o in world.obstacles
     ]
-
-
-def odom_pose(odom: Odom) -> tuple[float, float, float]:
-    p = odom.base_position_in_world
-    return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
 
 def nav_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
@@ -192,7 +187,7 @@ class NavRun:
             self.last = self.odom.pop(timeout_s=30.0)
         if self.last is None:
             raise RuntimeError("no odom from the sim")
-        return odom_pose(self.last)
+        return Pose.of_odom(self.last)
 
     def _drain(self, g: GoalFigures | None) -> None:
         for m in self.odom.drain():
@@ -205,9 +200,9 @@ class NavRun:
                     g.contacts[e.other] = g.contacts.get(e.other, 0) + 1
 
     def _observe(self, m: Odom, g: GoalFigures) -> None:
-        x, y, yaw = odom_pose(m)
+        x, y, yaw = Pose.of_odom(m)
         if self.last is not None:
-            x0, y0, _ = odom_pose(self.last)
+            x0, y0, _ = Pose.of_odom(self.last)
             g.path_m += math.hypot(x - x0, y - y0)
         fp = footprint_corners(x, y, yaw, self.fp)
         reach = self.fp.circumscribed + g.closest_obstacle_m

@@ -15,7 +15,8 @@ The node builds the parts from the config and the bus, runs the loop and publish
 Each tick b (multiples of `time.participants.navigation.period_s`): the odom stamped b
 (waited for: 50 Hz), the depth layer, the map to adopt, perception's people due by b,
 the cancels; until the map is in, idle ("waiting for the map": zero cmd_vel, a queued
-goal `active`); else the goal due, the costmap rebuilt when a layer changed,
+goal `active`); else the goal due, a handover goal following its person on a new map,
+the costmap rebuilt when a layer changed,
 `Navigator.tick` (its `clear` recovery empties the depth layer); then `wbc/cmd_vel`
 (source `navigation`) and `nav/status` stamped b, `nav/path` on a new plan, the ack. So
 goals, cancels and map updates take effect at ticks fixed by sim time, never by when a
@@ -30,7 +31,6 @@ import time
 import numpy as np
 
 from common.bus import WaitTimeout
-from common.geometry import yaw_of_quat_xyzw
 from common.lockstep import PeriodicTicker
 from common.messages import to_wire
 from common.messages.base import NS_PER_S
@@ -53,11 +53,6 @@ NAME = "navigation"
 #: Wall seconds to wait for a tick's input (odom, a depth frame, perception, the map
 #: fetch, the tick a goal is stamped at); NavigationSettings has no setting for it.
 INPUT_TIMEOUT_S = 30.0
-
-
-def odom_pose(odom: Odom) -> Pose:
-    p = odom.base_position_in_world
-    return Pose(p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw))
 
 
 class NavNode:
@@ -137,7 +132,7 @@ class NavNode:
             self._publish(b, np.zeros(3), None, "no odom")
             self.intake.done(b, m.costmap, self.pose)
             return
-        pose = odom_pose(odom)
+        pose = Pose.of_odom(odom)
         self.pose = pose
         changed = self.depth is not None and self.depth.update(b, pose, m.grid, m.layer)
         fresh = self.feed.tick(b) if self.feed is not None else None
