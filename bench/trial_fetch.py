@@ -36,14 +36,22 @@ from bench.eval.run import read_world, start_gate_overrides, watch_mission
 from common import robot
 from common.bus import Bus
 from common.config import Overrides, merged
-from common.geometry import FloatArray, make_T, quat_xyzw_to_matrix, wrap_angle
+from common.geometry import (
+    FloatArray,
+    inv_T,
+    make_T,
+    quat_xyzw_to_matrix,
+    transform_points,
+    wrap_angle,
+    yaw_only,
+)
 from common.keys import SERVICES, RobotKeys
 from common.messages.arrays import as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionRequest
 from common.messages.sim import HandoverTaken, ObjectDropped, RobotState
 from common.messages.wbc import WbcStatus
-from common.messages.world import Artifact, Cylinder
+from common.messages.world import Artifact
 from deploy.stack import ProcessStack
 from services.mission.grasp_pose import plan_error
 from services.wbc.reach import side_grasp
@@ -115,14 +123,10 @@ def _T_world_base(position: Any, quat_xyzw: Any) -> FloatArray:
     return make_T(quat_xyzw_to_matrix(np.asarray(quat_xyzw, float)), np.asarray(position, float))
 
 
-def _height(a: Artifact) -> float:
-    return a.shape.height if isinstance(a.shape, Cylinder) else 2.0 * a.shape.half_size[2]
-
-
 def truth_grasp(truth: Artifact, T_world_base: FloatArray) -> FloatArray:
     """The side grasp of the true object: on its axis at 3/8 of its height, approached
     from the shoulder's side (what the grasp planner aims for, seen from the base)."""
-    centre = np.array(truth.position) + np.array([0.0, 0.0, 0.375 * _height(truth)])
+    centre = np.array(truth.position) + np.array([0.0, 0.0, 0.375 * truth.shape.height])
     sx, sz = robot.arm_plane()["shoulder"]
     shoulder = T_world_base[:3, :3] @ np.array([sx, 0.0, sz]) + T_world_base[:3, 3]
     return side_grasp(centre, (centre - shoulder)[:2])
@@ -134,11 +138,8 @@ def approach_errors(record: MissionRecord, truth: Artifact) -> Figures:
     if not ends or not record.trajectory:
         return {}
     sample = min(record.trajectory, key=lambda s: abs(s[0] - ends[0]))
-    T = _T_world_base(sample[1:4], sample[4:8])
-    yaw = math.atan2(T[1, 0], T[0, 0])
-    v = np.array(truth.position[:2]) - T[:2, 3]
-    c, s = math.cos(yaw), math.sin(yaw)
-    bx, by = c * v[0] + s * v[1], -s * v[0] + c * v[1]
+    T_world_by = yaw_only(_T_world_base(sample[1:4], sample[4:8]))
+    bx, by, _ = transform_points(inv_T(T_world_by), truth.position)[0]
     return {
         "truth_d_err_m": round(math.hypot(bx, by) - robot.D_OPT_M, 4),
         "truth_theta_err_deg": round(

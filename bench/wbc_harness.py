@@ -33,7 +33,7 @@ import numpy as np
 
 from common import robot
 from common.geometry import FloatArray, quat_wxyz_to_xyzw, rpy_of_quat_xyzw, yaw_of_quat_xyzw
-from common.messages.world import Cylinder, RobotStart, WorldDescription
+from common.messages.world import RobotStart, WorldDescription
 from services.sim import mjcf
 from services.sim.scene import compile_scene
 from services.sim.world import generate_world
@@ -205,7 +205,7 @@ def grasp_plan(world: WorldDescription) -> GraspPlan:
     base_xy = np.array(bottle_truth.position[:2]) + normal * robot.D_OPT_M
     yaw = math.atan2(-normal[1], -normal[0])
     shape = bottle_truth.shape
-    height = shape.height if isinstance(shape, Cylinder) else 2 * shape.half_size[2]
+    height = shape.height
     centre = np.array(bottle_truth.position) + np.array([0.0, 0.0, 0.375 * height])  # mid-body
     return GraspPlan(
         q0=robot.standing_q("stand", base_xy[0], base_xy[1], yaw),

@@ -22,7 +22,7 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
-from common.config import RecordingSettings, resolve
+from common.config import Config, RecordingSettings, resolve
 
 APP_ID = "dume"
 #: A batch is written when it reaches this many bytes or rows, or `flush_s` passed.
@@ -84,6 +84,12 @@ class FrameSelector:
         self.period_ns = max(1, round(1e9 / camera_hz))
         self.every = max(1, camera_every)
         self.dense = self.every * max(1, dense_every)
+
+    @classmethod
+    def of(cls, config: Config) -> FrameSelector:
+        """The selector of a stack's settings (`sim.camera_hz`, `recording.*_every`)."""
+        r = config.recording
+        return cls(config.sim.camera_hz, r.camera_every, r.depth_every)
 
     def logged(self, stamp_ns: int) -> bool:
         return (stamp_ns // self.period_ns) % self.every == 0

@@ -100,6 +100,11 @@ class Cuboid(msgspec.Struct, frozen=True, forbid_unknown_fields=True, tag="cuboi
 
     half_size: Vec3
 
+    @property
+    def height(self) -> float:
+        """m, from the bottom face to the top (as `Cylinder.height`)."""
+        return 2.0 * self.half_size[2]
+
 
 class Artifact(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """A graspable object standing upright on a support surface.

@@ -85,10 +85,7 @@ class PerceptionNode:
         self.publisher = bus.publisher(keys.detections, Detections, "data")
         self.recent = RecentDetections()
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_ns / NS_PER_S, svc.stop)
-        r = cfg.recording
-        logger = PerceptionLogger(
-            svc.rec, FrameSelector(cfg.sim.camera_hz, r.camera_every, r.depth_every)
-        )
+        logger = PerceptionLogger(svc.rec, FrameSelector.of(cfg))
         self.processor = FrameProcessor(
             self.settings, frames, truths, network, unavailable, self._publish, logger.frame
         )

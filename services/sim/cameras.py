@@ -128,10 +128,14 @@ class CameraRig:
         )
 
     def _spent(self, camera: str, t0: float, capture: bool) -> None:
+        """Book a pass's wall time: a capture starts the camera's `render_ms` afresh,
+        its labels add to it."""
         spent = time.perf_counter() - t0
-        self.render_ms[camera] = spent * 1e3 + (0.0 if capture else self.render_ms[camera])
+        if capture:
+            self.render_ms[camera] = 0.0
+            self.captures[camera] = self.captures.get(camera, 0) + 1
+        self.render_ms[camera] += spent * 1e3
         self.render_s[camera] = self.render_s.get(camera, 0.0) + spent
-        self.captures[camera] = self.captures.get(camera, 0) + capture
 
     def close(self) -> None:
         """Free the renderer's GL context."""

@@ -109,10 +109,7 @@ class SimOutputs:
         self.odom_period_ns = round(NS_PER_S / config.sim.odom_hz)
         self.camera_period_ns = round(NS_PER_S / config.sim.camera_hz)
         self.scene_log = SceneLogger(rec, core.model, groups={0, 1, 2})
-        r = config.recording
-        self.sim_log = SimLogger(
-            rec, FrameSelector(config.sim.camera_hz, r.camera_every, r.depth_every)
-        )
+        self.sim_log = SimLogger(rec, FrameSelector.of(config))
         s = config.sim
         self.render = RenderWorker(core.model, s.camera_width, s.camera_height, world, self._put)
 
