@@ -32,6 +32,7 @@ from common.bus import Bus
 from common.config import Config, ConfigError, load_config
 from common.keys import RobotKeys
 from common.recording import RerunHandler, open_recording
+from common.sched import CpuLayout, Role, allowed_cpus, pin
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +40,18 @@ log = logging.getLogger(__name__)
 class Service:
     """What a running service holds: config, keys, bus, recording and the stop event."""
 
-    def __init__(self, name: str, config: Config, bus: Bus, rec: rr.RecordingStream) -> None:
+    def __init__(
+        self,
+        name: str,
+        config: Config,
+        bus: Bus,
+        rec: rr.RecordingStream,
+        cpus: CpuLayout | None = None,
+    ) -> None:
         self.name = name
+        #: The machine's CPUs by role (`cpu.layout`), as computed before this process
+        #: pinned itself: a thread of the other role pins itself to `cpus.rest`.
+        self.cpus = cpus or CpuLayout()
         self.config = config
         self.keys = RobotKeys(config.robot)
         self.bus = bus
@@ -58,6 +69,19 @@ class Service:
         self.bus.declare_alive(self.keys.alive(self.name))
         self.is_ready = True
         self.log.info("ready")
+
+
+def place(name: str, config: Config) -> CpuLayout:
+    """Pin this process to its role's CPUs (`cpu.layout`; before any thread starts: they
+    inherit it); the machine's layout, for threads of the other role."""
+    layout = CpuLayout.of(config.cpu.layout, allowed_cpus())
+    role: Role = "control" if name in config.cpu.control else "rest"
+    cpus = layout.of_role(role)
+    if why := pin(cpus):
+        log.warning("%s: %s runs on any CPU", why, name)
+    elif cpus is not None:
+        log.info("%s runs on CPUs %s (%s)", name, sorted(cpus), role)
+    return layout
 
 
 def parse_args(name: str, argv: Sequence[str] | None) -> argparse.Namespace:
@@ -110,11 +134,12 @@ def run(
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     setup_logging(config.log.level, name)
+    layout = place(name, config)
     rec = open_recording(name, config.recording)
     if config.recording.enabled:
         logging.getLogger("dume").addHandler(RerunHandler(rec, name))
     bus = Bus.open(config)
-    svc = Service(name, config, bus, rec)
+    svc = Service(name, config, bus, rec, layout)
     _install_signals(svc.stop)
     try:
         main(svc)

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from common.bus import open_session
 from common.config import ConfigError, load_config
-from common.service import parse_args, setup_logging
+from common.service import parse_args, place, setup_logging
 
 log = logging.getLogger("dume.router")
 
@@ -27,6 +27,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"router: {exc}", file=sys.stderr)
         return 2
     setup_logging(config.log.level, "router")
+    place("router", config)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

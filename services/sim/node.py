@@ -51,7 +51,7 @@ class SimNode:
         bus, keys = svc.bus, svc.keys
         # Declared in this order: the publishers, then the commands, acks, cmd_vel, pushes,
         # people commands and liveliness.
-        self.out = SimOutputs(bus, keys, cfg, self.core, world, svc.rec)
+        self.out = SimOutputs(bus, keys, cfg, self.core, world, svc.rec, svc.cpus)
         commands = bus.fifo(keys.command, JointCommand, maxlen=256)
         acks = bus.fifo(keys.ack_all, Ack, maxlen=4096)
         self.intake = CommandIntake(bus, keys, self.core, cfg.wbc.cmd_vel_timeout_s, svc.log)

@@ -33,6 +33,7 @@ from common.messages.sim import (
 )
 from common.messages.world import WorldDescription
 from common.recording import FrameSelector, stamp
+from common.sched import CpuLayout
 from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.render_worker import RenderWorker, Shot
@@ -91,7 +92,10 @@ class SimOutputs:
         core: SimCore,
         world: WorldDescription,
         rec: rr.RecordingStream,
+        cpus: CpuLayout | None = None,
     ) -> None:
+        """`cpus`: the machine's layout; the cameras render on its `rest`."""
+        cpus = cpus or CpuLayout()
         self.config = config
         self.core = core
         self.rec = rec
@@ -111,7 +115,9 @@ class SimOutputs:
         self.scene_log = SceneLogger(rec, core.model, groups={0, 1, 2})
         self.sim_log = SimLogger(rec, FrameSelector.of(config))
         s = config.sim
-        self.render = RenderWorker(core.model, s.camera_width, s.camera_height, world, self._put)
+        self.render = RenderWorker(
+            core.model, s.camera_width, s.camera_height, world, self._put, cpus.rest
+        )
 
     def begin(self, world: WorldDescription) -> None:
         """The recording at t = 0: the scene's geometry and the world's layout."""

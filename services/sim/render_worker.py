@@ -11,6 +11,8 @@ and never reorders anything. `submit` blocks only when every snapshot is still w
 to be rendered (`SNAPSHOTS`).
 
 The thread owns the `CameraRig` (an EGL context is current in the thread that made it).
+It runs on `cpus` (`cpu.layout`'s rest: off the physics' CPU, whose caches it would
+evict, `common.sched`); Mesa's rasterizer threads, started from it, inherit them.
 `close()` renders what was submitted, then stops the thread.
 """
 
@@ -26,6 +28,7 @@ import mujoco
 
 from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
+from common.sched import pin
 from services.sim.cameras import CameraRig
 
 log = logging.getLogger("dume.sim")
@@ -57,8 +60,10 @@ class RenderWorker:
         height: int,
         world: WorldDescription | None,
         deliver: Deliver,
+        cpus: frozenset[int] | None = None,
     ) -> None:
         self.model = model
+        self.cpus = cpus
         self.deliver = deliver
         self._free: queue.Queue[mujoco.MjData] = queue.Queue()
         for _ in range(SNAPSHOTS):
@@ -105,6 +110,8 @@ class RenderWorker:
             self._thread.join()
 
     def _run(self, width: int, height: int, world: WorldDescription | None) -> None:
+        if why := pin(self.cpus):
+            log.warning("%s: the cameras render on the physics' CPU", why)
         try:
             self.rig = CameraRig(self.model, width, height, world=world)
         except BaseException as exc:  # reported to the constructor's caller
