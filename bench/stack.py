@@ -13,8 +13,9 @@ first plans) it measures for `sim_s` seconds of sim time, or to the request's en
   each camera's rendering (`render_s`), the WBC's tick (`WbcStatus.tick_us`, the median ×
   its rate), the network's forward (`Detections.segment_ms` × the frames); and from them
   the ideal real-time factor for this machine: the sim and the WBC alternate every
-  command period, so physics + rendering + the WBC's tick are one serial chain, and
-  everything bare shares the machine's cores: ideal = min(1 / serial, cores / total).
+  command period, so physics + the WBC's tick are one serial chain (the cameras render
+  on a thread of their own, `services.sim.render_worker`), and everything bare shares
+  the machine's cores: ideal = min(1 / serial, cores / total).
   `measured_over_ideal` says how much of it the stack reaches (the rest is transport,
   encoding, recording, Python glue and waiting);
 - the WBC's tick p50/p99 (every status's tick: a sample of one tick in ten), the sim's
@@ -114,8 +115,8 @@ def figures(w: Window, cores: int) -> dict[str, Any]:
     qp = [s.qp_time_us for s in w.wbc]
     wbc_tick = statistics.median(ticks) * 1e-6 * WBC_HZ if ticks else 0.0
     forward = sum(d.segment_ms for d in w.dets) * 1e-3 / sim
-    serial = step + sum(render.values()) + wbc_tick
-    total = serial + forward
+    serial = step + wbc_tick
+    total = serial + sum(render.values()) + forward
     ideal = min(1.0 / serial, cores / total) if serial > 0 else float("inf")
     rtf = sim / wall
     return {
