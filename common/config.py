@@ -47,6 +47,7 @@ Overrides = Mapping[str, Any]
 Port = Annotated[int, msgspec.Meta(ge=1, le=65535, description="a TCP port")]
 Positive = Annotated[float, msgspec.Meta(gt=0)]
 NonNegative = Annotated[float, msgspec.Meta(ge=0)]
+Unit = Annotated[float, msgspec.Meta(ge=0, le=1)]
 #: (vx m/s, vy m/s, wz rad/s) limits, or their rates of change per s.
 Limits3 = Annotated[list[Positive], msgspec.Meta(min_length=3, max_length=3)]
 
@@ -118,6 +119,70 @@ class TimeSettings(_Section):
         return {n: round(p.latency_s * NS_PER_S) for n, p in self.participants.items()}
 
 
+class ImuSettings(_Section):
+    """The trunk's MEMS IMU, read every physics step (1 kHz), white noise plus a bias that
+    starts somewhere and wanders. Densities from the Bosch BMI088 datasheet (gyroscope
+    0.014 °/s/√Hz, accelerometer 175 µg/√Hz); the bias random walks are those a Kalibr
+    calibration of it typically gives; the turn-on biases are left after the factory's
+    calibration (well inside the datasheet's ±1 °/s and ±20 mg offsets)."""
+
+    gyro_noise_density: NonNegative = 2.4e-4  # rad/s/√Hz
+    gyro_bias_walk: NonNegative = 2.0e-5  # rad/s²/√Hz
+    gyro_bias_initial: NonNegative = 1.7e-3  # rad/s, σ per axis (0.1 °/s)
+    accel_noise_density: NonNegative = 1.7e-3  # m/s²/√Hz
+    accel_bias_walk: NonNegative = 4.0e-4  # m/s³/√Hz
+    accel_bias_initial: NonNegative = 0.05  # m/s², σ per axis
+
+
+class JointSensorSettings(_Section):
+    """Joint encoders (absolute, at the joint) and the feet's force sensors."""
+
+    #: Counts per joint turn: positions are quantised to 2π / counts (16 bits: 96 µrad).
+    encoder_counts: Annotated[int, msgspec.Meta(ge=0)] = 65536
+    #: σ of the white noise on the drives' velocity estimates, rad/s.
+    velocity_noise: NonNegative = 0.02
+    #: σ of the feet's force readings, N; a foot is in contact above `contact_force_n`.
+    foot_force_noise: NonNegative = 5.0
+    contact_force_n: NonNegative = 20.0
+
+
+class LidarSettings(_Section):
+    """The trunk's planar laser scanner (`common.robot.LIDAR_MOUNT`), cast with MuJoCo's
+    rays against everything but the robot. As a Hokuyo UST-10LX (270°, 10 m, ±40 mm):
+    0.5° beams at 10 Hz, Gaussian range noise, beams lost at random; a beam that meets the
+    robot's own body is masked (no return), as the driver's angular mask would."""
+
+    rate_hz: Positive = 10.0
+    fov_deg: Annotated[float, msgspec.Meta(gt=0.0, le=360.0)] = 270.0
+    beams: Annotated[int, msgspec.Meta(ge=2)] = 541
+    range_min_m: NonNegative = 0.1
+    range_max_m: Positive = 10.0
+    range_noise_m: NonNegative = 0.015
+    dropout: Unit = 0.01
+
+
+class DepthNoiseSettings(_Section):
+    """The RGB-D cameras' depth errors, as a stereo sensor's (Intel RealSense D435's
+    model: σ grows with the square of the range): σ(z) = `sigma_per_m2` z², no return
+    where the depth jumps by more than `edge_jump_m` to a neighbour (stereo cannot match
+    across an edge), and pixels lost at random."""
+
+    enabled: bool = True
+    sigma_per_m2: NonNegative = 0.0025
+    edge_jump_m: Positive = 0.1
+    dropout: Unit = 0.005
+
+
+class SensorSettings(_Section):
+    """What the robot measures, with its errors (`services.sim.sensors`), seeded by
+    `sim.world_seed`: the same seed, the same noise."""
+
+    imu: ImuSettings = msgspec.field(default_factory=ImuSettings)
+    joints: JointSensorSettings = msgspec.field(default_factory=JointSensorSettings)
+    lidar: LidarSettings = msgspec.field(default_factory=LidarSettings)
+    depth: DepthNoiseSettings = msgspec.field(default_factory=DepthNoiseSettings)
+
+
 class SimSettings(_Section):
     world: Literal["hall", "small"] = "hall"
     world_seed: int = 0
@@ -132,6 +197,7 @@ class SimSettings(_Section):
     camera_height: int = 240
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
     segmentation_truth: bool = True
+    sensors: SensorSettings = msgspec.field(default_factory=SensorSettings)
 
 
 class GaitSettings(_Section):

@@ -84,6 +84,16 @@ class RobotKeys:
         return f"{self.prefix}/odom"
 
     @property
+    def state_truth(self) -> str:
+        """The base's true pose and twist (`StateTruth`): evaluation, tests, trials only."""
+        return f"{self.prefix}/state_truth"
+
+    @property
+    def scan(self) -> str:
+        """The trunk lidar's planar scan (`LaserScan`)."""
+        return f"{self.prefix}/scan"
+
+    @property
     def command(self) -> str:
         return f"{self.prefix}/command"
 

@@ -123,6 +123,31 @@ CAMERA_MOUNTS: dict[str, CameraMount] = {
     ),
 }
 
+# --- the other sensors ------------------------------------------------------------------
+#: The IMU's frame: the URDF's `imu_link`, fixed on the trunk with the base's axes.
+IMU_FRAME = "imu_link"
+
+
+@dataclass(frozen=True)
+class LidarMount:
+    """A planar range scanner: its frame on a parent frame (x the scan's 0°, z up; beams
+    sweep counter-clockwise about z)."""
+
+    name: str
+    parent_frame: str
+    T_parent_lidar: FloatArray = field(repr=False)
+
+
+#: On the trunk's front face, below the head camera and ahead of the front hips (their
+#: rotors reach x = 0.44 m): the plane at about 0.5 m above the floor while standing,
+#: above the pallets' tops and below the tables', through walls, shelves' uprights and
+#: people's legs. Beams behind about ±100° meet the robot's own legs and are masked.
+LIDAR_MOUNT = LidarMount(
+    "lidar",
+    BASE_FRAME,
+    make_T(np.eye(3), (0.46, 0.0, -0.03)),
+)
+
 # --- joint dynamics: dume's choices where the URDF has none -----------------------------
 # Reflected rotor inertia (kg m^2): B1 legs have geared rotors (the knee the most), which
 # also keeps light links stable at 1 kHz; the Z1 and its jaw get a small one.

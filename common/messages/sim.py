@@ -75,6 +75,11 @@ class RobotState(Message, frozen=True):
     base_position_in_world: (3,) m. base_orientation_xyzw: base frame in world.
     base_linear_velocity_in_world: (3,) m/s. base_angular_velocity_in_base: (3,) rad/s.
     foot_contacts: FL, FR, RL, RR touching the ground. foot_forces: (4,) normal force, N.
+    imu_angular_velocity: (3,) rad/s and imu_specific_force: (3,) m/s², the trunk IMU's
+        sample in its frame (`common.robot.IMU_FRAME`, the base's axes): the specific
+        force is acceleration minus gravity (about +9.81 up when at rest).
+    q, v, the feet and the IMU are measured (`services.sim.sensors`: quantised, noisy,
+    biased), as a robot's low-level state (Unitree's `LowState`) reports them.
     gripper_angle: jaw angle, rad (0 closed, negative open). gripper_effort: jaw torque, N·m.
     watchdog: the sim's hold is engaged (no command for 20 ms); watchdog_reason says why.
     locomotion: dynamic (torques move the legs) or kinematic (the base follows cmd_vel).
@@ -91,6 +96,8 @@ class RobotState(Message, frozen=True):
     base_angular_velocity_in_base: Vec3
     foot_contacts: tuple[bool, bool, bool, bool]
     foot_forces: tuple[Finite, Finite, Finite, Finite]
+    imu_angular_velocity: Vec3
+    imu_specific_force: Vec3
     gripper_angle: Finite
     gripper_effort: Finite
     watchdog: bool = False
@@ -114,6 +121,39 @@ class Odom(Message, frozen=True):
     gripper_effort: Finite
     watchdog: bool = False
     locomotion: Locomotion = "dynamic"
+
+
+class StateTruth(Message, frozen=True):
+    """`dume/<r>/state_truth`, 50 Hz: the base as the simulator knows it (MuJoCo's free
+    joint). Truth: read by evaluation, tests and trials, never by a service's loop.
+
+    Fields as in `Odom`: position m, orientation xyzw, linear velocity m/s in world,
+    angular velocity rad/s in base.
+    """
+
+    stamp_ns: StampNs
+    base_position_in_world: Vec3
+    base_orientation_xyzw: QuatXYZW
+    base_linear_velocity_in_world: Vec3
+    base_angular_velocity_in_base: Vec3
+
+
+class LaserScan(Message, frozen=True):
+    """`dume/<r>/scan`, 10 Hz: one sweep of the trunk's planar lidar.
+
+    ranges: (n,) float32 m, 0 = no return; beam k at angle_min + k angle_increment (rad,
+    counter-clockwise about the lidar's z from its x). range_min, range_max: m.
+    T_base_lidar: the lidar's frame in the base (row-major 4×4). The sweep is taken at
+    stamp_ns as a whole (the sim casts every beam at once).
+    """
+
+    stamp_ns: StampNs
+    angle_min: Finite
+    angle_increment: Finite
+    range_min: Finite
+    range_max: Finite
+    ranges: Array
+    T_base_lidar: Mat4
 
 
 class JointCommand(Message, frozen=True):

@@ -6,7 +6,8 @@ updates the scene once from the camera and renders RGB and depth (`capture_frame
 when someone needs them, the segmentation labels (`capture_labels`; `capture` does all):
 - depth is MuJoCo's linearised z-buffer, i.e. the distance along the optical axis (not
   along the pixel's ray; `tests/unit/test_cameras.py` checks both against geometry),
-  float32 metres, 0 where nothing is drawn (the far plane);
+  float32 metres, 0 where nothing is drawn (the far plane); with `depth_noise`, as the
+  stereo sensor measures it (`services.sim.sensors.DepthNoise`);
 - segmentation becomes instance labels through `scene.segmentation_ids` (artifacts,
   people and obstacles of the world, the robot; 0 for the floor and the sky);
 - intrinsics are `common.robot.intrinsics` at the rig's resolution; `T_base_camera`
@@ -29,6 +30,7 @@ from common.messages import to_wire
 from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
 from services.sim import scene
+from services.sim.sensors import DepthNoise
 
 _MJ_CAMERA_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])  # MuJoCo cameras look down -z, y up
 
@@ -46,9 +48,11 @@ class CameraRig:
         width: int = 320,
         height: int = 240,
         world: WorldDescription | None = None,
+        depth_noise: DepthNoise | None = None,
     ) -> None:
         self.model = model
         self.width, self.height = width, height
+        self.depth_noise = depth_noise
         self.renderer = mujoco.Renderer(model, height, width)
         flags = self.renderer.scene.flags
         for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION):
@@ -92,6 +96,8 @@ class CameraRig:
         depth = r.render()
         r.disable_depth_rendering()
         depth[depth >= self._far * (1.0 - 1e-4)] = 0.0
+        if self.depth_noise is not None:
+            depth = self.depth_noise.apply(depth, camera, stamp_ns)
         self._spent(camera, t0, capture=True)
 
         cam = self.model.camera(camera).id

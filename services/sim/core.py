@@ -17,21 +17,26 @@ made frictionless (condim 1) so they glide instead of dragging the held legs (wi
 friction a turn in place bends a hip by 0.17 rad), and foot contacts mean little there.
 `push(force, duration)` applies an external force on the base (tests and evaluation: a
 disturbance the controller must survive; `services.sim.push`).
+The state carries what the robot's sensors measure (`services.sim.sensors`): joints and
+feet as the encoders and force sensors read them, and the IMU, sampled after every step
+(the bias walks whether or not anyone reads it); `lidar.scan(data)` casts the scan.
 Time is exact: `time_ns = tick * 1_000_000`.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
 from common import robot
+from common.config import SensorSettings
 from common.geometry import FloatArray, make_T, quat_wxyz_to_xyzw, quat_xyzw_to_matrix
 from common.messages import Array
-from common.messages.sim import Locomotion, Odom, RobotState, WorldEvent
+from common.messages.sim import Locomotion, Odom, RobotState, StateTruth, WorldEvent
 from common.messages.world import WorldDescription
 from services.sim import mjcf, scene
 from services.sim.drive import JAW, N_JOINTS, CommandError, JointDrive, joint_addresses, validate
@@ -39,6 +44,7 @@ from services.sim.events import ContactMonitor, DropMonitor
 from services.sim.handover import Handover
 from services.sim.people import People
 from services.sim.push import PushError, PushQueue
+from services.sim.sensors import Imu, JointSensors, Lidar, rng_for
 
 TICK_NS = 1_000_000
 __all__ = ["TICK_NS", "CommandError", "PushError", "SimCore"]
@@ -54,6 +60,7 @@ class SimCore:
         locomotion: Locomotion = "dynamic",
         watchdog_ms: float = 20.0,
         walking_people: bool = False,
+        sensors: SensorSettings | None = None,
     ) -> None:
         if locomotion not in ("dynamic", "kinematic"):
             raise ValueError(f"locomotion {locomotion!r} is not 'dynamic' or 'kinematic'")
@@ -88,6 +95,12 @@ class SimCore:
         if locomotion == "kinematic":
             for foot in robot.FOOT_FRAMES:
                 self.model.geom_condim[self.model.geom(f"{foot}_0").id] = 1
+        s = sensors or SensorSettings()
+        self.imu = Imu(s.imu, self.dt, rng_for(world.seed, "imu"))
+        self.joint_sensors = JointSensors(s.joints, rng_for(world.seed, "joints"))
+        self.lidar = Lidar(self.model, s.lidar, rng_for(world.seed, "lidar"))
+        self._imu_adr = mjcf.imu_sensor_addresses(self.model)
+        self._measured: _Measured | None = None
         start = world.robot_start
         self._pose = (start.x, start.y, start.yaw)  # the kinematic base: x, y, yaw
         self.reset_robot(start.x, start.y, start.yaw)
@@ -141,6 +154,7 @@ class SimCore:
         self._pose = (x, y, yaw)
         mujoco.mj_forward(self.model, self.data)
         self.contacts.update(self.data, self.time_ns)  # the feet's forces for the first state
+        self._sense()
 
     # -- the tick ---------------------------------------------------------------------------
 
@@ -162,7 +176,17 @@ class SimCore:
         found = self.contacts.contacts
         events.extend(self.handover.update(self.model, data, found, self.dt, stamp))
         events.extend(self.drops.update(data, found, self.handover.held, stamp))
+        self._sense()
         return events
+
+    def _sense(self) -> None:
+        """Sample the IMU, the encoders and the feet for the state now (every step: the
+        IMU's bias walks whether or not anyone reads it)."""
+        data, adr = self.data, self._imu_adr
+        gyro, accel = self.imu.read(data.sensordata[adr[0]], data.sensordata[adr[1]])
+        q, v = self.joint_sensors.joints(data.qpos[self._q], data.qvel[self._v])
+        forces, contacts = self.joint_sensors.feet(self.contacts.contacts.foot_force)
+        self._measured = _Measured(q, v, forces, contacts, gyro, accel)
 
     def _move_base(self) -> None:
         """Advance the kinematic base by one step of cmd_vel; level, at standing height."""
@@ -194,23 +218,26 @@ class SimCore:
         """The state at the current time (tick defaults to the current one)."""
         if tick is not None and tick != self.tick:
             raise ValueError(f"state of tick {tick} asked at tick {self.tick}")
-        data = self.data
+        data, m = self.data, self._measured
+        assert m is not None  # sensed at every reset and step
         base_q, base_v = data.qpos[self._base_q], data.qvel[self._base_v]
-        q, tau = data.qpos[self._q], self.drive.applied(data)
-        fl, fr, rl, rr = self.contacts.contacts.foot_force.tolist()
+        tau = self.drive.applied(data)
+        fl, fr, rl, rr = m.foot_force.tolist()
         return RobotState(
             stamp_ns=self.time_ns,
             tick=self.tick,
-            q=_joints(q),
-            v=_joints(data.qvel[self._v]),
+            q=_joints(m.q),
+            v=_joints(m.v),
             tau=_joints(tau),
             base_position_in_world=tuple(base_q[:3].tolist()),
             base_orientation_xyzw=_xyzw(base_q),
             base_linear_velocity_in_world=tuple(base_v[:3].tolist()),
             base_angular_velocity_in_base=tuple(base_v[3:].tolist()),
-            foot_contacts=(fl > 0.0, fr > 0.0, rl > 0.0, rr > 0.0),
+            foot_contacts=m.contacts,
             foot_forces=(fl, fr, rl, rr),
-            gripper_angle=float(q[JAW]),
+            imu_angular_velocity=_vec3(m.gyro),
+            imu_specific_force=_vec3(m.accel),
+            gripper_angle=float(m.q[JAW]),
             gripper_effort=float(tau[JAW]),
             watchdog=self.drive.watchdog,
             watchdog_reason=self.drive.reason,
@@ -233,6 +260,18 @@ class SimCore:
             locomotion=self.locomotion,
         )
 
+    def state_truth(self) -> StateTruth:
+        """The base as MuJoCo's free joint has it now (truth: for evaluation)."""
+        data = self.data
+        base_q, base_v = data.qpos[self._base_q], data.qvel[self._base_v]
+        return StateTruth(
+            stamp_ns=self.time_ns,
+            base_position_in_world=_vec3(base_q[:3]),
+            base_orientation_xyzw=_xyzw(base_q),
+            base_linear_velocity_in_world=_vec3(base_v[:3]),
+            base_angular_velocity_in_base=_vec3(base_v[3:]),
+        )
+
     def T_world_base(self) -> FloatArray:
         """The base in the world (4x4) at the current time."""
         base_q = self.data.qpos[self._base_q]
@@ -249,6 +288,23 @@ class SimCore:
             x, y, _ = self.people.pose(pid)
             out[pid] = (x, y, 0.0)
         return out
+
+
+@dataclass(frozen=True)
+class _Measured:
+    """The sensors' sample for the current state (`services.sim.sensors`)."""
+
+    q: FloatArray
+    v: FloatArray
+    foot_force: FloatArray
+    contacts: tuple[bool, bool, bool, bool]
+    gyro: FloatArray
+    accel: FloatArray
+
+
+def _vec3(x: FloatArray) -> tuple[float, float, float]:
+    a, b, c = x.tolist()
+    return a, b, c
 
 
 def _joints(x: FloatArray) -> Array:

@@ -41,7 +41,9 @@ from common.robot_description import (
     CAMERA_MOUNTS,
     FOOT_FRAMES,
     GRIPPER_BOXES,
+    IMU_FRAME,
     JOINT_NAMES,
+    LIDAR_MOUNT,
     MOVER_LINK,
     ROOT_JOINT,
     STATOR_LINK,
@@ -107,6 +109,7 @@ def robot_spec() -> mujoco.MjSpec:
         spec.body(foot).add_site(name=foot, size=[0.01, 0, 0])
     _add_gripper(spec)
     _add_cameras(spec)
+    _add_sensors(spec)
 
     for name, armature, damping, friction in zip(
         JOINT_NAMES, joint_armature(), joint_damping(), joint_frictionloss(), strict=True
@@ -169,6 +172,44 @@ def _add_gripper(spec: mujoco.MjSpec) -> None:
         pos=list(T_STATOR_TCP[:3, 3]),
         quat=_wxyz(T_STATOR_TCP[:3, :3]),
         size=[0.005, 0, 0],
+    )
+
+
+#: The sensors' sites: a group the renderer does not draw (it draws sites of groups 0-2).
+SENSOR_SITE_GROUP = 4
+#: The IMU's MuJoCo sensors, in `sensordata`'s order: angular velocity (rad/s) and
+#: specific force (m/s²), both in the IMU's frame.
+IMU_SENSORS = (
+    ("imu_gyro", mujoco.mjtSensor.mjSENS_GYRO),
+    ("imu_accel", mujoco.mjtSensor.mjSENS_ACCELEROMETER),
+)
+
+
+def imu_sensor_addresses(model: mujoco.MjModel) -> tuple[slice, slice]:
+    """Where the gyro's and the accelerometer's readings lie in `MjData.sensordata`."""
+    out = []
+    for name, _ in IMU_SENSORS:
+        sensor = model.sensor(name)
+        adr, dim = int(sensor.adr[0]), int(sensor.dim[0])
+        out.append(slice(adr, adr + dim))
+    return out[0], out[1]
+
+
+def _add_sensors(spec: mujoco.MjSpec) -> None:
+    """The IMU (MuJoCo's gyro and accelerometer at site `IMU_FRAME`, read as the step's
+    first stage computes them, noise added by `services.sim.sensors`) and the lidar's
+    site (its rays are cast by `sensors.Lidar`)."""
+    spec.body(IMU_FRAME).add_site(name=IMU_FRAME, size=[0.01, 0, 0], group=SENSOR_SITE_GROUP)
+    site = mujoco.mjtObj.mjOBJ_SITE
+    for name, kind in IMU_SENSORS:
+        spec.add_sensor(name=name, type=kind, objtype=site, objname=IMU_FRAME)
+    T = LIDAR_MOUNT.T_parent_lidar
+    spec.body(LIDAR_MOUNT.parent_frame).add_site(
+        name=LIDAR_MOUNT.name,
+        pos=list(T[:3, 3]),
+        quat=_wxyz(T[:3, :3]),
+        size=[0.02, 0, 0],
+        group=SENSOR_SITE_GROUP,  # not drawn: the cameras must not see it
     )
 
 

@@ -46,6 +46,7 @@ class SimNode:
             locomotion=cfg.sim.locomotion,
             watchdog_ms=cfg.sim.watchdog_ms,
             walking_people=cfg.sim.walking_people,
+            sensors=cfg.sim.sensors,
         )
         self.duration_ns = round(cfg.sim.duration_s * NS_PER_S)
         bus, keys = svc.bus, svc.keys

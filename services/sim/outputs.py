@@ -1,7 +1,8 @@
 """What the sim gives out: the robot's description, and everything stamped with sim time.
 
 `SimOutputs.publish(t)` puts out, in this order, all stamped t (ns): the state (when the
-commander answers it; every tick without one), odom at `sim.odom_hz`, each camera's
+commander answers it; every tick without one), odom and the base's truth (`state_truth`)
+at `sim.odom_hz`, the lidar's scan at its rate (`sim.sensors.lidar`), each camera's
 RGB-D frame at `sim.camera_hz` and its truth segmentation (`sim.segmentation_truth`)
 (each rendered only for someone who looks: a subscriber or the recording's kept frames),
 the recording's poses every 40 ms, and last the clock (when due), so a participant woken
@@ -18,16 +19,19 @@ from common import robot
 from common.bus import Bus
 from common.config import Config
 from common.keys import WORLD_CLOCK, WORLD_EVENTS, RobotKeys
+from common.messages import to_wire
 from common.messages.base import NS_PER_S
 from common.messages.sim import (
     CameraFrame,
     CameraInfo,
     Clock,
+    LaserScan,
     Odom,
     RobotDescription,
     RobotState,
     SegmentationTruth,
     SimStats,
+    StateTruth,
     WorldEvent,
     WorldEvents,
 )
@@ -38,6 +42,7 @@ from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.render_worker import RenderWorker, Shot
 from services.sim.rerun_scene import SceneLogger
+from services.sim.sensors import DepthNoise
 from services.sim.sim_log import SimLogger
 
 #: The recording's body poses are logged this often, ns of sim time.
@@ -103,6 +108,8 @@ class SimOutputs:
         self.clock = bus.publisher(WORLD_CLOCK, Clock, "control")
         self.state = bus.publisher(keys.state, RobotState, "control")
         self.odom = bus.publisher(keys.odom, Odom, "control")
+        self.state_truth = bus.publisher(keys.state_truth, StateTruth, "data")
+        self.scan = bus.publisher(keys.scan, LaserScan, "data")
         self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
         self.sim_stats = bus.publisher(keys.sim_stats, SimStats, "data")
         self.rgbd = {c: bus.publisher(keys.camera_rgbd(c), CameraFrame, "bulk") for c in cameras}
@@ -115,9 +122,13 @@ class SimOutputs:
         self.scene_log = SceneLogger(rec, core.model, groups={0, 1, 2})
         self.sim_log = SimLogger(rec, FrameSelector.of(config))
         s = config.sim
+        noise = s.sensors.depth
         self.render = RenderWorker(
-            core.model, s.camera_width, s.camera_height, world, self._put, cpus.rest
-        )
+            core.model, s.camera_width, s.camera_height, world, self._put, cpus.rest,
+            DepthNoise(noise, world.seed) if noise.enabled else None,
+        )  # fmt: skip
+        self.lidar_period_ns = round(NS_PER_S / s.sensors.lidar.rate_hz)
+        self.T_base_lidar = tuple(robot.LIDAR_MOUNT.T_parent_lidar.ravel().tolist())
 
     def begin(self, world: WorldDescription) -> None:
         """The recording at t = 0: the scene's geometry and the world's layout."""
@@ -137,6 +148,9 @@ class SimOutputs:
             self.state.put(state)
         if t_ns % self.odom_period_ns == 0:
             self.odom.put(self.core.odom())
+            self.state_truth.put(self.core.state_truth())
+        if t_ns % self.lidar_period_ns == 0:
+            self.scan.put(self._scan(t_ns))
             if self.sim_log.enabled:
                 self.sim_log.state(t_ns, state or self.core.robot_state(tick))
         if t_ns % self.camera_period_ns == 0:
@@ -149,6 +163,21 @@ class SimOutputs:
             self.clock.put(
                 Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf)
             )
+
+    def _scan(self, t_ns: int) -> LaserScan:
+        lidar = self.core.lidar
+        ranges = lidar.scan(self.core.data)
+        if self.sim_log.enabled:
+            self.sim_log.scan(t_ns, lidar.angles, ranges, lidar.T_world_lidar(self.core.data))
+        return LaserScan(
+            stamp_ns=t_ns,
+            angle_min=float(lidar.angles[0]),
+            angle_increment=lidar.angle_increment,
+            range_min=lidar.s.range_min_m,
+            range_max=lidar.s.range_max_m,
+            ranges=to_wire(ranges),
+            T_base_lidar=self.T_base_lidar,
+        )
 
     def _shots(self, t_ns: int) -> list[Shot]:
         """The cameras to render at t: only for someone who looks (a subscriber, the

@@ -30,6 +30,7 @@ from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
 from common.sched import pin
 from services.sim.cameras import CameraRig
+from services.sim.sensors import DepthNoise
 
 log = logging.getLogger("dume.sim")
 
@@ -61,9 +62,11 @@ class RenderWorker:
         world: WorldDescription | None,
         deliver: Deliver,
         cpus: frozenset[int] | None = None,
+        depth_noise: DepthNoise | None = None,
     ) -> None:
         self.model = model
         self.cpus = cpus
+        self.depth_noise = depth_noise
         self.deliver = deliver
         self._free: queue.Queue[mujoco.MjData] = queue.Queue()
         for _ in range(SNAPSHOTS):
@@ -113,7 +116,7 @@ class RenderWorker:
         if why := pin(self.cpus):
             log.warning("%s: the cameras render on the physics' CPU", why)
         try:
-            self.rig = CameraRig(self.model, width, height, world=world)
+            self.rig = CameraRig(self.model, width, height, world, self.depth_noise)
         except BaseException as exc:  # reported to the constructor's caller
             self._error = exc
             self._ready.set()

@@ -3,7 +3,9 @@
 Cameras go to `camera/<cam>`: the pinhole and RGB (JPEG) at the camera rate, depth (mm)
 and the truth segmentation (with its label table) at every `recording.depth_every`-th
 logged frame, so a recording stays near 1 MB per sim second. Plots go to `plots/sim/…`,
-events to `log/sim/events` and, for contacts, as points in `world/events`.
+events to `log/sim/events` and, for contacts, as points in `world/events`. The lidar's
+scan goes, every `SCAN_EVERY_NS`, to `world/truth/scan`: its returns placed by the true
+pose of the lidar (the sim's view; a service places them by its estimate).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 import numpy as np
 import rerun as rr
 
+from common.geometry import FloatArray
 from common.messages import as_numpy
 from common.messages.sim import (
     CameraFrame,
@@ -25,6 +28,9 @@ from common.messages.sim import (
 )
 from common.messages.world import WorldDescription
 from common.recording import FrameSelector, is_recording, stamp
+
+#: The recording keeps one scan in this many ns of sim time (of the lidar's 10 Hz).
+SCAN_EVERY_NS = 500_000_000
 
 
 class SimLogger:
@@ -92,6 +98,19 @@ class SimLogger:
     def keeps_dense(self, t_ns: int) -> bool:
         """Whether it keeps their depth and segmentation too."""
         return self.enabled and self.frames.dense_logged(t_ns)
+
+    def scan(
+        self, t_ns: int, angles: FloatArray, ranges: FloatArray, T_world_lidar: FloatArray
+    ) -> None:
+        """One scan's returns in the world, by the lidar's true pose (`SCAN_EVERY_NS`)."""
+        if not self.enabled or t_ns % SCAN_EVERY_NS:
+            return
+        hit = ranges > 0.0
+        r, a = ranges[hit].astype(float), angles[hit]
+        local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
+        points = local @ T_world_lidar[:3, :3].T + T_world_lidar[:3, 3]
+        stamp(self.rec, t_ns)
+        self.rec.log("world/truth/scan", rr.Points3D(points, radii=0.015, colors=(255, 80, 40)))
 
     def camera(self, t_ns: int, frame: CameraFrame, truth: SegmentationTruth | None) -> None:
         if not self.enabled:

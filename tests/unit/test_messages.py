@@ -36,6 +36,8 @@ def robot_states(draw: st.DrawFn) -> RobotState:
         base_angular_velocity_in_base=draw(vec3),
         foot_contacts=draw(st.tuples(*[st.booleans()] * 4)),
         foot_forces=draw(st.tuples(*[finite] * 4)),
+        imu_angular_velocity=draw(vec3),
+        imu_specific_force=draw(vec3),
         gripper_angle=draw(finite),
         gripper_effort=draw(finite),
         watchdog=draw(st.booleans()),

@@ -22,6 +22,7 @@ from services.sim.core import CommandError, SimCore
 from services.sim.feasibility import surface_normal_towards
 from services.sim.hold import StandHold
 from services.sim.people import MAX_SPEED_MPS, PAUSE_S
+from services.sim.sensors import ideal_sensors
 from services.sim.standing import STAND_KD, STAND_KP
 from services.sim.world import generate_world
 
@@ -55,7 +56,7 @@ def hold(core: SimCore, law: StandHold) -> list[object]:
 def test_torques_follow_the_pd_law_and_are_clipped_to_the_urdf_limits(
     world: WorldDescription,
 ) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     state = core.robot_state()
     q, v = q_of(state), f64(state.v)
     rng = np.random.default_rng(0)
@@ -79,7 +80,7 @@ def test_torques_follow_the_pd_law_and_are_clipped_to_the_urdf_limits(
 def test_malformed_commands_raise_and_the_previous_command_stays(
     world: WorldDescription,
 ) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     good = dict(tau_ff=np.full(N, 1.0), q_des=np.zeros(N), v_des=np.zeros(N))
     zeros = np.zeros(N)
     core.command(good["tau_ff"], good["q_des"], good["v_des"], zeros, zeros, 0)
@@ -103,7 +104,7 @@ def test_malformed_commands_raise_and_the_previous_command_stays(
 
 def test_a_plain_pd_hold_sags_more_than_2cm(world: WorldDescription) -> None:
     """Why the stand-hold carries a feed-forward: 300/10 alone gives way under 61 kg."""
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     law = StandHold()
     law.tau_ff[:] = 0.0
     for _ in range(1000):
@@ -115,7 +116,7 @@ def test_a_plain_pd_hold_sags_more_than_2cm(world: WorldDescription) -> None:
 def test_the_stand_hold_keeps_the_base_within_2cm_for_2s_without_events(
     world: WorldDescription,
 ) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     law = StandHold()
     np.testing.assert_array_equal(law.kp, STAND_KP)
     np.testing.assert_array_equal(law.kd, STAND_KD)
@@ -137,7 +138,7 @@ def test_the_stand_hold_keeps_the_base_within_2cm_for_2s_without_events(
 def test_the_robot_starts_standing_at_the_world_start_on_four_feet(
     world: WorldDescription,
 ) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     state = core.robot_state(0)
     start = world.robot_start
     assert state.base_position_in_world == pytest.approx(
@@ -151,7 +152,7 @@ def test_the_robot_starts_standing_at_the_world_start_on_four_feet(
 
 
 def test_state_time_is_exact_and_quaternions_are_xyzw(world: WorldDescription) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     for _ in range(3):
         core.step()
     state = core.robot_state(3)
@@ -170,7 +171,7 @@ def test_state_time_is_exact_and_quaternions_are_xyzw(world: WorldDescription) -
 def test_watchdog_holds_after_20ms_without_commands_and_the_base_stays_up_for_5s(
     world: WorldDescription,
 ) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     flags = []
     lowest = np.inf
     for _ in range(5000):
@@ -221,7 +222,7 @@ def test_kinematic_base_follows_cmd_vel_level_at_standing_height(world: WorldDes
 
 def test_cmd_vel_needs_kinematic_locomotion(world: WorldDescription) -> None:
     with pytest.raises(RuntimeError):
-        SimCore(world).set_cmd_vel(0.1, 0.0, 0.0)
+        SimCore(world, sensors=ideal_sensors()).set_cmd_vel(0.1, 0.0, 0.0)
 
 
 # -- people ------------------------------------------------------------------------------------
@@ -429,7 +430,7 @@ def test_robot_contact_when_the_trunk_is_driven_into_a_bar_once_not_for_feet(
 
 
 def test_truth_positions_name_every_artifact_and_person(world: WorldDescription) -> None:
-    core = SimCore(world)
+    core = SimCore(world, sensors=ideal_sensors())
     truth = core.truth_positions()
     assert set(truth) == {a.id for a in world.artifacts} | {p.id for p in world.people}
     assert truth["bottle_1"] == pytest.approx(world.artifacts[0].position, abs=1e-6)

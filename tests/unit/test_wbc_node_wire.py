@@ -27,6 +27,8 @@ def state(q: Array) -> RobotState:
         base_angular_velocity_in_base=(0.0, 0.0, 0.0),
         foot_contacts=(True, True, True, True),
         foot_forces=(150.0, 150.0, 150.0, 150.0),
+        imu_angular_velocity=(0.0, 0.0, 0.0),
+        imu_specific_force=(0.0, 0.0, 9.81),
         gripper_angle=0.0,
         gripper_effort=0.0,
     )
