@@ -8,8 +8,10 @@ each step the driver has the tick's odom and `wbc/status` (`odom`, `status`), an
 script publishes through `cmd`, `mode`, `goal` and `push`, then yields; the driver acks
 the tick. A push is stamped two driver periods ahead: the sim reaches that time only
 after the driver's next ack, by when the push has long arrived, so it lands on its stamp.
-The driver keeps the fall figures (lowest base, largest roll/pitch) and what the robot
-touched in the world (truth contact events, the floor aside) for every trial.
+The driver keeps, for every trial, from the sim's truth (`state_truth`): the fall
+figures (lowest base, largest roll/pitch), what the robot touched in the world (contact
+events, the floor aside) and how far the robot's own odometry is from it
+(`EstimateErrors`). Scripts steer by the robot's `odom` (`base`), as the robot would.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.estimate_errors import EstimateErrors
 from common.bus import Bus
 from common.clients import ArmClient, Refused
 from common.config import Overrides, merged
@@ -29,7 +32,7 @@ from common.geometry import FloatArray, quat_xyzw_to_matrix
 from common.keys import WORLD_EVENTS, WORLD_PUSH
 from common.lockstep import PeriodicTicker
 from common.messages.base import NS_PER_S
-from common.messages.sim import Odom, Push, RobotContact, WorldEvents
+from common.messages.sim import Odom, Push, RobotContact, StateTruth, WorldEvents
 from common.messages.wbc import ArmGoal, CmdVel, WbcMode, WbcStatus
 from common.messages.wbc import GoalStatus as GoalState
 from deploy.stack import ProcessStack
@@ -89,6 +92,8 @@ class Driver:
         self.bus, self.keys = bus, keys
         self.stop = threading.Event()
         self._odom = bus.latest(keys.odom, Odom, history=16)
+        self._truth = bus.latest(keys.state_truth, StateTruth, history=16)
+        self.estimate = EstimateErrors()
         self._status = bus.latest(keys.wbc_status, WbcStatus, history=16)
         self._cmd = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self._mode = bus.publisher(keys.wbc_mode, WbcMode, "control")
@@ -99,6 +104,7 @@ class Driver:
         self.ticker = PeriodicTicker(bus, keys, NAME, PERIOD_S, self.stop)
         self.t_ns = 0
         self.odom: Odom | None = None
+        self.truth: StateTruth | None = None
         self.status: WbcStatus | None = None
         self.velocity = (0.0, 0.0, 0.0)
         self.min_height_m = math.inf
@@ -164,7 +170,9 @@ class Driver:
             self.t_ns = stamp
             self.odom = self._odom.wait_stamp(stamp, timeout_s)
             self.status = self._status.wait_stamp(stamp, timeout_s)
-            self._check_fall(self.odom)
+            self.truth = self._truth.wait_stamp(stamp, timeout_s)
+            self._check_fall(self.truth)
+            self.estimate.add(self.odom, self.truth)
             for events in self._events.drain():
                 for e in events.events:
                     if isinstance(e, RobotContact) and e.other != "floor":
@@ -180,18 +188,20 @@ class Driver:
             if self.fell:
                 return
 
-    def _check_fall(self, odom: Odom) -> None:
-        z = odom.base_position_in_world[2]
-        tilt = float(np.degrees(np.max(np.abs(rpy(odom.base_orientation_xyzw)[:2]))))
+    def _check_fall(self, truth: StateTruth) -> None:
+        z = truth.base_position_in_world[2]
+        tilt = float(np.degrees(np.max(np.abs(rpy(truth.base_orientation_xyzw)[:2]))))
         self.min_height_m = min(self.min_height_m, z)
         self.max_tilt_deg = max(self.max_tilt_deg, tilt)
         self.fell = self.fell or z < FELL_HEIGHT_M or tilt > FELL_TILT_DEG
 
-    def base(self) -> tuple[FloatArray, float]:
-        """Base xy (2,) and yaw now."""
-        assert self.odom is not None
-        p = np.array(self.odom.base_position_in_world[:2])
-        return p, float(rpy(self.odom.base_orientation_xyzw)[2])
+    def base(self, truth: bool = False) -> tuple[FloatArray, float]:
+        """Base xy (2,) and yaw now: as the robot's odometry has them, or (`truth`) as the
+        sim does, for the figures."""
+        state = self.truth if truth else self.odom
+        assert state is not None
+        p = np.array(state.base_position_in_world[:2])
+        return p, float(rpy(state.base_orientation_xyzw)[2])
 
     def figures(self) -> dict[str, Any]:
         return {
@@ -201,4 +211,5 @@ class Driver:
             "max_roll_pitch_deg": round(self.max_tilt_deg, 2),
             "qp_failures": 0 if self.status is None else self.status.qp_failures,
             "robot_contacts": dict(sorted(self.contacts.items())),
+            "odometry": self.estimate.figures(),
         }

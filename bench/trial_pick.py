@@ -185,12 +185,12 @@ def pick(d: Driver, out: Figures, walk_s: float = 20.0) -> Script:
             out["lift_error_m"] = round(d.status.gripper_error_m, 4)
             out["lift_wrench_base"] = [round(x, 2) for x in d.status.gripper_wrench]
     else:
-        p0, _ = d.base()
+        p0, _ = d.base(truth=True)
         back = [*route[-2::-1], start]  # the way it came: clear of the table and walls
         yield from walk_holding(d, walk_s, back)
         yield from d.wait(1.5)
         out["walked_s"] = walk_s
-        out["end_from_walk_start_m"] = round(float(np.linalg.norm(d.base()[0] - p0)), 3)
+        out["end_from_walk_start_m"] = round(float(np.linalg.norm(d.base(truth=True)[0] - p0)), 3)
     dropped = [e for w in events.drain() for e in w.events if isinstance(e, ObjectDropped)]
     assert d.status is not None
     out["held"] = bool(d.status.held and not dropped and "failed_at" not in out)

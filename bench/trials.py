@@ -2,7 +2,8 @@
 
 Each runs over a real stack (router + sim + wbc as processes, lockstep, dynamic
 locomotion; see `bench.trial_driver`) and returns JSON-ready figures; the CLI prints them
-on its last line.
+on its last line. The robot is steered by its own odometry; what it did is measured on
+the sim's truth, and every trial reports the odometry's errors against it (`odometry`).
 
 - walk: 5 m at 0.5 m/s; final error to the point 5 m ahead, lateral drift.
 - strafe: 2 m to the left at 0.3 m/s; final error, forward drift.
@@ -65,9 +66,9 @@ def _travel(d: Driver, v: tuple[float, float, float], seconds: float) -> Script:
 
 
 def straight(d: Driver, v: tuple[float, float, float], seconds: float, out: Figures) -> Script:
-    p0, yaw0 = d.base()
+    p0, yaw0 = d.base(truth=True)
     yield from _travel(d, v, seconds)
-    p1, _ = d.base()
+    p1, _ = d.base(truth=True)
     c, s = math.cos(yaw0), math.sin(yaw0)
     goal_b = np.array(v[:2]) * seconds
     goal = p0 + np.array([c * goal_b[0] - s * goal_b[1], s * goal_b[0] + c * goal_b[1]])
@@ -90,7 +91,7 @@ def strafe(d: Driver, out: Figures) -> Script:
 
 
 def turn(d: Driver, out: Figures) -> Script:
-    p0, yaw = d.base()
+    p0, yaw = d.base(truth=True)
     turned, last = 0.0, yaw
     d.mode("walk")
     yield from d.wait(0.5)
@@ -99,25 +100,25 @@ def turn(d: Driver, out: Figures) -> Script:
     while d.t < end + 2.0:
         if d.t >= end:
             d.cmd(0.0)
-        _, yaw = d.base()
+        _, yaw = d.base(truth=True)
         turned += wrap_angle(yaw - last)
         last = yaw
         yield
     out["yaw_turned_deg"] = round(math.degrees(turned), 1)
-    out["position_drift_m"] = round(float(np.linalg.norm(d.base()[0] - p0)), 3)
+    out["position_drift_m"] = round(float(np.linalg.norm(d.base(truth=True)[0] - p0)), 3)
 
 
 def _after_push(d: Driver, seconds: float, lateral: np.ndarray) -> Generator[None, None, Figures]:
     """Watch the base for `seconds`: lowest height, largest tilt, largest sideways excursion."""
-    p0, _ = d.base()
+    p0, _ = d.base(truth=True)
     low, tilt, side = math.inf, 0.0, 0.0
     end = d.t + seconds
     while d.t < end and not d.fell:
-        assert d.odom is not None
-        low = min(low, d.odom.base_position_in_world[2])
-        roll_pitch = rpy_of_quat_xyzw(d.odom.base_orientation_xyzw)[:2]
+        assert d.truth is not None
+        low = min(low, d.truth.base_position_in_world[2])
+        roll_pitch = rpy_of_quat_xyzw(d.truth.base_orientation_xyzw)[:2]
         tilt = max(tilt, float(np.degrees(np.max(np.abs(roll_pitch)))))
-        side = max(side, abs(float((d.base()[0] - p0) @ lateral)))
+        side = max(side, abs(float((d.base(truth=True)[0] - p0) @ lateral)))
         yield
     return {
         "min_base_height_m": round(low, 4),

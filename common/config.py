@@ -211,6 +211,26 @@ class GaitSettings(_Section):
     d_max: Limits3 = msgspec.field(default_factory=lambda: [2.0, 2.0, 3.0])
 
 
+class EstimatorSettings(_Section):
+    """The WBC's leg-inertial estimator (`services.wbc.estimator`): the tilt filter's
+    gains, and the Kalman filter's noises (process: per √s; measurement: σ)."""
+
+    tilt_kp: NonNegative = 1.0  # 1/s: how fast gravity pulls roll and pitch
+    tilt_ki: NonNegative = 0.05  # 1/s²: how fast the gyro's roll and pitch bias is learnt
+    #: m/s²: the accelerometer corrects the tilt only within g ± this (a push, a foot's
+    #: impact). Not tight: a trot's own accelerations must average out, and a tight
+    #: gate keeps a biased half of them (1 m/s² tilted the estimate 6° in 5 s of trot).
+    gravity_gate: Positive = 5.0
+    calibrate_s: NonNegative = 1.0  # s at rest at the start: the gyro's bias
+    q_position: NonNegative = 0.002  # m/√s
+    q_accel: NonNegative = 0.5  # m/s/√s: the IMU's acceleration error
+    q_foot_stance: NonNegative = 0.005  # m/√s: a stance foot's slip
+    q_foot_swing: NonNegative = 2.0  # m/√s
+    r_kin: Positive = 0.005  # m: the legs' kinematics
+    r_vel: Positive = 0.05  # m/s: a stance foot's velocity (encoders, a foot rolling)
+    r_height: Positive = 0.005  # m: a stance foot's height above the floor
+
+
 class WbcSettings(_Section):
     """The whole-body controller service (`services/wbc`).
 
@@ -229,6 +249,11 @@ class WbcSettings(_Section):
     #: A cmd_vel older than this (sim time) means stop.
     cmd_vel_timeout_s: Positive = 0.5
     gait: GaitSettings = msgspec.field(default_factory=GaitSettings)
+    #: Where the base's pose and twist come from: `estimate`, the leg-inertial estimator
+    #: on the robot's sensors (it publishes `odom`); `truth`, the sim's free joint (an
+    #: ablation: the sim publishes `odom`).
+    base_state: Literal["estimate", "truth"] = "truth"
+    estimator: EstimatorSettings = msgspec.field(default_factory=EstimatorSettings)
     #: A gap in the state's stamps longer than this stops the robot.
     stale_state_s: float = 0.05
     #: `wbc/status` rate and rerun time-series rate, Hz of sim time.
@@ -567,6 +592,18 @@ class CpuSettings(_Section):
     control: tuple[str, ...] = ("sim", "wbc", "router")
 
 
+class LocalizationSettings(_Section):
+    """Where the robot is in the map.
+
+    start_pose: where the robot stands at start-up, (x m, y m, yaw rad) in the map, as
+    the user gives it (`dume up --start-pose`): the odometry starts there. Unset, the
+    launcher fills in the world's start (`deploy.stack`); a service started by hand
+    without it starts odometry at the origin.
+    """
+
+    start_pose: tuple[float, float, float] | None = None
+
+
 class LogSettings(_Section):
     level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     #: Log, every `trace_every_s` of sim time, a running digest of everything each
@@ -586,8 +623,15 @@ class Config(_Section):
     semantic_map: SemanticMapSettings = msgspec.field(default_factory=SemanticMapSettings)
     mission: MissionSettings = msgspec.field(default_factory=MissionSettings)
     recording: RecordingSettings = msgspec.field(default_factory=RecordingSettings)
+    localization: LocalizationSettings = msgspec.field(default_factory=LocalizationSettings)
     cpu: CpuSettings = msgspec.field(default_factory=CpuSettings)
     log: LogSettings = msgspec.field(default_factory=LogSettings)
+
+    def odom_from_estimate(self) -> bool:
+        """Whether `odom` is the WBC's estimate (`wbc.base_state = "estimate"` on legs);
+        otherwise the sim publishes its free joint (the truth ablation, or kinematic
+        locomotion, where the base is moved, not walked)."""
+        return self.wbc.base_state == "estimate" and self.sim.locomotion == "dynamic"
 
 
 def _literal(text: str) -> Any:

@@ -83,6 +83,21 @@ def stack_env(
     return env
 
 
+def with_start_pose(overrides: Overrides) -> dict[str, Any]:
+    """The overrides with `localization.start_pose` filled in from the world's start when
+    the robot estimates its base and no start pose was given (the user's default: the
+    pose a person would type for the demo's world)."""
+    out = dict(overrides)
+    config = load_config(out)
+    if not config.odom_from_estimate() or config.localization.start_pose is not None:
+        return out
+    from services.sim.world import generate_world
+
+    start = generate_world(config.sim.world_seed, config.sim.world).robot_start
+    out["localization.start_pose"] = [start.x, start.y, start.yaw]
+    return out
+
+
 def settings_env(run_dir: Path, overrides: Overrides) -> dict[str, str]:
     """The overrides of every process of a stack: written to the run's settings file,
     named by `DUME_SETTINGS`."""
@@ -99,7 +114,7 @@ class _Stack:
         self.run_id = run_id or new_run_id()
         self.run_dir = REPO_ROOT / "var" / "run" / f"{self.run_id}-{self.port}"
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        self.overrides = dict(overrides)
+        self.overrides = with_start_pose(overrides)
         self.env = stack_env(
             port=self.port,
             run_id=self.run_id,

@@ -22,7 +22,7 @@ import hashlib
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import msgspec
 
@@ -149,6 +149,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     drops: objects that fell (`ObjectDropped`). services_down: stack processes that had
     exited by the end of the run. recording: the run's recording folder ("" when off).
     digest: the run's fingerprint (`run_digest`): the same seed gives the same digest.
+    odometry: how far the robot's `odom` was from the truth over the request.
     """
 
     world: str
@@ -181,6 +182,8 @@ class WorldResult(msgspec.Struct, kw_only=True):
     recording: str = ""
     error: str = ""
     digest: str = ""
+    #: The robot's own estimate of its base against the truth (`EstimateErrors.figures`).
+    odometry: dict[str, float] = msgspec.field(default_factory=dict)
 
     @property
     def succeeded(self) -> bool:
@@ -219,8 +222,10 @@ class MissionRecord:
     ended: str = ""
     wall_s: float = 0.0
     #: The base every `TRAJECTORY_EVERY_NS` of sim time from the request on: (stamp_ns,
-    #: x, y, z, qx, qy, qz, qw) from the sim's odom.
+    #: x, y, z, qx, qy, qz, qw) from the sim's truth (`state_truth`).
     trajectory: list[tuple[float, ...]] = field(default_factory=list)
+    #: The robot's odometry against the truth over the request (`EstimateErrors`).
+    odometry: dict[str, Any] = field(default_factory=dict)
 
 
 #: The trajectory's sample period in a `MissionRecord` (10 Hz).
@@ -278,4 +283,5 @@ def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription
     result.contacts = [f"{c.body}-{c.other}@{c.stamp_ns / 1e9:.1f}s" for c in contacts]
     result.drops = len(events_of(record.events, "drop"))
     result.digest = run_digest(record)
+    result.odometry = dict(record.odometry)
     return result

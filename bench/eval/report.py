@@ -67,6 +67,12 @@ def _fmt(x: float) -> str:
     return "-" if math.isnan(x) else f"{x:.1f}"
 
 
+def _odom(r: WorldResult, key: str) -> str:
+    """One of the odometry's figures for the table ("-" when none was measured)."""
+    x = r.odometry.get(key)
+    return "-" if x is None else f"{x:g}"
+
+
 def report_markdown(
     settings: Mapping[str, Any], summary: Mapping[str, Any], results: Sequence[WorldResult]
 ) -> str:
@@ -120,15 +126,16 @@ def report_markdown(
         "## Worlds",
         "",
         "| seed | object → person | truth | mission | agree | stage reached | sim s | wall s "
-        "| rtf | contacts | drops |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rtf | contacts | drops | odom drift % | odom error m |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         mission = r.mission_state + (f" ({r.mission_reason})" if r.mission_reason else "")
         lines.append(
             f"| {r.world_seed} | {r.object} → {r.person} | {r.outcome} | {mission or '-'} "
             f"| {'yes' if r.agree else 'no'} | {r.stage_reached or '-'} | {r.sim_time_s:.1f} "
-            f"| {r.wall_time_s:.0f} | {r.rtf:.2f} | {r.contacts_static} | {r.drops} |"
+            f"| {r.wall_time_s:.0f} | {r.rtf:.2f} | {r.contacts_static} | {r.drops} "
+            f"| {_odom(r, 'drift_pct')} | {_odom(r, 'position_error_m')} |"
         )
     lines += ["", "## Plots", "", *(f"![{p}]({p})\n" for p in PLOTS)]
     return "\n".join(lines)

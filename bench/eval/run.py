@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
+from bench.estimate_errors import EstimateErrors, StampPairs
 from bench.eval.judge import (
     TERMINAL,
     TRAJECTORY_EVERY_NS,
@@ -47,7 +48,7 @@ from common.lifelines import Dependencies
 from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
 from common.messages.perception import Detections
 from common.messages.semantic_map import MapEntity, MapListing
-from common.messages.sim import Clock, Odom, WorldEvents
+from common.messages.sim import Clock, Odom, StateTruth, WorldEvents
 from common.messages.world import WorldDescription
 
 #: Called with the request's status (None before the first), the clock, and whether the
@@ -154,7 +155,7 @@ def watch_mission(
     statuses = bus.fifo(keys.mission_status, MissionStatus, maxlen=1 << 16)
     events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=1 << 16)
     clock = bus.latest(WORLD_CLOCK, Clock)
-    odom = bus.fifo(keys.odom, Odom, maxlen=1 << 20)
+    poses = _Poses(bus, keys)
     publisher = bus.publisher(keys.mission_request, MissionRequest, "control")
     alive = bus.watch_alive(keys.alive_all)
     deps = Dependencies(alive.lifelines, WATCHED, keys.alive)
@@ -178,7 +179,8 @@ def watch_mission(
             record.start_ns = record.end_ns = now.stamp_ns if now else 0
             publisher.put(request)
         wall0 = time.perf_counter()
-        _follow(record, statuses, events, clock, odom, timeout_s, on_progress, deps)
+        poses.pairs.start_ns = record.start_ns
+        _follow(record, statuses, events, clock, poses, timeout_s, on_progress, deps)
         record.wall_s = time.perf_counter() - wall0
         lost = record.ended.startswith(DEPENDENCY_LOST)
         if not lost and (not record.changes or record.changes[-1].state not in TERMINAL):
@@ -187,7 +189,8 @@ def watch_mission(
         record.ended = "the simulator's clock stopped"
     finally:
         record.wall_s = record.wall_s or time.perf_counter() - wall0
-        for sub in (statuses, events, clock, odom):
+        record.odometry = poses.pairs.errors.figures()
+        for sub in (statuses, events, clock, poses.truth, poses.odom):
             sub.undeclare()
         alive.undeclare()
         publisher.undeclare()
@@ -205,7 +208,7 @@ def _follow(
     statuses: Fifo[MissionStatus],
     events: Fifo[WorldEvents],
     clock: Latest[Clock],
-    odom: Fifo[Odom],
+    poses: _Poses,
     timeout_s: float,
     on_progress: Progress | None,
     deps: Dependencies,
@@ -224,7 +227,7 @@ def _follow(
                 forgotten = True  # the mission had our request and now has none
         for batch in events.drain():
             record.events.extend(batch.events)
-        _sample(record, odom)
+        poses.sample(record)
         changes = transitions(seen, rid)
         lost = deps.lost() or (
             "mission restarted: it has no request in progress" if forgotten else None
@@ -261,13 +264,25 @@ def _follow(
             return
 
 
-def _sample(record: MissionRecord, odom: Fifo[Odom]) -> None:
-    """Keep the base's pose every `TRAJECTORY_EVERY_NS` from the request on."""
-    for o in odom.drain():
-        if o.stamp_ns >= record.start_ns and o.stamp_ns % TRAJECTORY_EVERY_NS == 0:
-            record.trajectory.append(
-                (o.stamp_ns, *o.base_position_in_world, *o.base_orientation_xyzw)
-            )
+class _Poses:
+    """The base's truth and the robot's odometry as they come: the truth's trajectory,
+    and the two paired by stamp for the odometry's errors."""
+
+    def __init__(self, bus: Bus, keys: RobotKeys) -> None:
+        self.truth = bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 20)
+        self.odom = bus.fifo(keys.odom, Odom, maxlen=1 << 20)
+        self.pairs = StampPairs(EstimateErrors())
+
+    def sample(self, record: MissionRecord) -> None:
+        """Keep the true pose every `TRAJECTORY_EVERY_NS` from the request on."""
+        for o in self.odom.drain():
+            self.pairs.odom(o)
+        for t in self.truth.drain():
+            self.pairs.truth(t)
+            if t.stamp_ns >= record.start_ns and t.stamp_ns % TRAJECTORY_EVERY_NS == 0:
+                record.trajectory.append(
+                    (t.stamp_ns, *t.base_position_in_world, *t.base_orientation_xyzw)
+                )
 
 
 def _cancel(

@@ -1,13 +1,16 @@
 """What the sim gives out: the robot's description, and everything stamped with sim time.
 
 `SimOutputs.publish(t)` puts out, in this order, all stamped t (ns): the state (when the
-commander answers it; every tick without one), odom and the base's truth (`state_truth`)
-at `sim.odom_hz`, the lidar's scan at its rate (`sim.sensors.lidar`), each camera's
-RGB-D frame at `sim.camera_hz` and its truth segmentation (`sim.segmentation_truth`)
-(each rendered only for someone who looks: a subscriber or the recording's kept frames),
-the recording's poses every 40 ms, and last the clock (when due), so a participant woken
-by the clock finds its inputs as of t in. `events` puts out a step's world events. The
-recording (rerun) is logged alongside. Called from the sim's loop thread only.
+commander answers it; every tick without one), the base's truth (`state_truth`) at
+`sim.odom_hz` and `odom` with it unless the WBC estimates the base
+(`Config.odom_from_estimate`), the lidar's scan at its rate (`sim.sensors.lidar`), each
+camera's RGB-D frame at `sim.camera_hz` and its truth segmentation
+(`sim.segmentation_truth`) (each rendered only for someone who looks: a subscriber or
+the recording's kept frames), the recording's poses every 40 ms, and last the clock
+(when due), so a participant woken by the clock finds its inputs as of t in (the WBC's
+`odom`, when it estimates, comes after its tick: its consumers wait for the stamp).
+`events` puts out a step's world events. The recording (rerun) is logged alongside.
+Called from the sim's loop thread only.
 """
 
 from __future__ import annotations
@@ -107,7 +110,11 @@ class SimOutputs:
         cameras = config.sim.cameras
         self.clock = bus.publisher(WORLD_CLOCK, Clock, "control")
         self.state = bus.publisher(keys.state, RobotState, "control")
-        self.odom = bus.publisher(keys.odom, Odom, "control")
+        #: The free joint on `odom` only when nothing estimates it (the truth ablation,
+        #: kinematic locomotion); otherwise the WBC publishes its estimate there.
+        self.odom = (
+            None if config.odom_from_estimate() else bus.publisher(keys.odom, Odom, "control")
+        )
         self.state_truth = bus.publisher(keys.state_truth, StateTruth, "data")
         self.scan = bus.publisher(keys.scan, LaserScan, "data")
         self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
@@ -147,7 +154,8 @@ class SimOutputs:
             state = self.core.robot_state(tick)
             self.state.put(state)
         if t_ns % self.odom_period_ns == 0:
-            self.odom.put(self.core.odom())
+            if self.odom is not None:
+                self.odom.put(self.core.odom())
             self.state_truth.put(self.core.state_truth())
         if t_ns % self.lidar_period_ns == 0:
             self.scan.put(self._scan(t_ns))

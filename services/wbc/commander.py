@@ -3,19 +3,22 @@
 `WbcCommander` owns the controller and its bookkeeping; the node feeds it what came over
 the bus and publishes what it returns. A tick, all on the WBC's thread, in this order:
 
-1. `begin(t, state, msg)`: the first state, or one after a gap over `stale_state_s`
-   (sim time), resets the controller to hold where the robot is; returns dt (s);
+1. `begin(t, state, msg)`: with `wbc.base_state = "estimate"`, the odometry predicts the
+   base at t and the state carries it (`odometry`); the first state, or one after a gap
+   over `stale_state_s` (sim time), resets the controller to hold where the robot is;
+   returns the state and dt (s);
 2. the node pushes the cmd_vel and `wbc/mode` samples that came into `arbiter` and
    `modes`; `apply_modes(t, state)` applies the modes due at t (`set_mode`), and
    `start_goals(t)` starts the arm goals due at t (`goals`) in the order they came;
 3. `command(t, state, dt)`: damping in mode `damp`; otherwise the controller's step with
    the cmd_vel (walk only) and the arm references, through the QP-failure `fallback`;
-4. after the publish: `end(t, msg)` observes the arm and records the base pose; `status`
-   and `errors` for `wbc/status` and rerun.
+4. after the publish: `end(t, msg)` corrects the odometry from the legs, observes the
+   arm and records the base pose; `status` and `errors` for `wbc/status` and rerun.
 
-Units: stamps ns of sim time, poses in world (4×4), cmd_vel (vx, vy, ωz) m/s and rad/s
-in `base_yaw`. Threads: `goals.accept` runs on the query server's thread and reads `mode`
-(an attribute read, no lock); everything else is the WBC's thread only.
+Units: stamps ns of sim time, poses in world (4×4; odom when estimating), cmd_vel (vx,
+vy, ωz) m/s and rad/s in `base_yaw`. Threads: `goals.accept` runs on the query server's
+thread and reads `mode` (an attribute read, no lock); everything else is the WBC's
+thread only.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from services.wbc.controller import WbcCommand, WbcReferences, WbcState, WholeBo
 from services.wbc.fallback import QpFallback
 from services.wbc.goals import GoalIntake
 from services.wbc.inputs import CmdVelArbiter, ModeQueue, PoseHistory
+from services.wbc.odometry import LegOdometry, Pose2
 from services.wbc.safety import damp_command
 from services.wbc.telemetry import tracking_errors
 from services.wbc.values import JAW, Q_ARM, V_JAW
@@ -52,6 +56,8 @@ class WbcCommander:
     `mode` is the current mode and `reason` the last thing said (`say`); `obs` the arm as
     of the last `end` (None before the first tick); `qp_us` the last QP's build and solve
     time (µs of wall time). `period_ns` is the tick's period, the dt after a gap.
+    `odometry` is the base's estimate (None when the state's base is used: the truth
+    ablation); it starts at `start` (x, y, yaw).
     """
 
     def __init__(
@@ -60,6 +66,7 @@ class WbcCommander:
         latency: Mapping[str, int],
         period_ns: int,
         log: logging.Logger,
+        start: Pose2 | None = None,
     ) -> None:
         self.log, self.period_ns = log, period_ns
         self.ctrl = WholeBodyController(gait=w.gait, clock=time.perf_counter)
@@ -77,6 +84,9 @@ class WbcCommander:
         self.obs: ArmObservation | None = None
         self.qp_us = 0.0
         self.goals = GoalIntake(lambda: self.mode, log)
+        self.odometry: LegOdometry | None = None
+        if w.base_state == "estimate":
+            self.odometry = LegOdometry(w.estimator, start or (0.0, 0.0, 0.0))
 
     def say(self, reason: str) -> None:
         """Log `reason` and make it the status's reason."""
@@ -85,17 +95,20 @@ class WbcCommander:
 
     # -- a tick ---------------------------------------------------------------------------
 
-    def begin(self, t: int, state: WbcState, msg: RobotState) -> float:
-        """Start the tick of the (well-formed, finite) state at t: dt (s) since the last."""
+    def begin(self, t: int, state: WbcState, msg: RobotState) -> tuple[WbcState, float]:
+        """Start the tick of the (well-formed, finite) state at t: the state the controller
+        runs on (the base estimated, with odometry) and dt (s) since the last tick."""
         gap = 0 if self.last_stamp is None else t - self.last_stamp
+        dt = gap / NS_PER_S if 0 < gap <= self.stale_ns else self.period_ns / NS_PER_S
+        if self.odometry is not None:  # over a gap, too: the base kept moving
+            state = self.odometry.predict(msg, state, gap / NS_PER_S or dt, self.ctrl.model)
         if self.obs is None or gap > self.stale_ns:  # first state, or a gap: hold where it is
             if self.obs is not None:
                 self.say(f"stale state: no state for {gap / 1e6:.0f} ms of sim time; stopped")
             self.ctrl.reset(state)
             self.observe(msg)
-        dt = gap / NS_PER_S if 0 < gap <= self.stale_ns else self.period_ns / NS_PER_S
         self.last_stamp = t
-        return dt
+        return state, dt
 
     def observe(self, msg: RobotState) -> None:
         """The arm as the model (updated this tick) and the state's gripper show it."""
@@ -140,7 +153,11 @@ class WbcCommander:
         """This tick's joint command (`dt` s since the last tick)."""
         assert self.obs is not None
         arm = self.actions.update(t, self.obs)
+        if self.odometry is not None and self.mode in ("walk", "manipulate"):
+            self.odometry.moving()
         if self.mode == "damp":
+            if self.odometry is not None:  # the legs' kinematics at the estimate, to correct it
+                self.ctrl.update_model(state, tcp=False)
             cmd = damp_command(state.q)
             if arm.gripper_effort is not None:
                 cmd.tau_ff[JAW] = arm.gripper_effort
@@ -160,7 +177,10 @@ class WbcCommander:
         return self.fallback.command(cmd, state, arm)
 
     def end(self, t: int, msg: RobotState) -> None:
-        """After the command went out: observe the arm, record the base pose at t."""
+        """After the command went out: correct the odometry, observe the arm, record the
+        base pose at t."""
+        if self.odometry is not None:
+            self.odometry.correct(self.ctrl.model, msg.foot_contacts)
         self.observe(msg)
         self.poses.add(t, self.ctrl.model.frames[robot.BASE_FRAME].H)
 

@@ -128,11 +128,12 @@ class WholeBodyController:
         self.ref_yaw = yaw_of(_rotation(state.base_orientation_xyzw))
         self.gait = TrotGait(self.gait.limits)
         self._initialised = True
-        self._update_model(state, tcp=True)
+        self.update_model(state, tcp=True)
         self.ref_xy = self.model.com[:2].copy()
         self._tcp_integral[:] = 0.0
 
-    def _update_model(self, state: WbcState, tcp: bool) -> FloatArray:
+    def update_model(self, state: WbcState, tcp: bool) -> FloatArray:
+        """The model at the state (`tcp`: with the gripper's Jacobian); R of the base."""
         R = _rotation(state.base_orientation_xyzw)
         q, v = self._q, self._v
         q[:3] = state.base_position_in_world
@@ -150,7 +151,7 @@ class WholeBodyController:
         t0 = clock() if clock else 0.0
         if not self._initialised:
             self.reset(state)
-        R = self._update_model(state, tcp=refs.T_world_tcp is not None)
+        R = self.update_model(state, tcp=refs.T_world_tcp is not None)
         m = self.model
         t1 = clock() if clock else 0.0
         feet = m.feet_p

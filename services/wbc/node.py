@@ -20,9 +20,11 @@ one `JointCommand` with the state's stamp. Per tick:
 This module is the wiring: the parts built from the config and the bus, the loop, and
 the `wbc/arm_goal` server, which hands requests to `goals.GoalIntake` on its own thread.
 
-State estimate: none of its own. The base pose and twist come from the sim's
-`RobotState` (MuJoCo's free joint, i.e. perfect odometry); joints, jaw angle and
-applied torques likewise. A real robot would put a kinematic-inertial estimator here.
+State estimate: with `wbc.base_state = "estimate"` the base's pose and twist are the
+leg-inertial odometry's (`odometry`: the IMU, the encoders, the feet's contacts), and
+the WBC publishes them on `odom` at `sim.odom_hz`, stamped with the state they answer
+(after the tick's correction); with `truth` (an ablation) they are the sim's free joint
+and the sim publishes `odom`.
 Bad inputs never stop the loop: refused goals get a typed `ErrorReply`, a state with NaN
 is answered with damping, a gap in the states (stale state) stops the robot.
 """
@@ -39,7 +41,7 @@ from common.bus import WaitTimeout
 from common.lockstep import UpstreamGate
 from common.messages import ArrayError
 from common.messages.base import NS_PER_S
-from common.messages.sim import JointCommand, RobotState
+from common.messages.sim import JointCommand, Odom, RobotState
 from common.messages.wbc import ArmGoalReply, ArmGoalRequest, CmdVel, WbcMode, WbcStatus
 from common.sched import make_realtime
 from common.service import Service
@@ -61,7 +63,10 @@ class WbcNode:
         w = cfg.wbc
         self.period_ns = cfg.time.period_ns_of(NAME, 1.0 / cfg.time.tick_hz)
         latency = cfg.time.latencies_ns()
-        self.core = core = WbcCommander(w, latency, self.period_ns, svc.log)
+        start = cfg.localization.start_pose
+        if w.base_state == "estimate" and start is None:
+            svc.log.warning("no localization.start_pose: odometry starts at the origin")
+        self.core = core = WbcCommander(w, latency, self.period_ns, svc.log, start)
         self.tick_us = 0.0
         #: Wall seconds this tick waited for upstream inputs (not compute).
         self._waited_s = 0.0
@@ -80,6 +85,8 @@ class WbcNode:
         self.mode_in = bus.fifo(keys.wbc_mode, WbcMode, maxlen=256)
         self.commands = bus.publisher(keys.command, JointCommand, "control")
         self.status = bus.publisher(keys.wbc_status, WbcStatus, "data")
+        self.odom = bus.publisher(keys.odom, Odom, "control") if cfg.odom_from_estimate() else None
+        self.odom_every = round(NS_PER_S / cfg.sim.odom_hz)
         bus.serve(keys.arm_goal, ArmGoalRequest, self._on_goal)
         self.logger = WbcLogger(svc.rec)
 
@@ -129,7 +136,7 @@ class WbcNode:
             self.commands.put(joint_command(t, damp_command(np.nan_to_num(state.q))))
             core.say(f"state at t={t / NS_PER_S:.3f} s has NaN: damping")
             return
-        dt = core.begin(t, state, msg)
+        state, dt = core.begin(t, state, msg)
         self._waited_s = 0.0
         # The inputs due at t: the mode source's, its modes, then the obeyed source's.
         self._upstream(t, self.mode_source)
@@ -145,6 +152,8 @@ class WbcNode:
         self.tick_us = (time.perf_counter() - t0 - self._waited_s) * 1e6
         # Off the critical path: the sim is stepping now.
         core.end(t, msg)
+        if self.odom is not None and core.odometry is not None and t % self.odom_every == 0:
+            self.odom.put(core.odometry.odom(msg))
         if t % self.status_every == 0:
             self.status.put(core.status(t, msg, self.tick_us))
         if t % self.log_every == 0:

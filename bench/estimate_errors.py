@@ -1,0 +1,103 @@
+"""How far the robot's own estimate of its base (`odom`) is from the sim's truth
+(`state_truth`), for trials and evaluation: truth-side, never in the robot's loop.
+
+`EstimateErrors.add(odom, truth)` takes one pair stamped alike; `figures()` gives:
+velocity RMSE (m/s, the 3-D linear velocity in world), the tilt error's p95 (deg, the
+angle between the up directions the two orientations see in the body), the height
+error's p95 (m), and at the end: the position error in the floor plane (m), the yaw
+error (deg), the distance the base truly walked (m) and the drift as a percentage of
+it. Odometry drifts by design (its x, y and yaw are integrated); the drift figure is
+what a localization must take up.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from common.geometry import quat_xyzw_to_matrix, wrap_angle, yaw_of
+from common.messages.sim import Odom, StateTruth
+
+
+class EstimateErrors:
+    """The odom-versus-truth errors over a run (module docstring)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self._v_sq = 0.0
+        self._tilt: list[float] = []
+        self._height: list[float] = []
+        self.distance_m = 0.0
+        self._last_xy: np.ndarray | None = None
+        self.position_error_m = 0.0
+        self.yaw_error_deg = 0.0
+
+    def add(self, odom: Odom, truth: StateTruth) -> None:
+        if odom.stamp_ns != truth.stamp_ns:
+            raise ValueError(f"odom at {odom.stamp_ns} ns, truth at {truth.stamp_ns} ns")
+        R_est = quat_xyzw_to_matrix(odom.base_orientation_xyzw)
+        R_true = quat_xyzw_to_matrix(truth.base_orientation_xyzw)
+        dv = np.subtract(odom.base_linear_velocity_in_world, truth.base_linear_velocity_in_world)
+        self._v_sq += float(dv @ dv)
+        cos_tilt = float(np.clip(R_est[2] @ R_true[2], -1.0, 1.0))
+        self._tilt.append(math.degrees(math.acos(cos_tilt)))
+        p_est = np.asarray(odom.base_position_in_world)
+        p_true = np.asarray(truth.base_position_in_world)
+        self._height.append(abs(float(p_est[2] - p_true[2])))
+        if self._last_xy is not None:
+            self.distance_m += float(np.linalg.norm(p_true[:2] - self._last_xy))
+        self._last_xy = p_true[:2].copy()
+        self.position_error_m = float(np.linalg.norm(p_est[:2] - p_true[:2]))
+        self.yaw_error_deg = math.degrees(wrap_angle(yaw_of(R_est) - yaw_of(R_true)))
+        self.n += 1
+
+    def figures(self) -> dict[str, Any]:
+        if self.n == 0:
+            return {"samples": 0}
+        drift = 100.0 * self.position_error_m / self.distance_m if self.distance_m > 0 else 0.0
+        return {
+            "samples": self.n,
+            "velocity_rmse_mps": round(math.sqrt(self._v_sq / self.n), 4),
+            "tilt_error_p95_deg": round(float(np.percentile(self._tilt, 95)), 3),
+            "height_error_p95_m": round(float(np.percentile(self._height, 95)), 4),
+            "distance_m": round(self.distance_m, 2),
+            "position_error_m": round(self.position_error_m, 3),
+            "drift_pct": round(drift, 2),
+            "yaw_error_deg": round(self.yaw_error_deg, 2),
+        }
+
+
+class StampPairs:
+    """Odom and truth samples as they come, in any order: each pair with one stamp goes to
+    `errors` once both are in (from `start_ns` on); an unmatched sample is dropped after
+    `horizon` newer ones of its kind."""
+
+    def __init__(self, errors: EstimateErrors, start_ns: int = 0, horizon: int = 64) -> None:
+        self.errors, self.start_ns, self.horizon = errors, start_ns, horizon
+        self._odom: dict[int, Odom] = {}
+        self._truth: dict[int, StateTruth] = {}
+
+    def odom(self, msg: Odom) -> None:
+        truth = self._truth.pop(msg.stamp_ns, None)
+        if truth is not None:
+            self._pair(msg, truth)
+        else:
+            self._keep(self._odom, msg.stamp_ns, msg)
+
+    def truth(self, msg: StateTruth) -> None:
+        odom = self._odom.pop(msg.stamp_ns, None)
+        if odom is not None:
+            self._pair(odom, msg)
+        else:
+            self._keep(self._truth, msg.stamp_ns, msg)
+
+    def _pair(self, odom: Odom, truth: StateTruth) -> None:
+        if odom.stamp_ns >= self.start_ns:
+            self.errors.add(odom, truth)
+
+    def _keep(self, pending: dict[int, Any], stamp: int, msg: Any) -> None:
+        pending[stamp] = msg
+        if len(pending) > self.horizon:
+            del pending[min(pending)]

@@ -1,0 +1,71 @@
+"""The odometry-versus-truth figures: drift over distance, tilt and velocity errors, and
+pairs matched by stamp whichever side comes first."""
+
+from __future__ import annotations
+
+import math
+
+import pinocchio as pin
+import pytest
+
+from bench.estimate_errors import EstimateErrors, StampPairs
+from common.messages.sim import Odom, StateTruth
+
+MS = 1_000_000
+LEVEL = (0.0, 0.0, 0.0, 1.0)
+
+
+def xyzw(roll: float, yaw: float) -> tuple[float, float, float, float]:
+    q = pin.Quaternion(pin.rpy.rpyToMatrix(roll, 0.0, yaw))
+    return (q.x, q.y, q.z, q.w)
+
+
+def odom(t: int, x: float, vx: float = 0.5, quat: tuple[float, ...] = LEVEL) -> Odom:
+    return Odom(
+        stamp_ns=t,
+        base_position_in_world=(x, 0.0, 0.5),
+        base_orientation_xyzw=quat,  # type: ignore[arg-type]
+        base_linear_velocity_in_world=(vx, 0.0, 0.0),
+        base_angular_velocity_in_base=(0.0, 0.0, 0.0),
+        gripper_angle=0.0,
+        gripper_effort=0.0,
+    )
+
+
+def truth(t: int, x: float, vx: float = 0.5) -> StateTruth:
+    return StateTruth(
+        stamp_ns=t,
+        base_position_in_world=(x, 0.0, 0.5),
+        base_orientation_xyzw=LEVEL,
+        base_linear_velocity_in_world=(vx, 0.0, 0.0),
+        base_angular_velocity_in_base=(0.0, 0.0, 0.0),
+    )
+
+
+def test_drift_is_the_final_error_over_the_true_distance() -> None:
+    e = EstimateErrors()
+    for k in range(101):  # 10 m truly; the odometry says 9.8 m, 0.1 m/s slow, tilted 2°
+        t = k * 20 * MS
+        e.add(odom(t, 0.098 * k, 0.4, xyzw(math.radians(2.0), 0.05)), truth(t, 0.1 * k))
+    f = e.figures()
+    assert f["distance_m"] == pytest.approx(10.0)
+    assert f["position_error_m"] == pytest.approx(0.2)
+    assert f["drift_pct"] == pytest.approx(2.0)
+    assert f["velocity_rmse_mps"] == pytest.approx(0.1)
+    assert f["tilt_error_p95_deg"] == pytest.approx(2.0, abs=1e-3)
+    assert f["yaw_error_deg"] == pytest.approx(math.degrees(0.05), abs=0.01)
+
+
+def test_pairs_match_by_stamp_in_any_order_and_mismatches_are_refused() -> None:
+    e = EstimateErrors()
+    pairs = StampPairs(e, start_ns=20 * MS)
+    pairs.truth(truth(0, 0.0))  # before the start: paired, not counted
+    pairs.odom(odom(0, 0.0))
+    pairs.odom(odom(20 * MS, 0.01))  # odom first
+    pairs.truth(truth(20 * MS, 0.01))
+    pairs.truth(truth(40 * MS, 0.02))  # truth first
+    pairs.odom(odom(40 * MS, 0.02))
+    pairs.truth(truth(60 * MS, 0.03))  # never matched
+    assert e.n == 2
+    with pytest.raises(ValueError, match="odom at"):
+        e.add(odom(0, 0.0), truth(MS, 0.0))
