@@ -44,7 +44,7 @@ import zenoh
 from common import robot
 from common.camera import backproject
 from common.config import Overrides, load_config, merged, resolve
-from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z, transform_points
+from common.geometry import FloatArray, matrix_to_quat_xyzw, rot_x, rot_y, rot_z, transform_points
 from common.messages import as_numpy, decode
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame, SegmentationTruth
@@ -105,8 +105,11 @@ def _shots(world: WorldDescription, rng: np.random.Generator) -> Iterator[tuple[
                     break
 
 
-def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, SegmentationTruth]]:
-    """Frames of the hall of `seed` from the bench's shots (deterministic per seed)."""
+def render_seed(
+    seed: int,
+) -> Iterator[tuple[WorldDescription, CameraFrame, FloatArray, SegmentationTruth]]:
+    """Frames of the hall of `seed` from the bench's shots (deterministic per seed), each
+    with the base's true pose at capture."""
     world = generate_world(seed, "hall")
     rng = np.random.default_rng([seed, 0xBE7C])
     model = scene.compile_scene(world)
@@ -124,7 +127,7 @@ def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, Segm
             mujoco.mj_kinematics(model, data)
             mujoco.mj_camlight(model, data)
             frame, truth = rig.capture(data, camera, 0)
-            yield world, frame, truth
+            yield world, frame, rig.base_pose(data), truth
     finally:
         rig.close()
 
@@ -132,6 +135,7 @@ def render_seed(seed: int) -> Iterator[tuple[WorldDescription, CameraFrame, Segm
 def _errors(
     world: WorldDescription,
     frame: CameraFrame,
+    T_world_base: FloatArray,
     truth: SegmentationTruth,
     predicted: Sequence[Any],
     out: dict[str, list[float]],
@@ -139,15 +143,17 @@ def _errors(
 ) -> None:
     """Per truth artifact in view: matched detection's IoU, centroid and axis errors.
 
-    Every figure goes in twice: under `all_` (every range) and, when the artifact's true
-    centre is within `MAX_RANGE_M` of the camera (horizontally), under `near_`, per class
-    and for all classes together (the acceptance's figures are the `near_` ones).
+    The base is where the sim has it (`T_world_base`): the figures are perception's own
+    errors, the pose's error aside. Every figure goes in twice: under `all_` (every
+    range) and, when the artifact's true centre is within `MAX_RANGE_M` of the camera
+    (horizontally), under `near_`, per class and for all classes together (the
+    acceptance's figures are the `near_` ones).
     """
     labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
     depth = np.asarray(as_numpy(frame.depth), dtype=np.float64)
     truths = TruthSegmenter(CLASSES).segment(labels, truth.instances)
     matches = metrics.match_instances(predicted, truths, [t.truth_id or "" for t in truths], depth)
-    geo = frame_geometry(frame)
+    geo = frame_geometry(frame, T_world_base)
     T_world_camera = geo.T_world_base_yaw @ geo.T_base_yaw_camera
     eye = T_world_camera[:2, 3]
     artifacts = {a.id: a for a in world.artifacts}
@@ -169,7 +175,8 @@ def _errors(
         figures: dict[str, float] = {}
         if cls == "bottle":
             figures["bottle_iou"] = m.iou
-        det = detect(frame, [predicted[m.matched]], 0.0) if m.matched is not None else []
+        pick = [predicted[m.matched]] if m.matched is not None else []
+        det = detect(frame, T_world_base, pick, 0.0) if pick else []
         if not det:
             figures["missed"] = 1.0
         else:
@@ -192,17 +199,18 @@ def accuracy(seeds: Sequence[int], net: Segmenter | None) -> dict[str, Any]:
     out: defaultdict[str, list[float]] = defaultdict(list)
     frames = 0
     for seed in seeds:
-        for world, frame, truth in render_seed(seed):
+        for world, frame, T_world_base, truth in render_seed(seed):
             frames += 1
             labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
             truths = TruthSegmenter(CLASSES).segment(labels, truth.instances)
-            _errors(world, frame, truth, truths, out, "truth_")
+            _errors(world, frame, T_world_base, truth, truths, out, "truth_")
             if net is not None:
                 rgb = np.asarray(as_numpy(frame.rgb), dtype=np.uint8)
                 depth = np.asarray(as_numpy(frame.depth), dtype=np.float32)
                 predicted = net.segment(rgb, depth)
-                _errors(world, frame, truth, predicted, out, "network_")
-                _errors(world, frame, truth, reported(frame, predicted), out, "reported_")
+                _errors(world, frame, T_world_base, truth, predicted, out, "network_")
+                shown = reported(frame, T_world_base, predicted)
+                _errors(world, frame, T_world_base, truth, shown, out, "reported_")
     result = summarise(out)
     for prefix in ("truth_", "network_", "reported_"):
         if frames and f"{prefix}false_people" in result:
@@ -212,14 +220,14 @@ def accuracy(seeds: Sequence[int], net: Segmenter | None) -> dict[str, Any]:
     return {"eval_seeds": list(seeds), "eval_frames": frames, **result}
 
 
-def reported(frame: CameraFrame, instances: Sequence[Any]) -> list[Any]:
+def reported(frame: CameraFrame, T_world_base: FloatArray, instances: Sequence[Any]) -> list[Any]:
     """The instances the service reports (`reported_` figures): a person without depth
     points, or one the robot sees inside itself (`services.perception.self_filter`), is
     dropped."""
     out = []
     for inst in instances:
         if inst.class_name == "person":
-            det = detect(frame, [inst], 0.0)
+            det = detect(frame, T_world_base, [inst], 0.0)
             if not det or is_self(det[0].detection):
                 continue
         out.append(inst)

@@ -92,7 +92,8 @@ class Driver:
         self.bus, self.keys = bus, keys
         self.stop = threading.Event()
         self._odom = bus.latest(keys.odom, Odom, history=16)
-        self._truth = bus.latest(keys.state_truth, StateTruth, history=16)
+        #: At 50 Hz, or with every state (the WBC's truth ablation): a second's worth.
+        self._truth = bus.latest(keys.state_truth, StateTruth, history=512)
         self.estimate = EstimateErrors()
         self._status = bus.latest(keys.wbc_status, WbcStatus, history=16)
         self._cmd = bus.publisher(keys.cmd_vel, CmdVel, "control")
@@ -165,12 +166,16 @@ class Driver:
         self.bus.declare_alive(self.keys.alive(NAME))
 
     def run(self, script: Script, timeout_s: float = 600.0) -> None:
-        """Step `script` once per tick until it ends or the robot falls."""
+        """Step `script` once per tick until it ends or the robot falls; it starts when the
+        robot's odometry has calibrated at rest (at once with the truth ablation)."""
+        started = False
         for stamp in self.ticker.ticks():
             self.t_ns = stamp
             self.odom = self._odom.wait_stamp(stamp, timeout_s)
             self.status = self._status.wait_stamp(stamp, timeout_s)
-            self.truth = self._truth.wait_stamp(stamp, timeout_s)
+            self._truth.wait_stamp(stamp, timeout_s)
+            self.truth = self._truth.at(stamp)
+            assert self.truth is not None and self.truth.stamp_ns == stamp, self.truth
             self._check_fall(self.truth)
             self.estimate.add(self.odom, self.truth)
             for events in self._events.drain():
@@ -179,6 +184,10 @@ class Driver:
                         self.contacts[e.other] = self.contacts.get(e.other, 0) + 1
             vx, vy, wz = self.velocity
             self._cmd.put(CmdVel(stamp_ns=stamp, vx=vx, vy=vy, wz=wz, source=NAME))
+            if not started and self.status.calibrating:  # the robot's IMU, at rest
+                self.ticker.ack(stamp)
+                continue
+            started = True
             try:
                 next(script)
             except StopIteration:

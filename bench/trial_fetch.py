@@ -49,7 +49,7 @@ from common.keys import SERVICES, RobotKeys
 from common.messages.arrays import as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionRequest
-from common.messages.sim import HandoverTaken, ObjectDropped, RobotState
+from common.messages.sim import HandoverTaken, ObjectDropped, RobotState, StateTruth
 from common.messages.wbc import WbcStatus
 from common.messages.world import Artifact
 from deploy.stack import ProcessStack
@@ -84,14 +84,15 @@ def fetch_settings(seed: int, db_dir: str) -> dict[str, Any]:
 
 
 class Probe:
-    """Watches `wbc/status` on a thread: keeps every sample, and the robot's state at
-    the first sample with an active `grasp` goal (where the jaws close)."""
+    """Watches `wbc/status` on a thread: keeps every sample, and the robot's state and the
+    base's truth at the first sample with an active `grasp` goal (where the jaws close)."""
 
     def __init__(self, bus: Bus, keys: RobotKeys) -> None:
         self._status = bus.fifo(keys.wbc_status, WbcStatus, maxlen=1 << 20)
         self._state = bus.latest(keys.state, RobotState)
+        self._truth = bus.latest(keys.state_truth, StateTruth)
         self.samples: list[WbcStatus] = []
-        self.at_grasp: tuple[WbcStatus, RobotState] | None = None
+        self.at_grasp: tuple[WbcStatus, RobotState, StateTruth] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="fetch-probe", daemon=True)
 
@@ -104,6 +105,7 @@ class Probe:
         self._thread.join()
         self._status.undeclare()
         self._state.undeclare()
+        self._truth.undeclare()
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -114,9 +116,9 @@ class Probe:
             if self.at_grasp is None and any(
                 g.kind == "grasp" and g.state == "active" for g in st.goals
             ):
-                state = self._state.get()
-                if state is not None:
-                    self.at_grasp = (st, state)
+                state, truth = self._state.get(), self._truth.get()
+                if state is not None and truth is not None:
+                    self.at_grasp = (st, state, truth)
 
 
 def _T_world_base(position: Any, quat_xyzw: Any) -> FloatArray:
@@ -148,12 +150,13 @@ def approach_errors(record: MissionRecord, truth: Artifact) -> Figures:
     }
 
 
-def grasp_errors(at: tuple[WbcStatus, RobotState] | None, truth: Artifact) -> Figures:
-    """Where the jaws closed (the measured TCP) against the true object's side grasp."""
+def grasp_errors(at: tuple[WbcStatus, RobotState, StateTruth] | None, truth: Artifact) -> Figures:
+    """Where the jaws closed (the measured TCP, the base where the sim had it at most
+    20 ms before) against the true object's side grasp."""
     if at is None:
         return {}
-    status, state = at
-    T_wb = _T_world_base(state.base_position_in_world, state.base_orientation_xyzw)
+    status, state, base = at
+    T_wb = _T_world_base(base.base_position_in_world, base.base_orientation_xyzw)
     tcp = T_wb @ robot.frame_in_base(as_numpy(state.q).astype(float), robot.TCP_FRAME).homogeneous
     want = truth_grasp(truth, T_wb)
     dist, angle = plan_error(tcp, want)

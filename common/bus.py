@@ -35,6 +35,7 @@ from common.config import Config, resolve
 from common.lifelines import Lifelines
 from common.messages import ErrorReply, PayloadError, decode, encode
 from common.messages.errors import ErrorCode
+from common.truth import TruthGuard
 
 log = logging.getLogger(__name__)
 
@@ -427,17 +428,29 @@ class AliveWatch:
 class Bus:
     """A Zenoh session with typed helpers. Close it (or use `with`) when done."""
 
-    def __init__(self, session: zenoh.Session, trace_every_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        trace_every_s: float = 0.0,
+        guard: TruthGuard | None = None,
+    ) -> None:
         self.session = session
         self.trace_every_ns = round(trace_every_s * 1e9)
+        #: A service's bus refuses to read simulator truth it was not granted.
+        self.guard = guard
         self._servers: list[Server[Any]] = []
         self._tokens: list[zenoh.LivelinessToken] = []
 
     @classmethod
     def open(
-        cls, config: Config, role: Role = "client", connect_timeout_s: float | None = None
+        cls,
+        config: Config,
+        role: Role = "client",
+        connect_timeout_s: float | None = None,
+        guard: TruthGuard | None = None,
     ) -> Bus:
-        return cls(open_session(config, role, connect_timeout_s), config.log.trace_every_s)
+        session = open_session(config, role, connect_timeout_s)
+        return cls(session, config.log.trace_every_s, guard)
 
     def __enter__(self) -> Bus:
         return self
@@ -449,10 +462,16 @@ class Bus:
         del type_  # for the reader and the type checker: what this publisher sends
         return Publisher(self.session, key, traffic, self.trace_every_ns)
 
+    def _reads(self, key: str) -> None:
+        if self.guard is not None:
+            self.guard.check(key)
+
     def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
+        self._reads(key)
         return Latest(self.session, key, type_, history)
 
     def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
+        self._reads(key)
         return Fifo(self.session, key, type_, maxlen)
 
     def serve(
@@ -482,6 +501,7 @@ class Bus:
         clone CI run never saw reach a session opened as the services started) is
         therefore asked again every `QUERY_RETRY_S` until the deadline.
         """
+        self._reads(key)
         payload = None if request is None else encode(request)
         deadline = time.monotonic() + timeout_s
         while True:

@@ -163,9 +163,9 @@ class LidarSettings(_Section):
 
 class DepthNoiseSettings(_Section):
     """The RGB-D cameras' depth errors, as a stereo sensor's (Intel RealSense D435's
-    model: σ grows with the square of the range): σ(z) = `sigma_per_m2` z², no return
-    where the depth jumps by more than `edge_jump_m` to a neighbour (stereo cannot match
-    across an edge), and pixels lost at random."""
+    model: σ grows with the square of the range): σ(z) = `sigma_per_m2` z², no return on
+    the farther side of a jump of more than `edge_jump_m` between neighbours (stereo's
+    occlusion band beside a nearer edge), and pixels lost at random."""
 
     enabled: bool = True
     sigma_per_m2: NonNegative = 0.0025
@@ -221,7 +221,9 @@ class EstimatorSettings(_Section):
     #: impact). Not tight: a trot's own accelerations must average out, and a tight
     #: gate keeps a biased half of them (1 m/s² tilted the estimate 6° in 5 s of trot).
     gravity_gate: Positive = 5.0
-    calibrate_s: NonNegative = 1.0  # s at rest at the start: the gyro's bias
+    calibrate_s: NonNegative = 1.0  # s standing still: the gyro's bias
+    #: s of sim time the gait waits at start-up for that calibration; then it goes anyway.
+    calibrate_timeout_s: NonNegative = 5.0
     q_position: NonNegative = 0.002  # m/√s
     q_accel: NonNegative = 0.5  # m/s/√s: the IMU's acceleration error
     q_foot_stance: NonNegative = 0.005  # m/√s: a stance foot's slip

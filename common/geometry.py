@@ -86,6 +86,11 @@ def make_T(R: npt.ArrayLike | None = None, p: npt.ArrayLike | None = None) -> Fl
     return T
 
 
+def T_of_pose(position: npt.ArrayLike, quat_xyzw: npt.ArrayLike) -> FloatArray:
+    """4×4 of a position and an orientation (x, y, z, w), e.g. an `Odom`'s base."""
+    return make_T(quat_xyzw_to_matrix(quat_xyzw), position)
+
+
 def inv_T(T: npt.ArrayLike) -> FloatArray:
     """Inverse of a 4x4 rigid transform."""
     T = np.asarray(T, dtype=float)

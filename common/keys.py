@@ -2,8 +2,9 @@
 
 Three namespaces: `dume/<robot>/…` for what belongs to one robot, `dume/map/…` for the
 shared semantic map and `dume/world/…` for the simulator's world. Everything under
-`dume/world/` and every `*_truth` key is simulator truth: only the sim, the map's
-`seed-from-world` mode, tests and evaluation may read it.
+`dume/world/` (the clock aside) and every `*_truth` key is simulator truth
+(`is_truth_key`): only the sim, tests, evaluation and options named as ablations or as
+the floor-plan prior may read it; `common.truth` enforces it in every service's bus.
 
 Nothing else in dume spells a key: services build them here, so a renamed key is one edit.
 """
@@ -55,6 +56,14 @@ def map_artifact(artifact_id: str) -> str:
 def map_person(person_id: str) -> str:
     """`dume/map/people/<id>`: one person of the semantic map (queryable)."""
     return f"{MAP_PEOPLE}/{_check_chunk(person_id, 'person id')}"
+
+
+def is_truth_key(key: str) -> bool:
+    """Whether `key` carries simulator truth: `dume/world/…` but the clock, or a segment
+    ending in `_truth` (`state_truth`, `segmentation_truth`)."""
+    if key == WORLD_CLOCK:
+        return False
+    return key.startswith(f"{ROOT}/world/") or any(p.endswith("_truth") for p in key.split("/"))
 
 
 @dataclass(frozen=True)

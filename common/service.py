@@ -33,6 +33,7 @@ from common.config import Config, ConfigError, load_config
 from common.keys import RobotKeys
 from common.recording import RerunHandler, open_recording
 from common.sched import CpuLayout, Role, allowed_cpus, pin
+from common.truth import TruthGuard
 
 log = logging.getLogger(__name__)
 
@@ -138,7 +139,7 @@ def run(
     rec = open_recording(name, config.recording)
     if config.recording.enabled:
         logging.getLogger("dume").addHandler(RerunHandler(rec, name))
-    bus = Bus.open(config)
+    bus = Bus.open(config, guard=TruthGuard.of(name, config))
     svc = Service(name, config, bus, rec, layout)
     _install_signals(svc.stop)
     try:

@@ -233,7 +233,9 @@ def _follow(
             "mission restarted: it has no request in progress" if forgotten else None
         )
         if lost is not None and final_ns < 0:
-            record.changes = changes
+            # What the mission said before it went may still be in: keep all of it.
+            seen.extend(s for s in statuses.drain() if s.request_id == rid)
+            record.changes = transitions(seen, rid)
             record.ended = f"{DEPENDENCY_LOST}: {lost}"
             c = clock.get()
             record.end_ns = max(record.end_ns, c.stamp_ns if c else 0)

@@ -72,14 +72,14 @@ class RobotState(Message, frozen=True):
 
     q, v, tau: (19,) float64 joint positions (rad), velocities (rad/s) and the torques
         applied during the last step (N·m, after clipping to the URDF limits).
-    base_position_in_world: (3,) m. base_orientation_xyzw: base frame in world.
-    base_linear_velocity_in_world: (3,) m/s. base_angular_velocity_in_base: (3,) rad/s.
     foot_contacts: FL, FR, RL, RR touching the ground. foot_forces: (4,) normal force, N.
     imu_angular_velocity: (3,) rad/s and imu_specific_force: (3,) m/s², the trunk IMU's
         sample in its frame (`common.robot.IMU_FRAME`, the base's axes): the specific
         force is acceleration minus gravity (about +9.81 up when at rest).
     q, v, the feet and the IMU are measured (`services.sim.sensors`: quantised, noisy,
-    biased), as a robot's low-level state (Unitree's `LowState`) reports them.
+    biased), as a robot's low-level state (Unitree's `LowState`) reports them. The base's
+    pose and twist are not here: a robot works them out (the WBC's odometry); the sim's
+    are on `state_truth`.
     gripper_angle: jaw angle, rad (0 closed, negative open). gripper_effort: jaw torque, N·m.
     watchdog: the sim's hold is engaged (no command for 20 ms); watchdog_reason says why.
     locomotion: dynamic (torques move the legs) or kinematic (the base follows cmd_vel).
@@ -90,10 +90,6 @@ class RobotState(Message, frozen=True):
     q: Array
     v: Array
     tau: Array
-    base_position_in_world: Vec3
-    base_orientation_xyzw: QuatXYZW
-    base_linear_velocity_in_world: Vec3
-    base_angular_velocity_in_base: Vec3
     foot_contacts: tuple[bool, bool, bool, bool]
     foot_forces: tuple[Finite, Finite, Finite, Finite]
     imu_angular_velocity: Vec3
@@ -106,10 +102,13 @@ class RobotState(Message, frozen=True):
 
 
 class Odom(Message, frozen=True):
-    """`dume/<r>/odom`, 50 Hz: the base and gripper for the slower services.
+    """`dume/<r>/odom`, 50 Hz: the base and gripper for the slower services: the WBC's
+    estimate (`wbc.base_state = "estimate"`), or the sim's free joint (the truth ablation,
+    kinematic locomotion).
 
-    Fields as in `RobotState`; `base_linear_velocity_in_world` m/s,
-    `base_angular_velocity_in_base` rad/s.
+    base_position_in_world m, base_orientation_xyzw, base_linear_velocity_in_world m/s,
+    base_angular_velocity_in_base rad/s; the gripper and the sim's flags as in
+    `RobotState`.
     """
 
     stamp_ns: StampNs
@@ -124,8 +123,9 @@ class Odom(Message, frozen=True):
 
 
 class StateTruth(Message, frozen=True):
-    """`dume/<r>/state_truth`, 50 Hz: the base as the simulator knows it (MuJoCo's free
-    joint). Truth: read by evaluation, tests and trials, never by a service's loop.
+    """`dume/<r>/state_truth`: the base as the simulator knows it (MuJoCo's free joint), at
+    `sim.odom_hz`, or every tick for the WBC's truth ablation (`wbc.base_state =
+    "truth"`). Truth: read by evaluation, tests, trials and that ablation only.
 
     Fields as in `Odom`: position m, orientation xyzw, linear velocity m/s in world,
     angular velocity rad/s in base.
@@ -180,7 +180,9 @@ class CameraFrame(Message, frozen=True):
     rgb: (H, W, 3) uint8. depth: (H, W) float32, metres along the optical axis, 0 = no return.
     fx, fy, cx, cy: pinhole intrinsics in pixels (pixel centres at integer coordinates).
     T_base_camera: camera optical frame (OpenCV: z forward, x right, y down) in the base
-        frame at capture. T_world_base: the base in the world at capture.
+        frame at capture (the robot's kinematics: a real one computes it from its joint
+        encoders). Where the base was at capture is not here: that is the robot's own
+        estimate, `odom` at the frame's stamp.
     """
 
     stamp_ns: StampNs
@@ -194,7 +196,6 @@ class CameraFrame(Message, frozen=True):
     rgb: Array
     depth: Array
     T_base_camera: Mat4
-    T_world_base: Mat4
 
 
 class SegmentationTruth(Message, frozen=True):

@@ -117,6 +117,8 @@ class WbcStatus(Message, frozen=True):
     contacts: FL, FR, RL, RR in stance. held: the grasp detector says an object is held.
     gripper_wrench: (6,) force N and torque N·m felt at gripper_tcp, in the base frame.
     reason: the last mode change or failure, for a person.
+    calibrating: the odometry is learning the IMU's bias at rest; the gait holds still
+    until it is done (`wbc.estimator.calibrate_timeout_s` at most).
     """
 
     stamp_ns: StampNs
@@ -135,5 +137,6 @@ class WbcStatus(Message, frozen=True):
     gripper_wrench: tuple[Finite, Finite, Finite, Finite, Finite, Finite]
     reason: str = ""
     tick_us: NonNegative = 0.0
+    calibrating: bool = False
 
     WALL_CLOCK = ("qp_time_us", "tick_us")

@@ -1,7 +1,8 @@
 """The short-lived obstacle layer's eyes: a depth image to marked and cleared cells.
 
 Every `stride`-th pixel with a return nearer than `max_range_m` is back-projected to the
-world (`common.camera`: eq. 1 through `T_world_camera = T_world_base · T_base_camera`).
+world (`common.camera`: eq. 1 through `T_world_camera = T_world_base · T_base_camera`,
+the base where the robot's odometry had it at the frame's stamp).
 Points between `min_height_m` and `max_height_m` (not the floor, not above the robot)
 mark their cells, except cells already in the static map and those under the robot's own
 footprint. Clearing: a marked cell whose centre (at two heights) projects into the image
@@ -26,6 +27,7 @@ from numpy.typing import NDArray
 
 from common.bus import WaitTimeout
 from common.camera import PinholeCamera
+from common.geometry import FloatArray
 from common.messages import as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.sim import CameraFrame
@@ -106,9 +108,17 @@ class DepthFeed:
         self.frames, self.camera, self.period_ns = frames, camera, period_ns
         self.fp, self.log, self.timeout_s, self.p = fp, log, timeout_s, p
 
-    def update(self, b: int, pose: Pose, grid: Grid | None, layer: ObstacleLayer) -> bool:
-        """Clear and mark `layer` from the frame stamped b; whether it touched a cell
-        (or held any active one)."""
+    def update(
+        self,
+        b: int,
+        pose: Pose,
+        T_world_base: FloatArray,
+        grid: Grid | None,
+        layer: ObstacleLayer,
+    ) -> bool:
+        """Clear and mark `layer` from the frame stamped b, the base at `pose` (and in 3-D
+        at `T_world_base`, 4×4: `odom` at b); whether it touched a cell (or held any
+        active one)."""
         if grid is None or b % self.period_ns:
             return False
         try:
@@ -119,7 +129,7 @@ class DepthFeed:
         f = self.frames.at(b)
         if f is None or f.stamp_ns != b:
             return False
-        T = np.array(f.T_world_base).reshape(4, 4) @ np.array(f.T_base_camera).reshape(4, 4)
+        T = T_world_base @ np.array(f.T_base_camera).reshape(4, 4)
         cam = PinholeCamera(
             f.fx, f.fy, f.cx, f.cy, T, np.asarray(as_numpy(f.depth), dtype=np.float32)
         )

@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from common.bus import WaitTimeout
+from common.geometry import T_of_pose
 from common.lockstep import PeriodicTicker
 from common.messages import to_wire
 from common.messages.base import NS_PER_S
@@ -134,7 +135,10 @@ class NavNode:
             return
         pose = Pose.of_odom(odom)
         self.pose = pose
-        changed = self.depth is not None and self.depth.update(b, pose, m.grid, m.layer)
+        changed = self.depth is not None and self.depth.update(
+            b, pose, T_of_pose(odom.base_position_in_world, odom.base_orientation_xyzw),
+            m.grid, m.layer,
+        )  # fmt: skip
         fresh = self.feed.tick(b) if self.feed is not None else None
         seen_changed = m.see(self.perception.due(b), b)  # every tick: lockstep waits here
         changed = m.take(fresh, seen_changed, b) or changed

@@ -2,12 +2,14 @@
 
 `FrameProcessor.process(cam, b)` (the loop's thread only; no lock: nothing here is shared)
 waits at most `perception.frame_timeout_s` wall seconds for the camera's frame stamped b
-(sim time, ns) and, with the `truth` segmenter, for its `segmentation_truth` stamped b;
+(sim time, ns), for `odom` stamped b (where the robot believes its base was at capture:
+it places what the frame shows in the world) and, with the `truth` segmenter, for its
+`segmentation_truth` stamped b;
 segments it (the ONNX network, or the sim's labels), measures each instance
 (`pipeline.detect`), drops the people inside the robot (`self_filter.drop_self`) and
 publishes `Detections` stamped b whatever happens: an empty list with a `reason` when
-nothing could be processed (no frame, no segmenter, a bad frame, a segmenter that
-raised). `process_ms` is the wall time from the frame's arrival to the message,
+nothing could be processed (no frame, no odom, no segmenter, a bad frame, a segmenter
+that raised). `process_ms` is the wall time from the frame's arrival to the message,
 `segment_ms` the segmenter's. A change of reason is logged once (not every tick), and
 so is a change of the classes a camera sees.
 
@@ -30,16 +32,17 @@ from numpy.typing import NDArray
 
 from common.bus import WaitTimeout
 from common.config import PerceptionSettings
+from common.geometry import T_of_pose
 from common.messages.arrays import ArrayError, as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
-from common.messages.sim import CameraFrame, SegmentationTruth
+from common.messages.sim import CameraFrame, Odom, SegmentationTruth
 from services.perception.pipeline import CLASSES, Detected, Segmented, detect
 from services.perception.segmenter import TruthSegmenter
 from services.perception.self_filter import drop_self
 
 log = logging.getLogger("dume.perception")
-T = TypeVar("T", CameraFrame, SegmentationTruth)
+T = TypeVar("T", CameraFrame, SegmentationTruth, Odom)
 M_co = TypeVar("M_co", covariant=True)
 
 #: The base's pose in a `Detections` of a camera whose frame did not come.
@@ -67,7 +70,7 @@ class FrameProcessor:
 
     `network` is the ONNX segmenter (None with the `truth` segmenter, or when it cannot
     run: then `unavailable` says why); `truths` holds each camera's `segmentation_truth`
-    (used with the `truth` segmenter only).
+    (used with the `truth` segmenter only); `odom` the robot's base.
     """
 
     def __init__(
@@ -75,6 +78,7 @@ class FrameProcessor:
         settings: PerceptionSettings,
         frames: Mapping[str, ByStamp[CameraFrame]],
         truths: Mapping[str, ByStamp[SegmentationTruth]],
+        odom: ByStamp[Odom],
         network: Network | None,
         unavailable: str,
         publish: Callable[[Detections], None],
@@ -82,7 +86,7 @@ class FrameProcessor:
     ) -> None:
         self.settings = settings
         self.truth = settings.segmenter == "truth"
-        self.frames, self.truths = frames, truths
+        self.frames, self.truths, self.odom = frames, truths, odom
         self.network, self.unavailable = network, unavailable
         self.truth_segmenter = TruthSegmenter(CLASSES)
         self.publish, self.show = publish, show
@@ -103,13 +107,20 @@ class FrameProcessor:
     def process(self, cam: str, b: int) -> None:
         """Detections of `cam` for tick b, published whatever happens (with a reason)."""
         frame, reason = self._wait(self.frames[cam], b, f"{cam} frame")
+        odom: Odom | None = None
+        if frame is not None:
+            odom, reason = self._wait(self.odom, b, "odom")
         t0 = time.perf_counter()  # the frame is in: from here on it is perception's time
         detected: list[Detected] = []
         segment_ms = 0.0
-        if frame is not None:
+        T_world_base = IDENTITY
+        if frame is not None and odom is not None:
+            T = T_of_pose(odom.base_position_in_world, odom.base_orientation_xyzw)
+            T_world_base = tuple(T.ravel().tolist())
             try:
                 instances, reason, segment_ms = self._segment(cam, frame, b)
-                detected = detect(frame, instances, self.settings.min_score) if not reason else []
+                min_score = self.settings.min_score
+                detected = detect(frame, T, instances, min_score) if not reason else []
                 detected, selves = drop_self(detected)
                 if selves:
                     log.debug("%s at t=%.3f s: %d person(s) inside the robot dropped",
@@ -128,7 +139,7 @@ class FrameProcessor:
         msg = Detections(
             stamp_ns=b,
             camera=cam,
-            T_world_base=frame.T_world_base if frame is not None else IDENTITY,
+            T_world_base=T_world_base,
             segmenter=self.settings.segmenter,
             detections=[d.detection for d in detected],
             reason=reason,

@@ -21,7 +21,7 @@ from common.lockstep import PeriodicTicker
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detections, LocateRequest
 from common.messages.semantic_map import MapEntity
-from common.messages.sim import CameraFrame, SegmentationTruth
+from common.messages.sim import CameraFrame, Odom, SegmentationTruth
 from common.recording import FrameSelector
 from common.service import Service
 from services.perception.frames import FrameProcessor
@@ -82,12 +82,13 @@ class PerceptionNode:
             if truth
             else {}
         )
+        odom = bus.latest(keys.odom, Odom, history=16)
         self.publisher = bus.publisher(keys.detections, Detections, "data")
         self.recent = RecentDetections()
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_ns / NS_PER_S, svc.stop)
         logger = PerceptionLogger(svc.rec, FrameSelector.of(cfg))
         self.processor = FrameProcessor(
-            self.settings, frames, truths, network, unavailable, self._publish, logger.frame
+            self.settings, frames, truths, odom, network, unavailable, self._publish, logger.frame
         )
         self.locator = Locator(
             self.recent,

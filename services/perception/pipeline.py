@@ -1,6 +1,6 @@
 """A camera frame and its segmented instances → `Detection`s.
 
-`detect(frame, instances, min_score)` measures every instance scored at least
+`detect(frame, T_world_base, instances, min_score)` measures every instance scored at least
 `min_score` (`measure.measure` on its mask's bounding box) and packs the message;
 instances with too few depth points are left out. The instances come from the
 segmenter (`segmenter.Segmenter`, or `TruthSegmenter` for the truth ablation). No
@@ -39,12 +39,13 @@ class Segmented(Protocol):
     def mask(self) -> BoolArray: ...
 
 
-def frame_geometry(frame: CameraFrame) -> FrameGeometry:
-    """The frame's intrinsics and transforms as numpy."""
+def frame_geometry(frame: CameraFrame, T_world_base: npt.ArrayLike) -> FrameGeometry:
+    """The frame's intrinsics and transforms as numpy; the base at capture (4×4) is the
+    robot's estimate (`odom` at the frame's stamp)."""
     return FrameGeometry(
         camera=PinholeCamera(frame.fx, frame.fy, frame.cx, frame.cy),
         T_base_camera=np.asarray(frame.T_base_camera, dtype=float).reshape(4, 4),
-        T_world_base=np.asarray(frame.T_world_base, dtype=float).reshape(4, 4),
+        T_world_base=np.asarray(T_world_base, dtype=float).reshape(4, 4),
     )
 
 
@@ -94,10 +95,16 @@ class Detected:
     points_world: npt.NDArray[np.float64]
 
 
-def detect(frame: CameraFrame, instances: Iterable[Segmented], min_score: float) -> list[Detected]:
-    """Measure each instance scored ≥ `min_score`; those without depth are left out."""
+def detect(
+    frame: CameraFrame,
+    T_world_base: npt.ArrayLike,
+    instances: Iterable[Segmented],
+    min_score: float,
+) -> list[Detected]:
+    """Measure each instance scored ≥ `min_score` (the base at `T_world_base`, 4×4, at
+    capture); those without depth are left out."""
     depth = np.asarray(as_numpy(frame.depth))
-    geo = frame_geometry(frame)
+    geo = frame_geometry(frame, T_world_base)
     out = []
     for inst in instances:
         if inst.score < min_score:

@@ -11,7 +11,8 @@ when someone needs them, the segmentation labels (`capture_labels`; `capture` do
 - segmentation becomes instance labels through `scene.segmentation_ids` (artifacts,
   people and obstacles of the world, the robot; 0 for the floor and the sky);
 - intrinsics are `common.robot.intrinsics` at the rig's resolution; `T_base_camera`
-  (OpenCV optical frame) and `T_world_base` come from the same kinematics the image shows.
+  (OpenCV optical frame) comes from the same kinematics the image shows. The base's
+  pose in the world (`base_pose`) is the sim's truth: it is not in the frame.
 `render_ms` keeps each camera's last capture time; `render_s` and `captures` the wall
 seconds spent and the captures made, per camera, since the rig was made.
 """
@@ -104,7 +105,7 @@ class CameraRig:
         T_world_camera = make_T(
             data.cam_xmat[cam].reshape(3, 3) @ _MJ_CAMERA_TO_OPTICAL, data.cam_xpos[cam]
         )
-        T_world_base = make_T(data.xmat[self._base].reshape(3, 3), data.xpos[self._base])
+        T_world_base = self.base_pose(data)
         fx, fy, cx, cy = robot.intrinsics(mount)
         return CameraFrame(
             stamp_ns=stamp_ns,
@@ -118,8 +119,11 @@ class CameraRig:
             rgb=to_wire(rgb),
             depth=to_wire(depth.astype(np.float32, copy=False)),
             T_base_camera=_row_major(inv_T(T_world_base) @ T_world_camera),
-            T_world_base=_row_major(T_world_base),
         )
+
+    def base_pose(self, data: mujoco.MjData) -> FloatArray:
+        """T_world_base (4×4) as the sim has it (truth: training labels and tests)."""
+        return make_T(data.xmat[self._base].reshape(3, 3), data.xpos[self._base])
 
     def capture_labels(self, camera: str, stamp_ns: int) -> SegmentationTruth:
         """The instance labels of the scene `capture_frame` last set up (for `camera`)."""

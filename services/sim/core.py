@@ -220,7 +220,6 @@ class SimCore:
             raise ValueError(f"state of tick {tick} asked at tick {self.tick}")
         data, m = self.data, self._measured
         assert m is not None  # sensed at every reset and step
-        base_q, base_v = data.qpos[self._base_q], data.qvel[self._base_v]
         tau = self.drive.applied(data)
         fl, fr, rl, rr = m.foot_force.tolist()
         return RobotState(
@@ -229,10 +228,6 @@ class SimCore:
             q=_joints(m.q),
             v=_joints(m.v),
             tau=_joints(tau),
-            base_position_in_world=tuple(base_q[:3].tolist()),
-            base_orientation_xyzw=_xyzw(base_q),
-            base_linear_velocity_in_world=tuple(base_v[:3].tolist()),
-            base_angular_velocity_in_base=tuple(base_v[3:].tolist()),
             foot_contacts=m.contacts,
             foot_forces=(fl, fr, rl, rr),
             imu_angular_velocity=_vec3(m.gyro),

@@ -182,7 +182,7 @@ def render_seed(seed: int, world_name: str = "hall") -> tuple[dict[int, str], li
                     labels=np.asarray(as_numpy(truth.labels)).astype(np.uint16),
                     intrinsics=(frame.fx, frame.fy, frame.cx, frame.cy),
                     T_base_camera=np.array(frame.T_base_camera, dtype=float).reshape(4, 4),
-                    T_world_base=np.array(frame.T_world_base, dtype=float).reshape(4, 4),
+                    T_world_base=rig.base_pose(data),
                 )
             )
     finally:

@@ -1,16 +1,16 @@
 """What the sim gives out: the robot's description, and everything stamped with sim time.
 
 `SimOutputs.publish(t)` puts out, in this order, all stamped t (ns): the state (when the
-commander answers it; every tick without one), the base's truth (`state_truth`) at
-`sim.odom_hz` and `odom` with it unless the WBC estimates the base
-(`Config.odom_from_estimate`), the lidar's scan at its rate (`sim.sensors.lidar`), each
-camera's RGB-D frame at `sim.camera_hz` and its truth segmentation
-(`sim.segmentation_truth`) (each rendered only for someone who looks: a subscriber or
-the recording's kept frames), the recording's poses every 40 ms, and last the clock
-(when due), so a participant woken by the clock finds its inputs as of t in (the WBC's
-`odom`, when it estimates, comes after its tick: its consumers wait for the stamp).
-`events` puts out a step's world events. The recording (rerun) is logged alongside.
-Called from the sim's loop thread only.
+commander answers it; every tick without one; with the WBC's truth ablation the base's
+truth just before it), the base's truth (`state_truth`) at `sim.odom_hz` and `odom` with
+it unless the WBC estimates the base (`Config.odom_from_estimate`), the lidar's scan at
+its rate (`sim.sensors.lidar`), each camera's RGB-D frame at `sim.camera_hz` and its
+truth segmentation (`sim.segmentation_truth`) (each rendered only for someone who looks:
+a subscriber or the recording's kept frames), the recording's poses every 40 ms, and
+last the clock (when due), so a participant woken by the clock finds its inputs as of t
+in (the WBC's `odom`, when it estimates, comes after its tick: its consumers wait for
+the stamp). `events` puts out a step's world events. The recording (rerun) is logged
+alongside. Called from the sim's loop thread only.
 """
 
 from __future__ import annotations
@@ -115,7 +115,13 @@ class SimOutputs:
         self.odom = (
             None if config.odom_from_estimate() else bus.publisher(keys.odom, Odom, "control")
         )
-        self.state_truth = bus.publisher(keys.state_truth, StateTruth, "data")
+        self.state_truth = bus.publisher(keys.state_truth, StateTruth, "control")
+        #: The WBC's truth ablation reads the base's truth beside every state it answers.
+        self.truth_with_state = (
+            config.wbc.base_state == "truth"
+            and config.sim.locomotion == "dynamic"
+            and "wbc" in config.time.participants
+        )
         self.scan = bus.publisher(keys.scan, LaserScan, "data")
         self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
         self.sim_stats = bus.publisher(keys.sim_stats, SimStats, "data")
@@ -149,18 +155,24 @@ class SimOutputs:
         """Everything stamped t: state (`state_due`), odom, cameras, then the clock
         (`clock_due`, with the wall real-time factor `wall_rtf`)."""
         # The state goes out when the commander answers it (every tick without one).
-        state = None
+        state = truth = None
         if state_due:
+            if self.truth_with_state:  # first: the WBC finds it in when the state comes
+                truth = self.core.state_truth()
+                self.state_truth.put(truth)
             state = self.core.robot_state(tick)
             self.state.put(state)
         if t_ns % self.odom_period_ns == 0:
             if self.odom is not None:
                 self.odom.put(self.core.odom())
-            self.state_truth.put(self.core.state_truth())
+            if truth is None:
+                truth = self.core.state_truth()
+                self.state_truth.put(truth)
         if t_ns % self.lidar_period_ns == 0:
             self.scan.put(self._scan(t_ns))
             if self.sim_log.enabled:
-                self.sim_log.state(t_ns, state or self.core.robot_state(tick))
+                state = state or self.core.robot_state(tick)
+                self.sim_log.state(t_ns, state, truth or self.core.state_truth())
         if t_ns % self.camera_period_ns == 0:
             self.render.submit(t_ns, self.core.data, self._shots(t_ns))
         if t_ns % POSES_EVERY_NS == 0:

@@ -161,13 +161,15 @@ class DepthNoise:
         z = depth.astype(np.float64)
         valid = z > 0.0
         jump = s.edge_jump_m
+        # Across a jump the farther pixel goes (the stereo pair's occlusion band lies on
+        # the background beside a nearer edge); the nearer surface keeps its depth.
+        far = np.where(valid, z, np.inf)  # no return: farther than anything
         edge = np.zeros_like(valid)
-        dx = np.abs(np.diff(z, axis=1)) > jump
-        dy = np.abs(np.diff(z, axis=0)) > jump
-        edge[:, 1:] |= dx
-        edge[:, :-1] |= dx
-        edge[1:, :] |= dy
-        edge[:-1, :] |= dy
+        dx, dy = np.diff(far, axis=1), np.diff(far, axis=0)
+        edge[:, 1:] |= dx > jump  # the right one is farther
+        edge[:, :-1] |= dx < -jump
+        edge[1:, :] |= dy > jump
+        edge[:-1, :] |= dy < -jump
         noisy = z + rng.normal(0.0, 1.0, z.shape) * (s.sigma_per_m2 * z * z)
         lost = rng.random(z.shape) < s.dropout
         keep = valid & ~edge & ~lost & (noisy > 0.0)

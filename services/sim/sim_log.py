@@ -24,6 +24,7 @@ from common.messages.sim import (
     RobotContact,
     RobotState,
     SegmentationTruth,
+    StateTruth,
     WorldEvent,
 )
 from common.messages.world import WorldDescription
@@ -71,19 +72,20 @@ class SimLogger:
             static=True,
         )
 
-    def state(self, t_ns: int, state: RobotState) -> None:
+    def state(self, t_ns: int, state: RobotState, truth: StateTruth) -> None:
+        """The robot's state and the base's truth (the true trajectory, under `truth/`)."""
         if not self.enabled:
             return
         stamp(self.rec, t_ns)
-        x, y, z = state.base_position_in_world
-        qx, qy, qz, qw = state.base_orientation_xyzw
+        x, y, z = truth.base_position_in_world
+        qx, qy, qz, qw = truth.base_orientation_xyzw
         roll = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
         pitch = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
-        self.rec.log("plots/sim/base_height_m", rr.Scalars(z))
-        self.rec.log("plots/sim/base_roll_pitch_rad", rr.Scalars([roll, pitch]))
+        self.rec.log("plots/truth/base_height_m", rr.Scalars(z))
+        self.rec.log("plots/truth/base_roll_pitch_rad", rr.Scalars([roll, pitch]))
         self.rec.log("plots/sim/gripper_effort_nm", rr.Scalars(state.gripper_effort))
         self.rec.log("plots/sim/watchdog", rr.Scalars(float(state.watchdog)))
-        self.rec.log("world/robot_trail", rr.Points3D([(x, y, 0.01)], radii=0.01))
+        self.rec.log("world/truth/robot_trail", rr.Points3D([(x, y, 0.01)], radii=0.01))
 
     def rtf(self, t_ns: int, rtf: float) -> None:
         if not self.enabled:

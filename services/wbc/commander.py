@@ -11,7 +11,8 @@ the bus and publishes what it returns. A tick, all on the WBC's thread, in this 
    `modes`; `apply_modes(t, state)` applies the modes due at t (`set_mode`), and
    `start_goals(t)` starts the arm goals due at t (`goals`) in the order they came;
 3. `command(t, state, dt)`: damping in mode `damp`; otherwise the controller's step with
-   the cmd_vel (walk only) and the arm references, through the QP-failure `fallback`;
+   the cmd_vel (walk only; zero while the odometry calibrates at start-up) and the arm
+   references, through the QP-failure `fallback`;
 4. after the publish: `end(t, msg)` corrects the odometry from the legs, observes the
    arm and records the base pose; `status` and `errors` for `wbc/status` and rerun.
 
@@ -85,6 +86,7 @@ class WbcCommander:
         self.qp_us = 0.0
         self.goals = GoalIntake(lambda: self.mode, log)
         self.odometry: LegOdometry | None = None
+        self.calibrate_timeout_ns = round(w.estimator.calibrate_timeout_s * NS_PER_S)
         if w.base_state == "estimate":
             self.odometry = LegOdometry(w.estimator, start or (0.0, 0.0, 0.0))
 
@@ -101,7 +103,10 @@ class WbcCommander:
         gap = 0 if self.last_stamp is None else t - self.last_stamp
         dt = gap / NS_PER_S if 0 < gap <= self.stale_ns else self.period_ns / NS_PER_S
         if self.odometry is not None:  # over a gap, too: the base kept moving
-            state = self.odometry.predict(msg, state, gap / NS_PER_S or dt, self.ctrl.model)
+            standing = not self.ctrl.gait.walking
+            state = self.odometry.predict(
+                msg, state, gap / NS_PER_S or dt, self.ctrl.model, standing
+            )
         if self.obs is None or gap > self.stale_ns:  # first state, or a gap: hold where it is
             if self.obs is not None:
                 self.say(f"stale state: no state for {gap / 1e6:.0f} ms of sim time; stopped")
@@ -153,8 +158,6 @@ class WbcCommander:
         """This tick's joint command (`dt` s since the last tick)."""
         assert self.obs is not None
         arm = self.actions.update(t, self.obs)
-        if self.odometry is not None and self.mode in ("walk", "manipulate"):
-            self.odometry.moving()
         if self.mode == "damp":
             if self.odometry is not None:  # the legs' kinematics at the estimate, to correct it
                 self.ctrl.update_model(state, tcp=False)
@@ -162,8 +165,11 @@ class WbcCommander:
             if arm.gripper_effort is not None:
                 cmd.tau_ff[JAW] = arm.gripper_effort
             return cmd
+        cmd_vel = self.arbiter.command(t) if self.mode == "walk" else np.zeros(3)
+        if self.calibrating(t):  # the IMU learns its bias at rest: the gait waits
+            cmd_vel = np.zeros(3)
         refs = WbcReferences(
-            cmd_vel=self.arbiter.command(t) if self.mode == "walk" else np.zeros(3),
+            cmd_vel=cmd_vel,
             T_world_tcp=arm.T_world_tcp,
             tcp_twist=arm.tcp_twist,
             tcp_acceleration=arm.tcp_acceleration,
@@ -172,9 +178,22 @@ class WbcCommander:
             gripper_effort=arm.gripper_effort,
         )
         cmd = self.ctrl.step(state, refs, dt)
+        if self.odometry is not None and self.ctrl.gait.walking:
+            self.odometry.moving()  # the calibration at rest is over
         timing = self.ctrl.last_timing
         self.qp_us = (timing.get("build", 0.0) + timing.get("solve", 0.0)) * 1e6
         return self.fallback.command(cmd, state, arm)
+
+    def calibrating(self, t: int) -> bool:
+        """Whether the odometry still calibrates at rest at t (within its timeout)."""
+        odo = self.odometry
+        if odo is None or not odo.calibrating:
+            return False
+        if t < self.calibrate_timeout_ns:
+            return True
+        odo.moving()
+        self.say("odometry: no still second to calibrate the IMU in; going on uncalibrated")
+        return False
 
     def end(self, t: int, msg: RobotState) -> None:
         """After the command went out: correct the odometry, observe the arm, record the
@@ -219,4 +238,5 @@ class WbcCommander:
             gripper_wrench=tuple(float(x) for x in wrench),  # type: ignore[arg-type]
             reason=self.reason,
             tick_us=tick_us,
+            calibrating=self.odometry is not None and self.odometry.calibrating,
         )

@@ -9,8 +9,9 @@ Two parts, run every controller tick (dt s):
    The accelerometer pulls roll and pitch towards gravity: with the measured up
    direction u = f / |f| and the predicted û = Rᵀ e_z, e = u × û, the correction kp e
    turns û towards u, and ḃ = −ki e learns the gyro's bias on the axes gravity observes.
-   The accelerometer is trusted only while |f| is within `gravity_gate` of g (a trot's
-   accelerations would tilt it). Yaw is unobservable here: it drifts with the residual z
+   The centripetal part of f (ω × v, v from part 2) is taken out first, and the
+   accelerometer is trusted only while |f| is within `gravity_gate` of g (an impact, a
+   push). Yaw is unobservable here: it drifts with the residual z
    bias, measured at rest before the robot moves (`calibrate`: the mean gyro is its bias,
    the mean specific force sets roll and pitch) and then frozen; the localization
    against the map corrects it. An accelerometer's constant bias looks like a tilt at
@@ -52,10 +53,7 @@ N_FEET = 4
 #: The calibration's test for standing still: slower than this turn rate (rad/s; the
 #: gyro's bias is far less) and an accelerometer within this of g (m/s²).
 STILL_RAD_S = 0.05
-STILL_ACCEL = 0.2
-#: 1/s: how fast gravity sets roll and pitch while calibrating and still (a stack starts
-#: with the robot settling onto its feet: the first sample's tilt is off by degrees).
-CALIBRATION_KP = 10.0
+STILL_ACCEL = 0.5
 NX = 6 + 3 * N_FEET
 
 
@@ -95,23 +93,37 @@ class TiltFilter:
         self._calib.append(np.concatenate([gyro, f]))
         return True
 
-    def finish_calibration(self) -> None:
-        """The gyro's bias is its mean at rest, roll and pitch the mean gravity's (yaw kept)."""
+    def finish_calibration(self, tilt: bool = True) -> None:
+        """The gyro's bias is its mean at rest; with `tilt`, roll and pitch the mean
+        gravity's (yaw kept)."""
         if self._calib:
             mean = np.mean(self._calib, axis=0)
             self.bias = mean[:3]
-            self.reset(mean[3:], math.atan2(self.R[1, 0], self.R[0, 0]))
+            if tilt:
+                self.reset(mean[3:], math.atan2(self.R[1, 0], self.R[0, 0]))
             self._calib = []
 
+    def discard_calibration(self) -> None:
+        self._calib = []
+
     def update(
-        self, gyro: FloatArray, specific_force: FloatArray, dt: float, kp: float | None = None
+        self,
+        gyro: FloatArray,
+        specific_force: FloatArray,
+        dt: float,
+        kp: float | None = None,
+        velocity: FloatArray | None = None,
     ) -> None:
-        """Integrate the gyro over dt; pull towards gravity with `kp` (default `tilt_kp`)."""
+        """Integrate the gyro over dt; pull towards gravity with `kp` (default `tilt_kp`).
+        With the base's `velocity` (odom), the centripetal part of the specific force,
+        ω × v in the body, is taken out first: a steady turn is not a tilt."""
         s = self.s
         kp = s.tilt_kp if kp is None else kp
         w = np.asarray(gyro, float) - self.bias
         self.omega = w
         f = np.asarray(specific_force, float)
+        if velocity is not None:
+            f = f - np.cross(w, self.R.T @ velocity)
         norm = float(np.linalg.norm(f))
         if norm > 0.0 and abs(norm - G) < s.gravity_gate:
             e = np.cross(f / norm, self.R.T @ E_Z)
@@ -222,7 +234,10 @@ class LegInertialEstimator:
     `predict(gyro, specific_force, dt, contact)` → the predicted state to run the
     controller's model at, and `correct(Correction)` with the model's kinematics there.
     While `calibrating` (until it has stood still `calibrate_s`, or is asked to move) the
-    gyro's bias is learnt.
+    gyro's bias is learnt and gravity sets roll and pitch; afterwards, every unbroken
+    `calibrate_s` the robot stands still (`standing`, the gait not stepping) measures
+    the bias again: the z bias, which nothing else observes, stops wandering into yaw.
+    `recalibrations` counts those.
     """
 
     def __init__(self, s: EstimatorSettings) -> None:
@@ -232,6 +247,7 @@ class LegInertialEstimator:
         self.calibrating = False
         self._calib_left = 0.0
         self.started = False
+        self.recalibrations = 0
 
     def start(
         self,
@@ -247,16 +263,31 @@ class LegInertialEstimator:
         self.started = True
 
     def predict(
-        self, gyro: FloatArray, specific_force: FloatArray, dt: float, contact: tuple[bool, ...]
+        self,
+        gyro: FloatArray,
+        specific_force: FloatArray,
+        dt: float,
+        contact: tuple[bool, ...],
+        standing: bool = False,
     ) -> None:
-        kp = None
-        if self.calibrating and self.tilt.calibrate(gyro, specific_force):
-            kp = CALIBRATION_KP  # standing still: the accelerometer is all gravity
-            self._calib_left -= dt  # only the time it stood still counts
-            if self._calib_left <= 0.0:
-                self.tilt.finish_calibration()
-                self.calibrating = False
-        self.tilt.update(gyro, specific_force, dt, kp)
+        # No faster pull towards gravity while calibrating: the controller stands on this
+        # estimate, and a tilt that follows the accelerometer's every jolt (kp 10 1/s)
+        # shook the standing robot at 0.1 rad/s, so it never stood still enough to end.
+        if self.calibrating or standing:
+            if self.tilt.calibrate(gyro, specific_force):
+                self._calib_left -= dt  # only the time it stood still counts
+                if self._calib_left <= 0.0:
+                    self.tilt.finish_calibration(tilt=self.calibrating)
+                    self.recalibrations += not self.calibrating
+                    self.calibrating = False
+                    self._calib_left = self.s.calibrate_s
+            elif not self.calibrating:  # a rest's window must be unbroken
+                self.tilt.discard_calibration()
+                self._calib_left = self.s.calibrate_s
+        elif self._calib_left != self.s.calibrate_s:  # walking: a window left open is void
+            self.tilt.discard_calibration()
+            self._calib_left = self.s.calibrate_s
+        self.tilt.update(gyro, specific_force, dt, None, self.kf.velocity)
         a = self.tilt.R @ np.asarray(specific_force, float) - G * E_Z
         self.kf.predict(a, dt, contact)
 

@@ -23,14 +23,16 @@ the `wbc/arm_goal` server, which hands requests to `goals.GoalIntake` on its own
 State estimate: with `wbc.base_state = "estimate"` the base's pose and twist are the
 leg-inertial odometry's (`odometry`: the IMU, the encoders, the feet's contacts), and
 the WBC publishes them on `odom` at `sim.odom_hz`, stamped with the state they answer
-(after the tick's correction); with `truth` (an ablation) they are the sim's free joint
-and the sim publishes `odom`.
+(after the tick's correction); with `truth` (an ablation) they are the sim's free joint,
+read from `state_truth` stamped as the state (the sim sends it just before), and the sim
+publishes `odom`.
 Bad inputs never stop the loop: refused goals get a typed `ErrorReply`, a state with NaN
 is answered with damping, a gap in the states (stale state) stops the robot.
 """
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
 import time
@@ -41,7 +43,7 @@ from common.bus import WaitTimeout
 from common.lockstep import UpstreamGate
 from common.messages import ArrayError
 from common.messages.base import NS_PER_S
-from common.messages.sim import JointCommand, Odom, RobotState
+from common.messages.sim import JointCommand, Odom, RobotState, StateTruth
 from common.messages.wbc import ArmGoalReply, ArmGoalRequest, CmdVel, WbcMode, WbcStatus
 from common.sched import make_realtime
 from common.service import Service
@@ -74,6 +76,10 @@ class WbcNode:
         self.log_every = round(NS_PER_S / w.log_hz)
         bus, keys = svc.bus, svc.keys
         self.states = bus.latest(keys.state, RobotState, history=4)
+        #: The truth ablation's base (`wbc.base_state = "truth"`), beside each state.
+        self.truths = (
+            bus.latest(keys.state_truth, StateTruth, history=8) if w.base_state == "truth" else None
+        )
         self.cmd_vel = bus.fifo(keys.cmd_vel, CmdVel, maxlen=4096)
         #: cmd_vel into the arbiter, the modes they carry into the queue.
         self.intake = ArbiterFeed(self.cmd_vel, core.arbiter, "", core.modes)
@@ -127,8 +133,14 @@ class WbcNode:
 
     def tick(self, msg: RobotState, t0: float) -> None:
         t, core = msg.stamp_ns, self.core
+        base = None
+        if self.truths is not None:  # the truth ablation: the sim's base beside the state
+            base = self._truth_at(t)
+            if base is None:  # no command: the sim's watchdog holds the joints
+                core.say(f"no state_truth at t={t / NS_PER_S:.3f} s (truth ablation): not answered")
+                return
         try:
-            state = wbc_state(msg)
+            state = wbc_state(msg, base)
         except ArrayError as exc:  # no command: the sim's watchdog holds the joints
             core.say(f"state at t={t / NS_PER_S:.3f} s is malformed ({exc}): not answered")
             return
@@ -161,6 +173,13 @@ class WbcNode:
             self.logger.log(
                 t, core.ctrl, cmd.tau_ff, core.errors(), core.qp_us, self.tick_us, T_goal
             )
+
+    def _truth_at(self, t: int) -> StateTruth | None:
+        assert self.truths is not None
+        with contextlib.suppress(WaitTimeout):
+            self.truths.wait_stamp(t, UPSTREAM_WAIT_S)
+        truth = self.truths.at(t)
+        return truth if truth is not None and truth.stamp_ns == t else None
 
     def _upstream(self, t: int, producer: str) -> None:
         """Wait for `producer`'s cmd_vel due at t (lockstep; see the module's docstring)."""

@@ -16,8 +16,9 @@ The odom frame starts at the start pose the user gives (`localization.start_pose
 yaw in the map; the height from the stance feet), so odom and map coincide at start-up
 and part only by the estimator's drift, which localization's T_map_odom takes up. The
 first state is taken at rest (a stack starts standing): roll and pitch from gravity, the
-feet where the legs put them; for the first `calibrate_s` the gyro's bias is learnt,
-cut short when the robot is asked to walk (`moving`).
+feet where the legs put them; for the first `calibrate_s` standing still the gyro's
+bias is learnt, cut short when the gait starts stepping (`moving`), and again at every
+later standstill as long.
 """
 
 from __future__ import annotations
@@ -43,11 +44,17 @@ class LegOdometry:
         self.est = LegInertialEstimator(s)
         self.start_pose = start
         self._v_pred: FloatArray = np.zeros(3)
+
         self._zero_v: FloatArray | None = None
 
     @property
     def started(self) -> bool:
         return self.est.started
+
+    @property
+    def calibrating(self) -> bool:
+        """Learning the IMU's bias at start-up (until it has stood still long enough)."""
+        return self.est.calibrating
 
     def _start(self, msg: RobotState, joints: FloatArray, model: RobotModel) -> None:
         """At rest: the tilt from gravity, the feet from the legs, the height from them."""
@@ -63,8 +70,11 @@ class LegOdometry:
         z = robot.FOOT_RADIUS_M - float(np.mean(down))
         self.est.start(f, np.array([x, y, z]), yaw, rel)
 
-    def predict(self, msg: RobotState, state: WbcState, dt: float, model: RobotModel) -> WbcState:
-        """The state with the base predicted at the message's stamp (dt s since the last)."""
+    def predict(
+        self, msg: RobotState, state: WbcState, dt: float, model: RobotModel, standing: bool
+    ) -> WbcState:
+        """The state with the base predicted at the message's stamp (dt s since the last;
+        `standing`: the gait is not stepping, so a still IMU measures its own bias)."""
         est = self.est
         if not est.started:
             self._start(msg, np.asarray(state.q), model)
@@ -74,6 +84,7 @@ class LegOdometry:
                 np.array(msg.imu_specific_force, dtype=float),
                 dt,
                 msg.foot_contacts,
+                standing,
             )
         self._v_pred = est.velocity.copy()
         return WbcState(

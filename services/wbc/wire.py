@@ -14,7 +14,7 @@ import numpy as np
 from common import robot
 from common.geometry import FloatArray
 from common.messages import Array, ArrayError
-from common.messages.sim import JointCommand, RobotState
+from common.messages.sim import JointCommand, RobotState, StateTruth
 from services.wbc.values import WbcCommand, WbcState
 
 #: The service's name: its lockstep participant, and the `source` of its commands.
@@ -22,6 +22,7 @@ NAME = "wbc"
 
 _F64 = np.dtype("<f8")
 _JOINTS = (len(robot.JOINT_NAMES),)
+_UPRIGHT = np.array([0.0, 0.0, 0.0, 1.0])
 #: Bytes of one joint vector on the wire: 19 float64.
 _JOINT_BYTES = len(robot.JOINT_NAMES) * _F64.itemsize
 
@@ -38,19 +39,23 @@ def _joints_out(x: FloatArray) -> Array:
     return Array("float64", _JOINTS, x.astype(_F64, copy=False).tobytes())
 
 
-def wbc_state(msg: RobotState) -> WbcState:
+def wbc_state(msg: RobotState, base: StateTruth | None = None) -> WbcState:
     """The controller's view of a state; ArrayError when its joint vectors are malformed.
 
-    q (rad) and v (rad/s) are read-only views into the message's bytes; the base pose and
-    twist are copied (world frame, except the angular velocity: base frame).
+    q (rad) and v (rad/s) are read-only views into the message's bytes. The base's pose
+    and twist (world frame, the angular velocity in the base) are the truth ablation's
+    `base`, or at rest at the origin for the odometry to fill in (`odometry.predict`).
     """
+    q, v = _joints_in(msg.q, "q"), _joints_in(msg.v, "v")
+    if base is None:
+        return WbcState(q, v, np.zeros(3), _UPRIGHT.copy(), np.zeros(3), np.zeros(3))
     return WbcState(
-        q=_joints_in(msg.q, "q"),
-        v=_joints_in(msg.v, "v"),
-        base_position_in_world=np.array(msg.base_position_in_world),
-        base_orientation_xyzw=np.array(msg.base_orientation_xyzw),
-        base_linear_velocity_in_world=np.array(msg.base_linear_velocity_in_world),
-        base_angular_velocity_in_base=np.array(msg.base_angular_velocity_in_base),
+        q=q,
+        v=v,
+        base_position_in_world=np.array(base.base_position_in_world),
+        base_orientation_xyzw=np.array(base.base_orientation_xyzw),
+        base_linear_velocity_in_world=np.array(base.base_linear_velocity_in_world),
+        base_angular_velocity_in_base=np.array(base.base_angular_velocity_in_base),
     )
 
 

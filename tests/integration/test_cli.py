@@ -106,7 +106,7 @@ def test_a_run_records_the_world_the_robot_and_both_cameras(
         "/camera/camera_head/rgb",
         "/camera/camera_wrist/rgb",
         "/camera/camera_head/depth",
-        "/plots/sim/base_height_m",
+        "/plots/truth/base_height_m",
     ):
         assert entity in stats, entity
 

@@ -209,7 +209,7 @@ def test_the_wrist_camera_in_look_at_the_standoff_measures_bottle_1_within_toler
             assert frame is not None and truth is not None and det.stamp_ns == frame.stamp_ns
             label = next(k for k, v in truth.instances.items() if v == "bottle_1")
             mask = np.asarray(as_numpy(truth.labels)) == label
-            geo = frame_geometry(frame)
+            geo = frame_geometry(frame, np.array(det.T_world_base).reshape(4, 4))
             pts = backproject(np.asarray(as_numpy(frame.depth)), geo.camera, mask=mask)
             T_world_camera = geo.T_world_base_yaw @ geo.T_base_yaw_camera
             visible = transform_points(T_world_camera, pts).mean(axis=0)

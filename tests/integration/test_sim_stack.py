@@ -10,9 +10,10 @@ import pytest
 
 from common import robot
 from common.config import parse_overrides
+from common.geometry import T_of_pose
 from common.keys import WORLD_CLOCK, WORLD_DESCRIPTION
 from common.messages import as_numpy
-from common.messages.sim import CameraFrame, Clock, Odom, RobotDescription, RobotState
+from common.messages.sim import CameraFrame, Clock, Odom, RobotDescription, RobotState, StateTruth
 from common.messages.sim import SegmentationTruth as SegTruth
 from common.messages.world import WorldDescription
 from deploy.stack import ProcessStack
@@ -65,17 +66,20 @@ def _trajectory(seconds: float, tmp: str) -> tuple[np.ndarray, np.ndarray]:
         s.spawn("router")
         # subscribe before anything runs, so the trajectory starts at t = 0
         states = s.bus.fifo(s.keys.state, RobotState, maxlen=1_000_000)
+        truths = s.bus.fifo(s.keys.state_truth, StateTruth, maxlen=100_000)  # 50 Hz
         s.spawn("tests.integration.wiggle_commander")
         s.spawn("tests.integration.wiggle_participant")
         s.wait_ready(["commander", "wiggle"], 60)
         s.spawn("sim")
         wait_clock(s, seconds)
         got = {st.stamp_ns: st for st in states.drain()}
+        bases = {b.stamp_ns: b.base_position_in_world for b in truths.drain()}
     finally:
         s.stop()
     stamps = sorted(t for t in got if t <= round(seconds * 1e9))
     q = np.array([as_numpy(got[t].q) for t in stamps])
-    base = np.array([got[t].base_position_in_world for t in stamps])
+    at = sorted(bases)  # the base's truth as of each state (its newest at or before)
+    base = np.array([bases[at[max(np.searchsorted(at, t, "right") - 1, 0)]] for t in stamps])
     return np.array(stamps), np.hstack([q, base])
 
 
@@ -113,10 +117,12 @@ def _ray_box_depth(
 
 def test_camera_depth_matches_the_world_geometry(stack: StartStack) -> None:
     s = stack(
-        ["sim", "hold"], *HOLD_COMMANDER, *SMALL, "sim.duration_s=3", 'sim.cameras=["camera_head"]'
-    )
+        ["sim", "hold"], *HOLD_COMMANDER, *SMALL, "sim.duration_s=3", 'sim.cameras=["camera_head"]',
+        "sim.sensors.depth.enabled=false",  # the renderer's geometry, not the sensor's noise
+    )  # fmt: skip
     frames = s.bus.latest(s.keys.camera_rgbd("camera_head"), CameraFrame, history=8)
     truths = s.bus.latest(s.keys.camera_segmentation_truth("camera_head"), SegTruth, history=8)
+    bases = s.bus.latest(s.keys.state_truth, StateTruth, history=64)  # the frame has no pose
     world = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, timeout_s=10)
     frame = frames.wait(lambda f: f.stamp_ns >= 1_000_000_000, 120)
     truth = truths.wait(lambda t: t.stamp_ns >= frame.stamp_ns, 30)
@@ -126,7 +132,10 @@ def test_camera_depth_matches_the_world_geometry(stack: StartStack) -> None:
     rgb = as_numpy(frame.rgb)
     assert rgb.std() > 5  # an image, not a blank
 
-    T_wc = np.array(frame.T_world_base).reshape(4, 4) @ np.array(frame.T_base_camera).reshape(4, 4)
+    base = bases.wait_stamp(frame.stamp_ns, 30) and bases.at(frame.stamp_ns)
+    assert base is not None and base.stamp_ns == frame.stamp_ns
+    T_wb = T_of_pose(base.base_position_in_world, base.base_orientation_xyzw)
+    T_wc = T_wb @ np.array(frame.T_base_camera).reshape(4, 4)
     v, u = np.mgrid[0 : frame.height, 0 : frame.width]
     rays_cam = np.stack(
         [(u - frame.cx) / frame.fx, (v - frame.cy) / frame.fy, np.ones_like(u, dtype=float)], -1

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from common import robot
 from common.config import EstimatorSettings, SensorSettings
@@ -223,3 +224,26 @@ def test_on_the_simulated_robots_sensors_standing_it_tracks_the_truth() -> None:
 def robot_yaw(xyzw: np.ndarray) -> float:
     R = np.asarray(pin.Quaternion(xyzw).toRotationMatrix())
     return math.atan2(R[1, 0], R[0, 0])
+
+
+def test_every_unbroken_standstill_measures_the_gyros_bias_again() -> None:
+    s = EstimatorSettings()
+    est = LegInertialEstimator(s)
+    est.start(UP, np.zeros(3), 0.0, np.zeros((4, 3)))
+    dt, feet = 0.002, (True,) * 4
+    b1, b2 = np.array([0.0, 0.0, 0.002]), np.array([0.0, 0.0, -0.004])
+    for _ in range(int(s.calibrate_s / dt) + 1):
+        est.predict(b1, UP, dt, feet, standing=True)
+    assert not est.calibrating and est.tilt.bias[2] == pytest.approx(0.002)
+    for _ in range(500):  # walking: the bias wanders to b2, nothing measures it
+        est.predict(b2, UP, dt, feet, standing=False)
+    half = int(0.5 * s.calibrate_s / dt)
+    for _ in range(half):  # half a window, then a jolt: the window starts again
+        est.predict(b2, UP, dt, feet, standing=True)
+    est.predict(b2, UP + np.array([0.0, 0.0, 1.0]), dt, feet, standing=True)
+    for _ in range(half + 10):
+        est.predict(b2, UP, dt, feet, standing=True)
+    assert est.recalibrations == 0 and est.tilt.bias[2] == pytest.approx(0.002)
+    for _ in range(half):
+        est.predict(b2, UP, dt, feet, standing=True)
+    assert est.recalibrations == 1 and est.tilt.bias[2] == pytest.approx(-0.004)

@@ -41,7 +41,6 @@ def _frame(t: int) -> CameraFrame:
         rgb=to_wire(np.zeros((H, W, 3), np.uint8)),
         depth=to_wire(np.full((H, W), 5.0, np.float32)),
         T_base_camera=tuple(T_BASE_CAMERA.ravel().tolist()),
-        T_world_base=tuple(T_WORLD_BASE.ravel().tolist()),
     )
 
 

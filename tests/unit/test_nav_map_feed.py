@@ -186,8 +186,8 @@ def test_the_depth_layer_waits_only_at_frame_ticks_with_a_grid(
     layer = ObstacleLayer((60, 60), 3 * S)
     pose = Pose(1.5, 1.5, 0.0)
     caplog.set_level(logging.WARNING, LOG.name)
-    assert not feed.update(0, pose, None, layer)  # no grid yet
-    assert not feed.update(PERIOD, pose, _grid(), layer)  # no frame due
-    assert not feed.update(S // 10, pose, _grid(), layer)
+    assert not feed.update(0, pose, np.eye(4), None, layer)  # no grid yet
+    assert not feed.update(PERIOD, pose, np.eye(4), _grid(), layer)  # no frame due
+    assert not feed.update(S // 10, pose, np.eye(4), _grid(), layer)
     assert frames.waited == [S // 10]
     assert [r.getMessage() for r in caplog.records] == ["no camera_head frame for t=0.10 s"]

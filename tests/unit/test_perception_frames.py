@@ -14,16 +14,32 @@ import pytest
 
 from common.bus import WaitTimeout
 from common.config import PerceptionSettings
+from common.geometry import matrix_to_quat_xyzw
 from common.messages import to_wire
 from common.messages.perception import Detections
-from common.messages.sim import CameraFrame, SegmentationTruth
+from common.messages.sim import CameraFrame, Odom, SegmentationTruth
 from services.perception.frames import IDENTITY, FrameProcessor
 from services.perception.pipeline import Detected, Segmented
-from tests.unit.test_perception_geometry_pipeline import Inst, _frame
+from tests.unit.test_perception_geometry_pipeline import T_WORLD_BASE, Inst, _frame
 
 CAM = "camera_wrist"
 B = 300_000_000  # the ray-cast frame's stamp
-M = TypeVar("M", CameraFrame, SegmentationTruth)
+M = TypeVar("M", CameraFrame, SegmentationTruth, Odom)
+#: The base's pose at capture as a `Detections` carries it.
+POSE = tuple(T_WORLD_BASE.ravel().tolist())
+
+
+def odom(stamp_ns: int = B) -> Odom:
+    """The robot's odometry at the stamp: the base where the ray-cast frame was taken."""
+    return Odom(
+        stamp_ns=stamp_ns,
+        base_position_in_world=tuple(T_WORLD_BASE[:3, 3].tolist()),
+        base_orientation_xyzw=tuple(matrix_to_quat_xyzw(T_WORLD_BASE[:3, :3]).tolist()),
+        base_linear_velocity_in_world=(0.0, 0.0, 0.0),
+        base_angular_velocity_in_base=(0.0, 0.0, 0.0),
+        gripper_angle=0.0,
+        gripper_effort=0.0,
+    )
 
 
 class Buffer(Generic[M]):
@@ -60,6 +76,7 @@ class Rig:
         network: Network | None = None,
         truths: Buffer[SegmentationTruth] | None = None,
         unavailable: str = "",
+        odoms: Buffer[Odom] | None = None,
     ) -> None:
         settings = PerceptionSettings(
             segmenter="truth" if truths is not None else "network", frame_timeout_s=0.01
@@ -70,6 +87,7 @@ class Rig:
             settings,
             {CAM: frames},
             {CAM: truths} if truths is not None else {},
+            odoms if odoms is not None else Buffer(odom()),
             network,
             unavailable,
             self.published.append,
@@ -98,7 +116,8 @@ def test_the_networks_instances_are_measured_and_published_with_the_frames_pose(
     rig = Rig(Buffer(frame), Network([Inst("bottle", 0.9, mask), Inst("can", 0.2, mask)]))
     msg = rig.tick()
     assert [d.class_name for d in msg.detections] == ["bottle"]  # the can scored too low
-    assert (msg.reason, msg.T_world_base) == ("", frame.T_world_base)
+    assert msg.reason == ""
+    np.testing.assert_allclose(msg.T_world_base, POSE, atol=1e-12)  # odom's, at capture
     assert msg.process_ms >= msg.segment_ms >= 0.0
     ((shown, detected, shape),) = rig.shown
     assert shown is msg and len(detected) == 1 and shape == (frame.height, frame.width)
@@ -113,7 +132,16 @@ def test_the_truth_segmenter_reads_the_sims_labels_stamped_at_the_tick() -> None
     missing = Rig(Buffer(frame), truths=Buffer[SegmentationTruth]()).tick()
     assert missing.detections == []
     assert missing.reason == f"no {CAM} segmentation_truth stamped 0.300 s within 0.01 s"
-    assert missing.T_world_base == frame.T_world_base  # the frame came
+    np.testing.assert_allclose(missing.T_world_base, POSE, atol=1e-12)  # the frame came
+
+
+def test_a_frame_without_the_robots_pose_at_capture_is_published_empty_with_why() -> None:
+    frame, mask = _frame()
+    net = Network([Inst("bottle", 0.9, mask)])
+    for odoms in (Buffer[Odom](), Buffer(odom(B - 20_000_000))):  # none, or only an older one
+        msg = Rig(Buffer(frame), net, odoms=odoms).tick()
+        assert (msg.detections, msg.T_world_base) == ([], IDENTITY)
+        assert msg.reason == "no odom stamped 0.300 s within 0.01 s"
 
 
 @pytest.mark.parametrize(
@@ -137,7 +165,7 @@ def test_a_reason_is_logged_once_per_change(caplog: pytest.LogCaptureFixture) ->
     frame, mask = _frame()
     ticks = [B + k * 100_000_000 for k in range(4)]
     frames = Buffer(*(msgspec.structs.replace(frame, stamp_ns=b) for b in ticks))
-    rig = Rig(frames, None, unavailable="no model")
+    rig = Rig(frames, None, unavailable="no model", odoms=Buffer(*(odom(b) for b in ticks)))
     with caplog.at_level(logging.INFO, logger="dume.perception"):
         for b in ticks[:3]:
             rig.tick(b)

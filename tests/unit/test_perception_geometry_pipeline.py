@@ -62,14 +62,15 @@ def _frame() -> tuple[CameraFrame, np.ndarray]:
         rgb=to_wire(np.zeros((H, W, 3), dtype=np.uint8)),
         depth=to_wire(depth.astype(np.float32)),
         T_base_camera=tuple(T_BASE_CAMERA.ravel().tolist()),
-        T_world_base=tuple(T_WORLD_BASE.ravel().tolist()),
     )
     return frame, labels == 2
 
 
 def test_a_detection_message_carries_the_bottles_geometry_and_its_mask() -> None:
     frame, mask = _frame()
-    found = detect(frame, [Inst("bottle", 0.9, mask), Inst("can", 0.2, mask)], min_score=0.5)
+    found = detect(
+        frame, T_WORLD_BASE, [Inst("bottle", 0.9, mask), Inst("can", 0.2, mask)], min_score=0.5
+    )
     assert len(found) == 1  # the can scored below min_score
     det = decode(encode(found[0].detection), Detection)  # it travels
     assert det.class_name == "bottle" and det.shape == "cylinder" and not det.axis_fallback
@@ -92,12 +93,12 @@ def test_a_detection_message_carries_the_bottles_geometry_and_its_mask() -> None
 def test_a_mask_of_another_size_than_the_depth_is_refused() -> None:
     frame, _ = _frame()
     with pytest.raises(ValueError, match="does not match depth"):
-        detect(frame, [Inst("bottle", 1.0, np.ones((10, 10), dtype=bool))], 0.5)
+        detect(frame, T_WORLD_BASE, [Inst("bottle", 1.0, np.ones((10, 10), dtype=bool))], 0.5)
 
 
 def _dets(stamp_ns: int, camera: str, *items: tuple[str, float, int, float]) -> Detections:
     frame, mask = _frame()
-    base = detect(frame, [Inst("bottle", 1.0, mask)], 0.0)[0].detection
+    base = detect(frame, T_WORLD_BASE, [Inst("bottle", 1.0, mask)], 0.0)[0].detection
     dets = [
         Detection(
             **{f: getattr(base, f) for f in base.__struct_fields__ if f not in ("class_name",)}
@@ -109,7 +110,7 @@ def _dets(stamp_ns: int, camera: str, *items: tuple[str, float, int, float]) -> 
     return Detections(
         stamp_ns=stamp_ns,
         camera=camera,
-        T_world_base=frame.T_world_base,
+        T_world_base=tuple(T_WORLD_BASE.ravel().tolist()),
         segmenter="truth",
         detections=dets,
     )

@@ -30,7 +30,7 @@ def test_a_frame_shows_the_state_it_was_submitted_with() -> None:
     worker.submit(8, core.data, [Shot("camera_head", labels=False)])
     worker.close()
     assert [(f.stamp_ns, t is not None) for f, t in got] == [(7, True), (8, False)]
-    assert got[0][0].T_world_base != got[1][0].T_world_base  # the second saw the move
+    assert got[0][0].depth.data != got[1][0].depth.data  # the second saw the move
 
     # What the loop itself would have rendered at tick 7: the same pixels.
     core.data.qpos[:] = before

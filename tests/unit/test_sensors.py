@@ -144,7 +144,9 @@ def test_depth_loses_its_edges_and_grows_noisy_with_range() -> None:
     out = noise.apply(depth, "camera_head", 100)
     assert out.dtype == np.float32
     assert np.all(out[:5] == 0.0)
-    assert np.all(out[10:, 39:41] == 0.0)  # both sides of the edge are lost
+    assert np.all(out[10:, 40] == 0.0)  # the far side of the edge is lost …
+    assert np.all(out[10:, 39] > 0.0)  # … the near one keeps its depth
+    assert np.all(out[5, :40] > 0.0)  # beside no return: kept
     near, far = out[10:, :30] - 1.0, out[10:, 50:] - 4.0
     assert near.std() == pytest.approx(0.004, rel=0.1)
     assert far.std() == pytest.approx(0.004 * 16, rel=0.1)

@@ -109,7 +109,7 @@ def test_a_plain_pd_hold_sags_more_than_2cm(world: WorldDescription) -> None:
     law.tau_ff[:] = 0.0
     for _ in range(1000):
         hold(core, law)
-    sag = robot.STAND_BASE_HEIGHT_M - core.robot_state().base_position_in_world[2]
+    sag = robot.STAND_BASE_HEIGHT_M - core.state_truth().base_position_in_world[2]
     assert sag > 0.02
 
 
@@ -121,13 +121,14 @@ def test_the_stand_hold_keeps_the_base_within_2cm_for_2s_without_events(
     np.testing.assert_array_equal(law.kp, STAND_KP)
     np.testing.assert_array_equal(law.kd, STAND_KD)
     heights, events = [], []
-    start = np.array(core.robot_state().base_position_in_world)
+    start = np.array(core.state_truth().base_position_in_world)
     for _ in range(2000):
         events += hold(core, law)
-        heights.append(core.robot_state().base_position_in_world[2])
+        heights.append(core.state_truth().base_position_in_world[2])
     assert np.max(np.abs(np.array(heights) - robot.STAND_BASE_HEIGHT_M)) < 0.02
     state = core.robot_state()
-    assert np.linalg.norm(np.array(state.base_position_in_world)[:2] - start[:2]) < 0.01
+    base = core.state_truth().base_position_in_world
+    assert np.linalg.norm(np.array(base)[:2] - start[:2]) < 0.01
     assert np.max(np.abs(q_of(state) - law.q_des)) < 0.02
     weight = 9.81 * core.model.body_subtreemass[core.model.body(robot.BASE_FRAME).id]
     assert all(state.foot_contacts) and sum(state.foot_forces) == pytest.approx(weight, rel=0.05)
@@ -141,7 +142,7 @@ def test_the_robot_starts_standing_at_the_world_start_on_four_feet(
     core = SimCore(world, sensors=ideal_sensors())
     state = core.robot_state(0)
     start = world.robot_start
-    assert state.base_position_in_world == pytest.approx(
+    assert core.state_truth().base_position_in_world == pytest.approx(
         (start.x, start.y, robot.STAND_BASE_HEIGHT_M)
     )
     np.testing.assert_allclose(q_of(state), robot.POSTURES["stand"])
@@ -158,9 +159,11 @@ def test_state_time_is_exact_and_quaternions_are_xyzw(world: WorldDescription) -
     state = core.robot_state(3)
     assert state.stamp_ns == core.time_ns == 3_000_000 and state.tick == 3
     yaw = world.robot_start.yaw
-    _, _, z, w = state.base_orientation_xyzw
+    truth = core.state_truth()
+    assert truth.stamp_ns == state.stamp_ns
+    _, _, z, w = truth.base_orientation_xyzw
     assert (z, w) == pytest.approx((math.sin(yaw / 2), math.cos(yaw / 2)), abs=1e-3)
-    np.testing.assert_allclose(core.T_world_base()[:3, 3], state.base_position_in_world)
+    np.testing.assert_allclose(core.T_world_base()[:3, 3], truth.base_position_in_world)
     with pytest.raises(ValueError, match="tick 2"):
         core.robot_state(2)
 
@@ -177,7 +180,7 @@ def test_watchdog_holds_after_20ms_without_commands_and_the_base_stays_up_for_5s
     for _ in range(5000):
         flags.append(core.robot_state().watchdog)
         core.step()
-        lowest = min(lowest, core.robot_state().base_position_in_world[2])
+        lowest = min(lowest, core.state_truth().base_position_in_world[2])
     assert not any(flags[:21]) and all(flags[21:])  # engaged by the step from t = 20 ms
     state = core.robot_state()
     assert state.watchdog_reason == "no command for 20 ms"
@@ -197,18 +200,18 @@ def test_watchdog_holds_after_20ms_without_commands_and_the_base_stays_up_for_5s
 
 def test_kinematic_base_follows_cmd_vel_level_at_standing_height(world: WorldDescription) -> None:
     core = SimCore(world, locomotion="kinematic")
-    start = np.array(core.robot_state().base_position_in_world)
+    start = np.array(core.state_truth().base_position_in_world)
     core.set_cmd_vel(0.5, 0.0, 0.0)
     for _ in range(2000):
         core.step()
-    state = core.robot_state()
-    end = np.array(state.base_position_in_world)
+    state, truth = core.robot_state(), core.state_truth()
+    end = np.array(truth.base_position_in_world)
     assert np.linalg.norm(end[:2] - start[:2]) == pytest.approx(1.0, abs=0.02)
     heading = math.atan2(end[1] - start[1], end[0] - start[0])
     assert heading == pytest.approx(world.robot_start.yaw, abs=1e-6)
     assert end[2] == pytest.approx(robot.STAND_BASE_HEIGHT_M)
     assert state.locomotion == "kinematic" and core.odom().locomotion == "kinematic"
-    assert state.base_linear_velocity_in_world[:2] == pytest.approx(
+    assert truth.base_linear_velocity_in_world[:2] == pytest.approx(
         (0.5 * math.cos(heading), 0.5 * math.sin(heading)), abs=1e-6
     )
     core.set_cmd_vel(0.0, 0.0, 0.5)

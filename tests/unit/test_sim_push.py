@@ -89,8 +89,8 @@ def test_a_standing_robot_held_by_pd_is_moved_sideways_by_a_push(
     pushed.push((0.0, 200.0, 0.0), 0.1)
     step_held(pushed, law, 150)
     step_held(still, law, 150)
-    y_pushed = pushed.robot_state().base_position_in_world[1]
-    y_still = still.robot_state().base_position_in_world[1]
+    y_pushed = pushed.state_truth().base_position_in_world[1]
+    y_still = still.state_truth().base_position_in_world[1]
     assert y_pushed - y_still > 0.005
 
 
