@@ -17,6 +17,9 @@ the sim's truth, and every trial reports the odometry's errors against it (`odom
 - pick: the truth pose of the small world's bottle → walk to the stance across the table
   edge (round the table when it is in the way) → ready → Reach with a pre-grasp approach
   → Grasp → lift 10 cm → stow → walk 20 s at 0.3 m/s holding it (`bench.trial_pick`).
+- localize, localize-off: the localizer on the robot's scans and odometry during the
+  random walk, people walking by; told the start pose exactly, or 0.5 m and 10° off
+  (`bench.trial_localize`).
 - push: 20 N·s lateral pushes on the base (200 N for 0.1 s, `dume/world/push`): standing,
   then trotting at 0.5 m/s, to the left and to the right; after each, the lowest base,
   the largest roll/pitch and how far the base was thrown sideways; never falls.
@@ -41,10 +44,11 @@ import numpy as np
 import pinocchio as pin
 
 from bench.trial_driver import Driver, Script, start_stack
+from bench.trial_localize import localize
 from bench.trial_pick import pick
 from bench.trial_random import random_walk
 from common import robot
-from common.config import Overrides
+from common.config import Overrides, merged
 from common.geometry import rpy_of_quat_xyzw, wrap_angle
 from common.messages.wbc import Posture, Reach
 
@@ -204,6 +208,10 @@ def reach(d: Driver, out: Figures, n: int = 20, seed: int = 0) -> Script:
     }
 
 
+#: The start pose the localizer is given in `localize-off`: 0.5 m and 10° off.
+LOCALIZE_OFF = (0.4, -0.3, math.radians(10.0))
+
+
 SCRIPTS = {
     "walk": walk,
     "turn": turn,
@@ -212,7 +220,11 @@ SCRIPTS = {
     "reach": reach,
     "pick": pick,
     "push": push,
+    "localize": lambda d, out: localize(d, out),
+    "localize-off": lambda d, out: localize(d, out, start_off=LOCALIZE_OFF),
 }
+#: The trials whose robot is on its own odometry, with people walking by.
+OWN_ODOMETRY = {"localize", "localize-off"}
 
 
 #: Where each trial runs by default: the hall's seed 3 has 6 m free ahead of the start
@@ -223,6 +235,8 @@ WORLDS = {
     "turn": ("hall", 3),
     "random": ("hall", 3),
     "push": ("hall", 3),
+    "localize": ("hall", 3),
+    "localize-off": ("hall", 3),
     "goto": ("hall", 3),
     "goals": ("hall", 3),
 }
@@ -253,6 +267,9 @@ def run_trial(
         return run_fetch(seed, overrides)
     out: Figures = {"trial": name, "world": world, "world_seed": seed}
     out["wbc_period_s"] = wbc_period_s
+    if name in OWN_ODOMETRY:
+        own = {"wbc.base_state": "estimate", "sim.walking_people": True}
+        overrides = merged(own, overrides or {})
     with start_stack(world, seed, wbc_period_s, overrides) as stack:
         d = Driver(stack)
         d.start()

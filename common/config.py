@@ -604,6 +604,24 @@ class LocalizationSettings(_Section):
     """
 
     start_pose: tuple[float, float, float] | None = None
+    #: Every n-th beam of a scan is matched (541 → 181).
+    beam_stride: int = 3
+    #: A match is taken when this share of its beams ends within `inlier_m` of the map.
+    min_inliers: Unit = 0.5
+    inlier_m: Positive = 0.1
+    #: Beyond this a beam's end pulls no harder (people, clutter the map lacks), m.
+    huber_m: Positive = 0.1
+    #: A match farther than this from the odometry's prediction is refused, m and rad.
+    gate_m: Positive = 0.3
+    gate_rad: Positive = 0.15
+    #: So many refused scans in a row: lost (navigation stops); a search window then
+    #: re-seeds the match, as at start-up: ± m and ± rad.
+    lost_after: int = 10
+    search_m: Positive = 0.6
+    search_rad: Positive = 0.27
+    #: How the covariance grows while no scan matches: m² of x, y and rad² of yaw per m
+    #: the odometry travelled.
+    growth_per_m: NonNegative = 0.01
 
 
 class LogSettings(_Section):

@@ -1,6 +1,7 @@
 """`dume`: the command line of a dume stack.
 
-    dume up [--world-seed N] [--world small] [--realtime]   supervisord in the foreground
+    dume up [--world-seed N] [--world small] [--realtime] [--start-pose X Y YAW]
+                                                         supervisord in the foreground
     dume status                                             who is alive; the mission's state
     dume world --seed N [--world small] [--grid]            a generated world as JSON
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
@@ -54,14 +55,18 @@ def _port(args: argparse.Namespace) -> dict[str, Any]:
 
 def cmd_up(args: argparse.Namespace) -> int:
     from common.recording import new_run_id
-    from deploy.stack import SUPERVISORD_CONF, settings_env, stack_env
+    from deploy.stack import SUPERVISORD_CONF, settings_env, stack_env, with_start_pose
 
     realtime = {"time.mode": "realtime"} if args.realtime else {}
-    settings = merged(
-        {"sim.world_seed": args.world_seed, "sim.world": args.world},
-        parse_overrides(args.set),
-        realtime,
-        _port(args),
+    start = {"localization.start_pose": list(args.start_pose)} if args.start_pose else {}
+    settings = with_start_pose(
+        merged(
+            {"sim.world_seed": args.world_seed, "sim.world": args.world},
+            parse_overrides(args.set),
+            realtime,
+            start,
+            _port(args),
+        )
     )
     config = load_config(settings)
     run_id = new_run_id()
@@ -304,6 +309,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--realtime", action="store_true", help="pace the sim to the wall clock")
+    p.add_argument(
+        "--start-pose",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "YAW"),
+        help="where the robot stands, m m rad in the map (default: the world's start)",
+    )
     p.set_defaults(func=cmd_up)
 
     p = add("status", "which services are alive and ready; the latest mission status")

@@ -72,6 +72,29 @@ def test_the_tilt_filter_converges_from_a_wrong_start_and_learns_the_bias() -> N
     assert np.linalg.norm(seen(f.bias) - seen(bias)) < 1e-3
 
 
+#: Four feet on the floor around the base, relative to it (m, odom axes).
+FEET = np.array(
+    [[0.35, 0.25, -0.5], [0.35, -0.25, -0.5], [-0.35, 0.25, -0.5], [-0.35, -0.25, -0.5]]
+)
+
+
+def tick(
+    est: LegInertialEstimator,
+    gyro: np.ndarray,
+    f: np.ndarray = UP,
+    dt: float = 0.002,
+    standing: bool = True,
+    rate: np.ndarray | None = None,
+) -> None:
+    """One tick of a base over fixed feet turning at `rate` (world axes; default still):
+    predict with the IMU, correct with what the legs' kinematics would show."""
+    est.predict(gyro, f, dt, (True,) * 4, standing)
+    w_true = np.zeros(3) if rate is None else rate
+    # The model's foot velocity less the base's: (ω̂ − ω) × p (the feet do not move).
+    rel_v = np.cross(est._omega_used - w_true, FEET)
+    est.correct(Correction(FEET, rel_v, (True,) * 4))
+
+
 def test_the_tilt_filter_integrates_a_turn_and_calibration_removes_the_yaw_bias() -> None:
     s = EstimatorSettings()
     est = LegInertialEstimator(s)
@@ -79,13 +102,14 @@ def test_the_tilt_filter_integrates_a_turn_and_calibration_removes_the_yaw_bias(
     bias = np.array([0.0, 0.0, 0.02])
     dt = 0.002
     for _ in range(int(s.calibrate_s / dt) + 1):  # at rest: the bias is measured
-        est.predict(bias, UP, dt, (True,) * 4)
+        tick(est, bias, dt=dt)
     assert not est.calibrating
     assert abs(est.tilt.bias[2] - 0.02) < 1e-9
     yaw0 = math.atan2(est.R[1, 0], est.R[0, 0])
     rate, seconds = 0.5, 2.0
     for _ in range(round(seconds / dt)):  # turn at 0.5 rad/s about z (gravity unchanged)
-        est.predict(bias + np.array([0.0, 0.0, rate]), UP, dt, (True,) * 4)
+        spin = np.array([0.0, 0.0, rate])
+        tick(est, bias + spin, dt=dt, standing=False, rate=spin)
     yaw = math.atan2(est.R[1, 0], est.R[0, 0])
     assert abs(yaw - yaw0 - rate * seconds) < 1e-6
 
@@ -230,20 +254,33 @@ def test_every_unbroken_standstill_measures_the_gyros_bias_again() -> None:
     s = EstimatorSettings()
     est = LegInertialEstimator(s)
     est.start(UP, np.zeros(3), 0.0, np.zeros((4, 3)))
-    dt, feet = 0.002, (True,) * 4
+    dt = 0.002
     b1, b2 = np.array([0.0, 0.0, 0.002]), np.array([0.0, 0.0, -0.004])
     for _ in range(int(s.calibrate_s / dt) + 1):
-        est.predict(b1, UP, dt, feet, standing=True)
+        tick(est, b1)
     assert not est.calibrating and est.tilt.bias[2] == pytest.approx(0.002)
     for _ in range(500):  # walking: the bias wanders to b2, nothing measures it
-        est.predict(b2, UP, dt, feet, standing=False)
+        tick(est, b2, standing=False)
     half = int(0.5 * s.calibrate_s / dt)
     for _ in range(half):  # half a window, then a jolt: the window starts again
-        est.predict(b2, UP, dt, feet, standing=True)
-    est.predict(b2, UP + np.array([0.0, 0.0, 1.0]), dt, feet, standing=True)
+        tick(est, b2)
+    tick(est, b2, UP + np.array([0.0, 0.0, 1.0]))
     for _ in range(half + 10):
-        est.predict(b2, UP, dt, feet, standing=True)
+        tick(est, b2)
     assert est.recalibrations == 0 and est.tilt.bias[2] == pytest.approx(0.002)
     for _ in range(half):
-        est.predict(b2, UP, dt, feet, standing=True)
+        tick(est, b2)
     assert est.recalibrations == 1 and est.tilt.bias[2] == pytest.approx(-0.004)
+
+
+def test_the_bias_is_found_when_the_controller_turns_the_robot_against_it() -> None:
+    """Standing, the controller holds the estimated heading: the base turns at minus the
+    gyro's bias and the gyro reads nothing. The legs show the turn: the bias is found."""
+    s = EstimatorSettings()
+    est = LegInertialEstimator(s)
+    est.start(UP, np.zeros(3), 0.0, np.zeros((4, 3)))
+    bias = np.array([0.001, -0.002, -0.0026])
+    for _ in range(int(s.calibrate_s / 0.002) + 1):
+        tick(est, np.zeros(3), rate=-bias)  # gyro = bias + true rate = 0
+    assert not est.calibrating
+    np.testing.assert_allclose(est.tilt.bias, bias, atol=1e-6)

@@ -1,0 +1,206 @@
+"""Where the base is in the map, from one lidar scan: scan-to-map matching on a likelihood
+field (as AMCL's and Hector's sensor models; the matcher is Gauss-Newton with a robust
+loss, seeded by a correlative search when the pose is in doubt).
+
+- `LikelihoodField.of_grid`: each cell's distance to the nearest occupied cell of the
+  map (an exact Euclidean distance transform, capped at `max_dist_m`), bilinear with its
+  gradient at any point. A beam's end that lies on a mapped obstacle costs nothing;
+  one that ends in free space costs its distance to the nearest one.
+- `scan_points`: a `LaserScan`'s returns as points in the base's floor plane (the
+  lidar's mount applied; the trunk's roll and pitch are a few degrees, whose effect on
+  a horizontal range is below a millimetre per metre, and are left out).
+- `refine(field, points, pose)`: the pose (x, y, yaw) minimising Σ ρ(d(T·p)), ρ Huber at
+  `huber_m`, and no pull at all beyond 3 `huber_m`: a beam on a person or on clutter
+  the map does not have does not drag the pose.
+  Gauss-Newton on the three pose parameters, the Jacobian from the field's gradient.
+  Returns the pose, the inlier share (beams within `inlier_m` of an obstacle, the
+  match's confidence) and the covariance σ² H⁻¹ of the last step.
+- `search(field, points, pose, …)`: the best pose on a grid of offsets (x, y, yaw)
+  around `pose`, scored by the inlier-weighted field (what seeds `refine` when the start
+  pose is off by decimetres, or after the robot was lost).
+
+Pure numpy; `tests/unit/test_localization_matcher.py` checks it on ray-cast scans.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from common.geometry import FloatArray
+
+Pose2 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class LikelihoodField:
+    """Distance (m) to the nearest occupied cell, on the map's grid: cell [iy, ix] is
+    centred at origin + (i + 0.5) × resolution (the occupancy grids' convention)."""
+
+    dist: FloatArray  # (ny, nx)
+    grad_x: FloatArray
+    grad_y: FloatArray
+    resolution: float
+    origin: tuple[float, float]
+    max_dist_m: float
+
+    @classmethod
+    def of_grid(
+        cls,
+        occupied: npt.NDArray[np.bool_],
+        resolution: float,
+        origin: tuple[float, float],
+        max_dist_m: float = 1.0,
+    ) -> LikelihoodField:
+        dist = ndimage.distance_transform_edt(~occupied) * resolution
+        dist = np.minimum(dist, max_dist_m)
+        gy, gx = np.gradient(dist, resolution)
+        return cls(dist, gx, gy, resolution, origin, max_dist_m)
+
+    def at(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Distance (n,) and its gradient (n, 2) at points (n, 2); off the map: the cap,
+        no gradient."""
+        u = (xy[:, 0] - self.origin[0]) / self.resolution - 0.5
+        v = (xy[:, 1] - self.origin[1]) / self.resolution - 0.5
+        ny, nx = self.dist.shape
+        inside = (u >= 0.0) & (v >= 0.0) & (u < nx - 1) & (v < ny - 1)
+        d = np.full(len(xy), self.max_dist_m)
+        g = np.zeros((len(xy), 2))
+        if not inside.any():
+            return d, g
+        u, v = u[inside], v[inside]
+        i0, j0 = v.astype(int), u.astype(int)
+        fv, fu = v - i0, u - j0
+        w00, w01 = (1 - fv) * (1 - fu), (1 - fv) * fu
+        w10, w11 = fv * (1 - fu), fv * fu
+
+        def bilinear(a: FloatArray) -> FloatArray:
+            return (
+                w00 * a[i0, j0]
+                + w01 * a[i0, j0 + 1]
+                + w10 * a[i0 + 1, j0]
+                + w11 * a[i0 + 1, j0 + 1]
+            )
+
+        d[inside] = bilinear(self.dist)
+        g[inside, 0] = bilinear(self.grad_x)
+        g[inside, 1] = bilinear(self.grad_y)
+        return d, g
+
+
+def scan_points(
+    ranges: FloatArray,
+    angle_min: float,
+    angle_increment: float,
+    T_base_lidar: FloatArray,
+    stride: int = 1,
+) -> FloatArray:
+    """The scan's returns (0 = none) as (n, 2) points in the base's floor plane."""
+    r = np.asarray(ranges, dtype=float)[::stride]
+    a = angle_min + angle_increment * np.arange(0, len(ranges), stride)
+    hit = r > 0.0
+    r, a = r[hit], a[hit]
+    p = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
+    T = np.asarray(T_base_lidar, dtype=float).reshape(4, 4)
+    return (p @ T[:3, :3].T + T[:3, 3])[:, :2]
+
+
+def transform(points: FloatArray, pose: Pose2) -> FloatArray:
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.stack(
+        [c * points[:, 0] - s * points[:, 1] + x, s * points[:, 0] + c * points[:, 1] + y], axis=1
+    )
+
+
+@dataclass(frozen=True)
+class Match:
+    """A matched pose (x, y, yaw in the map), the share of beams within `inlier_m` of an
+    obstacle, the mean robust cost per beam (m²), and the pose's covariance (3, 3)."""
+
+    pose: Pose2
+    inliers: float
+    cost: float
+    covariance: FloatArray
+
+
+def refine(
+    field: LikelihoodField,
+    points: FloatArray,
+    pose: Pose2,
+    *,
+    huber_m: float = 0.1,
+    inlier_m: float = 0.1,
+    sigma_m: float = 0.03,
+    iterations: int = 15,
+) -> Match:
+    """Gauss-Newton on (x, y, yaw) with a Huber loss (see the module docstring)."""
+    x = np.array(pose, dtype=float)
+    H = np.eye(3)
+    n = max(len(points), 1)
+    for _ in range(iterations):
+        c, s = math.cos(x[2]), math.sin(x[2])
+        world = transform(points, (x[0], x[1], x[2]))
+        d, g = field.at(world)
+        # IRLS weights: Huber's, and none beyond 3 huber_m (a person, clutter, a beam
+        # through a door the map shuts: their pull, however weak, adds up).
+        w = np.where(d <= huber_m, 1.0, huber_m / np.maximum(d, 1e-9))
+        w[d > 3.0 * huber_m] = 0.0
+        # ∂(Rp + t)/∂yaw = (−s px − c py, c px − s py)
+        dyaw = np.stack(
+            [-s * points[:, 0] - c * points[:, 1], c * points[:, 0] - s * points[:, 1]], axis=1
+        )
+        J = np.column_stack([g[:, 0], g[:, 1], np.sum(g * dyaw, axis=1)])
+        JW = J * w[:, None]
+        H = JW.T @ J + 1e-6 * np.eye(3)
+        step = -np.linalg.solve(H, JW.T @ d)
+        step[:2] = np.clip(step[:2], -0.1, 0.1)  # the field is only locally linear
+        step[2] = float(np.clip(step[2], -0.05, 0.05))
+        x += step
+        if abs(step[0]) + abs(step[1]) < 1e-4 and abs(step[2]) < 1e-4:
+            break
+    d, _ = field.at(transform(points, (x[0], x[1], x[2])))
+    rho = np.where(d <= huber_m, 0.5 * d * d, huber_m * (d - 0.5 * huber_m))
+    cov: FloatArray = np.asarray(sigma_m**2 * np.linalg.inv(H), dtype=float)
+    return Match(
+        (float(x[0]), float(x[1]), float(math.atan2(math.sin(x[2]), math.cos(x[2])))),
+        float(np.mean(d <= inlier_m)) if len(points) else 0.0,
+        float(np.sum(rho) / n),
+        cov,
+    )
+
+
+def search(
+    field: LikelihoodField,
+    points: FloatArray,
+    pose: Pose2,
+    *,
+    window_m: float = 0.6,
+    step_m: float = 0.05,
+    window_rad: float = math.radians(15.0),
+    step_rad: float = math.radians(1.0),
+    inlier_m: float = 0.1,
+) -> Pose2:
+    """The offset on the grid around `pose` under which most beams end on an obstacle
+    (ties: the nearer to the field's obstacles on average)."""
+    offsets = np.arange(-window_m, window_m + 1e-9, step_m)
+    yaws = pose[2] + np.arange(-window_rad, window_rad + 1e-9, step_rad)
+    best, best_score = pose, -math.inf
+    for yaw in yaws:
+        rotated = transform(points, (0.0, 0.0, float(yaw)))
+        # every (dx, dy) at once: (k, n, 2) endpoints
+        dx, dy = np.meshgrid(offsets, offsets, indexing="ij")
+        shift = np.stack([dx.ravel() + pose[0], dy.ravel() + pose[1]], axis=1)
+        ends = rotated[None, :, :] + shift[:, None, :]
+        d, _ = field.at(ends.reshape(-1, 2))
+        d = d.reshape(len(shift), len(points))
+        score = np.sum(np.exp(-0.5 * (d / inlier_m) ** 2), axis=1)
+        k = int(np.argmax(score))
+        if score[k] > best_score:
+            best_score = float(score[k])
+            best = (float(shift[k, 0]), float(shift[k, 1]), float(yaw))
+    return best
