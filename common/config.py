@@ -612,8 +612,8 @@ class LocalizationSettings(_Section):
     #: Beyond this a beam's end pulls no harder (people, clutter the map lacks), m.
     huber_m: Positive = 0.1
     #: A match farther than this from the odometry's prediction is refused, m and rad.
-    gate_m: Positive = 0.3
-    gate_rad: Positive = 0.15
+    gate_m: Positive = 0.15
+    gate_rad: Positive = 0.1
     #: So many refused scans in a row: lost (navigation stops); a search window then
     #: re-seeds the match, as at start-up: ± m and ± rad.
     lost_after: int = 10

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 ROOT = "dume"
 DEFAULT_ROBOT = "b1"
 CAMERAS = ("camera_head", "camera_wrist")
-SERVICES = ("sim", "perception", "semantic_map", "navigation", "wbc", "mission")
+SERVICES = ("sim", "perception", "semantic_map", "navigation", "wbc", "localization", "mission")
 
 # The shared world (sim truth) and the shared map.
 WORLD_CLOCK = f"{ROOT}/world/clock"
@@ -96,6 +96,11 @@ class RobotKeys:
     def state_truth(self) -> str:
         """The base's true pose and twist (`StateTruth`): evaluation, tests, trials only."""
         return f"{self.prefix}/state_truth"
+
+    @property
+    def localization(self) -> str:
+        """T_map_odom and its status (`localization.Localization`)."""
+        return f"{self.prefix}/localization"
 
     @property
     def scan(self) -> str:

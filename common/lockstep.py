@@ -369,6 +369,14 @@ class PeriodicTicker:
     def ack(self, stamp_ns: int) -> None:
         self._ack.put(Ack(service=self._name, stamp_ns=stamp_ns))
 
+    def run(self, tick: Callable[[int], None]) -> None:
+        """`tick(b)` at each tick, acked whatever it did (an exception goes on up)."""
+        for b in self.ticks():
+            try:
+                tick(b)
+            finally:
+                self.ack(b)
+
 
 #: Wall seconds a participant waits, at its first tick, to hear of the participants the
 #: sim already heard of (`hear_all`).

@@ -51,7 +51,7 @@ from deploy.stack import Supervised
 from services.semantic_map.store import database_path, remove_database
 
 #: The services `dume up` runs (supervisord's programs that start by default).
-SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation", "mission")
+SERVICES = ("sim", "wbc", "perception", "semantic_map", "navigation", "localization", "mission")
 #: Wall seconds for every service to be ready, and for supervisord to stop them all.
 READY_TIMEOUT_S = 300.0
 STOP_TIMEOUT_S = 180.0

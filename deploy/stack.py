@@ -41,6 +41,7 @@ MODULES = {
     "perception": "services.perception",
     "semantic_map": "services.semantic_map",
     "navigation": "services.navigation",
+    "localization": "services.localization",
     "wbc": "services.wbc",
     "mission": "services.mission",
 }
@@ -83,18 +84,29 @@ def stack_env(
     return env
 
 
-def with_start_pose(overrides: Overrides) -> dict[str, Any]:
-    """The overrides with `localization.start_pose` filled in from the world's start when
-    the robot estimates its base and no start pose was given (the user's default: the
-    pose a person would type for the demo's world)."""
+#: The localization's lockstep participation when the robot estimates its base: at the
+#: lidar's rate, its correction taking effect one scan later.
+LOCALIZATION = {"role": "periodic", "period_s": 0.1, "latency_s": 0.1}
+
+
+def with_start_pose(overrides: Overrides, services: Sequence[str] | None = None) -> dict[str, Any]:
+    """The overrides of a robot on its own odometry (`wbc.base_state = "estimate"`):
+    the localization becomes a lockstep participant, and `localization.start_pose` is
+    filled in from the world's start when none was given (the user's default: the pose
+    a person would type for the demo's world). Unchanged for the truth ablation; the
+    participant only when `services` (None: every one) includes the localization."""
     out = dict(overrides)
     config = load_config(out)
-    if not config.odom_from_estimate() or config.localization.start_pose is not None:
+    if not config.odom_from_estimate():
         return out
-    from services.sim.world import generate_world
+    runs = services is None or "localization" in services
+    if runs and "localization" not in config.time.participants:
+        out["time.participants.localization"] = dict(LOCALIZATION)
+    if config.localization.start_pose is None:
+        from services.sim.world import generate_world
 
-    start = generate_world(config.sim.world_seed, config.sim.world).robot_start
-    out["localization.start_pose"] = [start.x, start.y, start.yaw]
+        start = generate_world(config.sim.world_seed, config.sim.world).robot_start
+        out["localization.start_pose"] = [start.x, start.y, start.yaw]
     return out
 
 
@@ -109,12 +121,19 @@ def settings_env(run_dir: Path, overrides: Overrides) -> dict[str, str]:
 class _Stack:
     """What both kinds of stack share: config, a client bus, readiness."""
 
-    def __init__(self, overrides: Overrides, port: int | None, run_id: str | None) -> None:
+    def __init__(
+        self,
+        overrides: Overrides,
+        port: int | None,
+        run_id: str | None,
+        services: Sequence[str] | None = None,
+    ) -> None:
+        """`services`: the ones this stack runs (None: every one)."""
         self.port = port or free_port()
         self.run_id = run_id or new_run_id()
         self.run_dir = REPO_ROOT / "var" / "run" / f"{self.run_id}-{self.port}"
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        self.overrides = with_start_pose(overrides)
+        self.overrides = with_start_pose(overrides, services)
         self.env = stack_env(
             port=self.port,
             run_id=self.run_id,
@@ -199,7 +218,7 @@ class ProcessStack(_Stack):
     ) -> None:
         names = [n for n in services if n in MODULES]
         overrides = overrides or {}
-        super().__init__(merged(overrides, only_started(names, overrides)), port, run_id)
+        super().__init__(merged(overrides, only_started(names, overrides)), port, run_id, names)
         self.services = list(services)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 

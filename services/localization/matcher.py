@@ -3,9 +3,10 @@ field (as AMCL's and Hector's sensor models; the matcher is Gauss-Newton with a 
 loss, seeded by a correlative search when the pose is in doubt).
 
 - `LikelihoodField.of_grid`: each cell's distance to the nearest occupied cell of the
-  map (an exact Euclidean distance transform, capped at `max_dist_m`), bilinear with its
-  gradient at any point. A beam's end that lies on a mapped obstacle costs nothing;
-  one that ends in free space costs its distance to the nearest one.
+  map (an exact Euclidean distance transform to the cells' centres, capped at
+  `max_dist_m`), bilinear with its gradient at any point. A beam's end that
+  lies on a mapped obstacle costs nothing; one that ends in free space costs its
+  distance to the nearest one.
 - `scan_points`: a `LaserScan`'s returns as points in the base's floor plane (the
   lidar's mount applied; the trunk's roll and pitch are a few degrees, whose effect on
   a horizontal range is below a millimetre per metre, and are left out).
@@ -56,6 +57,9 @@ class LikelihoodField:
         origin: tuple[float, float],
         max_dist_m: float = 1.0,
     ) -> LikelihoodField:
+        # To the nearest occupied cell's centre: a cell is occupied when an obstacle
+        # overlaps it at all, so a face lies anywhere in its boundary cell, on average
+        # at the centre (taking the cell's edge instead measured no better).
         dist = ndimage.distance_transform_edt(~occupied) * resolution
         dist = np.minimum(dist, max_dist_m)
         gy, gx = np.gradient(dist, resolution)

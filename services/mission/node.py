@@ -45,6 +45,7 @@ import zenoh
 from common.bus import Bus
 from common.lifelines import Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
+from common.map_frame import MapFrame
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionRequest, MissionStatus, PatrolRequest, PatrolStatus
 from common.service import Service
@@ -79,7 +80,9 @@ class MissionNode:
         self.period_s = cfg.time.period_of(NAME, 0.05)
         latency = cfg.time.latencies_ns()
         bus, keys = svc.bus, svc.keys
-        self.robot = BusRobot(bus, keys, m.query_timeout_s, latency, m.sighting_gate_m)
+        self.robot = BusRobot(
+            bus, keys, m.query_timeout_s, latency, m.sighting_gate_m, MapFrame(bus, keys, cfg)
+        )
         self.gate = UpstreamGate(bus, keys, cfg)
         self.gate.watch("navigation", self.robot.nav)
         self.gate.watch("perception", self.robot.detections)

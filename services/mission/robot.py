@@ -35,6 +35,7 @@ from common.keys import (
     map_artifact,
     map_person,
 )
+from common.map_frame import MapFrame
 from common.messages import PayloadError
 from common.messages.navigation import (
     NavGoal,
@@ -65,6 +66,11 @@ _NOT_FOUND = ("unknown_id", "invalid")
 SUPPORTS_TIMEOUT_S = 10.0
 
 
+def _odom_pose(odom: Odom) -> tuple[float, float, float]:
+    p = odom.base_position_in_world
+    return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
+
+
 class BusRobot:
     """The robot over the bus (see the module docstring)."""
 
@@ -75,6 +81,7 @@ class BusRobot:
         query_timeout_s: float,
         latency_ns: dict[str, int],
         sighting_gate_m: float = 0.35,
+        map_frame: MapFrame | None = None,
     ) -> None:
         self.bus, self.keys = bus, keys
         self.timeout_s = query_timeout_s
@@ -84,6 +91,8 @@ class BusRobot:
         #: What the mission sends at its tick b takes effect at b + its own latency.
         self.latency_ns = latency_ns.get(NAME, 0)
         self.odom = bus.latest(keys.odom, Odom, history=16)
+        #: The map frame (the localization's correction of odom); None: odom is the map.
+        self.map_frame = map_frame
         self.wbc = bus.latest(keys.wbc_status, WbcStatus, history=16)
         self.nav = bus.latest(keys.nav_status, NavStatus, history=32)
         #: The newest detections of either camera (what the lockstep gate waits on) …
@@ -102,6 +111,8 @@ class BusRobot:
 
     def begin(self, b: int) -> None:
         self._t, self._cmd, self._mode = b, (0.0, 0.0, 0.0), None
+        if self.map_frame is not None:
+            self.map_frame.wait(b, self.timeout_s)
         for frame in self._frames_in.drain():
             if frame.camera == WRIST:
                 self._wrist.append(frame)
@@ -184,17 +195,18 @@ class BusRobot:
         return list(found.surfaces)
 
     def robot_xy(self) -> tuple[float, float] | None:
+        """The base in the map: odom with the localization's correction due now."""
         odom = self.odom.at(self._t)
         if odom is None:
             return None
-        p = odom.base_position_in_world
-        return p[0], p[1]
+        x, y, _ = self.map_frame.pose(odom, self._t) if self.map_frame else _odom_pose(odom)
+        return x, y
 
     def robot_yaw(self) -> float | None:
         odom = self.odom.at(self._t)
         if odom is None:
             return None
-        return yaw_of_quat_xyzw(odom.base_orientation_xyzw)
+        return (self.map_frame.pose(odom, self._t) if self.map_frame else _odom_pose(odom))[2]
 
     # -- navigation -----------------------------------------------------------------------
 

@@ -13,14 +13,15 @@ The node builds the parts from the config and the bus, runs the loop and publish
 - `navigator.Navigator`, the goal's life; `nav_log.NavLogger`, what it tells a person.
 
 Each tick b (multiples of `time.participants.navigation.period_s`): the odom stamped b
-(waited for: 50 Hz), the depth layer, the map to adopt, perception's people due by b,
-the cancels; until the map is in, idle ("waiting for the map": zero cmd_vel, a queued
-goal `active`); else the goal due, a handover goal following its person on a new map,
-the costmap rebuilt when a layer changed,
-`Navigator.tick` (its `clear` recovery empties the depth layer); then `wbc/cmd_vel`
-(source `navigation`) and `nav/status` stamped b, `nav/path` on a new plan, the ack. So
-goals, cancels and map updates take effect at ticks fixed by sim time, never by when a
-message happened to arrive.
+(waited for: 50 Hz), put in the map with the localization due at b
+(`common.map_frame.MapFrame`; standing still while it is `lost`), the depth layer, the
+map to adopt, perception's people due by b, the cancels; until the map is in, idle
+("waiting for the map": zero cmd_vel, a queued goal `active`); else the goal due, a
+handover goal following its person on a new map, the costmap rebuilt when a layer
+changed, `Navigator.tick` (its `clear` recovery empties the depth layer); then
+`wbc/cmd_vel` (source `navigation`) and `nav/status` stamped b, `nav/path` on a new
+plan, the ack. So goals, cancels and map updates take effect at ticks fixed by sim time,
+never by when a message happened to arrive.
 """
 
 from __future__ import annotations
@@ -31,8 +32,9 @@ import time
 import numpy as np
 
 from common.bus import WaitTimeout
-from common.geometry import T_of_pose
+from common.geometry import yaw_of
 from common.lockstep import PeriodicTicker
+from common.map_frame import MapFrame
 from common.messages import to_wire
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavCancel, NavGoalRequest, NavPath, NavStatus
@@ -87,6 +89,7 @@ class NavNode:
         self.nav = Navigator(self.fp, n, self.period_s)
         self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
         self.odom = bus.latest(keys.odom, Odom, history=16)
+        self.map_frame = MapFrame(bus, keys, cfg)
         self.depth: DepthFeed | None = None
         if self.camera:
             frames = bus.latest(keys.camera_rgbd(self.camera), CameraFrame, 2)
@@ -115,11 +118,7 @@ class NavNode:
         if self.feed is not None:
             self.feed.start(self.svc.stop)
         self.svc.ready()
-        for b in self.ticker.ticks():
-            try:
-                self.tick(b)
-            finally:
-                self.ticker.ack(b)
+        self.ticker.run(self.tick)
 
     def tick(self, b: int) -> None:
         t0 = time.perf_counter()
@@ -133,18 +132,22 @@ class NavNode:
             self._publish(b, np.zeros(3), None, "no odom")
             self.intake.done(b, m.costmap, self.pose)
             return
-        pose = Pose.of_odom(odom)
+        if not self.map_frame.wait(b, INPUT_TIMEOUT_S):
+            self.svc.log.warning("no localization due at t=%.2f s", b / NS_PER_S)
+        T_map_base = self.map_frame.base(odom, b)  # odom, corrected into the map
+        pose = Pose(float(T_map_base[0, 3]), float(T_map_base[1, 3]), yaw_of(T_map_base[:3, :3]))
         self.pose = pose
-        changed = self.depth is not None and self.depth.update(
-            b, pose, T_of_pose(odom.base_position_in_world, odom.base_orientation_xyzw),
-            m.grid, m.layer,
-        )  # fmt: skip
+        changed = self.depth is not None and self.depth.update(b, pose, T_map_base, m.grid, m.layer)
         fresh = self.feed.tick(b) if self.feed is not None else None
         seen_changed = m.see(self.perception.due(b), b)  # every tick: lockstep waits here
         changed = m.take(fresh, seen_changed, b) or changed
         self.intake.apply_cancels(b)
         if m.costmap is None:
             self._publish(b, np.zeros(3), None, "waiting for the map", self.intake.queued(b))
+            self.intake.done(b, m.costmap, pose)
+            return
+        if self.map_frame.status(b) == "lost":  # it does not know where it is: stand
+            self._publish(b, np.zeros(3), None, "localization lost", self.intake.queued(b))
             self.intake.done(b, m.costmap, pose)
             return
         self.intake.start_due(b, m.costmap, pose, m.map_at)

@@ -2,8 +2,9 @@
 
 `FrameProcessor.process(cam, b)` (the loop's thread only; no lock: nothing here is shared)
 waits at most `perception.frame_timeout_s` wall seconds for the camera's frame stamped b
-(sim time, ns), for `odom` stamped b (where the robot believes its base was at capture:
-it places what the frame shows in the world) and, with the `truth` segmenter, for its
+(sim time, ns), for `odom` stamped b (where the robot believes its base was at capture,
+with the localization's correction in effect at b: it places what the frame shows in the
+map) and, with the `truth` segmenter, for its
 `segmentation_truth` stamped b;
 segments it (the ONNX network, or the sim's labels), measures each instance
 (`pipeline.detect`), drops the people inside the robot (`self_filter.drop_self`) and
@@ -32,7 +33,7 @@ from numpy.typing import NDArray
 
 from common.bus import WaitTimeout
 from common.config import PerceptionSettings
-from common.geometry import T_of_pose
+from common.geometry import FloatArray, T_of_pose
 from common.messages.arrays import ArrayError, as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
@@ -83,8 +84,14 @@ class FrameProcessor:
         unavailable: str,
         publish: Callable[[Detections], None],
         show: Callable[[Detections, list[Detected], tuple[int, int]], None],
+        place: Callable[[Odom, int], FloatArray] | None = None,
     ) -> None:
         self.settings = settings
+        #: The base in the map (4 × 4) of an odom sample at tick b: the localization's
+        #: correction composed (`common.map_frame.MapFrame.base`); odom itself without.
+        self.place = place or (
+            lambda o, _b: T_of_pose(o.base_position_in_world, o.base_orientation_xyzw)
+        )
         self.truth = settings.segmenter == "truth"
         self.frames, self.truths, self.odom = frames, truths, odom
         self.network, self.unavailable = network, unavailable
@@ -115,7 +122,7 @@ class FrameProcessor:
         segment_ms = 0.0
         T_world_base = IDENTITY
         if frame is not None and odom is not None:
-            T = T_of_pose(odom.base_position_in_world, odom.base_orientation_xyzw)
+            T = self.place(odom, b)
             T_world_base = tuple(T.ravel().tolist())
             try:
                 instances, reason, segment_ms = self._segment(cam, frame, b)

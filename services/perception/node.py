@@ -17,7 +17,9 @@ from __future__ import annotations
 import logging
 
 from common.config import ConfigError, PerceptionSettings, resolve
+from common.geometry import FloatArray
 from common.lockstep import PeriodicTicker
+from common.map_frame import MapFrame
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detections, LocateRequest
 from common.messages.semantic_map import MapEntity
@@ -88,8 +90,10 @@ class PerceptionNode:
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_ns / NS_PER_S, svc.stop)
         logger = PerceptionLogger(svc.rec, FrameSelector.of(cfg))
         self.processor = FrameProcessor(
-            self.settings, frames, truths, odom, network, unavailable, self._publish, logger.frame
-        )
+            self.settings, frames, truths, odom, network, unavailable, self._publish, logger.frame,
+            self._place,
+        )  # fmt: skip
+        self.map_frame = MapFrame(bus, keys, cfg)
         self.locator = Locator(
             self.recent,
             self.cameras,
@@ -111,6 +115,12 @@ class PerceptionNode:
             for cam in self.cameras:
                 self.processor.process(cam, b)
             self.ticker.ack(b)
+
+    def _place(self, odom: Odom, b: int) -> FloatArray:
+        """The base at tick b in the map: odom with the localization due at b."""
+        if not self.map_frame.wait(b, self.settings.frame_timeout_s):
+            log.warning("no localization due at t=%.2f s: the last correction", b / NS_PER_S)
+        return self.map_frame.base(odom, b)
 
     def _publish(self, msg: Detections) -> None:
         """A camera's detections out on the bus, and kept for `locate`."""

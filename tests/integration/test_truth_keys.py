@@ -9,6 +9,7 @@ import pytest
 
 from common.bus import Bus
 from common.keys import WORLD_CLOCK, WORLD_DESCRIPTION, WORLD_EVENTS
+from common.messages.localization import Localization
 from common.messages.sim import Clock, Odom, StateTruth, WorldEvents
 from common.messages.world import WorldDescription
 from common.truth import TruthGuard, TruthKeyError
@@ -17,7 +18,9 @@ from tests.conftest import HOLD_COMMANDER, StartStack
 
 pytestmark = pytest.mark.integration
 
-EVERY_SERVICE = ["sim", "perception", "semantic_map", "navigation", "wbc", "mission"]
+EVERY_SERVICE = [
+    "sim", "perception", "semantic_map", "navigation", "wbc", "localization", "mission"
+]  # fmt: skip
 
 
 @pytest.mark.parametrize("base_state", ["estimate", "truth"])
@@ -27,8 +30,14 @@ def test_the_default_stack_runs_under_the_truth_guard(stack: StartStack, base_st
     raised `TruthKeyError` and exited."""
     assert set(EVERY_SERVICE) < set(MODULES)
     s = stack(EVERY_SERVICE, 'sim.world="small"', f'wbc.base_state="{base_state}"')
+    located = s.bus.latest(s.keys.localization, Localization, history=64)
     clock = s.bus.latest(WORLD_CLOCK, Clock)
     clock.wait(lambda c: c.stamp_ns >= 2_000_000_000, 240.0)
+    if base_state == "estimate":  # the robot on its own: the lidar matched to the map
+        loc = located.wait(lambda m: m.stamp_ns >= 1_000_000_000, 30.0)
+        assert loc.status == "ok" and loc.confidence > 0.5, loc
+    else:
+        assert located.get() is None  # the truth ablation: odom is the map
     for name in EVERY_SERVICE:
         assert s.procs[name].poll() is None, f"{name} exited:\n{s.log_text(name)[-3000:]}"
         assert "TruthKeyError" not in s.log_text(name), s.log_text(name)[-3000:]

@@ -1,0 +1,89 @@
+"""The map frame for a consumer of `odom`: T_map_base = T_map_odom · T_odom_base.
+
+`odom` is the robot's odometry (it drifts); `localization` publishes T_map_odom at the
+lidar's rate (`common.messages.localization`). `MapFrame.wait(t)` blocks (bounded) until
+the localization due at t is in: its tick d, the newest multiple of its period with
+d + latency ≤ t, as every lockstep consumer of a periodic producer does; `at(t)` is that
+sample; `base(odom, t)` the base in the map as (4 × 4) and `pose(odom, t)` as (x, y,
+yaw). `status(t)` says whether the robot knows where it is (`lost`: navigation stops).
+
+Off (`enabled` false) when the stack runs no localization (`localization` is not a
+lockstep participant: the truth ablation, where odom is the map): T_map_odom is the
+identity and the status `ok`. Before the first sample, and while it is missing, the
+identity too (odometry starts at the start pose in the map), status `initialising`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from common.bus import Bus, WaitTimeout
+from common.config import Config
+from common.geometry import FloatArray, T_of_pose, make_T, rot_z, yaw_of
+from common.keys import RobotKeys
+from common.messages.localization import Localization, LocalizationStatus
+from common.messages.sim import Odom
+
+NAME = "localization"
+
+
+class MapFrame:
+    def __init__(self, bus: Bus, keys: RobotKeys, config: Config) -> None:
+        p = config.time.participants.get(NAME)
+        self.enabled = p is not None
+        self.period_ns = round(p.period_s * 1e9) if p is not None else 0
+        self.latency_ns = round(p.latency_s * 1e9) if p is not None else 0
+        self.lockstep = config.time.mode == "lockstep"
+        self._latest = (
+            bus.latest(keys.localization, Localization, history=64) if self.enabled else None
+        )
+
+    def due(self, t_ns: int) -> int:
+        """The localization tick whose output takes effect at t."""
+        d = t_ns - self.latency_ns
+        return -1 if d < 0 else (d // self.period_ns) * self.period_ns
+
+    def wait(self, t_ns: int, timeout_s: float) -> bool:
+        """Wait for the sample due at t (lockstep); whether it is in."""
+        if self._latest is None:
+            return True
+        d = self.due(t_ns)
+        if d < 0:
+            return True
+        if self.lockstep:
+            with contextlib.suppress(WaitTimeout):
+                self._latest.wait_stamp(d, timeout_s)
+        msg = self._latest.at(d)
+        return msg is not None and msg.stamp_ns == d
+
+    def at(self, t_ns: int) -> Localization | None:
+        if self._latest is None:
+            return None
+        d = self.due(t_ns)
+        return None if d < 0 else self._latest.at(d)
+
+    def status(self, t_ns: int) -> LocalizationStatus:
+        if not self.enabled:
+            return "ok"
+        msg = self.at(t_ns)
+        return "initialising" if msg is None else msg.status
+
+    def map_odom(self, t_ns: int) -> FloatArray:
+        """T_map_odom (4 × 4) in effect at t."""
+        msg = self.at(t_ns)
+        if msg is None:
+            return np.eye(4)
+        x, y, yaw = msg.map_odom
+        return make_T(rot_z(yaw), (x, y, 0.0))
+
+    def base(self, odom: Odom, t_ns: int) -> FloatArray:
+        """T_map_base (4 × 4) of an odom sample, with the correction in effect at t."""
+        T = T_of_pose(odom.base_position_in_world, odom.base_orientation_xyzw)
+        return T if not self.enabled else self.map_odom(t_ns) @ T
+
+    def pose(self, odom: Odom, t_ns: int) -> tuple[float, float, float]:
+        """(x, y, yaw) of the base in the map."""
+        T = self.base(odom, t_ns)
+        return float(T[0, 3]), float(T[1, 3]), yaw_of(T[:3, :3])

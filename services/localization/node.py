@@ -1,0 +1,153 @@
+"""The localization service: T_map_odom from the lidar, on the map's static occupancy.
+
+Its own process (not navigation's): perception, the mission and navigation all compose
+with it (`common.map_frame.MapFrame`), and the scan matching stays off navigation's
+20 Hz loop. A periodic lockstep participant at the lidar's rate
+(`time.participants.localization`, 0.1 s, latency 0.1 s), running only when the robot
+estimates its base (`wbc.base_state = "estimate"`: the launcher lists it then); with the
+truth ablation odom is the map already, and the service idles.
+
+At start it fetches the map's occupancy as of t = 0 (the static layer: the floor-plan
+prior, or a map file) and builds the likelihood field once; the start pose is
+`localization.start_pose` (the user's, `dume up --start-pose`). Each tick b: the scan
+and `odom` stamped b (waited for), `Localizer.update`, then `localization` stamped b:
+T_map_odom, T_map_base with its covariance, the status and the confidence; to rerun, the
+scan over the map, the pose and its 2σ ellipse, the status (`LocalizationLogger`).
+A scan or odom that does not come is said once and the last correction republished
+with status `uncertain`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from common.bus import BusError, WaitTimeout
+from common.geometry import yaw_of_quat_xyzw
+from common.keys import MAP_OCCUPANCY, as_of
+from common.lockstep import PeriodicTicker
+from common.messages import as_numpy
+from common.messages.base import NS_PER_S
+from common.messages.localization import Localization
+from common.messages.semantic_map import OccupancyGrid
+from common.messages.sim import LaserScan, Odom
+from common.service import Service
+from services.localization.localizer import Estimate, Localizer
+from services.localization.matcher import LikelihoodField, scan_points
+from services.localization.telemetry import LocalizationLogger
+
+NAME = "localization"
+#: Wall seconds a tick waits for its scan and odom.
+INPUT_TIMEOUT_S = 30.0
+
+
+class LocalizationNode:
+    def __init__(self, svc: Service) -> None:
+        self.svc, cfg = svc, svc.config
+        self.s = cfg.localization
+        self.active = NAME in cfg.time.participants
+        period_s = cfg.time.period_of(NAME, 1.0 / cfg.sim.sensors.lidar.rate_hz)
+        bus, keys = svc.bus, svc.keys
+        self.scans = bus.latest(keys.scan, LaserScan, history=8)
+        self.odom = bus.latest(keys.odom, Odom, history=32)
+        self.pub = bus.publisher(keys.localization, Localization, "control")
+        self.ticker = PeriodicTicker(bus, keys, NAME, period_s, svc.stop)
+        self.logger = LocalizationLogger(svc.rec)
+        self.loc: Localizer | None = None
+        self.last: Estimate | None = None
+        self._said = ""
+        self._status = ""
+
+    def _field(self) -> LikelihoodField:
+        """The map's occupancy as of t = 0, asked for until the map answers."""
+        while True:
+            try:
+                grid = self.svc.bus.query(as_of(MAP_OCCUPANCY, 0), None, OccupancyGrid, 5.0)
+                break
+            except BusError as exc:
+                self.svc.log.info("waiting for the map's occupancy: %s", exc)
+                if self.svc.stop.wait(0.5):
+                    raise
+        occupied = np.asarray(as_numpy(grid.cells)) == 100
+        self.logger.map(occupied, grid.resolution_m, grid.origin_xy)
+        self.svc.log.info(
+            "matching on the map's %s occupancy: %d occupied cells of %.2f m",
+            grid.static_source, int(occupied.sum()), grid.resolution_m,
+        )  # fmt: skip
+        origin = (float(grid.origin_xy[0]), float(grid.origin_xy[1]))
+        return LikelihoodField.of_grid(occupied, grid.resolution_m, origin)
+
+    def run(self) -> None:
+        svc = self.svc
+        if not self.active:
+            svc.log.info("not a lockstep participant (the truth ablation: odom is the map)")
+            svc.ready()
+            svc.stop.wait()
+            return
+        start = self.s.start_pose
+        if start is None:
+            svc.log.warning("no localization.start_pose: the robot is taken to start at 0 0 0")
+            start = (0.0, 0.0, 0.0)
+        self.loc = Localizer(self.s, self._field(), start)
+        svc.ready()
+        self.ticker.run(self.tick)
+
+    def tick(self, b: int) -> None:
+        assert self.loc is not None
+        scan, odom = self._input(self.scans, b, "scan"), self._input(self.odom, b, "odom")
+        if scan is None or odom is None:
+            self._publish(b, self.last, "uncertain", f"no {'scan' if scan is None else 'odom'}")
+            return
+        pts = scan_points(
+            np.asarray(as_numpy(scan.ranges), dtype=float),
+            scan.angle_min,
+            scan.angle_increment,
+            np.asarray(scan.T_base_lidar).reshape(4, 4),
+            self.s.beam_stride,
+        )
+        p = odom.base_position_in_world
+        est = self.loc.update(pts, (p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)))
+        self.last = est
+        self._publish(b, est, est.status, est.refused)
+        self.logger.log(b, est, pts)
+
+    def _input(self, latest, b: int, what: str):  # type: ignore[no-untyped-def]
+        with contextlib.suppress(WaitTimeout):
+            latest.wait_stamp(b, INPUT_TIMEOUT_S)
+        msg = latest.at(b)
+        if msg is None or msg.stamp_ns != b:
+            why = f"no {what} stamped {b / NS_PER_S:.2f} s"
+            if why != self._said:
+                self.svc.log.warning("%s", why)
+                self._said = why
+            return None
+        return msg
+
+    def _publish(self, b: int, est: Estimate | None, status: str, reason: str) -> None:
+        if est is None:
+            assert self.loc is not None
+            start = self.loc.start
+            cov = tuple(float(x) for x in self.loc.covariance.ravel())
+            mo, mb = start, start
+        else:
+            cov = tuple(float(x) for x in est.covariance.ravel())
+            mo, mb = est.map_odom, est.map_base
+        self.pub.put(
+            Localization(
+                stamp_ns=b,
+                map_odom=(mo[0], mo[1], mo[2]),
+                map_base=(mb[0], mb[1], mb[2]),
+                covariance=cov,
+                status=status,  # type: ignore[arg-type]
+                confidence=min(1.0, max(0.0, est.confidence if est is not None else 0.0)),
+                reason=reason,
+            )
+        )
+        if status != self._status:
+            self.svc.log.info("t=%.2f s: %s %s", b / NS_PER_S, status, reason)
+            self._status = status
+
+
+def main(svc: Service) -> None:
+    LocalizationNode(svc).run()
