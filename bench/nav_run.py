@@ -108,7 +108,7 @@ def nav_stack(
     world: str, seed: int, extra: Overrides | None = None, perception: bool = False
 ) -> ProcessStack:
     db = tempfile.mkdtemp(prefix="dume-nav-trial-")
-    services = ["sim", "wbc", "semantic_map", "navigation"]
+    services = ["sim", "wbc", "semantic_map", "navigation", "localization"]
     if perception:
         services.insert(2, "perception")
     return ProcessStack(services, merged(nav_settings(world, seed, db), extra or {}))

@@ -39,7 +39,9 @@ class CmdVel(Message, frozen=True):
 class Reach(Message, frozen=True, tag="reach"):
     """Move `gripper_tcp` to H (row-major 4×4) in `frame` (base or world) as of `stamp_ns`.
 
-    A base-frame goal is fixed in the world from the base pose at its stamp.
+    A base-frame goal is fixed in the world from the base pose at its stamp. `world` is
+    the WBC's: the odometry's frame (`odom`); a client planning in the map converts with
+    the localization's T_odom_map (`services.mission.robot.BusRobot.send_arm_goal`).
     approach_axis: unit vector in H's frame along which the gripper approaches;
     pregrasp_m: the approach starts this far back along it.
     """

@@ -22,9 +22,12 @@ import logging
 import time
 from collections import deque
 
+import msgspec
+import numpy as np
+
 from common.bus import Bus, BusError, NoReply, RemoteError
 from common.clients import ArmClient, NavClient
-from common.geometry import yaw_of_quat_xyzw
+from common.geometry import inv_T, yaw_of_quat_xyzw
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_OCCUPANCY,
@@ -48,6 +51,7 @@ from common.messages.wbc import (
     ArmGoal,
     CmdVel,
     GoalStatus,
+    Reach,
     WbcMode,
     WbcModeName,
     WbcStatus,
@@ -238,6 +242,12 @@ class BusRobot:
             self._mode = ("stand", "navigation")
 
     def send_arm_goal(self, goal: ArmGoal) -> str:
+        """Send an arm goal; a world-frame reach, planned in the map, goes in the WBC's
+        world, the odometry's frame (T_odom_map with the correction due now)."""
+        if isinstance(goal, Reach) and goal.frame == "world" and self.map_frame is not None:
+            T_odom_map = inv_T(self.map_frame.map_odom(self._t))
+            H = T_odom_map @ np.asarray(goal.H, dtype=float).reshape(4, 4)
+            goal = msgspec.structs.replace(goal, H=tuple(H.ravel().tolist()))
         return self._arm.send(goal, effective_ns=self._effective)
 
     def wbc_status(self) -> WbcStatus | None:
