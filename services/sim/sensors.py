@@ -165,7 +165,8 @@ class DepthNoise:
         # the background beside a nearer edge); the nearer surface keeps its depth.
         far = np.where(valid, z, np.inf)  # no return: farther than anything
         edge = np.zeros_like(valid)
-        dx, dy = np.diff(far, axis=1), np.diff(far, axis=0)
+        with np.errstate(invalid="ignore"):  # inf − inf between two no-returns: no jump
+            dx, dy = np.diff(far, axis=1), np.diff(far, axis=0)
         edge[:, 1:] |= dx > jump  # the right one is farther
         edge[:, :-1] |= dx < -jump
         edge[1:, :] |= dy > jump
