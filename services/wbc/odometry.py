@@ -15,10 +15,12 @@ joint. Per tick, on the WBC's thread:
 The odom frame starts at the start pose the user gives (`localization.start_pose`: x, y,
 yaw in the map; the height from the stance feet), so odom and map coincide at start-up
 and part only by the estimator's drift, which localization's T_map_odom takes up. The
-first state is taken at rest (a stack starts standing): roll and pitch from gravity, the
-feet where the legs put them; for the first `calibrate_s` standing still the gyro's
-bias is learnt, cut short when the gait starts stepping (`moving`), and again at every
-later standstill as long.
+estimate starts again at every state until the four feet first stand on the floor
+together (a stack starts with the robot settling onto its feet: integrating that drop
+moved the odometry 0.2 m): roll and pitch from gravity (level while the accelerometer is
+not reading it), the feet where the legs put them; for the first `calibrate_s` standing
+still the gyro's bias is learnt, cut short when the gait starts stepping (`moving`), and
+again at every later standstill as long.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ class LegOdometry:
         self.est = LegInertialEstimator(s)
         self.start_pose = start
         self._v_pred: FloatArray = np.zeros(3)
+        #: The four feet have been down together: the robot stands, the estimate runs.
+        self._grounded = False
 
         self._zero_v: FloatArray | None = None
 
@@ -76,8 +80,9 @@ class LegOdometry:
         """The state with the base predicted at the message's stamp (dt s since the last;
         `standing`: the gait is not stepping, so a still IMU measures its own bias)."""
         est = self.est
-        if not est.started:
+        if not self._grounded:  # started again each tick until the four feet are down
             self._start(msg, np.asarray(state.q), model)
+            self._grounded = all(msg.foot_contacts)
         else:
             est.predict(
                 np.array(msg.imu_angular_velocity, dtype=float),
