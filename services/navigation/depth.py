@@ -3,7 +3,8 @@
 Every `stride`-th pixel with a return nearer than `max_range_m` is back-projected to the
 world (`common.camera`: eq. 1 through `T_world_camera = T_world_base · T_base_camera`,
 the base where the robot's odometry had it at the frame's stamp).
-Points between `min_height_m` and `max_height_m` (not the floor, not above the robot)
+Points between `min_height_m` and `max_height_m` above the floor the frame shows
+(`heights_above_floor`: not the floor, not above the robot)
 mark their cells, except cells already in the static map and those under the robot's own
 footprint. Clearing: a marked cell whose centre (at two heights) projects into the image
 with a measured depth beyond it by `see_through_m` has been seen through, and is
@@ -19,6 +20,7 @@ loop thread only.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -45,6 +47,37 @@ class DepthParams:
     max_height_m: float = 1.8
     max_range_m: float = 4.0
     see_through_m: float = 0.15
+    #: The floor the frame shows: points within this of z = 0 fit it (m), at least so
+    #: many of them, and a fit tilted more than `floor_max_tilt_rad` or offset more than
+    #: `floor_max_offset_m` is not the floor (z = 0 is kept).
+    floor_band_m: float = 0.12
+    floor_min_points: int = 200
+    floor_max_tilt_rad: float = 0.06
+    floor_max_offset_m: float = 0.08
+
+
+def heights_above_floor(pts: NDArray[np.float64], p: DepthParams) -> NDArray[np.float64]:
+    """Each point's (n, 3, world) height above the floor the frame itself shows: a plane
+    z = a x + b y + c fitted by least squares to the points near z = 0, twice (the second
+    time without those more than 3 cm off the first fit); the world's z where the frame
+    shows too little floor or the fit is not a floor. The base's roll and pitch come from
+    the robot's own estimate: 1° off puts the floor 7 cm up at 4 m, over `min_height_m`,
+    a wall of phantom obstacles; measured from the floor seen, it stays on the floor."""
+    z = pts[:, 2]
+    near = np.abs(z) < p.floor_band_m
+    if int(near.sum()) < p.floor_min_points:
+        return z
+    xy0 = pts[near, :2].mean(axis=0)
+    A = np.column_stack([pts[near, 0] - xy0[0], pts[near, 1] - xy0[1], np.ones(int(near.sum()))])
+    zf = z[near]
+    coef = np.linalg.lstsq(A, zf, rcond=None)[0]
+    inliers = np.abs(A @ coef - zf) < 0.03
+    if int(inliers.sum()) >= p.floor_min_points:
+        coef = np.linalg.lstsq(A[inliers], zf[inliers], rcond=None)[0]
+    a, b, c = (float(v) for v in coef)
+    if math.hypot(a, b) > math.tan(p.floor_max_tilt_rad) or abs(c) > p.floor_max_offset_m:
+        return z
+    return z - (a * (pts[:, 0] - xy0[0]) + b * (pts[:, 1] - xy0[1]) + c)
 
 
 def obstacle_cells(
@@ -52,7 +85,8 @@ def obstacle_cells(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Cells (iy, ix) to mark from one frame (the camera with its depth image)."""
     pts = cam.points_world(stride=p.stride, max_depth_m=p.max_range_m)
-    keep = (pts[:, 2] > p.min_height_m) & (pts[:, 2] < p.max_height_m)
+    height = heights_above_floor(pts, p)
+    keep = (height > p.min_height_m) & (height < p.max_height_m)
     pts = pts[keep]
     if not len(pts):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)

@@ -164,3 +164,29 @@ def test_an_idle_navigator_ticks_at_rest_without_a_goal() -> None:
     out = nav.tick(0, Pose(1.0, 1.0, 0.0), cm)
     assert out.state == "idle"
     assert not np.any(out.cmd)
+
+
+def test_heights_are_measured_from_the_floor_the_frame_shows() -> None:
+    """The base's estimated pitch is 1.5° off: in the world the floor rises 10 cm at
+    4 m, over the 8 cm an obstacle needs. From the fitted floor, only the box stands."""
+    from services.navigation.depth import DepthParams, heights_above_floor
+
+    xs, ys = np.meshgrid(np.linspace(0.5, 4.0, 40), np.linspace(-1.5, 1.5, 20))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    bx, by = np.meshgrid(np.linspace(2.4, 2.6, 5), np.linspace(-0.2, 0.2, 8))
+    box = np.column_stack([bx.ravel(), by.ravel(), np.full(bx.size, 0.3)])
+    pts = np.vstack([floor, box])
+    pitch = math.radians(-1.5)  # about the camera at (0, 0, 0.6): what a wrong tilt does
+    c, s = math.cos(pitch), math.sin(pitch)
+    rel = pts - [0.0, 0.0, 0.6]
+    seen = np.column_stack(
+        [c * rel[:, 0] + s * rel[:, 2], rel[:, 1], -s * rel[:, 0] + c * rel[:, 2]]
+    )
+    seen += [0.0, 0.0, 0.6]
+    p = DepthParams()
+    assert np.max(seen[: len(floor), 2]) > p.min_height_m  # phantom obstacles on z alone
+    h = heights_above_floor(seen, p)
+    assert np.max(np.abs(h[: len(floor)])) < 0.01
+    assert np.allclose(h[len(floor) :], 0.3, atol=0.02)
+    # Too little floor in view: the world's z.
+    np.testing.assert_array_equal(heights_above_floor(seen[-60:], p), seen[-60:, 2])
