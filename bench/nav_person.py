@@ -4,7 +4,7 @@ The hall of seed 3 has 6 m of free floor ahead of the robot's start and 3 m to i
 The robot gets a goal 6 m straight ahead. `person_2` is moved (`dume/world/people_command`)
 to 1.2 m left of the path, 4.5 m ahead; once the robot has walked 0.3 m they step into the
 path at 1 m/s and stand there, and 1 s after the robot has stood still they step back out.
-Their position at every odom sample follows from those commands (straight legs at a
+Their position at every truth sample follows from those commands (straight legs at a
 known speed from known stamps; the sim applies each at its stamp). Figures: the closest
 approach of the footprint to them, the fastest and slowest 0.5 s mean speed while they
 have been within 2 m for that window and a 0.5 s reaction time before it, the length
@@ -24,9 +24,10 @@ import numpy as np
 from bench.nav_run import nav_stack, send_goal
 from common.bus import Latest
 from common.config import REPO_ROOT, Overrides, merged
+from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS, WORLD_PEOPLE_COMMAND
 from common.messages.navigation import NavStatus, PoseGoal
-from common.messages.sim import Odom, PersonCommand, RobotContact, WorldEvents
+from common.messages.sim import PersonCommand, RobotContact, StateTruth, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
 from deploy.stack import ProcessStack
@@ -40,7 +41,8 @@ SETTINGS = {
     "semantic_map.cameras": ["camera_head"],
 }
 WALK_MPS = 1.0
-WINDOW = 25  # odom samples: 0.5 s at 50 Hz
+WINDOW = 25  # samples: 0.5 s at 50 Hz
+SAMPLE_NS = 20_000_000  # the base's truth, every 20 ms
 Leg = Callable[[int], tuple[float, float] | None]
 
 
@@ -84,8 +86,9 @@ class PersonFigures:
     contacts: dict[str, int] = field(default_factory=dict)
 
 
-def _pose(m: Odom) -> Pose:
-    return Pose.of_odom(m)
+def _pose(m: StateTruth) -> Pose:
+    p = m.base_position_in_world
+    return Pose(p[0], p[1], yaw_of_quat_xyzw(m.base_orientation_xyzw))
 
 
 def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
@@ -97,11 +100,11 @@ def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
     into, out_of = start.yaw - math.pi / 2, start.yaw + math.pi / 2
     people.put(PersonCommand(stamp_ns=0, person_id="person_2", position=side, yaw=into))
     status: Latest[NavStatus] = s.bus.latest(s.keys.nav_status, NavStatus)
-    odom = s.bus.fifo(s.keys.odom, Odom, maxlen=200_000)
+    odom = s.bus.fifo(s.keys.state_truth, StateTruth, maxlen=200_000)  # measured on truth
     events = s.bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
     gx, gy = start.at(6.0, 0.0)
     reply = send_goal(s, PoseGoal(x=gx, y=gy, yaw=start.yaw))
-    samples: list[Odom] = []
+    samples: list[StateTruth] = []
     legs: list[Leg] = []
     t_in = t_out = 0
     still_since: int | None = None
@@ -109,6 +112,8 @@ def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
     done: NavStatus | None = None
     while time.monotonic() < deadline and reply.accepted:
         msg = odom.pop(timeout_s=1.0)
+        if msg is not None and msg.stamp_ns % SAMPLE_NS:
+            continue  # the truth ablation sends it with every state: keep 50 Hz
         if msg is not None:
             samples.append(msg)
             t = msg.stamp_ns
@@ -129,7 +134,7 @@ def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
         if st is not None and st.goal_id == reply.goal_id and st.state not in ("active", "idle"):
             done = st
             break
-    samples.extend(odom.drain())
+    samples.extend(m for m in odom.drain() if m.stamp_ns % SAMPLE_NS == 0)
     f = PersonFigures(state=done.state if done else reply.reason or "timeout (wall)")
     f.t_in_s, f.t_out_s = t_in / 1e9, t_out / 1e9
     for w in events.drain():

@@ -4,7 +4,8 @@
 dynamic locomotion, the head camera on (navigation's short-lived layer), the semantic map
 seeded from the world into a fresh database, navigation on `map_source="map"` (so the map's
 occupancy and people queryables are exercised), the WBC walking on navigation's cmd_vel.
-`NavRun` sends goals and watches every 50 Hz odom sample and the world's contact events
+`NavRun` sends goals and watches every 50 Hz sample of the base's truth (`state_truth`:
+the robot's own `odom` drifts when it estimates its base) and the world's contact events
 (truth, evaluation only): path length walked, closest approach of the footprint (arm
 stowed) to the static obstacles (oriented boxes, exact rectangle-to-rectangle distance)
 and to the people (their floor points at t = 0: people stand unless
@@ -24,13 +25,13 @@ from numpy.typing import NDArray
 
 from common.clients import NavClient, Refused
 from common.config import Overrides, merged
+from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
-from common.messages.sim import Odom, RobotContact, WorldEvents
+from common.messages.sim import RobotContact, StateTruth, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
 from deploy.stack import ProcessStack
-from services.navigation.grid import Pose
 
 Corners = NDArray[np.float64]  # (4, 2) m, world, counter-clockwise
 
@@ -102,6 +103,11 @@ def nav_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
         "wbc.initial_mode": "walk",
         "recording.enabled": False,
     }
+
+
+def _pose(m: StateTruth) -> tuple[float, float, float]:
+    p = m.base_position_in_world
+    return p[0], p[1], yaw_of_quat_xyzw(m.base_orientation_xyzw)
 
 
 def nav_stack(
@@ -177,20 +183,23 @@ class NavRun:
         self.people_xy = np.array([p.position for p in self.world.people]).reshape(-1, 2)
         self.fp = Footprint.stowed()
         self.status = bus.latest(keys.nav_status, NavStatus, history=4)
-        self.odom = bus.fifo(keys.odom, Odom, maxlen=200_000)
+        self.odom = bus.fifo(keys.state_truth, StateTruth, maxlen=200_000)
         self.events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
-        self.last: Odom | None = None
+        self.last: StateTruth | None = None
 
     def pose(self) -> tuple[float, float, float]:
+        """The base's true pose now (x, y, yaw)."""
         self._drain(None)
         if self.last is None:
             self.last = self.odom.pop(timeout_s=30.0)
         if self.last is None:
-            raise RuntimeError("no odom from the sim")
-        return Pose.of_odom(self.last)
+            raise RuntimeError("no state_truth from the sim")
+        return _pose(self.last)
 
     def _drain(self, g: GoalFigures | None) -> None:
         for m in self.odom.drain():
+            if m.stamp_ns % 20_000_000:
+                continue  # the truth ablation sends it with every state: keep 50 Hz
             if g is not None:
                 self._observe(m, g)
             self.last = m
@@ -199,10 +208,10 @@ class NavRun:
                 if g is not None and isinstance(e, RobotContact) and e.other != "floor":
                     g.contacts[e.other] = g.contacts.get(e.other, 0) + 1
 
-    def _observe(self, m: Odom, g: GoalFigures) -> None:
-        x, y, yaw = Pose.of_odom(m)
+    def _observe(self, m: StateTruth, g: GoalFigures) -> None:
+        x, y, yaw = _pose(m)
         if self.last is not None:
-            x0, y0, _ = Pose.of_odom(self.last)
+            x0, y0, _ = _pose(self.last)
             g.path_m += math.hypot(x - x0, y - y0)
         fp = footprint_corners(x, y, yaw, self.fp)
         reach = self.fp.circumscribed + g.closest_obstacle_m
