@@ -24,7 +24,6 @@ import numpy as np
 from bench.nav_run import nav_stack, send_goal
 from common.bus import Latest
 from common.config import REPO_ROOT, Overrides, merged
-from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS, WORLD_PEOPLE_COMMAND
 from common.messages.navigation import NavStatus, PoseGoal
 from common.messages.sim import PersonCommand, RobotContact, StateTruth, WorldEvents
@@ -86,11 +85,6 @@ class PersonFigures:
     contacts: dict[str, int] = field(default_factory=dict)
 
 
-def _pose(m: StateTruth) -> Pose:
-    p = m.base_position_in_world
-    return Pose(p[0], p[1], yaw_of_quat_xyzw(m.base_orientation_xyzw))
-
-
 def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
     """Run the scenario on a started navigation stack with perception; its figures."""
     world = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 30.0)
@@ -149,7 +143,7 @@ def person_step_in(s: ProcessStack, timeout_s: float = 1500.0) -> PersonFigures:
         return next((p for leg in legs if (p := leg(t)) is not None), side)
 
     dist = np.array([
-        float(distance_to_footprint(_pose(m), fp, np.array([person_at(m.stamp_ns)]))[0])
+        float(distance_to_footprint(Pose.of_odom(m), fp, np.array([person_at(m.stamp_ns)]))[0])
         for m in samples
     ])  # fmt: skip
     f.closest_m = float(dist.min())

@@ -25,13 +25,13 @@ from numpy.typing import NDArray
 
 from common.clients import NavClient, Refused
 from common.config import Overrides, merged
-from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
 from common.messages.sim import RobotContact, StateTruth, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
 from deploy.stack import ProcessStack
+from services.navigation.grid import Pose
 
 Corners = NDArray[np.float64]  # (4, 2) m, world, counter-clockwise
 
@@ -103,11 +103,6 @@ def nav_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
         "wbc.initial_mode": "walk",
         "recording.enabled": False,
     }
-
-
-def _pose(m: StateTruth) -> tuple[float, float, float]:
-    p = m.base_position_in_world
-    return p[0], p[1], yaw_of_quat_xyzw(m.base_orientation_xyzw)
 
 
 def nav_stack(
@@ -194,7 +189,7 @@ class NavRun:
             self.last = self.odom.pop(timeout_s=30.0)
         if self.last is None:
             raise RuntimeError("no state_truth from the sim")
-        return _pose(self.last)
+        return Pose.of_odom(self.last)
 
     def _drain(self, g: GoalFigures | None) -> None:
         for m in self.odom.drain():
@@ -209,9 +204,9 @@ class NavRun:
                     g.contacts[e.other] = g.contacts.get(e.other, 0) + 1
 
     def _observe(self, m: StateTruth, g: GoalFigures) -> None:
-        x, y, yaw = _pose(m)
+        x, y, yaw = Pose.of_odom(m)
         if self.last is not None:
-            x0, y0, _ = _pose(self.last)
+            x0, y0, _ = Pose.of_odom(self.last)
             g.path_m += math.hypot(x - x0, y - y0)
         fp = footprint_corners(x, y, yaw, self.fp)
         reach = self.fp.circumscribed + g.closest_obstacle_m

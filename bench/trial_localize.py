@@ -25,8 +25,9 @@ import numpy as np
 from bench.trial_driver import Driver, Script
 from bench.trial_random import random_walk
 from common.config import LocalizationSettings
-from common.geometry import wrap_angle, yaw_of_quat_xyzw
+from common.geometry import wrap_angle
 from common.keys import WORLD_DESCRIPTION
+from common.map_frame import odom_pose
 from common.messages import as_numpy
 from common.messages.sim import LaserScan, Odom, StateTruth
 from common.messages.world import WorldDescription
@@ -35,11 +36,6 @@ from services.localization.matcher import LikelihoodField, scan_points
 
 Figures = dict[str, Any]
 SEEKING_S = 1.0  # the first scans, while an off start pose is sought, are counted apart
-
-
-def _pose(msg: Odom | StateTruth) -> tuple[float, float, float]:
-    p = msg.base_position_in_world
-    return (p[0], p[1], yaw_of_quat_xyzw(msg.base_orientation_xyzw))
 
 
 def localize(
@@ -83,14 +79,14 @@ def localize(
                     s.beam_stride,
                 )
                 t0 = time.perf_counter()
-                est = loc.update(pts, _pose(odom))
+                est = loc.update(pts, odom_pose(odom))
                 wall.append(time.perf_counter() - t0)
                 statuses[est.status] = statuses.get(est.status, 0) + 1
                 if est.refused:
                     key = est.refused.split(" (")[0].split(" of the beams")[0]
                     key = "too few beams on the map" if "%" in key else "jumped from the odometry"
                     refusals[key] = refusals.get(key, 0) + 1
-                tx, ty, tyaw = _pose(truth)
+                tx, ty, tyaw = odom_pose(truth)
                 e_m = math.hypot(est.map_base[0] - tx, est.map_base[1] - ty)
                 e_rad = abs(wrap_angle(est.map_base[2] - tyaw))
                 errors.append((scan.stamp_ns / 1e9, e_m, e_rad))

@@ -21,12 +21,18 @@ import numpy as np
 
 from common.bus import Bus, WaitTimeout
 from common.config import Config
-from common.geometry import FloatArray, T_of_pose, make_T, rot_z, yaw_of
+from common.geometry import FloatArray, T_of_pose, make_T, rot_z, yaw_of, yaw_of_quat_xyzw
 from common.keys import RobotKeys
 from common.messages.localization import Localization, LocalizationStatus
-from common.messages.sim import Odom
+from common.messages.sim import Odom, StateTruth
 
 NAME = "localization"
+
+
+def odom_pose(msg: Odom | StateTruth) -> tuple[float, float, float]:
+    """(x, y, yaw) of a base pose message (the odometry's, or the sim's truth)."""
+    p = msg.base_position_in_world
+    return p[0], p[1], yaw_of_quat_xyzw(msg.base_orientation_xyzw)
 
 
 class MapFrame:
@@ -85,5 +91,7 @@ class MapFrame:
 
     def pose(self, odom: Odom, t_ns: int) -> tuple[float, float, float]:
         """(x, y, yaw) of the base in the map."""
+        if not self.enabled:
+            return odom_pose(odom)
         T = self.base(odom, t_ns)
         return float(T[0, 3]), float(T[1, 3]), yaw_of(T[:3, :3])

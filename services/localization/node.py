@@ -20,13 +20,14 @@ with status `uncertain`.
 from __future__ import annotations
 
 import contextlib
+from typing import TypeVar
 
 import numpy as np
 
-from common.bus import BusError, WaitTimeout
-from common.geometry import yaw_of_quat_xyzw
+from common.bus import BusError, Latest, WaitTimeout
 from common.keys import MAP_OCCUPANCY, as_of
 from common.lockstep import PeriodicTicker
+from common.map_frame import odom_pose
 from common.messages import as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.localization import Localization
@@ -38,6 +39,7 @@ from services.localization.matcher import LikelihoodField, scan_points
 from services.localization.telemetry import LocalizationLogger
 
 NAME = "localization"
+M = TypeVar("M", LaserScan, Odom)
 #: Wall seconds a tick waits for its scan and odom.
 INPUT_TIMEOUT_S = 30.0
 
@@ -106,13 +108,12 @@ class LocalizationNode:
             np.asarray(scan.T_base_lidar).reshape(4, 4),
             self.s.beam_stride,
         )
-        p = odom.base_position_in_world
-        est = self.loc.update(pts, (p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)))
+        est = self.loc.update(pts, odom_pose(odom))
         self.last = est
         self._publish(b, est, est.status, est.refused)
         self.logger.log(b, est, pts)
 
-    def _input(self, latest, b: int, what: str):  # type: ignore[no-untyped-def]
+    def _input(self, latest: Latest[M], b: int, what: str) -> M | None:
         with contextlib.suppress(WaitTimeout):
             latest.wait_stamp(b, INPUT_TIMEOUT_S)
         msg = latest.at(b)

@@ -27,7 +27,7 @@ import numpy as np
 
 from common.bus import Bus, BusError, NoReply, RemoteError
 from common.clients import ArmClient, NavClient
-from common.geometry import inv_T, yaw_of_quat_xyzw
+from common.geometry import inv_T
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_OCCUPANCY,
@@ -38,7 +38,7 @@ from common.keys import (
     map_artifact,
     map_person,
 )
-from common.map_frame import MapFrame
+from common.map_frame import MapFrame, odom_pose
 from common.messages import PayloadError
 from common.messages.navigation import (
     NavGoal,
@@ -68,11 +68,6 @@ WRIST = "camera_wrist"
 _NOT_FOUND = ("unknown_id", "invalid")
 #: Wall seconds the floor plan's supports may take (the map's first answer asks the sim).
 SUPPORTS_TIMEOUT_S = 10.0
-
-
-def _odom_pose(odom: Odom) -> tuple[float, float, float]:
-    p = odom.base_position_in_world
-    return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
 
 class BusRobot:
@@ -203,14 +198,14 @@ class BusRobot:
         odom = self.odom.at(self._t)
         if odom is None:
             return None
-        x, y, _ = self.map_frame.pose(odom, self._t) if self.map_frame else _odom_pose(odom)
+        x, y, _ = self.map_frame.pose(odom, self._t) if self.map_frame else odom_pose(odom)
         return x, y
 
     def robot_yaw(self) -> float | None:
         odom = self.odom.at(self._t)
         if odom is None:
             return None
-        return (self.map_frame.pose(odom, self._t) if self.map_frame else _odom_pose(odom))[2]
+        return (self.map_frame.pose(odom, self._t) if self.map_frame else odom_pose(odom))[2]
 
     # -- navigation -----------------------------------------------------------------------
 

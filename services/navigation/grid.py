@@ -18,10 +18,10 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from common.geometry import yaw_of_quat_xyzw
+from common.map_frame import odom_pose
 from common.messages import semantic_map, world
 from common.messages.arrays import as_numpy
-from common.messages.sim import Odom
+from common.messages.sim import Odom, StateTruth
 from common.robot import Footprint
 
 BoolGrid = NDArray[np.bool_]
@@ -36,10 +36,9 @@ class Pose(NamedTuple):
     yaw: float
 
     @classmethod
-    def of_odom(cls, odom: Odom) -> Pose:
-        """The base's pose on the floor from its odometry (the yaw about z)."""
-        p = odom.base_position_in_world
-        return cls(p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw))
+    def of_odom(cls, odom: Odom | StateTruth) -> Pose:
+        """The base's pose on the floor from its odometry (or the sim's truth)."""
+        return cls(*odom_pose(odom))
 
 
 @dataclass(frozen=True)

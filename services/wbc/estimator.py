@@ -11,10 +11,11 @@ Two parts, run every controller tick (dt s):
    turns û towards u, and ḃ = −ki e learns the gyro's bias on the axes gravity observes.
    The centripetal part of f (ω × v, v from part 2) is taken out first, and the
    accelerometer is trusted only while |f| is within `gravity_gate` of g (an impact, a
-   push). Yaw is unobservable here: it drifts with the residual z
-   bias, measured at rest before the robot moves (`calibrate`: the mean gyro is its bias,
-   the mean specific force sets roll and pitch) and then frozen; the localization
-   against the map corrects it. An accelerometer's constant bias looks like a tilt at
+   push). Yaw is unobservable here: it drifts with the residual z bias. The bias is
+   measured whenever the robot stands still on four feet (`calibrate`: the mean of the
+   gyro less the base's true rate, which the legs give; the first time, the mean
+   specific force also sets roll and pitch); the localization against the map corrects
+   the yaw. An accelerometer's constant bias looks like a tilt at
    rest: 0.1 m/s² is 0.6°, which no filter on these sensors removes.
 2. `LegKalman`, a linear Kalman filter (as the MIT Cheetah's and Unitree's legged
    estimators) over x = [p (3), v (3), p_foot (4 × 3)] in odom, given R:
@@ -112,14 +113,12 @@ class TiltFilter:
         gyro: FloatArray,
         specific_force: FloatArray,
         dt: float,
-        kp: float | None = None,
         velocity: FloatArray | None = None,
     ) -> None:
-        """Integrate the gyro over dt; pull towards gravity with `kp` (default `tilt_kp`).
-        With the base's `velocity` (odom), the centripetal part of the specific force,
-        ω × v in the body, is taken out first: a steady turn is not a tilt."""
+        """Integrate the gyro over dt; pull towards gravity at `tilt_kp`. With the base's
+        `velocity` (odom), the centripetal part of the specific force, ω × v in the body,
+        is taken out first: a steady turn is not a tilt."""
         s = self.s
-        kp = s.tilt_kp if kp is None else kp
         w = np.asarray(gyro, float) - self.bias
         self.omega = w
         f = np.asarray(specific_force, float)
@@ -129,7 +128,7 @@ class TiltFilter:
         if norm > 0.0 and abs(norm - G) < s.gravity_gate:
             e = np.cross(f / norm, self.R.T @ E_Z)
             self.bias -= s.tilt_ki * e * dt
-            w = w + kp * e
+            w = w + s.tilt_kp * e
         self.R = self.R @ np.asarray(pin.exp3(w * dt))
 
 
@@ -192,9 +191,8 @@ class LegKalman:
         A = np.zeros((3 * N_FEET, 6))
         b = (jq - rolling).ravel()
         for i in range(N_FEET):
-            px, py, pz = p[i]
             A[3 * i : 3 * i + 3, 0:3] = -np.eye(3)
-            A[3 * i : 3 * i + 3, 3:6] = [[0.0, -pz, py], [pz, 0.0, -px], [-py, px, 0.0]]
+            A[3 * i : 3 * i + 3, 3:6] = pin.skew(p[i])  # p × ω
         return np.asarray(np.linalg.lstsq(A, b, rcond=None)[0])
 
     def reset(self, position: FloatArray, rel_position: FloatArray) -> None:
@@ -297,7 +295,7 @@ class LegInertialEstimator:
         if not (self.calibrating or standing) and self._calib_left != self.s.calibrate_s:
             self.tilt.discard_calibration()  # walking: a window left open is void
             self._calib_left = self.s.calibrate_s
-        self.tilt.update(gyro, specific_force, dt, None, self.kf.velocity)
+        self.tilt.update(gyro, specific_force, dt, self.kf.velocity)
         self._omega_used = self.tilt.R @ self.tilt.omega  # what the model's twist will use
         a = self.tilt.R @ np.asarray(specific_force, float) - G * E_Z
         self.kf.predict(a, dt, contact)
