@@ -99,7 +99,8 @@ class LocalizationNode:
         assert self.loc is not None
         scan, odom = self._input(self.scans, b, "scan"), self._input(self.odom, b, "odom")
         if scan is None or odom is None:
-            self._publish(b, self.last, "uncertain", f"no {'scan' if scan is None else 'odom'}")
+            status = "uncertain" if self.loc.status == "ok" else self.loc.status
+            self._publish(b, self.last, status, f"no {'scan' if scan is None else 'odom'}")
             return
         pts = scan_points(
             np.asarray(as_numpy(scan.ranges), dtype=float),
@@ -126,11 +127,10 @@ class LocalizationNode:
         return msg
 
     def _publish(self, b: int, est: Estimate | None, status: str, reason: str) -> None:
-        if est is None:
+        if est is None:  # no scan matched yet: odom starts at the start pose, in the map
             assert self.loc is not None
-            start = self.loc.start
             cov = tuple(float(x) for x in self.loc.covariance.ravel())
-            mo, mb = start, start
+            mo, mb = (0.0, 0.0, 0.0), self.loc.start
         else:
             cov = tuple(float(x) for x in est.covariance.ravel())
             mo, mb = est.map_odom, est.map_base
