@@ -5,7 +5,9 @@ lidar's rate (`common.messages.localization`). `MapFrame.wait(t)` blocks (bounde
 the localization due at t is in: its tick d, the newest multiple of its period with
 d + latency ≤ t, as every lockstep consumer of a periodic producer does; `at(t)` is that
 sample; `base(odom, t)` the base in the map as (4 × 4) and `pose(odom, t)` as (x, y,
-yaw). `status(t)` says whether the robot knows where it is (`lost`: navigation stops).
+yaw); `to_odom(H, capture, now)` a pose planned in the map from a capture, back in odom
+(the mission's grasps). `status(t)` says whether the robot knows where it is (`lost`:
+navigation stops).
 
 Off (`enabled` false) when the stack runs no localization (`localization` is not a
 lockstep participant: the truth ablation, where odom is the map): T_map_odom is the
@@ -16,17 +18,19 @@ identity too (odometry starts at the start pose in the map), status `initialisin
 from __future__ import annotations
 
 import contextlib
+import logging
 
 import numpy as np
 
 from common.bus import Bus, WaitTimeout
 from common.config import Config
-from common.geometry import FloatArray, T_of_pose, make_T, rot_z, yaw_of, yaw_of_quat_xyzw
+from common.geometry import FloatArray, T_of_pose, inv_T, make_T, rot_z, yaw_of, yaw_of_quat_xyzw
 from common.keys import RobotKeys
 from common.messages.localization import Localization, LocalizationStatus
 from common.messages.sim import Odom, StateTruth
 
 NAME = "localization"
+log = logging.getLogger(__name__)
 
 
 def odom_pose(msg: Odom | StateTruth) -> tuple[float, float, float]:
@@ -36,14 +40,16 @@ def odom_pose(msg: Odom | StateTruth) -> tuple[float, float, float]:
 
 
 class MapFrame:
-    def __init__(self, bus: Bus, keys: RobotKeys, config: Config) -> None:
+    def __init__(self, bus: Bus, keys: RobotKeys, config: Config, history: int = 64) -> None:
+        """history: samples kept (at the localization's 10 Hz, 64 is 6.4 s); a consumer
+        that looks back further (the mission, at a grasp plan's capture) keeps more."""
         p = config.time.participants.get(NAME)
         self.enabled = p is not None
         self.period_ns = round(p.period_s * 1e9) if p is not None else 0
         self.latency_ns = round(p.latency_s * 1e9) if p is not None else 0
         self.lockstep = config.time.mode == "lockstep"
         self._latest = (
-            bus.latest(keys.localization, Localization, history=64) if self.enabled else None
+            bus.latest(keys.localization, Localization, history=history) if self.enabled else None
         )
 
     def due(self, t_ns: int) -> int:
@@ -83,6 +89,18 @@ class MapFrame:
             return np.eye(4)
         x, y, yaw = msg.map_odom
         return make_T(rot_z(yaw), (x, y, 0.0))
+
+    def to_odom(self, H_map: FloatArray, capture_ns: int, now_ns: int) -> FloatArray:
+        """A map pose planned from what was seen at `capture_ns`, in odom (4 × 4): with the
+        correction that placed it (due at the capture), so the pose stays where the base
+        saw it; a correction made since (a few cm) would move it off the thing seen. The
+        newest correction (with a warning) when the capture's is no longer kept."""
+        if self.at(capture_ns) is None and self.at(now_ns) is not None:
+            log.warning(
+                "no localization kept from t=%.2f s: the newest correction", capture_ns / 1e9
+            )
+            capture_ns = now_ns
+        return inv_T(self.map_odom(capture_ns)) @ np.asarray(H_map, dtype=float)
 
     def base(self, odom: Odom, t_ns: int) -> FloatArray:
         """T_map_base (4 × 4) of an odom sample, with the correction in effect at t."""

@@ -71,6 +71,11 @@ def subscribe(bus: Bus, key: str, inbox: Inbox) -> zenoh.Subscriber[None]:
     return bus.session.declare_subscriber(key, lambda s: inbox.push(s.payload.to_bytes()))
 
 
+#: Localization samples the mission keeps (60 s at 10 Hz): a grasp plan's reaches (the
+#: lift, the back-out) go to odom with the correction at its capture, seconds before.
+MAP_FRAME_HISTORY = 600
+
+
 class MissionNode:
     """The parts, wired from the config and the bus, and the loop; see the module docstring."""
 
@@ -81,8 +86,9 @@ class MissionNode:
         latency = cfg.time.latencies_ns()
         bus, keys = svc.bus, svc.keys
         self.robot = BusRobot(
-            bus, keys, m.query_timeout_s, latency, m.sighting_gate_m, MapFrame(bus, keys, cfg)
-        )
+            bus, keys, m.query_timeout_s, latency, m.sighting_gate_m,
+            MapFrame(bus, keys, cfg, history=MAP_FRAME_HISTORY),
+        )  # fmt: skip
         self.gate = UpstreamGate(bus, keys, cfg)
         self.gate.watch("navigation", self.robot.nav)
         self.gate.watch("perception", self.robot.detections)

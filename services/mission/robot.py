@@ -27,7 +27,6 @@ import numpy as np
 
 from common.bus import Bus, BusError, NoReply, RemoteError
 from common.clients import ArmClient, NavClient
-from common.geometry import inv_T
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_OCCUPANCY,
@@ -238,10 +237,13 @@ class BusRobot:
 
     def send_arm_goal(self, goal: ArmGoal) -> str:
         """Send an arm goal; a world-frame reach, planned in the map, goes in the WBC's
-        world, the odometry's frame (T_odom_map with the correction due now)."""
+        world, the odometry's frame, with the correction that placed what it was planned
+        from: T_odom_map due at the goal's stamp (the capture). What the camera saw was
+        seen from the base, so odom at the capture holds it exactly; a correction the
+        localization made since (a few cm) would move the grasp off the object."""
         if isinstance(goal, Reach) and goal.frame == "world" and self.map_frame is not None:
-            T_odom_map = inv_T(self.map_frame.map_odom(self._t))
-            H = T_odom_map @ np.asarray(goal.H, dtype=float).reshape(4, 4)
+            H_map = np.asarray(goal.H, dtype=float).reshape(4, 4)
+            H = self.map_frame.to_odom(H_map, goal.stamp_ns, self._t)
             goal = msgspec.structs.replace(goal, H=tuple(H.ravel().tolist()))
         return self._arm.send(goal, effective_ns=self._effective)
 
