@@ -8,16 +8,22 @@ error's p95 (m), and at the end: the position error in the floor plane (m), the 
 error (deg), the distance the base truly walked (m) and the drift as a percentage of
 it. Odometry drifts by design (its x, y and yaw are integrated); the drift figure is
 what a localization must take up.
+
+`LocalizationErrors.add(localization, truth)` does the same for the localization's
+base in the map (`Localization.map_base`, at its scan's stamp): the position error's
+p50, p95 and max (m), the heading error's p95 and max (deg), and how many ticks were not
+`ok` (and `lost`). `StampPairs` pairs either estimate with the truth by stamp.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
-from common.geometry import quat_xyzw_to_matrix, wrap_angle, yaw_of
+from common.geometry import quat_xyzw_to_matrix, wrap_angle, yaw_of, yaw_of_quat_xyzw
+from common.messages.localization import Localization
 from common.messages.sim import Odom, StateTruth
 
 
@@ -69,33 +75,83 @@ class EstimateErrors:
         }
 
 
-class StampPairs:
-    """Odom and truth samples as they come, in any order: each pair with one stamp goes to
-    `errors` once both are in (from `start_ns` on); an unmatched sample is dropped after
-    `horizon` newer ones of its kind."""
+class LocalizationErrors:
+    """The localization-versus-truth errors over a run (module docstring)."""
 
-    def __init__(self, errors: EstimateErrors, start_ns: int = 0, horizon: int = 64) -> None:
-        self.errors, self.start_ns, self.horizon = errors, start_ns, horizon
-        self._odom: dict[int, Odom] = {}
+    def __init__(self) -> None:
+        self._position: list[float] = []
+        self._heading: list[float] = []
+        self.not_ok = 0
+        self.lost = 0
+
+    @property
+    def n(self) -> int:
+        return len(self._position)
+
+    def add(self, loc: Localization, truth: StateTruth) -> None:
+        if loc.stamp_ns != truth.stamp_ns:
+            raise ValueError(f"localization at {loc.stamp_ns} ns, truth at {truth.stamp_ns} ns")
+        x, y, yaw = loc.map_base
+        p = truth.base_position_in_world
+        self._position.append(math.hypot(x - p[0], y - p[1]))
+        yaw_true = yaw_of_quat_xyzw(truth.base_orientation_xyzw)
+        self._heading.append(abs(math.degrees(wrap_angle(yaw - yaw_true))))
+        self.not_ok += loc.status != "ok"
+        self.lost += loc.status == "lost"
+
+    def figures(self) -> dict[str, Any]:
+        if not self._position:
+            return {"samples": 0}
+        pos, head = np.asarray(self._position), np.asarray(self._heading)
+        return {
+            "samples": self.n,
+            "position_p50_m": round(float(np.percentile(pos, 50)), 4),
+            "position_p95_m": round(float(np.percentile(pos, 95)), 4),
+            "position_max_m": round(float(pos.max()), 4),
+            "heading_p95_deg": round(float(np.percentile(head, 95)), 3),
+            "heading_max_deg": round(float(head.max()), 3),
+            "not_ok": self.not_ok,
+            "lost": self.lost,
+        }
+
+
+E = TypeVar("E", Odom, Localization)
+
+
+class Errors(Protocol):
+    def add(self, estimate: Any, truth: StateTruth) -> None: ...
+
+    def figures(self) -> dict[str, Any]: ...
+
+
+class StampPairs(Generic[E]):
+    """Estimates (odom or localization) and truth samples as they come, in any order: each
+    pair with one stamp goes to `errors` once both are in (from `start_ns` on); an
+    unmatched sample is dropped after `horizon` newer ones of its kind."""
+
+    def __init__(self, errors: Errors, start_ns: int = 0, horizon: int = 64) -> None:
+        self.errors: Errors = errors
+        self.start_ns, self.horizon = start_ns, horizon
+        self._estimate: dict[int, E] = {}
         self._truth: dict[int, StateTruth] = {}
 
-    def odom(self, msg: Odom) -> None:
+    def estimate(self, msg: E) -> None:
         truth = self._truth.pop(msg.stamp_ns, None)
         if truth is not None:
             self._pair(msg, truth)
         else:
-            self._keep(self._odom, msg.stamp_ns, msg)
+            self._keep(self._estimate, msg.stamp_ns, msg)
 
     def truth(self, msg: StateTruth) -> None:
-        odom = self._odom.pop(msg.stamp_ns, None)
-        if odom is not None:
-            self._pair(odom, msg)
+        estimate = self._estimate.pop(msg.stamp_ns, None)
+        if estimate is not None:
+            self._pair(estimate, msg)
         else:
             self._keep(self._truth, msg.stamp_ns, msg)
 
-    def _pair(self, odom: Odom, truth: StateTruth) -> None:
-        if odom.stamp_ns >= self.start_ns:
-            self.errors.add(odom, truth)
+    def _pair(self, estimate: E, truth: StateTruth) -> None:
+        if estimate.stamp_ns >= self.start_ns:
+            self.errors.add(estimate, truth)
 
     def _keep(self, pending: dict[int, Any], stamp: int, msg: Any) -> None:
         pending[stamp] = msg

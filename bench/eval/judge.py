@@ -150,6 +150,8 @@ class WorldResult(msgspec.Struct, kw_only=True):
     exited by the end of the run. recording: the run's recording folder ("" when off).
     digest: the run's fingerprint (`run_digest`): the same seed gives the same digest.
     odometry: how far the robot's `odom` was from the truth over the request.
+    localization: how far its localization's base in the map was (none for the truth
+    ablation).
     """
 
     world: str
@@ -184,6 +186,8 @@ class WorldResult(msgspec.Struct, kw_only=True):
     digest: str = ""
     #: The robot's own estimate of its base against the truth (`EstimateErrors.figures`).
     odometry: dict[str, float] = msgspec.field(default_factory=dict)
+    #: Its localization against the truth (`LocalizationErrors.figures`).
+    localization: dict[str, float] = msgspec.field(default_factory=dict)
 
     @property
     def succeeded(self) -> bool:
@@ -226,6 +230,8 @@ class MissionRecord:
     trajectory: list[tuple[float, ...]] = field(default_factory=list)
     #: The robot's odometry against the truth over the request (`EstimateErrors`).
     odometry: dict[str, Any] = field(default_factory=dict)
+    #: Its localization against the truth over the request (`LocalizationErrors`).
+    localization: dict[str, Any] = field(default_factory=dict)
 
 
 #: The trajectory's sample period in a `MissionRecord` (10 Hz).
@@ -284,4 +290,5 @@ def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription
     result.drops = len(events_of(record.events, "drop"))
     result.digest = run_digest(record)
     result.odometry = dict(record.odometry)
+    result.localization = dict(record.localization)
     return result

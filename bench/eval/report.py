@@ -73,6 +73,27 @@ def _odom(r: WorldResult, key: str) -> str:
     return "-" if x is None else f"{x:g}"
 
 
+def _located(r: WorldResult, key: str, scale: float = 1.0) -> str:
+    """One of the localization's figures for the table ("-" when it did not run)."""
+    x = r.localization.get(key)
+    return "-" if x is None else f"{x * scale:.3g}"
+
+
+def localization_summary(results: Sequence[WorldResult]) -> str:
+    """The localization's worst world, for the summary ("" when it did not run)."""
+    located = [r for r in results if r.localization.get("samples")]
+    if not located:
+        return ""
+    worst = max(located, key=lambda r: r.localization["position_p95_m"])
+    heading = max(r.localization["heading_p95_deg"] for r in located)
+    lost = sum(int(r.localization.get("lost", 0)) for r in located)
+    return (
+        f"Localization against the truth: position p95 ≤ "
+        f"{100 * worst.localization['position_p95_m']:.1f} cm in every world (worst: seed "
+        f"{worst.world_seed}), heading p95 ≤ {heading:.2f}°; {lost} ticks lost."
+    )
+
+
 def report_markdown(
     settings: Mapping[str, Any], summary: Mapping[str, Any], results: Sequence[WorldResult]
 ) -> str:
@@ -112,6 +133,7 @@ def report_markdown(
         f"Real-time factor (sim / wall, over the missions): {summary['rtf']:.2f}. "
         f"Contacts with static obstacles: {summary['contacts_static']}; "
         f"objects dropped: {summary['drops']}.",
+        *(["", line] if (line := localization_summary(results)) else []),
         "",
         "## Failures",
         "",
@@ -126,8 +148,9 @@ def report_markdown(
         "## Worlds",
         "",
         "| seed | object → person | truth | mission | agree | stage reached | sim s | wall s "
-        "| rtf | contacts | drops | odom drift % | odom error m |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rtf | contacts | drops | odom drift % | odom error m | loc p95 cm | loc max cm "
+        "| loc heading p95 ° |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         mission = r.mission_state + (f" ({r.mission_reason})" if r.mission_reason else "")
@@ -135,7 +158,9 @@ def report_markdown(
             f"| {r.world_seed} | {r.object} → {r.person} | {r.outcome} | {mission or '-'} "
             f"| {'yes' if r.agree else 'no'} | {r.stage_reached or '-'} | {r.sim_time_s:.1f} "
             f"| {r.wall_time_s:.0f} | {r.rtf:.2f} | {r.contacts_static} | {r.drops} "
-            f"| {_odom(r, 'drift_pct')} | {_odom(r, 'position_error_m')} |"
+            f"| {_odom(r, 'drift_pct')} | {_odom(r, 'position_error_m')} "
+            f"| {_located(r, 'position_p95_m', 100)} | {_located(r, 'position_max_m', 100)} "
+            f"| {_located(r, 'heading_p95_deg')} |"
         )
     lines += ["", "## Plots", "", *(f"![{p}]({p})\n" for p in PLOTS)]
     return "\n".join(lines)

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
-from bench.estimate_errors import EstimateErrors, StampPairs
+from bench.estimate_errors import EstimateErrors, LocalizationErrors, StampPairs
 from bench.eval.judge import (
     TERMINAL,
     TRAJECTORY_EVERY_NS,
@@ -45,6 +45,7 @@ from common.keys import (
     RobotKeys,
 )
 from common.lifelines import Dependencies
+from common.messages.localization import Localization
 from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
 from common.messages.perception import Detections
 from common.messages.semantic_map import MapEntity, MapListing
@@ -179,7 +180,7 @@ def watch_mission(
             record.start_ns = record.end_ns = now.stamp_ns if now else 0
             publisher.put(request)
         wall0 = time.perf_counter()
-        poses.pairs.start_ns = record.start_ns
+        poses.pairs.start_ns = poses.located.start_ns = record.start_ns
         _follow(record, statuses, events, clock, poses, timeout_s, on_progress, deps)
         record.wall_s = time.perf_counter() - wall0
         lost = record.ended.startswith(DEPENDENCY_LOST)
@@ -190,7 +191,8 @@ def watch_mission(
     finally:
         record.wall_s = record.wall_s or time.perf_counter() - wall0
         record.odometry = poses.pairs.errors.figures()
-        for sub in (statuses, events, clock, poses.truth, poses.odom):
+        record.localization = poses.located.errors.figures()
+        for sub in (statuses, events, clock, poses.truth, poses.odom, poses.localization):
             sub.undeclare()
         alive.undeclare()
         publisher.undeclare()
@@ -267,20 +269,26 @@ def _follow(
 
 
 class _Poses:
-    """The base's truth and the robot's odometry as they come: the truth's trajectory,
-    and the two paired by stamp for the odometry's errors."""
+    """The base's truth, the robot's odometry and its localization as they come: the
+    truth's trajectory, and each estimate paired with the truth by stamp for its errors
+    (no localization samples in the truth ablation, which runs none)."""
 
     def __init__(self, bus: Bus, keys: RobotKeys) -> None:
         self.truth = bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 20)
         self.odom = bus.fifo(keys.odom, Odom, maxlen=1 << 20)
-        self.pairs = StampPairs(EstimateErrors())
+        self.localization = bus.fifo(keys.localization, Localization, maxlen=1 << 16)
+        self.pairs: StampPairs[Odom] = StampPairs(EstimateErrors())
+        self.located: StampPairs[Localization] = StampPairs(LocalizationErrors())
 
     def sample(self, record: MissionRecord) -> None:
         """Keep the true pose every `TRAJECTORY_EVERY_NS` from the request on."""
         for o in self.odom.drain():
-            self.pairs.odom(o)
+            self.pairs.estimate(o)
+        for loc in self.localization.drain():
+            self.located.estimate(loc)
         for t in self.truth.drain():
             self.pairs.truth(t)
+            self.located.truth(t)
             if t.stamp_ns >= record.start_ns and t.stamp_ns % TRAJECTORY_EVERY_NS == 0:
                 record.trajectory.append(
                     (t.stamp_ns, *t.base_position_in_world, *t.base_orientation_xyzw)

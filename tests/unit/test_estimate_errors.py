@@ -1,5 +1,5 @@
-"""The odometry-versus-truth figures: drift over distance, tilt and velocity errors, and
-pairs matched by stamp whichever side comes first."""
+"""The odometry-versus-truth figures: drift over distance, tilt and velocity errors; the
+localization's percentiles; and pairs matched by stamp whichever side comes first."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import math
 import pinocchio as pin
 import pytest
 
-from bench.estimate_errors import EstimateErrors, StampPairs
+from bench.estimate_errors import EstimateErrors, LocalizationErrors, StampPairs
+from common.messages.localization import Localization
 from common.messages.sim import Odom, StateTruth
 
 MS = 1_000_000
@@ -60,12 +61,43 @@ def test_pairs_match_by_stamp_in_any_order_and_mismatches_are_refused() -> None:
     e = EstimateErrors()
     pairs = StampPairs(e, start_ns=20 * MS)
     pairs.truth(truth(0, 0.0))  # before the start: paired, not counted
-    pairs.odom(odom(0, 0.0))
-    pairs.odom(odom(20 * MS, 0.01))  # odom first
+    pairs.estimate(odom(0, 0.0))
+    pairs.estimate(odom(20 * MS, 0.01))  # odom first
     pairs.truth(truth(20 * MS, 0.01))
     pairs.truth(truth(40 * MS, 0.02))  # truth first
-    pairs.odom(odom(40 * MS, 0.02))
+    pairs.estimate(odom(40 * MS, 0.02))
     pairs.truth(truth(60 * MS, 0.03))  # never matched
     assert e.n == 2
     with pytest.raises(ValueError, match="odom at"):
         e.add(odom(0, 0.0), truth(MS, 0.0))
+
+
+def located(t: int, x: float, yaw: float, status: str = "ok") -> Localization:
+    return Localization(
+        t,
+        (0.0, 0.0, 0.0),
+        (x, 0.0, yaw),
+        (0.0,) * 9,
+        status,  # type: ignore[arg-type]
+        1.0,
+    )
+
+
+def test_localization_errors_are_percentiles_of_the_map_pose_against_truth() -> None:
+    e = LocalizationErrors()
+    pairs = StampPairs(e)
+    for k in range(100):  # 1 cm off, 0.1° off; every 20th tick 6 cm and 1° off, lost
+        t = k * 100 * MS
+        bad = k % 20 == 19
+        off, yaw = (0.06, 1.0) if bad else (0.01, 0.1)
+        pairs.estimate(located(t, 0.1 * k + off, math.radians(yaw), "lost" if bad else "ok"))
+        pairs.truth(truth(t, 0.1 * k))
+    f = e.figures()
+    assert f["samples"] == 100 and f["lost"] == 5 and f["not_ok"] == 5
+    assert f["position_p50_m"] == pytest.approx(0.01)
+    assert f["position_max_m"] == pytest.approx(0.06)
+    assert 0.01 <= f["position_p95_m"] <= 0.06
+    assert f["heading_max_deg"] == pytest.approx(1.0)
+    assert LocalizationErrors().figures() == {"samples": 0}
+    with pytest.raises(ValueError, match="localization at"):
+        e.add(located(0, 0.0, 0.0), truth(MS, 0.0))
