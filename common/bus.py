@@ -66,6 +66,16 @@ class RemoteError(BusError):
         super().__init__(f"{key}: {error.code}: {error.message}")
 
 
+def _error_of(key: str, raw: bytes) -> BusError:
+    """The error a query's error reply stands for: a dume queryable's `ErrorReply`
+    (`RemoteError`), or one Zenoh made itself (a timeout on the way, which carries no
+    `ErrorReply`: hall eval, a loaded host), a `NoReply` the caller may ask again."""
+    try:
+        return RemoteError(key, decode(raw, ErrorReply, key=key))
+    except PayloadError:
+        return NoReply(f"{key}: the transport answered with an error ({raw[:40]!r})")
+
+
 class RequestError(Exception):
     """Raised by a `serve` handler to refuse a request with a reason."""
 
@@ -511,8 +521,7 @@ class Bus:
                 if reply.ok is not None:
                     out.append(decode(reply.ok.payload.to_bytes(), reply_type, key=key))
                 elif reply.err is not None:
-                    err = decode(reply.err.payload.to_bytes(), ErrorReply, key=key)
-                    raise RemoteError(key, err)
+                    raise _error_of(key, reply.err.payload.to_bytes())
             if out or deadline - time.monotonic() < QUERY_RETRY_S:
                 return out
             time.sleep(QUERY_RETRY_S)

@@ -9,7 +9,7 @@ import threading
 import pytest
 import zenoh
 
-from common.bus import AliveWatch, Bus, NoReply, WaitTimeout
+from common.bus import AliveWatch, Bus, NoReply, RemoteError, RequestError, WaitTimeout
 from common.messages import ErrorReply
 
 
@@ -57,3 +57,22 @@ def test_a_query_asks_again_until_a_late_queryable_answers() -> None:
             bus.query("test/nobody", None, ErrorReply, 0.5)
         for server in bus._servers:
             server.close()
+
+
+def test_an_error_reply_that_is_not_dumes_is_a_no_reply_and_ours_a_remote_error() -> None:
+    """Zenoh answers a query with an error of its own (a timeout on the way: a loaded
+    hall eval's localization asking for the map) that is no `ErrorReply`: it crashed
+    the asker with a `PayloadError`; it is a `NoReply` the asker may ask again."""
+    with _session() as s:
+        bus = Bus(s)
+        raw = s.declare_queryable("test/raw", lambda q: q.reply_err(b"\x05"))
+        ours = bus.serve("test/ours", None, lambda _r, _s: (_ for _ in ()).throw(
+            RequestError("unknown_id", "no such thing")))  # fmt: skip
+        try:
+            with pytest.raises(NoReply, match="the transport answered with an error"):
+                bus.query("test/raw", None, ErrorReply, 2.0)
+            with pytest.raises(RemoteError, match="unknown_id: no such thing"):
+                bus.query("test/ours", None, ErrorReply, 2.0)
+        finally:
+            raw.undeclare()
+            ours.close()
