@@ -13,18 +13,29 @@ what a localization must take up.
 base in the map (`Localization.map_base`, at its scan's stamp): the position error's
 p50, p95 and max (m), the heading error's p95 and max (deg), and how many ticks were not
 `ok` (and `lost`). `StampPairs` pairs either estimate with the truth by stamp.
+
+`PlacementErrors` measures where perception puts the artifacts it sees in the map:
+each artifact detection within `max_range_m`, matched to the nearest true artifact of
+its class (within `gate_m`), gives the map-frame error (`axis_in_world`, placed with
+the robot's own pose), the base-frame error (`axis_in_base_yaw` placed with the true
+base: perception's geometry alone) and the pose's share (`T_world_base` against the
+truth: position error plus range × heading error). The issue's check: the map-frame
+error is within the base-frame error plus the pose's share plus 1 cm (`excess_p95_mm`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
 from common.geometry import quat_xyzw_to_matrix, wrap_angle, yaw_of, yaw_of_quat_xyzw
 from common.messages.localization import Localization
+from common.messages.perception import Detections
 from common.messages.sim import Odom, StateTruth
+from common.messages.world import Artifact
 
 
 class EstimateErrors:
@@ -112,6 +123,90 @@ class LocalizationErrors:
             "heading_max_deg": round(float(head.max()), 3),
             "not_ok": self.not_ok,
             "lost": self.lost,
+        }
+
+
+class PlacementErrors:
+    """Perception's map-frame placement of artifacts against the truth (module docstring).
+    `detections(msg)` and `truth(msg)` as they come, in any order; a camera's detections
+    are measured once the truth at their stamp is in (kept `horizon` samples back)."""
+
+    def __init__(
+        self,
+        artifacts: Sequence[Artifact],
+        gate_m: float = 0.3,
+        max_range_m: float = 3.0,
+        horizon: int = 256,
+    ) -> None:
+        self.artifacts = [(a.object_class, a.position[0], a.position[1]) for a in artifacts]
+        self.gate_m, self.max_range_m, self.horizon = gate_m, max_range_m, horizon
+        self.stop_ns: int | None = None  # measure nothing stamped from here on
+        self._truths: dict[int, StateTruth] = {}
+        self._waiting: list[Detections] = []
+        self._map: list[float] = []
+        self._base: list[float] = []
+        self._pose: list[float] = []
+        self._excess: list[float] = []
+
+    def detections(self, msg: Detections) -> None:
+        truth = self._truths.get(msg.stamp_ns)
+        if truth is not None:
+            self._measure(msg, truth)
+        elif not self._truths or msg.stamp_ns > max(self._truths):
+            self._waiting.append(msg)
+
+    def truth(self, msg: StateTruth) -> None:
+        self._truths[msg.stamp_ns] = msg
+        if len(self._truths) > self.horizon:
+            del self._truths[min(self._truths)]
+        due = [d for d in self._waiting if d.stamp_ns <= msg.stamp_ns]
+        self._waiting = [d for d in self._waiting if d.stamp_ns > msg.stamp_ns]
+        for d in due:
+            if (t := self._truths.get(d.stamp_ns)) is not None:
+                self._measure(d, t)
+
+    def _measure(self, msg: Detections, truth: StateTruth) -> None:
+        if self.stop_ns is not None and msg.stamp_ns >= self.stop_ns:
+            return
+        tx, ty = truth.base_position_in_world[0], truth.base_position_in_world[1]
+        tyaw = yaw_of_quat_xyzw(truth.base_orientation_xyzw)
+        T = np.asarray(msg.T_world_base, dtype=float).reshape(4, 4)
+        pose_m = math.hypot(T[0, 3] - tx, T[1, 3] - ty)
+        yaw_err = abs(wrap_angle(yaw_of(T[:3, :3]) - tyaw))
+        c, s = math.cos(tyaw), math.sin(tyaw)
+        for det in msg.detections:
+            ax, ay = det.axis_in_base_yaw[0], det.axis_in_base_yaw[1]
+            rng = math.hypot(ax, ay)
+            if det.class_name == "person" or rng > self.max_range_m:
+                continue
+            placed = (tx + c * ax - s * ay, ty + s * ax + c * ay)  # with the true base
+            near = [(math.hypot(x - placed[0], y - placed[1]), x, y)
+                    for cls, x, y in self.artifacts if cls == det.class_name]  # fmt: skip
+            if not near or (best := min(near))[0] > self.gate_m:
+                continue
+            _, x, y = best
+            e_map = math.hypot(det.axis_in_world[0] - x, det.axis_in_world[1] - y)
+            share = pose_m + rng * yaw_err
+            self._map.append(e_map)
+            self._base.append(best[0])
+            self._pose.append(share)
+            self._excess.append(e_map - best[0] - share)
+
+    def figures(self) -> dict[str, Any]:
+        if not self._map:
+            return {"samples": 0}
+
+        def mm(values: list[float], q: float) -> float:
+            return round(1e3 * float(np.percentile(values, q)), 1)
+
+        return {
+            "samples": len(self._map),
+            "map_error_p50_mm": mm(self._map, 50),
+            "map_error_p95_mm": mm(self._map, 95),
+            "base_error_p50_mm": mm(self._base, 50),
+            "base_error_p95_mm": mm(self._base, 95),
+            "pose_share_p95_mm": mm(self._pose, 95),
+            "excess_p95_mm": mm(self._excess, 95),
         }
 
 

@@ -151,7 +151,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     digest: the run's fingerprint (`run_digest`): the same seed gives the same digest.
     odometry: how far the robot's `odom` was from the truth over the request.
     localization: how far its localization's base in the map was (none for the truth
-    ablation).
+    ablation). placement: how far perception put the artifacts it saw in the map.
     """
 
     world: str
@@ -188,6 +188,8 @@ class WorldResult(msgspec.Struct, kw_only=True):
     odometry: dict[str, float] = msgspec.field(default_factory=dict)
     #: Its localization against the truth (`LocalizationErrors.figures`).
     localization: dict[str, float] = msgspec.field(default_factory=dict)
+    #: Perception's placement of artifacts in the map (`PlacementErrors.figures`).
+    placement: dict[str, float] = msgspec.field(default_factory=dict)
 
     @property
     def succeeded(self) -> bool:
@@ -232,6 +234,8 @@ class MissionRecord:
     odometry: dict[str, Any] = field(default_factory=dict)
     #: Its localization against the truth over the request (`LocalizationErrors`).
     localization: dict[str, Any] = field(default_factory=dict)
+    #: Perception's artifacts in the map against the truth, before the pick.
+    placement: dict[str, Any] = field(default_factory=dict)
 
 
 #: The trajectory's sample period in a `MissionRecord` (10 Hz).
@@ -291,4 +295,5 @@ def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription
     result.digest = run_digest(record)
     result.odometry = dict(record.odometry)
     result.localization = dict(record.localization)
+    result.placement = dict(record.placement)
     return result

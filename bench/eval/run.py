@@ -24,7 +24,12 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
-from bench.estimate_errors import EstimateErrors, LocalizationErrors, StampPairs
+from bench.estimate_errors import (
+    EstimateErrors,
+    LocalizationErrors,
+    PlacementErrors,
+    StampPairs,
+)
 from bench.eval.judge import (
     TERMINAL,
     TRAJECTORY_EVERY_NS,
@@ -192,7 +197,9 @@ def watch_mission(
         record.wall_s = record.wall_s or time.perf_counter() - wall0
         record.odometry = poses.pairs.errors.figures()
         record.localization = poses.located.errors.figures()
-        for sub in (statuses, events, clock, poses.truth, poses.odom, poses.localization):
+        record.placement = poses.placement.figures()
+        poses.undeclare()
+        for sub in (statuses, events, clock):
             sub.undeclare()
         alive.undeclare()
         publisher.undeclare()
@@ -269,16 +276,24 @@ def _follow(
 
 
 class _Poses:
-    """The base's truth, the robot's odometry and its localization as they come: the
-    truth's trajectory, and each estimate paired with the truth by stamp for its errors
-    (no localization samples in the truth ablation, which runs none)."""
+    """The base's truth, the robot's odometry, its localization and perception's
+    detections as they come: the truth's trajectory, and each estimate paired with the
+    truth by stamp for its errors (no localization samples in the truth ablation, which
+    runs none); the detections' placement until the pick begins (the picked object moves
+    from its true place then)."""
 
     def __init__(self, bus: Bus, keys: RobotKeys) -> None:
+        self.detections = bus.fifo(keys.detections, Detections, maxlen=1 << 14)
+        self.placement = PlacementErrors(read_world(bus).artifacts)
         self.truth = bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 20)
         self.odom = bus.fifo(keys.odom, Odom, maxlen=1 << 20)
         self.localization = bus.fifo(keys.localization, Localization, maxlen=1 << 16)
         self.pairs: StampPairs[Odom] = StampPairs(EstimateErrors())
         self.located: StampPairs[Localization] = StampPairs(LocalizationErrors())
+
+    def undeclare(self) -> None:
+        for sub in (self.truth, self.odom, self.localization, self.detections):
+            sub.undeclare()
 
     def sample(self, record: MissionRecord) -> None:
         """Keep the true pose every `TRAJECTORY_EVERY_NS` from the request on."""
@@ -286,9 +301,15 @@ class _Poses:
             self.pairs.estimate(o)
         for loc in self.localization.drain():
             self.located.estimate(loc)
+        if self.placement.stop_ns is None:
+            picks = (c.stamp_ns for c in record.changes if c.behaviour == "pick_object")
+            self.placement.stop_ns = next(picks, None)
+        for det in self.detections.drain():
+            self.placement.detections(det)
         for t in self.truth.drain():
             self.pairs.truth(t)
             self.located.truth(t)
+            self.placement.truth(t)
             if t.stamp_ns >= record.start_ns and t.stamp_ns % TRAJECTORY_EVERY_NS == 0:
                 record.trajectory.append(
                     (t.stamp_ns, *t.base_position_in_world, *t.base_orientation_xyzw)

@@ -5,12 +5,18 @@ from __future__ import annotations
 
 import math
 
+import msgspec
+import numpy as np
 import pinocchio as pin
 import pytest
 
-from bench.estimate_errors import EstimateErrors, LocalizationErrors, StampPairs
+from bench.estimate_errors import EstimateErrors, LocalizationErrors, PlacementErrors, StampPairs
+from common.geometry import make_T, rot_z
 from common.messages.localization import Localization
+from common.messages.perception import Detections
 from common.messages.sim import Odom, StateTruth
+from common.messages.world import Artifact, Cylinder
+from tests.unit.mission_fakes import detection
 
 MS = 1_000_000
 LEVEL = (0.0, 0.0, 0.0, 1.0)
@@ -101,3 +107,41 @@ def test_localization_errors_are_percentiles_of_the_map_pose_against_truth() -> 
     assert LocalizationErrors().figures() == {"samples": 0}
     with pytest.raises(ValueError, match="localization at"):
         e.add(located(0, 0.0, 0.0), truth(MS, 0.0))
+
+
+def seen(t: int, T_world_base: np.ndarray, axis_base: tuple[float, float], cls: str) -> Detections:
+    """A detection of an artifact at `axis_base` (base_yaw), placed with `T_world_base`."""
+    d = detection(f"{cls}_1", 0.6)
+    a = T_world_base @ np.array([axis_base[0], axis_base[1], 0.0, 1.0])
+    d = msgspec.structs.replace(
+        d,
+        axis_in_base_yaw=(axis_base[0], axis_base[1], 0.8),
+        axis_in_world=(float(a[0]), float(a[1]), 0.8),
+    )
+    return Detections(t, "wrist", tuple(T_world_base.ravel().tolist()), "network", [d])  # type: ignore[arg-type]
+
+
+def test_placement_splits_the_map_error_into_geometry_and_the_pose() -> None:
+    bottle = Artifact("bottle_1", "bottle", (2.0, 0.5, 0.8), 0.0, Cylinder(0.03, 0.2), 0.3,
+                      (1, 1, 1, 1), "table_1")  # fmt: skip
+    box = msgspec.structs.replace(bottle, id="box_1", object_class="box", position=(9, 9, 0.8))
+    e = PlacementErrors([bottle, box])
+    yaw = math.radians(1.0)  # the robot thinks it is 2 cm ahead and turned 1° left
+    T_est = make_T(rot_z(yaw), (0.02, 0.0, 0.5))
+    # 5 mm of geometry error along y; seen first, the truth comes after
+    e.detections(seen(0, T_est, (2.0, 0.505), "bottle"))
+    e.detections(seen(0, T_est, (2.0, 0.5), "can"))  # no can in the world
+    e.detections(seen(0, T_est, (8.0, 0.5), "bottle"))  # beyond 3 m
+    e.truth(truth(0, 0.0))
+    e.truth(truth(100 * MS, 0.0))
+    e.detections(seen(100 * MS, T_est, (2.0, 0.505), "bottle"))  # the truth was first
+    e.stop_ns = 200 * MS
+    e.truth(truth(200 * MS, 0.0))
+    e.detections(seen(200 * MS, T_est, (2.0, 0.505), "bottle"))  # the pick began: not kept
+    f = e.figures()
+    assert f["samples"] == 2
+    assert f["base_error_p95_mm"] == pytest.approx(5.0, abs=0.1)
+    share = 0.02 + math.hypot(2.0, 0.505) * yaw
+    assert f["pose_share_p95_mm"] == pytest.approx(1e3 * share, abs=0.1)
+    assert 20.0 < f["map_error_p95_mm"] <= 5.0 + 1e3 * share
+    assert f["excess_p95_mm"] <= 0.0

@@ -267,8 +267,10 @@ def synthetic_results() -> list[WorldResult]:
 
     loc = {"samples": 800, "position_p95_m": 0.031, "position_max_m": 0.052,
            "heading_p95_deg": 0.4, "lost": 0}  # fmt: skip
+    placed = {"samples": 40, "map_error_p95_mm": 21.0, "base_error_p95_mm": 9.5,
+              "excess_p95_mm": -2.1}  # fmt: skip
     return [
-        world(0, 6, True, localization=loc),
+        world(0, 6, True, localization=loc, placement=placed),
         world(1, 6, True, localization=loc | {"position_p95_m": 0.044, "lost": 2}),
         world(
             2,
@@ -319,8 +321,8 @@ def test_the_report_and_plots_are_written_with_the_right_numbers(tmp_path: Path)
     assert "world seed 3" in report and "the stack did not come up" in report
     assert "position p95 ≤ 4.4 cm in every world (worst: seed 1)" in report
     assert "heading p95 ≤ 0.40°; 2 ticks lost" in report
-    assert "| 0.022 | 3.1 | 5.2 | 0.4 |" not in report  # no odometry measured: "-"
-    assert "| - | - | 3.1 | 5.2 | 0.4 |" in report and "| - | - | - | - | - |" in report
+    assert "| 0 | - | - | 3.1 | 5.2 | 0.4 | 40 | 21 | 9.5 | -2.1 |" in report
+    assert "| 3 | - | - | - | - | - | - | - | - | - |" in report  # nothing measured
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["summary"] == json.loads(json.dumps(summary))
     assert [w["world_seed"] for w in doc["worlds"]] == [0, 1, 2, 3, 4]
