@@ -18,6 +18,8 @@ back-projected points) and axis error (horizontal distance from the detected axi
 artifact's true axis, from the world description), per class, for the network and for the
 truth segmenter (geometry alone); `near_` figures over the artifacts whose true centre is
 within 1.5 m of the camera horizontally (the acceptance's), `all_` over every range.
+The same frames again with the sim's depth noise (`sim.sensors.depth`, what the robot's
+camera gives it): the `noisy_` figures, against the same clean references.
 """
 
 from __future__ import annotations
@@ -37,15 +39,16 @@ from typing import Any
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import cv2
+import msgspec
 import mujoco
 import numpy as np
 import zenoh
 
 from common import robot
 from common.camera import backproject
-from common.config import Overrides, load_config, merged, resolve
+from common.config import DepthNoiseSettings, Overrides, load_config, merged, resolve
 from common.geometry import FloatArray, matrix_to_quat_xyzw, rot_x, rot_y, rot_z, transform_points
-from common.messages import as_numpy, decode
+from common.messages import as_numpy, decode, to_wire
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
@@ -57,6 +60,7 @@ from services.perception.self_filter import is_self
 from services.sim import feasibility as fz
 from services.sim import mjcf, scene
 from services.sim.cameras import CameraRig
+from services.sim.sensors import DepthNoise
 from services.sim.world import generate_world
 
 log = logging.getLogger(__name__)
@@ -66,6 +70,8 @@ EVAL_SEEDS = (9001, 9002, 9003)
 MAX_RANGE_M = 1.5
 MIN_PIXELS = 50
 CLASSES = ("bottle", "can", "box", "person")
+#: The figures' families: segmenters, each on the clean render and with the depth noise.
+PREFIXES = tuple(f"{n}{s}_" for n in ("", "noisy_") for s in ("truth", "network", "reported"))
 
 
 def _pct(x: Sequence[float], q: float) -> float | None:
@@ -140,8 +146,11 @@ def _errors(
     predicted: Sequence[Any],
     out: dict[str, list[float]],
     prefix: str,
+    reference: CameraFrame | None = None,
 ) -> None:
     """Per truth artifact in view: matched detection's IoU, centroid and axis errors.
+    `reference` (default `frame`): the frame whose depth gives the truth's visible
+    centroid (the clean render, when `frame` carries the depth noise).
 
     The base is where the sim has it (`T_world_base`): the figures are perception's own
     errors, the pose's error aside. Every figure goes in twice: under `all_` (every
@@ -150,7 +159,7 @@ def _errors(
     acceptance's figures are the `near_` ones).
     """
     labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
-    depth = np.asarray(as_numpy(frame.depth), dtype=np.float64)
+    depth = np.asarray(as_numpy((reference or frame).depth), dtype=np.float64)
     truths = TruthSegmenter(CLASSES).segment(labels, truth.instances)
     matches = metrics.match_instances(predicted, truths, [t.truth_id or "" for t in truths], depth)
     geo = frame_geometry(frame, T_world_base)
@@ -194,25 +203,38 @@ def _errors(
                 out[f"{prefix}{r}{key}"].append(value)
 
 
-def accuracy(seeds: Sequence[int], net: Segmenter | None) -> dict[str, Any]:
-    """Figures on the renders of `seeds` for the truth segmenter and the network."""
+def accuracy(
+    seeds: Sequence[int], net: Segmenter | None, noise: DepthNoiseSettings | None = None
+) -> dict[str, Any]:
+    """Figures on the renders of `seeds` for the truth segmenter and the network; with
+    `noise`, again on the same frames with the sim's depth noise (`noisy_` figures: what
+    the robot's depth camera gives it; the references stay the clean depth and the
+    world's truth)."""
     out: defaultdict[str, list[float]] = defaultdict(list)
     frames = 0
     for seed in seeds:
-        for world, frame, T_world_base, truth in render_seed(seed):
+        noisy = DepthNoise(noise, seed) if noise is not None else None
+        for world, clean, T_world_base, truth in render_seed(seed):
             frames += 1
             labels = np.asarray(as_numpy(truth.labels), dtype=np.int32)
             truths = TruthSegmenter(CLASSES).segment(labels, truth.instances)
-            _errors(world, frame, T_world_base, truth, truths, out, "truth_")
-            if net is not None:
+            variants = [("", clean)]
+            if noisy is not None:
+                depth = np.asarray(as_numpy(clean.depth), dtype=np.float32)
+                shot = noisy.apply(depth, clean.camera, frames)
+                variants.append(("noisy_", msgspec.structs.replace(clean, depth=to_wire(shot))))
+            for tag, frame in variants:
+                _errors(world, frame, T_world_base, truth, truths, out, f"{tag}truth_", clean)
+                if net is None:
+                    continue
                 rgb = np.asarray(as_numpy(frame.rgb), dtype=np.uint8)
                 depth = np.asarray(as_numpy(frame.depth), dtype=np.float32)
                 predicted = net.segment(rgb, depth)
-                _errors(world, frame, T_world_base, truth, predicted, out, "network_")
+                _errors(world, frame, T_world_base, truth, predicted, out, f"{tag}network_", clean)
                 shown = reported(frame, T_world_base, predicted)
-                _errors(world, frame, T_world_base, truth, shown, out, "reported_")
+                _errors(world, frame, T_world_base, truth, shown, out, f"{tag}reported_", clean)
     result = summarise(out)
-    for prefix in ("truth_", "network_", "reported_"):
+    for prefix in PREFIXES:
         if frames and f"{prefix}false_people" in result:
             result[f"{prefix}false_people_per_frame"] = round(
                 result[f"{prefix}false_people"] / frames, 3
@@ -237,7 +259,7 @@ def reported(frame: CameraFrame, T_world_base: FloatArray, instances: Sequence[A
 def summarise(out: dict[str, list[float]]) -> dict[str, Any]:
     """The figures' statistics: recall, mean IoU, p50/p95/max of errors in mm, counts."""
     result: dict[str, Any] = {}
-    for prefix in ("truth_", "network_", "reported_"):
+    for prefix in PREFIXES:
         counted = sum(out.get(f"{prefix}people_counted", []))
         if counted:
             found = sum(out[f"{prefix}people_found"])
@@ -399,7 +421,8 @@ def bench_perception(overrides: Overrides | None = None, sim_s: float = 8.0) -> 
     segmenter = "network" if net is not None else "truth"
     result: dict[str, Any] = {"bench": "perception", "network": net is not None}
     result.update(live(overrides, segmenter, sim_s, net, model))
-    result.update(accuracy(_unseen(EVAL_SEEDS, model), net))
+    noise = load_config(overrides).sim.sensors.depth
+    result.update(accuracy(_unseen(EVAL_SEEDS, model), net, noise if noise.enabled else None))
     for key, value in result.items():
         print(f"{key:40s} {value}")
     return result
