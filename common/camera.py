@@ -4,7 +4,9 @@
 its depth image. `backproject` is the paper's eq. 1, `t = K⁻¹ [u v 1]ᵀ d`, for every
 pixel of a depth image (or a crop of it) with a return; `PinholeCamera.project` is its
 inverse. Perception (an instance's points), navigation (the short-lived obstacle layer)
-and the map (learned obstacles, the missing test) all go through these.
+and the map (learned obstacles, the missing test) all go through these. `stereo_depth`
+is the depth a stereo sensor measures of a rendered one (the sim's cameras, and the
+segmenter's training, which must see what the robot's camera gives it).
 
 Conventions (those of `common.messages.sim.CameraFrame`):
 
@@ -162,3 +164,30 @@ def backproject(
     v, u = np.nonzero(valid)
     uv = np.column_stack([u * stride + origin[0], v * stride + origin[1]])
     return camera.unproject(uv, d[v, u])
+
+
+def stereo_depth(
+    depth: np.ndarray,
+    sigma_per_m2: float,
+    edge_jump_m: float,
+    dropout: float,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """A rendered depth image (m, 0 = no return) as a stereo sensor measures it: σ(z) =
+    `sigma_per_m2` z² noise, no return on the farther side of a jump of more than
+    `edge_jump_m` between neighbours (the occlusion band beside a nearer edge; the nearer
+    surface keeps its depth) and a `dropout` share of pixels lost; same dtype."""
+    z = depth.astype(np.float64)
+    valid = z > 0.0
+    far = np.where(valid, z, np.inf)  # no return: farther than anything
+    edge = np.zeros_like(valid)
+    with np.errstate(invalid="ignore"):  # inf − inf between two no-returns: no jump
+        dx, dy = np.diff(far, axis=1), np.diff(far, axis=0)
+    edge[:, 1:] |= dx > edge_jump_m  # the right one is farther
+    edge[:, :-1] |= dx < -edge_jump_m
+    edge[1:, :] |= dy > edge_jump_m
+    edge[:-1, :] |= dy < -edge_jump_m
+    noisy = z + rng.normal(0.0, 1.0, z.shape) * (sigma_per_m2 * z * z)
+    lost = rng.random(z.shape) < dropout
+    keep = valid & ~edge & ~lost & (noisy > 0.0)
+    return np.where(keep, noisy, 0.0).astype(depth.dtype)

@@ -30,6 +30,7 @@ import mujoco
 import numpy as np
 
 from common import robot
+from common.camera import stereo_depth
 from common.config import (
     DepthNoiseSettings,
     ImuSettings,
@@ -158,20 +159,4 @@ class DepthNoise:
     def apply(self, depth: np.ndarray, camera: str, stamp_ns: int) -> np.ndarray:
         s = self.s
         rng = np.random.default_rng([self.seed, zlib.crc32(camera.encode()), stamp_ns])
-        z = depth.astype(np.float64)
-        valid = z > 0.0
-        jump = s.edge_jump_m
-        # Across a jump the farther pixel goes (the stereo pair's occlusion band lies on
-        # the background beside a nearer edge); the nearer surface keeps its depth.
-        far = np.where(valid, z, np.inf)  # no return: farther than anything
-        edge = np.zeros_like(valid)
-        with np.errstate(invalid="ignore"):  # inf − inf between two no-returns: no jump
-            dx, dy = np.diff(far, axis=1), np.diff(far, axis=0)
-        edge[:, 1:] |= dx > jump  # the right one is farther
-        edge[:, :-1] |= dx < -jump
-        edge[1:, :] |= dy > jump
-        edge[:-1, :] |= dy < -jump
-        noisy = z + rng.normal(0.0, 1.0, z.shape) * (s.sigma_per_m2 * z * z)
-        lost = rng.random(z.shape) < s.dropout
-        keep = valid & ~edge & ~lost & (noisy > 0.0)
-        return np.where(keep, noisy, 0.0).astype(depth.dtype)
+        return stereo_depth(depth, s.sigma_per_m2, s.edge_jump_m, s.dropout, rng)
