@@ -9,7 +9,9 @@ the robot's own `odom` drifts when it estimates its base) and the world's contac
 (truth, evaluation only): path length walked, closest approach of the footprint (arm
 stowed) to the static obstacles (oriented boxes, exact rectangle-to-rectangle distance)
 and to the people (their floor points at t = 0: people stand unless
-`sim.walking_people`), and contacts, per goal.
+`sim.walking_people`), and contacts, per goal. Over the whole run, the robot's own
+estimates against the truth: its odometry (`EstimateErrors`: drift over the distance
+walked) and its localization (`LocalizationErrors`), none in the truth ablation.
 """
 
 from __future__ import annotations
@@ -23,11 +25,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from bench.estimate_errors import EstimateErrors, LocalizationErrors, StampPairs
 from common.clients import NavClient, Refused
 from common.config import Overrides, merged
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
+from common.messages.localization import Localization
 from common.messages.navigation import NavGoal, NavGoalReply, NavStatus, PoseGoal
-from common.messages.sim import RobotContact, StateTruth, WorldEvents
+from common.messages.sim import Odom, RobotContact, StateTruth, WorldEvents
 from common.messages.world import WorldDescription
 from common.robot import Footprint
 from deploy.stack import ProcessStack
@@ -181,6 +185,18 @@ class NavRun:
         self.odom = bus.fifo(keys.state_truth, StateTruth, maxlen=200_000)
         self.events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=100_000)
         self.last: StateTruth | None = None
+        self._odom = bus.fifo(keys.odom, Odom, maxlen=200_000)
+        self._located = bus.fifo(keys.localization, Localization, maxlen=50_000)
+        self.odometry: StampPairs[Odom] = StampPairs(EstimateErrors())
+        self.localization: StampPairs[Localization] = StampPairs(LocalizationErrors())
+
+    def estimates(self) -> dict[str, Any]:
+        """The odometry's and the localization's errors against the truth so far."""
+        self._drain(None)
+        return {
+            "odometry": self.odometry.errors.figures(),
+            "localization": self.localization.errors.figures(),
+        }
 
     def pose(self) -> tuple[float, float, float]:
         """The base's true pose now (x, y, yaw)."""
@@ -192,9 +208,15 @@ class NavRun:
         return Pose.of_odom(self.last)
 
     def _drain(self, g: GoalFigures | None) -> None:
+        for o in self._odom.drain():
+            self.odometry.estimate(o)
+        for loc in self._located.drain():
+            self.localization.estimate(loc)
         for m in self.odom.drain():
             if m.stamp_ns % 20_000_000:
                 continue  # the truth ablation sends it with every state: keep 50 Hz
+            self.odometry.truth(m)
+            self.localization.truth(m)
             if g is not None:
                 self._observe(m, g)
             self.last = m

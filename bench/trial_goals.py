@@ -72,6 +72,7 @@ def goals_trial(
         goals = draw_goals(run.world, run.pose(), count, seed)
         for x, y, yaw in goals:
             per_goal.append(run.goto(x, y, yaw).as_json())
+        estimates = run.estimates()
         logs = str(stack.run_dir.relative_to(REPO_ROOT))
     contacts: dict[str, int] = {}
     for g in per_goal:
@@ -92,5 +93,6 @@ def goals_trial(
         "path_m": round(sum(g["path_m"] or 0.0 for g in per_goal), 1),
         "wall_s": round(time.monotonic() - wall0, 1),
         "logs": logs,
+        **estimates,
         "per_goal": per_goal,
     }
