@@ -2,17 +2,23 @@
 field (as AMCL's and Hector's sensor models; the matcher is Gauss-Newton with a robust
 loss, seeded by a correlative search when the pose is in doubt).
 
-- `LikelihoodField.of_grid`: each cell's distance to the nearest occupied cell of the
-  map (an exact Euclidean distance transform to the cells' centres, capped at
-  `max_dist_m`), bilinear with its gradient at any point. A beam's end that
-  lies on a mapped obstacle costs nothing; one that ends in free space costs its
-  distance to the nearest one.
+- `LikelihoodField.of_grid`: each cell's signed distance to the map's obstacles'
+  boundary, taken through the centres of their outermost occupied cells (a cell is
+  occupied when an obstacle overlaps it, so the face lies anywhere in that cell, on
+  average at its centre): + in free space, − inside an obstacle (exact Euclidean
+  distance transforms of both sides, capped at ± `max_dist_m`), bilinear with its
+  gradient at any point. A beam's end costs its distance to the boundary on either
+  side: an unsigned field (nothing inside) let the range noise pull the scan into the
+  walls, by up to a wall's depth where one wall alone holds an axis.
 - `scan_points`: a `LaserScan`'s returns as points in the base's floor plane (the
-  lidar's mount applied; the trunk's roll and pitch are a few degrees, whose effect on
-  a horizontal range is below a millimetre per metre, and are left out).
+  lidar's mount applied; the trunk's roll and pitch, up to 4–5° while walking, shorten
+  a horizontal range by under 4 mm per metre and are left out: levelling the scan with
+  the odometry's attitude measured no better).
 - `refine(field, points, pose)`: the pose (x, y, yaw) minimising Σ ρ(d(T·p)), ρ Huber at
-  `huber_m`, and no pull at all beyond 3 `huber_m`: a beam on a person or on clutter
-  the map does not have does not drag the pose.
+  `huber_m`, and no pull at all beyond 3 `huber_m` in front of the map's obstacles or
+  `huber_m` inside them: a beam on a person or on clutter the map does not have, or one
+  that went where the map is solid but the lidar's plane is not (under a table's top
+  to a leg, a tilted beam onto the top), does not drag the pose.
   Gauss-Newton on the three pose parameters, the Jacobian from the field's gradient.
   Returns the pose, the inlier share (beams within `inlier_m` of an obstacle, the
   match's confidence) and the covariance σ² H⁻¹ of the last step.
@@ -39,8 +45,9 @@ Pose2 = tuple[float, float, float]
 
 @dataclass(frozen=True)
 class LikelihoodField:
-    """Distance (m) to the nearest occupied cell, on the map's grid: cell [iy, ix] is
-    centred at origin + (i + 0.5) × resolution (the occupancy grids' convention)."""
+    """Signed distance (m) to the obstacles' boundary (+ free, − inside; see the module
+    docstring), on the map's grid: cell [iy, ix] is centred at origin + (i + 0.5) ×
+    resolution (the occupancy grids' convention)."""
 
     dist: FloatArray  # (ny, nx)
     grad_x: FloatArray
@@ -57,17 +64,20 @@ class LikelihoodField:
         origin: tuple[float, float],
         max_dist_m: float = 1.0,
     ) -> LikelihoodField:
-        # To the nearest occupied cell's centre: a cell is occupied when an obstacle
-        # overlaps it at all, so a face lies anywhere in its boundary cell, on average
-        # at the centre (taking the cell's edge instead measured no better).
-        dist = ndimage.distance_transform_edt(~occupied) * resolution
-        dist = np.minimum(dist, max_dist_m)
+        # Zero on the outermost occupied cells' centres: a cell is occupied when an
+        # obstacle overlaps it at all, so a face lies anywhere in its boundary cell, on
+        # average at the centre (the cells' edges instead measured worse). Outside: to
+        # the nearest occupied centre; inside: to the nearest free centre, less a cell.
+        outside = ndimage.distance_transform_edt(~occupied)
+        inside = ndimage.distance_transform_edt(occupied) - 1.0
+        dist = np.where(occupied, -inside, outside) * resolution
+        dist = np.clip(dist, -max_dist_m, max_dist_m)
         gy, gx = np.gradient(dist, resolution)
         return cls(dist, gx, gy, resolution, origin, max_dist_m)
 
     def at(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Distance (n,) and its gradient (n, 2) at points (n, 2); off the map: the cap,
-        no gradient."""
+        """Signed distance (n,) and its gradient (n, 2) at points (n, 2); off the map: the
+        cap, no gradient."""
         u = (xy[:, 0] - self.origin[0]) / self.resolution - 0.5
         v = (xy[:, 1] - self.origin[1]) / self.resolution - 0.5
         ny, nx = self.dist.shape
@@ -150,10 +160,12 @@ def refine(
         c, s = math.cos(x[2]), math.sin(x[2])
         world = transform(points, (x[0], x[1], x[2]))
         d, g = field.at(world)
-        # IRLS weights: Huber's, and none beyond 3 huber_m (a person, clutter, a beam
-        # through a door the map shuts: their pull, however weak, adds up).
-        w = np.where(d <= huber_m, 1.0, huber_m / np.maximum(d, 1e-9))
-        w[d > 3.0 * huber_m] = 0.0
+        a = np.abs(d)
+        # IRLS weights: Huber's, and none beyond 3 huber_m in front (a person, clutter, a
+        # beam through a door the map shuts: their pull, however weak, adds up) or
+        # huber_m inside (a table's leg under its mapped top, a tilted beam onto it).
+        w = np.where(a <= huber_m, 1.0, huber_m / np.maximum(a, 1e-9))
+        w[(d > 3.0 * huber_m) | (d < -huber_m)] = 0.0
         # ∂(Rp + t)/∂yaw = (−s px − c py, c px − s py)
         dyaw = np.stack(
             [-s * points[:, 0] - c * points[:, 1], c * points[:, 0] - s * points[:, 1]], axis=1
@@ -168,6 +180,7 @@ def refine(
         if abs(step[0]) + abs(step[1]) < 1e-4 and abs(step[2]) < 1e-4:
             break
     d, _ = field.at(transform(points, (x[0], x[1], x[2])))
+    d = np.abs(d)
     rho = np.where(d <= huber_m, 0.5 * d * d, huber_m * (d - 0.5 * huber_m))
     cov: FloatArray = np.asarray(sigma_m**2 * np.linalg.inv(H), dtype=float)
     return Match(
