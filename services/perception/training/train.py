@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import torch
 from torch.nn import functional as F
@@ -30,6 +31,8 @@ from services.perception.training.data import (
     INV_DEPTH_MAX,
     MEAN,
     STD,
+    STEREO,
+    STEREO_SHARE,
     Frames,
     Sampler,
     class_weights,
@@ -149,6 +152,7 @@ def write_sidecar(settings: TrainSettings, validation: dict[str, Any] | None) ->
             "train_seeds": [min(settings.train_seeds), max(settings.train_seeds)],
             "val_seeds": [min(settings.val_seeds), max(settings.val_seeds)],
             "torch": torch.__version__,
+            "stereo_depth": {"share": STEREO_SHARE, **msgspec.to_builtins(STEREO)},
             **settings.extra,
         },
         "validation": validation,
