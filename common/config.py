@@ -215,12 +215,16 @@ class EstimatorSettings(_Section):
     """The WBC's leg-inertial estimator (`services.wbc.estimator`): the tilt filter's
     gains, and the Kalman filter's noises (process: per √s; measurement: σ)."""
 
-    tilt_kp: NonNegative = 1.0  # 1/s: how fast gravity pulls roll and pitch
+    tilt_kp: NonNegative = 0.1  # 1/s: how fast gravity pulls roll and pitch
     tilt_ki: NonNegative = 0.05  # 1/s²: how fast the gyro's roll and pitch bias is learnt
     #: m/s²: the accelerometer corrects the tilt only within g ± this (a push, a foot's
     #: impact). Not tight: a trot's own accelerations must average out, and a tight
     #: gate keeps a biased half of them (1 m/s² tilted the estimate 6° in 5 s of trot).
     gravity_gate: Positive = 5.0
+    #: 1/s: how fast the stance feet's plane (a flat floor) pulls roll and pitch.
+    floor_kp: NonNegative = 10.0
+    #: rad: a pair of stance feet sloping more than this (a slip, a step) is ignored.
+    floor_gate: Positive = 0.2
     calibrate_s: NonNegative = 1.0  # s standing still: the gyro's bias
     #: s of sim time the gait waits at start-up for that calibration; then it goes anyway.
     calibrate_timeout_s: NonNegative = 5.0

@@ -52,8 +52,9 @@ def test_tilt_from_gravity_recovers_roll_and_pitch() -> None:
 
 def test_the_tilt_filter_converges_from_a_wrong_start_and_learns_the_bias() -> None:
     """At rest, tilted 5° wrongly, with a gyro bias of 0.01 rad/s on every axis: gravity
-    pulls roll and pitch back, and the roll and pitch bias is learnt."""
-    s = EstimatorSettings()
+    pulls roll and pitch back, and the roll and pitch bias is learnt (gravity's pull at
+    1/s, ten times the default: the stance feet do most of the work on a robot)."""
+    s = EstimatorSettings(tilt_kp=1.0)
     f = TiltFilter(s)
     R_true = np.asarray(pin.rpy.rpyToMatrix(0.05, 0.03, 0.4))
     f.R = np.asarray(pin.rpy.rpyToMatrix(0.05 + math.radians(5), 0.03, 0.4))
@@ -70,6 +71,58 @@ def test_the_tilt_filter_converges_from_a_wrong_start_and_learns_the_bias() -> N
     up_body = R_true.T @ np.array([0.0, 0.0, 1.0])
     seen = lambda b: b - (b @ up_body) * up_body  # noqa: E731
     assert np.linalg.norm(seen(f.bias) - seen(bias)) < 1e-3
+
+
+def feet_of_a_tilted_stance(R_tilt: np.ndarray) -> np.ndarray:
+    """(4, 3) the feet's centres in the base (pinocchio forward kinematics, as the
+    controller's model has them) for joints that stand the base tilted by `R_tilt` on a
+    flat floor: each leg solved (Gauss-Newton on its foot) to put its foot where the
+    standing posture's foot is, seen from a base turned by `R_tilt`."""
+    model = RobotModel()
+    q = np.concatenate([np.zeros(3), [0.0, 0.0, 0.0, 1.0], robot.POSTURES["stand"]])
+    v = np.zeros(model.nv)
+    model.update(q, v, tcp=False)
+    target = model.feet_p @ R_tilt  # R_tiltᵀ r, per foot
+    for _ in range(30):
+        model.update(q, v, tcp=False)
+        err = (target - model.feet_p).ravel()
+        dq = np.linalg.lstsq(model.Jc[:, 6:], err, rcond=None)[0]
+        q[7:] += dq
+    model.update(q, v, tcp=False)
+    assert np.abs(model.feet_p - target).max() < 1e-9
+    return model.feet_p.copy()
+
+
+@pytest.mark.parametrize("gait", ["stand", "trot"])
+def test_the_stance_feet_give_roll_and_pitch_on_a_flat_floor(gait: str) -> None:
+    """The legs' kinematics of a base rolled 4° and pitched −3° over a flat floor: the
+    floor's plane pulls a level estimate to that tilt, with four feet down or with a
+    trot's two diagonal pairs in turn (each observes one axis), gravity's pull off."""
+    R_tilt = np.asarray(pin.rpy.rpyToMatrix(math.radians(4), math.radians(-3), 0.0))
+    feet = feet_of_a_tilted_stance(R_tilt)
+    s = EstimatorSettings(tilt_kp=0.0, tilt_ki=0.0)
+    f = TiltFilter(s)
+    yaw = np.asarray(pin.rpy.rpyToMatrix(0.0, 0.0, 0.7))
+    R_true = yaw @ R_tilt
+    f.R = yaw.copy()  # level: 5° off
+    assert tilt_error(f.R, R_true) > math.radians(4.9)
+    dt = 0.002
+    for k in range(int(4.0 / dt)):
+        if gait == "stand":
+            contact = (True, True, True, True)
+        else:  # FL+RR, then FR+RL, 0.25 s each
+            first = (k * dt) % 0.5 < 0.25
+            contact = (first, not first, not first, first)
+        f.correct_floor(feet, contact, dt)
+    assert tilt_error(f.R, R_true) < math.radians(0.02)
+    # One foot down says nothing; a pair sloping past `floor_gate` (a slip) is left out.
+    R = f.R.copy()
+    f.correct_floor(feet, (True, False, False, False), dt)
+    assert np.allclose(f.R, R)
+    slipped = feet.copy()
+    slipped[0, 2] += 0.5
+    f.correct_floor(slipped, (True, False, False, True), dt)
+    assert np.allclose(f.R, R)
 
 
 #: Four feet on the floor around the base, relative to it (m, odom axes).
