@@ -257,8 +257,8 @@ class WbcSettings(_Section):
     gait: GaitSettings = msgspec.field(default_factory=GaitSettings)
     #: Where the base's pose and twist come from: `estimate`, the leg-inertial estimator
     #: on the robot's sensors (it publishes `odom`); `truth`, the sim's free joint (an
-    #: ablation: the sim publishes `odom`).
-    base_state: Literal["estimate", "truth"] = "truth"
+    #: ablation: the sim publishes `odom`, and no localization runs).
+    base_state: Literal["estimate", "truth"] = "estimate"
     estimator: EstimatorSettings = msgspec.field(default_factory=EstimatorSettings)
     #: A gap in the state's stamps longer than this stops the robot.
     stale_state_s: float = 0.05
@@ -652,10 +652,15 @@ class Config(_Section):
     log: LogSettings = msgspec.field(default_factory=LogSettings)
 
     def odom_from_estimate(self) -> bool:
-        """Whether `odom` is the WBC's estimate (`wbc.base_state = "estimate"` on legs);
-        otherwise the sim publishes its free joint (the truth ablation, or kinematic
-        locomotion, where the base is moved, not walked)."""
-        return self.wbc.base_state == "estimate" and self.sim.locomotion == "dynamic"
+        """Whether `odom` is the WBC's estimate (`wbc.base_state = "estimate"`, on legs,
+        with the WBC the stack's commander); otherwise the sim publishes its free joint
+        (the truth ablation; kinematic locomotion, where the base is moved, not walked;
+        a stack without the WBC, such as the stand-hold commander's)."""
+        return (
+            self.wbc.base_state == "estimate"
+            and self.sim.locomotion == "dynamic"
+            and "wbc" in self.time.participants
+        )
 
 
 def _literal(text: str) -> Any:
