@@ -58,6 +58,8 @@ from common.geometry import FloatArray
 G = 9.81
 E_Z = np.array([0.0, 0.0, 1.0])
 N_FEET = 4
+#: Every pair of feet (i, j), i < j, as two index arrays (the floor's level pairs).
+FOOT_PAIRS = np.triu_indices(N_FEET, k=1)
 #: The calibration's test for standing still: slower than this turn rate (rad/s; the
 #: gyro's bias is far less) and an accelerometer within this of g (m/s²).
 STILL_RAD_S = 0.05
@@ -147,23 +149,19 @@ class TiltFilter:
         sloping by more than `floor_gate` (a slip, a step) is left out. The gyro's bias
         learns from it as from gravity."""
         s = self.s
-        down = [i for i, c in enumerate(contact) if c]
-        if s.floor_kp <= 0.0 or len(down) < 2:
+        down = np.asarray(contact, dtype=bool)
+        n_down = int(down.sum())
+        if s.floor_kp <= 0.0 or n_down < 2:
             return
+        i, j = FOOT_PAIRS
+        both = down[i] & down[j]
+        d = feet[i[both]] - feet[j[both]]
+        norm = np.sqrt(np.einsum("ij,ij->i", d, d))
+        d = d[norm >= 1e-3] / norm[norm >= 1e-3, None]
         up = self.R.T @ E_Z
-        e = np.zeros(3)
-        gate = math.sin(s.floor_gate)
-        for k, i in enumerate(down):
-            for j in down[k + 1 :]:
-                d = feet[i] - feet[j]
-                n = float(np.linalg.norm(d))
-                if n < 1e-3:
-                    continue
-                d = d / n
-                slope = float(up @ d)
-                if abs(slope) < gate:
-                    e += slope * np.cross(up, d)
-        e /= len(down) - 1
+        slope = d @ up
+        slope[np.abs(slope) >= math.sin(s.floor_gate)] = 0.0  # a slip, a step: left out
+        e = pin.skew(up) @ (slope @ d) / (n_down - 1)  # Σ slope (û × d̂), one cross
         self.bias -= s.tilt_ki * e * dt
         self.R = self.R @ np.asarray(pin.exp3(s.floor_kp * e * dt))
 
