@@ -12,7 +12,8 @@ what a localization must take up.
 `LocalizationErrors.add(localization, truth)` does the same for the localization's
 base in the map (`Localization.map_base`, at its scan's stamp): the position error's
 p50, p95 and max (m), the heading error's p95 and max (deg), and how many ticks were not
-`ok` (and `lost`). `StampPairs` pairs either estimate with the truth by stamp.
+`ok` (and `lost`). `StampPairs` pairs either estimate with the truth by stamp;
+`Estimates` holds both pairings, what a run that watches the robot keeps.
 
 `PlacementErrors` measures where perception puts the artifacts it sees in the map:
 each artifact detection within `max_range_m`, matched to the nearest true artifact of
@@ -252,3 +253,38 @@ class StampPairs(Generic[E]):
         pending[stamp] = msg
         if len(pending) > self.horizon:
             del pending[min(pending)]
+
+
+class Estimates:
+    """The robot's odometry and its localization, each paired with the truth by stamp:
+    feed `odom`, `localization` and `truth` samples as they come; `figures()` gives
+    `{"odometry": …, "localization": …}` (no localization samples in the truth ablation,
+    which runs none). Samples stamped before `start_ns` are not counted."""
+
+    def __init__(self) -> None:
+        self.odometry: StampPairs[Odom] = StampPairs(EstimateErrors())
+        self.localization: StampPairs[Localization] = StampPairs(LocalizationErrors())
+
+    @property
+    def start_ns(self) -> int:
+        return self.odometry.start_ns
+
+    @start_ns.setter
+    def start_ns(self, value: int) -> None:
+        self.odometry.start_ns = self.localization.start_ns = value
+
+    def odom(self, msg: Odom) -> None:
+        self.odometry.estimate(msg)
+
+    def located(self, msg: Localization) -> None:
+        self.localization.estimate(msg)
+
+    def truth(self, msg: StateTruth) -> None:
+        self.odometry.truth(msg)
+        self.localization.truth(msg)
+
+    def figures(self) -> dict[str, dict[str, Any]]:
+        return {
+            "odometry": self.odometry.errors.figures(),
+            "localization": self.localization.errors.figures(),
+        }

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bench.estimate_errors import EstimateErrors, LocalizationErrors, StampPairs
+from bench.estimate_errors import Estimates
 from common.clients import NavClient, Refused
 from common.config import Overrides, merged
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS
@@ -187,16 +187,12 @@ class NavRun:
         self.last: StateTruth | None = None
         self._odom = bus.fifo(keys.odom, Odom, maxlen=200_000)
         self._located = bus.fifo(keys.localization, Localization, maxlen=50_000)
-        self.odometry: StampPairs[Odom] = StampPairs(EstimateErrors())
-        self.localization: StampPairs[Localization] = StampPairs(LocalizationErrors())
+        self._estimates = Estimates()
 
     def estimates(self) -> dict[str, Any]:
         """The odometry's and the localization's errors against the truth so far."""
         self._drain(None)
-        return {
-            "odometry": self.odometry.errors.figures(),
-            "localization": self.localization.errors.figures(),
-        }
+        return self._estimates.figures()
 
     def pose(self) -> tuple[float, float, float]:
         """The base's true pose now (x, y, yaw)."""
@@ -209,14 +205,13 @@ class NavRun:
 
     def _drain(self, g: GoalFigures | None) -> None:
         for o in self._odom.drain():
-            self.odometry.estimate(o)
+            self._estimates.odom(o)
         for loc in self._located.drain():
-            self.localization.estimate(loc)
+            self._estimates.located(loc)
         for m in self.odom.drain():
             if m.stamp_ns % 20_000_000:
                 continue  # the truth ablation sends it with every state: keep 50 Hz
-            self.odometry.truth(m)
-            self.localization.truth(m)
+            self._estimates.truth(m)
             if g is not None:
                 self._observe(m, g)
             self.last = m

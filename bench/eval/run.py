@@ -24,12 +24,7 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
-from bench.estimate_errors import (
-    EstimateErrors,
-    LocalizationErrors,
-    PlacementErrors,
-    StampPairs,
-)
+from bench.estimate_errors import Estimates, PlacementErrors
 from bench.eval.judge import (
     TERMINAL,
     TRAJECTORY_EVERY_NS,
@@ -185,7 +180,7 @@ def watch_mission(
             record.start_ns = record.end_ns = now.stamp_ns if now else 0
             publisher.put(request)
         wall0 = time.perf_counter()
-        poses.pairs.start_ns = poses.located.start_ns = record.start_ns
+        poses.estimates.start_ns = record.start_ns
         _follow(record, statuses, events, clock, poses, timeout_s, on_progress, deps)
         record.wall_s = time.perf_counter() - wall0
         lost = record.ended.startswith(DEPENDENCY_LOST)
@@ -195,8 +190,8 @@ def watch_mission(
         record.ended = "the simulator's clock stopped"
     finally:
         record.wall_s = record.wall_s or time.perf_counter() - wall0
-        record.odometry = poses.pairs.errors.figures()
-        record.localization = poses.located.errors.figures()
+        estimates = poses.estimates.figures()
+        record.odometry, record.localization = estimates["odometry"], estimates["localization"]
         record.placement = poses.placement.figures()
         poses.undeclare()
         for sub in (statuses, events, clock):
@@ -288,8 +283,7 @@ class _Poses:
         self.truth = bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 20)
         self.odom = bus.fifo(keys.odom, Odom, maxlen=1 << 20)
         self.localization = bus.fifo(keys.localization, Localization, maxlen=1 << 16)
-        self.pairs: StampPairs[Odom] = StampPairs(EstimateErrors())
-        self.located: StampPairs[Localization] = StampPairs(LocalizationErrors())
+        self.estimates = Estimates()
 
     def undeclare(self) -> None:
         for sub in (self.truth, self.odom, self.localization, self.detections):
@@ -298,17 +292,16 @@ class _Poses:
     def sample(self, record: MissionRecord) -> None:
         """Keep the true pose every `TRAJECTORY_EVERY_NS` from the request on."""
         for o in self.odom.drain():
-            self.pairs.estimate(o)
+            self.estimates.odom(o)
         for loc in self.localization.drain():
-            self.located.estimate(loc)
+            self.estimates.located(loc)
         if self.placement.stop_ns is None:
             picks = (c.stamp_ns for c in record.changes if c.behaviour == "pick_object")
             self.placement.stop_ns = next(picks, None)
         for det in self.detections.drain():
             self.placement.detections(det)
         for t in self.truth.drain():
-            self.pairs.truth(t)
-            self.located.truth(t)
+            self.estimates.truth(t)
             self.placement.truth(t)
             if t.stamp_ns >= record.start_ns and t.stamp_ns % TRAJECTORY_EVERY_NS == 0:
                 record.trajectory.append(

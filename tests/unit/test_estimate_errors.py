@@ -10,7 +10,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from bench.estimate_errors import EstimateErrors, LocalizationErrors, PlacementErrors, StampPairs
+from bench.estimate_errors import (
+    EstimateErrors,
+    Estimates,
+    LocalizationErrors,
+    PlacementErrors,
+    StampPairs,
+)
 from common.geometry import make_T, rot_z
 from common.messages.localization import Localization
 from common.messages.perception import Detections
@@ -145,3 +151,18 @@ def test_placement_splits_the_map_error_into_geometry_and_the_pose() -> None:
     assert f["pose_share_p95_mm"] == pytest.approx(1e3 * share, abs=0.1)
     assert 20.0 < f["map_error_p95_mm"] <= 5.0 + 1e3 * share
     assert f["excess_p95_mm"] <= 0.0
+
+
+def test_estimates_pair_the_odometry_and_the_localization_with_one_truth() -> None:
+    est = Estimates()
+    est.start_ns = 100 * MS
+    for k in range(4):  # 0 ms is before the start: paired, not counted
+        t = k * 100 * MS
+        est.odom(odom(t, 0.1 * k + 0.01))
+        est.located(located(t, 0.1 * k + 0.02, 0.0))
+        est.truth(truth(t, 0.1 * k))
+    f = est.figures()
+    assert f["odometry"]["samples"] == 3 and f["localization"]["samples"] == 3
+    assert f["odometry"]["position_error_m"] == pytest.approx(0.01)
+    assert f["localization"]["position_max_m"] == pytest.approx(0.02)
+    assert Estimates().figures() == {"odometry": {"samples": 0}, "localization": {"samples": 0}}
