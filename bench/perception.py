@@ -24,6 +24,8 @@ camera gives it): the `noisy_` figures, against the same clean references.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import json
 import logging
 import math
@@ -54,6 +56,8 @@ from common.messages.sim import CameraFrame, SegmentationTruth
 from common.messages.world import WorldDescription
 from deploy.stack import ProcessStack
 from services.perception import metrics
+from services.perception.frames import shape_check_of
+from services.perception.measure import ShapeCheck
 from services.perception.pipeline import detect, frame_geometry
 from services.perception.segmenter import Segmenter, TruthSegmenter
 from services.perception.self_filter import is_self
@@ -242,16 +246,27 @@ def accuracy(
     return {"eval_seeds": list(seeds), "eval_frames": frames, **result}
 
 
+@functools.cache
+def _shape_check() -> ShapeCheck | None:
+    return shape_check_of(load_config().perception)
+
+
 def reported(frame: CameraFrame, T_world_base: FloatArray, instances: Sequence[Any]) -> list[Any]:
     """The instances the service reports (`reported_` figures): a person without depth
     points, or one the robot sees inside itself (`services.perception.self_filter`), is
-    dropped."""
+    dropped; a can or box takes the class of perception's shape check (the default
+    settings')."""
+    check = _shape_check()
     out = []
     for inst in instances:
         if inst.class_name == "person":
             det = detect(frame, T_world_base, [inst], 0.0)
             if not det or is_self(det[0].detection):
                 continue
+        elif check is not None and inst.class_name in check.classes:
+            det = detect(frame, T_world_base, [inst], 0.0, check)
+            if det and det[0].detection.class_name != inst.class_name:
+                inst = dataclasses.replace(inst, class_name=det[0].detection.class_name)
         out.append(inst)
     return out
 

@@ -297,6 +297,15 @@ class PerceptionSettings(_Section):
     #: for the slowest (under load, 2 threads: p50 42-56 ms, p95 88-105 ms; 1: 33-36 ms,
     #: 72-75 ms). 0 lets OpenCV choose.
     dnn_threads: int = 1
+    #: The can/box shape check (`services.perception.measure.ShapeCheck`): within this
+    #: depth of the camera (m) a can or box whose points fit a cylinder within
+    #: `shape_check_rms_per_m2` × depth² (m) is a can, else a box; 0 m: no check.
+    #: Measured on the perception bench's renders (hall seeds 0-9, 9001-9003, the sim's
+    #: depth noise) within 1.2 m: 61 cans fit within 1.7-2.4e-3 × depth² (the noise
+    #: itself), 56 boxes no better than 3.2e-3; the network had 10 of the 117 wrong.
+    #: Farther, the noise hides the shape. A real camera needs its own figure.
+    shape_check_range_m: NonNegative = 1.2
+    shape_check_rms_per_m2: Positive = 2.8e-3
 
 
 class SemanticMapSettings(_Section):

@@ -43,6 +43,9 @@ class Detection(Message, frozen=True):
     axis_fallback: the visible arc was too short to fit a circle: the axis is one
         radius (half the visible width) behind the centroid along the line of sight.
     fit_rms_m: m, the points' rms distance to the fitted surface (0 when not fitted).
+    network_class: the segmenter's class when perception's shape check changed it (a
+        can or a box near the camera is told by whether its depth fits a cylinder);
+        None when `class_name` is the segmenter's.
     """
 
     class_name: ClassName
@@ -63,6 +66,7 @@ class Detection(Message, frozen=True):
     radius: NonNegative = 0.0
     axis_fallback: bool = False
     fit_rms_m: NonNegative = 0.0
+    network_class: ClassName | None = None
 
 
 class Detections(Message, frozen=True):

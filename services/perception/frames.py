@@ -38,7 +38,8 @@ from common.messages.arrays import ArrayError, as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
 from common.messages.sim import CameraFrame, Odom, SegmentationTruth
-from services.perception.pipeline import CLASSES, Detected, Segmented, detect
+from services.perception.measure import ShapeCheck
+from services.perception.pipeline import CLASSES, Detected, Segmented, class_text, detect
 from services.perception.segmenter import TruthSegmenter
 from services.perception.self_filter import drop_self
 
@@ -48,6 +49,13 @@ M_co = TypeVar("M_co", covariant=True)
 
 #: The base's pose in a `Detections` of a camera whose frame did not come.
 IDENTITY = tuple(float(x) for x in (1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1))
+
+
+def shape_check_of(settings: PerceptionSettings) -> ShapeCheck | None:
+    """The can/box shape check the settings ask for (None: `shape_check_range_m` 0)."""
+    if settings.shape_check_range_m <= 0.0:
+        return None
+    return ShapeCheck(settings.shape_check_range_m, settings.shape_check_rms_per_m2)
 
 
 class ByStamp(Protocol[M_co]):
@@ -96,6 +104,7 @@ class FrameProcessor:
         self.frames, self.truths, self.odom = frames, truths, odom
         self.network, self.unavailable = network, unavailable
         self.truth_segmenter = TruthSegmenter(CLASSES)
+        self.shape_check = None if self.truth else shape_check_of(settings)  # truth is truth
         self.publish, self.show = publish, show
         self._seen: dict[str, tuple[str, ...]] = {}
         self._reasons: dict[str, str] = {}
@@ -127,7 +136,9 @@ class FrameProcessor:
             try:
                 instances, reason, segment_ms = self._segment(cam, frame, b)
                 min_score = self.settings.min_score
-                detected = detect(frame, T, instances, min_score) if not reason else []
+                detected = (
+                    detect(frame, T, instances, min_score, self.shape_check) if not reason else []
+                )
                 detected, selves = drop_self(detected)
                 if selves:
                     log.debug("%s at t=%.3f s: %d person(s) inside the robot dropped",
@@ -185,7 +196,7 @@ class FrameProcessor:
             return
         self._seen[msg.camera] = seen
         items = ", ".join(
-            f"{d.class_name} d={d.d_obj:.2f} m θ={math.degrees(d.theta_obj):+.1f}°"
+            f"{class_text(d)} d={d.d_obj:.2f} m θ={math.degrees(d.theta_obj):+.1f}°"
             for d in msg.detections
         )
         log.info("%s at t=%.3f s sees: %s", msg.camera, msg.stamp_ns / NS_PER_S, items or "nothing")

@@ -8,10 +8,20 @@ support is dropped (`support`); the centroid of what is left gives eq. 2 (d_obj,
 and, through `T_world_base`, the world position, and the class's upright fit in
 `base_yaw` (z up) is carried to the world. `FrameGeometry` holds what a `CameraFrame`
 says about its geometry, as numpy.
+
+The shape check (`ShapeCheck`): near the camera, whether a can or a box is a cylinder is
+told better by its depth than by its look. The network reads a small box seen square-on
+as a can (hall seed 0's 9 x 6 x 13 cm box from 0.78 m: can 0.62-0.73 in every frame)
+and a can as a box at times; a can's points fit a cylinder to the depth noise, a box's
+do not. So a can or box within `range_m` of the camera whose cylinder fit (not a
+fallback: enough arc to fit) lies within `rms_per_m2` × depth² of its points is a can,
+and beyond it a box, whatever the network said; the measurement keeps the network's
+class beside it (`network_class`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +43,29 @@ from services.perception.support import support_inliers
 MIN_POINTS = 8
 #: Rounds of the depth-gap and support gates (`object_inliers`).
 GATE_ROUNDS = 3
+
+
+@dataclass(frozen=True)
+class ShapeCheck:
+    """The can/box shape check (see the module docstring; `perception.shape_check_*`).
+
+    range_m: checked only this near the camera (the centroid's depth, m); rms_per_m2:
+    the cylinder fit's rms bound at 1 m depth, m (it grows as the depth squared, as a
+    stereo sensor's noise does)."""
+
+    range_m: float
+    rms_per_m2: float
+    classes: tuple[str, str] = ("can", "box")
+
+    def judge(self, cylinder: UprightFit, depth_m: float) -> str | None:
+        """`can` or `box` by the cylinder fit of points at `depth_m`; None when it cannot
+        tell (too far, or no circle fitted)."""
+        if not 0.0 < depth_m <= self.range_m or cylinder.fallback:
+            return None
+        if not math.isfinite(cylinder.rms_m):
+            return None
+        can, box = self.classes
+        return can if cylinder.rms_m <= self.rms_per_m2 * depth_m**2 else box
 
 
 @dataclass(frozen=True)
@@ -63,6 +96,8 @@ class Measurement:
     d_obj, theta_obj: eq. 2 in base_yaw (m, rad). fit_base_yaw: the upright fit in
     base_yaw; axis_world: (3,) its axis point in the world; yaw_world: its yaw there.
     points_world: (N, 3) the inlier points (for logging). n_points, n_outliers: counts.
+    class_name: the instance's class after the shape check; network_class: the
+    segmenter's, when the check changed it ("" otherwise).
     """
 
     centroid_camera: FloatArray
@@ -77,6 +112,8 @@ class Measurement:
     points_world: FloatArray
     n_points: int
     n_outliers: int
+    class_name: str = ""
+    network_class: str = ""
 
 
 def object_inliers(pts_cam: FloatArray, T_base_yaw_camera: FloatArray, upright: bool) -> BoolArray:
@@ -107,9 +144,11 @@ def measure(
     mask: BoolArray,
     origin: tuple[int, int],
     class_name: str,
+    shape_check: ShapeCheck | None = None,
 ) -> Measurement | None:
     """The instance's geometry from its mask over `depth` (a crop at `origin`), or None
-    when fewer than `MIN_POINTS` pixels have depth."""
+    when fewer than `MIN_POINTS` pixels have depth; with `shape_check`, a can's or a box's
+    class by its shape near the camera (see the module docstring)."""
     pts_cam = backproject(depth, geo.camera, mask=mask, origin=origin)
     if len(pts_cam) < MIN_POINTS:
         return None
@@ -123,6 +162,14 @@ def measure(
     d_obj, theta_obj = heading(centroid_by)
     eye_by = T_by_c[:3, 3]
     fit = fit_upright(pts_by, eye_by, shape)
+    network_class = ""
+    if shape_check is not None and class_name in shape_check.classes:
+        cylinder = fit if shape == "cylinder" else fit_upright(pts_by, eye_by, "cylinder")
+        by_shape = shape_check.judge(cylinder, float(centroid_cam[2]))
+        if by_shape is not None and by_shape != class_name:
+            network_class, class_name = class_name, by_shape
+            shape = CLASS_SHAPES[class_name]
+            fit = cylinder if shape == "cylinder" else fit_upright(pts_by, eye_by, shape)
     base_yaw_in_world = yaw_of(T_w_by[:3, :3])
     return Measurement(
         centroid_camera=centroid_cam,
@@ -137,4 +184,6 @@ def measure(
         points_world=transform_points(T_w_by, pts_by),
         n_points=int(keep.sum()),
         n_outliers=int((~keep).sum()),
+        class_name=class_name,
+        network_class=network_class,
     )

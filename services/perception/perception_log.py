@@ -18,7 +18,7 @@ import rerun as rr
 
 from common.messages.perception import Detection, Detections
 from common.recording import FrameSelector, is_recording, stamp
-from services.perception.pipeline import Detected, mask_of
+from services.perception.pipeline import Detected, class_text, mask_of
 
 #: Points logged per instance at most.
 MAX_LOG_POINTS = 120
@@ -54,7 +54,7 @@ class PerceptionLogger:
             return
         dets = [d.detection for d in detected]
         colours = _PALETTE[np.arange(len(dets)) % len(_PALETTE)]
-        labels = [f"{d.class_name} {d.score:.2f}" for d in dets]
+        labels = [f"{class_text(d)} {d.score:.2f}" for d in dets]
         self.rec.log(
             f"camera/{cam}/perception/boxes",
             rr.Boxes2D(
@@ -89,7 +89,7 @@ class PerceptionLogger:
             rr.Points3D(
                 [d.centroid_in_world for d in dets],
                 labels=[
-                    f"{d.class_name} d={d.d_obj:.2f} m θ={math.degrees(d.theta_obj):.0f}°"
+                    f"{class_text(d)} d={d.d_obj:.2f} m θ={math.degrees(d.theta_obj):.0f}°"
                     for d in dets
                 ],
                 colors=colours,

@@ -1,7 +1,8 @@
 """A camera frame and its segmented instances → `Detection`s.
 
-`detect(frame, T_world_base, instances, min_score)` measures every instance scored at least
-`min_score` (`measure.measure` on its mask's bounding box) and packs the message;
+`detect(frame, T_world_base, instances, min_score, shape_check)` measures every instance
+scored at least `min_score` (`measure.measure` on its mask's bounding box; a can's or a
+box's class checked by its shape near the camera) and packs the message;
 instances with too few depth points are left out. The instances come from the
 segmenter (`segmenter.Segmenter`, or `TruthSegmenter` for the truth ablation). No
 transport here: `node.py` feeds it.
@@ -22,7 +23,7 @@ from common.geometry import BoolArray
 from common.messages import as_numpy, to_wire
 from common.messages.perception import Detection
 from common.messages.sim import CameraFrame
-from services.perception.measure import FrameGeometry, Measurement, measure
+from services.perception.measure import FrameGeometry, Measurement, ShapeCheck, measure
 
 #: The classes perception reports (the network's, and what truth labels are mapped to).
 CLASSES = ("bottle", "can", "box", "person")
@@ -67,7 +68,7 @@ def to_detection(
 ) -> Detection:
     fit = m.fit_base_yaw
     return Detection(
-        class_name=inst.class_name,
+        class_name=m.class_name or inst.class_name,
         score=float(min(max(inst.score, 0.0), 1.0)),
         bbox=bbox,
         mask=to_wire(crop.astype(np.uint8)),
@@ -84,6 +85,7 @@ def to_detection(
         radius=fit.radius,
         axis_fallback=fit.fallback,
         fit_rms_m=fit.rms_m if math.isfinite(fit.rms_m) else 0.0,
+        network_class=m.network_class or None,
     )
 
 
@@ -100,9 +102,11 @@ def detect(
     T_world_base: npt.ArrayLike,
     instances: Iterable[Segmented],
     min_score: float,
+    shape_check: ShapeCheck | None = None,
 ) -> list[Detected]:
     """Measure each instance scored ≥ `min_score` (the base at `T_world_base`, 4×4, at
-    capture); those without depth are left out."""
+    capture), a can's or box's class checked by its shape with `shape_check`
+    (`measure.ShapeCheck`); those without depth are left out."""
     depth = np.asarray(as_numpy(frame.depth))
     geo = frame_geometry(frame, T_world_base)
     out = []
@@ -118,11 +122,17 @@ def detect(
             continue
         u0, v0, u1, v1 = bbox
         crop = inst.mask[v0:v1, u0:u1]
-        m = measure(geo, depth[v0:v1, u0:u1], crop, (u0, v0), inst.class_name)
+        m = measure(geo, depth[v0:v1, u0:u1], crop, (u0, v0), inst.class_name, shape_check)
         if m is None:
             continue
         out.append(Detected(to_detection(inst, bbox, crop, m), m.points_world))
     return out
+
+
+def class_text(d: Detection) -> str:
+    """A detection's class for a person: `box (network: can)` when the shape check
+    changed the network's."""
+    return f"{d.class_name} (network: {d.network_class})" if d.network_class else d.class_name
 
 
 def mask_of(detection: Detection, shape: Sequence[int]) -> BoolArray:

@@ -17,7 +17,7 @@ from common.geometry import FloatArray, inv_T, make_T, rot_x, rot_y, rot_z, tran
 from common.robot_description import R_FORWARD_OPTICAL
 from services.perception.fits import fit_box, fit_cylinder
 from services.perception.geometry import heading, robust_centroid
-from services.perception.measure import FrameGeometry, measure
+from services.perception.measure import FrameGeometry, ShapeCheck, measure
 from tests.unit.perception_raycast import Plane, Shape, UprightBox, UprightCylinder, render
 
 W, H = 320, 240
@@ -201,3 +201,68 @@ def test_too_few_points_is_no_measurement() -> None:
     depth = np.zeros((H, W))
     depth[10, 10] = 1.0
     assert measure(GEO, depth, depth > 0, (0, 0), "bottle") is None
+
+
+CHECK = ShapeCheck(range_m=1.2, rms_per_m2=2.8e-3)
+
+
+def _noisy(depth: FloatArray, seed: int, sigma_per_m2: float = 1.0e-3) -> FloatArray:
+    """Depth with white noise growing as depth² (a stereo sensor's), none where no hit."""
+    rng = np.random.default_rng(seed)
+    return np.where(depth > 0, depth + rng.normal(0.0, sigma_per_m2, depth.shape) * depth**2, 0.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("yaw_deg", [0.0, 35.0])
+def test_the_shape_check_reads_a_box_the_network_called_a_can_as_a_box(
+    seed: int, yaw_deg: float
+) -> None:
+    # hall seed 0: a 9 x 6 x 13 cm box 0.78 m away, its top in view, square-on or not,
+    # called a can
+    x, y = ahead(0.8)
+    box = UprightBox((x, y, 0.665), (0.045, 0.031, 0.065), math.radians(30 + yaw_deg))
+    depth, labels, _ = render([Plane((0, 0, 0.6), (0, 0, 1)), box], T_WORLD_CAMERA, K, W, H)
+    depth = _noisy(depth, seed)
+    m = measure(GEO, depth, labels == 2, (0, 0), "can", CHECK)
+    assert m is not None
+    assert (m.class_name, m.network_class) == ("box", "can")
+    assert m.fit_base_yaw.shape == "box"
+    assert np.hypot(m.axis_world[0] - x, m.axis_world[1] - y) < 0.02
+    unchecked = measure(GEO, depth, labels == 2, (0, 0), "can")
+    assert unchecked is not None
+    assert (unchecked.class_name, unchecked.fit_base_yaw.shape) == ("can", "cylinder")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("distance", [0.75, 1.1])
+def test_the_shape_check_reads_a_can_the_network_called_a_box_as_a_can(
+    seed: int, distance: float
+) -> None:
+    x, y = ahead(distance)
+    shapes: list[Shape] = [Plane((0, 0, 0.8), (0, 0, 1)), UprightCylinder((x, y), 0.03, 0.8, 0.92)]
+    depth, labels, _ = render(shapes, T_WORLD_CAMERA, K, W, H)
+    depth = _noisy(depth, seed)
+    as_box = measure(GEO, depth, labels == 2, (0, 0), "box", CHECK)
+    as_can = measure(GEO, depth, labels == 2, (0, 0), "can", CHECK)
+    assert as_box is not None and as_can is not None
+    assert (as_box.class_name, as_box.network_class) == ("can", "box")
+    assert (as_can.class_name, as_can.network_class) == ("can", "")
+    assert as_box.fit_base_yaw.radius == pytest.approx(0.03, abs=3e-3)
+
+
+def test_the_shape_check_leaves_far_objects_bottles_and_unfitted_arcs_to_the_network() -> None:
+    x, y = ahead(1.6)  # beyond range_m of the camera
+    box = UprightBox((x, y, 0.865), (0.045, 0.031, 0.065), math.radians(30))
+    depth, labels, _ = render([Plane((0, 0, 0.8), (0, 0, 1)), box], T_WORLD_CAMERA, K, W, H)
+    far = measure(GEO, _noisy(depth, 0), labels == 2, (0, 0), "can", CHECK)
+    assert far is not None and (far.class_name, far.network_class) == ("can", "")
+    x, y = ahead(0.8)  # a bottle is not one of the pair, whatever its shape
+    box = UprightBox((x, y, 0.865), (0.045, 0.031, 0.065), math.radians(30))
+    depth, labels, _ = render([Plane((0, 0, 0.8), (0, 0, 1)), box], T_WORLD_CAMERA, K, W, H)
+    bottle = measure(GEO, _noisy(depth, 0), labels == 2, (0, 0), "bottle", CHECK)
+    assert bottle is not None and bottle.class_name == "bottle"
+    arc = fit_cylinder(
+        np.column_stack([np.full(12, 3.0), np.linspace(-0.02, 0.02, 12), np.linspace(0, 0.1, 12)]),
+        eye=(0.0, 0.0, 0.5),
+    )
+    assert arc.fallback and CHECK.judge(arc, 0.8) is None
