@@ -135,6 +135,16 @@ def test_the_truth_segmenter_reads_the_sims_labels_stamped_at_the_tick() -> None
     np.testing.assert_allclose(missing.T_world_base, POSE, atol=1e-12)  # the frame came
 
 
+def test_the_shape_check_corrects_the_network_and_never_the_truth_segmenter() -> None:
+    frame, mask = _frame()  # a 3 cm cylinder within the check's range
+    msg = Rig(Buffer(frame), Network([Inst("box", 0.9, mask)])).tick()
+    assert [(d.class_name, d.network_class) for d in msg.detections] == [("can", "box")]
+    labels = to_wire(mask.astype(np.int32))
+    truth = SegmentationTruth(stamp_ns=B, camera=CAM, labels=labels, instances={1: "box_1"})
+    msg = Rig(Buffer(frame), truths=Buffer(truth)).tick()
+    assert [(d.class_name, d.network_class) for d in msg.detections] == [("box", None)]
+
+
 def test_a_frame_without_the_robots_pose_at_capture_is_published_empty_with_why() -> None:
     frame, mask = _frame()
     net = Network([Inst("bottle", 0.9, mask)])

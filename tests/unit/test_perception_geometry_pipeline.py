@@ -24,7 +24,8 @@ from services.perception.locate import (
     check_request,
     nearest_to,
 )
-from services.perception.pipeline import CLASSES, detect, mask_of
+from services.perception.measure import ShapeCheck
+from services.perception.pipeline import CLASSES, class_text, detect, mask_of
 from tests.unit.perception_raycast import Plane, Shape, UprightCylinder, render
 
 W, H = 320, 240
@@ -88,6 +89,19 @@ def test_a_detection_message_carries_the_bottles_geometry_and_its_mask() -> None
     dx, dy = det.axis_in_world[0] - 0.5, det.axis_in_world[1] + 0.2
     assert det.axis_in_base_yaw[0] == pytest.approx(c * dx + s * dy, abs=1e-9)
     assert det.axis_in_base_yaw[1] == pytest.approx(-s * dx + c * dy, abs=1e-9)
+
+
+def test_a_can_read_as_a_box_travels_as_a_can_with_the_networks_class_beside_it() -> None:
+    frame, mask = _frame()  # the 3 cm cylinder, 1 m ahead: a can's shape
+    check = ShapeCheck(range_m=1.2, rms_per_m2=2.8e-3)
+    det = decode(encode(detect(frame, T_WORLD_BASE, [Inst("box", 0.9, mask)], 0.5, check)[0]
+                        .detection), Detection)  # fmt: skip
+    assert (det.class_name, det.network_class, det.shape) == ("can", "box", "cylinder")
+    assert class_text(det) == "can (network: box)"
+    same = detect(frame, T_WORLD_BASE, [Inst("can", 0.9, mask)], 0.5, check)[0].detection
+    assert (same.class_name, same.network_class, class_text(same)) == ("can", None, "can")
+    unchecked = detect(frame, T_WORLD_BASE, [Inst("box", 0.9, mask)], 0.5)[0].detection
+    assert (unchecked.class_name, unchecked.network_class) == ("box", None)
 
 
 def test_a_mask_of_another_size_than_the_depth_is_refused() -> None:
