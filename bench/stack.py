@@ -36,12 +36,13 @@ from typing import Any
 from bench.eval.run import read_map, start_gate_overrides, watch_mission
 from bench.eval.targets import demo_pair
 from common.bus import Latest
-from common.config import REPO_ROOT, Overrides, merged
+from common.config import Overrides, merged
 from common.keys import SERVICES
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.perception import Detections
 from common.messages.sim import Clock, SimStats
 from common.messages.wbc import WbcStatus
+from common.recording import run_dir
 from deploy.stack import ProcessStack
 
 #: Sim seconds left out at the start (the stack settling, the first plan and map).
@@ -148,9 +149,8 @@ def figures(w: Window, cores: int) -> dict[str, Any]:
     }
 
 
-def _recording_mb(run_id: str) -> float:
-    """The run's recording so far (every service's `.rrd`), MB; 0 without one."""
-    folder = REPO_ROOT / "recordings" / run_id
+def _recording_mb(folder: Path) -> float:
+    """The run's recording so far (every service's `.rrd` in `folder`), MB; 0 without one."""
     return round(sum(p.stat().st_size for p in folder.glob("*.rrd")) / 1e6, 1)
 
 
@@ -195,11 +195,11 @@ def bench_stack(overrides: Overrides, sim_s: float = 60.0, full: bool = False) -
             flush=True,
         )
         record = watch_mission(bus, keys, request, timeout, on_progress, start_gate=True)
-        run_id = stack.run_id
+        recording = run_dir(stack.config.recording, stack.run_id)
     if w.start is None or w.end is None or w.end.sim_s <= w.start.sim_s:
         return {"error": f"no measured window (the run ended at {record.end_ns / 1e9:.1f} s)"}
     out = figures(w, cores)
     final = record.changes[-1] if record.changes else None
     out["mission"] = final.state if final else "none"
-    out["recording_mb"] = _recording_mb(run_id)
+    out["recording_mb"] = _recording_mb(recording)
     return out

@@ -38,7 +38,10 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "config.toml"
 ENV_PREFIX = "DUME_"
 #: Environment variables that are not settings.
-ENV_NOT_SETTINGS = frozenset({"DUME_CONFIG", "DUME_SETTINGS", "DUME_PYTHON", "DUME_RUN_DIR"})
+ENV_NOT_SETTINGS = frozenset(
+    {"DUME_CONFIG", "DUME_SETTINGS", "DUME_PYTHON", "DUME_RUN_DIR", "DUME_USER",
+     "DUME_CTL_PASSWORD"}
+)  # fmt: skip
 #: Overrides as data: a dotted key path (`"time.participants.wbc.period_s"`) → its value.
 Overrides = Mapping[str, Any]
 
@@ -318,10 +321,15 @@ class SemanticMapSettings(_Section):
     `start` says (ids are stable across restarts) unless `reset` is true.
     floor_plan: the static occupancy layer when the start mode brings none (`world`: the
     simulator's grid, the building's floor plan; `none`).
+    site: which place the map is of (`Config.map_site`; empty: the simulated world,
+    `hall seed 3`). A database, a prior map file or an import of another site is never
+    used: the service refuses it with the reason. name: the database's; empty: the
+    site's (`hall-seed-3`), so that each world keeps its own map.
     """
 
     start: Literal["prior", "seed-from-world", "empty"] = "empty"
-    name: str = "default"
+    site: str = ""
+    name: str = ""
     #: Folder of the databases (`<dir>/<name>.sqlite`), relative to the repository root.
     dir: str = "var/map"
     #: True: start over whatever the database holds.
@@ -574,7 +582,9 @@ class MissionSettings(_Section):
 
 class RecordingSettings(_Section):
     enabled: bool = True
-    dir: str = "recordings"
+    #: Recordings go to `<dir>/<run id>/<service>.rrd`: by default the run's folder, beside
+    #: its logs (`deploy.runs`).
+    dir: str = "var/run"
     #: One id shared by every service of a run; `dume up` sets a fresh one.
     run_id: str = ""
     #: gRPC address of a live viewer (`rerun+http://127.0.0.1:9876/proxy`), empty for none.
@@ -659,6 +669,11 @@ class Config(_Section):
     localization: LocalizationSettings = msgspec.field(default_factory=LocalizationSettings)
     cpu: CpuSettings = msgspec.field(default_factory=CpuSettings)
     log: LogSettings = msgspec.field(default_factory=LogSettings)
+
+    def map_site(self) -> str:
+        """The place this stack's map is of: `semantic_map.site`, else the simulated
+        world (`hall seed 3`)."""
+        return self.semantic_map.site or f"{self.sim.world} seed {self.sim.world_seed}"
 
     def odom_from_estimate(self) -> bool:
         """Whether `odom` is the WBC's estimate (`wbc.base_state = "estimate"`, on legs,

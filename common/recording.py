@@ -1,10 +1,11 @@
 """rerun: one recording per run, shared by every service.
 
 Each service opens a `RecordingStream` with the run's id (`recording.run_id`, set by
-`dume up` for all of them) and saves its own `recordings/<run>/<service>.rrd`;
-`rerun recordings/<run>/*.rrd` opens them as one recording. With `recording.viewer`
-set, the data is also streamed to a live viewer. Everything is stamped on the
-`sim_time` timeline (seconds of sim time), never on wall time.
+`dume up` for all of them) and saves its own `var/run/<run>/<service>.rrd` (the run's
+folder, beside its logs; `recording.dir`); `dume view <run>` opens them as one
+recording. With `recording.viewer` set, the data is also streamed to a live viewer.
+Everything is stamped on the `sim_time` timeline (seconds of sim time), never on wall
+time.
 
 Entity paths are shared: `world/…` (3D, world frame), `robot/…`, `camera/<cam>/…`,
 `plots/<service>/…` (time series), `log/<service>` (text). The blueprint that lays them
@@ -125,20 +126,70 @@ class RerunHandler(logging.Handler):
             self.handleError(record)
 
 
+#: The plots' tabs: (name, origin), the controller's first.
+PLOT_TABS = (
+    ("controller", "plots/wbc"),
+    ("navigation", "plots/nav"),
+    ("localization", "plots/localization"),
+    ("perception", "plots/perception"),
+    ("sim", "plots/sim"),
+    ("truth", "plots/truth"),
+)
+
+
+def view_origins(blueprint: rrb.Blueprint) -> list[tuple[str, str]]:
+    """(view name, origin) of every view in `blueprint`, depth first."""
+    out: list[tuple[str, str]] = []
+
+    def walk(part: object) -> None:
+        if isinstance(part, rrb.View):
+            out.append((str(part.name), str(part.origin)))
+        for child in getattr(part, "contents", None) or []:
+            if isinstance(child, (rrb.View, rrb.Container)):
+                walk(child)
+
+    walk(blueprint.root_container)
+    return out
+
+
+def shown_by(entity: str, origins: list[tuple[str, str]]) -> list[str]:
+    """The names of the views whose origin holds `entity` (an entity path)."""
+    path = "/" + entity.strip("/")
+    return [
+        n
+        for n, o in origins
+        if path == "/" + o.strip("/") or path.startswith("/" + o.strip("/") + "/")
+    ]
+
+
 def default_blueprint(cameras: tuple[str, ...] = ("camera_head", "camera_wrist")) -> rrb.Blueprint:
-    """The layout of a run: the 3D world, both cameras, time series and text logs."""
+    """The layout of a run, what a person watching the robot wants in view: the 3D world
+    (the map's occupancy and entities, the costmap and the planned path, the cameras'
+    frustums, the robot's true trail, perception's points), both cameras with
+    perception's boxes and masks, the mission's behaviour tree and decisions, and the
+    plots (the controller's first) beside the services' logs. The side panels start
+    open: the entity tree and the timeline are how one finds the rest."""
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
                 rrb.Spatial3DView(name="world", origin="world"),
-                rrb.TimeSeriesView(name="plots", origin="plots"),
+                rrb.Tabs(
+                    *[rrb.TimeSeriesView(name=n, origin=o) for n, o in PLOT_TABS],
+                    rrb.TimeSeriesView(name="mission progress", origin="mission/progress"),
+                ),
                 row_shares=[3, 2],
             ),
             rrb.Vertical(
                 *[rrb.Spatial2DView(name=cam, origin=f"camera/{cam}") for cam in cameras],
-                rrb.TextLogView(name="log", origin="log"),
+                rrb.Tabs(
+                    rrb.TextDocumentView(name="behaviour tree", origin="mission/tree"),
+                    rrb.TextLogView(name="mission", origin="mission"),
+                    rrb.TextLogView(name="logs", origin="log"),
+                    rrb.TextDocumentView(name="world", origin="world/description"),
+                ),
+                row_shares=[2, 2, 3],
             ),
             column_shares=[3, 2],
         ),
-        collapse_panels=True,
+        collapse_panels=False,
     )

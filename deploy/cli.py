@@ -1,9 +1,14 @@
 """`dume`: the command line of a dume stack.
 
-    dume up [--world-seed N] [--world small] [--realtime] [--start-pose X Y YAW]
-                                                         supervisord in the foreground
-    dume status                                             who is alive; the mission's state
-    dume world --seed N [--world small] [--grid]            a generated world as JSON
+    dume up [--world-seed N] [--world small] [--map FILE|truth] [--realtime]
+            [--start-pose X Y YAW]                       supervisord in the foreground
+    dume status [--ready S]                                 who is alive; the mission's state
+    dume runs [--all]                                       the runs that are up, their folders
+    dume logs [SERVICE] [--run RUN] [-f]                    a run's files, or a service's log
+    dume ctl [--run RUN] [status | restart sim | ...]       supervisorctl on a run
+    dume view [RUN] [--web | --snapshot FILE.png]           a run's recording in rerun
+    dume down [--run RUN]                                   stop a `dume up` run
+    dume world --world-seed N [--world small] [--grid]      a generated world as JSON (truth)
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
     dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
     dume map [--patrol | --export FILE | --import FILE]     the semantic map (JSON)
@@ -15,8 +20,10 @@
     dume trial goals [--count 10] | person             random goals; a person stepping in (JSON)
     dume train-segmenter [--seed S]                         render data, train, export ONNX
 
-Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's) to talk to the
-stack on that port, and `--set key=value` to override settings.
+Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's; with neither,
+when nothing listens there, the one run that is up) to talk to the stack on that port,
+and `--set key=value` to override settings. A run's logs, settings and recording are in
+`var/run/<run>/`, printed by every command that starts a stack.
 """
 
 from __future__ import annotations
@@ -34,23 +41,101 @@ from typing import Any
 
 import msgspec
 
-from common.bus import Bus, NoRouter, WaitTimeout
+from common.bus import Bus, BusError, NoReply, NoRouter, WaitTimeout
 from common.config import REPO_ROOT, Config, ConfigError, load_config, merged, parse_overrides
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.lifelines import Dependencies
 from common.messages import encode
-from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
+from deploy.runs import (
+    RUNS_DIR,
+    RunInfo,
+    RunNotFound,
+    find_run,
+    listening,
+    now_iso,
+    restarts,
+    runs_up,
+    shown,
+    write_info,
+)
 
 #: How long a command waits for the stack's router before saying there is none.
 CONNECT_TIMEOUT_S = 3.0
+#: Wall seconds for the mission to hold a request, and then to take or refuse it.
+SUBMIT_TIMEOUT_S = 10.0
+#: Wall seconds a command waits for the router of a run that is starting on its port.
+STARTING_WAIT_S = 15.0
+#: Where a command that fails for a reason nobody foresaw leaves its traceback.
+CLI_ERRORS = RUNS_DIR / "cli-errors.log"
 
 
-def _client_config(args: argparse.Namespace) -> Config:
-    return load_config(merged(parse_overrides(args.set), _port(args)))
+class CliError(Exception):
+    """What went wrong, for a person, and what to do about it: printed as one line."""
+
+    def __init__(self, cause: str, hint: str = "") -> None:
+        super().__init__(cause)
+        self.cause, self.hint = cause, hint
+
+    def line(self) -> str:
+        return f"dume: {self.cause}" + (f" ({self.hint})" if self.hint else "")
+
+
+def _client_config(args: argparse.Namespace, wait_s: float = 0.0) -> Config:
+    """The settings of a command that talks to a stack. With no `--port` (and no
+    `DUME_ZENOH_PORT`), when nothing listens on the default port and exactly one run is
+    up, that run's (`dume demo` picks a free port); no stack at all is a `CliError`. A
+    run that is starting on the port (its router not listening yet) is waited for, up to
+    `wait_s` or `STARTING_WAIT_S`."""
+    config = load_config(merged(parse_overrides(args.set), _port(args)))
+    host, port = config.zenoh.host, config.zenoh.port
+    up = runs_up()
+    if any(r.info.port == port for r in up):
+        wait_s = max(wait_s, STARTING_WAIT_S)
+    deadline = time.monotonic() + wait_s
+    while True:
+        if listening(host, port):
+            return config
+        if time.monotonic() >= deadline:
+            break
+        time.sleep(0.25)
+    chosen = args.port is not None or "DUME_ZENOH_PORT" in os.environ
+    if not chosen and len(up) == 1:
+        run = up[0].info
+        print(f"dume: run {run.run_id} ({run.kind}) on port {run.port}", file=sys.stderr)
+        return load_config(merged(parse_overrides(args.set), {"zenoh.port": run.port}))
+    if up:
+        listed = ", ".join(f"{r.info.run_id} ({r.info.kind}) on --port {r.info.port}" for r in up)
+        hint = f"running: {listed}"
+    else:
+        hint = "start one with `dume up`, or pass the --port that `dume demo` printed"
+    raise CliError(f"no dume stack on tcp/{host}:{port}", hint)
 
 
 def _port(args: argparse.Namespace) -> dict[str, Any]:
-    return {"zenoh.port": args.port} if args.port else {}
+    return {"zenoh.port": args.port} if args.port is not None else {}
+
+
+def port_number(text: str) -> int:
+    """argparse's type of `--port`: 1-65535."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a port (1-65535)")
+    return port
+
+
+def seed_number(text: str) -> int:
+    """argparse's type of a world seed: 0 or more."""
+    try:
+        seed = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a seed (an integer)") from None
+    if seed < 0:
+        raise argparse.ArgumentTypeError(f"{seed}: seeds are 0 or more")
+    return seed
 
 
 def cmd_up(args: argparse.Namespace) -> int:
@@ -65,33 +150,86 @@ def cmd_up(args: argparse.Namespace) -> int:
             parse_overrides(args.set),
             realtime,
             start,
+            map_start(args.map, args.world, args.world_seed),
             _port(args),
         )
     )
     config = load_config(settings)
+    port = config.zenoh.port
+    if listening(config.zenoh.host, port):
+        up = [r for r in runs_up() if r.info.port == port]
+        who = f"run {up[0].info.run_id}" if up else "another program"
+        raise CliError(
+            f"port {port} is in use ({who})",
+            "stop it (`dume down`), or start this one on another port (`dume up --port 7450`)",
+        )
     run_id = new_run_id()
-    run_dir = REPO_ROOT / "var" / "run" / run_id
+    run_dir = RUNS_DIR / run_id
     run_dir.mkdir(parents=True, exist_ok=True)
     env = stack_env(
-        port=config.zenoh.port,
-        run_id=run_id,
-        run_dir=run_dir,
-        settings=settings_env(run_dir, settings),
+        port=port, run_id=run_id, run_dir=run_dir, settings=settings_env(run_dir, settings)
+    )
+    sim = config.sim
+    write_info(
+        run_dir,
+        RunInfo(
+            run_id=run_id,
+            port=port,
+            pid=os.getpid(),  # supervisord's, after the exec
+            kind="up",
+            world=sim.world,
+            world_seed=sim.world_seed,
+            started=now_iso(),
+        ),
     )
     exe = os.path.join(os.path.dirname(sys.executable), "supervisord")
     print(
-        f"dume up: run {run_id}, zenoh port {config.zenoh.port}, {config.sim.world} world "
-        f"seed {config.sim.world_seed}, {config.time.mode}; logs in {run_dir}",
+        f"dume up: run {run_id}, zenoh port {port}, {sim.world} world seed "
+        f"{sim.world_seed}, {config.time.mode}, map {config.semantic_map.start}\n"
+        f"  logs and recording: {shown(run_dir)}/  (dume logs [SERVICE], dume view, "
+        "dume ctl status; dume down stops it)",
         file=sys.stderr,
+        flush=True,
     )
     os.execve(exe, [exe, "-c", str(SUPERVISORD_CONF)], env)
     return 0  # not reached
 
 
+def map_start(map_arg: str | None, world: str, seed: int) -> dict[str, Any]:
+    """`dume up --map`'s settings. None: the site's own database, resumed (empty the
+    first time: `dume map --patrol` maps it); `truth`: seeded from the world's truth with
+    noise (the ablation that stands in for a mapping run, as the demo's); a file: that
+    prior map (`dume map --export`). Each of the last two starts over in a database of
+    its own (`<site>-truth`, `<site>-prior`): the site's own map is never overwritten."""
+    if map_arg is None:
+        return {}
+    site = f"{world}-seed-{seed}"
+    if map_arg == "truth":
+        return {
+            "semantic_map.start": "seed-from-world",
+            "semantic_map.name": f"{site}-truth",
+            "semantic_map.reset": True,
+        }
+    path = pathlib.Path(map_arg).expanduser().resolve()
+    if not path.is_file():
+        raise CliError(f"no map file {map_arg}", "`dume map --export FILE` writes one")
+    return {
+        "semantic_map.start": "prior",
+        "semantic_map.prior_file": str(path),
+        "semantic_map.name": f"{site}-prior",
+        "semantic_map.reset": True,
+    }
+
+
 def cmd_status(args: argparse.Namespace) -> int:
-    config = _client_config(args)
+    config = _client_config(args, wait_s=args.ready)
     keys = RobotKeys(config.robot)
     with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
+        if args.ready:  # until every service is up (or the time is out)
+            watch = bus.watch_alive(keys.alive_all)
+            with contextlib.suppress(WaitTimeout):
+                watch.wait_for({keys.alive(s) for s in SERVICES}, args.ready)
+            watch.undeclare()
         alive = sorted(service_of_alive_key(k) for k in bus.alive_now(keys.alive_all, 2.0))
         status_sub = bus.latest(keys.mission_status, MissionStatus)
         try:
@@ -105,7 +243,20 @@ def cmd_status(args: argparse.Namespace) -> int:
         "missing": [s for s in SERVICES if s not in alive],
         "mission": None if status is None else msgspec.to_builtins(status),
     }
+    run = next((r for r in runs_up() if r.info.port == config.zenoh.port), None)
+    if run is not None:
+        died = restarts(run.folder)
+        out |= {"run": run.info.run_id, "folder": run.shown(), "restarts": died}
+        for name, k in died.items():  # visible: a restarted sim started the world over
+            print(
+                f"dume: {name} died and was restarted {k} time(s) in run {run.info.run_id}"
+                + (" (its world started over at t = 0)" if name == "sim" else "")
+                + f": see {run.shown()}/supervisord.log and {name}.log",
+                file=sys.stderr,
+            )
     print(json.dumps(out))
+    if args.ready:
+        return 0 if not out["missing"] else 1
     return 0 if alive else 1
 
 
@@ -133,12 +284,17 @@ def cmd_request(args: argparse.Namespace) -> int:
         time.sleep(0.2)  # let the subscription reach the router before the request goes out
         with contextlib.suppress(WaitTimeout):
             alive.wait_for({keys.alive("mission")}, 2.0)
+        if mission.missing():
+            raise CliError(
+                "the mission service is not running",
+                "`dume status` says which services are up, `dume logs mission` why",
+            )
         mission.arm()
-        bus.session.put(keys.mission_request, encode(request))
+        # Handed over, not just put: the mission answers once it holds the request.
+        bus.query(keys.mission_submit, request, MissionReceipt, SUBMIT_TIMEOUT_S)
         print(json.dumps({"request_id": request.request_id, "sent": msgspec.to_builtins(request)}))
-        if not args.wait:
-            return 0
-        deadline = time.monotonic() + args.timeout
+        # Without --wait: until the mission took it or refused it (its first status).
+        deadline = time.monotonic() + (args.timeout if args.wait else SUBMIT_TIMEOUT_S)
         ours = False
         while time.monotonic() < deadline:
             status = statuses.pop(timeout_s=0.2)
@@ -160,15 +316,13 @@ def cmd_request(args: argparse.Namespace) -> int:
                 return 0
             if status.state in ("failed", "cancelled", "rejected"):
                 return 1
-        print(
-            json.dumps(
-                {
-                    "request_id": request.request_id,
-                    "outcome": "timeout",
-                    "reason": "the mission did not finish in time",
-                }
-            )
-        )
+            if not args.wait:
+                hint = f"follow it: `dume status`; stop it: `dume cancel {request.request_id}`"
+                print(f"dume: {request.request_id} {status.state} ({hint})", file=sys.stderr)
+                return 0
+        said = "finish" if args.wait else "take it or refuse it"
+        out = {"request_id": request.request_id, "outcome": "timeout"}
+        print(json.dumps(out | {"reason": f"the mission did not {said} in time"}))
         return 3
 
 
@@ -190,18 +344,25 @@ def cmd_map(args: argparse.Namespace) -> int:
     from common.keys import MAP_ARTIFACTS, MAP_EXPORT, MAP_IMPORT, MAP_PEOPLE
     from common.messages.mission import PatrolRequest, PatrolStatus
     from common.messages.semantic_map import MapFile, MapListing, MapSummary
-    from services.semantic_map.mapfile import read_map_file, write_map_file
+    from services.semantic_map.mapfile import MapFileError, read_map_file, write_map_file
 
+    try:  # the file first: a bad one needs no stack to say so
+        imported = read_map_file(Path(args.import_)) if args.import_ else None
+    except MapFileError as exc:
+        raise CliError(str(exc), "`dume map --export FILE` writes one") from None
     config = _client_config(args)
     keys = RobotKeys(config.robot)
     with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         if args.export:
             mf = bus.query(MAP_EXPORT, None, MapFile, 10.0)
+            if args.export == "-":
+                sys.stdout.buffer.write(msgspec.json.format(msgspec.json.encode(mf), indent=1))
+                return 0
             write_map_file(Path(args.export), mf)
             print(json.dumps({"exported": args.export, "entities": len(mf.entities)}))
             return 0
-        if args.import_:
-            summary = bus.query(MAP_IMPORT, read_map_file(Path(args.import_)), MapSummary, 10.0)
+        if imported is not None:
+            summary = bus.query(MAP_IMPORT, imported, MapSummary, 10.0)
             print(json.dumps(msgspec.to_builtins(summary)))
             return 0
 
@@ -231,6 +392,133 @@ def cmd_map(args: argparse.Namespace) -> int:
         mapped = listings()
     print(json.dumps({k: [msgspec.to_builtins(e) for e in v] for k, v in mapped.items()}))
     return 0
+
+
+def _run_line(r: Any) -> dict[str, Any]:
+    i = r.info
+    return {
+        "run": i.run_id,
+        "kind": i.kind,
+        "up": r.up,
+        "port": i.port,
+        "world": f"{i.world} {i.world_seed}",
+        "started": i.started,
+        "folder": r.shown(),
+    }
+
+
+def cmd_runs(args: argparse.Namespace) -> int:
+    from deploy.runs import all_runs
+
+    found = all_runs() if args.all else runs_up()
+    for r in found[: args.limit]:
+        print(json.dumps(_run_line(r)))
+    if not found:
+        what = "no run" if args.all else "no run is up"
+        print(f"dume: {what} (runs keep their folders in {shown(RUNS_DIR)})", file=sys.stderr)
+    return 0
+
+
+def cmd_logs(args: argparse.Namespace) -> int:
+    """The run's folder and files; with a service, its log's last lines (or follow it)."""
+    run = find_run(args.run)
+    if args.service is None:
+        print(json.dumps(_run_line(run)))
+        for path in sorted(run.folder.iterdir()):
+            if path.is_file() and not path.name.startswith("."):
+                print(f"{path.stat().st_size:>12,}  {shown(path)}")
+        return 0
+    path = run.folder / f"{args.service}.log"
+    if not path.is_file():
+        logs = sorted(p.stem for p in run.folder.glob("*.log"))
+        raise CliError(f"run {run.info.run_id} has no {args.service}.log", f"it has: {logs}")
+    if args.follow:
+        os.execvp("tail", ["tail", "-n", str(args.lines), "-F", str(path)])
+    lines = path.read_text(errors="replace").splitlines()
+    print("\n".join(lines[-args.lines :]))
+    return 0
+
+
+def _ctl_env(run: Any) -> dict[str, str]:
+    from deploy.runs import ctl_secret, current_user
+
+    return dict(
+        os.environ,
+        DUME_RUN_DIR=str(run.folder),
+        DUME_PYTHON=sys.executable,
+        DUME_USER=current_user(),
+        DUME_CTL_PASSWORD=ctl_secret(run.folder),
+    )
+
+
+def cmd_ctl(args: argparse.Namespace) -> int:
+    """supervisorctl on a supervised run, with the run's environment."""
+    from deploy.stack import SUPERVISORD_CONF
+
+    run = find_run(args.run, supervised=True)
+    if not run.up:
+        raise CliError(f"run {run.info.run_id} is not up", "start one with `dume up`")
+    exe = os.path.join(os.path.dirname(sys.executable), "supervisorctl")
+    argv = [exe, "-c", str(SUPERVISORD_CONF), *(args.ctl_args or ["status"])]
+    os.execve(exe, argv, _ctl_env(run))
+    return 0  # not reached
+
+
+def cmd_down(args: argparse.Namespace) -> int:
+    """Stop a run that is up: supervisord (or the demo) stops every service."""
+    import signal
+
+    run = find_run(args.run)
+    if not run.up:
+        raise CliError(f"run {run.info.run_id} is not up", "`dume runs` lists those that are")
+    if run.info.kind == "stack":
+        raise CliError(
+            f"run {run.info.run_id} belongs to another command (pid {run.info.pid})",
+            "stop that command (Ctrl-C); `dume down` stops `dume up` and `dume demo` runs",
+        )
+    os.kill(run.info.pid, signal.SIGTERM)
+    deadline = time.monotonic() + args.timeout
+    while time.monotonic() < deadline and run.up:
+        time.sleep(0.2)
+    if run.up:
+        raise CliError(
+            f"run {run.info.run_id} still up after {args.timeout:.0f} s",
+            f"its supervisord log: {run.shown()}/supervisord.log",
+        )
+    print(json.dumps({"stopped": run.info.run_id, "folder": run.shown()}))
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """The run's recording in rerun's viewer (native, or served to a browser)."""
+    run = find_run(args.run)
+    rrds = sorted(str(p) for p in run.folder.glob("*.rrd"))
+    if not rrds:
+        raise CliError(
+            f"run {run.info.run_id} has no recording in {run.shown()}",
+            "recording.enabled was off, or the run stopped before its first flush",
+        )
+    if args.snapshot:
+        from deploy.snapshot import snapshot
+
+        i = run.info
+        title = f"run {i.run_id}: {i.world} world seed {i.world_seed}"
+        t = snapshot(run.folder, pathlib.Path(args.snapshot), args.at, title)
+        print(json.dumps({"snapshot": args.snapshot, "run": i.run_id, "at_s": round(t, 2)}))
+        return 0
+    exe = os.path.join(os.path.dirname(sys.executable), "rerun")
+    web = args.web or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    argv = [exe, *rrds]
+    if web:
+        argv[1:1] = ["--serve-web", "--web-viewer-port", str(args.web_port)]
+        print(
+            f"dume view: serving {run.info.run_id} at http://localhost:{args.web_port} "
+            "(Ctrl-C to stop)",
+            file=sys.stderr,
+            flush=True,
+        )
+    os.execv(exe, argv)
+    return 0  # not reached
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -295,18 +583,38 @@ def cmd_train_segmenter(args: argparse.Namespace) -> int:
     return 0
 
 
+def version() -> str:
+    """dume's version, and the commit of a git checkout."""
+    import importlib.metadata
+
+    from deploy.runs import source_commit
+
+    try:
+        v = importlib.metadata.version("dume")
+    except importlib.metadata.PackageNotFoundError:
+        v = "unknown"
+    commit = source_commit()
+    return f"dume {v}" + (f" ({commit})" if commit != "unknown" else "")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="dume", description=__doc__.split("\n\n")[0])
+    assert __doc__ is not None
+    parser = argparse.ArgumentParser(
+        prog="dume",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=version())
     sub = parser.add_subparsers(dest="command", required=True)
 
     def add(name: str, help_: str) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help_)
+        p = sub.add_parser(name, help=help_, description=help_)
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-        p.add_argument("--port", type=int, default=None, help="the stack's Zenoh port")
+        p.add_argument("--port", type=port_number, default=None, help="the stack's Zenoh port")
         return p
 
     p = add("up", "run the stack under supervisord in the foreground")
-    p.add_argument("--world-seed", type=int, default=0)
+    p.add_argument("--world-seed", type=seed_number, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--realtime", action="store_true", help="pace the sim to the wall clock")
     p.add_argument(
@@ -316,14 +624,29 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=("X", "Y", "YAW"),
         help="where the robot stands, m m rad in the map (default: the world's start)",
     )
+    p.add_argument(
+        "--map",
+        default=None,
+        metavar="FILE|truth",
+        help="start the map from a file (dume map --export), or from the world's truth "
+        "with noise (the ablation standing in for a mapping run); default: this world's "
+        "own map, resumed",
+    )
     p.set_defaults(func=cmd_up)
 
     p = add("status", "which services are alive and ready; the latest mission status")
     p.add_argument("--wait", type=float, default=0.5, help="seconds to listen for a status")
+    p.add_argument(
+        "--ready",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="wait up to S wall seconds for every service; exit 0 only when all are up",
+    )
     p.set_defaults(func=cmd_status)
 
-    p = add("world", "print a generated world as JSON")
-    p.add_argument("--seed", type=int, default=0)
+    p = add("world", "print a generated world as JSON (the simulator's truth)")
+    p.add_argument("--world-seed", "--seed", dest="seed", type=seed_number, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--walking-people", action="store_true")
     p.add_argument("--grid", action="store_true", help="include the occupancy grid")
@@ -338,6 +661,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=600.0)
     p.set_defaults(func=cmd_request)
 
+    p = add("runs", "the runs that are up (--all: every run kept in var/run), JSON lines")
+    p.add_argument("--all", action="store_true")
+    p.add_argument("--limit", type=int, default=20)
+    p.set_defaults(func=cmd_runs)
+
+    p = add("logs", "a run's folder (logs, recording, settings), or a service's log")
+    p.add_argument("service", nargs="?", help="sim, wbc, mission, supervisord, router, ...")
+    p.add_argument("--run", default=None, help="a run id or its prefix (default: the newest)")
+    p.add_argument("-n", "--lines", type=int, default=40)
+    p.add_argument("-f", "--follow", action="store_true")
+    p.set_defaults(func=cmd_logs)
+
+    p = add("ctl", "supervisorctl on a `dume up` or `dume demo` run (default: status)")
+    p.add_argument("--run", default=None, help="a run id or its prefix (default: the newest)")
+    p.add_argument("ctl_args", nargs=argparse.REMAINDER, help="status, restart sim, tail -f wbc")
+    p.set_defaults(func=cmd_ctl)
+
+    p = add("down", "stop a `dume up` (or `dume demo`) run")
+    p.add_argument("--run", default=None, help="a run id or its prefix (default: the newest)")
+    p.add_argument("--timeout", type=float, default=120.0, help="wall seconds to wait")
+    p.set_defaults(func=cmd_down)
+
+    p = add("view", "open a run's recording in rerun (served to a browser when headless)")
+    p.add_argument("run", nargs="?", default=None, help="a run id or its prefix (the newest)")
+    p.add_argument("--web", action="store_true", help="serve it to a browser")
+    p.add_argument("--web-port", type=port_number, default=9090)
+    p.add_argument(
+        "--snapshot",
+        metavar="FILE.png",
+        help="no viewer: draw the run from its recording (the hall from above, both cameras)",
+    )
+    p.add_argument("--at", type=float, default=None, help="--snapshot: the cameras at S sim s")
+    p.set_defaults(func=cmd_view)
+
     p = add("cancel", "cancel a request")
     p.add_argument("request_id")
     p.add_argument("--reason", default="cancelled by the user")
@@ -348,7 +705,7 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument(
         "--patrol", action="store_true", help="the mission walks a coverage route; the map maps it"
     )
-    what.add_argument("--export", metavar="FILE", help="write the map as JSON")
+    what.add_argument("--export", metavar="FILE", help="write the map as JSON (-: stdout)")
     what.add_argument("--import", dest="import_", metavar="FILE", help="replace the map")
     p.add_argument("--spacing", type=float, default=0.0, help="patrol viewpoint spacing, m")
     p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds for the patrol")
@@ -362,7 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
         "the world's truth positions with noise (seed-from-world), standing in for an earlier "
         "mapping run, unless --map gives a prior map file."
     )
-    p.add_argument("--world-seed", type=int, default=0)
+    p.add_argument("--world-seed", type=seed_number, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--object", default=None, help="a map id or class (default: a bottle)")
     p.add_argument("--person", default=None, help="a person's map id (default: the farthest)")
@@ -379,7 +736,7 @@ def build_parser() -> argparse.ArgumentParser:
         "stdout line is a JSON summary."
     )
     p.add_argument("--worlds", type=int, default=20, help="how many worlds")
-    p.add_argument("--seed", type=int, default=0, help="world i is seed S + i")
+    p.add_argument("--seed", type=seed_number, default=0, help="world i is seed S + i")
     p.add_argument("--out", default="var/eval/latest", metavar="DIR")
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--walking-people", action="store_true", help="the walking-people scenario")
@@ -402,7 +759,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--yaw", type=float, default=0.0, help="goto: the goal's yaw, rad")
     p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals")
     p.add_argument("--count", type=int, default=10, help="goals: how many")
-    p.add_argument("--world-seed", type=int, default=None, help="default: the trial's own")
+    p.add_argument("--world-seed", type=seed_number, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)
 
@@ -417,6 +774,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run a command; every error ends as one line on stderr with a hint, never a
+    traceback (one nobody foresaw is kept in `var/run/cli-errors.log`)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     args = build_parser().parse_args(argv)
     try:
@@ -424,11 +783,52 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"dume: {exc}", file=sys.stderr)
         return 2
+    except CliError as exc:
+        print(exc.line(), file=sys.stderr)
+        return 1
+    except RunNotFound as exc:
+        print(f"dume: {exc.args[0]}", file=sys.stderr)
+        return 1
     except NoRouter as exc:
-        print(f"dume: {exc}", file=sys.stderr)
+        print(CliError(_plain(exc), _NO_STACK).line(), file=sys.stderr)
+        return 1
+    except (NoReply, WaitTimeout) as exc:
+        hint = "is the stack still starting? `dume status` says who is ready"
+        print(CliError(f"no answer from the stack: {_plain(exc)}", hint).line(), file=sys.stderr)
+        return 1
+    except BusError as exc:
+        print(CliError(_plain(exc), "`dume logs` shows the run's logs").line(), file=sys.stderr)
+        return 1
+    except OSError as exc:  # a file to read or write
+        name = f" {exc.filename}" if exc.filename else ""
+        print(f"dume: cannot use{name}: {exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # a bug: one line here, the traceback in the file
+        import traceback
+
+        CLI_ERRORS.parent.mkdir(parents=True, exist_ok=True)
+        with CLI_ERRORS.open("a") as f:
+            f.write(f"--- {now_iso()} dume {' '.join(sys.argv[1:])}\n{traceback.format_exc()}")
+        print(
+            f"dume: internal error: {type(exc).__name__}: {_plain(exc)} "
+            f"(the traceback is in {shown(CLI_ERRORS)})",
+            file=sys.stderr,
+        )
+        return 70
+
+
+_NO_STACK = "start one with `dume up`, or pass the --port that `dume demo` printed"
+
+
+def _plain(exc: BaseException) -> str:
+    """An exception's message without what a person cannot use (Zenoh's Rust source
+    locations: `... at /root/.cargo/.../orchestrator.rs:388.`)."""
+    import re
+
+    text = str(exc).strip()
+    return re.sub(r"\s*at /\S+\.rs:\d+\.?", "", text) or type(exc).__name__
 
 
 if __name__ == "__main__":

@@ -2,20 +2,21 @@
 print one JSON line.
 
 The stack is every service (`SERVICES`) under supervisord (`deploy.stack.Supervised`),
-lockstep, recording to `recordings/<run>/`. The semantic map starts from the world's
-truth positions with noise (`semantic_map.start = "seed-from-world"`), standing in for an
-earlier mapping run (`dume map --patrol`), or from a prior map file (`--map FILE`), in a
-fresh database of its own. Once every service is ready the demo asks, by map ids, for
-the bottle and the person farthest apart in the map (the longest job), or for the
-`--object` (an id or a class) and `--person` given, the other side chosen far from it.
-Progress goes to stderr: each status change, and every sim second the behaviour,
-progress, sim time and real-time factor. The outcome is `succeeded` when the mission
-says so and the sim's truth agrees (its `HandoverTaken` event: the object the requested
-map id stands for in the requested person's hand); exit code 0 only then. The last line:
-`{"outcome", "reason", "sim_time_s", "wall_time_s", "rtf", "locomotion", "recording",
-"digest"}`: the digest fingerprints the run (`bench.eval.judge.run_digest`: the status
-timeline and the base's trajectory at 10 Hz), so two runs of one seed can be compared;
-`var/run/<run>-<port>/record.json` holds what it was made of.
+lockstep, its logs and recording in `var/run/<run>/` (`deploy.runs`). The semantic map
+starts from the world's truth positions with noise (`semantic_map.start =
+"seed-from-world"`), standing in for an earlier mapping run (`dume map --patrol`), or
+from a prior map file (`--map FILE`), in a fresh database of its own. Once every service
+is ready the demo asks, by map ids, for the bottle and the person farthest apart in the
+map (the longest job), or for the `--object` (an id or a class) and `--person` given,
+the other side chosen far from it. Progress goes to stderr: each status change, and
+every sim second the behaviour, progress, sim time and real-time factor. The outcome is
+`succeeded` when the mission says so and the sim's truth agrees (its `HandoverTaken`
+event: the object the requested map id stands for in the requested person's hand); exit
+code 0 only then. The last line: `{"outcome", "reason", "sim_time_s", "wall_time_s",
+"rtf", "locomotion", "recording", "digest"}`: the digest fingerprints the run
+(`bench.eval.judge.run_digest`: the status timeline and the base's trajectory at 10 Hz),
+so two runs of one seed can be compared; `var/run/<run>/record.json` holds what it was
+made of.
 """
 
 from __future__ import annotations
@@ -144,8 +145,10 @@ def run_demo(args: argparse.Namespace) -> int:
     start = f"prior map {args.map}" if args.map else "seed-from-world (truth + noise)"
     print(
         f"dume demo: {args.world} world seed {args.world_seed}, map {start}, "
-        f"port {stack.port}, run {stack.run_id}",
+        f"port {stack.port}, run {stack.run_id}\n"
+        f"dume demo: logs and recording in {_shown(stack.run_dir)}/ (dume logs, dume view)",
         file=sys.stderr,
+        flush=True,
     )
     wall0 = time.perf_counter()
     result = WorldResult(world=args.world, world_seed=args.world_seed, scenario="demo")

@@ -1,12 +1,13 @@
 """Start and stop a dume stack: supervisord for users, plain processes for tests.
 
-Both hand a run's settings to every process of the stack, so each reads the same
-configuration: the Zenoh port, the run id and the run's folder in the environment
-(`DUME_*`), and the overrides, given as data (`{"sim.world": "small"}`), written once to
-`<run dir>/settings.json` (`DUME_SETTINGS`, see `common.config`). `Supervised` runs
-`supervisord -c deploy/supervisord.conf`, which restarts a service that dies;
-`ProcessStack` starts the router and any subset of services as child processes, so a
-test can kill one and watch what the others do.
+Both keep the run's files in its folder, `var/run/<run id>/` (`deploy.runs`: the logs,
+the settings, the recording, `run.json`), and hand a run's settings to every process of
+the stack, so each reads the same configuration: the Zenoh port, the run id and the
+run's folder in the environment (`DUME_*`), and the overrides, given as data
+(`{"sim.world": "small"}`), written once to `<run dir>/settings.json` (`DUME_SETTINGS`,
+see `common.config`). `Supervised` runs `supervisord -c deploy/supervisord.conf`, which
+restarts a service that dies; `ProcessStack` starts the router and any subset of
+services as child processes, so a test can kill one and watch what the others do.
 """
 
 from __future__ import annotations
@@ -29,6 +30,16 @@ from common.bus import AliveWatch, Bus
 from common.config import REPO_ROOT, Config, Overrides, load_config, merged, write_settings
 from common.keys import RobotKeys, service_of_alive_key
 from common.recording import new_run_id
+from deploy.runs import (
+    RUNS_DIR,
+    Kind,
+    RunInfo,
+    ctl_secret,
+    current_user,
+    mark_ended,
+    now_iso,
+    write_info,
+)
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +81,8 @@ def stack_env(
             "DUME_ZENOH_PORT": str(port),
             "DUME_RECORDING_RUN_ID": run_id,
             "DUME_RUN_DIR": str(run_dir),
+            "DUME_USER": current_user(),
+            "DUME_CTL_PASSWORD": ctl_secret(run_dir),
             "MUJOCO_GL": env.get("MUJOCO_GL", "egl"),
             "PYTHONUNBUFFERED": "1",
             # Every process of the stack (the router, supervisord's children, a test's
@@ -127,11 +140,13 @@ class _Stack:
         port: int | None,
         run_id: str | None,
         services: Sequence[str] | None = None,
+        kind: Kind = "stack",
     ) -> None:
-        """`services`: the ones this stack runs (None: every one)."""
+        """`services`: the ones this stack runs (None: every one); `kind`: what `run.json`
+        calls it (`deploy.runs`)."""
         self.port = port or free_port()
         self.run_id = run_id or new_run_id()
-        self.run_dir = REPO_ROOT / "var" / "run" / f"{self.run_id}-{self.port}"
+        self.run_dir = RUNS_DIR / self.run_id
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.overrides = with_start_pose(overrides, services)
         self.env = stack_env(
@@ -142,6 +157,19 @@ class _Stack:
         )
         self.config: Config = load_config(env=self.env)
         self.keys = RobotKeys(self.config.robot)
+        sim = self.config.sim
+        write_info(
+            self.run_dir,
+            RunInfo(
+                run_id=self.run_id,
+                port=self.port,
+                pid=os.getpid(),
+                kind=kind,
+                world=sim.world,
+                world_seed=sim.world_seed,
+                started=now_iso(),
+            ),
+        )
         self._bus: Bus | None = None
         self._alive: AliveWatch | None = None
 
@@ -178,6 +206,10 @@ class _Stack:
             watch.undeclare()
             if own is not None:
                 own.close()
+
+    def ended(self) -> None:
+        """The stack is down: `run.json` says so (its launcher may live on)."""
+        mark_ended(self.run_dir)
 
     def close_bus(self) -> None:
         if self._alive is not None:
@@ -272,6 +304,7 @@ class ProcessStack(_Stack):
                 log.warning("%s did not stop within %.1f s: killed", name, timeout_s)
                 os.killpg(proc.pid, signal.SIGKILL)
                 codes[name] = proc.wait(timeout=5)
+        self.ended()
         return codes
 
     def __enter__(self) -> ProcessStack:
@@ -291,7 +324,7 @@ class Supervised(_Stack):
         port: int | None = None,
         run_id: str | None = None,
     ) -> None:
-        super().__init__(overrides or {}, port, run_id)
+        super().__init__(overrides or {}, port, run_id, kind="demo")
         self.proc: subprocess.Popen[bytes] | None = None
 
     def command(self) -> list[str]:
@@ -323,6 +356,7 @@ class Supervised(_Stack):
     def stop(self, timeout_s: float = 20.0) -> int | None:
         self.close_bus()
         if self.proc is None:
+            self.ended()
             return None
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
@@ -331,6 +365,8 @@ class Supervised(_Stack):
         except subprocess.TimeoutExpired:
             os.killpg(self.proc.pid, signal.SIGKILL)
             return self.proc.wait(timeout=5)
+        finally:
+            self.ended()
 
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.05) -> bool:

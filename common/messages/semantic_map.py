@@ -79,11 +79,14 @@ class MapFile(Message, frozen=True):
 
     version: the format's version (1). counters: per class, the last number given
     (`{"bottle": 3}`), so ids stay unique after an import. occupancy: the merged grid
-    (static + learned), the static layer of a map started from this file.
+    (static + learned), the static layer of a map started from this file. site: the
+    place it is a map of (`Config.map_site`: `hall seed 3`; empty in files from before
+    sites were kept); a map service of another site refuses it.
     """
 
     version: Literal[1] = 1
     stamp_ns: StampNs = 0
+    site: str = ""
     entities: list[MapEntity] = msgspec.field(default_factory=list)
     counters: dict[str, int] = msgspec.field(default_factory=dict)
     occupancy: OccupancyGrid | None = None

@@ -18,15 +18,20 @@ from common.bus import RequestError
 from common.messages.semantic_map import MapFile, MapSummary
 from services.semantic_map.mapfile import occupancy_from_grid, tracks_from_file
 from services.semantic_map.mapper import SemanticMap
-from services.semantic_map.startup import save_all
+from services.semantic_map.startup import MapSiteError, check_site, save_all
 from services.semantic_map.store import MapStore
 from services.semantic_map.views import ViewHistory
 
 log = logging.getLogger("dume.semantic_map")
 
 
-def check_import(mf: MapFile) -> None:
-    """Refuse (`RequestError`, code `invalid`) a file the map cannot take."""
+def check_import(mf: MapFile, site: str = "") -> None:
+    """Refuse (`RequestError`, code `invalid`) a file the map cannot take: one of
+    another site than `site`, or inconsistent."""
+    try:
+        check_site("the file", mf.site, site)
+    except MapSiteError as exc:
+        raise RequestError("invalid", str(exc)) from None
     ids = [e.id for e in mf.entities]
     if len(set(ids)) != len(ids):
         raise RequestError("invalid", "the map file names an id twice")
@@ -67,6 +72,7 @@ def export_map(smap: SemanticMap) -> MapFile:
     entities = smap.entities("artifact") + smap.entities("person")
     return MapFile(
         stamp_ns=smap.stamp_ns,
+        site=smap.site,
         entities=entities,
         counters=dict(smap.ids.counters),
         occupancy=smap.grid(),

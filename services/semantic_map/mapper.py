@@ -123,6 +123,8 @@ class SemanticMap:
         self.stamp_ns = 0
         #: Where the static occupancy layer came from: world, file or none.
         self.static_source: Literal["world", "file", "none"] = "none"
+        #: The place this is a map of (`Config.map_site`), kept with it and its files.
+        self.site = ""
         self._dirty: dict[str, Track] = {}
         self._deleted: list[str] = []
         self._counters_dirty = False

@@ -54,7 +54,7 @@ from services.semantic_map.intake import (
 )
 from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.rerun_log import MapLogger
-from services.semantic_map.startup import open_map, world_description
+from services.semantic_map.startup import MapSiteError, open_map, world_description
 from services.semantic_map.store import MapStore, database_path, remove_database
 from services.semantic_map.supports import FloorPlanSupports
 from services.semantic_map.views import ViewHistory
@@ -68,14 +68,15 @@ class MapNode:
         self.svc = svc
         self.cfg = svc.config.semantic_map
         self.period_ns = svc.config.time.period_ns_of(NAME, 0.1)
-        path = database_path(self.cfg)
+        self.site = svc.config.map_site()
+        path = database_path(self.cfg, site=self.site)
         if self.cfg.reset:
             remove_database(path)
         self.store = MapStore(path)
         self.lock = threading.RLock()
         self.smap: SemanticMap
         world = partial(world_description, svc.bus, svc.stop)
-        self.smap, how = open_map(self.cfg, self.store, world)
+        self.smap, how = open_map(self.cfg, self.store, world, self.site)
         log.info("%s", how)
         latency_ns = svc.config.time.latency_ns_of(NAME, self.period_ns / NS_PER_S)
         lockstep = svc.config.time.mode == "lockstep"
@@ -131,7 +132,7 @@ class MapNode:
 
     def _on_import(self, mf: MapFile | None, _selector: str) -> MapSummary:
         assert mf is not None
-        check_import(mf)
+        check_import(mf, self.site)
         with self.lock:
             return import_map(mf, self.smap, self.store, self.views)
 
@@ -185,7 +186,11 @@ class MapNode:
 
 
 def main(svc: Service) -> None:
-    node = MapNode(svc)
+    try:
+        node = MapNode(svc)
+    except MapSiteError as exc:  # never serve a map of another place: say so and stop
+        log.error("refused: %s", exc)
+        raise SystemExit(2) from None
     try:
         node.run()
     finally:

@@ -4,7 +4,9 @@ A database that holds a map is resumed (entities with their ids and histograms, 
 counters, the static and learned occupancy layers) whatever the start mode, unless
 `reset`. An empty one starts from a prior map file, from the sim's truth with noise, or
 empty; the static layer comes from the file, or else from the floor plan (the sim's grid)
-when `floor_plan = "world"`, or is unknown. `world_description` asks the sim for its
+when `floor_plan = "world"`, or is unknown. Every map records its site (`Config.map_site`:
+which place it is of); a database or prior file of another site is refused
+(`MapSiteError`), never silently used. `world_description` asks the sim for its
 world (what `open_map` and the floor plan's supports, `supports`, read), waiting a
 bounded time.
 """
@@ -56,16 +58,33 @@ def world_description(
     return None
 
 
+class MapSiteError(ValueError):
+    """A map of another place than this stack's: which, and what to do."""
+
+
+def check_site(what: str, recorded: str, site: str) -> None:
+    """`MapSiteError` when `what` (a database, a file) records a site other than `site`
+    (one recording none, from before sites were kept, is taken)."""
+    if recorded and site and recorded != site:
+        raise MapSiteError(
+            f"{what} is a map of {recorded!r}, and this stack is {site!r}: give a map of "
+            f"{site!r} (or semantic_map.name for a new database; semantic_map.reset=true "
+            "starts this one over)"
+        )
+
+
 def open_map(
     s: SemanticMapSettings,
     store: MapStore,
     world: Callable[[], WorldDescription | None],
+    site: str = "",
 ) -> tuple[SemanticMap, str]:
     """The map and a sentence saying where it came from. `world()` fetches the sim's
-    description (None when there is none); it is called only when needed."""
+    description (None when there is none); it is called only when needed. `site`: the
+    place the map must be of (`MapSiteError` otherwise)."""
     occ_kw = dict(hits_needed=s.obstacle_hits, z_range=tuple(s.obstacle_z_m))
     if not store.is_empty():
-        return _resume(s, store, occ_kw)
+        return _resume(s, store, occ_kw, site)
     tracks: list[Track] = []
     occ: Occupancy | None = None
     source: Literal["world", "file", "none"] = "none"
@@ -74,6 +93,7 @@ def open_map(
         if not s.prior_file:
             raise ValueError("semantic_map.start = prior needs semantic_map.prior_file")
         mf = read_map_file(resolve(s.prior_file))
+        check_site(f"the prior map file {s.prior_file}", mf.site, site)
         tracks = tracks_from_file(mf, "prior")
         counters = dict(mf.counters)
         if mf.occupancy is not None:
@@ -95,8 +115,9 @@ def open_map(
     smap.static_source = source
     for tr in tracks:
         smap.add(tr)
+    smap.site = site
     save_all(smap, store, {"start": s.start, "static_source": source})
-    return smap, f"new map {store.path.name} from {s.start}: {len(tracks)} entities"
+    return smap, f"new map {store.path.name} of {site!r} from {s.start}: {len(tracks)} entities"
 
 
 def save_all(smap: SemanticMap, store: MapStore, meta: dict[str, str] | None = None) -> None:
@@ -110,7 +131,7 @@ def save_all(smap: SemanticMap, store: MapStore, meta: dict[str, str] | None = N
             "static": Grid(occ.static, occ.resolution_m, occ.origin_xy),
             "learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy),
         },
-        meta={"stamp_ns": str(smap.stamp_ns), **(meta or {})},
+        meta={"stamp_ns": str(smap.stamp_ns), "site": smap.site, **(meta or {})},
         replace=True,
     )
 
@@ -120,9 +141,10 @@ def _static_source(text: str) -> Literal["world", "file", "none"]:
 
 
 def _resume(
-    s: SemanticMapSettings, store: MapStore, occ_kw: dict[str, object]
+    s: SemanticMapSettings, store: MapStore, occ_kw: dict[str, object], site: str
 ) -> tuple[SemanticMap, str]:
     snap = store.load()
+    check_site(f"the database {store.path}", snap.meta.get("site", ""), site)
     g = snap.grids.get("static")
     if g is None:
         occ = Occupancy.unknown(s.grid_half_extent_m, s.grid_resolution_m, **occ_kw)
@@ -141,8 +163,12 @@ def _resume(
     smap.take_changes()
     smap.stamp_ns = int(snap.meta.get("stamp_ns", "0"))
     smap.static_source = _static_source(snap.meta.get("static_source", "none"))
+    smap.site = site or snap.meta.get("site", "")
+    if site and not snap.meta.get("site"):
+        store.commit(meta={"site": site})  # from before sites were kept: it is this one's now
     n = len(snap.entities)
     return (
         smap,
-        f"resumed {store.path.name}: {n} entities, started as {snap.meta.get('start', '?')}",
+        f"resumed {store.path.name} of {smap.site!r}: {n} entities, started as "
+        f"{snap.meta.get('start', '?')}",
     )

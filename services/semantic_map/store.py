@@ -10,6 +10,7 @@ Appearance histograms travel as float32 blobs; grids as zlib-compressed bytes.
 
 from __future__ import annotations
 
+import re
 import sqlite3
 import zlib
 from collections.abc import Iterable
@@ -50,9 +51,11 @@ _ENC = msgspec.msgpack.Encoder()
 _DEC = decoder(MapEntity)
 
 
-def database_path(settings: SemanticMapSettings, name: str | None = None) -> Path:
-    """The file of map `name` (the settings' own by default): `<dir>/<name>.sqlite`."""
-    return resolve(settings.dir) / f"{name or settings.name}.sqlite"
+def database_path(settings: SemanticMapSettings, name: str | None = None, site: str = "") -> Path:
+    """The file of map `name` (the settings' own by default, else the site's, else
+    `default`): `<dir>/<name>.sqlite`."""
+    stem = name or settings.name or re.sub(r"[^a-z0-9]+", "-", site.lower()).strip("-")
+    return resolve(settings.dir) / f"{stem or 'default'}.sqlite"
 
 
 def remove_database(path: Path) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from common.config import REPO_ROOT
 from common.keys import WORLD_CLOCK
 from common.messages.sim import Clock, Odom
 from deploy.stack import free_port
@@ -44,16 +45,43 @@ def test_a_request_without_a_mission_service_says_so_instead_of_waiting(stack: S
         "--timeout",
         "600",
     )
-    assert out.returncode == 3
-    last = json.loads(out.stdout.strip().splitlines()[-1])
-    assert last["outcome"] == "dependency_lost"
-    assert last["reason"] == "mission is not running"
+    assert out.returncode == 1 and out.stdout == ""  # nothing was sent
+    assert out.stderr.startswith("dume: the mission service is not running (`dume status`")
 
 
-def test_commands_say_when_no_stack_answers() -> None:
-    out = dume("status", "--port", str(free_port()), timeout=30)
-    assert out.returncode == 1
-    assert "no dume stack answers" in out.stderr
+def test_commands_say_when_no_stack_answers_in_one_line_with_a_hint() -> None:
+    port = str(free_port())
+    for args in (("status",), ("request", "bottle_1", "--to", "person_1"), ("map",)):
+        out = dume(*args, "--port", port, timeout=30)
+        assert out.returncode == 1, args
+        (line,) = out.stderr.strip().splitlines()
+        assert line.startswith(f"dume: no dume stack on tcp/127.0.0.1:{port}"), line
+        assert "`dume up`" in line and ".rs" not in line
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (("world", "--seed", "-1"), "seeds are 0 or more"),
+        (("status", "--port", "0"), "0 is not a port (1-65535)"),
+        (("map", "--import", "/nonexistent/map.json"), "map file /nonexistent/map.json does not"),
+        (("logs", "--run", "no-such-run"), "no run 'no-such-run'"),
+        (("up", "--map", "/nonexistent/map.json"), "no map file /nonexistent/map.json"),
+    ],
+)
+def test_argument_and_file_errors_are_one_line_with_the_cause(
+    args: tuple[str, ...], said: str
+) -> None:
+    out = dume(*args, timeout=30)
+    assert out.returncode in (1, 2)
+    assert said in out.stderr.strip().splitlines()[-1]
+    assert "Traceback" not in out.stderr
+
+
+def test_version_and_help_keep_the_usage() -> None:
+    assert dume("--version").stdout.startswith("dume ")
+    help_ = dume("--help").stdout
+    assert "dume request OBJECT --to PERSON" in help_ and "dume logs" in help_
 
 
 def test_a_bad_setting_is_refused_with_its_key() -> None:
@@ -158,5 +186,7 @@ def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Pa
     assert world["agree"] and world["stages_passed"][-1] == "release_object"
     assert summary["succeeded"] == 1 and summary["success_rate"] == 1.0
     report = (tmp_path / "report.md").read_text()
-    assert "**Success: 1/1 (100 %)**" in report
+    assert "**Success: 1/1 (100 %; 95 % interval 21-100 %, Wilson)**" in report
     assert (tmp_path / "stage_times.png").exists() and (tmp_path / "outcomes.png").exists()
+    assert (tmp_path / "worlds" / "seed-0.png").exists()
+    assert world["logs"].startswith("var/run/") and (REPO_ROOT / world["logs"] / "sim.log").exists()
