@@ -3,9 +3,9 @@
 Logged on change: the goal's state and reason, the speed rule acting (slow, handover,
 stop — with the person and their distance), recoveries; at 2 Hz while the robot aligns
 its final heading (within 0.3 m of the goal): the yaw error, the commanded and the
-measured ωz. To rerun: every new plan
-(`nav/plan`), the lookahead point and the follower's command at 5 Hz, and the costmap
-as an image at 1 Hz (lethal 255, costs scaled to 0–200).
+measured ωz. To rerun: every new plan (`world/nav/plan`), the follower's command and the
+tick's time at 5 Hz (`plots/nav/…`), and the costmap at 1 Hz as a textured quad on the
+floor of the 3D world (`world/nav/costmap`: lethal red, costs orange).
 """
 
 from __future__ import annotations
@@ -22,6 +22,30 @@ from services.navigation.costmap import Costmap
 from services.navigation.grid import Pose
 
 PLAN_Z = 0.05
+#: The costmap's height in the 3D view, m: just above the floor, under the map's cells.
+COSTMAP_Z = 0.005
+
+
+def costmap_mesh(cm: Costmap) -> rr.Mesh3D:
+    """The costmap as a textured quad on the floor: lethal red, costs orange by their
+    value, free cells clear (one RGBA texel per cell, row iy at y = origin + iy·res)."""
+    cost = np.asarray(cm.cost, dtype=np.float32)
+    rgba = np.zeros((*cost.shape, 4), dtype=np.uint8)
+    lethal = cost < 0
+    rgba[lethal] = (220, 40, 40, 170)
+    costly = ~lethal & (cost > 0)
+    rgba[costly, 0], rgba[costly, 1] = 255, 160
+    rgba[costly, 3] = np.clip(40 + 120 * cost[costly], 0, 160).astype(np.uint8)
+    g = cm.grid
+    (x0, y0), ny, nx = g.origin, *cost.shape
+    x1, y1 = x0 + nx * g.resolution, y0 + ny * g.resolution
+    return rr.Mesh3D(
+        vertex_positions=[[x0, y0, COSTMAP_Z], [x1, y0, COSTMAP_Z], [x1, y1, COSTMAP_Z],
+                          [x0, y1, COSTMAP_Z]],
+        triangle_indices=[[0, 1, 2], [0, 2, 3]],
+        vertex_texcoords=[[0, 0], [1, 0], [1, 1], [0, 1]],
+        albedo_texture=rgba,
+    )  # fmt: skip
 
 
 class NavLogger:
@@ -73,16 +97,15 @@ class NavLogger:
         if out.new_plan is not None:
             p = out.new_plan.poses
             pts = np.column_stack([p[:, 0], p[:, 1], np.full(len(p), PLAN_Z)])
-            self.rec.log("nav/plan", rr.LineStrips3D([pts], colors=[(40, 200, 80)]))
+            self.rec.log("world/nav/plan", rr.LineStrips3D([pts], colors=[(40, 200, 80)]))
         if b % 200_000_000 == 0:
-            self.rec.log("nav/cmd/vx", rr.Scalars(float(out.cmd[0])))
-            self.rec.log("nav/cmd/vy", rr.Scalars(float(out.cmd[1])))
-            self.rec.log("nav/cmd/wz", rr.Scalars(float(out.cmd[2])))
-            self.rec.log("nav/tick_ms", rr.Scalars(tick_ms))
+            self.rec.log("plots/nav/cmd/vx", rr.Scalars(float(out.cmd[0])))
+            self.rec.log("plots/nav/cmd/vy", rr.Scalars(float(out.cmd[1])))
+            self.rec.log("plots/nav/cmd/wz", rr.Scalars(float(out.cmd[2])))
+            self.rec.log("plots/nav/tick_ms", rr.Scalars(tick_ms))
         if b - self.last_costmap >= 1_000_000_000:
             self.last_costmap = b
-            img = np.where(cm.cost < 0, 255, np.clip(cm.cost * 200, 0, 200)).astype(np.uint8)
-            self.rec.log("nav/costmap", rr.Image(img[::-1]))
+            self.rec.log("world/nav/costmap", costmap_mesh(cm))
 
     def _align(self, b: int, pose: Pose, nav: Any, out: Any, wz_measured: float) -> None:
         if out.state != "active" or nav.goal is None or out.remaining_m > 0.3:

@@ -1,11 +1,14 @@
 """What the sim shows in rerun: the world's layout, the robot's state, cameras, events.
 
-Cameras go to `camera/<cam>`: the pinhole and RGB (JPEG) at the camera rate, depth (mm)
-and the truth segmentation (with its label table) at every `recording.depth_every`-th
-logged frame, so a recording stays near 1 MB per sim second. Plots go to `plots/sim/…`,
-events to `log/sim/events` and, for contacts, as points in `world/events`. The lidar's
-scan goes, every `SCAN_EVERY_NS`, to `world/truth/scan`: its returns placed by the true
-pose of the lidar (the sim's view; a service places them by its estimate).
+The world is Z-up (`world`'s view coordinates, as MuJoCo's). Cameras go to
+`camera/<cam>`: the pinhole and RGB (JPEG) at the camera rate, depth (mm) and the truth
+segmentation (with its label table) at every `recording.depth_every`-th logged frame, so
+a recording stays near 1 MB per sim second; each logged frame also places the camera's
+frustum in the 3D world (`world/cameras/<cam>`, by the base's true pose at capture).
+Plots go to `plots/sim/…`, events to `log/sim/events` and, for contacts, as points in
+`world/events`. The lidar's scan goes, every `SCAN_EVERY_NS`, to `world/truth/scan`: its
+returns placed by the true pose of the lidar (the sim's view; a service places them by
+its estimate).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import math
 import numpy as np
 import rerun as rr
 
-from common.geometry import FloatArray
+from common.geometry import FloatArray, quat_xyzw_to_matrix
 from common.messages import as_numpy
 from common.messages.sim import (
     CameraFrame,
@@ -32,6 +35,10 @@ from common.recording import FrameSelector, is_recording, stamp
 
 #: The recording keeps one scan in this many ns of sim time (of the lidar's 10 Hz).
 SCAN_EVERY_NS = 500_000_000
+#: True base poses kept to place the cameras' frustums (a frame renders a few ticks late).
+BASES_KEPT = 64
+#: The frustums' depth in the 3D view, m.
+FRUSTUM_M = 0.25
 
 
 class SimLogger:
@@ -40,10 +47,13 @@ class SimLogger:
         self.enabled = is_recording(rec)
         self.frames = frames
         self._annotated: set[str] = set()
+        #: The base's true pose by stamp (the newest `BASES_KEPT`): where to draw a camera.
+        self._bases: dict[int, FloatArray] = {}
 
     def world(self, world: WorldDescription) -> None:
         if not self.enabled:
             return
+        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)  # MuJoCo's
         lines = [
             f"# {world.name} world, seed {world.seed}",
             "",
@@ -86,6 +96,12 @@ class SimLogger:
         self.rec.log("plots/sim/gripper_effort_nm", rr.Scalars(state.gripper_effort))
         self.rec.log("plots/sim/watchdog", rr.Scalars(float(state.watchdog)))
         self.rec.log("world/truth/robot_trail", rr.Points3D([(x, y, 0.01)], radii=0.01))
+        T = np.eye(4)
+        T[:3, :3] = quat_xyzw_to_matrix(truth.base_orientation_xyzw)
+        T[:3, 3] = (x, y, z)
+        self._bases[t_ns] = T
+        while len(self._bases) > BASES_KEPT:
+            del self._bases[next(iter(self._bases))]
 
     def rtf(self, t_ns: int, rtf: float) -> None:
         if not self.enabled:
@@ -131,6 +147,20 @@ class SimLogger:
             ),
         )
         self.rec.log(f"{path}/rgb", rr.Image(as_numpy(frame.rgb)).compress(jpeg_quality=80))
+        base = self._bases.get(frame.stamp_ns)
+        if base is not None:  # the camera in the 3D world: its frustum where it looked
+            T = base @ np.asarray(frame.T_base_camera, dtype=float).reshape(4, 4)
+            self.rec.log(
+                f"world/cameras/{cam}",
+                rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]),
+                rr.Pinhole(
+                    focal_length=[frame.fx, frame.fy],
+                    principal_point=[frame.cx, frame.cy],
+                    resolution=[frame.width, frame.height],
+                    camera_xyz=rr.ViewCoordinates.RDF,
+                    image_plane_distance=FRUSTUM_M,
+                ),
+            )
         if truth is not None and cam not in self._annotated:  # the same for every frame
             self.rec.log(
                 f"{path}/segmentation_truth",
