@@ -25,9 +25,11 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 from bench.eval.judge import MissionRecord, WorldResult, evaluate
+from bench.eval.pictures import world_picture
 from bench.eval.report import json_safe, write_report
 from bench.eval.run import (
     Progress,
@@ -41,11 +43,13 @@ from bench.eval.run import (
 )
 from bench.eval.targets import TargetError, seeded_pair
 from common.bus import BusError
-from common.config import REPO_ROOT, ConfigError, merged, parse_overrides, resolve
+from common.config import ConfigError, merged, parse_overrides, resolve
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
+from common.recording import run_dir
 from deploy.demo import SERVICES
+from deploy.runs import shown
 from deploy.stack import ProcessStack
 from services.semantic_map.store import database_path, remove_database
 
@@ -117,6 +121,9 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
             bus, keys, request, args.timeout, _stage_line(seed), start_gate=True
         )
         evaluate(result, record, world)
+        step = "draw the world"
+        result.picture = f"worlds/seed-{seed}.png"
+        world_picture(world, record, result, resolve(args.out) / result.picture)
         step = "read the running settings"
         for k, v in read_back(bus, keys).items():
             seen.setdefault(k, set()).add(v)
@@ -128,12 +135,32 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         )
         stack.stop(timeout_s=STOP_TIMEOUT_S)
         remove_database(database_path(stack.config.semantic_map, map_name))
+    result.logs = shown(stack.run_dir)
     if args.record:
-        folder = resolve(stack.config.recording.dir) / stack.run_id
-        result.recording = str(
-            folder.relative_to(REPO_ROOT) if folder.is_relative_to(REPO_ROOT) else folder
-        )
+        folder = run_dir(stack.config.recording, stack.run_id)
+        result.recording = shown(folder)
+        if not result.succeeded and result.sim_time_s > 0:
+            result.failure_frames = failure_frames(folder, resolve(args.out), seed, result)
     return result
+
+
+def failure_frames(folder: Path, out: Path, seed: int, result: WorldResult) -> list[str]:
+    """The run drawn from its recording 3 s before it failed and when it did (paths
+    relative to the report); none when the recording cannot be read."""
+    from deploy.snapshot import snapshot
+
+    drawn: list[str] = []
+    end = result.sim_time_s
+    for before in (3.0, 0.0):
+        name = f"worlds/seed-{seed}-failure-{before:.0f}s.png"
+        title = f"seed {seed}: {result.failure[:140]} (t = {end - before:.1f} s)"
+        try:
+            snapshot(folder, out / name, max(0.0, end - before), title)
+        except (OSError, ValueError) as exc:
+            _say(f"    seed {seed}: no failure frames: {exc}")
+            return drawn
+        drawn.append(name)
+    return drawn
 
 
 def run_eval(args: argparse.Namespace) -> int:

@@ -148,6 +148,9 @@ class WorldResult(msgspec.Struct, kw_only=True):
     contacts_static: robot contacts with static obstacles (`contacts`: who touched what).
     drops: objects that fell (`ObjectDropped`). services_down: stack processes that had
     exited by the end of the run. recording: the run's recording folder ("" when off).
+    logs: the run's folder (its services' logs, `deploy.runs`). picture: the world from
+    above with the run on it, relative to the report (`pictures.world_picture`);
+    failure_frames: the cameras around a failure, drawn from the recording (`--record`).
     digest: the run's fingerprint (`run_digest`): the same seed gives the same digest.
     odometry: how far the robot's `odom` was from the truth over the request.
     localization: how far its localization's base in the map was (none for the truth
@@ -182,6 +185,9 @@ class WorldResult(msgspec.Struct, kw_only=True):
     drops: int = 0
     services_down: list[str] = msgspec.field(default_factory=list)
     recording: str = ""
+    logs: str = ""
+    picture: str = ""
+    failure_frames: list[str] = msgspec.field(default_factory=list)
     error: str = ""
     digest: str = ""
     #: The robot's own estimate of its base against the truth (`EstimateErrors.figures`).

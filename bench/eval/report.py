@@ -3,8 +3,10 @@
 
 `summarize` counts: success rate (truth), how many worlds got through each stage of the
 tree, how often the mission's own outcome agreed with the truth, sim and wall times and
-the real-time factor. `write_report` writes the Markdown report (settings, per-stage
-table, every failure with its world seed and reason, times, a per-world table), the JSON
+the real-time factor. `write_report` writes the Markdown report (settings with the commit
+and the machine, the success rate with its Wilson interval, per-stage table, every
+failure with its world seed, reason and pictures, the failures counted by reason and
+stage, times, a per-world table linking each world's picture and run folder), the JSON
 (settings, summary, every `WorldResult`) and the plots, drawn with matplotlib's Agg
 canvas on `Figure` objects (no pyplot state, no display needed). Pure but for the files.
 """
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import statistics
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -21,7 +24,10 @@ from typing import Any
 import msgspec
 
 from bench.eval.judge import WorldResult
+from bench.eval.pictures import machine, reasons_table, wilson
+from common.config import REPO_ROOT
 from common.messages.mission import STAGES
+from deploy.runs import source_commit
 
 PLOTS = ("stage_times.png", "outcomes.png")
 
@@ -100,11 +106,21 @@ def localization_summary(results: Sequence[WorldResult]) -> str:
     )
 
 
+def _link(path: str, out: Path | None) -> str:
+    """`path` (relative to the repository, or absolute) as seen from the report's folder."""
+    target = Path(path) if Path(path).is_absolute() else REPO_ROOT / path
+    return os.path.relpath(target, out) if out is not None else str(target)
+
+
 def report_markdown(
-    settings: Mapping[str, Any], summary: Mapping[str, Any], results: Sequence[WorldResult]
+    settings: Mapping[str, Any],
+    summary: Mapping[str, Any],
+    results: Sequence[WorldResult],
+    out: Path | None = None,
 ) -> str:
-    """The report's Markdown text."""
+    """The report's Markdown text (links relative to `out`, the report's folder)."""
     n = summary["worlds"]
+    lo, hi = wilson(summary["succeeded"], n)
     lines = [
         "# dume eval",
         "",
@@ -114,7 +130,8 @@ def report_markdown(
         "",
         "## Result",
         "",
-        f"**Success: {summary['succeeded']}/{n} ({_pct(summary['succeeded'], n)})**, judged "
+        f"**Success: {summary['succeeded']}/{n} ({_pct(summary['succeeded'], n)}; 95 % "
+        f"interval {lo * 100:.0f}-{hi * 100:.0f} %, Wilson)**, judged "
         "from sim truth (the requested object in the requested person's hand). The "
         f"mission's own outcome agreed with the truth in {summary['mission_agrees']} of "
         f"{n - summary['errors']} runs.",
@@ -145,24 +162,32 @@ def report_markdown(
         "",
     ]
     failures = [r for r in results if not r.succeeded]
-    lines += [
-        f"- world seed {r.world_seed} ({r.object} → {r.person}): {r.failure}" for r in failures
-    ]
+    for r in failures:
+        lines.append(f"- world seed {r.world_seed} ({r.object} → {r.person}): {r.failure}")
+        shots = [r.picture, *r.failure_frames] if r.picture else r.failure_frames
+        lines += [f"  ![seed {r.world_seed}]({p})" for p in shots]
     lines += ["- none"] if not failures else []
+    lines += ["", "By reason and the stage it ended in:", "", *reasons_table(results)]
     lines += [
         "",
         "## Worlds",
         "",
+        "The picture: the world from above, the robot's true path coloured by stage; logs: "
+        "the run's folder (every service's log; its recording with `--record`).",
+        "",
         "| seed | object → person | truth | mission | agree | stage reached | sim s | wall s "
-        "| rtf | contacts | drops |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rtf | contacts | drops | picture | logs |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         mission = r.mission_state + (f" ({r.mission_reason})" if r.mission_reason else "")
+        picture = f"[top-down]({r.picture})" if r.picture else "-"
+        logs = f"[{Path(r.logs).name}]({_link(r.logs, out)})" if r.logs else "-"
         lines.append(
             f"| {r.world_seed} | {r.object} → {r.person} | {r.outcome} | {mission or '-'} "
             f"| {'yes' if r.agree else 'no'} | {r.stage_reached or '-'} | {r.sim_time_s:.1f} "
-            f"| {r.wall_time_s:.0f} | {r.rtf:.2f} | {r.contacts_static} | {r.drops} |"
+            f"| {r.wall_time_s:.0f} | {r.rtf:.2f} | {r.contacts_static} | {r.drops} "
+            f"| {picture} | {logs} |"
         )
     lines += [
         "",
@@ -250,7 +275,8 @@ def write_report(
     """Write report.md, results.json and the plots under `out`; return the summary."""
     out.mkdir(parents=True, exist_ok=True)
     summary = summarize(results)
-    (out / "report.md").write_text(report_markdown(settings, summary, results))
+    settings = {**settings, "commit": source_commit(), "machine": machine()}
+    (out / "report.md").write_text(report_markdown(settings, summary, results, out))
     doc = {"settings": dict(settings), "summary": summary, "worlds": msgspec.to_builtins(results)}
     (out / "results.json").write_text(json.dumps(json_safe(doc), indent=2) + "\n")
     plot_stage_times(results, out / PLOTS[0])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import random
 from pathlib import Path
 
@@ -22,8 +23,10 @@ from bench.eval.judge import (
     truth_object,
     truth_person,
 )
+from bench.eval.pictures import reasons_table, wilson, world_picture
 from bench.eval.report import summarize, write_report
 from bench.eval.targets import TargetError, demo_pair, seeded_pair
+from common.config import REPO_ROOT
 from common.messages.mission import STAGES, MissionRequest, MissionState, MissionStatus
 from common.messages.semantic_map import MapEntity
 from common.messages.sim import HandoverTaken, ObjectDropped, RobotContact, WorldEvent
@@ -278,6 +281,8 @@ def synthetic_results() -> list[WorldResult]:
             False,
             mission_reason="grasp_failed",
             truth_reason="bottle_1 never reached person_1's hand",
+            picture="worlds/seed-2.png",
+            logs="var/run/run-2",
         ),
         world(3, 0, False, error="the stack did not come up: sim"),
         world(4, 6, True, contacts_static=2, drops=1),
@@ -314,7 +319,13 @@ def test_the_report_and_plots_are_written_with_the_right_numbers(tmp_path: Path)
     summary = write_report(tmp_path, settings, results)
     report = (tmp_path / "report.md").read_text()
     assert "segmenter: network" in report and "locomotion: dynamic" in report
-    assert "**Success: 3/5 (60 %)**" in report
+    assert "**Success: 3/5 (60 %; 95 % interval 23-88 %, Wilson)**" in report
+    assert "- commit: " in report and "cores, Python 3." in report
+    assert "| grasp_failed | pick_object | 1 |" in report
+    assert "| error | navigate_to_object | 1 |" in report
+    logs = os.path.relpath(REPO_ROOT / "var/run/run-2", tmp_path)
+    assert f"| [top-down](worlds/seed-2.png) | [run-2]({logs}) |" in report
+    assert "  ![seed 2](worlds/seed-2.png)" in report
     assert "| navigate_to_object | 4 | 80 % |" in report
     assert "| pick_object | 3 | 60 % |" in report
     assert "world seed 2 (bottle_1 → person_1)" in report and "grasp_failed" in report
@@ -360,3 +371,28 @@ def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run() -> 
     assert cfg.semantic_map.start == "prior" and cfg.semantic_map.prior_file.endswith(
         "var/map.json"
     )
+
+
+def test_a_world_is_drawn_from_above_with_the_run_on_it(
+    hall: WorldDescription, tmp_path: Path
+) -> None:
+    req = MissionRequest(request_id="r1", object="bottle_1", person="person_2")
+    record = MissionRecord(request=req, start_ns=0, end_ns=30 * S, wall_s=30.0)
+    record.changes = [status(1, "running", "navigate_to_object"),
+                      status(20, "failed", "pick_object")]  # fmt: skip
+    start = hall.robot_start
+    record.trajectory = [(k * 0.1 * S, start.x + 0.05 * k, start.y, 0.5, 0, 0, 0, 1)
+                         for k in range(300)]  # fmt: skip
+    result = WorldResult(world="hall", world_seed=0, scenario="standing", object="bottle_1",
+                         person="person_2", truth_object="bottle_1", truth_person="person_2",
+                         mission_reason="grasp_failed", stage_reached="pick_object")  # fmt: skip
+    out = tmp_path / "worlds" / "seed-0.png"
+    world_picture(hall, record, result, out)
+    data = out.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_the_wilson_interval_and_the_reasons_table() -> None:
+    assert wilson(19, 20) == pytest.approx((0.764, 0.991), abs=1e-3)
+    assert wilson(0, 5)[0] == 0.0 and wilson(5, 5)[1] == 1.0
+    assert reasons_table(synthetic_results()[:2]) == ["- none"]
