@@ -193,7 +193,7 @@ class SimSettings(_Section):
     locomotion: Literal["dynamic", "kinematic"] = "dynamic"
     #: Stop after this much sim time (0: run until stopped).
     duration_s: float = 0.0
-    watchdog_ms: float = 20.0
+    watchdog_ms: Positive = 20.0
     odom_hz: Positive = 50.0
     camera_hz: Positive = 10.0
     camera_width: int = 320
