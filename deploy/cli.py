@@ -512,8 +512,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     if web:
         argv[1:1] = ["--serve-web", "--web-viewer-port", str(args.web_port)]
         print(
-            f"dume view: serving {run.info.run_id} at http://localhost:{args.web_port} "
-            "(Ctrl-C to stop)",
+            f"dume view: serving {run.info.run_id} to a browser on port {args.web_port}: "
+            "open the `connect at http://…` link rerun prints (Ctrl-C stops it)",
             file=sys.stderr,
             flush=True,
         )

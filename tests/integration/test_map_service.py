@@ -234,7 +234,9 @@ def test_ids_and_acknowledged_writes_survive_a_sigkill_in_the_middle_of_writes(
         k += 1
     assert killed.wait(70.0)
     assert len(acked) >= 2, "the map acknowledged too few frames before the kill"
-    store = MapStore(db_dir / "default.sqlite")
+    (path,) = db_dir.glob("*.sqlite")  # the site's database (hall-seed-0)
+    assert path.name == "hall-seed-0.sqlite"
+    store = MapStore(path)
     assert store.integrity() == "ok"
     snap = store.load()
     store.close()
