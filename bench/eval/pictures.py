@@ -112,14 +112,20 @@ def world_picture(
     fig.savefig(path, dpi=90)
 
 
-def reasons_table(results: Sequence[WorldResult]) -> list[str]:
-    """Markdown rows: the failures counted by typed reason and the stage they ended in."""
+def failure_counts(results: Sequence[WorldResult]) -> dict[tuple[str, str], int]:
+    """The failures counted by (typed reason, the stage they ended in)."""
     counts: dict[tuple[str, str], int] = {}
     for r in results:
         if r.succeeded:
             continue
         key = (r.mission_reason or ("error" if r.error else "none"), r.stage_reached or "-")
         counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def reasons_table(results: Sequence[WorldResult]) -> list[str]:
+    """Markdown rows: the failures counted by typed reason and the stage they ended in."""
+    counts = failure_counts(results)
     if not counts:
         return ["- none"]
     rows = ["| reason | stage | worlds |", "|---|---|---|"]

@@ -24,12 +24,12 @@ from typing import Any
 import msgspec
 
 from bench.eval.judge import WorldResult
-from bench.eval.pictures import machine, reasons_table, wilson
+from bench.eval.pictures import failure_counts, machine, reasons_table, wilson
 from common.config import REPO_ROOT
 from common.messages.mission import STAGES
 from deploy.runs import source_commit
 
-PLOTS = ("stage_times.png", "outcomes.png")
+PLOTS = ("stage_times.png", "outcomes.png", "reasons.png")
 
 
 def _stats(values: Sequence[float]) -> dict[str, float]:
@@ -258,6 +258,32 @@ def plot_outcomes(results: Sequence[WorldResult], path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
+def plot_reasons(results: Sequence[WorldResult], path: Path) -> None:
+    """The failures as a histogram of their typed reasons, stacked by the stage each
+    ended in."""
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
+
+    counts = failure_counts(results)
+    reasons = sorted({r for r, _ in counts}, key=lambda r: -sum(
+        k for (q, _), k in counts.items() if q == r))  # fmt: skip
+    fig = Figure(figsize=(8, 1.8 + 0.4 * max(1, len(reasons))), layout="constrained")
+    ax = fig.add_subplot()
+    for j, stage in enumerate(["-", *STAGES]):
+        left = [sum(counts.get((r, s), 0) for s in ["-", *STAGES][:j]) for r in reasons]
+        widths = [counts.get((r, stage), 0) for r in reasons]
+        if any(widths):
+            ax.barh(range(len(reasons)), widths, left=left, color=f"C{j}", label=stage)
+    ax.set_yticks(range(len(reasons)), reasons or ["no failure"])
+    ax.invert_yaxis()
+    ax.set_xlabel("worlds")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_title("Failures by reason (colour: the stage it ended in)", fontsize="medium")
+    if reasons:
+        ax.legend(loc="lower right", fontsize="small")
+    fig.savefig(path, dpi=100)
+
+
 def json_safe(x: Any) -> Any:
     """`x` with every NaN as None (JSON has no NaN)."""
     if isinstance(x, float) and math.isnan(x):
@@ -281,4 +307,5 @@ def write_report(
     (out / "results.json").write_text(json.dumps(json_safe(doc), indent=2) + "\n")
     plot_stage_times(results, out / PLOTS[0])
     plot_outcomes(results, out / PLOTS[1])
+    plot_reasons(results, out / PLOTS[2])
     return summary

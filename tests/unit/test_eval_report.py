@@ -338,7 +338,7 @@ def test_the_report_and_plots_are_written_with_the_right_numbers(tmp_path: Path)
     assert doc["summary"] == json.loads(json.dumps(summary))
     assert [w["world_seed"] for w in doc["worlds"]] == [0, 1, 2, 3, 4]
     assert doc["worlds"][0]["truth_match_m"] == [None, None]  # NaN is not JSON
-    for png in ("stage_times.png", "outcomes.png"):
+    for png in ("stage_times.png", "outcomes.png", "reasons.png"):
         data = (tmp_path / png).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
 
