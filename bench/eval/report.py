@@ -274,7 +274,7 @@ def plot_reasons(results: Sequence[WorldResult], path: Path) -> None:
         widths = [counts.get((r, stage), 0) for r in reasons]
         if any(widths):
             ax.barh(range(len(reasons)), widths, left=left, color=f"C{j}", label=stage)
-    ax.set_yticks(range(len(reasons)), reasons or ["no failure"])
+    ax.set_yticks(range(max(1, len(reasons))), reasons or ["no failure"])
     ax.invert_yaxis()
     ax.set_xlabel("worlds")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))

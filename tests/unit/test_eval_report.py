@@ -396,3 +396,8 @@ def test_the_wilson_interval_and_the_reasons_table() -> None:
     assert wilson(19, 20) == pytest.approx((0.764, 0.991), abs=1e-3)
     assert wilson(0, 5)[0] == 0.0 and wilson(5, 5)[1] == 1.0
     assert reasons_table(synthetic_results()[:2]) == ["- none"]
+
+
+def test_a_report_without_failures_draws_its_reasons_too(tmp_path: Path) -> None:
+    write_report(tmp_path, {}, synthetic_results()[:2])
+    assert (tmp_path / "reasons.png").read_bytes()[:4] == b"\x89PNG"
