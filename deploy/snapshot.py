@@ -14,6 +14,7 @@ FILE.png` writes it; the README's picture is one.
 from __future__ import annotations
 
 import bisect
+import warnings
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from typing import Any
 import cv2
 import numpy as np
 from rerun.chunk import RrdReader
+from rerun.error_utils import RerunWarning
 
 #: Entities read, by prefix (a recording holds far more).
 WANTED = (
@@ -66,7 +68,10 @@ def read_run(folder: Path, wanted: Iterable[str] = WANTED) -> dict[str, Series]:
     prefixes = tuple(wanted)
     out: dict[str, Series] = defaultdict(Series)
     for rrd in sorted(folder.glob("*.rrd")):
-        for chunk in RrdReader(rrd).stream():
+        with warnings.catch_warnings():  # a live run's files have no footer yet: read whole
+            warnings.simplefilter("ignore", RerunWarning)
+            reader = RrdReader(rrd)
+        for chunk in reader.stream():
             path = chunk.entity_path
             if not path.startswith(prefixes):
                 continue
