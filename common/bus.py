@@ -199,6 +199,28 @@ class Publisher(Generic[T]):
         self._pub.undeclare()
 
 
+#: A subscription logs a rejected sample at most this often (wall s); the ones between
+#: are counted into the next line (garbage at 20 Hz must not flood a service's log).
+REJECT_LOG_EVERY_S = 5.0
+
+
+class Throttle:
+    """At most one line per `every_s` (wall): `due(now)` says whether to log now, and how
+    many were held back since the last line."""
+
+    def __init__(self, every_s: float) -> None:
+        self.every_s = every_s
+        self._last = -float("inf")
+        self._held = 0
+
+    def due(self, now: float) -> tuple[bool, int]:
+        if now - self._last < self.every_s:
+            self._held += 1
+            return False, 0
+        held, self._held, self._last = self._held, 0, now
+        return True, held
+
+
 class _Subscription(ABC, Generic[T]):
     def __init__(self, session: zenoh.Session, key: str, type_: type[T]) -> None:
         self.key = key
@@ -207,6 +229,7 @@ class _Subscription(ABC, Generic[T]):
         self.rejected = 0
         self.last_error: PayloadError | None = None
         self._cond = threading.Condition()
+        self._warn = Throttle(REJECT_LOG_EVERY_S)
         self._sub = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -216,7 +239,10 @@ class _Subscription(ABC, Generic[T]):
             with self._cond:
                 self.rejected += 1
                 self.last_error = exc
-            log.warning("%s", exc)
+                due, held = self._warn.due(time.monotonic())
+            if due:
+                more = f" (and {held} more rejected on {self.key} since)" if held else ""
+                log.warning("%s%s", exc, more)
             return
         with self._cond:
             self.received += 1

@@ -50,6 +50,12 @@ Overrides = Mapping[str, Any]
 Port = Annotated[int, msgspec.Meta(ge=1, le=65535, description="a TCP port")]
 Positive = Annotated[float, msgspec.Meta(gt=0)]
 NonNegative = Annotated[float, msgspec.Meta(ge=0)]
+#: A coordinate or any other real number: finite (no NaN, no infinity).
+FiniteFloat = Annotated[float, msgspec.Meta(ge=-1e9, le=1e9)]
+#: A score or share, [0, 1].
+Fraction = Annotated[float, msgspec.Meta(ge=0, le=1)]
+PositiveInt = Annotated[int, msgspec.Meta(ge=1)]
+NonNegativeInt = Annotated[int, msgspec.Meta(ge=0)]
 Unit = Annotated[float, msgspec.Meta(ge=0, le=1)]
 #: (vx m/s, vy m/s, wz rad/s) limits, or their rates of change per s.
 Limits3 = Annotated[list[Positive], msgspec.Meta(min_length=3, max_length=3)]
@@ -188,16 +194,16 @@ class SensorSettings(_Section):
 
 class SimSettings(_Section):
     world: Literal["hall", "small"] = "hall"
-    world_seed: int = 0
+    world_seed: NonNegativeInt = 0
     walking_people: bool = False
     locomotion: Literal["dynamic", "kinematic"] = "dynamic"
     #: Stop after this much sim time (0: run until stopped).
-    duration_s: float = 0.0
+    duration_s: NonNegative = 0.0
     watchdog_ms: Positive = 20.0
     odom_hz: Positive = 50.0
     camera_hz: Positive = 10.0
-    camera_width: int = 320
-    camera_height: int = 240
+    camera_width: PositiveInt = 320
+    camera_height: PositiveInt = 240
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
     segmentation_truth: bool = True
     sensors: SensorSettings = msgspec.field(default_factory=SensorSettings)
@@ -264,14 +270,14 @@ class WbcSettings(_Section):
     base_state: Literal["estimate", "truth"] = "estimate"
     estimator: EstimatorSettings = msgspec.field(default_factory=EstimatorSettings)
     #: A gap in the state's stamps longer than this stops the robot.
-    stale_state_s: float = 0.05
+    stale_state_s: Positive = 0.05
     #: `wbc/status` rate and rerun time-series rate, Hz of sim time.
     status_hz: Positive = 50.0
     log_hz: Positive = 25.0
     #: Torque cap of Grasp goals, N·m (a goal's max_effort is clipped to it).
-    grip_effort_max_nm: float = 5.0
+    grip_effort_max_nm: Positive = 5.0
     #: Good QP solves in a row before leaving the fallback stand hold.
-    recover_ticks: int = 50
+    recover_ticks: PositiveInt = 50
 
 
 class PerceptionSettings(_Section):
@@ -286,7 +292,7 @@ class PerceptionSettings(_Section):
     segmenter: Literal["network", "truth"] = "network"
     model: str = "services/perception/models/segmenter.onnx"
     #: Instances scored below this are dropped.
-    min_score: float = 0.5
+    min_score: Fraction = 0.5
     #: Cameras processed (those the sim also publishes).
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head", "camera_wrist"])
     #: Wall seconds to wait for a camera's frame stamped at a tick before publishing an
@@ -294,12 +300,12 @@ class PerceptionSettings(_Section):
     frame_timeout_s: Positive = 2.0
     #: Locate by map id: a detection of the entity's class within this distance of its
     #: mapped position (m, horizontal) is that entity.
-    locate_gate_m: float = 0.5
+    locate_gate_m: Positive = 0.5
     #: Threads of the network's forward (`cv2.setNumThreads`). One: on a small machine the
     #: sim and the controller hold the other cores, and a forward split over threads waits
     #: for the slowest (under load, 2 threads: p50 42-56 ms, p95 88-105 ms; 1: 33-36 ms,
     #: 72-75 ms). 0 lets OpenCV choose.
-    dnn_threads: int = 1
+    dnn_threads: NonNegativeInt = 1
     #: The can/box shape check (`services.perception.measure.ShapeCheck`): within this
     #: depth of the camera (m) a can or box whose points fit a cylinder within
     #: `shape_check_rms_per_m2` × depth² (m) is a can, else a box; 0 m: no check.
@@ -335,58 +341,58 @@ class SemanticMapSettings(_Section):
     #: True: start over whatever the database holds.
     reset: bool = False
     prior_file: str = ""
-    seed_noise_m: float = 0.05
-    seed_noise_seed: int = 0
+    seed_noise_m: NonNegative = 0.05
+    seed_noise_seed: NonNegativeInt = 0
     floor_plan: Literal["world", "none"] = "world"
     #: Cameras whose detections are fused: the head camera. The wrist camera, away from a
     #: table, sees the robot's own legs and the floor at close range (false people); the
     #: mission reads its close-up views itself.
     cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_head"])
     #: Measurement noise of a detection's horizontal position: sigma0 + per_m × range, m.
-    sigma0_m: float = 0.02
-    sigma_per_m: float = 0.02
+    sigma0_m: NonNegative = 0.02
+    sigma_per_m: NonNegative = 0.02
     #: Association gate: a detection joins an entity of its class within
     #: max(gate_min_m, gate_sigmas × combined σ).
-    gate_min_m: float = 0.25
-    gate_sigmas: float = 3.0
+    gate_min_m: Positive = 0.25
+    gate_sigmas: Positive = 3.0
     #: Detections an artifact or person needs before it gets an id.
-    confirm_hits: int = 2
+    confirm_hits: PositiveInt = 2
     #: One object under two classes: artifacts closer than `class_merge_m` are one, and
     #: the class seen more often from within `class_near_m` keeps it, m.
-    class_near_m: float = 2.0
-    class_merge_m: float = 0.05
+    class_near_m: Positive = 2.0
+    class_merge_m: NonNegative = 0.05
     #: Below this score a detection is ignored.
-    min_score: float = 0.5
+    min_score: Fraction = 0.5
     #: Frames looking at an artifact's place without seeing it before it is missing.
-    missing_after_frames: int = 5
+    missing_after_frames: PositiveInt = 5
     #: Range within which a camera is trusted to see an artifact, and a person, m (the
     #: network finds a can on a bench from the wrist camera at 2 m, not at 2.5 m: a look
     #: from farther proves nothing; the head camera's looks from 2-3 m deleted the small
     #: world's true bottle twice in a patrol).
-    look_range_m: float = 2.0
-    person_look_range_m: float = 6.0
+    look_range_m: Positive = 2.0
+    person_look_range_m: Positive = 6.0
     #: A person detection this close to a static obstacle cell is not a person, m.
-    person_obstacle_margin_m: float = 0.1
+    person_obstacle_margin_m: NonNegative = 0.1
     #: An artifact or person the map created itself from perception and fused fewer times
     #: than this is a false entry when looked for at its place and not seen: it is
     #: deleted (prior, seeded and imported artifacts are only marked missing).
-    drop_below_observations: int = 10
+    drop_below_observations: NonNegativeInt = 10
     #: People: acceleration noise of the constant-velocity model, m/s², and the weight of
     #: the colour-histogram distance in the association cost.
-    person_accel_sigma: float = 1.5
-    appearance_weight: float = 4.0
+    person_accel_sigma: Positive = 1.5
+    appearance_weight: NonNegative = 4.0
     #: Learned obstacles: frames a cell must be seen occupied in, heights counted, m.
-    obstacle_hits: int = 3
-    obstacle_z_m: list[float] = msgspec.field(default_factory=lambda: [0.15, 1.9])
+    obstacle_hits: PositiveInt = 3
+    obstacle_z_m: tuple[FiniteFloat, FiniteFloat] = (0.15, 1.9)
     #: Grid extent when no floor plan gives one (a square about the origin), m.
-    grid_half_extent_m: float = 15.0
-    grid_resolution_m: float = 0.05
+    grid_half_extent_m: Positive = 15.0
+    grid_resolution_m: Positive = 0.05
     #: Cameras also fused while the mission's patrol holds the arm in `look` (its
     #: `mission/patrol/status` says so).
     patrol_cameras: list[str] = msgspec.field(default_factory=lambda: ["camera_wrist"])
     #: Sim seconds between rerun logs of the entities and of the grid.
-    log_every_s: float = 1.0
-    grid_log_every_s: float = 5.0
+    log_every_s: Positive = 1.0
+    grid_log_every_s: Positive = 5.0
 
 
 class ControllerSettings(_Section):
@@ -436,22 +442,22 @@ class NavigationSettings(_Section):
     #: The depth camera of the short-lived obstacle layer ("" for none), and how long a
     #: cell it saw occupied stays so.
     obstacle_camera: str = "camera_head"
-    obstacle_ttl_s: float = 3.0
+    obstacle_ttl_s: Positive = 3.0
     controller: ControllerSettings = msgspec.field(default_factory=ControllerSettings)
     planner: PlannerSettings = msgspec.field(default_factory=PlannerSettings)
     #: Arrival tolerances of the standoff and handover goals (a PoseGoal carries its own).
-    goal_tolerance_m: float = 0.08
-    goal_tolerance_rad: float = 0.1
+    goal_tolerance_m: Positive = 0.08
+    goal_tolerance_rad: Positive = 0.1
     people: PeopleSettings = msgspec.field(default_factory=PeopleSettings)
     #: People in the costmap: plans go around them (off: only the speed rules act).
     people_in_costmap: bool = True
     #: A goal: replanned every `replan_s`; blocked (no plan, or no progress) this long
     #: starts the next recovery, and after the last fails it; `goal_timeout_s` fails it.
-    replan_s: float = 1.0
+    replan_s: Positive = 1.0
     blocked_timeout_s: Positive = 3.0
     goal_timeout_s: Positive = 180.0
     #: How often the semantic map's occupancy and people are fetched (map source), s.
-    map_refresh_s: float = 1.0
+    map_refresh_s: Positive = 1.0
 
 
 class ApproachSettings(_Section):
@@ -479,8 +485,8 @@ class ApproachSettings(_Section):
     reacquire_wz: Positive = 0.3
     reacquire_turn_margin_rad: Positive = 0.15
     #: Backwards speed while re-acquiring, and the distance after which backing off stops.
-    back_off_speed: float = 0.08
-    back_off_max_m: float = 0.3
+    back_off_speed: Positive = 0.08
+    back_off_max_m: NonNegative = 0.3
     #: No arrival this long after the approach starts: failed.
     timeout_s: Positive = 40.0
 
@@ -522,7 +528,7 @@ class MissionSettings(_Section):
     """
 
     #: A status goes out on every change and at least this often.
-    status_every_s: float = 1.0
+    status_every_s: Positive = 1.0
     #: Wall seconds a query may take (map, nav goal, arm goal) before it counts as no answer.
     query_timeout_s: Positive = 2.0
     #: Wall seconds to wait for the odom stamped at a tick before ticking without it.
@@ -536,34 +542,34 @@ class MissionSettings(_Section):
     reach_timeout_s: Positive = 20.0
     #: A grasp's Reach that gives up farther than this from its goal met something solid
     #: or is out of reach: `grasp_pose_failed`, not re-picked (m).
-    reach_miss_max_m: float = 0.06
+    reach_miss_max_m: Positive = 0.06
     grasp_timeout_s: Positive = 8.0
     release_timeout_s: Positive = 5.0
     #: After the grasp, the object is lifted this far straight up before stowing, m.
-    lift_m: float = 0.10
+    lift_m: NonNegative = 0.10
     #: The whole visual approach (the controller re-acquires and fails by itself sooner).
     approach_timeout_s: Positive = 90.0
     #: Pose estimation: stand still this long, then wait this long for a detection.
-    settle_s: float = 0.5
+    settle_s: NonNegative = 0.5
     detection_timeout_s: Positive = 3.0
     #: Wrist detections older than this (sim time, behind the tick) are not a sighting.
-    sighting_max_age_s: float = 0.5
+    sighting_max_age_s: Positive = 0.5
     #: A wrist detection is the target only this close to its mapped place, m.
-    sighting_gate_m: float = 0.35
+    sighting_gate_m: Positive = 0.35
     #: The handover: how long to wait for the pull; the back-off after the release.
     handover_timeout_s: Positive = 60.0
     #: The object leaving the jaws this soon after a pull was felt was taken, not lost (s).
-    handover_taken_window_s: float = 0.5
+    handover_taken_window_s: NonNegative = 0.5
     #: At the handover pose: look this long, then walk again if the person's mapped place
     #: is farther than this from straight ahead at the handover distance (m).
-    handover_check_s: float = 1.0
-    handover_tol_m: float = 0.12
+    handover_check_s: NonNegative = 1.0
+    handover_tol_m: Positive = 0.12
     #: After the release: walk backwards at this speed (m/s) for this long.
-    back_off_speed: float = 0.15
-    back_off_s: float = 1.0
+    back_off_speed: Positive = 0.15
+    back_off_s: NonNegative = 1.0
     #: Recovery: re-picks after a grasp lost or failed; instances tried for a class request.
-    repick_budget: int = 2
-    max_candidates: int = 3
+    repick_budget: NonNegativeInt = 2
+    max_candidates: PositiveInt = 3
     approach_gains: ApproachSettings = msgspec.field(default_factory=ApproachSettings)
     pull_detector: PullSettings = msgspec.field(default_factory=PullSettings)
     #: The mapping patrol (`dume map --patrol`): viewpoint spacing and the clearance kept
@@ -590,10 +596,10 @@ class RecordingSettings(_Section):
     #: gRPC address of a live viewer (`rerun+http://127.0.0.1:9876/proxy`), empty for none.
     viewer: str = ""
     #: Log every n-th camera frame, by its stamp (images dominate the recording's size).
-    camera_every: int = 2
+    camera_every: PositiveInt = 2
     #: Of the logged frames, log depth and segmentation with every n-th (they do not
     #: compress like RGB's JPEG).
-    depth_every: int = 10
+    depth_every: PositiveInt = 10
     #: Wall seconds the recording batches rows before writing them: fewer, larger chunks
     #: (a chunk per entity per flush, each with its ~2 KB schema: at rerun's 0.2 s they
     #: were most of the file); a live viewer lags by as much.
@@ -626,9 +632,9 @@ class LocalizationSettings(_Section):
     without it starts odometry at the origin.
     """
 
-    start_pose: tuple[float, float, float] | None = None
+    start_pose: tuple[FiniteFloat, FiniteFloat, FiniteFloat] | None = None
     #: Every n-th beam of a scan is matched (541 → 181).
-    beam_stride: int = 3
+    beam_stride: PositiveInt = 3
     #: A match is taken when this share of its beams ends within `inlier_m` of the map.
     min_inliers: Unit = 0.5
     inlier_m: Positive = 0.1
@@ -639,7 +645,7 @@ class LocalizationSettings(_Section):
     gate_rad: Positive = 0.1
     #: So many refused scans in a row: lost (navigation stops); a search window then
     #: re-seeds the match, as at start-up: ± m and ± rad.
-    lost_after: int = 10
+    lost_after: PositiveInt = 10
     search_m: Positive = 0.6
     search_rad: Positive = 0.27
     #: How the covariance grows while no scan matches: m² of x, y and rad² of yaw per m
@@ -652,7 +658,7 @@ class LogSettings(_Section):
     #: Log, every `trace_every_s` of sim time, a running digest of everything each
     #: publisher sent (`common.bus.Publisher`): two runs of one seed that differ show in
     #: the first service and key whose lines differ. 0: off.
-    trace_every_s: float = 0.0
+    trace_every_s: NonNegative = 0.0
 
 
 class Config(_Section):

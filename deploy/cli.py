@@ -255,9 +255,7 @@ def cmd_status(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
     print(json.dumps(out))
-    if args.ready:
-        return 0 if not out["missing"] else 1
-    return 0 if alive else 1
+    return 0 if not out["missing"] else 1  # a stack missing a service is not well
 
 
 def cmd_world(args: argparse.Namespace) -> int:
@@ -641,7 +639,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         metavar="S",
-        help="wait up to S wall seconds for every service; exit 0 only when all are up",
+        help="wait up to S wall seconds for every service (exit 0 only when all are up)",
     )
     p.set_defaults(func=cmd_status)
 

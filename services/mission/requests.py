@@ -40,9 +40,11 @@ class Rejection:
 
 
 def _request_id_of(payload: bytes) -> str:
+    """The request id of a malformed request, when it has one to echo ("" otherwise: not
+    JSON, not an object, or nested past the parser's depth)."""
     try:
         value = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, UnicodeDecodeError, RecursionError):
         return ""
     rid = value.get("request_id") if isinstance(value, dict) else None
     return rid[:128] if isinstance(rid, str) else ""

@@ -5,11 +5,20 @@ from __future__ import annotations
 import json
 import socket
 import threading
+import time
 
 import pytest
 import zenoh
 
-from common.bus import AliveWatch, Bus, NoReply, RemoteError, RequestError, WaitTimeout
+from common.bus import (
+    AliveWatch,
+    Bus,
+    NoReply,
+    RemoteError,
+    RequestError,
+    Throttle,
+    WaitTimeout,
+)
 from common.messages import ErrorReply
 
 
@@ -76,3 +85,31 @@ def test_an_error_reply_that_is_not_dumes_is_a_no_reply_and_ours_a_remote_error(
         finally:
             raw.undeclare()
             ours.close()
+
+
+def test_garbage_on_a_subscribed_key_is_counted_and_logged_at_most_every_5_s(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The probe: garbage at 20 Hz on `wbc/cmd_vel` logged one WARNING per sample."""
+    with _session() as s, caplog.at_level("WARNING", logger="common.bus"):
+        bus = Bus(s)
+        sub = bus.fifo("test/garbage", ErrorReply)
+        pub = s.declare_publisher("test/garbage")
+        for _ in range(200):
+            pub.put(b"\\x00 not a payload")
+        deadline = time.monotonic() + 5.0
+        while sub.rejected < 200 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sub.rejected == 200 and sub.received == 0
+        lines = [r for r in caplog.records if "test/garbage" in r.getMessage()]
+        assert len(lines) == 1  # the first; the rest wait for the next line, 5 s on
+        pub.undeclare()
+        sub.undeclare()
+
+
+def test_the_throttle_says_when_to_log_and_how_many_it_held_back() -> None:
+    t = Throttle(5.0)
+    assert t.due(100.0) == (True, 0)
+    assert [t.due(100.0 + k)[0] for k in range(1, 5)] == [False] * 4
+    assert t.due(105.0) == (True, 4)
+    assert t.due(106.0) == (False, 0)

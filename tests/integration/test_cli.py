@@ -47,6 +47,9 @@ def test_a_request_without_a_mission_service_says_so_instead_of_waiting(stack: S
     )
     assert out.returncode == 1 and out.stdout == ""  # nothing was sent
     assert out.stderr.startswith("dume: the mission service is not running (`dume status`")
+    status = dume("status", "--port", str(s.port))
+    assert status.returncode == 1  # a stack missing services is not well: it says which
+    assert "mission" in json.loads(status.stdout)["missing"]
 
 
 def test_commands_say_when_no_stack_answers_in_one_line_with_a_hint() -> None:

@@ -31,6 +31,10 @@ from tests.unit.mission_fakes import detection, entity, small_world
         (b'{"request_id": "", "object": "bottle_1", "person": "person_1"}', "", "request_id"),
         (b'{"request_id": 5, "object": "bottle_1", "person": "person_1"}', "", "request_id"),
         (b'{"request_id": "r", "object": "bottle_1", "person": "p_1", "x": 1}', "r", "x"),
+        # nested past any parser's depth (the probe's RecursionError lost the tick)
+        (b"[" * 100_000 + b"]" * 100_000, "", "Expected `object`"),
+        (b'{"a":' * 100_000 + b"1" + b"}" * 100_000, "", "unknown field `a`"),
+        (b'{"request_id": "r3", "x":' + b"[" * 100_000 + b"]" * 100_000 + b"}", "", "`x`"),
     ],
 )
 def test_a_malformed_request_is_rejected_with_its_id_when_it_has_one(
