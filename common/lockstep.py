@@ -352,7 +352,11 @@ class PeriodicTicker:
         self._name = name
         self._stop = stop
 
-    def ticks(self, poll_s: float = 0.1) -> Iterator[int]:
+    def ticks(
+        self, poll_s: float = 0.1, on_idle: Callable[[], None] | None = None
+    ) -> Iterator[int]:
+        """The ticks; `on_idle()` is called every `poll_s` wall seconds the clock does not
+        reach the next one (a participant can notice that the world stopped)."""
         next_ns: int | None = None
         while not self._stop.is_set():
             clock = self.clock.get()
@@ -361,6 +365,8 @@ class PeriodicTicker:
                 try:
                     clock = self.clock.wait(_at_or_after(target), poll_s)
                 except WaitTimeout:
+                    if on_idle is not None:
+                        on_idle()
                     continue
             stamp = (clock.stamp_ns // self.period_ns) * self.period_ns
             next_ns = stamp + self.period_ns

@@ -246,12 +246,19 @@ def cmd_status(args: argparse.Namespace) -> int:
     run = next((r for r in runs_up() if r.info.port == config.zenoh.port), None)
     if run is not None:
         died = restarts(run.folder)
-        out |= {"run": run.info.run_id, "folder": run.shown(), "restarts": died}
-        for name, k in died.items():  # visible: a restarted sim started the world over
+        out |= {"run": run.info.run_id, "folder": run.shown(), "died": died}
+        for name, k in died.items():  # visible: who died, and what became of them
+            back = name in alive
+            then = (
+                f"restarted ({k} time(s))"
+                if back
+                else "not restarted: the world stopped (`dume down`, then `dume up` for a new run)"
+                if name == "sim"
+                else "down"
+            )
             print(
-                f"dume: {name} died and was restarted {k} time(s) in run {run.info.run_id}"
-                + (" (its world started over at t = 0)" if name == "sim" else "")
-                + f": see {run.shown()}/supervisord.log and {name}.log",
+                f"dume: {name} died in run {run.info.run_id}, {then}: see "
+                f"{run.shown()}/supervisord.log and {name}.log",
                 file=sys.stderr,
             )
     print(json.dumps(out))

@@ -163,9 +163,9 @@ _EXITED = re.compile(r"exited: (\S+) \((.*); not expected\)")
 
 
 def restarts(folder: Path) -> dict[str, int]:
-    """Per program, how often supervisord saw it die unexpectedly in this run (and
-    restarted it: a restarted sim starts its world over at t = 0), from
-    `supervisord.log`; empty for a run without one."""
+    """Per program, how often supervisord saw it die unexpectedly in this run (it
+    restarts every one but the sim), from `supervisord.log`; empty for a run without
+    one."""
     counts: dict[str, int] = {}
     with contextlib.suppress(OSError):
         for line in (folder / "supervisord.log").read_text(errors="replace").splitlines():

@@ -78,6 +78,27 @@ class Desk:
         self.send(status)
         self.log.status(status)
 
+    def stalled(self, b: int) -> bool:
+        """The clock stopped after tick b (no tick for a while): when a dependency of
+        the running request is gone (the sim above all: no clock comes from a dead
+        world), the request fails `dependency_lost` stamped b, and the robot is halted;
+        whether the status changed. Nobody waits for the dead, even without ticks."""
+        request = self.tree.request
+        lost = self.deps.lost() if request is not None else None
+        if request is None or lost is None:
+            return False
+        said = f"{lost}: the world stopped at t={b / NS_PER_S:.2f} s" if lost.startswith(
+            "sim") else lost  # fmt: skip
+        self.errors.error("t=%.2f s: %s: the mission fails", b / NS_PER_S, said)
+        outcome = self.tree.fail("dependency_lost", said)
+        self.deps.disarm()
+        if outcome is None:
+            return False
+        return self.board.update(
+            b, request.request_id, outcome.state, self.board.status.behaviour,
+            self.board.status.progress, outcome.reason, outcome.detail,
+        )  # fmt: skip
+
     def flush(self, b: int, changed: bool) -> None:
         """Publish the status stamped b when it changed or the periodic repeat is due."""
         if changed or self.board.due(b):

@@ -13,10 +13,12 @@ Each tick b (multiples of `time.participants.mission.period_s`):
    (`busy`), when a service it depends on is not running (`unavailable`) or when the map
    does not know the object or the person; else the tree starts; cancels of the running
    request stop the tree (`MissionTree.cancel`);
-3. a dependency (the WBC, navigation, perception, the map: those of `time.participants`)
-   that went away or restarted since the request started fails it `dependency_lost`
-   (nobody waits for the dead); else the tree ticks once; its outcome, stage and
-   progress become the status;
+3. a dependency (the sim; the WBC, navigation, perception, the map: those of
+   `time.participants`) that went away or restarted since the request started fails it
+   `dependency_lost` (nobody waits for the dead); else the tree ticks once; its outcome,
+   stage and progress become the status. A dead sim stops the clock, so no tick comes:
+   while the clock stands still the loop checks every 0.1 s wall (`Desk.stalled`) and
+   fails the request `dependency_lost: sim is gone`, stamped at the last tick;
 4. the patrol (`patrol_desk`): its requests (`mission/patrol`, a query answered once the
    loop took it; a start refused `busy` while a fetch runs), then one step of a running
    patrol (`patrol.PatrolRunner`: walk obeying navigation, the arm in `look`, pose goals
@@ -63,6 +65,8 @@ from services.mission.tree import MissionTree
 
 NAME = "mission"
 #: The services a running mission depends on (those that are lockstep participants).
+#: The services a job depends on: the sim (the world and its clock) and the lockstep
+#: participants among these.
 DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map")
 
 
@@ -93,7 +97,7 @@ class MissionNode:
         self.gate.watch("navigation", self.robot.nav)
         self.gate.watch("perception", self.robot.detections)
         self.alive = bus.watch_alive(keys.alive_all)
-        needed = [n for n in DEPENDENCIES if n in cfg.time.participants]
+        needed = ["sim", *(n for n in DEPENDENCIES if n in cfg.time.participants)]
         self.deps = Dependencies(self.alive.lifelines, needed, keys.alive)
         heard = {keys.alive(n) for n in self.deps.names}
         self.inputs = TickInputs(
@@ -140,10 +144,12 @@ class MissionNode:
             self.patrol.busy_with,
         )
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
+        self.last_b = 0
 
     def run(self) -> None:
         self.svc.ready()
-        for b in self.ticker.ticks():
+        for b in self.ticker.ticks(on_idle=self._stalled):
+            self.last_b = b
             try:
                 self.tick(b)
             except Exception:  # a bug: say it, stop the robot, keep serving
@@ -151,6 +157,15 @@ class MissionNode:
             finally:
                 self.patrol_pub.put(self.patrol.published(b))  # every tick: the map waits
                 self.ticker.ack(b)
+
+    def _stalled(self) -> None:
+        """No tick for a while: a request whose sim (or another dependency) is gone ends
+        now, its status stamped at the last tick (the loop is the only thread here)."""
+        try:
+            if self.desk.stalled(self.last_b):
+                self.desk.flush(self.last_b, True)
+        except Exception:  # a bug: say it, keep serving
+            self.svc.log.exception("mission: failing a stalled request raised")
 
     def tick(self, b: int) -> None:
         """Inputs as of b, the desks' steps, the robot's outputs, then the status."""

@@ -31,8 +31,8 @@ def alive(port: int) -> set[str]:
     return set(json.loads(out.stdout)["alive"]) if out.stdout.strip() else set()
 
 
-def sim_pid(run_id: str) -> int:
-    out = dume("ctl", "--run", run_id, "pid", "sim", timeout=30)
+def pid_of(run_id: str, program: str) -> int:
+    out = dume("ctl", "--run", run_id, "pid", program, timeout=30)
     return int(out.stdout.strip()) if out.stdout.strip().isdigit() else 0
 
 
@@ -126,7 +126,7 @@ def recorded_entities(folder: Path) -> set[str]:
     return paths
 
 
-def test_dume_up_runs_the_stack_and_restarts_a_killed_sim() -> None:
+def test_dume_up_restarts_a_killed_service_but_never_the_world() -> None:
     port = free_port()
     up, run_id = _up(port, "--world", "small", "--set", "sim.cameras=[]")
     try:
@@ -138,14 +138,19 @@ def test_dume_up_runs_the_stack_and_restarts_a_killed_sim() -> None:
         assert busy.returncode == 1
         assert f"port {port} is in use (run {run_id})" in busy.stderr
 
-        first = sim_pid(run_id)
+        first = pid_of(run_id, "perception")
         assert first > 0
-        os.kill(first, signal.SIGKILL)
-        assert wait_until(lambda: sim_pid(run_id) not in (0, first), 60, poll_s=0.5)
-        assert wait_until(lambda: "sim" in alive(port), 120, poll_s=1.0)
+        os.kill(first, signal.SIGKILL)  # a service: restarted
+        assert wait_until(lambda: pid_of(run_id, "perception") not in (0, first), 60, 0.5)
+        assert wait_until(lambda: "perception" in alive(port), 120, poll_s=1.0)
+        os.kill(pid_of(run_id, "sim"), signal.SIGKILL)  # the world: never restarted
+        assert wait_until(lambda: "sim" not in alive(port), 30, poll_s=0.5)
         said = dume("status", "--port", str(port))
-        assert json.loads(said.stdout)["restarts"] == {"sim": 1}
-        assert f"sim died and was restarted 1 time(s) in run {run_id}" in said.stderr
+        assert said.returncode == 1 and json.loads(said.stdout)["missing"] == ["sim"]
+        assert json.loads(said.stdout)["died"] == {"perception": 1, "sim": 1}
+        assert f"perception died in run {run_id}, restarted (1 time(s))" in said.stderr
+        assert f"sim died in run {run_id}, not restarted: the world stopped" in said.stderr
+        assert pid_of(run_id, "sim") == 0
     finally:
         _stop(up)
     assert wait_until(lambda: not alive(port), 30, poll_s=1.0)

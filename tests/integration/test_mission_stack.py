@@ -135,6 +135,22 @@ def test_a_dependency_that_dies_mid_mission_fails_it_within_a_second_of_sim_time
     assert s.procs["mission"].poll() is None
 
 
+def test_a_sim_that_dies_mid_mission_fails_it_without_waiting_for_a_tick(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    """No clock comes from a dead world: the mission notices it without a tick."""
+    s = _no_controller_stack(stack, tmp_path)
+    user = User(s)
+    user.request({"request_id": "r1", "object": "bottle_1", "person": "person_1"})
+    running = user.wait("r1", {"running"}, 60.0)
+    s.kill("sim")
+    done = user.wait("r1", {"failed", "cancelled", "succeeded"}, 30.0)  # not left running
+    assert (done.state, done.reason) == ("failed", "dependency_lost"), done
+    assert done.detail.startswith("sim is gone: the world stopped at t="), done.detail
+    assert done.stamp_ns >= running.stamp_ns
+    assert s.procs["mission"].poll() is None
+
+
 def test_a_watch_whose_mission_dies_ends_with_dependency_lost_instead_of_waiting(
     stack: StartStack, tmp_path: Path
 ) -> None:
