@@ -203,7 +203,9 @@ def map_start(map_arg: str | None, world: str, seed: int) -> dict[str, Any]:
     its own (`<site>-truth`, `<site>-prior`): the site's own map is never overwritten."""
     if map_arg is None:
         return {}
-    site = f"{world}-seed-{seed}"
+    from services.semantic_map.store import site_slug
+
+    site = site_slug(load_config({"sim.world": world, "sim.world_seed": seed}).map_site())
     if map_arg == "truth":
         return {
             "semantic_map.start": "seed-from-world",

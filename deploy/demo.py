@@ -25,7 +25,6 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -43,11 +42,12 @@ from bench.eval.run import (
 )
 from bench.eval.targets import TargetError, demo_pair
 from common.bus import BusError
-from common.config import REPO_ROOT, merged, parse_overrides, resolve
+from common.config import merged, parse_overrides, resolve
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
 from common.recording import new_run_id, run_dir
+from deploy.runs import shown
 from deploy.stack import Supervised
 from services.semantic_map.store import database_path, remove_database
 
@@ -146,7 +146,7 @@ def run_demo(args: argparse.Namespace) -> int:
     print(
         f"dume demo: {args.world} world seed {args.world_seed}, map {start}, "
         f"port {stack.port}, run {stack.run_id}\n"
-        f"dume demo: logs and recording in {_shown(stack.run_dir)}/ (dume logs, dume view)",
+        f"dume demo: logs and recording in {shown(stack.run_dir)}/ (dume logs, dume view)",
         file=sys.stderr,
         flush=True,
     )
@@ -181,13 +181,9 @@ def run_demo(args: argparse.Namespace) -> int:
                 "wall_time_s": round(wall, 2),
                 "rtf": result.rtf,
                 "locomotion": locomotion,
-                "recording": _shown(recording),
+                "recording": shown(recording),
                 "digest": result.digest,
             }
         )
     )
     return 0 if outcome == "succeeded" else 1
-
-
-def _shown(path: Path) -> str:
-    return str(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path)

@@ -26,6 +26,8 @@ import numpy as np
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
+from services.perception.perception_log import PALETTE
+
 #: Entities read, by prefix (a recording holds far more).
 WANTED = (
     "/world/map/",
@@ -135,7 +137,7 @@ def camera_image(run: dict[str, Series], cam: str, t: float) -> np.ndarray | Non
         if ids.shape == img.shape[:2]:
             tint = np.zeros_like(img)
             for k in np.unique(ids[ids > 0]):
-                tint[ids == k] = _PALETTE[int(k) % len(_PALETTE)]
+                tint[ids == k] = PALETTE[int(k) % len(PALETTE)]
             on = ids > 0
             img[on] = (0.55 * img[on] + 0.45 * tint[on]).astype(np.uint8)
     boxes = run.get(f"/camera/{cam}/perception/boxes")
@@ -155,10 +157,6 @@ def camera_image(run: dict[str, Series], cam: str, t: float) -> np.ndarray | Non
 
 #: rerun's `ChannelDatatype` codes of the label images perception logs (8 or 16 bits).
 _CHANNEL_DTYPES: dict[int, type] = {6: np.uint8, 8: np.uint16}
-_PALETTE = np.array(
-    [[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48], [145, 30, 180]],
-    dtype=np.uint8,
-)
 
 
 def top_down(ax: Any, run: dict[str, Series], t: float | None = None) -> None:

@@ -10,7 +10,6 @@ ended (✓ handed over, ✗ failed, with why in the title). `wilson` is the succ
 from __future__ import annotations
 
 import math
-import os
 import platform
 from collections.abc import Sequence
 from pathlib import Path
@@ -21,6 +20,7 @@ from bench.eval.judge import MissionRecord, WorldResult, static_contacts
 from common.messages.arrays import as_numpy
 from common.messages.mission import STAGES
 from common.messages.world import WorldDescription
+from common.sched import allowed_cpus
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -43,7 +43,7 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cores = len(allowed_cpus())
     return f"{model}, {cores} cores, Python {platform.python_version()}"
 
 

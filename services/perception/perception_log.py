@@ -22,7 +22,8 @@ from services.perception.pipeline import Detected, class_text, mask_of
 
 #: Points logged per instance at most.
 MAX_LOG_POINTS = 120
-_PALETTE = np.array(
+#: Instance colours (boxes, masks), also `dume view --snapshot`'s.
+PALETTE = np.array(
     [[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48], [145, 30, 180]],
     dtype=np.uint8,
 )
@@ -53,7 +54,7 @@ class PerceptionLogger:
         if not self.frames.logged(msg.stamp_ns):  # the sim keeps no image of it
             return
         dets = [d.detection for d in detected]
-        colours = _PALETTE[np.arange(len(dets)) % len(_PALETTE)]
+        colours = PALETTE[np.arange(len(dets)) % len(PALETTE)]
         labels = [f"{class_text(d)} {d.score:.2f}" for d in dets]
         self.rec.log(
             f"camera/{cam}/perception/boxes",

@@ -51,10 +51,15 @@ _ENC = msgspec.msgpack.Encoder()
 _DEC = decoder(MapEntity)
 
 
+def site_slug(site: str) -> str:
+    """A site as a file name: `hall seed 3` → `hall-seed-3`."""
+    return re.sub(r"[^a-z0-9]+", "-", site.lower()).strip("-")
+
+
 def database_path(settings: SemanticMapSettings, name: str | None = None, site: str = "") -> Path:
     """The file of map `name` (the settings' own by default, else the site's, else
     `default`): `<dir>/<name>.sqlite`."""
-    stem = name or settings.name or re.sub(r"[^a-z0-9]+", "-", site.lower()).strip("-")
+    stem = name or settings.name or site_slug(site)
     return resolve(settings.dir) / f"{stem or 'default'}.sqlite"
 
 
