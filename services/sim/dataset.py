@@ -10,20 +10,28 @@ joints), which moves the cameras' height and tilt. Frames per seed:
 - wrist camera in `look` from near the artifacts' standoff poses (distance between `D_OPT_M`
   and a little beyond `STANDOFF_DISTANCE_M`, heading jittered): tables with objects close up;
 - head camera from free poses facing a person (1.2-7 m away), an artifact, or anywhere;
-- wrist camera in a random posture facing a person (what a handover sees).
+- wrist camera in a random posture facing a person (what a handover sees);
+- artifacts from 1.5-3 m, the wrist camera held up as the mapping patrol holds it or the
+  head camera, those on benches twice as often, and furniture edges with no artifact near
+  as negatives (`services.sim.dataset_shots`: drawn from a generator of their own, so the
+  frames above are the same as before they were added).
+
+`render_seed(seed, plan="heldout")` renders the confusion report's views instead
+(`dataset_shots.plan_heldout_shots`), from another stream of the seed. A shard records its
+plan and version (`PLANS`): `write_dataset` renders again a shard of another one.
 
 A shard holds `rgb` (N, H, W, 3) uint8, `depth_mm` (N, H, W) uint16 (0 = no return),
 `labels` (N, H, W) uint16 instance labels, `label_ids`/`label_names` (the world's label →
 truth id, `bottle_1`, `person_2`, `table_1`, `robot`), `camera` (N,), `intrinsics` (N, 4)
-fx fy cx cy, `T_base_camera` and `T_world_base` (N, 4, 4), `seed` and `world`. It knows
-nothing of classes: a trainer maps ids to its classes.
+fx fy cx cy, `T_base_camera` and `T_world_base` (N, 4, 4), `seed`, `world` and `plan`. It
+knows nothing of classes: a trainer maps ids to its classes.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
@@ -35,9 +43,11 @@ from common import robot
 from common.geometry import matrix_to_quat_xyzw, rot_x, rot_y, rot_z
 from common.messages.arrays import as_numpy
 from common.messages.world import WorldDescription
+from services.sim import dataset_shots as shots_
 from services.sim import feasibility as fz
 from services.sim import mjcf, scene
 from services.sim.cameras import CameraRig
+from services.sim.dataset_shots import Floor, Shot, facing
 from services.sim.world import generate_world
 
 log = logging.getLogger(__name__)
@@ -67,16 +77,6 @@ class Frame(NamedTuple):
     T_world_base: NDArray[np.float64]
 
 
-class Shot(NamedTuple):
-    """Where to put the robot and which camera to capture."""
-
-    camera: str
-    x: float
-    y: float
-    yaw: float
-    posture: str
-
-
 def _jittered_q(shot: Shot, rng: np.random.Generator) -> NDArray[np.float64]:
     """Pinocchio q of the shot's pose and posture, with height, tilt and arm jitter."""
     q = np.array(robot.standing_q(shot.posture, shot.x, shot.y, shot.yaw), dtype=float)
@@ -89,45 +89,11 @@ def _jittered_q(shot: Shot, rng: np.random.Generator) -> NDArray[np.float64]:
     return q
 
 
-class _Floor:
-    """Free points of a world's floor, drawn with a generator."""
-
-    def __init__(self, world: WorldDescription, rng: np.random.Generator) -> None:
-        self.grid, self.rng = world.occupancy, rng
-        self.clear = fz.clearance(world.occupancy)
-
-    def point(
-        self,
-        clearance_m: float,
-        near: tuple[float, float] | None = None,
-        ring: tuple[float, float] = (0.0, math.inf),
-    ) -> tuple[float, float]:
-        """A free point with `clearance_m`, within `ring` of `near` when one fits."""
-        res, (x0, y0) = self.grid.resolution, self.grid.origin
-        mask = self.clear >= clearance_m
-        if near is not None:
-            ny, nx = mask.shape
-            xs = x0 + (np.arange(nx) + 0.5) * res - near[0]
-            ys = y0 + (np.arange(ny) + 0.5) * res - near[1]
-            dist = np.hypot(xs[None, :], ys[:, None])
-            in_ring = mask & (dist >= ring[0]) & (dist <= ring[1])
-            mask = in_ring if in_ring.any() else mask
-        idx = np.flatnonzero(mask)
-        iy, ix = np.unravel_index(int(idx[self.rng.integers(idx.size)]), mask.shape)
-        return float(x0 + (ix + self.rng.random()) * res), float(
-            y0 + (iy + self.rng.random()) * res
-        )
-
-
-def _facing(x: float, y: float, target: tuple[float, float], rng: np.random.Generator) -> float:
-    return math.atan2(target[1] - y, target[0] - x) + float(rng.uniform(-0.35, 0.35))
-
-
 def plan_shots(world: WorldDescription, rng: np.random.Generator) -> list[Shot]:
     """The seed's camera placements (see the module docstring)."""
     shots: list[Shot] = []
     surfaces = {s.id: s for s in world.surfaces}
-    floor = _Floor(world, rng)
+    floor = Floor(world, rng)
     order = np.resize(rng.permutation(len(world.artifacts)), WRIST_ARTIFACT_FRAMES)
     for index in order.tolist():
         artifact = world.artifacts[index]
@@ -146,21 +112,40 @@ def plan_shots(world: WorldDescription, rng: np.random.Generator) -> list[Shot]:
             x, y = floor.point(0.5, target, (1.0, 4.0))
         else:
             x, y = floor.point(0.5)
-        yaw = _facing(x, y, target, rng) if target else float(rng.uniform(-math.pi, math.pi))
+        yaw = facing(x, y, target, rng) if target else float(rng.uniform(-math.pi, math.pi))
         posture = ("stand", "stow", "look")[int(rng.integers(3))]
         shots.append(Shot("camera_head", x, y, yaw, posture))
     for _ in range(WRIST_PERSON_FRAMES if world.people else 0):
         person = world.people[int(rng.integers(len(world.people)))]
         x, y = floor.point(0.4, person.position, (1.0, 4.0))
         posture = ("look", "ready", "handover")[int(rng.integers(3))]
-        shots.append(Shot("camera_wrist", x, y, _facing(x, y, person.position, rng), posture))
-    return shots
+        shots.append(Shot("camera_wrist", x, y, facing(x, y, person.position, rng), posture))
+    more = np.random.default_rng([world.seed, 0xD05E, 2])  # the frames above stay as they were
+    shots += shots_.far_shots(world, more, shots_.FAR_FRAMES)
+    return shots + shots_.edge_shots(world, more, shots_.EDGE_FRAMES)
 
 
-def render_seed(seed: int, world_name: str = "hall") -> tuple[dict[int, str], list[Frame]]:
-    """Label → truth id of the world of `seed`, and its frames (deterministic per seed)."""
+#: The plans a shard can be rendered with: (plan, its generator's stream of the seed,
+#: its version, stored in the shard; a shard of another version is rendered again).
+PLANS: dict[str, tuple[Callable[[WorldDescription, np.random.Generator], list[Shot]], int, int]] = {
+    "train": (plan_shots, 0xD05E, 2),
+    "heldout": (shots_.plan_heldout_shots, 0xC0F5, 1),
+}
+
+
+def plan_tag(plan: str) -> str:
+    """What a shard of `plan` records: `train-2`."""
+    return f"{plan}-{PLANS[plan][2]}"
+
+
+def render_seed(
+    seed: int, world_name: str = "hall", plan: str = "train"
+) -> tuple[dict[int, str], list[Frame]]:
+    """Label → truth id of the world of `seed`, and its frames of `plan` (`PLANS`;
+    deterministic per seed)."""
     world = generate_world(seed, world_name)
-    rng = np.random.default_rng([seed, 0xD05E])
+    planner, stream, _ = PLANS[plan]
+    rng = np.random.default_rng([seed, stream])
     model = scene.compile_scene(world, with_robot=True)
     data = mujoco.MjData(model)
     qpos = mjcf.mj_indices(model).qpos
@@ -168,7 +153,7 @@ def render_seed(seed: int, world_name: str = "hall") -> tuple[dict[int, str], li
     instances = dict(rig.instances)
     frames: list[Frame] = []
     try:
-        for shot in plan_shots(world, rng):
+        for shot in planner(world, rng):
             data.qpos[qpos] = mjcf.q_pin_to_mj(_jittered_q(shot, rng))
             mujoco.mj_kinematics(model, data)
             mujoco.mj_camlight(model, data)
@@ -196,7 +181,12 @@ def shard_path(folder: Path, seed: int) -> Path:
 
 
 def save_shard(
-    path: Path, seed: int, world: str, instances: dict[int, str], frames: list[Frame]
+    path: Path,
+    seed: int,
+    world: str,
+    instances: dict[int, str],
+    frames: list[Frame],
+    plan: str = "train",
 ) -> None:
     """Write `frames` as one compressed shard (atomically: a partial file never remains)."""
     if not frames:
@@ -216,22 +206,34 @@ def save_shard(
         T_world_base=np.stack([f.T_world_base for f in frames]),
         seed=np.int64(seed),
         world=np.array(world),
+        plan=np.array(plan_tag(plan)),
     )
     tmp.replace(path)
 
 
+def shard_plan(path: Path) -> str:
+    """The plan and version a shard was rendered with (`train-1`: before shards said)."""
+    with np.load(path) as shard:
+        return str(shard["plan"]) if "plan" in shard.files else "train-1"
+
+
 def write_dataset(
-    seeds: Iterable[int], folder: Path, world_name: str = "hall", overwrite: bool = False
+    seeds: Iterable[int],
+    folder: Path,
+    world_name: str = "hall",
+    overwrite: bool = False,
+    plan: str = "train",
 ) -> Iterator[Path]:
-    """Render and save each seed's shard into `folder`; yields the paths (existing shards are
-    kept unless `overwrite`, so an interrupted run resumes)."""
+    """Render and save each seed's shard of `plan` into `folder`; yields the paths
+    (existing shards of the plan's version are kept unless `overwrite`, so an interrupted
+    run resumes)."""
     folder.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
         path = shard_path(folder, seed)
-        if path.exists() and not overwrite:
+        if path.exists() and not overwrite and shard_plan(path) == plan_tag(plan):
             yield path
             continue
-        instances, frames = render_seed(seed, world_name)
-        save_shard(path, seed, world_name, instances, frames)
-        log.info("seed %d: %d frames -> %s", seed, len(frames), path.name)
+        instances, frames = render_seed(seed, world_name, plan)
+        save_shard(path, seed, world_name, instances, frames, plan)
+        log.info("seed %d: %d frames of %s -> %s", seed, len(frames), plan, path.name)
         yield path
