@@ -19,6 +19,7 @@
     dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
     dume trial goals [--count 10] | person             random goals; a person stepping in (JSON)
     dume train-segmenter [--seed S]                         render data, train, export ONNX
+    dume train-segmenter --confusion MODEL                  its confusion by range, held out
 
 Every command takes `--port` (default: `DUME_ZENOH_PORT` or the config's; with neither,
 when nothing listens there, the one run that is up) to talk to the stack on that port,
@@ -573,6 +574,14 @@ def cmd_train_segmenter(args: argparse.Namespace) -> int:
     from services.sim.dataset import write_dataset
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    if args.confusion is not None:
+        from bench.segmenter_confusion import HeldOutError, run
+
+        try:
+            run(args.confusion)
+        except HeldOutError as exc:
+            raise CliError(str(exc), "held-out seeds: bench.segmenter_confusion.SEEDS") from exc
+        return 0
     shards = REPO_ROOT / "var" / "datasets" / "segmenter"
     train = list(range(args.train_seeds))
     val = list(range(10_000, 10_000 + args.val_seeds))  # held out: never trained on
@@ -776,6 +785,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--val-seeds", type=int, default=24, help="held-out worlds from 10000")
     p.add_argument("--steps", type=int, default=4000)
     p.add_argument("--out", type=pathlib.Path, default=None, help="default: the shipped model")
+    p.add_argument(
+        "--confusion",
+        type=pathlib.Path,
+        metavar="MODEL",
+        default=None,
+        help="no training: MODEL's per-class confusion by range on held-out renders",
+    )
     p.set_defaults(func=cmd_train_segmenter)
     return parser
 
