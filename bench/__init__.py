@@ -94,7 +94,7 @@ ALL = ("sim", "wbc", "perception", "nav")
 #: `dume trial <name>`: the trials `bench.trials.run_trial` runs (named here, so the
 #: command line lists them without importing the trials' dependencies).
 TRIALS = (
-    "walk", "turn", "strafe", "random", "reach", "pick", "push", "localize", "localize-off",
+    "walk", "turn", "strafe", "random", "reach", "pick", "push", "localize", "localize-off", "slam",
     "goto", "goals", "person", "fetch", "patrol",
 )  # fmt: skip
 

@@ -9,6 +9,11 @@ set-up) becomes the likelihood field. The localizer is told the start pose off b
 `start_off` (x m, y m, yaw rad in the robot's frame; the issue's 0.5 m and 10° with
 `--set`-free option `off`), and every `scan` is matched with `odom` at its stamp.
 
+`dume trial slam` walks the same with no map at all: SLAM (`services.localization.slam`)
+maps while it localizes, told the start pose exactly (the map's frame), and the figures
+add its grid's agreement with the floor plan over what it saw (`map_agreement`), its
+keyframes and loop closures.
+
 Figures: the map-frame position and heading errors of T_map_base against the truth
 (p50, p95, max; the first second, while the start is sought, apart), the statuses, the
 refusals, the match's wall time per scan, and the odometry's own drift for comparison.
@@ -22,8 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from bench import map_agreement
 from bench.trial_driver import Driver, Script
 from bench.trial_random import random_walk
+from common import robot
 from common.config import LocalizationSettings
 from common.geometry import wrap_angle
 from common.keys import WORLD_DESCRIPTION
@@ -33,6 +40,7 @@ from common.messages.sim import LaserScan, Odom, StateTruth
 from common.messages.world import WorldDescription
 from services.localization.localizer import Localizer, compose
 from services.localization.matcher import LikelihoodField, scan_points
+from services.localization.slam import Slam
 
 Figures = dict[str, Any]
 SEEKING_S = 1.0  # the first scans, while an off start pose is sought, are counted apart
@@ -43,6 +51,7 @@ def localize(
     out: Figures,
     seconds: float = 120.0,
     start_off: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    slam: bool = False,
 ) -> Script:
     world = d.bus.query(WORLD_DESCRIPTION, None, WorldDescription, timeout_s=10.0)
     grid = world.occupancy
@@ -52,7 +61,10 @@ def localize(
     s = LocalizationSettings()
     start = world.robot_start
     given = compose((start.x, start.y, start.yaw), start_off)
-    loc = Localizer(s, field, given)
+    loc: Localizer | Slam = Localizer(s, field, given)
+    if slam:
+        T = robot.LIDAR_MOUNT.T_parent_lidar
+        loc = Slam(s, s.slam, given, (float(T[0, 3]), float(T[1, 3])))
     scans = d.bus.fifo(d.keys.scan, LaserScan, maxlen=10_000)
     odoms = d.bus.latest(d.keys.odom, Odom, history=256)
     truths = d.bus.latest(d.keys.state_truth, StateTruth, history=2048)
@@ -76,10 +88,13 @@ def localize(
                     scan.angle_min,
                     scan.angle_increment,
                     np.asarray(scan.T_base_lidar).reshape(4, 4),
-                    s.beam_stride,
+                    1 if slam else s.beam_stride,
                 )
                 t0 = time.perf_counter()
-                est = loc.update(pts, odom_pose(odom))
+                if isinstance(loc, Slam):
+                    est = loc.update(pts, odom_pose(odom), s.beam_stride)
+                else:
+                    est = loc.update(pts, odom_pose(odom))
                 wall.append(time.perf_counter() - t0)
                 statuses[est.status] = statuses.get(est.status, 0) + 1
                 if est.refused:
@@ -96,6 +111,18 @@ def localize(
         odoms.undeclare()
         truths.undeclare()
     out.update(_figures(errors, statuses, refusals, wall, start_off))
+    if isinstance(loc, Slam):
+        g = loc.grid
+        plan = map_agreement.truth_on(world, g.shape, g.resolution_m, g.origin_xy)
+        out["slam"] = {
+            "keyframes": len(loc.keyframes),
+            "closures": len(loc.closures),
+            "closure_corrections_m": [round(c.correction_m, 3) for c in loc.closures],
+            "agreement": map_agreement.agreement(g.cells(), plan),
+            "agreement_at_lidar_height": map_agreement.agreement(
+                g.cells(), map_agreement.truth_on(world, g.shape, g.resolution_m, g.origin_xy, 0.5)
+            ),
+        }
 
 
 def _figures(

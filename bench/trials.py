@@ -222,9 +222,10 @@ SCRIPTS = {
     "push": push,
     "localize": lambda d, out: localize(d, out),
     "localize-off": lambda d, out: localize(d, out, start_off=LOCALIZE_OFF),
+    "slam": lambda d, out: localize(d, out, slam=True),
 }
 #: The trials whose robot is on its own odometry, with people walking by.
-OWN_ODOMETRY = {"localize", "localize-off"}
+OWN_ODOMETRY = {"localize", "localize-off", "slam"}
 
 
 #: Where each trial runs by default: the hall's seed 3 has 6 m free ahead of the start
@@ -237,6 +238,7 @@ WORLDS = {
     "push": ("hall", 3),
     "localize": ("hall", 3),
     "localize-off": ("hall", 3),
+    "slam": ("hall", 3),
     "goto": ("hall", 3),
     "goals": ("hall", 3),
 }

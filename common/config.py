@@ -623,6 +623,51 @@ class CpuSettings(_Section):
     control: tuple[str, ...] = ("sim", "wbc", "router")
 
 
+class SlamSettings(_Section):
+    """Mapping while localizing (`services/localization/slam.py`), when the map has no
+    static layer to localize on. Distances m, angles rad, the grid's geometry that of the
+    map's (`semantic_map.grid_*`)."""
+
+    #: A pose this far from the last keyframe (m, rad) makes a new one.
+    keyframe_m: Positive = 0.4
+    keyframe_rad: Positive = 0.26
+    #: The local map the scans are tracked on: the last n keyframes' returns.
+    local_keyframes: PositiveInt = 20
+    #: A local match is taken when this share of its beams ends on the local map.
+    min_inliers: Unit = 0.4
+    #: How far a scan's match may stray from the odometry's prediction at no cost (1 σ of
+    #: the prior the match weighs against its beams), m and rad.
+    prior_sigma_m: Positive = 0.02
+    prior_sigma_rad: Positive = 0.01
+    #: The between factors' noise: a floor and a share per metre between keyframes.
+    odom_sigma_m: Positive = 0.01
+    odom_sigma_per_m: NonNegative = 0.02
+    odom_sigma_rad: Positive = 0.003
+    odom_sigma_rad_per_m: NonNegative = 0.01
+    #: Loop closures: a new keyframe within `closure_radius_m` of one `closure_gap` or
+    #: more keyframes older, tried every `closure_every` keyframes, on a submap of the
+    #: older one and `closure_submap` neighbours each side, searched ± m and ± rad around
+    #: the graph's pose, taken at `closure_min_inliers`.
+    closure_radius_m: Positive = 2.5
+    closure_gap: PositiveInt = 25
+    closure_every: PositiveInt = 3
+    closure_submap: NonNegativeInt = 5
+    closure_search_m: Positive = 0.4
+    closure_search_rad: Positive = 0.12
+    closure_min_inliers: Unit = 0.6
+    closure_sigma_m: Positive = 0.03
+    closure_sigma_rad: Positive = 0.01
+    #: The grid: a cell is occupied when this share of the beams that met it ended there.
+    occupied_ratio: Unit = 0.25
+    half_extent_m: Positive = 15.0
+    resolution_m: Positive = 0.05
+    #: The local map's cells, m: finer than the map's, so a scan's heading is not
+    #: quantised to what a 5 cm cell 5 m away allows (0.4°).
+    track_resolution_m: Positive = 0.025
+    #: The grid goes out on `slam/occupancy` at most this often, s of sim time.
+    publish_every_s: Positive = 1.0
+
+
 class LocalizationSettings(_Section):
     """Where the robot is in the map.
 
@@ -651,6 +696,10 @@ class LocalizationSettings(_Section):
     #: How the covariance grows while no scan matches: m² of x, y and rad² of yaw per m
     #: the odometry travelled.
     growth_per_m: NonNegative = 0.01
+    #: `localize` on the map's static layer, `slam` (build the map while localizing on
+    #: it), or `auto`: slam when the map has no static layer (an empty map: exploring).
+    mode: Literal["auto", "localize", "slam"] = "auto"
+    slam: SlamSettings = msgspec.field(default_factory=SlamSettings)
 
 
 class LogSettings(_Section):

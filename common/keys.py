@@ -103,6 +103,13 @@ class RobotKeys:
         return f"{self.prefix}/localization"
 
     @property
+    def slam_occupancy(self) -> str:
+        """The grid the localization builds while mapping (`semantic_map.OccupancyGrid`,
+        `static_source` "slam"), published when it changed, at most every
+        `localization.slam.publish_every_s`; its stamp goes out on `localization`."""
+        return f"{self.prefix}/slam/occupancy"
+
+    @property
     def scan(self) -> str:
         """The trunk lidar's planar scan (`LaserScan`)."""
         return f"{self.prefix}/scan"

@@ -20,6 +20,9 @@ class Localization(Message, frozen=True):
     given), `ok`, `uncertain` (the last scans did not match; the correction is kept and
     its covariance grows), `lost` (navigation stops). confidence: the last match's share
     of beams on the map. reason: why the last scan was refused ("" when it matched).
+    grid_stamp_ns: while mapping (SLAM), the stamp of the newest grid published on
+    `slam/occupancy` (0: none, or not mapping): a consumer applying this sample waits
+    for that grid, so every run adopts the same grid at the same tick.
     """
 
     stamp_ns: StampNs
@@ -29,3 +32,4 @@ class Localization(Message, frozen=True):
     status: LocalizationStatus
     confidence: Unit
     reason: str = ""
+    grid_stamp_ns: StampNs = 0

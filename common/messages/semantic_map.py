@@ -63,14 +63,15 @@ class OccupancyGrid(Message, frozen=True):
     at origin + ((ix + 0.5) res, (iy + 0.5) res) in the world frame.
     resolution_m: cell size, m. origin_xy: world position of cell (0, 0)'s corner, m.
     static_source: where the static layer came from (`world`: the simulator's floor plan,
-    `file`: a map file, `none`). learned_cells: cells occupied by obstacles seen in depth.
+    `file`: a map file, `slam`: the robot's own lidar map, `none`). learned_cells: cells
+    occupied by obstacles seen in depth.
     """
 
     stamp_ns: StampNs
     resolution_m: NonNegative
     origin_xy: tuple[Finite, Finite]
     cells: Array
-    static_source: Literal["world", "file", "none"] = "none"
+    static_source: Literal["world", "file", "slam", "none"] = "none"
     learned_cells: int = 0
 
 

@@ -55,6 +55,10 @@ class LikelihoodField:
     resolution: float
     origin: tuple[float, float]
     max_dist_m: float
+    #: The gradient of the bilinear interpolant itself rather than the interpolated
+    #: central differences (`grad_x`, `grad_y` unused): on a map of one scan's thin lines
+    #: of cells the differences vanish on the lines, where the scan's returns lie.
+    exact_gradient: bool = False
 
     @classmethod
     def of_grid(
@@ -63,6 +67,7 @@ class LikelihoodField:
         resolution: float,
         origin: tuple[float, float],
         max_dist_m: float = 1.0,
+        exact_gradient: bool = False,
     ) -> LikelihoodField:
         # Zero on the outermost occupied cells' centres: a cell is occupied when an
         # obstacle overlaps it at all, so a face lies anywhere in its boundary cell, on
@@ -73,7 +78,7 @@ class LikelihoodField:
         dist = np.where(occupied, -inside, outside) * resolution
         dist = np.clip(dist, -max_dist_m, max_dist_m)
         gy, gx = np.gradient(dist, resolution)
-        return cls(dist, gx, gy, resolution, origin, max_dist_m)
+        return cls(dist, gx, gy, resolution, origin, max_dist_m, exact_gradient)
 
     def at(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Signed distance (n,) and its gradient (n, 2) at points (n, 2); off the map: the
@@ -101,8 +106,14 @@ class LikelihoodField:
             )
 
         d[inside] = bilinear(self.dist)
-        g[inside, 0] = bilinear(self.grad_x)
-        g[inside, 1] = bilinear(self.grad_y)
+        if self.exact_gradient:
+            a00, a01 = self.dist[i0, j0], self.dist[i0, j0 + 1]
+            a10, a11 = self.dist[i0 + 1, j0], self.dist[i0 + 1, j0 + 1]
+            g[inside, 0] = ((1 - fv) * (a01 - a00) + fv * (a11 - a10)) / self.resolution
+            g[inside, 1] = ((1 - fu) * (a10 - a00) + fu * (a11 - a01)) / self.resolution
+        else:
+            g[inside, 0] = bilinear(self.grad_x)
+            g[inside, 1] = bilinear(self.grad_y)
         return d, g
 
 
@@ -151,9 +162,16 @@ def refine(
     inlier_m: float = 0.1,
     sigma_m: float = 0.03,
     iterations: int = 15,
+    prior: FloatArray | None = None,
 ) -> Match:
-    """Gauss-Newton on (x, y, yaw) with a Huber loss (see the module docstring)."""
+    """Gauss-Newton on (x, y, yaw) with a Huber loss (see the module docstring).
+
+    `prior`: an information matrix (3, 3) on the offset from `pose`, in units of the
+    beams' (a beam weighs 1): the odometry's word where the scan says little (a hall's
+    long axis with its far wall out of range), as Cartographer's scan matcher weighs its
+    initial pose."""
     x = np.array(pose, dtype=float)
+    x0 = x.copy()
     H = np.eye(3)
     n = max(len(points), 1)
     for _ in range(iterations):
@@ -173,7 +191,13 @@ def refine(
         J = np.column_stack([g[:, 0], g[:, 1], np.sum(g * dyaw, axis=1)])
         JW = J * w[:, None]
         H = JW.T @ J + 1e-6 * np.eye(3)
-        step = -np.linalg.solve(H, JW.T @ d)
+        g_ = JW.T @ d
+        if prior is not None:
+            off = x - x0
+            off[2] = math.atan2(math.sin(off[2]), math.cos(off[2]))
+            H = H + prior
+            g_ = g_ + prior @ off
+        step = -np.linalg.solve(H, g_)
         step[:2] = np.clip(step[:2], -0.1, 0.1)  # the field is only locally linear
         step[2] = float(np.clip(step[2], -0.05, 0.05))
         x += step

@@ -8,8 +8,13 @@ estimates its base (`wbc.base_state = "estimate"`: the launcher lists it then); 
 truth ablation odom is the map already, and the service idles.
 
 At start it fetches the map's occupancy as of t = 0 (the static layer: the floor-plan
-prior, or a map file) and builds the likelihood field once; the start pose is
-`localization.start_pose` (the user's, `dume up --start-pose`). Each tick b: the scan
+prior, a map file, or the robot's own earlier SLAM grid) and builds the likelihood field
+once; the start pose is `localization.start_pose` (the user's, `dume up --start-pose`).
+A map with no static layer (`static_source` none: an empty map, exploring), or
+`localization.mode = "slam"`, makes it map while it localizes (`slam.Slam`): the same
+`localization` samples, and the grid it builds on `slam/occupancy` whenever it changed,
+at most every `slam.publish_every_s`, its stamp in the sample of that tick
+(`grid_stamp_ns`) so the map adopts it at the same tick in every run. Each tick b: the scan
 and `odom` stamped b (waited for), `Localizer.update`, then `localization` stamped b:
 T_map_odom, T_map_base with its covariance, the status and the confidence; to rerun, the
 scan over the map, the pose and its 2σ ellipse, the status (`LocalizationLogger`).
@@ -28,7 +33,7 @@ from common.bus import BusError, Latest, WaitTimeout
 from common.keys import MAP_OCCUPANCY, as_of
 from common.lockstep import PeriodicTicker
 from common.map_frame import odom_pose
-from common.messages import as_numpy
+from common.messages import as_numpy, to_wire
 from common.messages.base import NS_PER_S
 from common.messages.localization import Localization
 from common.messages.semantic_map import OccupancyGrid
@@ -36,6 +41,7 @@ from common.messages.sim import LaserScan, Odom
 from common.service import Service
 from services.localization.localizer import Estimate, Localizer
 from services.localization.matcher import LikelihoodField, scan_points
+from services.localization.slam import OCCUPIED, Slam
 from services.localization.telemetry import LocalizationLogger
 
 NAME = "localization"
@@ -56,12 +62,16 @@ class LocalizationNode:
         self.pub = bus.publisher(keys.localization, Localization, "control")
         self.ticker = PeriodicTicker(bus, keys, NAME, period_s, svc.stop)
         self.logger = LocalizationLogger(svc.rec)
-        self.loc: Localizer | None = None
+        self.loc: Localizer | Slam | None = None
+        self.grid_pub = bus.publisher(keys.slam_occupancy, OccupancyGrid, "data")
+        self._grid_version = -1
+        self._grid_stamp = 0
+        self._grid_every_ns = round(self.s.slam.publish_every_s * NS_PER_S)
         self.last: Estimate | None = None
         self._said = ""
         self._status = ""
 
-    def _field(self) -> LikelihoodField:
+    def _grid(self) -> OccupancyGrid:
         """The map's occupancy as of t = 0, asked for until the map answers."""
         while True:
             try:
@@ -71,6 +81,9 @@ class LocalizationNode:
                 self.svc.log.info("waiting for the map's occupancy: %s", exc)
                 if self.svc.stop.wait(0.5):
                     raise
+        return grid
+
+    def _field(self, grid: OccupancyGrid) -> LikelihoodField:
         occupied = np.asarray(as_numpy(grid.cells)) == 100
         self.logger.map(occupied, grid.resolution_m, grid.origin_xy)
         self.svc.log.info(
@@ -91,7 +104,12 @@ class LocalizationNode:
         if start is None:
             svc.log.warning("no localization.start_pose: the robot is taken to start at 0 0 0")
             start = (0.0, 0.0, 0.0)
-        self.loc = Localizer(self.s, self._field(), start)
+        grid = self._grid()
+        if self.s.mode == "slam" or (self.s.mode == "auto" and grid.static_source == "none"):
+            svc.log.info("mapping while localizing (SLAM): the map has no static layer")
+            self.loc = Slam(self.s, self.s.slam, start, self._lidar_origin())
+        else:
+            self.loc = Localizer(self.s, self._field(grid), start)
         svc.ready()
         self.ticker.run(self.tick)
 
@@ -109,10 +127,39 @@ class LocalizationNode:
             np.asarray(scan.T_base_lidar).reshape(4, 4),
             self.s.beam_stride,
         )
-        est = self.loc.update(pts, odom_pose(odom))
+        if isinstance(self.loc, Slam):
+            full = scan_points(
+                np.asarray(as_numpy(scan.ranges), dtype=float), scan.angle_min,
+                scan.angle_increment, np.asarray(scan.T_base_lidar).reshape(4, 4),
+            )  # fmt: skip
+            est = self.loc.update(full, odom_pose(odom), self.s.beam_stride)
+            self._publish_grid(b, self.loc)
+        else:
+            est = self.loc.update(pts, odom_pose(odom))
         self.last = est
         self._publish(b, est, est.status, est.refused)
         self.logger.log(b, est, pts)
+
+    def _lidar_origin(self) -> tuple[float, float]:
+        """Where the lidar sits in the base (x, y), from the first scan."""
+        scan = self.scans.wait(lambda _m: True, INPUT_TIMEOUT_S)
+        T = np.asarray(scan.T_base_lidar).reshape(4, 4)
+        return float(T[0, 3]), float(T[1, 3])
+
+    def _publish_grid(self, b: int, slam: Slam) -> None:
+        """The SLAM grid on `slam/occupancy` when it changed and `publish_every_s` passed."""
+        g = slam.grid
+        if g.version == self._grid_version or b - self._grid_stamp < self._grid_every_ns:
+            return
+        cells = g.cells()
+        self.grid_pub.put(
+            OccupancyGrid(
+                stamp_ns=b, resolution_m=g.resolution_m, origin_xy=g.origin_xy,
+                cells=to_wire(cells), static_source="slam",
+            )
+        )  # fmt: skip
+        self._grid_version, self._grid_stamp = g.version, b
+        self.logger.map(cells == OCCUPIED, g.resolution_m, g.origin_xy)
 
     def _input(self, latest: Latest[M], b: int, what: str) -> M | None:
         with contextlib.suppress(WaitTimeout):
@@ -143,6 +190,7 @@ class LocalizationNode:
                 status=status,  # type: ignore[arg-type]
                 confidence=min(1.0, max(0.0, est.confidence if est is not None else 0.0)),
                 reason=reason,
+                grid_stamp_ns=self._grid_stamp,
             )
         )
         if status != self._status:

@@ -35,13 +35,19 @@ class TickCommitter:
             grids = {"learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy)}
             smap.grid_dirty = False
             self.last_grid_save = b
+        meta = {"stamp_ns": str(b)}
+        if smap.static_dirty:  # the SLAM grid: written with its source at once
+            grids = dict(grids or {})
+            grids["static"] = Grid(occ.static, occ.resolution_m, occ.origin_xy)
+            meta["static_source"] = smap.static_source
+            smap.static_dirty = False
         if not changed and not deleted and counters is None and grids is None:
             return
         self.store.commit(
             entities=[(t.to_message(), t.appearance) for t in changed],
             counters=counters,
             grids=grids,
-            meta={"stamp_ns": str(b)},
+            meta=meta,
             deleted=deleted,
         )
 

@@ -121,8 +121,10 @@ class SemanticMap:
         self.people = PeopleTracker(self.ids, settings)
         self.occupancy = occupancy
         self.stamp_ns = 0
-        #: Where the static occupancy layer came from: world, file or none.
-        self.static_source: Literal["world", "file", "none"] = "none"
+        #: Where the static occupancy layer came from: world, file, slam or none.
+        self.static_source: Literal["world", "file", "slam", "none"] = "none"
+        #: The static layer changed since it was last written (the SLAM grid adopted).
+        self.static_dirty = False
         #: The place this is a map of (`Config.map_site`), kept with it and its files.
         self.site = ""
         self._dirty: dict[str, Track] = {}

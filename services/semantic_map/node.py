@@ -8,8 +8,10 @@ perception's detections and the mission's patrol status due by b (`UpstreamGate`
 the map's lock, fuse the frames `intake` releases (each fused camera's stamped at or
 before b − perception's latency; `fusion_log`): the head camera, and `patrol_cameras`
 too while the mission's patrol status due by b says it holds the arm in `look`
-(`intake.patrol_holds_look`); commit the tick in one SQLite transaction (`commit`), keep
-the map's view after b (`views`); then ack b.
+(`intake.patrol_holds_look`); while the map has no static layer but the robot's own,
+adopt the SLAM grid the localization's sample due by b names (`grid_stamp_ns`, waited
+for on `slam/occupancy`: every run adopts it at the same tick); commit the tick in one
+SQLite transaction (`commit`), keep the map's view after b (`views`); then ack b.
 Queryables run on their own threads: one with `at=<t>` (a lockstep consumer's tick) is
 answered from the view of the map's last tick that takes effect by t, so every run of a
 seed answers it alike; one without, from the map now (`queries`; export and import:
@@ -22,7 +24,9 @@ import logging
 import threading
 from functools import partial
 
-from common.bus import RequestError
+import numpy as np
+
+from common.bus import RequestError, WaitTimeout
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_ARTIFACTS_ONE,
@@ -34,8 +38,9 @@ from common.keys import (
     MAP_SUPPORTS,
 )
 from common.lockstep import PeriodicTicker, UpstreamGate
-from common.messages import PayloadError
+from common.messages import PayloadError, as_numpy
 from common.messages.base import NS_PER_S
+from common.messages.localization import Localization
 from common.messages.mission import PatrolStatus
 from common.messages.perception import Detections
 from common.messages.semantic_map import MapFile, MapSummary, OccupancyGrid, SupportListing
@@ -92,6 +97,10 @@ class MapNode:
         self.intake = DetectionIntake(det_fifo, frames)
         #: The mission's patrol, as it says (published every mission tick).
         self.patrol = bus.latest(keys.mission_patrol_status, PatrolStatus, history=8)
+        #: The localization's samples (their `grid_stamp_ns`) and the SLAM grids they name.
+        self.loc = bus.latest(keys.localization, Localization, history=16)
+        self.slam_grids = bus.latest(keys.slam_occupancy, OccupancyGrid, history=2)
+        self._slam_stamp = 0
         self.supports = FloorPlanSupports(self.cfg.floor_plan, world)
         self.logger = MapLogger(svc.rec, self.cfg.log_every_s, self.cfg.grid_log_every_s)
         self.committer = TickCommitter(self.store)
@@ -150,6 +159,7 @@ class MapNode:
         gate = UpstreamGate(svc.bus, svc.keys, svc.config)
         gate.watch("perception", self.det_latest)
         gate.watch("mission", self.patrol)
+        gate.watch("localization", self.loc)
         stall = svc.config.time.stall_timeout_s
         svc.ready()
         for b in ticker.ticks():
@@ -158,11 +168,43 @@ class MapNode:
             if late:
                 log.warning("tick %.1f s: no output of %s in time", b / NS_PER_S, late)
             with self.lock:
+                self._adopt_slam(b, gate)
                 self._fuse_due(b, gate)
                 self.committer.commit(self.smap, b)
                 self.logger.log(b, self.smap)
                 self.views.record(self.smap, b)
             ticker.ack(b)
+
+    def _adopt_slam(self, b: int, gate: UpstreamGate) -> None:
+        """The SLAM grid named by the localization's sample due at b, as the static layer
+        of a map that has none but the robot's own."""
+        if self.smap.static_source not in ("none", "slam"):
+            return
+        loc = self.loc.at(b - gate.latency_ns("localization"))
+        want = 0 if loc is None else loc.grid_stamp_ns
+        if want <= self._slam_stamp:
+            return
+        try:
+            self.slam_grids.wait_stamp(want, self.svc.config.time.stall_timeout_s)
+        except WaitTimeout:
+            log.warning(
+                "tick %.1f s: the SLAM grid of %.1f s never came", b / NS_PER_S, want / NS_PER_S
+            )
+            return
+        grid = self.slam_grids.at(want)
+        if grid is None or grid.stamp_ns != want:
+            return
+        try:
+            self.smap.occupancy.adopt_static(np.asarray(as_numpy(grid.cells), np.uint8))
+        except ValueError as exc:
+            log.error("the SLAM grid is not the map's: %s", exc)
+            self._slam_stamp = want
+            return
+        if self.smap.static_source != "slam":
+            log.info("t=%.1f s: the static layer is the robot's own SLAM grid", b / NS_PER_S)
+        self.smap.static_source = "slam"
+        self.smap.static_dirty = True
+        self._slam_stamp = want
 
     def _fuse_due(self, b: int, gate: UpstreamGate) -> None:
         """Fuse every frame `intake` releases at b: perception's due then (b − its

@@ -1,6 +1,7 @@
 """The persistent occupancy layer: a static grid plus obstacles seen in depth that stay.
 
-The static layer comes from a map file or the simulator's floor plan (`WorldDescription`'s
+The static layer comes from a map file, the robot's own SLAM grid (adopted as it grows),
+or the simulator's floor plan (`WorldDescription`'s
 5 cm grid) — or is all unknown. The learned layer counts, per cell, the depth frames in
 which points between `z_range` hit it (each frame counts a cell once); at `hits` frames
 the cell is a learned obstacle for good. Floor points (below 5 cm) make unknown cells
@@ -32,7 +33,7 @@ class Occupancy:
         hits: NDArray[np.uint16] | None = None,
     ) -> None:
         self.static = np.ascontiguousarray(static, dtype=np.uint8)
-        #: The static layer's obstacle cells (the static layer never changes after this).
+        #: The static layer's obstacle cells (changed only by `adopt_static`).
         self.static_occupied: NDArray[np.bool_] = self.static == OCCUPIED
         self.resolution_m = float(resolution_m)
         self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))
@@ -45,6 +46,14 @@ class Occupancy:
         self.version = 0
         if self.hits.shape != shape:
             raise ValueError(f"learned layer {self.hits.shape} does not match static {shape}")
+
+    def adopt_static(self, cells: NDArray[np.uint8]) -> None:
+        """A new static layer of the same geometry (the SLAM grid as it grows)."""
+        if cells.shape != self.static.shape:
+            raise ValueError(f"static layer {cells.shape} does not match {self.static.shape}")
+        self.static = np.ascontiguousarray(cells, dtype=np.uint8)
+        self.static_occupied = self.static == OCCUPIED
+        self.version += 1
 
     @classmethod
     def unknown(cls, half_extent_m: float, resolution_m: float, **kw: object) -> Occupancy:

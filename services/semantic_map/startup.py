@@ -136,8 +136,8 @@ def save_all(smap: SemanticMap, store: MapStore, meta: dict[str, str] | None = N
     )
 
 
-def _static_source(text: str) -> Literal["world", "file", "none"]:
-    return "world" if text == "world" else "file" if text == "file" else "none"
+def _static_source(text: str) -> Literal["world", "file", "slam", "none"]:
+    return text if text in ("world", "file", "slam") else "none"  # type: ignore[return-value]
 
 
 def _resume(

@@ -16,6 +16,7 @@ from common import robot
 from common.config import LocalizationSettings
 from services.localization.localizer import Localizer, compose, inverse
 from services.localization.matcher import LikelihoodField, refine, scan_points, search
+from tests.unit.lidar_raycast import slab_ranges
 
 RES = 0.05
 ORIGIN = (-1.0, -1.0)
@@ -122,21 +123,7 @@ def overlap_grid(
 
 def cast_boxes(boxes: list[Box], pose: tuple[float, float, float], noise_m: float) -> np.ndarray:
     """The lidar's ranges against the boxes themselves (exact, slab test), with range noise."""
-    T = T_BASE_LIDAR
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    ox, oy = x + c * T[0, 3] - s * T[1, 3], y + s * T[0, 3] + c * T[1, 3]
-    dx, dy = np.cos(yaw + ANGLES), np.sin(yaw + ANGLES)
-    r = np.full(len(ANGLES), np.inf)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for x0, y0, x1, y1 in boxes:
-            tx0, tx1 = (x0 - ox) / dx, (x1 - ox) / dx
-            ty0, ty1 = (y0 - oy) / dy, (y1 - oy) / dy
-            near = np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1))
-            far = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
-            r = np.where((near <= far) & (near > 0.0), np.minimum(r, near), r)
-    r = r + np.random.default_rng(7).normal(0.0, noise_m, len(r))
-    return np.where(r < 10.0, r, 0.0)
+    return slab_ranges(boxes, pose, noise_m, np.random.default_rng(7))
 
 
 @pytest.mark.parametrize("offset", [-0.02, -0.01, 0.0, 0.01, 0.02])
