@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from common.geometry import FloatArray
@@ -58,6 +58,29 @@ def support_targets(surfaces: Sequence[SupportSurface], step_m: float = 0.5) -> 
         for t in np.linspace(-hx, hx, n):
             points.append(np.asarray(sf.centre_xy, float) + t * along)
     return np.array(points).reshape(-1, 2)
+
+
+def grid_graph(
+    mask: NDArray[np.bool_], res: float
+) -> tuple[csr_matrix, NDArray[np.int64], NDArray[np.intp], NDArray[np.intp]]:
+    """The graph of the cells of `mask`, 8-connected, edge length in m (undirected: one
+    edge per pair), with each cell's node index (-1 off the mask) and the nodes' cells."""
+    index = -np.ones(mask.shape, np.int64)
+    ys, xs = np.nonzero(mask)
+    index[ys, xs] = np.arange(len(ys))
+    rows, cols, w = [], [], []
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        y2, x2 = ys + dy, xs + dx
+        ok = (y2 < mask.shape[0]) & (x2 >= 0) & (x2 < mask.shape[1])
+        ok[ok] &= mask[y2[ok], x2[ok]]
+        rows.append(index[ys[ok], xs[ok]])
+        cols.append(index[y2[ok], x2[ok]])
+        w.append(np.full(int(ok.sum()), res * math.hypot(dy, dx)))
+    n = len(ys)
+    graph = coo_matrix(
+        (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    ).tocsr()
+    return graph, index, ys, xs
 
 
 def coverage_route(
@@ -97,22 +120,7 @@ def coverage_route(
     cand = [(int(a), int(b)) for a, b in zip(*np.nonzero(reach & lattice), strict=True)]
     if targets is not None and len(targets):
         cand += _viewpoints_for(targets, cand, np.argwhere(reach), centre, see_m)
-    # The graph of the reachable cells, 8-connected, edge length in m.
-    index = -np.ones(safe.shape, np.int64)
-    ys, xs = np.nonzero(reach)
-    index[ys, xs] = np.arange(len(ys))
-    rows, cols, w = [], [], []
-    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        y2, x2 = ys + dy, xs + dx
-        ok = (y2 < safe.shape[0]) & (x2 >= 0) & (x2 < safe.shape[1])
-        ok[ok] &= reach[y2[ok], x2[ok]]
-        rows.append(index[ys[ok], xs[ok]])
-        cols.append(index[y2[ok], x2[ok]])
-        w.append(np.full(int(ok.sum()), res * math.hypot(dy, dx)))
-    n = len(ys)
-    graph = coo_matrix(
-        (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
-    ).tocsr()
+    graph, index, ys, xs = grid_graph(reach, res)
     viewpoints, paths = [], []
     here = (sy, sx)
     todo = set(cand)
