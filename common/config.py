@@ -584,6 +584,29 @@ class MissionSettings(_Section):
     #: looking ahead and down) where it sees the tops of benches that the head camera,
     #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.
     patrol_arm_posture: Literal["look", "stow"] = "look"
+    #: Exploration from nothing (`dume map --explore`, a request `{"task": "explore"}`):
+    #: frontier after frontier (`services/mission/frontiers.py`) until none is reachable.
+    #: A frontier shorter than `explore_min_frontier_m` is none; a goal keeps
+    #: `explore_clearance_m` from every occupied or unknown cell (the footprint turning on
+    #: the spot: its circumscribed radius is 0.67 m) and looks at its frontier from 1-2 m;
+    #: its cost is the path less `explore_gain` × the frontier in sight (m per m); a goal
+    #: that failed or was looked around from bars others within `explore_blacklist_m`, and
+    #: what a look-around left unseen within `explore_seen_m` of it is no frontier (m).
+    explore_min_frontier_m: Positive = 0.3
+    explore_clearance_m: Positive = 0.7
+    explore_gain: NonNegative = 0.5
+    explore_blacklist_m: NonNegative = 0.5
+    explore_seen_m: NonNegative = 1.2
+    #: The exploration's budget: goals chosen, and sim seconds; spent while a reachable
+    #: frontier is left, it fails `budget`.
+    explore_max_goals: PositiveInt = 60
+    explore_max_s: Positive = 1800.0
+    #: The arm while exploring: the head camera maps the floor (`look` would let the map
+    #: fuse the wrist camera too).
+    explore_arm_posture: Literal["look", "stow"] = "stow"
+    #: After an exploration that succeeded, walk the patrol's coverage route over the
+    #: explored map (the semantic pass: the arm in `patrol_arm_posture`).
+    explore_semantic_pass: bool = False
 
 
 class RecordingSettings(_Section):

@@ -1,5 +1,6 @@
-"""The user-facing mission API: the fetch (requests, cancels, statuses) and the mapping
-patrol. These travel as JSON so any Zenoh client can use them."""
+"""The user-facing mission API: requests (a fetch, an exploration, a mapping patrol),
+cancels, statuses, and the mapping jobs' own status. These travel as JSON so any Zenoh
+client can use them."""
 
 from __future__ import annotations
 
@@ -10,17 +11,38 @@ import msgspec
 from common.messages.base import Message, NonNegative, StampNs, Unit
 
 RequestId = Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
-#: A map id (`bottle_1`) or a class (`bottle`: the nearest mapped one).
-Target = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9]*(_[1-9][0-9]*)?$", max_length=64)]
+#: A map id (`bottle_1`) or a class (`bottle`: the nearest mapped one); "" for none.
+Target = Annotated[str, msgspec.Meta(pattern=r"^([a-z][a-z0-9]*(_[1-9][0-9]*)?)?$", max_length=64)]
+#: What a request asks the robot to do: bring an object to a person (`fetch`), map the
+#: place from nothing by frontier exploration (`explore`), or walk the mapping patrol's
+#: coverage route over the map it has (`patrol`).
+Task = Literal["fetch", "explore", "patrol"]
+#: The mapping jobs (`Task` less the fetch).
+JobTask = Literal["patrol", "explore"]
 
 
-class MissionRequest(Message, frozen=True):
-    """`dume/<r>/mission/request`: `{"request_id", "object", "person"}`."""
+class MissionRequest(Message, frozen=True, omit_defaults=True):
+    """`dume/<r>/mission/request`: `{"request_id", "object", "person"}` (a fetch), or
+    `{"request_id", "task": "explore"}` / `"patrol"`.
+
+    task: `fetch` (the default: a request without it is a fetch) needs `object` and
+    `person`; `explore` and `patrol` take neither. A request that breaks this does not
+    decode (the mission rejects it `malformed`, saying which field).
+    """
 
     WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
     request_id: RequestId
-    object: Target
-    person: Target
+    object: Target = ""
+    person: Target = ""
+    task: Task = "fetch"
+
+    def __post_init__(self) -> None:
+        if self.task == "fetch":
+            missing = [name for name in ("object", "person") if not getattr(self, name)]
+            if missing:
+                raise ValueError(f"a fetch needs {' and '.join(missing)}: none given")
+        elif self.object or self.person:
+            raise ValueError(f"task {self.task} takes no object or person")
 
 
 class MissionReceipt(Message, frozen=True):
@@ -48,7 +70,7 @@ MissionReason = Literal[
     "",
     # a request refused before it starts (state `rejected`)
     "malformed",  # not JSON, not an object, a field missing or of the wrong type
-    "busy",  # another mission or the mapping patrol is running: one job at a time
+    "busy",  # another mission, an exploration or the mapping patrol runs: one job at a time
     "unknown_object",  # no mapped artifact has that id, or none of that class
     "unknown_person",  # no mapped person has that id
     "unavailable",  # a service the mission needs did not answer (the map, navigation, wbc)
@@ -62,6 +84,8 @@ MissionReason = Literal[
     "handover_timeout",  # nobody took the object in time
     "mode_timeout",  # the whole-body controller did not take the mode asked for
     "dependency_lost",  # a service it depends on went away or restarted while it ran
+    "no_route",  # explore, patrol: no free floor the robot can reach in the map's grid
+    "budget",  # explore: its budget of goals or sim time ran out with frontiers left
     "cancelled",  # the user cancelled (state `cancelled`)
     "internal",  # a bug: logged with its traceback; the service kept running
 ]
@@ -108,6 +132,7 @@ PatrolReason = Literal[
     # a patrol that ran and failed (state `failed`)
     "navigation_failed",  # navigation refused the patrol's goals altogether
     "dependency_lost",  # a service it depends on went away or restarted while it ran
+    "budget",  # explore: its budget of goals or sim time ran out with frontiers left
     "internal",  # a bug: logged with its traceback; the service kept running
 ]
 
@@ -126,11 +151,15 @@ class PatrolRequest(Message, frozen=True):
 
 
 class PatrolStatus(Message, frozen=True):
-    """The patrol's state: the reply to `dume/<r>/mission/patrol`, and published on
-    `dume/<r>/mission/patrol/status` at every mission tick.
+    """The mapping job's state (the patrol's, or an exploration's): the reply to
+    `dume/<r>/mission/patrol`, and published on `dume/<r>/mission/patrol/status` at every
+    mission tick.
 
-    waypoint, waypoints: the viewpoint being walked to or looked around at, of how many.
-    travelled_m: path length walked so far. arm_look: the patrol holds the arm in `look`
+    task: which job (`patrol`, `explore`). waypoint, waypoints: the viewpoint being
+    walked to or looked around at, of how many (an exploration: the goals looked around
+    at, of those chosen so far). travelled_m: path length walked so far. known_m2: the
+    known-free floor in the map when the exploration last looked, m² (0 for a patrol).
+    arm_look: the job holds the arm in `look`
     now (the wrist camera sees bench tops: the map fuses `semantic_map.patrol_cameras`
     too). reason: typed (`PatrolReason`), for a start refused (`rejected`, only in that
     reply) or a patrol failed; detail: a sentence for a person (skipped viewpoints, why
@@ -140,9 +169,11 @@ class PatrolStatus(Message, frozen=True):
     WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
     stamp_ns: StampNs
     state: PatrolState
+    task: JobTask = "patrol"
     waypoint: int = 0
     waypoints: int = 0
     travelled_m: NonNegative = 0.0
+    known_m2: NonNegative = 0.0
     arm_look: bool = False
     reason: PatrolReason = ""
     detail: str = ""

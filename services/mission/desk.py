@@ -5,21 +5,25 @@
 1. the first step (since the mission started) sets the status `idle` with no request and
    the sim time it started at, so a client whose request was in progress hears it lost;
 2. requests drained from the inbox: parsed, refused at once (a `rejected` status
-   published stamped b) when malformed, when a mission or the mapping patrol runs
-   (`busy`; `busy_with` names the patrol), when a dependency is not running
-   (`unavailable`) or when the map does not know the object or the person
-   (`check_request`); else the tree starts, the dependencies are armed and `accepted` is
-   published;
+   published stamped b) when malformed, when a mission or a mapping job runs (`busy`;
+   `busy_with` names the job), when a dependency is not running (`unavailable`) or when
+   the map does not know the object or the person (`check_request`); else the tree
+   starts, the dependencies are armed and `accepted` is published. A request of task
+   `explore` or `patrol` goes to the mapping jobs' desk (`jobs.start_request`: refused
+   `busy`, `unavailable`, `no_route`), `accepted` with its stage;
 3. cancels drained from the inbox: one of the running request stops the tree
-   (`MissionTree.cancel`); others are logged and ignored;
+   (`MissionTree.cancel`) or its mapping job (`jobs.cancel`); others are logged and
+   ignored;
 4. a dependency that went away or restarted since the running request started
    (`Dependencies.lost`) fails it `dependency_lost`; else the tree ticks once (a
    behaviour that raises is logged, the robot halted, the mission failed `internal`);
 5. the outcome, or the running stage and progress, becomes the status
    (`StatusBoard.update`): `step` returns whether it changed.
 
-`flush(b, changed)` then publishes the status stamped b when it changed or the periodic
-repeat is due (the node calls it after the robot's own outputs for b are out).
+`job_status(b)`, once the jobs' desk stepped, puts a request's mapping job on the status
+(`jobs.report`: running with its stage and progress, then its outcome). `flush(b,
+changed)` then publishes the status stamped b when it changed or the periodic repeat is
+due (the node calls it after the robot's own outputs for b are out).
 
 No Zenoh and no lock: everything here runs on the loop's thread; the inboxes are the
 only things other threads touch. `send` publishes a status; `errors` is the service's
@@ -30,10 +34,11 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from typing import Protocol
 
 from common.lifelines import Dependencies
 from common.messages.base import NS_PER_S
-from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.mission import MissionReason, MissionRequest, MissionState, MissionStatus
 from services.mission.behaviours.abort import halt
 from services.mission.inbox import Inbox
 from services.mission.mission_log import MissionLogger
@@ -46,6 +51,38 @@ from services.mission.requests import (
     parse_request,
 )
 from services.mission.tree import MissionTree, Outcome
+
+
+class JobRefusal(Protocol):
+    @property
+    def reason(self) -> MissionReason: ...
+    @property
+    def detail(self) -> str: ...
+
+
+class JobReport(Protocol):
+    @property
+    def request_id(self) -> str: ...
+    @property
+    def state(self) -> MissionState: ...
+    @property
+    def stage(self) -> str: ...
+    @property
+    def progress(self) -> float: ...
+    @property
+    def reason(self) -> MissionReason: ...
+    @property
+    def detail(self) -> str: ...
+
+
+class Jobs(Protocol):
+    """The mapping jobs' desk as the fetch's desk sees it (`patrol_desk.PatrolDesk`)."""
+
+    def busy_with(self) -> str: ...
+    def start_request(self, request: MissionRequest) -> JobRefusal | None: ...
+    def cancel(self, request_id: str, reason: str) -> bool: ...
+    def report(self) -> JobReport | None: ...
+    def stalled(self, b: int) -> bool: ...
 
 
 class Desk:
@@ -62,13 +99,16 @@ class Desk:
         log: MissionLogger,
         send: Callable[[MissionStatus], None],
         errors: logging.Logger,
-        busy_with: Callable[[], str] = lambda: "",
+        busy_with: Callable[[], str] | None = None,
+        jobs: Jobs | None = None,
     ) -> None:
         self.tree, self.robot, self.deps, self.board = tree, robot, deps, board
         self.requests, self.cancels = requests, cancels
         self.log, self.send, self.errors = log, send, errors
-        #: What else runs that a request must wait for (the patrol), "" when nothing.
-        self.busy_with = busy_with
+        #: The mapping jobs' desk (None: this mission takes fetches only).
+        self.jobs = jobs
+        #: What else runs that a request must wait for (a mapping job), "" when nothing.
+        self.busy_with: Callable[[], str] = busy_with or (jobs.busy_with if jobs else lambda: "")
         #: Whether the first step ran (the `idle` status of a (re)start is set).
         self.started = False
 
@@ -84,6 +124,8 @@ class Desk:
         world), the request fails `dependency_lost` stamped b, and the robot is halted;
         whether the status changed. Nobody waits for the dead, even without ticks."""
         request = self.tree.request
+        if self.jobs is not None and self.jobs.stalled(b):
+            return self.job_status(b)
         lost = self.deps.lost() if request is not None else None
         if request is None or lost is None:
             return False
@@ -128,6 +170,9 @@ class Desk:
             if isinstance(parsed, Rejection):
                 self._reject(b, parsed)
                 continue
+            if parsed.task != "fetch":
+                self._job(b, parsed)
+                continue
             self.log.request(f"request {parsed.request_id}: {parsed.object} to {parsed.person}")
             if self.tree.busy:
                 running = self.tree.request.request_id if self.tree.request else ""
@@ -150,6 +195,35 @@ class Desk:
                 continue
             self._start(b, parsed)
 
+    def _job(self, b: int, request: MissionRequest) -> None:
+        """A request of task `explore` or `patrol`: to the mapping jobs' desk."""
+        rid = request.request_id
+        self.log.request(f"request {rid}: {request.task}")
+        refused: Rejection | None = None
+        if self.jobs is None:
+            refused = Rejection(rid, "unavailable", f"this mission takes no {request.task}")
+        elif self.tree.busy:
+            running = self.tree.request.request_id if self.tree.request else ""
+            refused = Rejection(rid, "busy", f"mission {running} is running")
+        else:
+            job_refused = self.jobs.start_request(request)
+            if job_refused is not None:
+                refused = Rejection(rid, job_refused.reason, job_refused.detail)
+        if refused is not None:
+            self._reject(b, refused)
+            return
+        self.board.update(b, rid, "accepted", request.task, detail=f"{request.task} started")
+        self._publish(self.board.sent(b))
+
+    def job_status(self, b: int) -> bool:
+        """A request's mapping job onto the status, after the jobs' desk stepped; whether
+        the status changed."""
+        report = self.jobs.report() if self.jobs is not None else None
+        if report is None:
+            return False
+        r = report
+        return self.board.update(b, r.request_id, r.state, r.stage, r.progress, r.reason, r.detail)
+
     def _start(self, b: int, request: MissionRequest) -> None:
         self.tree.start(request)
         self.deps.arm()
@@ -163,6 +237,10 @@ class Desk:
             current = self.tree.request
             if cancel is None:
                 self.log.request(f"cancel ignored: not a MissionCancel: {payload[:200]!r}", True)
+            elif self.jobs is not None and self.jobs.cancel(
+                cancel.request_id, cancel.reason or "cancelled by the user"
+            ):
+                self.log.request(f"cancel of {cancel.request_id}: {cancel.reason}")
             elif current is None or cancel.request_id != current.request_id:
                 running = current.request_id if current else "none"
                 self.log.request(

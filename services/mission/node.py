@@ -1,5 +1,5 @@
 """The mission service: a 20 Hz lockstep participant that ticks the bring-me tree and
-walks the mapping patrol, one job at a time.
+runs the mapping jobs (the patrol, the exploration), one job at a time.
 
 Requests and cancels arrive as raw JSON (so a malformed one can still be answered with
 its `request_id`) and wait in a queue for the loop; a request can also come as a query
@@ -9,20 +9,21 @@ Each tick b (multiples of `time.participants.mission.period_s`):
 1. inputs as of b: the odom stamped b (50 Hz, waited for), the `wbc/status` stamped
    before b (waited for while the controller is alive), and the outputs of navigation
    and perception that take effect by b (`UpstreamGate`);
-2. requests: parsed, refused at once when malformed, when a mission or the patrol runs
-   (`busy`), when a service it depends on is not running (`unavailable`) or when the map
-   does not know the object or the person; else the tree starts; cancels of the running
-   request stop the tree (`MissionTree.cancel`);
+2. requests: parsed, refused at once when malformed, when a mission or a mapping job
+   runs (`busy`), when a service it depends on is not running (`unavailable`) or when
+   the map does not know the object or the person; else the tree starts (a fetch) or
+   the mapping job (`explore`, `patrol`); cancels of the running request stop it;
 3. a dependency (the sim; the WBC, navigation, perception, the map: those of
    `time.participants`) that went away or restarted since the request started fails it
    `dependency_lost` (nobody waits for the dead); else the tree ticks once; its outcome,
    stage and progress become the status. A dead sim stops the clock, so no tick comes:
    while the clock stands still the loop checks every 0.1 s wall (`Desk.stalled`) and
    fails the request `dependency_lost: sim is gone`, stamped at the last tick;
-4. the patrol (`patrol_desk`): its requests (`mission/patrol`, a query answered once the
-   loop took it; a start refused `busy` while a fetch runs), then one step of a running
-   patrol (`patrol.PatrolRunner`: walk obeying navigation, the arm in `look`, pose goals
-   to navigation);
+4. the mapping jobs (`patrol_desk`): the patrol's requests (`mission/patrol`, a query
+   answered once the loop took it; a start refused `busy` while a fetch runs), then one
+   step of the running job (`patrol.PatrolRunner`, `explore.ExploreRunner`: walk
+   obeying navigation, the arm in its posture, pose goals to navigation); a request's
+   job then goes on `mission/status` (`Desk.job_status`);
 5. published stamped b: cmd_vel from source `mission` (zero unless a behaviour drives),
    a wbc mode when asked for (by the tree or the patrol), the status on change and every
    `status_every_s`, the patrol's status (every tick, even after a failed one: the map
@@ -54,6 +55,7 @@ from common.service import Service
 from services.mission.algorithms import default_algorithms
 from services.mission.behaviours.base import Context
 from services.mission.desk import Desk
+from services.mission.explore import ExploreRunner
 from services.mission.inbox import Inbox, RequestInbox
 from services.mission.inputs import TickInputs
 from services.mission.mission_log import MissionLogger
@@ -127,6 +129,7 @@ class MissionNode:
             Dependencies(self.alive.lifelines, needed, keys.alive),
             self.log,
             svc.log,
+            explorer=ExploreRunner(self.robot, m, self.log.patrol),
         )
         bus.serve(keys.mission_patrol, PatrolRequest, self.patrol.ask)
         self.patrol_pub = bus.publisher(keys.mission_patrol_status, PatrolStatus, "data")
@@ -141,7 +144,7 @@ class MissionNode:
             self.log,
             self.status_pub.put,
             svc.log,
-            self.patrol.busy_with,
+            jobs=self.patrol,
         )
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
         self.last_b = 0
@@ -173,6 +176,7 @@ class MissionNode:
         changed = self.desk.step(b)
         request = self.tree.request
         self.patrol.step(b, f"mission {request.request_id} is running" if request else "")
+        changed |= self.desk.job_status(b)
         self.robot.end(b)
         self.desk.flush(b, changed)
 

@@ -45,6 +45,15 @@ def _arrival_yaw(path: np.ndarray, previous: float) -> float:
     return previous
 
 
+def look_around(k: int, x: float, y: float, yaw: float, turns: int) -> list[PatrolGoal]:
+    """Viewpoint k's goals: the walk there arriving at `yaw`, then `turns` turns on the
+    spot of 360°/turns each (none for 0)."""
+    goals = [PatrolGoal(k, x, y, wrap_angle(yaw), look=False)]
+    for i in range(1, turns + 1):
+        goals.append(PatrolGoal(k, x, y, wrap_angle(yaw + i * 2 * math.pi / turns), True))
+    return goals
+
+
 def patrol_goals(route: Route, start_yaw: float, turns: int = 3) -> list[PatrolGoal]:
     """The pose goals that walk `route` and look around at each viewpoint (`turns` = 0:
     no look-around)."""
@@ -52,10 +61,7 @@ def patrol_goals(route: Route, start_yaw: float, turns: int = 3) -> list[PatrolG
     yaw = start_yaw
     for k, (vp, path) in enumerate(zip(route.viewpoints, route.paths, strict=True)):
         yaw = _arrival_yaw(np.asarray(path, float), yaw)
-        x, y = float(vp[0]), float(vp[1])
-        goals.append(PatrolGoal(k, x, y, wrap_angle(yaw), look=False))
-        for i in range(1, turns + 1):
-            goals.append(PatrolGoal(k, x, y, wrap_angle(yaw + i * 2 * math.pi / turns), True))
+        goals += look_around(k, float(vp[0]), float(vp[1]), yaw, turns)
     return goals
 
 

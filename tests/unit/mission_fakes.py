@@ -3,7 +3,8 @@
 `FakeRobot` implements `RobotPort`: a map of artifacts and people (and an occupancy grid
 and floor plan's supports for the patrol), a navigation that finishes a goal after
 `nav_ticks` ticks (or fails it, as scripted per goal kind; a pose goal leaves the robot
-at the pose; `nav_refuse` refuses chosen goals), a whole-body controller whose modes
+at the pose; `nav_refuse` refuses chosen goals; with `moves`, the mission's own cmd_vel
+moves it), a whole-body controller whose modes
 take effect on the next tick and whose arm goals finish after `arm_ticks` (or fail, as
 scripted per kind), a grasp detector that holds after a Grasp and can be made to let go
 while carrying, and a wrist camera that sees the artifacts listed in `visible`.
@@ -12,6 +13,7 @@ Everything the tree (or the patrol) asked for is recorded.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal, cast
@@ -123,6 +125,10 @@ class FakeRobot:
     nav_not_ready: int = 0
     modes_work: bool = True
     map_up: bool = True
+    #: Whether the mission's own cmd_vel moves the robot (in mode walk obeying `mission`).
+    moves: bool = False
+    #: The map's grid as the robot's sensing made it so far (None: `grid`).
+    occupancy_of: Callable[[FakeRobot], OccupancyGrid] | None = None
     t: int = 0
     # what the tree did
     nav_goals: list[tuple[str, NavGoal]] = field(default_factory=list)
@@ -146,6 +152,12 @@ class FakeRobot:
     def advance(self) -> None:
         """End of a tick: the commanded cmd_vel is recorded, time moves on, modes apply."""
         self.cmds.append(self._cmd)
+        if self.moves and (self.mode, self.source) == ("walk", "mission"):
+            vx, vy, wz = self._cmd
+            dt = TICK_NS / 1e9
+            c, s = math.cos(self.yaw), math.sin(self.yaw)
+            self.xy = (self.xy[0] + (c * vx - s * vy) * dt, self.xy[1] + (s * vx + c * vy) * dt)
+            self.yaw = math.remainder(self.yaw + wz * dt, math.tau)
         self._cmd = (0.0, 0.0, 0.0)
         self.t += TICK_NS
         if self._pending_mode is not None and self.modes_work:
@@ -196,6 +208,8 @@ class FakeRobot:
 
     def occupancy(self) -> OccupancyGrid:
         self._map()
+        if self.occupancy_of is not None:
+            return self.occupancy_of(self)
         if self.grid is not None:
             return self.grid
         cells = np.zeros((80, 80), np.uint8)

@@ -1,0 +1,247 @@
+"""The exploration on the mission's port, without Zenoh (`mission_fakes.FakeRobot`).
+
+A room the fake robot senses as it goes (`SensedRoom`: the map learns the room's cells
+within 2 m of wherever the robot stood when the map was read, never those within 0.9 m of
+it there, as the head camera): `ExploreRunner` steps off the unknown floor it starts on
+by itself (a turn on the spot, a walk onto seen floor), walks frontier after frontier,
+blacklists what navigation refuses, ends done with the room known, or on its budget.
+Then through the desks as the node ticks them: a request of task `explore` on
+`mission/status` with its stage and progress, cancelled, busy against a fetch, and a
+patrol asked for by request.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from common.messages import encode, to_wire
+from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
+from common.messages.navigation import NavGoal, PoseGoal
+from common.messages.semantic_map import OccupancyGrid
+from common.messages.world import FREE, OCCUPIED
+from common.robot import Footprint
+from services.mission.explore import ExploreRunner
+from services.mission.frontiers import UNKNOWN
+from services.mission.patrol_desk import PatrolDesk
+from tests.unit.mission_fakes import FakeRobot, fast_settings
+from tests.unit.test_mission_patrol import LOG, Rig
+
+RES = 0.1
+FP = Footprint(front=0.52, back=0.62, half_width=0.24)
+
+
+@dataclass
+class SensedRoom:
+    """An 8 × 6 m room with a table, on a 12 × 10 m grid nobody has seen yet."""
+
+    truth: NDArray[np.uint8]
+    known: NDArray[np.bool_]
+    reads: int = 0
+
+    @classmethod
+    def make(cls) -> SensedRoom:
+        truth = np.full((100, 120), UNKNOWN, np.uint8)  # outside the room: never seen
+        truth[20:80, 20:100] = OCCUPIED
+        truth[21:79, 21:99] = FREE
+        truth[45:55, 70:85] = OCCUPIED  # a table
+        return cls(truth, np.zeros(truth.shape, bool))
+
+    def __call__(self, robot: FakeRobot) -> OccupancyGrid:
+        self.reads += 1
+        iy, ix = np.mgrid[0 : self.truth.shape[0], 0 : self.truth.shape[1]]
+        d = np.hypot((ix + 0.5) * RES - 2.0 - robot.xy[0], (iy + 0.5) * RES - 2.0 - robot.xy[1])
+        self.known |= (d > 0.9) & (d < 2.0)
+        cells = np.where(self.known, self.truth, UNKNOWN).astype(np.uint8)
+        return OccupancyGrid(
+            stamp_ns=robot.t, resolution_m=RES, origin_xy=(-2.0, -2.0), cells=to_wire(cells)
+        )
+
+    def known_free_m2(self) -> float:
+        return float(np.sum(self.known & (self.truth == FREE))) * RES * RES
+
+
+def explorer(robot: FakeRobot, **settings: float) -> ExploreRunner:
+    return ExploreRunner(robot, fast_settings(**settings), LOG.info, FP)
+
+
+def run(robot: FakeRobot, job: ExploreRunner, ticks: int) -> int:
+    """Step the job until it ends or `ticks` passed; the ticks it ran."""
+    for n in range(ticks):
+        if not job.running:
+            return n
+        job.step()
+        robot.advance()
+    return ticks
+
+
+def test_from_nothing_it_steps_off_unknown_floor_then_explores_the_room_until_done() -> None:
+    room = SensedRoom.make()
+    robot = FakeRobot(xy=(2.0, 3.0), moves=True, occupancy_of=room)
+    job = explorer(robot)
+    job.start()
+    run(robot, job, 5000)
+    assert job.state == "done", (job.reason, job.detail)
+    assert job.detail.startswith("no reachable frontier left")
+    # Its own cmd_vel first (turn, then walk off the unknown floor), navigation after.
+    assert robot.modes[:3] == [("walk", "navigation"), ("walk", "mission"), ("walk", "navigation")]
+    assert robot.modes[-1] == ("stand", "navigation")
+    assert robot.arm_kinds() == ["stow"]  # stowed while exploring: no second stow either
+    walks = [g for _id, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert len(walks) == 4 * job.tally.chosen  # each goal: a walk and three turns
+    assert job.tally.chosen >= 3 and not job.tally.failed
+    free_m2 = float(np.sum(room.truth == FREE)) * RES * RES
+    assert room.known_free_m2() > 0.9 * free_m2  # the room is known
+    status = job.status(robot.t)
+    assert (status.task, status.state, status.waypoint) == ("explore", "done", job.tally.chosen)
+    assert status.known_m2 > 0.9 * free_m2 and status.travelled_m > 3.0
+    assert job.progress() < 1.0
+
+
+def test_a_goal_navigation_refuses_is_left_out_and_another_is_chosen() -> None:
+    room = SensedRoom.make()
+    refused: list[tuple[float, float]] = []
+
+    def refuse(goal: NavGoal) -> bool:  # the first walk goal on known floor, once
+        if isinstance(goal, PoseGoal) and not refused:
+            refused.append((goal.x, goal.y))
+            return True
+        return False
+
+    robot = FakeRobot(xy=(2.0, 3.0), moves=True, occupancy_of=room, nav_refuse=refuse)
+    job = explorer(robot)
+    job.start()
+    run(robot, job, 5000)
+    assert job.state == "done" and job.tally.failed == refused
+    chosen = [(g.x, g.y) for _id, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert all(math.dist(c, refused[0]) > 0.5 for c in chosen)
+
+
+def test_its_budget_of_goals_ends_it_failed_with_what_it_did() -> None:
+    room = SensedRoom.make()
+    robot = FakeRobot(xy=(2.0, 3.0), moves=True, occupancy_of=room)
+    job = explorer(robot, explore_max_goals=2)
+    job.start()
+    run(robot, job, 5000)
+    assert (job.state, job.reason) == ("failed", "budget")
+    assert job.detail.startswith("its budget of 2 goals ran out: 2 goal(s) walked of 2")
+    assert robot.modes[-1] == ("stand", "navigation") and not robot.active_nav_goals()
+
+
+def test_its_budget_of_sim_time_ends_it_even_during_a_goal() -> None:
+    robot = FakeRobot(xy=(2.0, 3.0), moves=True, occupancy_of=SensedRoom.make(), nav_ticks=10**6)
+    job = explorer(robot, explore_max_s=30.0)
+    job.start()
+    ticks = run(robot, job, 5000)
+    assert (job.state, job.reason) == ("failed", "budget") and ticks <= 30 * 20 + 2
+    assert robot.nav_cancels and not robot.active_nav_goals()
+
+
+def test_no_grid_fails_it_unavailable_and_no_floor_to_step_onto_no_route() -> None:
+    robot = FakeRobot(map_up=False)
+    job = explorer(robot)
+    job.start()
+    run(robot, job, 50)
+    assert (job.state, job.reason) == ("failed", "unavailable")
+    walled = np.full((60, 60), UNKNOWN, np.uint8)
+    walled[5:55, 5:55] = OCCUPIED  # it sees nothing but obstacles round it
+
+    def grid(r: FakeRobot) -> OccupancyGrid:
+        return OccupancyGrid(stamp_ns=0, resolution_m=0.1, origin_xy=(-3.0, -3.0),
+                             cells=to_wire(walled))  # fmt: skip
+
+    robot = FakeRobot(moves=True, occupancy_of=grid)
+    job = explorer(robot)
+    job.start()
+    run(robot, job, 2000)
+    assert (job.state, job.reason) == ("failed", "no_route")
+
+
+# -- through the desks: requests, status, cancel, one job at a time ----------------------
+
+
+class ExploreRig(Rig):
+    """The node's desks with an explorer in the sensed room."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.room = SensedRoom.make()
+        self.robot.xy, self.robot.moves, self.robot.occupancy_of = (2.0, 3.0), True, self.room
+        old = self.patrol
+        self.patrol = PatrolDesk(
+            old.runner, self.robot, old.settings, old.deps, old.log, LOG, answer_s=5.0,
+            explorer=ExploreRunner(self.robot, fast_settings(), LOG.info, FP),
+        )  # fmt: skip
+        self.desk.jobs = self.patrol
+        self.desk.busy_with = self.patrol.busy_with
+
+    def tick(self, n: int = 1) -> None:
+        for _ in range(n):
+            b = self.robot.now_ns
+            changed = self.desk.step(b)
+            request = self.tree.request
+            self.patrol.step(b, f"mission {request.request_id} is running" if request else "")
+            changed |= self.desk.job_status(b)
+            self.robot.advance()
+            self.desk.flush(b, changed)
+            self.published.append(self.patrol.published(b))
+
+    def of(self, request_id: str) -> list[MissionStatus]:
+        return [s for s in self.sent if s.request_id == request_id]
+
+
+def test_an_explore_request_runs_on_mission_status_with_its_stage_until_it_succeeds() -> None:
+    rig = ExploreRig()
+    rig.tick()
+    rig.requests.push(b'{"request_id": "x1", "task": "explore"}')
+    for _ in range(200):
+        rig.tick(25)
+        if rig.sent[-1].state == "succeeded":
+            break
+    ours = rig.of("x1")
+    assert [s.state for s in ours[:2]] == ["accepted", "running"]
+    assert {s.behaviour for s in ours} == {"explore"}
+    assert ours[-1].state == "succeeded" and ours[-1].progress == 1.0
+    assert "no reachable frontier left" in ours[-1].detail
+    progress = [s.progress for s in ours if s.state == "running"]
+    assert progress == sorted(progress) and len(progress) > 2
+    assert rig.published[-1].task == "explore" and rig.published[-1].state == "done"
+
+
+def test_an_explore_is_cancelled_by_its_request_id_and_blocks_a_fetch_meanwhile() -> None:
+    rig = ExploreRig()
+    rig.tick()
+    rig.requests.push(encode(MissionRequest(request_id="x1", task="explore")))
+    rig.tick(40)
+    rig.requests.push(encode(MissionRequest(request_id="f1", object="bottle_1", person="person_1")))
+    rig.requests.push(encode(MissionRequest(request_id="x2", task="explore")))
+    rig.tick()
+    assert [(s.state, s.reason, s.detail) for s in rig.of("f1")] == [
+        ("rejected", "busy", "an exploration is running")
+    ]
+    assert [(s.state, s.reason) for s in rig.of("x2")] == [("rejected", "busy")]
+    assert rig.ask("start").state == "rejected"  # nor a patrol on mission/patrol
+    rig.desk.cancels.push(encode(MissionCancel(request_id="x1", reason="enough")))
+    rig.tick()
+    assert (rig.of("x1")[-1].state, rig.of("x1")[-1].reason) == ("cancelled", "cancelled")
+    assert rig.robot.modes[-1] == ("stand", "navigation") and not rig.robot.active_nav_goals()
+    rig.requests.push(encode(MissionRequest(request_id="p1", task="patrol")))
+    rig.tick(2)
+    assert [s.state for s in rig.of("p1")] == ["accepted", "running"]
+    assert rig.of("p1")[-1].behaviour == "patrol" and rig.published[-1].task == "patrol"
+
+
+def test_a_request_during_a_fetch_is_busy_and_a_fetch_without_a_person_malformed() -> None:
+    rig = ExploreRig()
+    rig.tick()
+    rig.requests.push(b'{"request_id": "f0", "object": "bottle_1"}')
+    rig.requests.push(encode(MissionRequest(request_id="f1", object="bottle_1", person="person_1")))
+    rig.requests.push(b'{"request_id": "x1", "task": "explore"}')
+    rig.tick()
+    (f0,) = rig.of("f0")
+    assert (f0.state, f0.reason) == ("rejected", "malformed") and "person" in f0.detail
+    assert (rig.of("x1")[-1].state, rig.of("x1")[-1].reason) == ("rejected", "busy")
+    assert "mission f1 is running" in rig.of("x1")[-1].detail
