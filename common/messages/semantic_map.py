@@ -82,7 +82,9 @@ class MapFile(Message, frozen=True):
     (`{"bottle": 3}`), so ids stay unique after an import. occupancy: the merged grid
     (static + learned), the static layer of a map started from this file. site: the
     place it is a map of (`Config.map_site`: `hall seed 3`; empty in files from before
-    sites were kept); a map service of another site refuses it.
+    sites were kept); a map service of another site refuses it. supports: the surfaces
+    artifacts stand on, as the map saw them (`dume/map/supports` of a map with no floor
+    plan), kept for the next run's semantic pass.
     """
 
     version: Literal[1] = 1
@@ -91,6 +93,7 @@ class MapFile(Message, frozen=True):
     entities: list[MapEntity] = msgspec.field(default_factory=list)
     counters: dict[str, int] = msgspec.field(default_factory=dict)
     occupancy: OccupancyGrid | None = None
+    supports: list[SupportSurface] = msgspec.field(default_factory=list)
 
 
 class MapSummary(Message, frozen=True):
@@ -103,9 +106,10 @@ class MapSummary(Message, frozen=True):
 
 
 class SupportListing(Message, frozen=True):
-    """`dume/map/supports`: the floor plan's tables and benches, where artifacts stand
-    (what the mapping patrol must see from near). Empty when the map has no floor plan
-    (`semantic_map.floor_plan = "none"`).
+    """`dume/map/supports`: the tables, benches and loaded pallets artifacts stand on
+    (what the mapping patrol must see from near): the floor plan's with
+    `semantic_map.floor_plan = "world"`, else the surfaces the map saw at working height
+    (`services/semantic_map/supports.py`).
     """
 
     stamp_ns: StampNs

@@ -11,9 +11,30 @@ database. Both are called with the map's lock held (the tick thread, the node's 
 
 from __future__ import annotations
 
+import msgspec
+
 from common.messages.base import NS_PER_S
+from common.messages.world import SupportSurface
 from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.store import Grid, MapStore
+
+_SURFACES = msgspec.json.Encoder()
+
+
+def learned_grids(occ: Occupancy) -> dict[str, Grid]:
+    """The layers the map learns as it looks: obstacle hits and the tops."""
+    g = (occ.resolution_m, occ.origin_xy)
+    return {
+        "learned": Grid(occ.hits, *g),
+        "top_z": Grid(occ.top_z, *g),
+        "top_n": Grid(occ.top_n, *g),
+    }
+
+
+def surfaces_json(surfaces: list[SupportSurface]) -> str:
+    return _SURFACES.encode(surfaces).decode()
+
 
 #: Sim ns between writes of a changed learned occupancy layer.
 GRID_EVERY_NS = 2 * NS_PER_S
@@ -32,7 +53,7 @@ class TickCommitter:
         grids = None
         occ = smap.occupancy
         if smap.grid_dirty and b - self.last_grid_save >= GRID_EVERY_NS:
-            grids = {"learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy)}
+            grids = learned_grids(occ)
             smap.grid_dirty = False
             self.last_grid_save = b
         meta = {"stamp_ns": str(b)}
@@ -41,7 +62,10 @@ class TickCommitter:
             grids["static"] = Grid(occ.static, occ.resolution_m, occ.origin_xy)
             meta["static_source"] = smap.static_source
             smap.static_dirty = False
-        if not changed and not deleted and counters is None and grids is None:
+        if smap.surfaces_dirty:
+            meta["supports"] = surfaces_json(smap.surfaces)
+            smap.surfaces_dirty = False
+        if not changed and not deleted and counters is None and grids is None and len(meta) == 1:
             return
         self.store.commit(
             entities=[(t.to_message(), t.appearance) for t in changed],
@@ -53,5 +77,5 @@ class TickCommitter:
 
     def close(self, smap: SemanticMap) -> None:
         occ = smap.occupancy
-        self.store.commit(grids={"learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy)})
+        self.store.commit(grids=learned_grids(occ), meta={"supports": surfaces_json(smap.surfaces)})
         self.store.close()

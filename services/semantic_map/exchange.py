@@ -50,6 +50,7 @@ def import_map(mf: MapFile, smap: SemanticMap, store: MapStore, views: ViewHisto
             mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range
         )
         smap.static_source = "file"
+    smap.surfaces = list(mf.supports)
     for tr in tracks_from_file(mf, "import"):
         smap.add(tr)
     save_all(smap, store, {"static_source": smap.static_source})
@@ -76,4 +77,5 @@ def export_map(smap: SemanticMap) -> MapFile:
         entities=entities,
         counters=dict(smap.ids.counters),
         occupancy=smap.grid(),
+        supports=list(smap.surfaces),
     )

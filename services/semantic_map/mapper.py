@@ -49,12 +49,14 @@ from common.messages import as_numpy, to_wire
 from common.messages.perception import Detection, Detections
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
 from common.messages.sim import CameraFrame
+from common.messages.world import SupportSurface
 from services.semantic_map.appearance import colour_histogram
 from services.semantic_map.artifacts import ArtifactTracker
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
 from services.semantic_map.looks import looks_at
 from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.people import PeopleTracker, merge_split_people
+from services.semantic_map.supports import surfaces_from_tops
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
 SELF_RADIUS_M = 0.7
@@ -125,6 +127,10 @@ class SemanticMap:
         self.static_source: Literal["world", "file", "slam", "none"] = "none"
         #: The static layer changed since it was last written (the SLAM grid adopted).
         self.static_dirty = False
+        #: The surfaces artifacts stand on, as last found in the tops layer (or kept from
+        #: a database or file while the tops find none); `surfaces_dirty`: not yet written.
+        self.surfaces: list[SupportSurface] = []
+        self.surfaces_dirty = False
         #: The place this is a map of (`Config.map_site`), kept with it and its files.
         self.site = ""
         self._dirty: dict[str, Track] = {}
@@ -187,6 +193,14 @@ class SemanticMap:
     def is_false_entry(self, tr: Track) -> bool:
         """An entity the map made itself from too few detections to be trusted missing."""
         return tr.source == "perception" and tr.hits < self.settings.drop_below_observations
+
+    def find_surfaces(self) -> None:
+        """The surfaces the tops layer shows now (kept as they were when it shows none)."""
+        occ = self.occupancy
+        found = surfaces_from_tops(occ.top_z, occ.top_n, occ.resolution_m, occ.origin_xy)
+        if found and found != self.surfaces:
+            self.surfaces = found
+            self.surfaces_dirty = True
 
     # -- fusion --------------------------------------------------------------------------
 

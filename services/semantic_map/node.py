@@ -145,11 +145,18 @@ class MapNode:
         with self.lock:
             return import_map(mf, self.smap, self.store, self.views)
 
-    def _on_supports(self, _req: None, _selector: str) -> SupportListing:
-        surfaces = self.supports.surfaces()  # may wait for the sim: not under the lock
+    def _on_supports(self, _req: None, selector: str) -> SupportListing:
+        if self.cfg.floor_plan == "world":
+            surfaces = self.supports.surfaces()  # may wait for the sim: not under the lock
+            with self.lock:
+                stamp_ns = self.smap.stamp_ns
+            return SupportListing(stamp_ns=stamp_ns, surfaces=surfaces)
+        _selector, at = queries.split_at(selector)
+        view = self.views.at(at)
+        if view is not None:
+            return SupportListing(stamp_ns=view.stamp_ns, surfaces=list(view.surfaces))
         with self.lock:
-            stamp_ns = self.smap.stamp_ns
-        return SupportListing(stamp_ns=stamp_ns, surfaces=surfaces)
+            return SupportListing(stamp_ns=self.smap.stamp_ns, surfaces=list(self.smap.surfaces))
 
     # -- the tick --------------------------------------------------------------------------
 
@@ -170,6 +177,8 @@ class MapNode:
             with self.lock:
                 self._adopt_slam(b, gate)
                 self._fuse_due(b, gate)
+                if self.cfg.floor_plan != "world" and b % NS_PER_S == 0:
+                    self.smap.find_surfaces()
                 self.committer.commit(self.smap, b)
                 self.logger.log(b, self.smap)
                 self.views.record(self.smap, b)

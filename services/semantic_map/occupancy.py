@@ -7,6 +7,11 @@ which points between `z_range` hit it (each frame counts a cell once); at `hits`
 the cell is a learned obstacle for good. Floor points (below 5 cm) make unknown cells
 free. Points on people and near the robot are left out by the caller (people move: they
 are the map's people, not obstacles). Navigation keeps its own short-lived layer.
+
+The tops layer (`top_z`, `top_n`): per cell the highest point a frame saw there, kept as
+the running top, and how many frames saw the top within `TOP_TOL_M` of it: what
+`supports.surfaces_from_tops` reads the tables, benches and loaded pallets from (a
+horizontal surface at working height is a patch of cells with one top many frames saw).
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ from common.geometry import FloatArray
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, 255
 FLOOR_Z_M = 0.05
+#: A frame's highest point in a cell within this of the cell's top confirms it, m.
+TOP_TOL_M = 0.03
 
 
 class Occupancy:
@@ -31,6 +38,7 @@ class Occupancy:
         hits_needed: int = 3,
         z_range: tuple[float, float] = (0.15, 1.9),
         hits: NDArray[np.uint16] | None = None,
+        tops: tuple[NDArray[np.float32], NDArray[np.uint16]] | None = None,
     ) -> None:
         self.static = np.ascontiguousarray(static, dtype=np.uint8)
         #: The static layer's obstacle cells (changed only by `adopt_static`).
@@ -42,6 +50,9 @@ class Occupancy:
         shape = self.static.shape
         self.hits = np.zeros(shape, np.uint16) if hits is None else hits.astype(np.uint16)
         self.seen_free = np.zeros(shape, bool)
+        #: The tops layer (see the module docstring): m (0: nothing seen), frames.
+        self.top_z = np.zeros(shape, np.float32) if tops is None else tops[0].astype(np.float32)
+        self.top_n = np.zeros(shape, np.uint16) if tops is None else tops[1].astype(np.uint16)
         #: Counts the changes of `cells()`, so a reader can tell when the grid it holds is old.
         self.version = 0
         if self.hits.shape != shape:
@@ -82,6 +93,7 @@ class Occupancy:
         flat = np.unique(iy[hit] * nx + ix[hit])
         counts = self.hits.reshape(-1)
         counts[flat] = np.minimum(counts[flat].astype(np.int64) + 1, 60000).astype(np.uint16)
+        self._tops(iy[hit] * nx + ix[hit], z[hit])
         floor = inside & (np.abs(z) < FLOOR_Z_M)
         free = np.unique(iy[floor] * nx + ix[floor])
         seen = self.seen_free.reshape(-1)
@@ -91,6 +103,21 @@ class Occupancy:
         if learned or opened:
             self.version += 1
         return learned
+
+    def _tops(self, flat: NDArray[np.intp], z: FloatArray) -> None:
+        """One frame's highest point per cell against the cells' running tops."""
+        if len(flat) == 0:
+            return
+        top = np.full(self.top_z.size, -np.inf)
+        np.maximum.at(top, flat, z)
+        cells = np.unique(flat)
+        seen = top[cells].astype(np.float32)
+        tz, tn = self.top_z.reshape(-1), self.top_n.reshape(-1)
+        higher = seen > tz[cells] + TOP_TOL_M
+        same = ~higher & (seen >= tz[cells] - TOP_TOL_M)
+        tz[cells[higher]] = seen[higher]
+        tn[cells[higher]] = 1
+        tn[cells[same]] = np.minimum(tn[cells[same]].astype(np.int64) + 1, 60000)
 
     def learned_mask(self) -> NDArray[np.bool_]:
         return (self.hits >= self.hits_needed) & (self.static != OCCUPIED)

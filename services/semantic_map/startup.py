@@ -19,13 +19,15 @@ import time
 from collections.abc import Callable
 from typing import Literal
 
+import msgspec
 import numpy as np
 
 from common.bus import Bus, NoReply, RemoteError
 from common.config import SemanticMapSettings, resolve
 from common.keys import WORLD_DESCRIPTION
 from common.messages import PayloadError
-from common.messages.world import WorldDescription
+from common.messages.world import SupportSurface, WorldDescription
+from services.semantic_map.commit import learned_grids, surfaces_json
 from services.semantic_map.entities import Track
 from services.semantic_map.mapfile import (
     occupancy_from_grid,
@@ -39,6 +41,7 @@ from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.store import Grid, MapStore
 
 log = logging.getLogger(__name__)
+_SURFACES = msgspec.json.Decoder(list[SupportSurface])
 #: The service's logger (its lines go to rerun too), for the wait for the world.
 service_log = logging.getLogger("dume.semantic_map")
 
@@ -127,11 +130,13 @@ def save_all(smap: SemanticMap, store: MapStore, meta: dict[str, str] | None = N
     store.commit(
         entities=[(t.to_message(), t.appearance) for t in smap.tracks()],
         counters=dict(smap.ids.counters),
-        grids={
-            "static": Grid(occ.static, occ.resolution_m, occ.origin_xy),
-            "learned": Grid(occ.hits, occ.resolution_m, occ.origin_xy),
+        grids={"static": Grid(occ.static, occ.resolution_m, occ.origin_xy), **learned_grids(occ)},
+        meta={
+            "stamp_ns": str(smap.stamp_ns),
+            "site": smap.site,
+            "supports": surfaces_json(smap.surfaces),
+            **(meta or {}),
         },
-        meta={"stamp_ns": str(smap.stamp_ns), "site": smap.site, **(meta or {})},
         replace=True,
     )
 
@@ -150,11 +155,15 @@ def _resume(
         occ = Occupancy.unknown(s.grid_half_extent_m, s.grid_resolution_m, **occ_kw)
     else:
         hits = snap.grids.get("learned")
+        top_z, top_n = snap.grids.get("top_z"), snap.grids.get("top_n")
         occ = Occupancy(
             g.cells.astype(np.uint8),
             g.resolution_m,
             g.origin_xy,
             hits=None if hits is None else hits.cells.astype(np.uint16),
+            tops=None
+            if top_z is None or top_n is None
+            else (top_z.cells.astype(np.float32), top_n.cells.astype(np.uint16)),
             **occ_kw,  # type: ignore[arg-type]
         )
     smap = SemanticMap(s, occ, snap.counters)
@@ -163,6 +172,7 @@ def _resume(
     smap.take_changes()
     smap.stamp_ns = int(snap.meta.get("stamp_ns", "0"))
     smap.static_source = _static_source(snap.meta.get("static_source", "none"))
+    smap.surfaces = _SURFACES.decode(snap.meta.get("supports", "[]"))
     smap.site = site or snap.meta.get("site", "")
     if site and not snap.meta.get("site"):
         store.commit(meta={"site": site})  # from before sites were kept: it is this one's now

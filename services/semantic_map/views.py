@@ -19,6 +19,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
+from common.messages.world import SupportSurface
 from services.semantic_map.mapper import SemanticMap
 
 #: Views kept: a consumer at most a few ticks behind the map still finds its own.
@@ -36,6 +37,7 @@ class MapView:
     people: tuple[MapEntity, ...]
     grid_version: tuple[int, int]
     occupancy: OccupancyGrid
+    surfaces: tuple[SupportSurface, ...] = ()
 
     def entities(self, kind: EntityKind) -> list[MapEntity]:
         return list(self.people if kind == "person" else self.artifacts)
@@ -60,6 +62,7 @@ def view_of(smap: SemanticMap, tick_ns: int, previous: MapView | None) -> MapVie
         people=tuple(smap.entities("person")),
         grid_version=version,
         occupancy=previous.occupancy if same_grid and previous else smap.grid(),
+        surfaces=tuple(smap.surfaces),
     )
 
 

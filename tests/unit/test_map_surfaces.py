@@ -1,0 +1,89 @@
+"""The surfaces artifacts stand on, as the map sees them with no floor plan
+(`services.semantic_map.supports.surfaces_from_tops` on the occupancy's tops layer): a
+bench top seen in a few frames is one surface with its place, size, yaw and height; a
+wall, a low pallet and a top seen once are none; the front edge of a bench top the head
+camera sees from below is a strip there; the surfaces survive the database and a map file."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from common.config import SemanticMapSettings
+from services.semantic_map.exchange import export_map
+from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.occupancy import Occupancy
+from services.semantic_map.startup import open_map, save_all
+from services.semantic_map.store import MapStore
+from services.semantic_map.supports import surfaces_from_tops
+
+RES = 0.05
+
+
+def occupancy() -> Occupancy:
+    return Occupancy.unknown(5.0, RES, hits_needed=2)
+
+
+def top(cx: float, cy: float, half: tuple[float, float], yaw: float, z: float) -> np.ndarray:
+    """Points every 2 cm on a rectangle at height z (a table's top seen from above)."""
+    u, v = np.meshgrid(np.arange(-half[0], half[0], 0.02), np.arange(-half[1], half[1], 0.02))
+    c, s = math.cos(yaw), math.sin(yaw)
+    x, y = cx + c * u - s * v, cy + s * u + c * v
+    return np.column_stack([x.ravel(), y.ravel(), np.full(x.size, z)])
+
+
+def wall(x: float, y0: float, y1: float, z_max: float) -> np.ndarray:
+    y, z = np.meshgrid(np.arange(y0, y1, 0.02), np.arange(0.2, z_max, 0.05))
+    return np.column_stack([np.full(y.size, x), y.ravel(), z.ravel()])
+
+
+def test_a_bench_top_is_one_surface_and_a_wall_a_pallet_and_one_glance_are_none() -> None:
+    occ = occupancy()
+    bench = top(1.0, 2.0, (0.8, 0.35), math.radians(30.0), 0.9)
+    pallet = top(-2.0, -2.0, (0.6, 0.4), 0.0, 0.15)
+    for z_max in (1.1, 1.5, 1.9):  # a wall seen higher up as the robot backs off
+        occ.integrate(np.concatenate([bench, pallet, wall(-4.0, -3.0, 3.0, z_max)]))
+    occ.integrate(top(3.0, -3.0, (0.3, 0.3), 0.0, 0.75))  # a top seen once
+    found = surfaces_from_tops(occ.top_z, occ.top_n, occ.resolution_m, occ.origin_xy)
+    assert len(found) == 1
+    s = found[0]
+    assert s.id == "surface_1"
+    assert math.hypot(s.centre_xy[0] - 1.0, s.centre_xy[1] - 2.0) < 0.05
+    assert abs(s.top_height - 0.9) < 0.01
+    long_, short = sorted(s.half_extents, reverse=True)
+    assert abs(long_ - 0.8) < 0.06 and abs(short - 0.35) < 0.06
+    axis = s.yaw if s.half_extents[0] >= s.half_extents[1] else s.yaw + math.pi / 2
+    assert abs(math.sin(axis - math.radians(30.0))) < 0.05
+
+
+def test_the_front_edge_seen_from_below_is_a_strip_there() -> None:
+    occ = occupancy()
+    edge = top(0.0, 1.0, (0.8, 0.02), 0.0, 0.9)  # the head camera sees only the edge
+    for _ in range(3):
+        occ.integrate(edge)
+    (s,) = surfaces_from_tops(occ.top_z, occ.top_n, occ.resolution_m, occ.origin_xy)
+    assert math.hypot(s.centre_xy[0], s.centre_xy[1] - 1.0) < 0.05
+    assert max(s.half_extents) > 0.75
+
+
+def test_the_surfaces_survive_the_database_and_the_map_file(tmp_path: Path) -> None:
+    s = SemanticMapSettings(floor_plan="none", grid_half_extent_m=5.0)
+    occ = occupancy()
+    for _ in range(3):
+        occ.integrate(top(1.0, 2.0, (0.8, 0.35), 0.0, 0.9))
+    smap = SemanticMap(s, occ, {})
+    smap.find_surfaces()
+    assert len(smap.surfaces) == 1
+    assert export_map(smap).supports == smap.surfaces
+    path = tmp_path / "m.sqlite"
+    store = MapStore(path)
+    save_all(smap, store, {"start": "empty", "static_source": "slam"})
+    store.close()
+    again, _how = open_map(s, MapStore(path), lambda: None)
+    assert again.surfaces == smap.surfaces
+    assert again.static_source == "slam"
+    assert np.array_equal(again.occupancy.top_n, smap.occupancy.top_n)
+    again.find_surfaces()
+    assert again.surfaces == smap.surfaces
