@@ -77,6 +77,12 @@ def _stack(overrides: Overrides) -> dict[str, Any]:
     return bench_stack(overrides, opts.sim_s, opts.full)
 
 
+def _slam(settings: Overrides) -> dict[str, Any]:
+    from bench.slam import bench_slam
+
+    return bench_slam(settings)
+
+
 BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "sim": _sim,
     "wbc": _wbc,
@@ -86,6 +92,7 @@ BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "decoders": _decoders,
     "deadwatch": _deadwatch,
     "stack": _stack,
+    "slam": _slam,
 }
 #: What `dume bench all` runs (the others start stacks or processes in a loop: alone).
 ALL = ("sim", "wbc", "perception", "nav")

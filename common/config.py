@@ -678,6 +678,10 @@ class SlamSettings(_Section):
     closure_search_m: Positive = 0.4
     closure_search_rad: Positive = 0.12
     closure_min_inliers: Unit = 0.6
+    #: How a closure registers the new scan on the older submap: `field` (a correlative
+    #: search, then the Gauss-Newton refine, on the submap's grid) or `gicp` (small_gicp's
+    #: GICP on the submap's returns); `dume bench slam` measures both.
+    closure_registration: Literal["field", "gicp"] = "gicp"
     closure_sigma_m: Positive = 0.03
     closure_sigma_rad: Positive = 0.01
     #: The grid: a cell is occupied when this share of the beams that met it ended there.

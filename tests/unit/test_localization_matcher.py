@@ -16,7 +16,7 @@ from common import robot
 from common.config import LocalizationSettings
 from services.localization.localizer import Localizer, compose, inverse
 from services.localization.matcher import LikelihoodField, refine, scan_points, search
-from tests.unit.lidar_raycast import slab_ranges
+from bench.raycast import slab_ranges
 
 RES = 0.05
 ORIGIN = (-1.0, -1.0)

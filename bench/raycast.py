@@ -1,5 +1,5 @@
 """The trunk lidar's ranges ray-cast exactly against axis-aligned boxes (a slab test per
-box), for the localization's and the SLAM's tests."""
+box): the localization's and the SLAM's tests and `dume bench slam`."""
 
 from __future__ import annotations
 
