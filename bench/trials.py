@@ -32,6 +32,10 @@ Navigation's trials run over the full navigation stack instead (`bench.nav_run`)
 - fetch: one bring-me by the real mission over the full stack, its manipulation measured
   against the sim's truth (approach error, where the jaws closed, pull felt against taken;
   `bench.trial_fetch`).
+- patrol: the mission's mapping patrol from an empty map with the floor plan
+  (`bench.trial_patrol`); explore: its exploration from nothing, no floor plan, the small
+  world by default (`bench.trial_explore`): goals, time, known floor, the occupancy's
+  agreement with the truth.
 """
 
 from __future__ import annotations
@@ -263,6 +267,11 @@ def run_trial(
 
         world = (options or {}).get("world") or "hall"
         return patrol_run(world, 0 if world_seed is None else world_seed, overrides)
+    if name == "explore":  # the mission's exploration from nothing, no floor plan
+        from bench.trial_explore import explore_run
+
+        world = (options or {}).get("world") or "small"
+        return explore_run(world, 0 if world_seed is None else world_seed, overrides)
     if name == "fetch":  # the real mission over the full stack, with truth probes
         from bench.trial_fetch import run_fetch
 

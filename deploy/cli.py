@@ -11,7 +11,7 @@
     dume world --world-seed N [--world small] [--grid]      a generated world as JSON (truth)
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
     dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
-    dume map [--patrol | --export FILE | --import FILE]     the semantic map (JSON)
+    dume map [--explore | --patrol | --export FILE | --import FILE]   the semantic map (JSON)
     dume demo [--world-seed N] [--object ID --person ID]    bring an object, print a JSON line
     dume eval --worlds N --seed S --out DIR                 N worlds judged from truth: a report
     dume bench sim|wbc|nav|stack|all                        print figures (JSON last line)
@@ -281,10 +281,16 @@ def cmd_world(args: argparse.Namespace) -> int:
 
 def cmd_request(args: argparse.Namespace) -> int:
     config = _client_config(args)
-    keys = RobotKeys(config.robot)
     request = MissionRequest(
         request_id=args.request_id or uuid.uuid4().hex[:12], object=args.object, person=args.to
     )
+    return _submit(config, request, args.wait, args.timeout)
+
+
+def _submit(config: Config, request: MissionRequest, wait: bool, timeout_s: float) -> int:
+    """Hand `request` to the mission and follow its status (to the end with `wait`, else
+    until taken or refused), a JSON line each; the exit code (0 taken or succeeded)."""
+    keys = RobotKeys(config.robot)
     with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         statuses = bus.fifo(keys.mission_status, MissionStatus)
         alive = bus.watch_alive(keys.alive_all)
@@ -302,7 +308,7 @@ def cmd_request(args: argparse.Namespace) -> int:
         bus.query(keys.mission_submit, request, MissionReceipt, SUBMIT_TIMEOUT_S)
         print(json.dumps({"request_id": request.request_id, "sent": msgspec.to_builtins(request)}))
         # Without --wait: until the mission took it or refused it (its first status).
-        deadline = time.monotonic() + (args.timeout if args.wait else SUBMIT_TIMEOUT_S)
+        deadline = time.monotonic() + (timeout_s if wait else SUBMIT_TIMEOUT_S)
         ours = False
         while time.monotonic() < deadline:
             status = statuses.pop(timeout_s=0.2)
@@ -324,11 +330,11 @@ def cmd_request(args: argparse.Namespace) -> int:
                 return 0
             if status.state in ("failed", "cancelled", "rejected"):
                 return 1
-            if not args.wait:
+            if not wait:
                 hint = f"follow it: `dume status`; stop it: `dume cancel {request.request_id}`"
                 print(f"dume: {request.request_id} {status.state} ({hint})", file=sys.stderr)
                 return 0
-        said = "finish" if args.wait else "take it or refuse it"
+        said = "finish" if wait else "take it or refuse it"
         out = {"request_id": request.request_id, "outcome": "timeout"}
         print(json.dumps(out | {"reason": f"the mission did not {said} in time"}))
         return 3
@@ -360,6 +366,9 @@ def cmd_map(args: argparse.Namespace) -> int:
         raise CliError(str(exc), "`dume map --export FILE` writes one") from None
     config = _client_config(args)
     keys = RobotKeys(config.robot)
+    if args.explore:  # a request like a fetch's: its statuses to the end, exit 0 on success
+        rid = args.request_id or f"explore-{uuid.uuid4().hex[:8]}"
+        return _submit(config, MissionRequest(request_id=rid, task="explore"), True, args.timeout)
     with Bus.open(config, connect_timeout_s=CONNECT_TIMEOUT_S) as bus:
         if args.export:
             mf = bus.query(MAP_EXPORT, None, MapFile, 10.0)
@@ -716,15 +725,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reason", default="cancelled by the user")
     p.set_defaults(func=cmd_cancel)
 
-    p = add("map", "the semantic map: walk the mapping patrol, export, import; lists it")
+    p = add("map", "the semantic map: explore, walk the mapping patrol, export, import; lists it")
     what = p.add_mutually_exclusive_group()
     what.add_argument(
         "--patrol", action="store_true", help="the mission walks a coverage route; the map maps it"
     )
+    what.add_argument(
+        "--explore",
+        action="store_true",
+        help="the mission explores from nothing, frontier after frontier; its status to the end",
+    )
+    p.add_argument("--request-id", default=None, help="--explore: the request's id")
     what.add_argument("--export", metavar="FILE", help="write the map as JSON (-: stdout)")
     what.add_argument("--import", dest="import_", metavar="FILE", help="replace the map")
     p.add_argument("--spacing", type=float, default=0.0, help="patrol viewpoint spacing, m")
-    p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds for the patrol")
+    p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds for the job")
     p.set_defaults(func=cmd_map)
 
     p = add("demo", "start a stack, bring an object to a person, stop it, print a JSON result")

@@ -166,14 +166,14 @@ def test_no_grid_fails_it_unavailable_and_no_floor_to_step_onto_no_route() -> No
 class ExploreRig(Rig):
     """The node's desks with an explorer in the sensed room."""
 
-    def __init__(self) -> None:
+    def __init__(self, **settings: float) -> None:
         super().__init__()
         self.room = SensedRoom.make()
         self.robot.xy, self.robot.moves, self.robot.occupancy_of = (2.0, 3.0), True, self.room
-        old = self.patrol
+        old, m = self.patrol, fast_settings(**settings)
         self.patrol = PatrolDesk(
-            old.runner, self.robot, old.settings, old.deps, old.log, LOG, answer_s=5.0,
-            explorer=ExploreRunner(self.robot, fast_settings(), LOG.info, FP),
+            old.runner, self.robot, m, old.deps, old.log, LOG, answer_s=5.0,
+            explorer=ExploreRunner(self.robot, m, LOG.info, FP),
         )  # fmt: skip
         self.desk.jobs = self.patrol
         self.desk.busy_with = self.patrol.busy_with
@@ -245,3 +245,20 @@ def test_a_request_during_a_fetch_is_busy_and_a_fetch_without_a_person_malformed
     assert (f0.state, f0.reason) == ("rejected", "malformed") and "person" in f0.detail
     assert (rig.of("x1")[-1].state, rig.of("x1")[-1].reason) == ("rejected", "busy")
     assert "mission f1 is running" in rig.of("x1")[-1].detail
+
+
+def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_request() -> None:
+    rig = ExploreRig(explore_semantic_pass=True)
+    rig.tick()
+    rig.requests.push(encode(MissionRequest(request_id="x1", task="explore")))
+    for _ in range(300):
+        rig.tick(25)
+        if rig.sent[-1].state in ("succeeded", "failed"):
+            break
+    ours = rig.of("x1")
+    stages = [s.behaviour for s in ours if s.state == "running"]
+    assert stages[0] == "explore" and stages[-1] == "semantic_pass"
+    assert ours[-1].state == "succeeded", ours[-1]
+    assert ours[-1].detail.startswith("explored: no reachable frontier left")
+    assert rig.robot.arm_kinds()[-2:] == ["look", "stow"]  # the patrol's arm, then stowed
+    assert rig.published[-1].task == "patrol" and rig.published[-1].state == "done"

@@ -1,0 +1,163 @@
+"""`dume trial explore`: exploration from nothing, its map scored against the sim's truth.
+
+`explore_run` starts router + sim + wbc + perception + semantic_map + navigation +
+mission as processes (lockstep, dynamic locomotion, the network segmenter), the map
+empty in a fresh database with no floor plan (`semantic_map.floor_plan = "none"`: every
+cell unknown until the head camera's depth shows floor or an obstacle there), navigation
+on the map's occupancy, and the base from the sim's truth by default (`wbc.base_state =
+"truth"`, the ablation: the robot is told where it is, so the exploration is measured
+apart from localization; `--set wbc.base_state=estimate` explores on the robot's own
+odometry and SLAM). It submits `{"task": "explore"}` to the mission while the sim holds
+at t = 0 (`bench.eval.run.watch_mission`, start gate), follows its status to the end,
+then reads the mission's job status (goals, path walked, known floor) and the map's grid.
+
+Figures: the outcome and its reason, sim and wall time, goals walked / chosen / failed,
+path walked, the known-free floor against the room's (truth), and the occupancy's
+agreement with the floor plan (`bench.map_agreement`: IoU of the occupied cells within
+5 cm, false and missed obstacle cells) over the area reachable from the start (the
+floor connected to the robot's start in the truth, grown by 10 cm to take in the
+walls' faces). The truth is read here only, through `dume/world/description`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+import tempfile
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from bench.eval.run import start_gate_overrides, watch_mission
+from bench.map_agreement import FREE, UNKNOWN, agreement, truth_on
+from common.config import Overrides, merged
+from common.keys import MAP_OCCUPANCY, WORLD_DESCRIPTION
+from common.messages import as_numpy
+from common.messages.mission import MissionRequest, MissionStatus, PatrolRequest, PatrolStatus
+from common.messages.semantic_map import OccupancyGrid
+from common.messages.sim import Clock
+from common.messages.world import WorldDescription
+from deploy.stack import ProcessStack
+
+SERVICES = ["sim", "wbc", "perception", "semantic_map", "navigation", "mission"]
+#: Sim seconds the trial follows the exploration (the mission's own budget,
+#: `mission.explore_max_s`, ends it sooner).
+SIM_TIMEOUT_S = 2400.0
+
+
+def explore_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
+    return {
+        "sim.world": world,
+        "sim.world_seed": seed,
+        "sim.locomotion": "dynamic",
+        "wbc.base_state": "truth",
+        "semantic_map.dir": db_dir,
+        "semantic_map.name": "explore",
+        "semantic_map.reset": True,
+        "semantic_map.start": "empty",
+        "semantic_map.floor_plan": "none",
+        "navigation.map_source": "map",
+        "recording.enabled": False,
+    }
+
+
+def reachable_truth(world: WorldDescription, shape: tuple[int, int], res: float,
+                    origin: tuple[float, float]) -> NDArray[np.bool_]:  # fmt: skip
+    """The cells of the map's grid the robot could reach and see from its start: the truth's
+    free floor 8-connected to the start, grown by 2 cells (the obstacles' faces)."""
+    occupied = truth_on(world, shape, res, origin)
+    x, y = world.robot_start.x, world.robot_start.y
+    iy, ix = math.floor((y - origin[1]) / res), math.floor((x - origin[0]) / res)
+    labels, _n = ndimage.label(~occupied, structure=np.ones((3, 3)))
+    floor = labels == labels[iy, ix]
+    return np.asarray(ndimage.binary_dilation(floor, iterations=2), bool)
+
+
+def score_map(grid: OccupancyGrid, world: WorldDescription) -> dict[str, Any]:
+    """The map's grid against the truth over the reachable area (module docstring)."""
+    cells = np.asarray(as_numpy(grid.cells), np.uint8)
+    res, origin = grid.resolution_m, grid.origin_xy
+    area = reachable_truth(world, cells.shape, res, origin)
+    truth = truth_on(world, cells.shape, res, origin) & area
+    mine = np.where(area, cells, UNKNOWN).astype(np.uint8)
+    floor = area & ~ndimage.binary_dilation(truth, iterations=2)
+    known_free = float(np.sum((cells == FREE) & floor)) * res * res
+    floor_m2 = float(np.sum(floor)) * res * res
+    out = agreement(mine, truth, res)
+    return {
+        "known_free_m2": round(float(np.sum(cells == FREE)) * res * res, 1),
+        "floor_m2": round(floor_m2, 1),
+        "floor_known_share": round(known_free / floor_m2, 3) if floor_m2 else None,
+        "occupancy_iou_5cm": out["iou_within_5cm"],
+        "false_occupied_cells": out["false_occupied_cells"],
+        "missed_obstacle_cells": out["truth_seen_missed_cells"],
+        "unknown_outside_m2": round(float(np.sum((cells != UNKNOWN) & ~area)) * res * res, 1),
+    }
+
+
+def _progress(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
+    """The request's changes on stderr (its last word, with the clock, every 30 s)."""
+    if status is None or not (changed or clock.stamp_ns // 1_000_000_000 % 30 == 0):
+        return
+    said = f"({status.stamp_ns / 1e9:.1f} s: {status.detail})"
+    line = f"  t={clock.stamp_ns / 1e9:7.1f} s {status.state} {status.behaviour} {said}"
+    print(line, file=sys.stderr, flush=True)
+
+
+def explore_run(
+    world: str = "small",
+    seed: int = 0,
+    overrides: Overrides | None = None,
+    db_dir: str | None = None,
+    grid_out: str | None = None,
+) -> dict[str, Any]:
+    """Run an exploration on a fresh stack; the figures (JSON-ready). `grid_out`: a .npz
+    to keep the final grid (`cells`, `res`, `origin`) and the truth's (`truth`, `area`)."""
+    tmp = None
+    if db_dir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="dume-explore-")
+        db_dir = tmp.name
+    settings = merged(explore_settings(world, seed, db_dir), start_gate_overrides(),
+                      overrides or {})  # fmt: skip
+    out: dict[str, Any] = {"trial": "explore", "world": world, "world_seed": seed,
+                           "base_state": settings.get("wbc.base_state")}  # fmt: skip
+    s = ProcessStack(SERVICES, settings)
+    try:
+        s.start(timeout_s=180.0)
+        truth = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 30.0)
+        request = MissionRequest(request_id="explore", task="explore")
+        record = watch_mission(s.bus, s.keys, request, SIM_TIMEOUT_S, _progress, start_gate=True)
+        job = s.bus.query(s.keys.mission_patrol, PatrolRequest(action="status"), PatrolStatus)
+        grid = s.bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 30.0)
+    finally:
+        s.stop()
+        if tmp is not None:
+            tmp.cleanup()
+    last = record.changes[-1] if record.changes else None
+    failed = re.search(r"\((\d+) failed\)", last.detail if last else "")
+    sim_s = (record.end_ns - record.start_ns) / 1e9
+    out |= {
+        "outcome": last.state if last else "none",
+        "reason": last.reason if last else record.ended,
+        "detail": last.detail if last else record.ended,
+        "sim_s": round(sim_s, 1),
+        "wall_s": round(record.wall_s, 1),
+        "rtf": round(sim_s / record.wall_s, 3) if record.wall_s > 0 else None,
+        "goals_walked": job.waypoint,
+        "goals_chosen": job.waypoints,
+        "goals_failed": int(failed.group(1)) if failed else None,
+        "travelled_m": round(job.travelled_m, 1),
+        **score_map(grid, truth),
+    }
+    if grid_out:
+        cells = np.asarray(as_numpy(grid.cells), np.uint8)
+        shape, res, origin = cells.shape, grid.resolution_m, grid.origin_xy
+        np.savez_compressed(
+            grid_out, cells=cells, res=res, origin=np.array(origin),
+            truth=truth_on(truth, shape, res, origin),
+            area=reachable_truth(truth, shape, res, origin),
+        )  # fmt: skip
+    return out

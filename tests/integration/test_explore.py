@@ -1,0 +1,38 @@
+"""Exploration from nothing end to end: the small world mapped with no floor plan.
+
+sim + wbc + perception (the network) + semantic_map + navigation + mission, lockstep,
+dynamic locomotion, the map empty with no floor plan (`semantic_map.floor_plan =
+"none"`: every cell unknown until the head camera's depth shows floor or an obstacle),
+the base from the sim's truth (`wbc.base_state = "truth"`: the ablation, so the
+exploration is tried apart from localizing on a map being built). The mission takes a
+request `{"task": "explore"}` and walks frontier after frontier through navigation
+(`bench.trial_explore.explore_run`); it must end succeeded with no reachable frontier
+left, having made most of the room's floor known, and the map it built is scored
+against the world description (truth, read by the trial only); the figures are
+printed (`pytest -rP` shows them).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bench.trial_explore import explore_run
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+
+@pytest.mark.timeout(3600)  # a whole job: minutes of wall time on 2 cores
+def test_an_exploration_of_the_small_world_from_nothing_ends_with_no_frontier_left(
+    tmp_path: Path,
+) -> None:
+    out = explore_run("small", 0, db_dir=str(tmp_path))
+    print(json.dumps(out))
+    assert (out["outcome"], out["reason"]) == ("succeeded", ""), out
+    assert out["detail"].startswith("no reachable frontier left"), out
+    assert out["goals_walked"] >= 1 and out["travelled_m"] > 2.0, out
+    # The known floor grew from nothing to most of the room.
+    assert out["floor_known_share"] >= 0.8, out
+    assert out["occupancy_iou_5cm"] >= 0.5, out
