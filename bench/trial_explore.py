@@ -7,9 +7,10 @@ cell unknown until the head camera's depth shows floor or an obstacle there), na
 on the map's occupancy, and the base from the sim's truth by default (`wbc.base_state =
 "truth"`, the ablation: the robot is told where it is, so the exploration is measured
 apart from localization; `--set wbc.base_state=estimate` explores on the robot's own
-odometry and SLAM). It submits `{"task": "explore"}` to the mission while the sim holds
-at t = 0 (`bench.eval.run.watch_mission`, start gate), follows its status to the end,
-then reads the mission's job status (goals, path walked, known floor) and the map's grid.
+odometry and SLAM, the localization service then among the processes). It submits
+`{"task": "explore"}` to the mission while the sim holds at t = 0
+(`bench.eval.run.watch_mission`, start gate), follows its status to the end, then reads
+the mission's job status (goals, path walked, known floor) and the map's grid.
 
 Figures: the outcome and its reason, sim and wall time, goals walked / chosen / failed,
 path walked, the known-free floor against the room's (truth), and the occupancy's
@@ -120,11 +121,16 @@ def explore_run(
     if db_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="dume-explore-")
         db_dir = tmp.name
+    # The sim held at t = 0 until the request waits in the mission, so the mission takes
+    # it at its first tick in every run.
     settings = merged(explore_settings(world, seed, db_dir), start_gate_overrides(),
                       overrides or {})  # fmt: skip
+    own = settings.get("wbc.base_state") == "estimate"
     out: dict[str, Any] = {"trial": "explore", "world": world, "world_seed": seed,
                            "base_state": settings.get("wbc.base_state")}  # fmt: skip
-    s = ProcessStack(SERVICES, settings)
+    # The robot on its own odometry localizes, and maps while it does (SLAM: the map has
+    # no static layer), in the localization service; the truth ablation needs none.
+    s = ProcessStack([*SERVICES, "localization"] if own else SERVICES, settings)
     try:
         s.start(timeout_s=180.0)
         truth = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 30.0)

@@ -27,8 +27,8 @@ from common.robot import Footprint
 from services.mission.explore import ExploreRunner
 from services.mission.frontiers import UNKNOWN
 from services.mission.patrol_desk import PatrolDesk
-from tests.unit.mission_fakes import FakeRobot, fast_settings
-from tests.unit.test_mission_patrol import LOG, Rig
+from tests.unit.mission_fakes import TICK_NS, FakeRobot, fast_settings
+from tests.unit.test_mission_patrol import LOG, Rig, key_of
 
 RES = 0.1
 FP = Footprint(front=0.52, back=0.62, half_width=0.24)
@@ -262,3 +262,17 @@ def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_r
     assert ours[-1].detail.startswith("explored: no reachable frontier left")
     assert rig.robot.arm_kinds()[-2:] == ["look", "stow"]  # the patrol's arm, then stowed
     assert rig.published[-1].task == "patrol" and rig.published[-1].state == "done"
+
+
+def test_a_dependency_lost_while_no_tick_comes_fails_the_exploration_at_once() -> None:
+    rig = ExploreRig()
+    rig.tick()
+    rig.requests.push(encode(MissionRequest(request_id="x1", task="explore")))
+    rig.tick(10)
+    rig.lifelines.down(key_of("navigation"))
+    b = rig.robot.now_ns - TICK_NS  # the last tick: the clock stopped after it
+    assert rig.desk.stalled(b)
+    rig.desk.flush(b, True)
+    last = rig.of("x1")[-1]
+    assert (last.state, last.reason, last.stamp_ns) == ("failed", "dependency_lost", b)
+    assert "navigation" in last.detail and rig.robot.modes[-1] == ("stand", "navigation")
