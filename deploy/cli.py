@@ -773,6 +773,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--walking-people", action="store_true", help="the walking-people scenario")
     p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per world")
     p.add_argument("--record", action="store_true", help="write each world's recording")
+    p.add_argument(
+        "--map", choices=["truth", "explored"], default="truth",
+        help="explored: explore each world from nothing first, then the request on the "
+        "robot's own map; truth: the map seeded from the truth with noise (the ablation)",
+    )  # fmt: skip
     p.set_defaults(func=cmd_eval)
 
     p = add("bench", "benchmarks; each prints JSON on its last line")

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench.eval.explored import score_entities
 from bench.eval.judge import MissionRecord, WorldResult, evaluate
 from bench.eval.pictures import world_picture
 from bench.eval.report import json_safe, write_report
@@ -42,11 +43,15 @@ from bench.eval.run import (
     watch_mission,
 )
 from bench.eval.targets import TargetError, seeded_pair
+from bench.trial_explore import score_map
 from common.bus import BusError
 from common.config import ConfigError, merged, parse_overrides, resolve
+from common.keys import MAP_OCCUPANCY
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.semantic_map import OccupancyGrid
 from common.messages.sim import Clock
+from common.messages.world import WorldDescription
 from common.recording import run_dir
 from deploy.demo import SERVICES
 from deploy.runs import shown
@@ -65,21 +70,58 @@ def scenario_of(walking: bool) -> str:
 
 def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> dict[str, Any]:
     """The settings of world `seed`'s stack."""
+    explored = getattr(args, "map", "truth") == "explored"
     return merged(
         {
             "sim.world": args.world,
             "sim.world_seed": seed,
             "sim.walking_people": bool(args.walking_people),
             "sim.locomotion": "dynamic",
-            "semantic_map.start": "seed-from-world",
+            "semantic_map.start": "empty" if explored else "seed-from-world",
             "semantic_map.name": map_name,
             "semantic_map.reset": True,
             "semantic_map.seed_noise_seed": seed,
             "recording.enabled": bool(args.record),
         },
+        EXPLORED if explored else {},
         start_gate_overrides(),
         parse_overrides(args.set),
     )
+
+
+#: The settings of a world explored before its request: no floor plan (the map starts
+#: all unknown, the localization maps while it localizes), the semantic pass after it.
+EXPLORED = {
+    "semantic_map.floor_plan": "none",
+    "mission.explore_semantic_pass": True,
+}
+#: Sim seconds an exploration may take (the mission's own budget ends it sooner).
+EXPLORE_TIMEOUT_S = 2400.0
+
+
+def explore_first(
+    args: argparse.Namespace, stack: ProcessStack, world: WorldDescription, seed: int
+) -> dict[str, Any]:
+    """The exploration of world `seed` on its stack, and its map judged from truth."""
+    bus, keys = stack.bus, stack.keys
+    wall0 = time.perf_counter()
+    request = MissionRequest(request_id=f"explore-{seed}", task="explore")
+    record = watch_mission(
+        bus, keys, request, EXPLORE_TIMEOUT_S, _stage_line(seed), start_gate=True
+    )
+    final = record.changes[-1] if record.changes else None
+    arts, people = read_map(bus)
+    grid = bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 30.0)
+    return {
+        "outcome": final.state if final else f"no status ({record.ended})",
+        "reason": (f"{final.reason} " if final and final.reason else "")
+        + (final.detail if final else ""),
+        "sim_s": round((record.end_ns - record.start_ns) / 1e9, 1),
+        "localization": record.localization,
+        "wall_s": round(time.perf_counter() - wall0, 1),
+        **score_map(grid, world),
+        **score_entities(world, arts, people),
+    }
 
 
 def _say(text: str) -> None:
@@ -111,6 +153,10 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         stack.start(timeout_s=START_TIMEOUT_S)
         result.setup_wall_s = round(time.perf_counter() - wall0, 2)
         bus, keys = stack.bus, stack.keys
+        explored = args.map == "explored"
+        if explored:
+            step = "explore the world"
+            result.exploration = explore_first(args, stack, read_world(bus), seed)
         step = "read the world and the map"
         world, (arts, people) = read_world(bus), read_map(bus)
         pair = seeded_pair(arts, people, seed)
@@ -118,7 +164,7 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         request = MissionRequest(request_id=f"eval-{seed}", object=pair.object, person=pair.person)
         step = "run the mission"
         record: MissionRecord = watch_mission(
-            bus, keys, request, args.timeout, _stage_line(seed), start_gate=True
+            bus, keys, request, args.timeout, _stage_line(seed), start_gate=not explored
         )
         evaluate(result, record, world)
         step = "draw the world"
@@ -177,7 +223,13 @@ def run_eval(args: argparse.Namespace) -> int:
             "scenario": scenario_of(args.walking_people),
             "segmenter": ", ".join(sorted(seen.get("segmenter", {"not read"}))),
             "locomotion": ", ".join(sorted(seen.get("locomotion", {"not read"}))),
-            "map start": "seed-from-world (truth positions with noise, for an earlier mapping run)",
+            "map start": (
+                "explored: each world explored from nothing first (no floor plan, SLAM), "
+                "then the request on the robot's own map"
+                if args.map == "explored"
+                else "seed-from-world (truth positions with noise, for an earlier mapping "
+                "run: the truth ablation)"
+            ),
             "request": "a random mapped artifact and person per world (seeded by the world seed)",
             "timeout per world": f"{args.timeout:.0f} s sim",
             "extra settings": ", ".join(args.set) or "none",

@@ -196,6 +196,9 @@ class WorldResult(msgspec.Struct, kw_only=True):
     localization: dict[str, float] = msgspec.field(default_factory=dict)
     #: Perception's placement of artifacts in the map (`PlacementErrors.figures`).
     placement: dict[str, float] = msgspec.field(default_factory=dict)
+    #: With `--map explored`: the exploration before the request (its outcome, times) and
+    #: its map judged from truth (`explored.score_entities`, `trial_explore.score_map`).
+    exploration: dict[str, Any] = msgspec.field(default_factory=dict)
 
     @property
     def succeeded(self) -> bool:

@@ -211,8 +211,41 @@ def report_markdown(
             for r in results
         ),
     ]
+    lines += _exploration(results)
     lines += ["", "## Plots", "", *(f"![{p}]({p})\n" for p in PLOTS)]
     return "\n".join(lines)
+
+
+def _exploration(results: Sequence[WorldResult]) -> list[str]:
+    """With `--map explored`: each world's exploration and its map judged from truth."""
+    rows = [r for r in results if r.exploration]
+    if not rows:
+        return []
+    lines = [
+        "",
+        "## The exploration before each request",
+        "",
+        "Each world explored from nothing (no floor plan; SLAM), judged from truth: the "
+        "occupancy's IoU with the floor plan within 5 cm over the reachable area, the "
+        "floor known, the artifacts found within 10 cm (of the right class), false "
+        "entries, the people found.",
+        "",
+        "| seed | outcome | sim s | wall s | occupancy IoU | floor known | artifacts found "
+        "(right class) / all | false entries | people found / all | missed |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        e = r.exploration
+        missed = ", ".join([*e.get("missed", []), *e.get("wrong_class", [])]) or "-"
+        lines.append(
+            f"| {r.world_seed} | {e.get('outcome', '-')} | {e.get('sim_s', '-')} "
+            f"| {e.get('wall_s', '-')} | {e.get('occupancy_iou_5cm', '-')} "
+            f"| {e.get('floor_known_share', '-')} | {e.get('found_within_10cm', '-')} "
+            f"({e.get('found_right_class', '-')}) / {e.get('artifacts', '-')} "
+            f"| {', '.join(e.get('false_entries', [])) or '0'} "
+            f"| {e.get('people_found', '-')} / {e.get('people', '-')} | {missed} |"
+        )
+    return lines
 
 
 def plot_stage_times(results: Sequence[WorldResult], path: Path) -> None:
