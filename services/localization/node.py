@@ -29,6 +29,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from common import robot
 from common.bus import BusError, Latest, WaitTimeout
 from common.keys import MAP_OCCUPANCY, as_of
 from common.lockstep import PeriodicTicker
@@ -107,7 +108,8 @@ class LocalizationNode:
         grid = self._grid()
         if self.s.mode == "slam" or (self.s.mode == "auto" and grid.static_source == "none"):
             svc.log.info("mapping while localizing (SLAM): the map has no static layer")
-            self.loc = Slam(self.s, self.s.slam, start, self._lidar_origin())
+            T = robot.LIDAR_MOUNT.T_parent_lidar  # the lidar in the base (no scan yet at t = 0)
+            self.loc = Slam(self.s, self.s.slam, start, (float(T[0, 3]), float(T[1, 3])))
         else:
             self.loc = Localizer(self.s, self._field(grid), start)
         svc.ready()
@@ -139,12 +141,6 @@ class LocalizationNode:
         self.last = est
         self._publish(b, est, est.status, est.refused)
         self.logger.log(b, est, pts)
-
-    def _lidar_origin(self) -> tuple[float, float]:
-        """Where the lidar sits in the base (x, y), from the first scan."""
-        scan = self.scans.wait(lambda _m: True, INPUT_TIMEOUT_S)
-        T = np.asarray(scan.T_base_lidar).reshape(4, 4)
-        return float(T[0, 3]), float(T[1, 3])
 
     def _publish_grid(self, b: int, slam: Slam) -> None:
         """The SLAM grid on `slam/occupancy` when it changed and `publish_every_s` passed."""
