@@ -32,8 +32,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from bench.eval.run import start_gate_overrides, watch_mission
+from bench.eval.run import Progress, start_gate_overrides, watch_mission
 from bench.map_agreement import FREE, UNKNOWN, agreement, truth_on
+from common.bus import Latest
 from common.config import Overrides, merged
 from common.keys import MAP_OCCUPANCY, WORLD_DESCRIPTION
 from common.messages import as_numpy
@@ -99,13 +100,20 @@ def score_map(grid: OccupancyGrid, world: WorldDescription) -> dict[str, Any]:
     }
 
 
-def _progress(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
-    """The request's changes on stderr (its last word, with the clock, every 30 s)."""
-    if status is None or not (changed or clock.stamp_ns // 1_000_000_000 % 30 == 0):
-        return
-    said = f"({status.stamp_ns / 1e9:.1f} s: {status.detail})"
-    line = f"  t={clock.stamp_ns / 1e9:7.1f} s {status.state} {status.behaviour} {said}"
-    print(line, file=sys.stderr, flush=True)
+def _progress(job: Latest[PatrolStatus]) -> Progress:
+    """The request's changes, and the job's own status every 30 s of sim time, on stderr."""
+
+    def show(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
+        if status is None or not (changed or clock.stamp_ns // 1_000_000_000 % 30 == 0):
+            return
+        now = job.get()
+        said = status.detail if changed or now is None else (
+            f"{now.waypoint} of {now.waypoints} goals, {now.travelled_m:.1f} m walked, "
+            f"{now.known_m2:.1f} m² known")  # fmt: skip
+        line = f"  t={clock.stamp_ns / 1e9:7.1f} s {status.state} {status.behaviour}: {said}"
+        print(line, file=sys.stderr, flush=True)
+
+    return show
 
 
 def explore_run(
@@ -135,7 +143,9 @@ def explore_run(
         s.start(timeout_s=180.0)
         truth = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 30.0)
         request = MissionRequest(request_id="explore", task="explore")
-        record = watch_mission(s.bus, s.keys, request, SIM_TIMEOUT_S, _progress, start_gate=True)
+        job_now = s.bus.latest(s.keys.mission_patrol_status, PatrolStatus)
+        show = _progress(job_now)
+        record = watch_mission(s.bus, s.keys, request, SIM_TIMEOUT_S, show, start_gate=True)
         job = s.bus.query(s.keys.mission_patrol, PatrolRequest(action="status"), PatrolStatus)
         grid = s.bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 30.0)
     finally:

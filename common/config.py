@@ -595,7 +595,7 @@ class MissionSettings(_Section):
     explore_min_frontier_m: Positive = 0.3
     explore_clearance_m: Positive = 0.7
     explore_gain: NonNegative = 0.5
-    explore_blacklist_m: NonNegative = 0.5
+    explore_blacklist_m: NonNegative = 0.75
     explore_seen_m: NonNegative = 1.2
     #: The exploration's budget: goals chosen, and sim seconds; spent while a reachable
     #: frontier is left, it fails `budget`.

@@ -91,10 +91,14 @@ class _StepOut:
 
 @dataclass
 class _Tally:
-    """What the explore did: goals chosen, looked around from, failed (and where)."""
+    """What the explore did: goals chosen and walked, the places looked around from (the
+    goals and where the robot stood), the frontier points looked at, the goals failed;
+    the current goal."""
 
     chosen: int = 0
+    walked: int = 0
     looked: list[Point] = field(default_factory=list)
+    aimed: list[Point] = field(default_factory=list)
     failed: list[Point] = field(default_factory=list)
     goal: FrontierGoal | None = None
 
@@ -148,12 +152,12 @@ class ExploreRunner(GoalJob):
         t = self.tally
         left = 0 if self.last is None else self.last.clusters
         return (
-            f"{len(t.looked)} goal(s) walked of {t.chosen} chosen ({len(t.failed)} failed), "
+            f"{t.walked} goal(s) walked of {t.chosen} chosen ({len(t.failed)} failed), "
             f"{self.known_m2():.1f} m² known, {left} frontier(s) left"
         )
 
     def _counts(self) -> tuple[int, int]:
-        return len(self.tally.looked), self.tally.chosen
+        return self.tally.walked, self.tally.chosen
 
     def _last_walker(self) -> NavPatrol | None:
         return self.walker
@@ -183,8 +187,9 @@ class ExploreRunner(GoalJob):
             self.say(f"explore goal {self.tally.chosen} ({goal.x:.2f}, {goal.y:.2f}) failed "
                      f"({'; '.join(w.log)}): left out from now on")  # fmt: skip
         else:
-            xy = self.port.robot_xy() or (goal.x, goal.y)
-            self.tally.looked.append(xy)
+            self.tally.walked += 1
+            self.tally.looked += [(goal.x, goal.y), self.port.robot_xy() or (goal.x, goal.y)]
+            self.tally.aimed.append(goal.aim_xy)
 
     def _plan(self) -> NavPatrol | None:
         """The next goal's walker from the map as of the tick, or None (ended, stepping
@@ -203,7 +208,7 @@ class ExploreRunner(GoalJob):
         t = self.tally
         self.last = found = survey(
             np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
-            self.params, t.failed, t.looked,
+            self.params, t.failed, t.looked, t.aimed,
         )  # fmt: skip
         if found.goal is None:
             if not found.robot_on_known:

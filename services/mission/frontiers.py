@@ -8,9 +8,10 @@ entry point; the steps, each a function of its own:
 1. `frontier_mask`: the known-free cells 4-adjacent to an unknown cell of an unknown
    region (4-connected) of at least `min_unknown_m2`, or one that reaches past the known
    floor; a few depth samples missed inside seen floor bound nothing. Cells within
-   `seen_m` of a place the robot already looked around from are dropped: what a
-   look-around did not see from there (behind a table leg, under a bench) is not seen
-   from nearer either.
+   `seen_m` of a place the robot already looked around from, or of a frontier point it
+   already looked at from a goal (`aimed`), are dropped: what a look did not see from
+   there (behind a table leg, under a bench, in a pallet's shadow) is not seen from
+   nearer either, and the robot must not creep towards it goal after goal.
 2. `frontier_clusters`: those cells 8-connected (`ndimage.label`); clusters shorter than
    `min_frontier_m` (cells × res) dropped.
 3. `reach`: path lengths (m) from the robot over the cells its base may cross, as
@@ -23,7 +24,7 @@ entry point; the steps, each a function of its own:
    or unknown cell (the footprint turning in place there, as the patrol's viewpoints),
    between `view_m` of the cluster (the head camera sees the floor from 0.86 m ahead of
    the base, densely to about 2 m), not within `blacklist_m` of a goal that failed or
-   of one already looked around from; the cheapest by path + `NEAR_WEIGHT` × distance
+   of a place already looked around from; the cheapest by path + `NEAR_WEIGHT` × distance
    to the cluster, facing the cluster's cells within sight of it (`view_m`'s far end
    + 0.5 m). The next goal is the cluster's whose cost = path + distance − `gain` × the
    length of frontier within sight is least (a long frontier counts for what one look
@@ -72,7 +73,7 @@ class FrontierParams:
     pass_m: float = 0.32
     view_m: tuple[float, float] = (1.0, 2.0)
     gain: float = 0.5
-    blacklist_m: float = 0.5
+    blacklist_m: float = 0.75
     seen_m: float = 1.2
     min_unknown_m2: float = 0.1
 
@@ -80,7 +81,8 @@ class FrontierParams:
 @dataclass(frozen=True)
 class FrontierGoal:
     """Where to look from next: the pose (m, rad; world), the path to it over the grid,
-    the cluster's length and centre, its distance from the pose, and the cost."""
+    the cluster's length and centre, its distance from the pose, the cost, and the point
+    it faces (the mean of the cluster's cells in sight)."""
 
     x: float
     y: float
@@ -90,6 +92,7 @@ class FrontierGoal:
     frontier_xy: Point
     distance_m: float
     cost: float
+    aim_xy: Point
 
 
 @dataclass(frozen=True)
@@ -186,8 +189,11 @@ def survey(
     params: FrontierParams = FrontierParams(),
     failed: Sequence[Point] = (),
     looked: Sequence[Point] = (),
+    aimed: Sequence[Point] = (),
 ) -> Survey:
-    """The grid's frontiers and the next goal (see the module docstring)."""
+    """The grid's frontiers and the next goal (see the module docstring): `failed` the
+    goals navigation refused or failed, `looked` the places looked around from, `aimed`
+    the frontier points looked at from them."""
     p = params
     known_free = float(np.count_nonzero(cells == FREE)) * res * res
     rx = math.floor((robot_xy[0] - origin[0]) / res)
@@ -207,9 +213,9 @@ def survey(
         return np.column_stack([ox + (c[:, 1] + 0.5) * res, oy + (c[:, 0] + 0.5) * res])
 
     mask = frontier_mask(sub, res, p.min_unknown_m2)
-    if looked and mask.any():
+    if (looked or aimed) and mask.any():
         fc = np.argwhere(mask)
-        drop = _near(centres(fc), looked, p.seen_m)
+        drop = _near(centres(fc), [*looked, *aimed], p.seen_m)
         mask[fc[drop, 0], fc[drop, 1]] = False
     clusters = frontier_clusters(mask, res, p.min_frontier_m)
     free = sub == FREE
@@ -282,6 +288,7 @@ def _goal_for(
         frontier_xy=centre,
         distance_m=d,
         cost=along + d - p.gain * len(seen) * res,
+        aim_xy=(float(aim[0]), float(aim[1])),
     )
 
 

@@ -152,3 +152,14 @@ def test_a_step_out_never_crosses_an_occupied_cell() -> None:
     cells[:, 25] = OCCUPIED  # ... and to its left; free beyond both, and along y
     target = step_out_target(cells, RES, ORIGIN, (2.0, 2.0), pass_m=0.32, body_m=0.24)
     assert target is not None and 1.65 < target[0] < 2.4  # along the corridor, not over a wall
+
+
+def test_a_frontier_looked_at_that_stayed_is_not_aimed_at_again() -> None:
+    cells = room(8.0, 4.0)
+    cells[:, 80:] = UNKNOWN
+    cells[30:50, 70:79] = OCCUPIED  # a crate hides part of the frontier from the room
+    first = survey(cells, RES, ORIGIN, (1.0, 2.0)).goal
+    assert first is not None
+    after = survey(cells, RES, ORIGIN, (first.x, first.y), looked=[(first.x, first.y)],
+                   aimed=[first.aim_xy])  # fmt: skip
+    assert after.goal is None or math.dist(after.goal.aim_xy, first.aim_xy) > 1.2
