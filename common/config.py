@@ -597,6 +597,9 @@ class MissionSettings(_Section):
     explore_gain: NonNegative = 0.5
     explore_blacklist_m: NonNegative = 0.75
     explore_seen_m: NonNegative = 1.2
+    #: Frontiers farther than this from where the exploration started are left (m; 0:
+    #: none is, the map's grid bounds it): a hall's doors open on floor that goes on.
+    explore_radius_m: NonNegative = 0.0
     #: The exploration's budget: goals chosen, and sim seconds; spent while a reachable
     #: frontier is left, it fails `budget`.
     explore_max_goals: PositiveInt = 60

@@ -6,8 +6,9 @@ one at a time, one `step()` per mission tick:
 
 1. at the start and each time the last goal ended, it reads the map's occupancy grid as
    of the tick (`RobotPort.occupancy`) and asks `frontiers.survey` for the next goal
-   from the robot's pose, leaving out the goals that failed (blacklisted) and what it
-   already looked at (`explore_*` settings);
+   from the robot's pose, leaving out the goals that failed (blacklisted), what it
+   already looked at, and frontiers farther than `explore_radius_m` from where it
+   started (when set; `explore_*` settings);
 2. a goal is a walk there facing its frontier, then `LOOK_TURNS` turns on the spot (a
    `NavPatrol` of one viewpoint); navigation refusing or failing the walk blacklists it;
 3. standing on floor the map does not know (at the start: the head camera never sees the
@@ -127,6 +128,7 @@ class ExploreRunner(GoalJob):
         self._just_turned = False
         self._grid_misses = 0
         self._since_ns = 0
+        self._start_xy: Point | None = None
 
     def start(self) -> None:
         """Explore from the next `step`."""
@@ -134,6 +136,7 @@ class ExploreRunner(GoalJob):
         self.walker, self.tally, self.last = None, _Tally(), None
         self._step, self._step_outs, self._just_turned = None, 0, False
         self._grid_misses, self._since_ns = 0, self.port.now_ns
+        self._start_xy = self.port.robot_xy()
         self._begin()
 
     # -- how far it got -------------------------------------------------------------------
@@ -208,7 +211,7 @@ class ExploreRunner(GoalJob):
         t = self.tally
         self.last = found = survey(
             np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
-            self.params, t.failed, t.looked, t.aimed,
+            self.params, t.failed, t.looked, t.aimed, self._within(),
         )  # fmt: skip
         if found.goal is None:
             if not found.robot_on_known:
@@ -235,6 +238,11 @@ class ExploreRunner(GoalJob):
         return self.walker
 
     # -- off unknown floor ------------------------------------------------------------------
+
+    def _within(self) -> tuple[Point, float] | None:
+        """The disc the exploration keeps to (`explore_radius_m` about where it started)."""
+        r = self.settings.explore_radius_m
+        return None if r <= 0 or self._start_xy is None else (self._start_xy, r)
 
     def _leave_unknown(self, grid: OccupancyGrid, xy: Point) -> None:
         """The robot stands on floor the map does not know: a turn on the spot first, then

@@ -11,7 +11,10 @@ entry point; the steps, each a function of its own:
    `seen_m` of a place the robot already looked around from, or of a frontier point it
    already looked at from a goal (`aimed`), are dropped: what a look did not see from
    there (behind a table leg, under a bench, in a pallet's shadow) is not seen from
-   nearer either, and the robot must not creep towards it goal after goal.
+   nearer either, and the robot must not creep towards it goal after goal. With
+   `within` (a centre and a radius), cells farther than the radius from the centre are
+   dropped too: the place to map ends there (a hall's doors open on floor that goes on
+   to the map's edge).
 2. `frontier_clusters`: those cells 8-connected (`ndimage.label`); clusters shorter than
    `min_frontier_m` (cells × res) dropped.
 3. `reach`: path lengths (m) from the robot over the cells its base may cross, as
@@ -190,6 +193,7 @@ def survey(
     failed: Sequence[Point] = (),
     looked: Sequence[Point] = (),
     aimed: Sequence[Point] = (),
+    within: tuple[Point, float] | None = None,
 ) -> Survey:
     """The grid's frontiers and the next goal (see the module docstring): `failed` the
     goals navigation refused or failed, `looked` the places looked around from, `aimed`
@@ -216,6 +220,10 @@ def survey(
     if (looked or aimed) and mask.any():
         fc = np.argwhere(mask)
         drop = _near(centres(fc), [*looked, *aimed], p.seen_m)
+        mask[fc[drop, 0], fc[drop, 1]] = False
+    if within is not None and mask.any():
+        fc = np.argwhere(mask)
+        drop = ~_near(centres(fc), [within[0]], within[1])
         mask[fc[drop, 0], fc[drop, 1]] = False
     clusters = frontier_clusters(mask, res, p.min_frontier_m)
     free = sub == FREE

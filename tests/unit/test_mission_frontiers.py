@@ -163,3 +163,11 @@ def test_a_frontier_looked_at_that_stayed_is_not_aimed_at_again() -> None:
     after = survey(cells, RES, ORIGIN, (first.x, first.y), looked=[(first.x, first.y)],
                    aimed=[first.aim_xy])  # fmt: skip
     assert after.goal is None or math.dist(after.goal.aim_xy, first.aim_xy) > 1.2
+
+
+def test_frontiers_beyond_the_radius_to_explore_are_left() -> None:
+    cells = room(8.0, 4.0)
+    cells[:, 80:] = UNKNOWN  # the frontier at x = 4 m
+    near = survey(cells, RES, ORIGIN, (1.0, 2.0), within=((1.0, 2.0), 3.5))
+    far = survey(cells, RES, ORIGIN, (1.0, 2.0), within=((1.0, 2.0), 2.5))
+    assert near.goal is not None and far.clusters == 0 and far.goal is None
