@@ -49,6 +49,7 @@ def import_map(mf: MapFile, smap: SemanticMap, store: MapStore, views: ViewHisto
         smap.occupancy = occupancy_from_grid(
             mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range
         )
+        smap.occupancy.sensed_static()
         smap.static_source = "file"
     smap.surfaces = list(mf.supports)
     for tr in tracks_from_file(mf, "import"):

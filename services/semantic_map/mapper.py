@@ -241,12 +241,13 @@ class SemanticMap:
 
     def _near_static(self, observations: list[Observation], margin_m: float) -> list[bool]:
         """Whether each observation's place is within `margin_m` of a static obstacle cell
-        (furniture, walls: the floor plan's layer, not the learned one)."""
+        (furniture, walls: the static layer, not the learned one; of a lidar map, not the
+        blobs people standing leave: `Occupancy.furniture`)."""
         if not observations:
             return []
         occ = self.occupancy
         near = occupied_near(
-            occ.static_occupied,
+            occ.furniture,
             occ.resolution_m,
             occ.origin_xy,
             np.array([o.xy for o in observations]),

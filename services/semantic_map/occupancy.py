@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage
 
 from common.geometry import FloatArray
 
@@ -25,6 +26,20 @@ FREE, OCCUPIED, UNKNOWN = 0, 100, 255
 FLOOR_Z_M = 0.05
 #: A frame's highest point in a cell within this of the cell's top confirms it, m.
 TOP_TOL_M = 0.03
+#: An obstacle blob of a lidar map at most this across may be a person standing, m.
+PERSON_BLOB_M = 0.8
+
+
+def without_blobs(occupied: NDArray[np.bool_], max_cells: float) -> NDArray[np.bool_]:
+    """`occupied` less its 8-connected blobs at most `max_cells` across both ways."""
+    labels, _n = ndimage.label(occupied, structure=np.ones((3, 3), bool))
+    out = occupied.copy()
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        if box is None:
+            continue
+        if box[0].stop - box[0].start <= max_cells and box[1].stop - box[1].start <= max_cells:
+            out[box] &= labels[box] != k
+    return out
 
 
 class Occupancy:
@@ -43,6 +58,9 @@ class Occupancy:
         self.static = np.ascontiguousarray(static, dtype=np.uint8)
         #: The static layer's obstacle cells (changed only by `adopt_static`).
         self.static_occupied: NDArray[np.bool_] = self.static == OCCUPIED
+        #: The static obstacles nobody stands on (a floor plan's all; of a SLAM grid, not
+        #: the blobs a standing person leaves: `adopt_static`).
+        self.furniture: NDArray[np.bool_] = self.static_occupied
         self.resolution_m = float(resolution_m)
         self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))
         self.hits_needed = hits_needed
@@ -59,12 +77,20 @@ class Occupancy:
             raise ValueError(f"learned layer {self.hits.shape} does not match static {shape}")
 
     def adopt_static(self, cells: NDArray[np.uint8]) -> None:
-        """A new static layer of the same geometry (the SLAM grid as it grows)."""
+        """A new static layer of the same geometry (the SLAM grid as it grows). The lidar
+        maps whoever stood still as an obstacle: `furniture` leaves out the blobs a
+        person could be (`PERSON_BLOB_M` across at most)."""
         if cells.shape != self.static.shape:
             raise ValueError(f"static layer {cells.shape} does not match {self.static.shape}")
         self.static = np.ascontiguousarray(cells, dtype=np.uint8)
         self.static_occupied = self.static == OCCUPIED
+        self.sensed_static()
         self.version += 1
+
+    def sensed_static(self) -> None:
+        """The static layer is a sensor's map (the SLAM's, a map file's), not a floor plan:
+        `furniture` leaves out the blobs a person standing could have left in it."""
+        self.furniture = without_blobs(self.static_occupied, PERSON_BLOB_M / self.resolution_m)
 
     @classmethod
     def unknown(cls, half_extent_m: float, resolution_m: float, **kw: object) -> Occupancy:

@@ -101,6 +101,7 @@ def open_map(
         counters = dict(mf.counters)
         if mf.occupancy is not None:
             occ, source = occupancy_from_grid(mf.occupancy, **occ_kw), "file"
+            occ.sensed_static()
     if occ is None and (s.start == "seed-from-world" or s.floor_plan == "world"):
         w = world()
         if w is None and s.start == "seed-from-world":
@@ -173,6 +174,8 @@ def _resume(
     smap.stamp_ns = int(snap.meta.get("stamp_ns", "0"))
     smap.static_source = _static_source(snap.meta.get("static_source", "none"))
     smap.surfaces = _SURFACES.decode(snap.meta.get("supports", "[]"))
+    if smap.static_source in ("slam", "file"):
+        occ.sensed_static()
     smap.site = site or snap.meta.get("site", "")
     if site and not snap.meta.get("site"):
         store.commit(meta={"site": site})  # from before sites were kept: it is this one's now

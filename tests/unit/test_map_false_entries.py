@@ -240,6 +240,24 @@ def test_a_person_on_a_static_obstacle_is_not_a_person_and_hides_no_artifact() -
     assert [(e.id, round(e.position_in_world[0], 2)) for e in people] == [("person_1", 0.5)]
 
 
+def test_on_a_lidar_map_a_person_standing_is_a_person_and_a_bench_is_not() -> None:
+    """The SLAM grid maps whoever stood still as a blob: a person there is still a person
+    (and the bottle-like hand on them is dropped as clothes), while a "person" read on the
+    bench, a blob longer than a person, is ignored and the can on it is mapped."""
+    static = np.zeros((80, 80), np.uint8)
+    static[38:42, 48:56] = OCCUPIED  # a bench: x 1.0–2.0, y −0.25–0.25 (0.125 m cells)
+    static[47:49, 28:30] = OCCUPIED  # a person standing at x −1.5–1.25, y 0.875–1.125
+    occ = Occupancy(np.full((80, 80), 255, np.uint8), 0.125, (-5.0, -5.0))
+    occ.adopt_static(static)
+    smap = SemanticMap(SemanticMapSettings(), occ, {})
+    for k in range(1, 4):
+        _ingest(smap, k * S, _det("person", (2.0, 0.0)), _det("can", (1.95, 0.05)),
+                _det("person", (-1.4, 1.1)), _det("bottle", (-1.35, 1.15)))  # fmt: skip
+    assert [e.id for e in smap.entities("artifact")] == ["can_1"]
+    people = smap.entities("person")
+    assert [(e.id, round(e.position_in_world[0], 1)) for e in people] == [("person_1", -1.4)]
+
+
 def test_a_person_beside_a_bench_hides_no_artifact_on_it_but_clothes_stay_dropped() -> None:
     """The wrist camera reads a bench's front as a person 25 cm in front of the can on it,
     outside the obstacle margin: the can, on the bench, is still mapped; an artifact
