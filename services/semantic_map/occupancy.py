@@ -61,6 +61,10 @@ class Occupancy:
         #: The static obstacles nobody stands on (a floor plan's all; of a SLAM grid, not
         #: the blobs a standing person leaves: `adopt_static`).
         self.furniture: NDArray[np.bool_] = self.static_occupied
+        #: Of a sensed static layer, its obstacles grown by a cell: the depth learns no
+        #: obstacle there (the lidar saw that face; the depth's noise and the pose's would
+        #: only thicken it inwards). None for a floor plan.
+        self.beside_static: NDArray[np.bool_] | None = None
         self.resolution_m = float(resolution_m)
         self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))
         self.hits_needed = hits_needed
@@ -89,8 +93,12 @@ class Occupancy:
 
     def sensed_static(self) -> None:
         """The static layer is a sensor's map (the SLAM's, a map file's), not a floor plan:
-        `furniture` leaves out the blobs a person standing could have left in it."""
+        `furniture` leaves out the blobs a person standing could have left in it, and the
+        depth learns nothing beside its obstacles (`beside_static`)."""
         self.furniture = without_blobs(self.static_occupied, PERSON_BLOB_M / self.resolution_m)
+        self.beside_static = ndimage.binary_dilation(
+            self.static_occupied, structure=np.ones((3, 3), bool)
+        )
 
     @classmethod
     def unknown(cls, half_extent_m: float, resolution_m: float, **kw: object) -> Occupancy:
@@ -146,7 +154,10 @@ class Occupancy:
         tn[cells[same]] = np.minimum(tn[cells[same]].astype(np.int64) + 1, 60000)
 
     def learned_mask(self) -> NDArray[np.bool_]:
-        return (self.hits >= self.hits_needed) & (self.static != OCCUPIED)
+        learned = (self.hits >= self.hits_needed) & (self.static != OCCUPIED)
+        if self.beside_static is not None:
+            learned &= ~self.beside_static
+        return learned
 
     def cells(self) -> NDArray[np.uint8]:
         """The merged grid: static, unknown cells seen as floor made free, learned obstacles."""

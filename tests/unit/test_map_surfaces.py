@@ -87,3 +87,20 @@ def test_the_surfaces_survive_the_database_and_the_map_file(tmp_path: Path) -> N
     assert np.array_equal(again.occupancy.top_n, smap.occupancy.top_n)
     again.find_surfaces()
     assert again.surfaces == smap.surfaces
+
+
+def test_beside_a_lidar_wall_the_depth_learns_nothing_elsewhere_it_does() -> None:
+    """The depth's noise spreads a wall's face over two cells; the lidar's map already has
+    it: on a sensed static layer the learned cell inside is not added, a table top the
+    lidar's plane misses is."""
+    occ = Occupancy.unknown(2.0, RES, hits_needed=2)
+    static = np.full(occ.static.shape, 0, np.uint8)
+    static[:, 60] = 100  # a wall's face at x = 1.0–1.05
+    occ.adopt_static(static)
+    face = np.column_stack([np.full(20, 0.97), np.linspace(-0.5, 0.5, 20), np.full(20, 1.0)])
+    table = top(-1.0, 0.0, (0.3, 0.2), 0.0, 0.75)
+    for _ in range(3):
+        occ.integrate(np.concatenate([face, table]))
+    cells = occ.cells()
+    assert (cells[:, 59] == 100).sum() == 0  # x 0.95–1.0: beside the wall
+    assert (cells == 100).sum() > static.astype(bool).sum() + 100  # the table was learned
