@@ -68,6 +68,7 @@ class LocalizationNode:
         self._grid_version = -1
         self._grid_stamp = 0
         self._grid_every_ns = round(self.s.slam.publish_every_s * NS_PER_S)
+        self._closures_said = 0
         self.last: Estimate | None = None
         self._said = ""
         self._status = ""
@@ -156,6 +157,18 @@ class LocalizationNode:
         )  # fmt: skip
         self._grid_version, self._grid_stamp = g.version, b
         self.logger.map(cells == OCCUPIED, g.resolution_m, g.origin_xy)
+        self.logger.slam(
+            b,
+            np.array([kf.pose for kf in slam.keyframes], float).reshape(-1, 3),
+            [(c.older, c.newer) for c in slam.closures],
+        )
+        if len(slam.closures) > self._closures_said:
+            for c in slam.closures[self._closures_said :]:
+                self.svc.log.info(
+                    "t=%.1f s: loop closed, keyframe %d on %d (%.0f%% inliers), moved %.3f m",
+                    b / NS_PER_S, c.newer, c.older, 100 * c.inliers, c.correction_m,
+                )  # fmt: skip
+            self._closures_said = len(slam.closures)
 
     def _input(self, latest: Latest[M], b: int, what: str) -> M | None:
         with contextlib.suppress(WaitTimeout):

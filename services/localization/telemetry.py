@@ -33,6 +33,23 @@ class LocalizationLogger:
             static=True,
         )  # fmt: skip
 
+    def slam(self, t_ns: int, keyframes: FloatArray, closures: list[tuple[int, int]]) -> None:
+        """The SLAM's keyframes (n, 3: x, y, yaw) as its path, and its loop closures as
+        lines between the two keyframes each ties."""
+        stamp(self.rec, t_ns)
+        z = np.full(len(keyframes), 0.06)
+        self.rec.log(
+            "world/localization/keyframes",
+            rr.LineStrips3D([np.column_stack([keyframes[:, :2], z])], colors=(90, 160, 255),
+                            radii=0.015),
+        )  # fmt: skip
+        if closures:
+            ties = [[[*keyframes[i, :2], 0.08], [*keyframes[j, :2], 0.08]] for i, j in closures]
+            self.rec.log(
+                "world/localization/closures",
+                rr.LineStrips3D(ties, colors=(255, 120, 0), radii=0.02),
+            )
+
     def log(self, t_ns: int, est: Estimate, points_base: FloatArray) -> None:
         rec = self.rec
         stamp(rec, t_ns)
