@@ -140,9 +140,22 @@ def test_the_report_reads_as_markdown_tables_per_range() -> None:
     counts = Confusion()
     counts.add([_pred("box", labels == 1)], labels, NAMES, depth)
     text = confusion.markdown(counts.to_dict())
-    assert text.count("| true \\ read as | bottle | can | box | person | missed | n | right |") == 3
-    assert "| can | 0 | 0 | 1 | 0 | 0 | 1 | 0.00 |" in text
-    assert "| bottle | 0 | 0 | 0 | 0 | 1 | 1 | 0.00 |" in text
+    header = "| true \\ read as | bottle | can | box | person | missed | n | right | cut: right |"
+    assert text.count(header) == 3
+    assert "| can | 0 | 0 | 1 | 0 | 0 | 1 | 0.00 | 0/0 |" in text
+    assert "| bottle | 0 | 0 | 0 | 0 | 1 | 1 | 0.00 | 0/0 |" in text
+
+
+def test_instances_cut_by_the_border_are_also_counted_apart() -> None:
+    labels, depth = _scene(2.0)
+    labels[0:10, 30:36] = 7  # a bottle's lower body below the top border: 60 pixels
+    depth[0:10, 30:36] = 1.0
+    names = {**NAMES, 7: "bottle_2b"}
+    counts = Confusion()
+    counts.add([_pred("can", labels == 7), _pred("bottle", labels == 2)], labels, names, depth)
+    assert counts.table["0-1.5 m"]["bottle"]["can"] == 1
+    assert counts.cut["0-1.5 m"]["bottle"] == [0, 1]
+    assert counts.cut["1.5-3 m"]["bottle"] == [0, 0]  # the whole one is not cut
 
 
 @pytest.mark.parametrize(

@@ -10,7 +10,9 @@ which `metrics.person_recall` counts a person found): the pair's predicted class
 the truth instance is counted, no pair is `missed`. A truth instance counts when it has
 at least `min_pixels` pixels (people `min_person_pixels`, as `metrics.person_recall`
 counts them); smaller ones are matched all the same (a prediction paired with one is not
-false) but not counted. Its range is the median true depth of its pixels.
+false) but not counted. Its range is the median true depth of its pixels. Those cut by the
+image's border are counted, and also apart (`cut`: read right, of how many): a bottle
+whose neck is out of the frame is a can to look at.
 
 A predicted instance paired with no truth instance is false. Its range is the median true
 depth under its mask, and it is filed by the truth it lies on (`UNDER`): an `object` when
@@ -115,8 +117,9 @@ def truth_under(
 @dataclass
 class Confusion:
     """Counts over frames (see the module docstring). `table[bin][true][read as]`,
-    `false[bin][read as][under]`; `beyond`: truth and false instances outside the bins;
-    `small`: truth instances too small to count."""
+    `false[bin][read as][under]`; `cut[bin][true]`: [read right, counted] of the truth
+    instances cut by the image's border; `beyond`: truth and false instances outside the
+    bins; `small`: truth instances too small to count."""
 
     min_pixels: int = 50
     min_person_pixels: int = 500
@@ -125,6 +128,7 @@ class Confusion:
     frames: int = 0
     table: dict[str, dict[str, dict[str, int]]] = field(default_factory=dict)
     false: dict[str, dict[str, dict[str, int]]] = field(default_factory=dict)
+    cut: dict[str, dict[str, list[int]]] = field(default_factory=dict)
     beyond: dict[str, int] = field(default_factory=lambda: {"truth": 0, "false": 0})
     small: int = 0
 
@@ -134,6 +138,7 @@ class Confusion:
             name = bin_name(lo, hi)
             self.table.setdefault(name, {c: dict.fromkeys(columns, 0) for c in self.classes})
             self.false.setdefault(name, {c: dict.fromkeys(UNDER, 0) for c in self.classes})
+            self.cut.setdefault(name, {c: [0, 0] for c in self.classes})
 
     def add(
         self,
@@ -160,6 +165,10 @@ class Confusion:
             read = MISSED if p is None else predicted[p].class_name
             row = self.table[where][tru.class_name]
             row[read] = row.get(read, 0) + 1
+            u0, v0, u1, v1 = tru.bbox
+            if min(u0, v0) == 0 or u1 == labels.shape[1] or v1 == labels.shape[0]:
+                self.cut[where][tru.class_name][0] += read == tru.class_name
+                self.cut[where][tru.class_name][1] += 1
         taken = {p for p in paired if p is not None}
         for p, pred in enumerate(predicted):
             if p in taken:
@@ -188,6 +197,7 @@ class Confusion:
             "confusion": self.table,
             "correct": correct,
             "false": self.false,
+            "cut": self.cut,
             "false_total": {
                 name: sum(sum(r.values()) for r in rows.values())
                 for name, rows in self.false.items()
@@ -199,20 +209,21 @@ class Confusion:
 
 def markdown(report: Mapping[str, Any]) -> str:
     """`Confusion.to_dict()` as markdown: per bin, the confusion table (rows: true class;
-    columns: read as, missed, how many, the share read right) and the false instances
-    (rows: read as; columns: what they lie on)."""
+    columns: read as, missed, how many, the share read right, and read right of those cut
+    by the border) and the false instances (rows: read as; columns: what they lie on)."""
     out: list[str] = []
     for name, rows in report["confusion"].items():
         columns = list(next(iter(rows.values())))
         out += [f"**{name}**", ""]
-        out.append("| true \\ read as | " + " | ".join(columns) + " | n | right |")
-        out.append("|---" * (len(columns) + 3) + "|")
+        out.append("| true \\ read as | " + " | ".join(columns) + " | n | right | cut: right |")
+        out.append("|---" * (len(columns) + 4) + "|")
         for cls, row in rows.items():
             n = sum(row.values())
             share = report["correct"][name][cls]
             right = "–" if share is None else f"{share:.2f}"
             cells = " | ".join(str(row[c]) for c in columns)
-            out.append(f"| {cls} | {cells} | {n} | {right} |")
+            cut_right, cut_n = report["cut"][name][cls]
+            out.append(f"| {cls} | {cells} | {n} | {right} | {cut_right}/{cut_n} |")
         false = report["false"][name]
         out += ["", "| false, read as | " + " | ".join(UNDER) + " | all |"]
         out.append("|---" * (len(UNDER) + 2) + "|")
