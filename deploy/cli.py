@@ -803,7 +803,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seeds torch and the data order")
     p.add_argument("--train-seeds", type=int, default=180, help="worlds 0..N-1 to train on")
     p.add_argument("--val-seeds", type=int, default=24, help="held-out worlds from 10000")
-    p.add_argument("--steps", type=int, default=4000)
+    p.add_argument("--steps", type=int, default=6000, help="batches (TrainSettings.steps)")
     p.add_argument("--out", type=pathlib.Path, default=None, help="default: the shipped model")
     p.add_argument(
         "--confusion",
