@@ -586,13 +586,14 @@ class MissionSettings(_Section):
     patrol_arm_posture: Literal["look", "stow"] = "look"
     #: Exploration from nothing (`dume map --explore`, a request `{"task": "explore"}`):
     #: frontier after frontier (`services/mission/frontiers.py`) until none is reachable.
-    #: A frontier shorter than `explore_min_frontier_m` is none; a goal keeps
+    #: A frontier shorter than `explore_min_frontier_m` is none (about the robot's width:
+    #: on the SLAM's lidar map, gaps of 0.3 m at walls drew 4-5 m walks); a goal keeps
     #: `explore_clearance_m` from every occupied or unknown cell (the footprint turning on
     #: the spot: its circumscribed radius is 0.67 m) and looks at its frontier from 1-2 m;
     #: its cost is the path less `explore_gain` × the frontier in sight (m per m); a goal
     #: that failed or was looked around from bars others within `explore_blacklist_m`, and
     #: what a look-around left unseen within `explore_seen_m` of it is no frontier (m).
-    explore_min_frontier_m: Positive = 0.3
+    explore_min_frontier_m: Positive = 0.5
     explore_clearance_m: Positive = 0.7
     explore_gain: NonNegative = 0.5
     explore_blacklist_m: NonNegative = 0.75

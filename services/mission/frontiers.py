@@ -7,16 +7,17 @@ entry point; the steps, each a function of its own:
 
 1. `frontier_mask`: the known-free cells 4-adjacent to an unknown cell of an unknown
    region (4-connected) of at least `min_unknown_m2`, or one that reaches past the known
-   floor; a few depth samples missed inside seen floor bound nothing. Cells within
+   floor; a few depth samples missed inside seen floor bound nothing.
+2. `frontier_clusters`: those cells 8-connected (`ndimage.label`); clusters shorter than
+   `min_frontier_m` (cells × res) dropped. Then, of the clusters left, the cells within
    `seen_m` of a place the robot already looked around from, or of a frontier point it
    already looked at from a goal (`aimed`), are dropped: what a look did not see from
    there (behind a table leg, under a bench, in a pallet's shadow) is not seen from
    nearer either, and the robot must not creep towards it goal after goal. With
    `within` (a centre and a radius), cells farther than the radius from the centre are
    dropped too: the place to map ends there (a hall's doors open on floor that goes on
-   to the map's edge).
-2. `frontier_clusters`: those cells 8-connected (`ndimage.label`); clusters shorter than
-   `min_frontier_m` (cells × res) dropped.
+   to the map's edge). What is left is clustered again, whatever its length: the rest
+   of a long frontier is still one.
 3. `reach`: path lengths (m) from the robot over the cells its base may cross, as
    navigation plans (unknown counts as occupied there): known free and at least `pass_m`
    from every occupied or unknown cell (navigation's lethal inflation), 8-connected
@@ -216,7 +217,9 @@ def survey(
     def centres(c: NDArray[np.intp]) -> NDArray[np.float64]:
         return np.column_stack([ox + (c[:, 1] + 0.5) * res, oy + (c[:, 0] + 0.5) * res])
 
-    mask = frontier_mask(sub, res, p.min_unknown_m2)
+    mask = np.zeros(sub.shape, bool)
+    for c in frontier_clusters(frontier_mask(sub, res, p.min_unknown_m2), res, p.min_frontier_m):
+        mask[c[:, 0], c[:, 1]] = True
     if (looked or aimed) and mask.any():
         fc = np.argwhere(mask)
         drop = _near(centres(fc), [*looked, *aimed], p.seen_m)
@@ -225,7 +228,7 @@ def survey(
         fc = np.argwhere(mask)
         drop = ~_near(centres(fc), [within[0]], within[1])
         mask[fc[drop, 0], fc[drop, 1]] = False
-    clusters = frontier_clusters(mask, res, p.min_frontier_m)
+    clusters = frontier_clusters(mask, res, 0.0)
     free = sub == FREE
     start = (ry - y0, rx - x0)
     on_known = bool(0 <= start[0] < free.shape[0] and 0 <= start[1] < free.shape[1]
