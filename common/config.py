@@ -689,7 +689,7 @@ class SlamSettings(_Section):
     closure_sigma_m: Positive = 0.03
     closure_sigma_rad: Positive = 0.01
     #: The grid: a cell is occupied when this share of the beams that met it ended there.
-    occupied_ratio: Unit = 0.25
+    occupied_ratio: Unit = 0.4
     half_extent_m: Positive = 15.0
     resolution_m: Positive = 0.05
     #: The local map's cells, m: finer than the map's, so a scan's heading is not

@@ -101,9 +101,8 @@ class ScanGrid:
         d = ends - o
         length = np.hypot(d[:, 0], d[:, 1])
         step = 0.5 * self.resolution_m
-        # samples every half cell from the origin to two cells short of the end (a beam
-        # grazing a wall crosses the cells beside its end: they are not cleared)
-        n = np.maximum(np.floor((length - 2.0 * self.resolution_m) / step).astype(np.intp), 0)
+        # samples every half cell from the origin to a cell short of the end
+        n = np.maximum(np.floor((length - self.resolution_m) / step).astype(np.intp), 0)
         beam = np.repeat(np.arange(len(n)), n)
         first = np.cumsum(n) - n
         k = np.arange(int(n.sum())) - np.repeat(first, n)

@@ -204,7 +204,10 @@ class MapNode:
         if grid is None or grid.stamp_ns != want:
             return
         try:
-            self.smap.occupancy.adopt_static(np.asarray(as_numpy(grid.cells), np.uint8))
+            people = [tr.xy for tr in self.smap.people.confirmed]
+            self.smap.occupancy.adopt_static(
+                np.asarray(as_numpy(grid.cells), np.uint8), people=np.array(people).reshape(-1, 2)
+            )
         except ValueError as exc:
             log.error("the SLAM grid is not the map's: %s", exc)
             self._slam_stamp = want

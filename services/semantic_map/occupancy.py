@@ -80,13 +80,30 @@ class Occupancy:
         if self.hits.shape != shape:
             raise ValueError(f"learned layer {self.hits.shape} does not match static {shape}")
 
-    def adopt_static(self, cells: NDArray[np.uint8]) -> None:
+    def adopt_static(self, cells: NDArray[np.uint8], people: FloatArray | None = None) -> None:
         """A new static layer of the same geometry (the SLAM grid as it grows). The lidar
         maps whoever stood still as an obstacle: `furniture` leaves out the blobs a
-        person could be (`PERSON_BLOB_M` across at most)."""
+        person could be (`PERSON_BLOB_M` across at most), and a blob within
+        `PERSON_BLOB_M` / 2 of a mapped person (`people`, (n, 2) m) is theirs, not the
+        building's: unknown (nobody saw the floor they stand on)."""
         if cells.shape != self.static.shape:
             raise ValueError(f"static layer {cells.shape} does not match {self.static.shape}")
-        self.static = np.ascontiguousarray(cells, dtype=np.uint8)
+        cells = np.array(cells, dtype=np.uint8)
+        if people is not None and len(people):
+            occupied = cells == OCCUPIED
+            blobs = occupied & ~without_blobs(occupied, PERSON_BLOB_M / self.resolution_m)
+            labels, _n = ndimage.label(blobs, structure=np.ones((3, 3), bool))
+            ix, iy, inside = self.cells_of(np.asarray(people, float))
+            reach = round(0.5 * PERSON_BLOB_M / self.resolution_m)
+            theirs: set[int] = set()
+            for x, y in zip(ix[inside], iy[inside], strict=True):
+                window = labels[
+                    max(0, y - reach) : y + reach + 1, max(0, x - reach) : x + reach + 1
+                ]
+                theirs |= set(np.unique(window[window > 0]).tolist())
+            if theirs:
+                cells[np.isin(labels, list(theirs))] = UNKNOWN
+        self.static = cells
         self.static_occupied = self.static == OCCUPIED
         self.sensed_static()
         self.version += 1

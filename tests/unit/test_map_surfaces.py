@@ -104,3 +104,18 @@ def test_beside_a_lidar_wall_the_depth_learns_nothing_elsewhere_it_does() -> Non
     cells = occ.cells()
     assert (cells[:, 59] == 100).sum() == 0  # x 0.95–1.0: beside the wall
     assert (cells == 100).sum() > static.astype(bool).sum() + 100  # the table was learned
+
+
+def test_a_mapped_person_standing_leaves_no_obstacle_in_the_lidar_map() -> None:
+    """The SLAM grid holds a blob where a person stood: with that person mapped there the
+    blob is theirs (unknown), while a pillar's blob nobody stands at and a bench beside
+    the person stay obstacles."""
+    occ = Occupancy.unknown(2.0, RES)
+    static = np.zeros(occ.static.shape, np.uint8)
+    static[40:48, 40:48] = 100  # a person's blob at x, y 0.0–0.4
+    static[10:16, 10:16] = 100  # a pillar at −1.5
+    static[40:48, 50:80] = 100  # a bench from x 0.5, 1.5 m long
+    occ.adopt_static(static, people=np.array([[0.2, 0.2]]))
+    assert (occ.static[40:48, 40:48] == 255).all()
+    assert (occ.static[10:16, 10:16] == 100).all()
+    assert (occ.static[40:48, 50:80] == 100).all()
