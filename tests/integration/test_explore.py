@@ -9,7 +9,8 @@ request `{"task": "explore"}` and walks frontier after frontier through navigati
 (`bench.trial_explore.explore_run`); it must end succeeded with no reachable frontier
 left, having made most of the room's floor known, and the map it built is scored
 against the world description (truth, read by the trial only); the figures are
-printed (`pytest -rP` shows them).
+printed (`pytest -rP` shows them). The second test explores the same on the robot's own
+odometry, with the localization's SLAM.
 """
 
 from __future__ import annotations
@@ -34,5 +35,19 @@ def test_an_exploration_of_the_small_world_from_nothing_ends_with_no_frontier_le
     assert out["detail"].startswith("no reachable frontier left"), out
     assert out["goals_walked"] >= 1 and out["travelled_m"] > 2.0, out
     # The known floor grew from nothing to most of the room.
+    assert out["floor_known_share"] >= 0.8, out
+    assert out["occupancy_iou_5cm"] >= 0.5, out
+
+
+@pytest.mark.timeout(3600)
+def test_on_its_own_odometry_with_the_slam_it_explores_the_small_world_too(
+    tmp_path: Path,
+) -> None:
+    """The same on the robot's own estimate: the localization maps while it localizes
+    (the SLAM's lidar grid becomes the map's static layer) and the mission explores it."""
+    out = explore_run("small", 0, {"wbc.base_state": "estimate"}, db_dir=str(tmp_path))
+    print(json.dumps(out))
+    assert (out["outcome"], out["reason"]) == ("succeeded", ""), out
+    assert out["detail"].startswith("no reachable frontier left"), out
     assert out["floor_known_share"] >= 0.8, out
     assert out["occupancy_iou_5cm"] >= 0.5, out
