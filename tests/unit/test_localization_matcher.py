@@ -12,11 +12,11 @@ import math
 import numpy as np
 import pytest
 
+from bench.raycast import slab_ranges
 from common import robot
 from common.config import LocalizationSettings
 from services.localization.localizer import Localizer, compose, inverse
 from services.localization.matcher import LikelihoodField, refine, scan_points, search
-from bench.raycast import slab_ranges
 
 RES = 0.05
 ORIGIN = (-1.0, -1.0)
