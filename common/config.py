@@ -601,6 +601,9 @@ class MissionSettings(_Section):
     #: Frontiers farther than this from where the exploration started are left (m; 0:
     #: none is, the map's grid bounds it): a hall's doors open on floor that goes on.
     explore_radius_m: NonNegative = 0.0
+    #: The site's outline, as the operator gives it: frontiers outside the rectangle
+    #: (x0, y0, x1, y1 m in the map's frame) are left. None: the map's grid bounds it.
+    explore_bounds: tuple[FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat] | None = None
     #: The exploration's budget: goals chosen, and sim seconds; spent while a reachable
     #: frontier is left, it fails `budget`.
     explore_max_goals: PositiveInt = 60

@@ -57,6 +57,7 @@ from deploy.demo import SERVICES
 from deploy.runs import shown
 from deploy.stack import ProcessStack
 from services.semantic_map.store import database_path, remove_database
+from services.sim.world import generate_world
 
 #: Wall seconds for a world's stack to come up (every service ready), and for each of
 #: its processes to exit when stopped (the sim may be flushing a recording).
@@ -83,18 +84,29 @@ def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> dict[
             "semantic_map.seed_noise_seed": seed,
             "recording.enabled": bool(args.record),
         },
-        EXPLORED if explored else {},
+        explored_overrides(args.world, seed) if explored else {},
         start_gate_overrides(),
         parse_overrides(args.set),
     )
 
 
-#: The settings of a world explored before its request: no floor plan (the map starts
-#: all unknown, the localization maps while it localizes), the semantic pass after it.
-EXPLORED = {
-    "semantic_map.floor_plan": "none",
-    "mission.explore_semantic_pass": True,
-}
+def explored_overrides(world: str, seed: int) -> dict[str, Any]:
+    """The settings of a world explored before its request: no floor plan (the map starts
+    all unknown, the localization maps while it localizes), the semantic pass after it,
+    and the site's outline as an operator gives it (the hall's walls, 0.3 m out: its doors
+    open on floor that goes on to the map's edge)."""
+    hall = generate_world(seed, world).hall
+    margin = 0.3
+    return {
+        "semantic_map.floor_plan": "none",
+        "mission.explore_semantic_pass": True,
+        "mission.explore_bounds": [
+            hall.min_xy[0] - margin, hall.min_xy[1] - margin,
+            hall.max_xy[0] + margin, hall.max_xy[1] + margin,
+        ],
+    }  # fmt: skip
+
+
 #: Sim seconds an exploration may take (the mission's own budget ends it sooner).
 EXPLORE_TIMEOUT_S = 2400.0
 

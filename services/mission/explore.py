@@ -212,6 +212,7 @@ class ExploreRunner(GoalJob):
         self.last = found = survey(
             np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
             self.params, t.failed, t.looked, t.aimed, self._within(),
+            self.settings.explore_bounds,
         )  # fmt: skip
         if found.goal is None:
             if not found.robot_on_known:

@@ -16,8 +16,9 @@ entry point; the steps, each a function of its own:
    nearer either, and the robot must not creep towards it goal after goal. With
    `within` (a centre and a radius), cells farther than the radius from the centre are
    dropped too: the place to map ends there (a hall's doors open on floor that goes on
-   to the map's edge). What is left is clustered again, whatever its length: the rest
-   of a long frontier is still one.
+   to the map's edge); with `bounds` (x0, y0, x1, y1: the site's outline the operator
+   gives, in the map's frame), the cells outside it. What is left is clustered again,
+   whatever its length: the rest of a long frontier is still one.
 3. `reach`: path lengths (m) from the robot over the cells its base may cross, as
    navigation plans (unknown counts as occupied there): known free and at least `pass_m`
    from every occupied or unknown cell (navigation's lethal inflation), 8-connected
@@ -195,6 +196,7 @@ def survey(
     looked: Sequence[Point] = (),
     aimed: Sequence[Point] = (),
     within: tuple[Point, float] | None = None,
+    bounds: tuple[float, float, float, float] | None = None,
 ) -> Survey:
     """The grid's frontiers and the next goal (see the module docstring): `failed` the
     goals navigation refused or failed, `looked` the places looked around from, `aimed`
@@ -227,6 +229,12 @@ def survey(
     if within is not None and mask.any():
         fc = np.argwhere(mask)
         drop = ~_near(centres(fc), [within[0]], within[1])
+        mask[fc[drop, 0], fc[drop, 1]] = False
+    if bounds is not None and mask.any():
+        fc = np.argwhere(mask)
+        xy = centres(fc)
+        x0_, y0_, x1_, y1_ = bounds
+        drop = (xy[:, 0] < x0_) | (xy[:, 0] > x1_) | (xy[:, 1] < y0_) | (xy[:, 1] > y1_)
         mask[fc[drop, 0], fc[drop, 1]] = False
     clusters = frontier_clusters(mask, res, 0.0)
     free = sub == FREE

@@ -171,3 +171,11 @@ def test_frontiers_beyond_the_radius_to_explore_are_left() -> None:
     near = survey(cells, RES, ORIGIN, (1.0, 2.0), within=((1.0, 2.0), 3.5))
     far = survey(cells, RES, ORIGIN, (1.0, 2.0), within=((1.0, 2.0), 2.5))
     assert near.goal is not None and far.clusters == 0 and far.goal is None
+
+
+def test_frontiers_outside_the_site_outline_are_left() -> None:
+    cells = room(8.0, 4.0)
+    cells[:, 80:] = UNKNOWN  # the frontier at x = 4 m
+    inside = survey(cells, RES, ORIGIN, (1.0, 2.0), bounds=(-1.0, -1.0, 6.0, 5.0))
+    outside = survey(cells, RES, ORIGIN, (1.0, 2.0), bounds=(-1.0, -1.0, 3.8, 5.0))
+    assert inside.goal is not None and outside.clusters == 0 and outside.goal is None
