@@ -421,6 +421,7 @@ def _unseen(seeds: Sequence[int], model: Path) -> list[int]:
     """`seeds` minus any in the model's training or validation ranges (from its sidecar)."""
     try:
         meta = json.loads(model.with_suffix(".json").read_text())
+        meta = meta.get("training", meta)  # the ranges sit under "training" in the sidecar
         ranges = [meta[k] for k in ("train_seeds", "val_seeds") if k in meta]
     except (OSError, ValueError):
         return list(seeds)
