@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +73,13 @@ def _trajectory(seconds: float, tmp: str) -> tuple[np.ndarray, np.ndarray]:
         s.wait_ready(["commander", "wiggle"], 60)
         s.spawn("sim")
         wait_clock(s, seconds)
-        got = {st.stamp_ns: st for st in states.drain()}
+        # the clock can be read before the last states reach this subscriber (a loaded
+        # machine): drain until the state stamped `seconds` is in, for at most 10 s
+        got: dict[int, RobotState] = {}
+        end, deadline = round(seconds * 1e9), time.monotonic() + 10.0
+        while (not got or max(got) < end) and time.monotonic() < deadline:
+            got.update({st.stamp_ns: st for st in states.drain()})
+            time.sleep(0.05)
         bases = {b.stamp_ns: b.base_position_in_world for b in truths.drain()}
     finally:
         s.stop()
