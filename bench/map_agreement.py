@@ -1,10 +1,10 @@
 """How well a map the robot built agrees with the world's floor plan (truth; evaluation only).
 
 `truth_on(world, shape, res, origin, z=None)` rasterises the world's obstacles (oriented
-boxes standing on the floor) on a map's grid: a cell is occupied when its centre lies in
-a box grown by half a cell (a box overlapping the cell, as the sim's own 5 cm grid
-does); with `z`, only the boxes whose height spans z (what a planar lidar at that
-height can see).
+boxes standing on the floor) on a map's grid as the sim rasterises its own 5 cm grid
+(`feasibility.rect_mask`): a cell is occupied when its centre lies in a box grown by half
+a cell (a box overlapping the cell); with `z`, only the boxes whose height spans z (what
+a planar lidar at that height can see).
 
 `agreement(cells, truth)`: over the cells the map knows (not unknown), the IoU of the
 occupied cells within one cell (5 cm): a map cell counts as agreeing when a truth cell
@@ -16,7 +16,6 @@ truth's free floor the map knows as free, and how much it knows at all.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -24,6 +23,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from common.messages.world import WorldDescription
+from services.sim.feasibility import rect_mask
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, 255
 
@@ -35,19 +35,16 @@ def truth_on(
     origin_xy: tuple[float, float],
     z: float | None = None,
 ) -> NDArray[np.bool_]:
-    xs = origin_xy[0] + (np.arange(shape[1]) + 0.5) * resolution_m
-    ys = origin_xy[1] + (np.arange(shape[0]) + 0.5) * resolution_m
-    X, Y = np.meshgrid(xs, ys)
+    xs = origin_xy[0] + (np.arange(shape[1], dtype=np.float64) + 0.5) * resolution_m
+    ys = origin_xy[1] + (np.arange(shape[0], dtype=np.float64) + 0.5) * resolution_m
     occ = np.zeros(shape, bool)
     h = 0.5 * resolution_m
     for ob in world.obstacles:
         cz, hz = ob.centre[2], ob.half_size[2]
         if z is not None and not (cz - hz <= z <= cz + hz):
             continue
-        c, s = math.cos(ob.yaw), math.sin(ob.yaw)
-        dx, dy = X - ob.centre[0], Y - ob.centre[1]
-        u, v = c * dx + s * dy, -s * dx + c * dy
-        occ |= (np.abs(u) <= ob.half_size[0] + h) & (np.abs(v) <= ob.half_size[1] + h)
+        hx, hy = ob.half_size[0] + h, ob.half_size[1] + h
+        occ |= rect_mask(xs, ys, ob.centre[:2], ob.yaw, (-hx, hx), (-hy, hy))
     return occ
 
 

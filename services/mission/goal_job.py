@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Literal
 
@@ -57,7 +58,7 @@ Ending = Literal["done", "stopped", "failed"]
 JobPosture = Literal["look", "stow"]
 
 
-class GoalJob:
+class GoalJob(ABC):
     """One job's life; `state`, `reason` and `detail` say where it stands. A job is
     `task` (`patrol`, `explore`); it holds the arm in `arm_posture` while it runs."""
 
@@ -81,17 +82,20 @@ class GoalJob:
 
     # -- what a job says ------------------------------------------------------------------
 
+    @abstractmethod
     def _walker(self) -> NavPatrol | None:
         """The goals to walk now; None: none this tick (the job may have ended itself)."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def _counts(self) -> tuple[int, int]:
         """(the viewpoint being walked to or looked around at, of how many)."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def _walked(self, w: NavPatrol) -> None:
         """The walker's last goal ended (the job goes on or ends)."""
-        raise NotImplementedError
+        ...
 
     def _last_walker(self) -> NavPatrol | None:
         """The walker whose goal a job that ends must cancel, and whose skips it counts."""

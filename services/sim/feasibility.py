@@ -86,7 +86,7 @@ def cell_of(grid: OccupancyGrid, x: float, y: float) -> tuple[int, int] | None:
     return None
 
 
-def _rect_mask(
+def rect_mask(
     xs: NDArray[np.float64],
     ys: NDArray[np.float64],
     centre_xy: tuple[float, float],
@@ -121,7 +121,7 @@ def rasterize(
     grow = 0.5 * resolution
     for ob in obstacles:
         hx, hy = ob.half_size[0] + grow, ob.half_size[1] + grow
-        mask = _rect_mask(xs, ys, ob.centre[:2], ob.yaw, (-hx, hx), (-hy, hy))
+        mask = rect_mask(xs, ys, ob.centre[:2], ob.yaw, (-hx, hx), (-hy, hy))
         cells[mask] = OCCUPIED
     return OccupancyGrid(resolution=resolution, origin=(x0, y0), cells=to_wire(cells))
 
@@ -157,7 +157,7 @@ def footprint_free(
     window = as_numpy(grid.cells)[min(iy) : max(iy) + 1, min(ix) : max(ix) + 1]
     xs, ys = cell_centres(grid)
     xs, ys = xs[min(ix) : max(ix) + 1], ys[min(iy) : max(iy) + 1]
-    mask = _rect_mask(xs, ys, (pose.x, pose.y), pose.yaw, x_range, y_range)
+    mask = rect_mask(xs, ys, (pose.x, pose.y), pose.yaw, x_range, y_range)
     return not bool(np.any(window[mask] != FREE))
 
 
