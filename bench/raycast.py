@@ -1,5 +1,6 @@
 """The trunk lidar's ranges ray-cast exactly against axis-aligned boxes (a slab test per
-box): the localization's and the SLAM's tests and `dume bench slam`."""
+box), and those boxes rasterised as the sim does: the localization's and the SLAM's tests
+and `dume bench slam`."""
 
 from __future__ import annotations
 
@@ -34,3 +35,17 @@ def slab_ranges(
             r = np.where((near <= far) & (near > 0.0), np.minimum(r, near), r)
     r = r + rng.normal(0.0, noise_m, len(r))
     return np.where(r < 10.0, r, 0.0)
+
+
+def overlap_grid(
+    boxes: list[Box], origin: tuple[float, float], shape: tuple[int, int], res: float
+) -> np.ndarray:
+    """The occupancy of axis-aligned boxes as the sim rasterises it: a cell is occupied
+    when the box overlaps it (its centre lies within the box grown by half a cell)."""
+    h = 0.5 * res
+    xs = origin[0] + (np.arange(shape[1]) + 0.5) * res
+    ys = origin[1] + (np.arange(shape[0]) + 0.5) * res
+    occ = np.zeros(shape, dtype=bool)
+    for x0, y0, x1, y1 in boxes:
+        occ |= ((xs > x0 - h) & (xs < x1 + h))[None, :] & ((ys > y0 - h) & (ys < y1 + h))[:, None]
+    return occ

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.raycast import ANGLES, T_BASE_LIDAR, Box, slab_ranges
+from bench.raycast import ANGLES, T_BASE_LIDAR, Box, overlap_grid, slab_ranges
 from common.config import LocalizationSettings, Overrides, load_config
 from services.localization.localizer import compose, inverse
 from services.localization.matcher import scan_points
@@ -70,14 +70,7 @@ def drifting_odometry(path: list[tuple[float, float, float]]) -> list[tuple[floa
 
 def hall_occupancy(grid: ScanGrid) -> np.ndarray:
     """The boxes rasterised on the SLAM grid (a cell is occupied when a box overlaps it)."""
-    res, (ox, oy) = grid.resolution_m, grid.origin_xy
-    xs = ox + (np.arange(grid.shape[1]) + 0.5) * res
-    ys = oy + (np.arange(grid.shape[0]) + 0.5) * res
-    occ = np.zeros(grid.shape, bool)
-    h = 0.5 * res
-    for x0, y0, x1, y1 in HALL:
-        occ |= ((xs > x0 - h) & (xs < x1 + h))[None, :] & ((ys > y0 - h) & (ys < y1 + h))[:, None]
-    return occ
+    return overlap_grid(HALL, grid.origin_xy, grid.shape, grid.resolution_m)
 
 
 def run_loop(s: LocalizationSettings | None = None) -> tuple[Slam, list[float]]:

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from bench import raycast
 from bench.raycast import slab_ranges
 from common import robot
 from common.config import LocalizationSettings
@@ -110,15 +111,7 @@ Box = tuple[float, float, float, float]  # x0, y0, x1, y1
 def overlap_grid(
     boxes: list[Box], origin: tuple[float, float], shape: tuple[int, int]
 ) -> np.ndarray:
-    """The occupancy of axis-aligned boxes as the sim rasterises it: a cell is occupied
-    when the box overlaps it (its centre lies within the box grown by half a cell)."""
-    h = 0.5 * RES
-    xs = origin[0] + (np.arange(shape[1]) + 0.5) * RES
-    ys = origin[1] + (np.arange(shape[0]) + 0.5) * RES
-    occ = np.zeros(shape, dtype=bool)
-    for x0, y0, x1, y1 in boxes:
-        occ |= ((xs > x0 - h) & (xs < x1 + h))[None, :] & ((ys > y0 - h) & (ys < y1 + h))[:, None]
-    return occ
+    return raycast.overlap_grid(boxes, origin, shape, RES)
 
 
 def cast_boxes(boxes: list[Box], pose: tuple[float, float, float], noise_m: float) -> np.ndarray:
