@@ -159,10 +159,9 @@ class Occupancy:
         """One frame's highest point per cell against the cells' running tops."""
         if len(flat) == 0:
             return
-        top = np.full(self.top_z.size, -np.inf)
-        np.maximum.at(top, flat, z)
-        cells = np.unique(flat)
-        seen = top[cells].astype(np.float32)
+        order = np.argsort(flat, kind="stable")
+        cells, first = np.unique(flat[order], return_index=True)
+        seen = np.maximum.reduceat(z[order], first).astype(np.float32)
         tz, tn = self.top_z.reshape(-1), self.top_n.reshape(-1)
         higher = seen > tz[cells] + TOP_TOL_M
         same = ~higher & (seen >= tz[cells] - TOP_TOL_M)
