@@ -111,9 +111,7 @@ def explored_overrides(world: str, seed: int) -> dict[str, Any]:
 EXPLORE_TIMEOUT_S = 2400.0
 
 
-def explore_first(
-    args: argparse.Namespace, stack: ProcessStack, world: WorldDescription, seed: int
-) -> dict[str, Any]:
+def explore_first(stack: ProcessStack, world: WorldDescription, seed: int) -> dict[str, Any]:
     """The exploration of world `seed` on its stack, and its map judged from truth."""
     bus, keys = stack.bus, stack.keys
     wall0 = time.perf_counter()
@@ -168,7 +166,7 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         explored = args.map == "explored"
         if explored:
             step = "explore the world"
-            result.exploration = explore_first(args, stack, read_world(bus), seed)
+            result.exploration = explore_first(stack, read_world(bus), seed)
         step = "read the world and the map"
         world, (arts, people) = read_world(bus), read_map(bus)
         pair = seeded_pair(arts, people, seed)
