@@ -51,7 +51,7 @@ def import_map(mf: MapFile, smap: SemanticMap, store: MapStore, views: ViewHisto
         )
         smap.occupancy.sensed_static()
         smap.static_source = "file"
-    smap.surfaces = list(mf.supports)
+    smap.surfaces = smap.surfaces_before = list(mf.supports)
     for tr in tracks_from_file(mf, "import"):
         smap.add(tr)
     save_all(smap, store, {"static_source": smap.static_source})

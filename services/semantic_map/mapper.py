@@ -56,7 +56,7 @@ from services.semantic_map.entities import IdBook, Observation, Track, measureme
 from services.semantic_map.looks import looks_at
 from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.people import PeopleTracker, merge_split_people
-from services.semantic_map.supports import surfaces_from_tops
+from services.semantic_map.supports import surfaces_from_tops, with_kept
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
 SELF_RADIUS_M = 0.7
@@ -131,6 +131,10 @@ class SemanticMap:
         #: a database or file while the tops find none); `surfaces_dirty`: not yet written.
         self.surfaces: list[SupportSurface] = []
         self.surfaces_dirty = False
+        #: The surfaces the map started with (a file's, a database's): kept where the
+        #: tops this run builds show nothing of them yet (a run from a saved map looks
+        #: at a few tables, and the others stay served).
+        self.surfaces_before: list[SupportSurface] = []
         #: The place this is a map of (`Config.map_site`), kept with it and its files.
         self.site = ""
         self._dirty: dict[str, Track] = {}
@@ -198,6 +202,7 @@ class SemanticMap:
         """The surfaces the tops layer shows now (kept as they were when it shows none)."""
         occ = self.occupancy
         found = surfaces_from_tops(occ.top_z, occ.top_n, occ.resolution_m, occ.origin_xy)
+        found = with_kept(found, self.surfaces_before)
         if found and found != self.surfaces:
             self.surfaces = found
             self.surfaces_dirty = True

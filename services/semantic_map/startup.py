@@ -92,6 +92,7 @@ def open_map(
     occ: Occupancy | None = None
     source: Literal["world", "file", "none"] = "none"
     counters: dict[str, int] = {}
+    surfaces: list[SupportSurface] = []
     if s.start == "prior":
         if not s.prior_file:
             raise ValueError("semantic_map.start = prior needs semantic_map.prior_file")
@@ -99,6 +100,7 @@ def open_map(
         check_site(f"the prior map file {s.prior_file}", mf.site, site)
         tracks = tracks_from_file(mf, "prior")
         counters = dict(mf.counters)
+        surfaces = list(mf.supports)
         if mf.occupancy is not None:
             occ, source = occupancy_from_grid(mf.occupancy, **occ_kw), "file"
             occ.sensed_static()
@@ -117,6 +119,7 @@ def open_map(
         occ = Occupancy.unknown(s.grid_half_extent_m, s.grid_resolution_m, **occ_kw)
     smap = SemanticMap(s, occ, counters)
     smap.static_source = source
+    smap.surfaces = smap.surfaces_before = surfaces
     for tr in tracks:
         smap.add(tr)
     smap.site = site
@@ -173,7 +176,7 @@ def _resume(
     smap.take_changes()
     smap.stamp_ns = int(snap.meta.get("stamp_ns", "0"))
     smap.static_source = _static_source(snap.meta.get("static_source", "none"))
-    smap.surfaces = _SURFACES.decode(snap.meta.get("supports", "[]"))
+    smap.surfaces = smap.surfaces_before = _SURFACES.decode(snap.meta.get("supports", "[]"))
     if smap.static_source in ("slam", "file"):
         occ.sensed_static()
     smap.site = site or snap.meta.get("site", "")

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import cv2
 import numpy as np
@@ -54,7 +54,7 @@ def surfaces_from_tops(
     top = (top_n >= min_frames) & (top_z >= z0) & (top_z <= z1)
     joined = ndimage.binary_closing(top, structure=np.ones((3, 3), bool)) | top
     labels, n = ndimage.label(joined, structure=np.ones((3, 3), bool))
-    out: list[tuple[tuple[float, float], SupportSurface]] = []
+    out: list[SupportSurface] = []
     for k in range(1, n + 1):
         patch = (labels == k) & top
         heights = top_z[patch]
@@ -70,22 +70,44 @@ def surfaces_from_tops(
         ).astype(np.float32)
         (cx, cy), (w, h), angle = cv2.minAreaRect(xy)
         out.append(
-            (
-                (round(cx, 1), round(cy, 1)),
-                SupportSurface(
-                    id="",
-                    centre_xy=(float(cx), float(cy)),
-                    half_extents=(0.5 * (w + resolution_m), 0.5 * (h + resolution_m)),
-                    yaw=float(np.radians(angle)),
-                    top_height=height,
-                ),
+            SupportSurface(
+                id="",
+                centre_xy=(float(cx), float(cy)),
+                half_extents=(0.5 * (w + resolution_m), 0.5 * (h + resolution_m)),
+                yaw=float(np.radians(angle)),
+                top_height=height,
             )
         )
-    out.sort(key=lambda e: e[0])
+    return _numbered(out)
+
+
+def _numbered(surfaces: Iterable[SupportSurface]) -> list[SupportSurface]:
+    """`surface_1`, `surface_2`, ... in order of their centres (to 0.1 m, x then y)."""
+    ordered = sorted(surfaces, key=lambda s: (round(s.centre_xy[0], 1), round(s.centre_xy[1], 1)))
     return [
         SupportSurface(f"surface_{i}", s.centre_xy, s.half_extents, s.yaw, s.top_height)
-        for i, (_, s) in enumerate(out, start=1)
+        for i, s in enumerate(ordered, start=1)
     ]
+
+
+def _inside(p: tuple[float, float], s: SupportSurface) -> bool:
+    c, si = np.cos(s.yaw), np.sin(s.yaw)
+    dx, dy = p[0] - s.centre_xy[0], p[1] - s.centre_xy[1]
+    u, v = c * dx + si * dy, -si * dx + c * dy
+    return abs(u) <= s.half_extents[0] and abs(v) <= s.half_extents[1]
+
+
+def with_kept(found: list[SupportSurface], kept: list[SupportSurface]) -> list[SupportSurface]:
+    """`found` (this run's tops) and those of `kept` (a saved map's) it shows nothing of:
+    no centre of either inside the other."""
+    if not kept:
+        return found
+    extra = [
+        k
+        for k in kept
+        if not any(_inside(k.centre_xy, f) or _inside(f.centre_xy, k) for f in found)
+    ]
+    return _numbered([*found, *extra]) if extra else found
 
 
 class FloorPlanSupports:

@@ -9,15 +9,18 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from common.config import SemanticMapSettings
+from common.messages.world import SupportSurface
 from services.semantic_map.exchange import export_map
+from services.semantic_map.mapfile import write_map_file
 from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.startup import open_map, save_all
 from services.semantic_map.store import MapStore
-from services.semantic_map.supports import surfaces_from_tops
+from services.semantic_map.supports import surfaces_from_tops, with_kept
 
 RES = 0.05
 
@@ -87,6 +90,45 @@ def test_the_surfaces_survive_the_database_and_the_map_file(tmp_path: Path) -> N
     assert np.array_equal(again.occupancy.top_n, smap.occupancy.top_n)
     again.find_surfaces()
     assert again.surfaces == smap.surfaces
+
+
+def test_a_map_started_from_a_file_serves_its_supports_until_this_run_sees_them(
+    tmp_path: Path,
+) -> None:
+    s = SemanticMapSettings(floor_plan="none", grid_half_extent_m=5.0)
+    occ = occupancy()
+    for _ in range(3):
+        occ.integrate(top(1.0, 2.0, (0.8, 0.35), 0.0, 0.9))
+        occ.integrate(top(-2.0, -1.0, (0.5, 0.3), 0.0, 0.75))
+    explored = SemanticMap(s, occ, {})
+    explored.find_surfaces()
+    assert len(explored.surfaces) == 2
+    path = tmp_path / "saved.json"
+    write_map_file(path, export_map(explored))
+
+    prior = msgspec.structs.replace(s, start="prior", prior_file=str(path))
+    smap, _how = open_map(prior, MapStore(tmp_path / "m.sqlite"), lambda: None)
+    assert smap.surfaces == explored.surfaces and smap.static_source == "file"
+    smap.find_surfaces()  # no tops yet: the file's
+    assert smap.surfaces == explored.surfaces
+    for _ in range(3):  # this run sees the first table, a little off: its own, and the other
+        smap.occupancy.integrate(top(1.02, 2.0, (0.8, 0.35), 0.0, 0.9))
+    smap.find_surfaces()
+    assert [round(x.top_height, 2) for x in smap.surfaces] == [0.75, 0.9]
+    assert [x.id for x in smap.surfaces] == ["surface_1", "surface_2"]
+    assert abs(smap.surfaces[1].centre_xy[0] - 1.02) < 0.03  # this run's, not the file's
+
+
+def test_kept_surfaces_give_way_to_any_found_over_them() -> None:
+    def surface(x: float, y: float, half: float) -> SupportSurface:
+        return SupportSurface("", (x, y), (half, half), 0.0, 0.8)
+
+    kept = [surface(0.0, 0.0, 0.5), surface(3.0, 0.0, 0.5), surface(6.0, 0.0, 0.1)]
+    found = [surface(0.3, 0.3, 0.5), surface(6.05, 0.0, 1.0)]  # over the 1st and the 3rd
+    out = with_kept(found, kept)
+    assert [x.centre_xy for x in out] == [(0.3, 0.3), (3.0, 0.0), (6.05, 0.0)]
+    assert [x.id for x in out] == ["surface_1", "surface_2", "surface_3"]
+    assert with_kept(found, []) == found
 
 
 def test_beside_a_lidar_wall_the_depth_learns_nothing_elsewhere_it_does() -> None:
