@@ -53,6 +53,14 @@ from common.messages.world import SupportSurface
 from services.semantic_map.appearance import colour_histogram
 from services.semantic_map.artifacts import ArtifactTracker
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
+from services.semantic_map.evidence import (
+    PERSON_MERGE_M,
+    PERSON_REACH_M,
+    PERSON_RECENT_NS,
+    artifact_doubt,
+    person_doubt,
+    surface_under,
+)
 from services.semantic_map.looks import looks_at
 from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.people import PeopleTracker, merge_split_people
@@ -64,8 +72,6 @@ SELF_RADIUS_M = 0.7
 #: between LEARN_DEPTH_M (m).
 LEARN_STRIDE = 4
 LEARN_DEPTH_M = (0.05, 6.0)
-#: Person detections of one frame closer than this are one person, m.
-PERSON_MERGE_M = 0.4
 #: A person is looked for at this height above their floor point, m (the chest).
 PERSON_LOOK_HEIGHT_M = 1.0
 #: Detections farther than this (d_obj, m) are not fused: the segmenter is validated
@@ -240,9 +246,44 @@ class SemanticMap:
         (module docstring)."""
         inside = self._near_static(people, self.settings.person_obstacle_margin_m)
         on_robot = on_footprint(people, T_world_base, SELF_MARGIN_M)
-        bad = [a or b for a, b in zip(inside, on_robot, strict=True)]
+        bad = [
+            a or b or bool(self._doubt_person(o.xy))
+            for a, b, o in zip(inside, on_robot, people, strict=True)
+        ]
         report.ignored += sum(bad)
         return [o for o, b in zip(people, bad, strict=True) if not b]
+
+    def _doubt_person(self, xy: FloatArray) -> str:
+        """`evidence.person_doubt` on this map (the floor check on a sensed static layer)."""
+        sensed = self.static_source in ("slam", "file")
+        return person_doubt(xy, self.surfaces, self.occupancy if sensed else None)
+
+    def _doubt_artifact(self, xy: FloatArray, z: float, t: int) -> str:
+        """`evidence.artifact_doubt`, and off every surface beside a person seen lately."""
+        why = artifact_doubt(xy, z, self.surfaces)
+        if why or not self.surfaces or surface_under(xy, self.surfaces) is not None:
+            return why
+        for tr in self.people.confirmed:
+            if t - tr.last_seen_ns <= PERSON_RECENT_NS and np.linalg.norm(tr.xy - xy) < (
+                PERSON_REACH_M
+            ):
+                return f"on no surface, {np.linalg.norm(tr.xy - xy):.2f} m from {tr.id}"
+        return ""
+
+    def drop_doubtful(self) -> list[tuple[str, str]]:
+        """Delete the entities the map made itself that its surfaces and floor now say
+        cannot be (`evidence`): (id, reason)."""
+        out: list[tuple[Track, str]] = []
+        for tr in [*self.artifacts.confirmed, *self.people.confirmed]:
+            if tr.source != "perception":
+                continue
+            if tr.kind == "person":
+                why = self._doubt_person(tr.xy)
+            else:
+                why = self._doubt_artifact(tr.xy, tr.z, self.stamp_ns)
+            if why:
+                out.append((tr, f"not where a {tr.class_name} can be: {why}"))
+        return self._delete(out)
 
     def _near_static(self, observations: list[Observation], margin_m: float) -> list[bool]:
         """Whether each observation's place is within `margin_m` of a static obstacle cell
@@ -292,6 +333,9 @@ class SemanticMap:
         if on_person:
             report.ignored += len(on_person)
             arts = [o for o in arts if all(o is not q for q in on_person)]
+        kept = [o for o in arts if not self._doubt_artifact(o.xy, o.z, t)]
+        report.ignored += len(arts) - len(kept)
+        arts = kept
         before = {id(tr) for tr in self.tracks()}
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)

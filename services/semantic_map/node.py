@@ -179,6 +179,8 @@ class MapNode:
                 self._fuse_due(b, gate)
                 if self.cfg.floor_plan != "world" and b % NS_PER_S == 0:
                     self.smap.find_surfaces()
+                    for entity_id, why in self.smap.drop_doubtful():
+                        log.info("t=%.2f s: %s deleted: %s", b / NS_PER_S, entity_id, why)
                 self.committer.commit(self.smap, b)
                 self.logger.log(b, self.smap)
                 self.views.record(self.smap, b)

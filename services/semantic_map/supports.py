@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -90,11 +90,14 @@ def _numbered(surfaces: Iterable[SupportSurface]) -> list[SupportSurface]:
     ]
 
 
-def _inside(p: tuple[float, float], s: SupportSurface) -> bool:
+def inside(
+    p: Sequence[float] | NDArray[np.float64], s: SupportSurface, margin_m: float = 0.0
+) -> bool:
+    """Whether the point p (x, y) lies on surface s's rectangle grown by `margin_m`."""
     c, si = np.cos(s.yaw), np.sin(s.yaw)
-    dx, dy = p[0] - s.centre_xy[0], p[1] - s.centre_xy[1]
+    dx, dy = float(p[0]) - s.centre_xy[0], float(p[1]) - s.centre_xy[1]
     u, v = c * dx + si * dy, -si * dx + c * dy
-    return abs(u) <= s.half_extents[0] and abs(v) <= s.half_extents[1]
+    return bool(abs(u) <= s.half_extents[0] + margin_m and abs(v) <= s.half_extents[1] + margin_m)
 
 
 def with_kept(found: list[SupportSurface], kept: list[SupportSurface]) -> list[SupportSurface]:
@@ -103,9 +106,7 @@ def with_kept(found: list[SupportSurface], kept: list[SupportSurface]) -> list[S
     if not kept:
         return found
     extra = [
-        k
-        for k in kept
-        if not any(_inside(k.centre_xy, f) or _inside(f.centre_xy, k) for f in found)
+        k for k in kept if not any(inside(k.centre_xy, f) or inside(f.centre_xy, k) for f in found)
     ]
     return _numbered([*found, *extra]) if extra else found
 

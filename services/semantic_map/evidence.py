@@ -1,0 +1,107 @@
+"""Where a thing can be: the map's own geometry as evidence against false entries.
+
+A map the robot builds from nothing has no floor plan to tell it that a "box" is a table's
+edge; it has its support surfaces (the tops layer's tables and benches, `supports`) and its
+occupancy. The segmenter's false positives there fall in a few places a person would
+dismiss at a glance (the explored small and hall worlds: boxes flat on a table top, bottles
+under one, bottles on a person, a "person" standing in a table, people beyond the walls),
+so these rules hold for every detection and for every entity the map made itself:
+
+- an artifact over a support stands on it: its visible centroid lies between
+  `ABOVE_TOP_M` above the top (the smallest object's half height, less the depth's
+  noise; a mask flat on the top is the top) and the tallest artifact's height above it;
+  one below the top is the table's apron or legs;
+- an artifact off every support within `PERSON_REACH_M` of a person the map saw lately
+  is the person's hand or clothes (the same frame's person detections already drop
+  them; this catches the frames where the person is cut off or not detected);
+- a person does not stand inside a support's top, nor where the map knows no floor
+  (`KNOWN_FLOOR_M` around the place, on a lidar or file map: beyond the walls the depth
+  reads through gaps).
+
+The rules read the map's surfaces, so they apply on a map with no floor plan (the floor
+plan's ablation keeps the static-obstacle checks of `mapper`). Pure functions; the
+mapper applies them to each frame's observations and, when the surfaces change, to the
+entities it made itself (`source` perception), which it deletes with the reason.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.geometry import FloatArray
+from common.messages.world import SupportSurface
+from services.semantic_map.occupancy import FREE, Occupancy
+from services.semantic_map.supports import inside
+
+#: An artifact's visible centroid above the support's top, m: the flattest artifact (a
+#: box 8 cm tall) shows its top face and front, 4-8 cm up; a mask on the top itself sits
+#: within the tops' error of it (2-3 cm on the explored small world); the tallest
+#: artifact stands 0.25 m.
+ABOVE_TOP_M = (0.03, 0.45)
+#: A place within this of a surface's rectangle is over it, m (the rectangle is the
+#: tops' minimum-area one: a little short of the edge the camera saw).
+SURFACE_MARGIN_M = 0.05
+#: A person stands where the map knows floor within this, m (a person's blob and its
+#: shadow are unknown or occupied, the floor around them free).
+KNOWN_FLOOR_M = 0.35
+#: Person detections of one frame closer than this are one person, and an artifact
+#: detection this close to one of them is their clothes (`mapper`), m.
+PERSON_MERGE_M = 0.4
+#: An artifact off every surface this close to a person the map saw within
+#: `PERSON_RECENT_NS` is in their hand or on their clothes (an arm's reach from the
+#: person's axis point), m.
+PERSON_REACH_M = 0.6
+PERSON_RECENT_NS = 10_000_000_000
+
+
+def surface_under(
+    xy: FloatArray, surfaces: list[SupportSurface], margin_m: float = SURFACE_MARGIN_M
+) -> SupportSurface | None:
+    """The surface whose rectangle (grown by `margin_m`) holds `xy` (the highest one)."""
+    under = [s for s in surfaces if inside(xy, s, margin_m)]
+    return max(under, key=lambda s: s.top_height) if under else None
+
+
+def artifact_doubt(xy: FloatArray, z: float, surfaces: list[SupportSurface]) -> str:
+    """Why an artifact at (xy, z) (its visible centroid) cannot be one; "" when it can."""
+    s = surface_under(xy, surfaces)
+    if s is None:
+        return ""
+    above = z - s.top_height
+    if above < ABOVE_TOP_M[0]:
+        where = "below" if above < -ABOVE_TOP_M[0] else "flat on"
+        return f"{where} the top of {s.id} ({s.top_height:.2f} m) at {z:.2f} m: the surface itself"
+    if above > ABOVE_TOP_M[1]:
+        return f"{above:.2f} m above the top of {s.id}: taller than any artifact"
+    return ""
+
+
+def person_doubt(
+    xy: FloatArray, surfaces: list[SupportSurface], occupancy: Occupancy | None = None
+) -> str:
+    """Why a person at xy cannot be one; "" when they can. `occupancy`: check the floor
+    around them too (a map whose static layer the robot sensed)."""
+    s = surface_under(xy, surfaces, 0.0)
+    if s is not None:
+        return f"inside the top of {s.id}"
+    if occupancy is not None and not known_floor_near(occupancy, xy, KNOWN_FLOOR_M):
+        return f"no floor the map knows within {KNOWN_FLOOR_M:g} m (beyond a wall?)"
+    return ""
+
+
+def known_floor_near(occupancy: Occupancy, xy: FloatArray, radius_m: float) -> bool:
+    """Whether a cell within `radius_m` of xy is known floor: free in the static layer,
+    or seen as floor by the depth (the merged grid's free cells, but for learned
+    obstacles: a person's own cells are not floor anyway)."""
+    res = occupancy.resolution_m
+    ix = int(np.floor((float(xy[0]) - occupancy.origin_xy[0]) / res))
+    iy = int(np.floor((float(xy[1]) - occupancy.origin_xy[1]) / res))
+    r = int(np.ceil(radius_m / res))
+    h, w = occupancy.static.shape
+    y0, y1, x0, x1 = max(0, iy - r), min(h, iy + r + 1), max(0, ix - r), min(w, ix + r + 1)
+    if y0 >= y1 or x0 >= x1:
+        return False
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    disc = (yy - iy) ** 2 + (xx - ix) ** 2 <= r * r
+    floor = (occupancy.static[y0:y1, x0:x1] == FREE) | occupancy.seen_free[y0:y1, x0:x1]
+    return bool(np.any(floor & disc))

@@ -1,0 +1,149 @@
+"""The map's own geometry against false entries (`services.semantic_map.evidence`): the
+cases the explored small world showed (boxes flat on a table top, bottles under it, a
+"person" in the table, one beyond the walls, bottles on a person), as pure rules and
+through the mapper's frames."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.config import SemanticMapSettings
+from common.geometry import make_T
+from common.messages import to_wire
+from common.messages.perception import Detection, Detections
+from common.messages.world import SupportSurface
+from common.robot_description import R_FORWARD_OPTICAL
+from services.semantic_map.entities import Track
+from services.semantic_map.evidence import (
+    artifact_doubt,
+    known_floor_near,
+    person_doubt,
+    surface_under,
+)
+from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.occupancy import FREE, OCCUPIED, UNKNOWN, Occupancy
+
+S = 1_000_000_000
+#: A table 1.4 x 0.8 m at (2, 0), top at 0.8 m, turned 90°.
+TABLE = SupportSurface("surface_1", (2.0, 0.0), (0.7, 0.4), np.pi / 2, 0.8)
+
+
+def test_an_artifact_over_a_surface_stands_on_its_top() -> None:
+    assert surface_under(np.array([2.3, 0.6]), [TABLE]) is TABLE  # along the turned length
+    assert surface_under(np.array([2.6, 0.0]), [TABLE]) is None  # beyond its width
+    assert artifact_doubt(np.array([2.0, 0.3]), 0.87, [TABLE]) == ""  # a box 8 cm tall
+    assert artifact_doubt(np.array([2.0, 0.3]), 0.91, [TABLE]) == ""  # a bottle
+    flat = artifact_doubt(np.array([2.0, 0.3]), 0.82, [TABLE])
+    assert flat.startswith("flat on the top of surface_1")
+    assert artifact_doubt(np.array([2.0, 0.3]), 0.62, [TABLE]).startswith("below the top")
+    assert "taller than any artifact" in artifact_doubt(np.array([2.0, 0.3]), 1.4, [TABLE])
+    assert artifact_doubt(np.array([5.0, 0.0]), 0.2, [TABLE]) == ""  # off every surface: no say
+
+
+def _floor_map() -> Occupancy:
+    """A 4 x 4 m room: free inside, a wall at x = 1.5 m, unknown beyond it."""
+    cells = np.full((80, 80), UNKNOWN, np.uint8)
+    cells[:, :70] = FREE
+    cells[:, 70:72] = OCCUPIED
+    occ = Occupancy(cells, 0.05, (-2.0, -2.0))
+    occ.sensed_static()
+    return occ
+
+
+def test_a_person_stands_on_floor_and_not_in_a_table() -> None:
+    occ = _floor_map()
+    assert known_floor_near(occ, np.array([0.0, 0.0]), 0.35)
+    assert not known_floor_near(occ, np.array([1.95, 0.0]), 0.35)  # 0.4 m behind the wall
+    assert person_doubt(np.array([0.0, 0.0]), [TABLE], occ) == ""
+    assert person_doubt(np.array([1.95, 0.0]), [], occ).startswith("no floor the map knows")
+    assert person_doubt(np.array([1.95, 0.0]), [], None) == ""  # a floor plan's map: no say
+    assert person_doubt(np.array([2.1, 0.2]), [TABLE], None) == "inside the top of surface_1"
+
+
+# -- through the mapper ---------------------------------------------------------------------
+
+W, H = 320, 240
+T_BASE_CAMERA = make_T(R_FORWARD_OPTICAL, (0.0, 0.0, 0.8))
+
+
+def _det(cls: str, x: float, y: float, z: float) -> Detection:
+    p = (x, y, z)
+    return Detection(
+        class_name=cls,
+        score=0.9,
+        bbox=(10, 10, 12, 12),
+        mask=to_wire(np.ones((2, 2), np.uint8)),
+        centroid_in_base_yaw=p,
+        centroid_in_world=p,
+        axis_in_world=p,
+        extent=(0.1, 0.1, 0.1),
+        d_obj=float(np.hypot(x, y)),
+        theta_obj=0.0,
+        n_points=50,
+    )
+
+
+def _ingest(smap: SemanticMap, t: int, *dets: Detection) -> int:
+    msg = Detections(
+        stamp_ns=t,
+        camera="camera_head",
+        T_world_base=tuple(np.eye(4).ravel().tolist()),
+        segmenter="network",
+        detections=list(dets),
+    )
+    return smap.ingest(msg).ignored
+
+
+def _explored_map() -> SemanticMap:
+    smap = SemanticMap(SemanticMapSettings(floor_plan="none"), _floor_map(), {})
+    smap.static_source = "slam"
+    t = TABLE  # the same table, in the room: at (0.8, 0)
+    smap.surfaces = [SupportSurface(t.id, (0.8, 0.0), t.half_extents, t.yaw, t.top_height)]
+    return smap
+
+
+def test_the_mapper_ignores_what_cannot_be_and_keeps_what_can() -> None:
+    smap = _explored_map()
+    for k in range(6):
+        t = (k + 1) * S // 10
+        ignored = _ingest(
+            smap,
+            t,
+            _det("bottle", 0.8, 0.2, 0.9),  # on the table
+            _det("box", 0.8, -0.2, 0.81),  # the table's top read as a box
+            _det("can", 0.9, 0.0, 0.55),  # under it: its legs
+            _det("person", 0.8, 0.1, 1.0),  # in it
+            _det("person", 1.9, 0.5, 1.0),  # beyond the wall
+            _det("person", -1.0, 1.0, 1.0),  # on the floor
+        )
+        assert ignored == 4
+    assert [t.class_name for t in smap.artifacts.confirmed] == ["bottle"]
+    assert len(smap.people.confirmed) == 1
+    # a bottle in the person's hand: off every surface and within reach of them
+    for k in range(6):
+        _ingest(smap, S + k * S // 10, _det("bottle", -1.0, 1.45, 1.0))
+    assert [t.class_name for t in smap.artifacts.confirmed] == ["bottle"]
+
+
+def test_entries_the_map_made_are_deleted_once_its_surfaces_say_they_cannot_be() -> None:
+    smap = _explored_map()
+    surfaces, smap.surfaces = smap.surfaces, []  # made before the table was seen from above
+
+    def track(name: str, xy: tuple[float, float], z: float, source: str = "perception") -> str:
+        cls = name.split("_")[0]
+        kind = "person" if cls == "person" else "artifact"
+        smap.add(Track(cls, kind, np.array(xy), np.eye(2) * 0.01, z, source, id=name))  # type: ignore[arg-type]
+        return name
+
+    box = track("box_1", (0.8, -0.2), 0.81)
+    bottle = track("bottle_1", (0.8, 0.2), 0.9)
+    seated = track("person_1", (0.8, 0.1), 0.0)
+    prior = track("can_1", (0.9, 0.0), 0.55, "prior")  # another run's: not for this one to judge
+    assert smap.drop_doubtful() == []
+    smap.surfaces = surfaces
+    dropped = dict(smap.drop_doubtful())
+    assert set(dropped) == {box, seated}
+    assert dropped[box].startswith("not where a box can be: flat on the top of surface_1")
+    assert dropped[seated] == "not where a person can be: inside the top of surface_1"
+    assert {t.id for t in smap.tracks()} == {bottle, prior}
+    assert set(smap.take_deletions()) == {box, seated}
