@@ -9,7 +9,6 @@ import numpy as np
 
 from common.config import SemanticMapSettings
 from common.geometry import make_T
-from common.messages import to_wire
 from common.messages.perception import Detection, Detections
 from common.messages.world import SupportSurface
 from common.robot_description import R_FORWARD_OPTICAL
@@ -22,6 +21,7 @@ from services.semantic_map.evidence import (
 )
 from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import FREE, OCCUPIED, UNKNOWN, Occupancy
+from tests.unit.map_fakes import detection
 
 S = 1_000_000_000
 #: A table 1.4 x 0.8 m at (2, 0), top at 0.8 m, turned 90°.
@@ -66,23 +66,6 @@ W, H = 320, 240
 T_BASE_CAMERA = make_T(R_FORWARD_OPTICAL, (0.0, 0.0, 0.8))
 
 
-def _det(cls: str, x: float, y: float, z: float) -> Detection:
-    p = (x, y, z)
-    return Detection(
-        class_name=cls,
-        score=0.9,
-        bbox=(10, 10, 12, 12),
-        mask=to_wire(np.ones((2, 2), np.uint8)),
-        centroid_in_base_yaw=p,
-        centroid_in_world=p,
-        axis_in_world=p,
-        extent=(0.1, 0.1, 0.1),
-        d_obj=float(np.hypot(x, y)),
-        theta_obj=0.0,
-        n_points=50,
-    )
-
-
 def _ingest(smap: SemanticMap, t: int, *dets: Detection) -> int:
     msg = Detections(
         stamp_ns=t,
@@ -109,19 +92,19 @@ def test_the_mapper_ignores_what_cannot_be_and_keeps_what_can() -> None:
         ignored = _ingest(
             smap,
             t,
-            _det("bottle", 0.8, 0.2, 0.9),  # on the table
-            _det("box", 0.8, -0.2, 0.81),  # the table's top read as a box
-            _det("can", 0.9, 0.0, 0.55),  # under it: its legs
-            _det("person", 0.8, 0.1, 1.0),  # in it
-            _det("person", 1.9, 0.5, 1.0),  # beyond the wall
-            _det("person", -1.0, 1.0, 1.0),  # on the floor
+            detection("bottle", 0.8, 0.2, 0.9),  # on the table
+            detection("box", 0.8, -0.2, 0.81),  # the table's top read as a box
+            detection("can", 0.9, 0.0, 0.55),  # under it: its legs
+            detection("person", 0.8, 0.1, 1.0),  # in it
+            detection("person", 1.9, 0.5, 1.0),  # beyond the wall
+            detection("person", -1.0, 1.0, 1.0),  # on the floor
         )
         assert ignored == 4
     assert [t.class_name for t in smap.artifacts.confirmed] == ["bottle"]
     assert len(smap.people.confirmed) == 1
     # a bottle in the person's hand: off every surface and within reach of them
     for k in range(6):
-        _ingest(smap, S + k * S // 10, _det("bottle", -1.0, 1.45, 1.0))
+        _ingest(smap, S + k * S // 10, detection("bottle", -1.0, 1.45, 1.0))
     assert [t.class_name for t in smap.artifacts.confirmed] == ["bottle"]
 
 

@@ -19,6 +19,7 @@ from services.semantic_map.entities import Track
 from services.semantic_map.mapper import IngestReport, SemanticMap
 from services.semantic_map.occupancy import OCCUPIED, Occupancy
 from services.semantic_map.store import MapStore
+from tests.unit.map_fakes import detection
 
 S = 100_000_000
 W, H = 320, 240
@@ -45,20 +46,7 @@ def _frame(t: int) -> CameraFrame:
 
 
 def _det(cls: str, xy: tuple[float, float]) -> Detection:
-    p = (xy[0], xy[1], 0.5)
-    return Detection(
-        class_name=cls,
-        score=0.9,
-        bbox=(10, 10, 12, 12),
-        mask=to_wire(np.ones((2, 2), np.uint8)),
-        centroid_in_base_yaw=p,
-        centroid_in_world=p,
-        axis_in_world=p,
-        extent=(0.1, 0.1, 0.1),
-        d_obj=float(np.hypot(*xy)),
-        theta_obj=0.0,
-        n_points=50,
-    )
+    return detection(cls, *xy)
 
 
 def _ingest(smap: SemanticMap, t: int, *dets: Detection) -> IngestReport:
