@@ -383,6 +383,13 @@ class SemanticMapSettings(_Section):
     appearance_weight: NonNegative = 4.0
     #: Learned obstacles: frames a cell must be seen occupied in, heights counted, m.
     obstacle_hits: PositiveInt = 3
+    #: On a static layer the robot sensed (its SLAM grid, a saved map), the frames a cell
+    #: must be seen in, and how far from the lidar's obstacles (walls, machines: not a
+    #: table's legs) the depth learns none, m: the pose's error paints a wall's face 10-25
+    #: cm in front of it from far away, and the lidar has that face already (the explored
+    #: small world: the learned layer's false cells 930 → 10, the map's IoU 0.66 → 0.92).
+    obstacle_hits_sensed: PositiveInt = 12
+    sensed_clearance_m: NonNegative = 0.2
     obstacle_z_m: tuple[FiniteFloat, FiniteFloat] = (0.15, 1.9)
     #: Grid extent when no floor plan gives one (a square about the origin), m.
     grid_half_extent_m: Positive = 15.0

@@ -47,7 +47,7 @@ def import_map(mf: MapFile, smap: SemanticMap, store: MapStore, views: ViewHisto
     if mf.occupancy is not None:
         occ = smap.occupancy
         smap.occupancy = occupancy_from_grid(
-            mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range
+            mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range, sensed=occ.sensed
         )
         smap.occupancy.sensed_static()
         smap.static_source = "file"

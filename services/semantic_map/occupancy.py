@@ -28,6 +28,9 @@ FLOOR_Z_M = 0.05
 TOP_TOL_M = 0.03
 #: An obstacle blob of a lidar map at most this across may be a person standing, m.
 PERSON_BLOB_M = 0.8
+#: A sensed static layer's blobs at most this across are a table's or a bench's legs: the
+#: depth learns the top above them (`Occupancy.sensed`), m.
+LEG_BLOB_M = 0.3
 
 
 def without_blobs(occupied: NDArray[np.bool_], max_cells: float) -> NDArray[np.bool_]:
@@ -54,6 +57,7 @@ class Occupancy:
         z_range: tuple[float, float] = (0.15, 1.9),
         hits: NDArray[np.uint16] | None = None,
         tops: tuple[NDArray[np.float32], NDArray[np.uint16]] | None = None,
+        sensed: tuple[int, float] = (3, 0.05),
     ) -> None:
         self.static = np.ascontiguousarray(static, dtype=np.uint8)
         #: The static layer's obstacle cells (changed only by `adopt_static`).
@@ -61,10 +65,12 @@ class Occupancy:
         #: The static obstacles nobody stands on (a floor plan's all; of a SLAM grid, not
         #: the blobs a standing person leaves: `adopt_static`).
         self.furniture: NDArray[np.bool_] = self.static_occupied
-        #: Of a sensed static layer, its obstacles grown by a cell: the depth learns no
-        #: obstacle there (the lidar saw that face; the depth's noise and the pose's would
-        #: only thicken it inwards). None for a floor plan.
+        #: Of a sensed static layer, its obstacles (but small blobs: legs) grown by
+        #: `sensed[1]` m: the depth learns no obstacle there (the lidar saw that face; the
+        #: depth's noise and the pose's would only paint it again in front). None for a
+        #: floor plan. There, a cell is learned after `sensed[0]` frames, not `hits_needed`.
         self.beside_static: NDArray[np.bool_] | None = None
+        self.sensed = sensed
         self.resolution_m = float(resolution_m)
         self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))
         self.hits_needed = hits_needed
@@ -113,9 +119,15 @@ class Occupancy:
         `furniture` leaves out the blobs a person standing could have left in it, and the
         depth learns nothing beside its obstacles (`beside_static`)."""
         self.furniture = without_blobs(self.static_occupied, PERSON_BLOB_M / self.resolution_m)
-        self.beside_static = ndimage.binary_dilation(
-            self.static_occupied, structure=np.ones((3, 3), bool)
-        )
+        hits, clearance_m = self.sensed
+        self.hits_needed = hits
+        reach = round(clearance_m / self.resolution_m)
+        structure = without_blobs(self.static_occupied, LEG_BLOB_M / self.resolution_m)
+        self.beside_static = (
+            ndimage.binary_dilation(structure, structure=np.ones((3, 3), bool), iterations=reach)
+            if reach > 0
+            else structure
+        ) | self.static_occupied
 
     @classmethod
     def unknown(cls, half_extent_m: float, resolution_m: float, **kw: object) -> Occupancy:

@@ -85,7 +85,11 @@ def open_map(
     """The map and a sentence saying where it came from. `world()` fetches the sim's
     description (None when there is none); it is called only when needed. `site`: the
     place the map must be of (`MapSiteError` otherwise)."""
-    occ_kw = dict(hits_needed=s.obstacle_hits, z_range=tuple(s.obstacle_z_m))
+    occ_kw = dict(
+        hits_needed=s.obstacle_hits,
+        z_range=tuple(s.obstacle_z_m),
+        sensed=(s.obstacle_hits_sensed, s.sensed_clearance_m),
+    )
     if not store.is_empty():
         return _resume(s, store, occ_kw, site)
     tracks: list[Track] = []

@@ -148,6 +148,27 @@ def test_beside_a_lidar_wall_the_depth_learns_nothing_elsewhere_it_does() -> Non
     assert (cells == 100).sum() > static.astype(bool).sum() + 100  # the table was learned
 
 
+def test_on_a_sensed_layer_the_depth_leaves_walls_to_the_lidar_but_learns_tables() -> None:
+    """The explored small world's settings: 12 frames, nothing within 0.2 m of a wall or a
+    machine; a table's legs are small blobs: the top above and beside them is learned."""
+    occ = Occupancy.unknown(2.0, RES, hits_needed=3, sensed=(12, 0.2))
+    static = np.full(occ.static.shape, 0, np.uint8)
+    static[:, 60] = 100  # a wall's face at x = 1.0–1.05
+    for lx, ly in ((-1.3, -0.2), (-1.3, 0.15), (-0.75, -0.2), (-0.75, 0.15)):  # 4 legs
+        static[int((ly + 2.0) / RES), int((lx + 2.0) / RES)] = 100
+    occ.adopt_static(static)
+    ghost = np.column_stack([np.full(20, 0.87), np.linspace(-0.5, 0.5, 20), np.full(20, 1.0)])
+    table = top(-1.0, 0.0, (0.3, 0.2), 0.0, 0.75)
+    for k in range(12):
+        occ.integrate(np.concatenate([ghost, table]))
+        learned = occ.learned_mask()
+        assert learned.any() == (k == 11)  # not before the 12th frame
+    assert not learned[:, 55:60].any()  # the wall's face painted 15 cm in front: the lidar's
+    leg = (int((-0.2 + 2.0) / RES), int((-1.3 + 2.0) / RES))
+    assert learned[leg[0] + 1, leg[1] + 1]  # the top beside a leg
+    assert learned.sum() >= 90  # the whole top (0.6 x 0.4 m: 96 cells), but the legs
+
+
 def test_a_mapped_person_standing_leaves_no_obstacle_in_the_lidar_map() -> None:
     """The SLAM grid holds a blob where a person stood: with that person mapped there the
     blob is theirs (unknown), while a pillar's blob nobody stands at and a bench beside
