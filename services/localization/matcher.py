@@ -59,6 +59,10 @@ class LikelihoodField:
     #: central differences (`grad_x`, `grad_y` unused): on a map of one scan's thin lines
     #: of cells the differences vanish on the lines, where the scan's returns lie.
     exact_gradient: bool = False
+    #: Cells the map has seen (a return or a beam through them); None: all. A point in an
+    #: unseen cell is "off the map" (the cap, no gradient): a wall's unseen part is no
+    #: wall's end to pull the points toward.
+    known: npt.NDArray[np.bool_] | None = None
 
     @classmethod
     def of_grid(
@@ -68,6 +72,7 @@ class LikelihoodField:
         origin: tuple[float, float],
         max_dist_m: float = 1.0,
         exact_gradient: bool = False,
+        known: npt.NDArray[np.bool_] | None = None,
     ) -> LikelihoodField:
         # Zero on the outermost occupied cells' centres: a cell is occupied when an
         # obstacle overlaps it at all, so a face lies anywhere in its boundary cell, on
@@ -78,7 +83,7 @@ class LikelihoodField:
         dist = np.where(occupied, -inside, outside) * resolution
         dist = np.clip(dist, -max_dist_m, max_dist_m)
         gy, gx = np.gradient(dist, resolution)
-        return cls(dist, gx, gy, resolution, origin, max_dist_m, exact_gradient)
+        return cls(dist, gx, gy, resolution, origin, max_dist_m, exact_gradient, known)
 
     def at(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Signed distance (n,) and its gradient (n, 2) at points (n, 2); off the map: the
@@ -89,6 +94,10 @@ class LikelihoodField:
         inside = (u >= 0.0) & (v >= 0.0) & (u < nx - 1) & (v < ny - 1)
         d = np.full(len(xy), self.max_dist_m)
         g = np.zeros((len(xy), 2))
+        if self.known is not None and inside.any():
+            idx = np.flatnonzero(inside)
+            seen = self.known[(v[idx] + 0.5).astype(int), (u[idx] + 0.5).astype(int)]
+            inside[idx[~seen]] = False
         if not inside.any():
             return d, g
         u, v = u[inside], v[inside]
