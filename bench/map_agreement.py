@@ -12,12 +12,24 @@ lies within one cell of it, and a truth cell the map could see (one beside floor
 knows is free: a wall's face, not its inside) when a map cell lies within one of it;
 IoU = agreeing / (map's occupied + truth's seen occupied). Also the share of the
 truth's free floor the map knows as free, and how much it knows at all.
+
+`align_to_truth(cells, truth, res, origin)`: the rigid motion (a turn about the map's
+obstacles' centre, then a shift) that best lays the map's obstacle cells on the truth's
+(the mean distance to the nearest truth cell, clipped at 0.3 m, least over a grid of
+turns within 2° and shifts within 0.3 m). A map the robot made from nothing is in its
+own frame, anchored at the start pose it was told: a heading off by half a degree there
+turns the whole hall, 8 cm at 10 m, while its walls agree with each other to a cell.
+The report gives the IoU both as the map lies and after this alignment, and the
+alignment itself (how far the map's frame is from the world's), as SLAM maps are judged
+up to a rigid motion.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
@@ -71,3 +83,78 @@ def agreement(
             float(((cells == FREE) & floor).sum()) / max(1, int((seen & floor).sum())), 3
         ),
     }
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """A turn by `yaw_rad` about `centre_xy`, then a shift by `shift_xy` (m, world)."""
+
+    yaw_rad: float = 0.0
+    shift_xy: tuple[float, float] = (0.0, 0.0)
+    centre_xy: tuple[float, float] = (0.0, 0.0)
+
+    def apply(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Points (N, 2) moved by the alignment."""
+        c, s = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
+        d = np.atleast_2d(xy) - self.centre_xy
+        return np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]]) + np.add(
+            self.centre_xy, self.shift_xy
+        )
+
+    def warp(
+        self, cells: NDArray[np.uint8], resolution_m: float, origin_xy: tuple[float, float]
+    ) -> NDArray[np.uint8]:
+        """The grid moved by the alignment (nearest cell; unknown where nothing lands)."""
+        c, s = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
+        # cell (u, v) has its centre at origin + (u + 0.5, v + 0.5) res: in cells, the turn
+        # is about the centre's cell and the shift is shift / res
+        pc = (np.asarray(self.centre_xy) - origin_xy) / resolution_m - 0.5
+        t = pc + np.asarray(self.shift_xy) / resolution_m - np.array([[c, -s], [s, c]]) @ pc
+        m = np.array([[c, -s, t[0]], [s, c, t[1]]], np.float64)
+        h, w = cells.shape
+        return cv2.warpAffine(
+            cells, m, (w, h), flags=cv2.INTER_NEAREST, borderValue=int(UNKNOWN)
+        ).astype(np.uint8)
+
+
+def align_to_truth(
+    cells: NDArray[np.uint8],
+    truth: NDArray[np.bool_],
+    resolution_m: float,
+    origin_xy: tuple[float, float],
+    max_yaw_deg: float = 2.0,
+    max_shift_m: float = 0.3,
+) -> Alignment:
+    """The best rigid alignment of the map's obstacle cells to the truth's (module
+    docstring): a coarse grid of turns (0.1°) and shifts (2.5 cm), then a finer one."""
+    iy, ix = np.nonzero(cells == OCCUPIED)
+    if len(ix) == 0 or not truth.any():
+        return Alignment()
+    xy = np.column_stack(
+        [origin_xy[0] + (ix + 0.5) * resolution_m, origin_xy[1] + (iy + 0.5) * resolution_m]
+    )
+    centre = (float(xy[:, 0].mean()), float(xy[:, 1].mean()))
+    far = np.minimum(ndimage.distance_transform_edt(~truth) * resolution_m, 0.3)
+    h, w = truth.shape
+
+    def cost(a: Alignment) -> float:
+        p = a.apply(xy)
+        jx = np.floor((p[:, 0] - origin_xy[0]) / resolution_m).astype(np.intp)
+        jy = np.floor((p[:, 1] - origin_xy[1]) / resolution_m).astype(np.intp)
+        inside = (jx >= 0) & (jx < w) & (jy >= 0) & (jy < h)
+        return float(np.where(inside, far[jy.clip(0, h - 1), jx.clip(0, w - 1)], 0.3).mean())
+
+    best, best_cost = Alignment(centre_xy=centre), float("inf")
+    for yaw_step, shift_step, yaw_span, shift_span in (
+        (0.1, 0.025, max_yaw_deg, max_shift_m),
+        (0.02, 0.005, 0.1, 0.025),
+    ):
+        y0, (sx0, sy0) = np.degrees(best.yaw_rad), best.shift_xy
+        for yaw in np.arange(y0 - yaw_span, y0 + yaw_span + 1e-9, yaw_step):
+            for dx in np.arange(sx0 - shift_span, sx0 + shift_span + 1e-9, shift_step):
+                for dy in np.arange(sy0 - shift_span, sy0 + shift_span + 1e-9, shift_step):
+                    a = Alignment(float(np.radians(yaw)), (float(dx), float(dy)), centre)
+                    c = cost(a)
+                    if c < best_cost:
+                        best, best_cost = a, c
+    return best

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from bench.eval.run import Progress, start_gate_overrides, watch_mission
-from bench.map_agreement import FREE, UNKNOWN, agreement, truth_on
+from bench.map_agreement import FREE, UNKNOWN, Alignment, agreement, align_to_truth, truth_on
 from common.bus import Latest
 from common.config import Overrides, merged
 from common.keys import MAP_OCCUPANCY, WORLD_DESCRIPTION
@@ -78,8 +78,21 @@ def reachable_truth(world: WorldDescription, shape: tuple[int, int], res: float,
     return np.asarray(ndimage.binary_dilation(floor, iterations=2), bool)
 
 
-def score_map(grid: OccupancyGrid, world: WorldDescription) -> dict[str, Any]:
-    """The map's grid against the truth over the reachable area (module docstring)."""
+def map_alignment(grid: OccupancyGrid, world: WorldDescription) -> Alignment:
+    """The rigid motion laying the map's obstacles best on the truth's
+    (`map_agreement.align_to_truth`, over the reachable area)."""
+    cells = np.asarray(as_numpy(grid.cells), np.uint8)
+    res, origin = grid.resolution_m, grid.origin_xy
+    area = reachable_truth(world, cells.shape, res, origin)
+    truth = truth_on(world, cells.shape, res, origin) & area
+    return align_to_truth(np.where(area, cells, UNKNOWN).astype(np.uint8), truth, res, origin)
+
+
+def score_map(
+    grid: OccupancyGrid, world: WorldDescription, aligned: Alignment | None = None
+) -> dict[str, Any]:
+    """The map's grid against the truth over the reachable area (module docstring); with
+    `aligned` (`map_alignment`), its IoU once so moved too, and how far it moved."""
     cells = np.asarray(as_numpy(grid.cells), np.uint8)
     res, origin = grid.resolution_m, grid.origin_xy
     area = reachable_truth(world, cells.shape, res, origin)
@@ -89,6 +102,9 @@ def score_map(grid: OccupancyGrid, world: WorldDescription) -> dict[str, Any]:
     known_free = float(np.sum((cells == FREE) & floor)) * res * res
     floor_m2 = float(np.sum(floor)) * res * res
     out = agreement(mine, truth, res)
+    if aligned is not None:
+        moved = np.where(area, aligned.warp(cells, res, origin), UNKNOWN).astype(np.uint8)
+        out_aligned = agreement(moved, truth, res)
     return {
         "known_free_m2": round(float(np.sum(cells == FREE)) * res * res, 1),
         "floor_m2": round(floor_m2, 1),
@@ -97,6 +113,15 @@ def score_map(grid: OccupancyGrid, world: WorldDescription) -> dict[str, Any]:
         "false_occupied_cells": out["false_occupied_cells"],
         "missed_obstacle_cells": out["truth_seen_missed_cells"],
         "unknown_outside_m2": round(float(np.sum((cells != UNKNOWN) & ~area)) * res * res, 1),
+        **(
+            {
+                "occupancy_iou_5cm_aligned": out_aligned["iou_within_5cm"],
+                "frame_yaw_deg": round(float(np.degrees(aligned.yaw_rad)), 2),
+                "frame_shift_cm": round(100 * float(np.hypot(*aligned.shift_xy)), 1),
+            }
+            if aligned is not None
+            else {}
+        ),
     }
 
 
@@ -166,7 +191,7 @@ def explore_run(
         "goals_chosen": job.waypoints,
         "goals_failed": int(failed.group(1)) if failed else None,
         "travelled_m": round(job.travelled_m, 1),
-        **score_map(grid, truth),
+        **score_map(grid, truth, map_alignment(grid, truth)),
     }
     if grid_out:
         cells = np.asarray(as_numpy(grid.cells), np.uint8)

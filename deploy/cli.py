@@ -48,6 +48,7 @@ from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.lifelines import Dependencies
 from common.messages import encode
 from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
+from deploy.maps import NoSavedMap, saved_map, start_from
 from deploy.runs import (
     RUNS_DIR,
     RunInfo,
@@ -197,31 +198,36 @@ def cmd_up(args: argparse.Namespace) -> int:
 
 
 def map_start(map_arg: str | None, world: str, seed: int) -> dict[str, Any]:
-    """`dume up --map`'s settings. None: the site's own database, resumed (empty the
-    first time: `dume map --patrol` maps it); `truth`: seeded from the world's truth with
-    noise (the ablation that stands in for a mapping run, as the demo's); a file: that
-    prior map (`dume map --export`). Each of the last two starts over in a database of
-    its own (`<site>-truth`, `<site>-prior`): the site's own map is never overwritten."""
-    if map_arg is None:
-        return {}
-    from services.semantic_map.store import site_slug
+    """`dume up --map`'s settings. None: the site's own database, resumed; the first
+    time, started from the site's saved map (`deploy.maps`), else empty (`dume map
+    --explore` maps it); `truth`: seeded from the world's truth with noise and its floor
+    plan (the ablation that stands in for a mapping run); a file: that map (`dume map
+    --export`). Each of the last two starts over in a database of its own
+    (`<site>-truth`, `<site>-prior`): the site's own map is never overwritten. Only the
+    ablation has the floor plan: the others localize on their own grid."""
+    from services.semantic_map.store import database_path, site_slug
 
-    site = site_slug(load_config({"sim.world": world, "sim.world_seed": seed}).map_site())
-    if map_arg == "truth":
-        return {
-            "semantic_map.start": "seed-from-world",
-            "semantic_map.name": f"{site}-truth",
-            "semantic_map.reset": True,
-        }
-    path = pathlib.Path(map_arg).expanduser().resolve()
-    if not path.is_file():
-        raise CliError(f"no map file {map_arg}", "`dume map --export FILE` writes one")
-    return {
-        "semantic_map.start": "prior",
-        "semantic_map.prior_file": str(path),
-        "semantic_map.name": f"{site}-prior",
-        "semantic_map.reset": True,
-    }
+    config = load_config({"sim.world": world, "sim.world_seed": seed})
+    site = config.map_site()
+    slug = site_slug(site)
+    if map_arg is None:
+        own = database_path(config.semantic_map, None, site)
+        saved = None if own.is_file() else saved_map(site)
+        if own.is_file() or saved is None:
+            if saved is None and not own.is_file():
+                print(
+                    f"dume up: no map of {site!r} yet: the robot starts on an empty map "
+                    "(`dume map --explore` maps it)",
+                    file=sys.stderr,
+                )
+            return {"semantic_map.floor_plan": "none"}
+        return {**start_from(str(saved), site), "semantic_map.name": slug}
+    try:
+        settings = start_from(map_arg, site)
+    except FileNotFoundError:
+        raise CliError(f"no map file {map_arg}", "`dume map --export FILE` writes one") from None
+    suffix = "truth" if map_arg == "truth" else "prior"
+    return {**settings, "semantic_map.name": f"{slug}-{suffix}", "semantic_map.reset": True}
 
 
 def cmd_status(args: argparse.Namespace) -> int:
@@ -541,7 +547,12 @@ def cmd_view(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     from deploy.demo import run_demo
 
-    return run_demo(args)
+    try:
+        return run_demo(args)
+    except NoSavedMap as exc:
+        raise CliError(str(exc), exc.hint) from None
+    except FileNotFoundError as exc:
+        raise CliError(str(exc), "`dume map --export FILE` writes one") from None
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -654,8 +665,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="FILE|truth",
         help="start the map from a file (dume map --export), or from the world's truth "
-        "with noise (the ablation standing in for a mapping run); default: this world's "
-        "own map, resumed",
+        "with noise and its floor plan (the ablation standing in for a mapping run); "
+        "default: this world's own map, resumed (the first time: its saved map, else empty)",
     )
     p.set_defaults(func=cmd_up)
 
@@ -747,22 +758,33 @@ def build_parser() -> argparse.ArgumentParser:
         "Start every service under supervisord, ask for an object for a person (by default "
         "the bottle and the person farthest apart in the map), show the mission's progress, "
         "stop, and print a JSON line; exit 0 only on success. The semantic map starts from "
-        "the world's truth positions with noise (seed-from-world), standing in for an earlier "
-        "mapping run, unless --map gives a prior map file."
+        "the world's truth with noise (seed-from-world, the ablation standing in for a "
+        "mapping run), or with --map saved from the world's saved map (the robot's own, "
+        "explored from nothing; dume ships the demo worlds'), localized on from the "
+        "robot's own sensors, or from --map FILE."
     )
     p.add_argument("--world-seed", type=seed_number, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--object", default=None, help="a map id or class (default: a bottle)")
     p.add_argument("--person", default=None, help="a person's map id (default: the farthest)")
-    p.add_argument("--map", default=None, metavar="FILE", help="a prior map file (dume map)")
+    p.add_argument(
+        "--map",
+        default="truth",
+        metavar="truth|saved|FILE",
+        help="saved: the world's saved map, the robot's own (var/saved-maps/, then "
+        "deploy/maps/); FILE: a map file (dume map --export); truth (default, for now): the "
+        "map seeded from the world's truth with noise, the ablation standing in for a "
+        "mapping run",
+    )
     p.add_argument("--timeout", type=float, default=600.0, help="sim seconds for the mission")
     p.set_defaults(func=cmd_demo)
 
     p = add("eval", "N seeded worlds, one request each, judged from sim truth; a report")
     p.description = (
         "N seeded worlds (seeds S..S+N-1), each on a fresh stack with the default segmenter and "
-        "the dynamic controller, the map seeded from the world's truth with noise; one random "
-        "mapped artifact and person requested per world; success judged from the sim's "
+        "the dynamic controller, from the world's saved map (explored from nothing first, and "
+        "saved, when it has none; --map truth: seeded from the truth, the ablation); one "
+        "random mapped artifact and person requested per world; success judged from the sim's "
         "handover event. Writes DIR/report.md, DIR/results.json and PNG plots; the last "
         "stdout line is a JSON summary."
     )
@@ -774,9 +796,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per world")
     p.add_argument("--record", action="store_true", help="write each world's recording")
     p.add_argument(
-        "--map", choices=["truth", "explored"], default="truth",
-        help="explored: explore each world from nothing first, then the request on the "
-        "robot's own map; truth: the map seeded from the truth with noise (the ablation)",
+        "--map", default="truth", metavar="saved|DIR|explored|truth",
+        help="saved: each world's saved map (var/saved-maps/, then the maps dume ships), the "
+        "world explored from nothing first and its map saved in var/saved-maps/ when it has "
+        "none; DIR: the same in that folder; explored: every "
+        "world explored first, nothing saved; truth (default, for now): the map seeded from "
+        "the world's truth with noise, the ablation standing in for a mapping run",
     )  # fmt: skip
     p.set_defaults(func=cmd_eval)
 

@@ -2,10 +2,13 @@
 print one JSON line.
 
 The stack is every service (`SERVICES`) under supervisord (`deploy.stack.Supervised`),
-lockstep, its logs and recording in `var/run/<run>/` (`deploy.runs`). The semantic map
-starts from the world's truth positions with noise (`semantic_map.start =
-"seed-from-world"`), standing in for an earlier mapping run (`dume map --patrol`), or
-from a prior map file (`--map FILE`), in a fresh database of its own. Once every service
+lockstep, its logs and recording in `var/run/<run>/` (`deploy.runs`). The semantic map,
+in a fresh database of its own, starts from the world's truth positions with noise
+(`semantic_map.start = "seed-from-world"`, with the floor plan: the ablation standing in
+for a mapping run, still the default), from the world's saved map (`--map saved`: the
+robot's own, explored from nothing, `deploy.maps`), or from a map file (`--map FILE`);
+from a saved map or a file there is no floor plan, and the robot localizes on the map's
+own grid. Once every service
 is ready the demo asks, by map ids, for the bottle and the person farthest apart in the
 map (the longest job), or for the `--object` (an id or a class) and `--person` given,
 the other side chosen far from it. Progress goes to stderr: each status change, and
@@ -25,6 +28,7 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -42,11 +46,12 @@ from bench.eval.run import (
 )
 from bench.eval.targets import TargetError, demo_pair
 from common.bus import BusError
-from common.config import merged, parse_overrides, resolve
+from common.config import load_config, merged, parse_overrides
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock
 from common.recording import new_run_id, run_dir
+from deploy.maps import start_from
 from deploy.runs import shown
 from deploy.stack import Supervised
 from services.semantic_map.store import database_path, remove_database
@@ -60,11 +65,8 @@ STOP_TIMEOUT_S = 180.0
 
 def demo_overrides(args: argparse.Namespace, map_name: str) -> dict[str, Any]:
     """The demo stack's settings: the world, the recording, a fresh map of its own."""
-    start: dict[str, Any] = (
-        {"semantic_map.start": "prior", "semantic_map.prior_file": str(resolve(args.map))}
-        if args.map
-        else {"semantic_map.start": "seed-from-world"}
-    )
+    site = load_config({"sim.world": args.world, "sim.world_seed": args.world_seed}).map_site()
+    start = start_from(args.map, site)
     return merged(
         {
             "sim.world_seed": args.world_seed,
@@ -142,7 +144,11 @@ def run_demo(args: argparse.Namespace) -> int:
     map_name = f"demo-{run_id}"
     stack = Supervised(demo_overrides(args, map_name), port=args.port, run_id=run_id)
     recording = run_dir(stack.config.recording, stack.run_id)
-    start = f"prior map {args.map}" if args.map else "seed-from-world (truth + noise)"
+    start = (
+        "seed-from-world (truth + noise)"
+        if args.map == "truth"
+        else f"the saved map {shown(Path(str(stack.config.semantic_map.prior_file)))}"
+    )
     print(
         f"dume demo: {args.world} world seed {args.world_seed}, map {start}, "
         f"port {stack.port}, run {stack.run_id}\n"

@@ -5,12 +5,18 @@ World i is seed S + i. Each world gets a fresh stack (`ProcessStack`: the router
 every service as child processes in their own sessions, on a free port, lockstep) so no
 state leaks between worlds, a crashed service shows as down rather than restarted, and
 teardown is certain: the stack stops in a `finally`, on failure, on Ctrl-C and on
-SIGTERM (turned into the same interrupt). The map starts from the world's truth with
-noise (`seed-from-world`, noise seeded by the world seed, a fresh database per world),
-standing in for an earlier mapping run. The request is a random mapped artifact and
-person (`bench.eval.targets.seeded_pair`, seeded by the world seed). Success is the
-truth's (`bench.eval.judge`). The segmenter and the locomotion the report states are
-read back from what the running stack publishes.
+SIGTERM (turned into the same interrupt). The map (a fresh database per world) starts
+from the world's saved map with `--map saved` (var/saved-maps/ and the maps dume ships)
+or `--map DIR` (`map_source`), the robot localizing on its grid; a world with none is
+explored from nothing first (`explore_first`, scored against truth) and its map saved
+there, so an eval explores each world once. `--map explored` explores every world and
+saves nothing. `--map truth`, still the default, seeds the map from the truth with
+noise (`seed-from-world`, noise seeded by the world seed, with the floor plan): the
+ablation (on its own map the robot cannot yet tell which way a person faces, and
+hands over on a guessed side: see the README). The request is a
+random mapped artifact and person (`bench.eval.targets.seeded_pair`, seeded by the
+world seed). Success is the truth's (`bench.eval.judge`). The segmenter and the
+locomotion the report states are read back from what the running stack publishes.
 
 Progress is one compact line per stage change and one per world on stderr, not a
 progress bar: a world takes minutes of wall time, so a bar would sit still, while a line
@@ -23,12 +29,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from bench.eval.explored import score_entities
+from bench.eval.explored import moved, score_entities
 from bench.eval.judge import MissionRecord, WorldResult, evaluate
 from bench.eval.pictures import world_picture
 from bench.eval.report import json_safe, write_report
@@ -43,19 +50,22 @@ from bench.eval.run import (
     watch_mission,
 )
 from bench.eval.targets import TargetError, seeded_pair
-from bench.trial_explore import score_map
+from bench.trial_explore import map_alignment, score_map
 from common.bus import BusError
-from common.config import ConfigError, merged, parse_overrides, resolve
-from common.keys import MAP_OCCUPANCY
+from common.config import ConfigError, load_config, merged, parse_overrides, resolve
+from common.keys import MAP_EXPORT, MAP_OCCUPANCY
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
-from common.messages.semantic_map import OccupancyGrid
+from common.messages.semantic_map import MapFile, OccupancyGrid
 from common.messages.sim import Clock
 from common.messages.world import WorldDescription
 from common.recording import run_dir
+from deploy import maps
 from deploy.demo import SERVICES
+from deploy.maps import map_path, saved_map
 from deploy.runs import shown
 from deploy.stack import ProcessStack
+from services.semantic_map.mapfile import write_map_file
 from services.semantic_map.store import database_path, remove_database
 from services.sim.world import generate_world
 
@@ -69,22 +79,41 @@ def scenario_of(walking: bool) -> str:
     return "walking people" if walking else "standing people"
 
 
+def map_source(map_arg: str, world: str, seed: int) -> tuple[str, Path | None]:
+    """Where world `seed`'s map comes from under `--map`: `("truth", None)`, the truth
+    with noise (the ablation); `("explore", None)`, explored from nothing first;
+    `("file", FILE)`, the saved map FILE of the world (`<site>.json` in the folder
+    `--map` names, as `dume eval` saved it; `saved`: var/saved-maps/, then the maps dume
+    ships); `("explore", FILE)`, there is none yet: explored first, and its map saved as
+    FILE for the next eval."""
+    if map_arg in ("truth", "explored"):
+        return ("truth" if map_arg == "truth" else "explore"), None
+    site = load_config({"sim.world": world, "sim.world_seed": seed}).map_site()
+    folder = maps.SAVED_MAPS if map_arg == "saved" else resolve(map_arg)
+    found = saved_map(site, None if map_arg == "saved" else (folder,))
+    return ("file", found) if found else ("explore", map_path(folder, site))
+
+
 def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> dict[str, Any]:
     """The settings of world `seed`'s stack."""
-    explored = getattr(args, "map", "truth") == "explored"
+    how, path = map_source(getattr(args, "map", "truth"), args.world, seed)  # truth: no --map
+    start = {"truth": "seed-from-world", "explore": "empty", "file": "prior"}[how]
     return merged(
         {
             "sim.world": args.world,
             "sim.world_seed": seed,
             "sim.walking_people": bool(args.walking_people),
             "sim.locomotion": "dynamic",
-            "semantic_map.start": "empty" if explored else "seed-from-world",
+            "semantic_map.start": start,
             "semantic_map.name": map_name,
             "semantic_map.reset": True,
             "semantic_map.seed_noise_seed": seed,
             "recording.enabled": bool(args.record),
         },
-        explored_overrides(args.world, seed) if explored else {},
+        explored_overrides(args.world, seed) if how == "explore" else {},
+        {"semantic_map.floor_plan": "none", "semantic_map.prior_file": str(path)}
+        if how == "file"
+        else {},
         start_gate_overrides(),
         parse_overrides(args.set),
     )
@@ -111,8 +140,12 @@ def explored_overrides(world: str, seed: int) -> dict[str, Any]:
 EXPLORE_TIMEOUT_S = 2400.0
 
 
-def explore_first(stack: ProcessStack, world: WorldDescription, seed: int) -> dict[str, Any]:
-    """The exploration of world `seed` on its stack, and its map judged from truth."""
+def explore_first(
+    stack: ProcessStack, world: WorldDescription, seed: int, save: Path | None = None
+) -> dict[str, Any]:
+    """The exploration of world `seed` on its stack, and its map judged from truth;
+    with `save`, the explored map written there (`dume map --export`'s file) when the
+    exploration succeeded."""
     bus, keys = stack.bus, stack.keys
     wall0 = time.perf_counter()
     request = MissionRequest(request_id=f"explore-{seed}", task="explore")
@@ -122,15 +155,22 @@ def explore_first(stack: ProcessStack, world: WorldDescription, seed: int) -> di
     final = record.changes[-1] if record.changes else None
     arts, people = read_map(bus)
     grid = bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 30.0)
+    aligned = map_alignment(grid, world)
+    saved = ""
+    if save is not None and final is not None and final.state == "succeeded":
+        write_map_file(save, bus.query(MAP_EXPORT, None, MapFile, 30.0))
+        saved = shown(save)
     return {
+        "saved": saved,
         "outcome": final.state if final else f"no status ({record.ended})",
         "reason": (f"{final.reason} " if final and final.reason else "")
         + (final.detail if final else ""),
         "sim_s": round((record.end_ns - record.start_ns) / 1e9, 1),
         "localization": record.localization,
         "wall_s": round(time.perf_counter() - wall0, 1),
-        **score_map(grid, world),
+        **score_map(grid, world, aligned),
         **score_entities(world, arts, people),
+        "aligned": score_entities(world, moved(arts, aligned), moved(people, aligned)),
     }
 
 
@@ -154,7 +194,8 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
     """One world, start to teardown; never raises for a failed run (only on Ctrl-C)."""
     scenario = scenario_of(args.walking_people)
     result = WorldResult(world=args.world, world_seed=seed, scenario=scenario)
-    map_name = f"eval-{time.strftime('%Y%m%d-%H%M%S')}-{seed}"
+    # the process in the name too: two evals started in one second keep their own maps
+    map_name = f"eval-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{seed}"
     # A ConfigError (a settings file this process's schema no longer reads) stops the run.
     stack = ProcessStack(list(SERVICES), world_overrides(args, seed, map_name))
     wall0 = time.perf_counter()
@@ -163,10 +204,11 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         stack.start(timeout_s=START_TIMEOUT_S)
         result.setup_wall_s = round(time.perf_counter() - wall0, 2)
         bus, keys = stack.bus, stack.keys
-        explored = args.map == "explored"
+        how, path = map_source(args.map, args.world, seed)
+        explored = how == "explore"
         if explored:
             step = "explore the world"
-            result.exploration = explore_first(stack, read_world(bus), seed)
+            result.exploration = explore_first(stack, read_world(bus), seed, path)
         step = "read the world and the map"
         world, (arts, people) = read_world(bus), read_map(bus)
         pair = seeded_pair(arts, people, seed)
@@ -219,6 +261,28 @@ def failure_frames(folder: Path, out: Path, seed: int, result: WorldResult) -> l
     return drawn
 
 
+def map_start_text(map_arg: str) -> str:
+    """The report's line on where each world's map started."""
+    if map_arg == "truth":
+        return (
+            "seed-from-world (truth positions with noise, for an earlier mapping run: "
+            "the truth ablation)"
+        )
+    explored = (
+        "explored from nothing first (no floor plan, SLAM, the semantic pass), then the "
+        "request on the robot's own map and estimated pose"
+    )
+    if map_arg == "explored":
+        return f"each world {explored}"
+    saved = map_arg == "saved"
+    where = "var/saved-maps/ (or shipped with dume)" if saved else map_arg
+    return (
+        f"each world's saved map in {where} (an earlier exploration; no floor plan, the "
+        f"pose estimated on the map's own grid); a world with none there {explored}, and "
+        f"its map saved in {'var/saved-maps/' if saved else map_arg}"
+    )
+
+
 def run_eval(args: argparse.Namespace) -> int:
     out = resolve(args.out)
     seeds = [args.seed + i for i in range(args.worlds)]
@@ -233,13 +297,7 @@ def run_eval(args: argparse.Namespace) -> int:
             "scenario": scenario_of(args.walking_people),
             "segmenter": ", ".join(sorted(seen.get("segmenter", {"not read"}))),
             "locomotion": ", ".join(sorted(seen.get("locomotion", {"not read"}))),
-            "map start": (
-                "explored: each world explored from nothing first (no floor plan, SLAM), "
-                "then the request on the robot's own map"
-                if args.map == "explored"
-                else "seed-from-world (truth positions with noise, for an earlier mapping "
-                "run: the truth ablation)"
-            ),
+            "map start": map_start_text(args.map),
             "request": "a random mapped artifact and person per world (seeded by the world seed)",
             "timeout per world": f"{args.timeout:.0f} s sim",
             "extra settings": ", ".join(args.set) or "none",

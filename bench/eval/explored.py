@@ -10,7 +10,9 @@
 - people: each of the world's people is found when a mapped person lies within
   `PERSON_M` of where they stand (people are mapped at their feet and may have moved
   a step); mapped people matched to none are false.
-Lists name the truth ids, so a report says which ones were missed.
+Lists name the truth ids, so a report says which ones were missed. A map made from
+nothing is in its own frame (`map_agreement.align_to_truth`): `moved` puts its entities
+where its alignment to the truth moves them, for the figures "as aligned".
 """
 
 from __future__ import annotations
@@ -19,6 +21,10 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import msgspec
+import numpy as np
+
+from bench.map_agreement import Alignment
 from common.messages.semantic_map import MapEntity
 from common.messages.world import WorldDescription
 
@@ -47,6 +53,16 @@ def _pairs(
         used_t.add(tid)
         used_m.add(i)
         out.append((tid, mapped[i], d))
+    return out
+
+
+def moved(entities: Sequence[MapEntity], aligned: Alignment) -> list[MapEntity]:
+    """The entities as the map's alignment to the truth moves them (`map_agreement`)."""
+    out = []
+    for e in entities:
+        x, y, z = e.position_in_world
+        ((nx, ny),) = aligned.apply(np.array([[x, y]]))
+        out.append(msgspec.structs.replace(e, position_in_world=(float(nx), float(ny), z)))
     return out
 
 

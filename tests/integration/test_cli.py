@@ -162,6 +162,18 @@ def test_the_demo_refuses_an_object_the_map_does_not_hold_and_stops_its_stack() 
 
 
 @pytest.mark.slow
+def test_the_demo_starts_from_the_saved_map_dume_ships_and_names_its_entities() -> None:
+    """The small world's saved map (explored from nothing, `deploy/maps/`): the stack comes
+    up on it with no floor plan and the robot localizing on its grid, and the demo refuses
+    an id the map does not hold, naming the ones it does (its own, not the truth's)."""
+    out = dume("demo", "--world", "small", "--map", "saved", "--object", "bottle_9", timeout=600)
+    assert out.returncode == 1
+    line = _last_json(out)
+    assert "bottle_9" in str(line["reason"]) and "bottle_1" in str(line["reason"])
+    assert "the saved map deploy/maps/small-seed-0.json" in out.stderr
+
+
+@pytest.mark.slow
 @pytest.mark.timeout(2400)  # a whole job: minutes of wall time on 2 cores
 def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Path) -> None:
     out = dume(

@@ -45,3 +45,23 @@ def test_found_wrong_misplaced_false_and_people() -> None:
     assert a[4].id in s["missed"] and a[0].id not in s["missed"]
     assert s["people_found"] == 1 and s["false_people"] == ["person_2"]
     assert p[0].id not in s["people_missed"]
+
+
+def test_a_map_turned_in_its_own_frame_finds_its_artifacts_once_aligned() -> None:
+    """The whole map turned 1° about the hall's middle (a start heading a little off):
+    the far artifacts are more than 10 cm from their truth as it lies, all found once the
+    map's alignment to the truth moves them back."""
+    import numpy as np
+
+    from bench.eval.explored import moved, score_entities
+    from bench.map_agreement import Alignment
+
+    world = generate_world(0, "hall")
+    turn = Alignment(np.radians(1.0), (0.0, 0.0), (0.0, 0.0))
+    arts = [
+        entity(f"{x.object_class}_{i}", *turn.apply(np.array([x.position[:2]]))[0])
+        for i, x in enumerate(world.artifacts, 1)
+    ]
+    assert score_entities(world, arts, [])["found_within_10cm"] < len(world.artifacts)
+    back = Alignment(np.radians(-1.0), (0.0, 0.0), (0.0, 0.0))
+    assert score_entities(world, moved(arts, back), [])["found_right_class"] == len(arts)

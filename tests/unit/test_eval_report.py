@@ -346,11 +346,23 @@ def test_the_report_and_plots_are_written_with_the_right_numbers(tmp_path: Path)
 # -- the command lines' settings ------------------------------------------------------------
 
 
-def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run() -> None:
+@pytest.fixture
+def no_saved_maps(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """This machine's saved maps: an empty folder (the maps dume ships stay)."""
+    from deploy import maps
+
+    monkeypatch.setattr(maps, "SAVED_MAPS", tmp_path / "maps")
+    return tmp_path / "maps"
+
+
+def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run(
+    no_saved_maps: Path,
+) -> None:
     from bench.eval.evaluate import world_overrides
     from common.config import load_config
     from deploy.cli import build_parser
     from deploy.demo import demo_overrides
+    from deploy.maps import NoSavedMap
 
     args = build_parser().parse_args(
         ["eval", "--worlds", "2", "--world", "small", "--walking-people"]
@@ -362,15 +374,55 @@ def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run() -> 
     assert cfg.semantic_map.name == "eval-x-7" and cfg.semantic_map.seed_noise_seed == 7
     assert not cfg.recording.enabled and args.timeout == 300.0
 
-    demo = build_parser().parse_args(["demo", "--world-seed", "3", "--object", "can_1"])
+    demo = build_parser().parse_args(["demo", "--world-seed", "3"])  # truth, for now
     cfg = load_config(demo_overrides(demo, "demo-x"))
     assert (cfg.sim.world, cfg.sim.world_seed) == ("hall", 3)
     assert cfg.semantic_map.start == "seed-from-world" and cfg.recording.enabled
-    demo = build_parser().parse_args(["demo", "--map", "var/map.json"])
+    assert cfg.semantic_map.floor_plan == "world"
+    with pytest.raises(NoSavedMap, match="hall seed 3"):  # no map of it
+        demo_overrides(
+            build_parser().parse_args(["demo", "--world-seed", "3", "--map", "saved"]), "demo-x"
+        )
+    prior = no_saved_maps.parent / "map.json"
+    prior.write_text("{}")
+    demo = build_parser().parse_args(["demo", "--map", str(prior)])
     cfg = load_config(demo_overrides(demo, "demo-x"))
-    assert cfg.semantic_map.start == "prior" and cfg.semantic_map.prior_file.endswith(
-        "var/map.json"
+    assert cfg.semantic_map.start == "prior" and cfg.semantic_map.prior_file == str(prior)
+    assert cfg.semantic_map.floor_plan == "none"  # the file's grid is the static layer
+
+
+def test_a_saved_map_is_found_by_its_site_and_an_unmapped_world_is_explored_and_saved(
+    no_saved_maps: Path,
+) -> None:
+    from bench.eval.evaluate import map_source, world_overrides
+    from common.config import load_config
+    from deploy.cli import build_parser, map_start
+    from deploy.demo import demo_overrides
+
+    args = build_parser().parse_args(["eval", "--world", "small", "--seed", "41", "--map", "saved"])
+    cfg = load_config(world_overrides(args, 41, "eval-x-41"))
+    assert map_source("saved", "small", 41) == ("explore", no_saved_maps / "small-seed-41.json")
+    assert cfg.semantic_map.start == "empty" and cfg.semantic_map.floor_plan == "none"
+    assert cfg.mission.explore_semantic_pass and cfg.mission.explore_bounds
+    assert map_start(None, "small", 41) == {"semantic_map.floor_plan": "none"}
+
+    no_saved_maps.mkdir()
+    saved = no_saved_maps / "small-seed-41.json"
+    saved.write_text("{}")
+    assert map_source("saved", "small", 41) == ("file", saved)
+    cfg = load_config(world_overrides(args, 41, "eval-x-41"))
+    assert (cfg.semantic_map.start, cfg.semantic_map.prior_file) == ("prior", str(saved))
+    assert cfg.semantic_map.floor_plan == "none" and not cfg.mission.explore_bounds
+    demo = build_parser().parse_args(
+        ["demo", "--world", "small", "--world-seed", "41", "--map", "saved"]
     )
+    assert load_config(demo_overrides(demo, "demo-x")).semantic_map.prior_file == str(saved)
+    up = map_start(None, "small", 41)  # the site's own database starts from it
+    assert (up["semantic_map.start"], up["semantic_map.name"]) == ("prior", "small-seed-41")
+    # a folder of the user's: only that folder
+    other = no_saved_maps.parent / "other"
+    assert map_source(str(other), "small", 41) == ("explore", other / "small-seed-41.json")
+    assert map_source("explored", "small", 41) == ("explore", None)
 
 
 def test_a_world_is_drawn_from_above_with_the_run_on_it(

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.map_agreement import FREE, OCCUPIED, UNKNOWN, agreement
+from bench.map_agreement import FREE, OCCUPIED, UNKNOWN, Alignment, agreement, align_to_truth
 
 
 def hall() -> tuple[np.ndarray, np.ndarray]:
@@ -43,3 +43,26 @@ def test_a_cell_off_still_agrees_a_phantom_and_a_miss_do_not() -> None:
     a = agreement(missed, truth)
     assert a["truth_seen_missed_cells"] > 0
     assert a["iou_within_5cm"] < agreement(cells, truth)["iou_within_5cm"]
+
+
+def test_a_map_turned_and_shifted_in_its_own_frame_is_aligned_back() -> None:
+    """A room 6 x 4 m whose map came out turned 1.5° and shifted 14 cm (its frame anchored
+    on a heading a little off): a poor IoU as it lies, a full one once aligned, and the
+    alignment found undoes the motion."""
+    res, origin = 0.05, (-4.0, -3.0)
+    truth = np.zeros((120, 160), bool)
+    truth[10:12, 20:140] = truth[108:110, 20:140] = True  # two long walls
+    truth[10:110, 20:22] = truth[10:110, 138:140] = True  # two short ones
+    truth[50:60, 70:80] = True  # a machine
+    cells = np.where(truth, OCCUPIED, UNKNOWN).astype(np.uint8)
+    cells[12:108, 22:138] = FREE
+    cells[50:60, 70:80] = OCCUPIED
+    moved = Alignment(np.radians(1.5), (0.12, -0.08), (0.0, 0.0)).warp(cells, res, origin)
+    as_lies = agreement(moved, truth)["iou_within_5cm"]
+    a = align_to_truth(moved, truth, res, origin)
+    back = agreement(a.warp(moved, res, origin), truth)["iou_within_5cm"]
+    assert as_lies < 0.7 and back > 0.95, (as_lies, back)
+    assert abs(np.degrees(a.yaw_rad) + 1.5) < 0.1
+    # the point the map put at the room's corner goes back there
+    corner = Alignment(np.radians(1.5), (0.12, -0.08), (0.0, 0.0)).apply(np.array([[3.0, 2.0]]))
+    assert np.allclose(a.apply(corner), [[3.0, 2.0]], atol=0.05)
