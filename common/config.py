@@ -565,6 +565,12 @@ class MissionSettings(_Section):
     sighting_gate_m: Positive = 0.35
     #: The handover: how long to wait for the pull; the back-off after the release.
     handover_timeout_s: Positive = 60.0
+    #: A person whose facing the map does not know (one it saw, not seeded from truth):
+    #: the sides tried round them (the first the robot's, then 60° either way, 120°,
+    #: 180°: a person takes what is held out within 33° of their front) and the wait for
+    #: the pull on each, s.
+    handover_sides: PositiveInt = 6
+    handover_side_timeout_s: Positive = 10.0
     #: The object leaving the jaws this soon after a pull was felt was taken, not lost (s).
     handover_taken_window_s: NonNegative = 0.5
     #: At the handover pose: look this long, then walk again if the person's mapped place

@@ -25,9 +25,15 @@ class ArtifactStandoff(Message, frozen=True, tag="artifact_standoff"):
 
 
 class PersonHandover(Message, frozen=True, tag="person_handover"):
-    """Walk to a pose facing a mapped person at handover distance."""
+    """Walk to a pose facing a mapped person at handover distance.
+
+    bearing_rad: the side to stand on, as the world bearing from the person to the
+    robot (rad); None: in front of them when the map knows which way they face, else on
+    the robot's side (the mission's search round a person whose facing is unknown sends
+    the sides it tries)."""
 
     person_id: EntityId
+    bearing_rad: Finite | None = None
 
 
 NavGoal = PoseGoal | ArtifactStandoff | PersonHandover

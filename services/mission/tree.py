@@ -20,8 +20,13 @@
                            reason; then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
                              at_the_person: person_ahead, else PersonHandover once more
-          release_object: mode stand, Posture(handover), feel_pull, Release,
-                          mode walk/mission, back_off, mode stand, Posture(stow)
+          other_side (Recover: handover_timeout, budget handover_sides - 1, while the
+                      person's facing is unknown: the next side round them)
+            hand_over (sequence)
+              at_a_side: first_side, else go_round: Posture(stow), mode walk/navigation,
+                         PersonHandover at the side
+              release_object: mode stand, Posture(handover), feel_pull, Release,
+                              mode walk/mission, back_off, mode stand, Posture(stow)
         abort: halt everything, FAILURE with the blackboard's reason
 
 Every sequence has memory (a running child resumes). `MissionTree` runs it: `start`
@@ -51,6 +56,7 @@ from services.mission.behaviours.base import (
     FAILURE,
     GRASP_PLAN,
     REQUEST,
+    SIDE,
     TARGET,
     Context,
     Failure,
@@ -60,7 +66,7 @@ from services.mission.behaviours.base import (
     read,
     reset_blackboard,
 )
-from services.mission.behaviours.handover import FeelPull
+from services.mission.behaviours.handover import FeelPull, FirstSide, next_side
 from services.mission.behaviours.motion import BackOff, NavigateTo, PersonAhead, SetMode
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
 from services.mission.behaviours.request import ResolvePerson, SelectTarget, WaitForRequest
@@ -194,7 +200,23 @@ def build_tree(ctx: Context) -> Sequence:
         ctx.decide,
         forget_grasp,
     )
-    mission = _seq("mission", fetch, release)
+    go_round = _seq(
+        "go_round",
+        ArmAction(ctx, "carry", lambda _b: Posture(name="stow"), "arm_failed",
+                  s.posture_timeout_s, st[5]),
+        SetMode(ctx, "walk", "navigation", st[5], name="mode_walk_round"),
+        NavigateTo(ctx, "person", st[5], watch_held=True, name="navigate_round"),
+    )  # fmt: skip
+    offer = Recover(
+        "other_side",
+        _seq("hand_over", Selector("at_a_side", memory=True,
+                                   children=[FirstSide(ctx, st[5]), go_round]), release),
+        frozenset({"handover_timeout"}),
+        max(0, s.handover_sides - 1),
+        ctx.decide,
+        next_side(ctx, blackboard("other_side", (SIDE,))),
+    )  # fmt: skip
+    mission = _seq("mission", fetch, offer)
     return _seq(
         "bring_me",
         WaitForRequest(ctx),

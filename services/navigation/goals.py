@@ -10,9 +10,10 @@ surface's rectangle). The pose lies `STANDOFF_DISTANCE_M` out along it, facing t
 artifact; when its footprint is not free, directions further from the normal are tried
 in turn, so a crowded edge still gives a free pose.
 
-Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; in front
-of them when their heading is known, else on the robot's side; when that footprint is not
-free, the nearest free direction (by angle) around them.
+Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; on the
+side the goal asks for (`PersonHandover.bearing_rad`), else in front of them when their
+heading is known, else on the robot's side; when that footprint is not free, the nearest
+free direction (by angle) around them.
 """
 
 from __future__ import annotations
@@ -90,9 +91,13 @@ def handover_pose(
     robot_xy: tuple[float, float],
     fp: Footprint,
     margin: float = GOAL_MARGIN_M,
+    bearing: float | None = None,
 ) -> Pose:
-    """A free pose facing the person at `HANDOVER_DISTANCE_M` (see the module docstring)."""
-    if person.yaw is not None:
+    """A free pose facing the person at `HANDOVER_DISTANCE_M` (see the module docstring);
+    `bearing`: the side asked for (the bearing from the person), first."""
+    if bearing is not None:
+        preferred = bearing
+    elif person.yaw is not None:
         preferred = person.yaw
     else:
         preferred = math.atan2(robot_xy[1] - person.y, robot_xy[0] - person.x)

@@ -156,7 +156,7 @@ class GoalIntake:
         """The goal's pose, tolerances and handover person against `cm` and the map's
         data as of `at`; `GoalInvalid` with the reason."""
         g = req.goal
-        person_xy = None
+        person_xy, bearing = None, None
         try:
             if isinstance(g, PoseGoal):
                 target = Pose(g.x, g.y, g.yaw)
@@ -169,14 +169,15 @@ class GoalIntake:
                 assert isinstance(g, PersonHandover)
                 person = self.source.person(g.person_id, at_ns=at)
                 here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
-                target = goals.handover_pose(cm, person, here, self.fp)
+                bearing = g.bearing_rad
+                target = goals.handover_pose(cm, person, here, self.fp, bearing=bearing)
                 tol, tol_yaw, handover = *self.tolerance, g.person_id
                 person_xy = (person.x, person.y)
         except (SourceError, goals.GoalError) as exc:
             raise GoalInvalid(str(exc)) from None
         if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
             raise GoalInvalid(f"{target} is off the map")
-        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy)
+        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing)
 
     def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
         """A handover goal follows its person: once the map has them `RETARGET_M` from
@@ -190,7 +191,7 @@ class GoalIntake:
                                         person.y - g.person_xy[1]) < RETARGET_M:  # fmt: skip
             return
         try:
-            target = goals.handover_pose(cm, person, (pose.x, pose.y), self.fp)
+            target = goals.handover_pose(cm, person, (pose.x, pose.y), self.fp, bearing=g.bearing)
         except goals.GoalError as exc:
             self.log.info("goal %s keeps its pose: %s", g.goal_id, exc)
             return

@@ -62,6 +62,8 @@ class GoalSpec:
     handover_id: str = ""
     #: Where the person handed over to was when the pose was chosen (m, world).
     person_xy: tuple[float, float] | None = None
+    #: The side of the person the goal asked for (`PersonHandover.bearing_rad`).
+    bearing: float | None = None
 
 
 class TickOutput(NamedTuple):

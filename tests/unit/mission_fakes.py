@@ -13,6 +13,7 @@ Everything the tree (or the patrol) asked for is recorded.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -55,7 +56,8 @@ TICK_NS = 50_000_000
 NAV_MAP_WAIT_TICKS = 600
 
 
-def entity(map_id: str, x: float, y: float, kind: str = "artifact") -> MapEntity:
+def entity(map_id: str, x: float, y: float, kind: str = "artifact", yaw: float = 0.0) -> MapEntity:
+    """A mapped entity (yaw 0: a person whose facing the map does not know)."""
     return MapEntity(
         id=map_id,
         class_name=map_id.rsplit("_", 1)[0],
@@ -64,6 +66,7 @@ def entity(map_id: str, x: float, y: float, kind: str = "artifact") -> MapEntity
         uncertainty_m=0.05,
         last_seen_ns=0,
         source="seed-from-world",
+        yaw=yaw,
     )
 
 
@@ -478,7 +481,11 @@ class StubPull:
         return not self.never and self.count >= 1
 
 
-def stub_algorithms(grasp_possible: bool = True, pull: bool = True) -> Algorithms:
+def stub_algorithms(
+    grasp_possible: bool = True, pull: bool = True, pull_on_try: int = 1
+) -> Algorithms:
+    tries = itertools.count(1)  # the detectors made: one per offer
+
     def grasp(det: Detection, stamp_ns: int, T_world_base: object) -> StubPlan:
         if not grasp_possible:
             raise StubGraspError("the object lies on its side")
@@ -489,7 +496,7 @@ def stub_algorithms(grasp_possible: bool = True, pull: bool = True) -> Algorithm
         sighting=lambda d, th, s: (d, th, s),
         grasp_from_detection=grasp,
         grasp_error=StubGraspError,
-        pull_detector=lambda: StubPull(never=not pull),
+        pull_detector=lambda: StubPull(never=not pull or next(tries) < pull_on_try),
     )
 
 
@@ -518,13 +525,14 @@ def small_world(**kwargs: object) -> FakeRobot:
     if not robot.artifacts:
         robot.artifacts = {"bottle_1": entity("bottle_1", 3.0, 0.0)}
     if not robot.people_:
-        robot.people_ = {"person_1": entity("person_1", -3.0, 1.0, kind="person")}
+        # facing the robot's way in: as seeded from truth (`unknown_facing` for the search)
+        robot.people_ = {"person_1": entity("person_1", -3.0, 1.0, kind="person", yaw=math.pi)}
     if not robot.visible:
         robot.visible = set(robot.artifacts)
     return robot
 
 
-def context(robot: FakeRobot, settings: MissionSettings | None = None, **alg: bool) -> Context:
+def context(robot: FakeRobot, settings: MissionSettings | None = None, **alg: int) -> Context:
     decisions: list[str] = []
     ctx = Context(robot, settings or fast_settings(), stub_algorithms(**alg), decisions.append)
     ctx.decisions = decisions  # type: ignore[attr-defined]

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from common.config import MissionSettings
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PersonHandover
 from common.messages.wbc import Grasp, Posture, Reach, Release
+from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.handover import FeelPull
 from services.mission.tree import MissionTree, Outcome
-from tests.unit.mission_fakes import FakeRobot, context, fast_settings, small_world
+from tests.unit.mission_fakes import FakeRobot, context, entity, fast_settings, small_world
 
 REQUEST = MissionRequest(request_id="r1", object="bottle_1", person="person_1")
 
@@ -28,7 +31,7 @@ def mission(
     robot: FakeRobot,
     request: MissionRequest = REQUEST,
     settings: MissionSettings | None = None,
-    **algorithms: bool,
+    **algorithms: int,
 ) -> MissionTree:
     tree = MissionTree(context(robot, settings, **algorithms))
     tree.tick()  # idle: waiting for a request
@@ -238,6 +241,44 @@ def test_settings_change_the_handover_patience() -> None:
         robot2.advance()
         ticks_long += 1
     assert ticks_long - ticks_short == pytest.approx(40, abs=2)  # 2 s at 20 Hz
+
+
+def _unknown_facing() -> FakeRobot:
+    """The person as the map saw them: which way they face unknown (yaw 0)."""
+    return small_world(people_={"person_1": entity("person_1", -3.0, 1.0, kind="person")})
+
+
+def _handover_bearings(robot: FakeRobot) -> list[float | None]:
+    return [g.bearing_rad for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+
+
+def test_a_person_whose_facing_is_unknown_is_offered_the_object_from_side_after_side() -> None:
+    """Nobody pulls on the side the robot came to: it goes round the person, 60° either
+    way, 120°, behind, each offer waiting `handover_side_timeout_s`, then fails."""
+    robot = _unknown_facing()
+    settings = fast_settings(handover_side_timeout_s=1.0, handover_timeout_s=30.0)
+    outcome = run(mission(robot, pull=False, settings=settings), robot, max_ticks=6000)
+    assert (outcome.state, outcome.reason) == ("failed", "handover_timeout")
+    assert outcome.detail == "nobody took the object in 1 s on this side"
+    bearings = _handover_bearings(robot)
+    assert bearings[0] is None  # the bring: on the side it comes to
+    first = math.atan2(0.0, -HANDOVER_DISTANCE_M)  # the robot stood on the person's -x side
+    tried = [math.degrees(math.remainder(b - first, math.tau)) for b in bearings[1:]]  # type: ignore[operator]
+    assert [abs(t) for t in tried] == pytest.approx([60.0, 60.0, 120.0, 120.0, 180.0])
+    assert tried[0] > 0 > tried[1] and tried[2] > 0 > tried[3]
+    postures = [g for _, g in robot.arm_goals if isinstance(g, Posture)]
+    assert postures.count(Posture(name="handover")) == 6  # offered on each of six sides
+
+
+def test_the_person_takes_it_on_the_third_side_and_a_known_facing_is_not_searched() -> None:
+    robot = _unknown_facing()
+    settings = fast_settings(handover_side_timeout_s=1.0)
+    assert run(mission(robot, pull_on_try=3, settings=settings), robot).state == "succeeded"
+    assert len([b for b in _handover_bearings(robot) if b is not None]) == 2
+    robot = small_world()  # the facing known (seeded): one offer, the whole patience
+    outcome = run(mission(robot, pull=False, settings=settings), robot)
+    assert outcome.detail == "nobody took the object in 3 s"
+    assert all(b is None for b in _handover_bearings(robot))
 
 
 def test_a_goal_sent_before_navigation_has_its_map_is_sent_once_and_waited_for() -> None:

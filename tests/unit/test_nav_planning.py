@@ -190,3 +190,17 @@ def test_heights_are_measured_from_the_floor_the_frame_shows() -> None:
     assert np.allclose(h[len(floor) :], 0.3, atol=0.02)
     # Too little floor in view: the world's z.
     np.testing.assert_array_equal(heights_above_floor(seen[-60:], p), seen[-60:, 2])
+
+
+def test_a_handover_pose_takes_the_side_asked_for_before_the_persons_front() -> None:
+    """The mission's search round a person of unknown facing asks for a side: that side,
+    whichever way the person faces or the robot stands (or the nearest free one)."""
+    _, cm = _world_costmap("hall", 1)
+    person = cm.people[0]
+    front = handover_pose(cm, person, (0.0, 0.0), FP)
+    asked = math.remainder(math.atan2(front.y - person.y, front.x - person.x) + 2.0, math.tau)
+    pose = handover_pose(cm, person, (0.0, 0.0), FP, bearing=asked)
+    side = math.atan2(pose.y - person.y, pose.x - person.x)
+    assert abs(math.remainder(side - asked, math.tau)) < math.radians(45)  # that side, or near
+    assert pose_ok(cm, pose, FP, 0.03)
+    assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(1.3, abs=0.01)

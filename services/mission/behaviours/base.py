@@ -35,10 +35,14 @@ CANDIDATES = "candidates"  # list[str]: map ids of the object, nearest first
 CANDIDATE = "candidate"  # int: index of the candidate being fetched
 TARGET = "target"  # Target: the object being fetched
 PERSON = "person"  # str: the person's map id
+FACING = "facing"  # bool: the map knows which way the person faces
+SIDE = "side"  # tuple[float, int] | None: the bearing round the person first tried, try k
 DETECTION = "detection"  # tuple[int, Detection] | None: the grasp's detection
 GRASP_PLAN = "grasp_plan"  # a GraspPlan
 FAILURE = "failure"  # Failure | None
-ALL_KEYS = (REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, DETECTION, GRASP_PLAN, FAILURE)
+ALL_KEYS = (
+    REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE
+)  # fmt: skip
 
 
 @dataclass(frozen=True)

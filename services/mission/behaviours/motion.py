@@ -29,7 +29,8 @@ from common.messages.mission import MissionReason
 from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover
 from common.messages.wbc import WbcModeName
 from common.robot import HANDOVER_DISTANCE_M
-from services.mission.behaviours.base import PERSON, Context, MissionBehaviour
+from services.mission.behaviours.base import PERSON, SIDE, Context, MissionBehaviour
+from services.mission.behaviours.handover import side_bearing
 from services.mission.ports import PortError, Refused, Unavailable
 
 
@@ -83,7 +84,8 @@ class NavigateTo(MissionBehaviour):
     def _goal(self) -> NavGoal:
         if self.kind == "artifact":
             return ArtifactStandoff(artifact_id=self.target().map_id)
-        return PersonHandover(person_id=str(self.get(PERSON)))
+        side = self.get(SIDE)
+        return PersonHandover(person_id=str(self.get(PERSON)), bearing_rad=side_bearing(side))
 
     def initialise(self) -> None:
         super().initialise()

@@ -18,6 +18,7 @@ from services.mission import targets
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
+    FACING,
     PERSON,
     REQUEST,
     TARGET,
@@ -84,7 +85,7 @@ class SelectTarget(MissionBehaviour):
 
 
 class ResolvePerson(MissionBehaviour):
-    WRITES = (PERSON,)
+    WRITES = (PERSON, FACING)
 
     def __init__(self, ctx: Context) -> None:
         super().__init__("resolve_person", ctx, stage="bring_to_user")
@@ -98,5 +99,7 @@ class ResolvePerson(MissionBehaviour):
         if person is None:
             return self.fail("unknown_person", f"no mapped person is {request.person!r}")
         self.set(PERSON, person.id)
+        # 0.0 is also the yaw of an entity without one (`navigation.sources._person`)
+        self.set(FACING, person.yaw != 0.0)
         self.feedback_message = f"person {person.id}"
         return Status.SUCCESS
