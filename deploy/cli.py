@@ -758,10 +758,10 @@ def build_parser() -> argparse.ArgumentParser:
         "Start every service under supervisord, ask for an object for a person (by default "
         "the bottle and the person farthest apart in the map), show the mission's progress, "
         "stop, and print a JSON line; exit 0 only on success. The semantic map starts from "
-        "the world's truth with noise (seed-from-world, the ablation standing in for a "
-        "mapping run), or with --map saved from the world's saved map (the robot's own, "
-        "explored from nothing; dume ships the demo worlds'), localized on from the "
-        "robot's own sensors, or from --map FILE."
+        "the world's truth with noise (--map truth, the default for now: the ablation "
+        "standing in for a mapping run), or with --map saved from the world's saved map "
+        "(the robot's own, explored from nothing; dume ships hall and small seed 0's), "
+        "localized on from the robot's own sensors, or from --map FILE."
     )
     p.add_argument("--world-seed", type=seed_number, default=0)
     p.add_argument("--world", choices=["hall", "small"], default="hall")
@@ -770,11 +770,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--map",
         default="truth",
-        metavar="truth|saved|FILE",
+        metavar="saved|FILE|truth",
         help="saved: the world's saved map, the robot's own (var/saved-maps/, then "
-        "deploy/maps/); FILE: a map file (dume map --export); truth (default, for now): the "
-        "map seeded from the world's truth with noise, the ablation standing in for a "
-        "mapping run",
+        "deploy/maps/, which ships hall and small seed 0); FILE: a map file (dume map "
+        "--export); truth (the default, for now): the map seeded from the world's truth with "
+        "noise and its floor plan, the ablation standing in for a mapping run",
     )
     p.add_argument("--timeout", type=float, default=600.0, help="sim seconds for the mission")
     p.set_defaults(func=cmd_demo)
@@ -799,9 +799,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--map", default="truth", metavar="saved|DIR|explored|truth",
         help="saved: each world's saved map (var/saved-maps/, then the maps dume ships), the "
         "world explored from nothing first and its map saved in var/saved-maps/ when it has "
-        "none; DIR: the same in that folder; explored: every "
-        "world explored first, nothing saved; truth (default, for now): the map seeded from "
-        "the world's truth with noise, the ablation standing in for a mapping run",
+        "none (tens of minutes a hall); DIR: the same in that folder; explored: every world "
+        "explored first, nothing saved; truth (the default, for now): the map seeded from "
+        "the world's truth with noise and its floor plan, the ablation standing in for a "
+        "mapping run",
     )  # fmt: skip
     p.set_defaults(func=cmd_eval)
 

@@ -3,23 +3,23 @@ print one JSON line.
 
 The stack is every service (`SERVICES`) under supervisord (`deploy.stack.Supervised`),
 lockstep, its logs and recording in `var/run/<run>/` (`deploy.runs`). The semantic map,
-in a fresh database of its own, starts from the world's truth positions with noise
-(`semantic_map.start = "seed-from-world"`, with the floor plan: the ablation standing in
-for a mapping run, still the default), from the world's saved map (`--map saved`: the
-robot's own, explored from nothing, `deploy.maps`), or from a map file (`--map FILE`);
-from a saved map or a file there is no floor plan, and the robot localizes on the map's
-own grid. Once every service
-is ready the demo asks, by map ids, for the bottle and the person farthest apart in the
-map (the longest job), or for the `--object` (an id or a class) and `--person` given,
-the other side chosen far from it. Progress goes to stderr: each status change, and
-every sim second the behaviour, progress, sim time and real-time factor. The outcome is
-`succeeded` when the mission says so and the sim's truth agrees (its `HandoverTaken`
-event: the object the requested map id stands for in the requested person's hand); exit
-code 0 only then. The last line: `{"outcome", "reason", "sim_time_s", "wall_time_s",
-"rtf", "locomotion", "recording", "digest"}`: the digest fingerprints the run
-(`bench.eval.judge.run_digest`: the status timeline and the base's trajectory at 10 Hz),
-so two runs of one seed can be compared; `var/run/<run>/record.json` holds what it was
-made of.
+in a fresh database of its own, starts from the world's saved map (`--map saved`: the
+robot's own, explored from nothing, `deploy.maps`) or a map file (`--map FILE`), with no
+floor plan, the robot localizing on the map's own grid; or, with `--map truth` (the
+default for now: the saved hall map still holds false people, and the demo asks for the
+person farthest away), from the world's truth positions with noise (`semantic_map.start
+= "seed-from-world"`, with the floor plan: the ablation standing in for a mapping run).
+Once every service is ready the demo asks, by map ids, for the bottle and the person
+farthest apart in the map (the longest job), or for the `--object` (an id or a class)
+and `--person` given, the other side chosen far from it. Progress goes to stderr: each
+status change, and every sim second the behaviour, progress, sim time and real-time
+factor. The outcome is `succeeded` when the mission says so and the sim's truth agrees
+(its `HandoverTaken` event: the object the requested map id stands for in the requested
+person's hand); exit code 0 only then. The last line: `{"outcome", "reason",
+"sim_time_s", "wall_time_s", "rtf", "locomotion", "recording", "digest"}`: the digest
+fingerprints the run (`bench.eval.judge.run_digest`: the status timeline and the base's
+trajectory at 10 Hz), so two runs of one seed can be compared;
+`var/run/<run>/record.json` holds what it was made of.
 """
 
 from __future__ import annotations
@@ -145,7 +145,7 @@ def run_demo(args: argparse.Namespace) -> int:
     stack = Supervised(demo_overrides(args, map_name), port=args.port, run_id=run_id)
     recording = run_dir(stack.config.recording, stack.run_id)
     start = (
-        "seed-from-world (truth + noise)"
+        "seed-from-world (truth + noise: the ablation)"
         if args.map == "truth"
         else f"the saved map {shown(Path(str(stack.config.semantic_map.prior_file)))}"
     )

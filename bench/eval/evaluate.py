@@ -10,10 +10,10 @@ from the world's saved map with `--map saved` (var/saved-maps/ and the maps dume
 or `--map DIR` (`map_source`), the robot localizing on its grid; a world with none is
 explored from nothing first (`explore_first`, scored against truth) and its map saved
 there, so an eval explores each world once. `--map explored` explores every world and
-saves nothing. `--map truth`, still the default, seeds the map from the truth with
+saves nothing. `--map truth`, the default for now, seeds the map from the truth with
 noise (`seed-from-world`, noise seeded by the world seed, with the floor plan): the
-ablation (on its own map the robot cannot yet tell which way a person faces, and
-hands over on a guessed side: see the README). The request is a
+ablation.
+The request is a
 random mapped artifact and person (`bench.eval.targets.seeded_pair`, seeded by the
 world seed). Success is the truth's (`bench.eval.judge`). The segmenter and the
 locomotion the report states are read back from what the running stack publishes.

@@ -153,24 +153,24 @@ def _last_json(out: subprocess.CompletedProcess[str]) -> dict[str, object]:
 
 
 def test_the_demo_refuses_an_object_the_map_does_not_hold_and_stops_its_stack() -> None:
-    out = dume("demo", "--world", "small", "--object", "bottle_9", timeout=600)
+    """From the small world's saved map (explored from nothing, `deploy/maps/`): the stack
+    comes up on it with no floor plan, the robot localizing on its grid, and the demo
+    refuses an id the map does not hold, naming the ones it does."""
+    out = dume("demo", "--world", "small", "--map", "saved", "--object", "bottle_9", timeout=600)
     assert out.returncode == 1
     line = _last_json(out)
     assert set(line) == DEMO_KEYS
     assert line["outcome"] == "failed"
     assert "bottle_9" in str(line["reason"]) and "bottle_1" in str(line["reason"])
+    assert "the saved map deploy/maps/small-seed-0.json" in out.stderr
 
 
 @pytest.mark.slow
-def test_the_demo_starts_from_the_saved_map_dume_ships_and_names_its_entities() -> None:
-    """The small world's saved map (explored from nothing, `deploy/maps/`): the stack comes
-    up on it with no floor plan and the robot localizing on its grid, and the demo refuses
-    an id the map does not hold, naming the ones it does (its own, not the truth's)."""
-    out = dume("demo", "--world", "small", "--map", "saved", "--object", "bottle_9", timeout=600)
+def test_the_truth_ablation_demo_names_the_truths_entities() -> None:
+    out = dume("demo", "--world", "small", "--map", "truth", "--object", "bottle_9", timeout=600)
     assert out.returncode == 1
-    line = _last_json(out)
-    assert "bottle_9" in str(line["reason"]) and "bottle_1" in str(line["reason"])
-    assert "the saved map deploy/maps/small-seed-0.json" in out.stderr
+    assert "seed-from-world (truth + noise: the ablation)" in out.stderr
+    assert "bottle_9" in str(_last_json(out)["reason"])
 
 
 @pytest.mark.slow
@@ -184,6 +184,8 @@ def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Pa
         "small",
         "--seed",
         "0",
+        "--map",
+        "saved",
         "--out",
         str(tmp_path),
         timeout=3000,
@@ -194,8 +196,9 @@ def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Pa
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["settings"]["segmenter"] == "network"
     assert doc["settings"]["locomotion"] == "dynamic"
+    assert doc["settings"]["map start"].startswith("each world's saved map in var/saved-maps/")
     (world,) = doc["worlds"]
-    assert (world["object"], world["person"]) == ("bottle_1", "person_1")
+    assert world["object"] == "bottle_1"  # the map's ids: the robot's own map's
     assert (world["truth_object"], world["truth_person"]) == ("bottle_1", "person_1")
     assert world["outcome"] == "succeeded", world
     assert world["agree"] and world["stages_passed"][-1] == "release_object"

@@ -365,7 +365,7 @@ def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run(
     from deploy.maps import NoSavedMap
 
     args = build_parser().parse_args(
-        ["eval", "--worlds", "2", "--world", "small", "--walking-people"]
+        ["eval", "--worlds", "2", "--world", "small", "--walking-people", "--map", "truth"]
     )
     cfg = load_config(world_overrides(args, 7, "eval-x-7"))
     assert (cfg.sim.world, cfg.sim.world_seed, cfg.sim.walking_people) == ("small", 7, True)
@@ -374,15 +374,17 @@ def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run(
     assert cfg.semantic_map.name == "eval-x-7" and cfg.semantic_map.seed_noise_seed == 7
     assert not cfg.recording.enabled and args.timeout == 300.0
 
-    demo = build_parser().parse_args(["demo", "--world-seed", "3"])  # truth, for now
+    demo = build_parser().parse_args(["demo", "--world-seed", "3", "--map", "truth"])
     cfg = load_config(demo_overrides(demo, "demo-x"))
     assert (cfg.sim.world, cfg.sim.world_seed) == ("hall", 3)
     assert cfg.semantic_map.start == "seed-from-world" and cfg.recording.enabled
     assert cfg.semantic_map.floor_plan == "world"
-    with pytest.raises(NoSavedMap, match="hall seed 3"):  # no map of it
+    with pytest.raises(NoSavedMap, match="hall seed 3"):  # no saved map of it
         demo_overrides(
             build_parser().parse_args(["demo", "--world-seed", "3", "--map", "saved"]), "demo-x"
         )
+    default = build_parser().parse_args(["demo", "--world-seed", "3"])
+    assert load_config(demo_overrides(default, "demo-x")).semantic_map.start == "seed-from-world"
     prior = no_saved_maps.parent / "map.json"
     prior.write_text("{}")
     demo = build_parser().parse_args(["demo", "--map", str(prior)])
