@@ -146,11 +146,16 @@ class ScanGrid:
             self.origin_xy[0] + j0 * self.resolution_m,
             self.origin_xy[1] + i0 * self.resolution_m,
         )
-        seen = (self.hits > 0) | (self.misses > 0)
-        known = ndimage.binary_dilation(seen, np.ones((3, 3), bool), iterations=KNOWN_GROW)
+        # the seen cells grown on the field's extent only (padded by the growth, so the
+        # cells at its edge grow as on the whole grid): the grid is 1200² cells
+        k = KNOWN_GROW
+        a0, a1 = max(0, i0 - k), min(self.shape[0], i1 + k)
+        b0, b1 = max(0, j0 - k), min(self.shape[1], j1 + k)
+        seen = (self.hits[a0:a1, b0:b1] > 0) | (self.misses[a0:a1, b0:b1] > 0)
+        known = ndimage.binary_dilation(seen, np.ones((3, 3), bool), iterations=k)
         return LikelihoodField.of_grid(
             occ[i0:i1, j0:j1], self.resolution_m, origin, exact_gradient=True,
-            known=known[i0:i1, j0:j1],
+            known=known[i0 - a0 : i1 - a0, j0 - b0 : j1 - b0],
         )  # fmt: skip
 
     def cells(self) -> NDArray[np.uint8]:
