@@ -131,13 +131,19 @@ def test_kept_surfaces_give_way_to_any_found_over_them() -> None:
     assert with_kept(found, []) == found
 
 
+def _wall_face(occ: Occupancy) -> np.ndarray:
+    """A lidar map of free floor with a wall's face at x = 1.0–1.05 (column 60)."""
+    static = np.full(occ.static.shape, 0, np.uint8)
+    static[:, 60] = 100
+    return static
+
+
 def test_beside_a_lidar_wall_the_depth_learns_nothing_elsewhere_it_does() -> None:
     """The depth's noise spreads a wall's face over two cells; the lidar's map already has
     it: on a sensed static layer the learned cell inside is not added, a table top the
     lidar's plane misses is."""
     occ = Occupancy.unknown(2.0, RES, hits_needed=2)
-    static = np.full(occ.static.shape, 0, np.uint8)
-    static[:, 60] = 100  # a wall's face at x = 1.0–1.05
+    static = _wall_face(occ)
     occ.adopt_static(static)
     face = np.column_stack([np.full(20, 0.97), np.linspace(-0.5, 0.5, 20), np.full(20, 1.0)])
     table = top(-1.0, 0.0, (0.3, 0.2), 0.0, 0.75)
@@ -152,8 +158,7 @@ def test_on_a_sensed_layer_the_depth_leaves_walls_to_the_lidar_but_learns_tables
     """The explored small world's settings: 12 frames, nothing within 0.2 m of a wall or a
     machine; a table's legs are small blobs: the top above and beside them is learned."""
     occ = Occupancy.unknown(2.0, RES, hits_needed=3, sensed=(12, 0.2))
-    static = np.full(occ.static.shape, 0, np.uint8)
-    static[:, 60] = 100  # a wall's face at x = 1.0–1.05
+    static = _wall_face(occ)
     for lx, ly in ((-1.3, -0.2), (-1.3, 0.15), (-0.75, -0.2), (-0.75, 0.15)):  # 4 legs
         static[int((ly + 2.0) / RES), int((lx + 2.0) / RES)] = 100
     occ.adopt_static(static)
