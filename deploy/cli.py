@@ -211,15 +211,15 @@ def map_start(map_arg: str | None, world: str, seed: int) -> dict[str, Any]:
     site = config.map_site()
     slug = site_slug(site)
     if map_arg is None:
-        own = database_path(config.semantic_map, None, site)
-        saved = None if own.is_file() else saved_map(site)
-        if own.is_file() or saved is None:
-            if saved is None and not own.is_file():
-                print(
-                    f"dume up: no map of {site!r} yet: the robot starts on an empty map "
-                    "(`dume map --explore` maps it)",
-                    file=sys.stderr,
-                )
+        if database_path(config.semantic_map, None, site).is_file():
+            return {"semantic_map.floor_plan": "none"}  # resumed
+        saved = saved_map(site)
+        if saved is None:
+            print(
+                f"dume up: no map of {site!r} yet: the robot starts on an empty map "
+                "(`dume map --explore` maps it)",
+                file=sys.stderr,
+            )
             return {"semantic_map.floor_plan": "none"}
         return {**start_from(str(saved), site), "semantic_map.name": slug}
     try:

@@ -12,11 +12,10 @@ explored from nothing first (`explore_first`, scored against truth) and its map 
 there, so an eval explores each world once. `--map explored` explores every world and
 saves nothing. `--map truth`, the default for now, seeds the map from the truth with
 noise (`seed-from-world`, noise seeded by the world seed, with the floor plan): the
-ablation.
-The request is a
-random mapped artifact and person (`bench.eval.targets.seeded_pair`, seeded by the
-world seed). Success is the truth's (`bench.eval.judge`). The segmenter and the
-locomotion the report states are read back from what the running stack publishes.
+ablation. The request is a random mapped artifact and person
+(`bench.eval.targets.seeded_pair`, seeded by the world seed). Success is the truth's
+(`bench.eval.judge`). The segmenter and the locomotion the report states are read back
+from what the running stack publishes.
 
 Progress is one compact line per stage change and one per world on stderr, not a
 progress bar: a world takes minutes of wall time, so a bar would sit still, while a line
