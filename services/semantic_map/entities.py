@@ -57,6 +57,8 @@ class Track:
     hits: detections fused. misses: consecutive looks at its place without seeing it.
     near_hits: whole detections fused from within the fusion's `near_m` (the class is
     trusted from there; not stored: a track read from the database starts at 0).
+    seen_with: people, the ids of the people detected in one frame with this one (two
+    bodies, never one split track; not stored).
     """
 
     class_name: str
@@ -82,6 +84,7 @@ class Track:
     P: FloatArray | None = None
     #: People: the velocity at the last sighting was sure (extrapolated while unseen).
     moving: bool = False
+    seen_with: set[str] = field(default_factory=set)
 
     @property
     def confirmed(self) -> bool:

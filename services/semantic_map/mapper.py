@@ -221,14 +221,16 @@ class SemanticMap:
         axis = np.asarray(det.axis_in_world, float)
         centroid = np.asarray(det.centroid_in_world, float)
         xy = axis[:2] if np.all(np.isfinite(axis)) and axis.any() else centroid[:2]
+        u0, v0, u1, v1 = det.bbox
+        cut = rgb is not None and (u0 == 0 or v0 == 0 or u1 >= rgb.shape[1] or v1 >= rgb.shape[0])
         if det.class_name == "person":
             app = None
             if rgb is not None:
                 mask = np.asarray(as_numpy(det.mask))
                 app = colour_histogram(rgb, det.bbox, mask.astype(np.uint8))
-            return Observation("person", xy.copy(), 0.0, sigma, det.score, app)
-        u0, v0, u1, v1 = det.bbox
-        cut = rgb is not None and (u0 == 0 or v0 == 0 or u1 >= rgb.shape[1] or v1 >= rgb.shape[0])
+            return Observation(
+                "person", xy.copy(), 0.0, sigma, det.score, app, det.d_obj, whole=not cut
+            )
         return Observation(
             det.class_name,
             xy.copy(),
@@ -339,6 +341,11 @@ class SemanticMap:
         before = {id(tr) for tr in self.tracks()}
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)
+        splits = self.people.take_merged()
+        report.dropped += self._delete(
+            [(gone, f"the same person as {keep.id}: {why}") for keep, gone, why in splits]
+        )
+        changed_p += [k for k, _, _ in splits if all(k is not c for c in changed_p)]
         for tr in [*changed_a, *changed_p]:
             assert tr.id is not None
             self._dirty[tr.id] = tr

@@ -20,6 +20,17 @@ small-world patrol gave one standing person four ids when the colours vetoed). A
 starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
 unless it lies within `MIN_SEPARATION_M` of a person (then it is a piece of that body,
 e.g. legs whose colours did not match the shirt).
+
+A track still splits now and then: while the robot walks round a standing person their
+visible surface and the depth behind it move, a detection falls outside the gate, and a
+second id grows beside the first (the explored hall: three people with two ids each, 8 cm
+to 1.4 m apart). Two people never in one frame together (`Track.seen_with`) are merged
+back into one (`merge_splits`) when they are closer than `BODY_M` (two bodies do not
+overlap), or closer than `SPLIT_M` with like colours, both seen within `SPLIT_RECENT_NS`
+(the detections alternate between them). The id kept is the one seen more often from
+near (`SemanticMapSettings.class_near_m`), a person the map was given (a prior, a seed)
+before one it made; the other's id is deleted. The place is the two moment-matched, its
+covariance spanning both, so the next detection at either place joins it.
 """
 
 from __future__ import annotations
@@ -59,6 +70,12 @@ MAX_GATE_M = 1.2
 #: A detection left over this close to a person is a piece of them, never a new
 #: person (two bodies do not overlap), m.
 MIN_SEPARATION_M = 0.35
+#: Two people never seen together this close are one body, m (a person is 0.4-0.5 m across).
+BODY_M = 0.5
+#: Two people never seen together, alike in colours and both seen lately this close are one
+#: person whose track split, m (the explored hall's farthest split: 1.36 m).
+SPLIT_M = 1.5
+SPLIT_RECENT_NS = 10_000_000_000
 
 
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
@@ -78,6 +95,11 @@ def merge_split_people(observations: list[Observation], radius_m: float) -> list
             )
         out.append(best)
     return out
+
+
+def _rank(tr: Track) -> tuple[bool, int, int]:
+    """Which of two tracks of one person to keep: given before made, then more near views."""
+    return (tr.source != "perception", tr.near_hits, tr.hits)
 
 
 def sure_velocity(tr: Track) -> bool:
@@ -108,6 +130,7 @@ class PeopleTracker:
         self.ids = ids
         self.settings = settings
         self.tracks: list[Track] = []
+        self.merged: list[tuple[Track, Track, str]] = []
 
     @property
     def confirmed(self) -> list[Track]:
@@ -231,7 +254,83 @@ class PeopleTracker:
                 changed.append(tr)
         ttl = TENTATIVE_TTL_NS
         self.tracks = [t for t in self.tracks if t.confirmed or stamp_ns - t.last_seen_ns <= ttl]
-        return changed
+        seen = [t for t in changed if t.last_seen_ns == stamp_ns]
+        for tr in seen:
+            assert tr.id is not None
+            tr.seen_with.update(o.id for o in seen if o is not tr and o.id is not None)
+        self.merged.extend(self.merge_splits(seen, stamp_ns))
+        gone = {id(g) for _, g, _ in self.merged}
+        return [t for t in changed if id(t) not in gone]
+
+    def merge_splits(self, seen: list[Track], stamp_ns: int) -> list[tuple[Track, Track, str]]:
+        """Merge each person seen in this frame with a person that is the same body (module
+        doc): (kept, merged away, why), the merged one forgotten."""
+        out: list[tuple[Track, Track, str]] = []
+        for a in seen:
+            if all(a is not t for t in self.tracks):
+                continue  # merged away already
+            for b in self.confirmed:
+                why = self._same_body(a, b, stamp_ns)
+                if why:
+                    keep, gone = (b, a) if _rank(b) > _rank(a) else (a, b)
+                    self._absorb(keep, gone)
+                    out.append((keep, gone, why))
+                    if gone is a:
+                        break
+        return out
+
+    def _same_body(self, a: Track, b: Track, stamp_ns: int) -> str:
+        """Why a and b are one person; "" when they may be two."""
+        if a is b or b.id in a.seen_with or a.id in b.seen_with:
+            return ""
+        d = float(np.linalg.norm(a.xy - b.xy))
+        if d < BODY_M:
+            return f"{d:.2f} m apart and never seen together: one body"
+        if d >= SPLIT_M or stamp_ns - b.last_seen_ns > SPLIT_RECENT_NS:
+            return ""
+        if a.appearance is None or b.appearance is None:
+            return ""
+        app = bhattacharyya(a.appearance, b.appearance)
+        if app > MAX_APPEARANCE:
+            return ""
+        return (
+            f"{d:.2f} m apart, alike (colour distance {app:.2f}), seen in turn within "
+            f"{SPLIT_RECENT_NS * 1e-9:g} s and never together: one person whose track split"
+        )
+
+    def _absorb(self, keep: Track, gone: Track) -> None:
+        """One track of the two: the place moment-matched (the detections' weights), so
+        its covariance spans both places and the next detection at either one fuses."""
+        assert keep.P is not None and gone.P is not None
+        w = np.array([keep.hits, gone.hits], float) / max(keep.hits + gone.hits, 1)
+        mean = w[0] * keep.xy + w[1] * gone.xy
+        cov = sum(
+            wi * (tr.P[:2, :2] + np.outer(tr.xy - mean, tr.xy - mean))
+            for wi, tr in zip(w, (keep, gone), strict=True)
+            if tr.P is not None
+        )
+        P = np.zeros((4, 4))
+        P[:2, :2], P[2:, 2:] = cov, keep.P[2:, 2:]
+        self._set(keep, np.concatenate([mean, keep.velocity]), P)
+        keep.hits += gone.hits
+        keep.near_hits += gone.near_hits
+        keep.first_seen_ns = min(keep.first_seen_ns or gone.first_seen_ns, gone.first_seen_ns)
+        keep.last_seen_ns = max(keep.last_seen_ns, gone.last_seen_ns)
+        if keep.appearance is None and gone.appearance is not None:
+            keep.appearance = gone.appearance.copy()
+        assert keep.id is not None and gone.id is not None
+        for tr in self.tracks:  # who was seen with the one merged away was seen with this one
+            if gone.id in tr.seen_with:
+                tr.seen_with.discard(gone.id)
+                tr.seen_with.add(keep.id)
+                keep.seen_with.add(tr.id or "")
+        keep.seen_with.discard("")
+        self.drop(gone)
+
+    def take_merged(self) -> list[tuple[Track, Track, str]]:
+        """The merges since the last call: (kept, merged away, why)."""
+        merged, self.merged = self.merged, []
+        return merged
 
     def _fuse(self, tr: Track, obs: Observation, stamp_ns: int) -> None:
         assert tr.P is not None
@@ -247,6 +346,7 @@ class PeopleTracker:
         if obs.appearance is not None:
             tr.appearance = blend(tr.appearance, obs.appearance)
         tr.hits += 1
+        tr.near_hits += int(obs.whole and obs.range_m <= self.settings.class_near_m)
         tr.moving = sure_velocity(tr)
         tr.last_seen_ns = stamp_ns
         tr.misses = 0

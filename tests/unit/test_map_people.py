@@ -208,3 +208,99 @@ def test_a_walker_tracked_for_a_second_coasts_on_while_out_of_view() -> None:
     for k in range(15, 25):  # a second unseen
         tracker.update(k * DT_NS, [])
     assert abs(person.xy[0] - 2.4) < 0.3, person.xy
+
+
+def _standing(
+    tracker: PeopleTracker,
+    t0: int,
+    frames: int,
+    places: list[tuple[float, float]],
+    looks: list[np.ndarray | None],
+    range_m: float = 2.0,
+    seed: int = 0,
+) -> int:
+    """`frames` frames, each detecting one person at each of `places` (wearing `looks`);
+    returns the next frame's stamp."""
+    rng = np.random.default_rng(seed)
+    for k in range(frames):
+        obs = [
+            Observation(
+                "person", np.array(p) + rng.normal(0.0, 0.02, 2), 0.0, 0.05, 0.9, a, range_m
+            )
+            for p, a in zip(places, looks, strict=True)
+        ]
+        tracker.update(t0 + k * DT_NS, obs)
+    return t0 + frames * DT_NS
+
+
+def test_a_track_that_split_while_the_robot_walked_round_merges_back() -> None:
+    """Seen from one side, then from the other: the detections sit 0.6 m apart (outside
+    the gate), a second id grows; never seen together, alike in colour: one person again,
+    the id seen more often from near kept, the other's reason given."""
+    rng = np.random.default_rng(5)
+    shirt = _hist(7, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 20, [(3.0, 1.0)], [shirt], range_m=4.0)
+    t = _standing(tracker, t, 1, [(3.6, 1.0)], [shirt], range_m=1.5)
+    assert {tr.id for tr in tracker.confirmed} == {"person_1"}, "one frame: still tentative"
+    t = _standing(tracker, t, 30, [(3.6, 1.0)], [shirt], range_m=1.5, seed=1)
+    (person,) = tracker.confirmed
+    assert person.id == "person_2", "kept: the one seen from near"
+    assert person.hits == 51, "the merged one's detections counted"
+    ((keep, gone, why),) = tracker.take_merged()
+    assert (keep.id, gone.id) == ("person_2", "person_1")
+    assert "never together" in why and "split" in why
+
+
+def test_two_tracks_overlapping_as_one_body_merge_whatever_their_colours() -> None:
+    """0.45 m apart (outside the gate, beyond the tentative's separation), seen in turn in
+    other colours, never together: nobody stands inside another person."""
+    rng = np.random.default_rng(6)
+    front, back = _hist(3, rng), _hist(40, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 20, [(1.0, 2.0)], [front])
+    _standing(tracker, t, 20, [(1.45, 2.0)], [back])
+    (person,) = tracker.confirmed
+    ((_, _, why),) = tracker.take_merged()
+    assert "one body" in why
+    assert np.linalg.norm(person.xy - [1.45, 2.0]) < 0.1, "then follows the detections"
+
+
+def test_two_people_seen_together_stay_two_however_close_and_alike() -> None:
+    """Two workers in one shirt colour 0.6 m apart: seen together once, two people ever after,
+    also when the camera then sees one at a time."""
+    rng = np.random.default_rng(7)
+    shirt = _hist(12, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(0.0, 0.0), (0.6, 0.0)], [shirt, shirt])
+    for k in range(6):
+        t = _standing(tracker, t, 5, [(0.0, 0.0) if k % 2 else (0.6, 0.0)], [shirt], seed=k)
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
+    assert tracker.take_merged() == []
+
+
+def test_two_people_in_other_clothes_seen_in_turn_stay_two() -> None:
+    """1 m apart, never in one frame (the camera turns from one to the other), in other
+    clothes: two people, not a split track."""
+    rng = np.random.default_rng(8)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = 0
+    for k in range(6):
+        place, look = ((0.0, 0.0), red) if k % 2 == 0 else ((1.0, 0.0), blue)
+        t = _standing(tracker, t, 5, [place], [look], seed=k)
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
+
+
+def test_a_given_person_keeps_their_id_when_a_split_of_theirs_merges() -> None:
+    """A person from the map's prior (no colours yet) and a track the map made 0.4 m off:
+    one body, the prior's id kept."""
+    rng = np.random.default_rng(9)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    prior = Track(
+        "person", "person", np.array([5.0, 5.0]), np.eye(2) * 0.01, 0.0, "prior", id="person_4"
+    )
+    tracker.add(prior)
+    _standing(tracker, 0, 10, [(5.0, 5.4)], [_hist(20, rng)])
+    ids = [tr.id for tr in tracker.confirmed]
+    assert ids == ["person_4"]
