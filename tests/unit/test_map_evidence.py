@@ -130,3 +130,22 @@ def test_entries_the_map_made_are_deleted_once_its_surfaces_say_they_cannot_be()
     assert dropped[seated] == "not where a person can be: inside the top of surface_1"
     assert {t.id for t in smap.tracks()} == {bottle, prior}
     assert set(smap.take_deletions()) == {box, seated}
+
+
+def test_a_person_made_before_the_lidar_mapped_a_machine_face_is_deleted_once_it_has() -> None:
+    """The network reads a machine's edges as a person, the centroid on its face: seen
+    before the SLAM grid had that face, the "person" is kept; once the grid has it, gone.
+    A person standing 0.3 m from the machine stays."""
+    smap = _explored_map()
+    phantom, worker = "person_1", "person_2"
+    for name, xy in ((phantom, (-0.98, -1.0)), (worker, (-1.3, 0.6))):
+        smap.add(Track("person", "person", np.array(xy), np.eye(2) * 0.01, 0.0, "perception", name))
+    assert smap.drop_doubtful() == []
+    cells = smap.occupancy.static.copy()
+    machine = (slice(16, 52), slice(21, 36))  # x -0.95..-0.2, y -1.2..0.6: the worker 0.35 m off
+    cells[machine] = OCCUPIED
+    smap.occupancy.adopt_static(cells)
+    dropped = dict(smap.drop_doubtful())
+    assert set(dropped) == {phantom}
+    assert "static obstacle" in dropped[phantom]
+    assert [t.id for t in smap.people.confirmed] == [worker]
