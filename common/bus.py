@@ -1,7 +1,8 @@
 """Zenoh, typed: sessions from `deploy/zenoh/*.json5`, publishers, subscribers, queries.
 
-- `open_session(config, role)` reads the role's JSON5 file and sets the router's port
-  from the config (`DUME_ZENOH_PORT`), so stacks run side by side on one machine.
+- `open_session(config, role, user=…)` reads the role's JSON5 file and sets the router's
+  port from the config (`DUME_ZENOH_PORT`), so stacks run side by side on one machine;
+  a client logs in as `user` and the router enforces who may do what (`common.access`).
 - `Bus` wraps a session. Publishers are declared once and say their traffic class:
   `control` (state, commands, acks, clock, cmd_vel: real-time priority, never dropped,
   express), `data` (everything else small) and `bulk` (camera frames: lower priority so
@@ -31,6 +32,7 @@ from typing import Any, Generic, Literal, TypeVar
 import msgspec
 import zenoh
 
+from common.access import USER, CredentialsError, access_control, ensure_credentials
 from common.config import Config, resolve
 from common.lifelines import Lifelines
 from common.messages import ErrorReply, PayloadError, decode, encode
@@ -86,18 +88,28 @@ class RequestError(Exception):
 
 
 def session_config(
-    config: Config, role: Role, connect_timeout_s: float | None = None
+    config: Config,
+    role: Role,
+    connect_timeout_s: float | None = None,
+    user: str | None = USER,
 ) -> zenoh.Config:
     """The Zenoh config for a role, with the stack's endpoint from `config.zenoh`.
 
     A client waits for its router forever unless `connect_timeout_s` is given (the CLI's
-    commands, which should say "no stack here" rather than hang).
+    commands, which should say "no stack here" rather than hang). Under
+    `zenoh.access_control` the router gets the credentials and the ACL, a client logs in
+    as `user` (`common.access`; None: no login, which the router refuses).
     """
     z = config.zenoh
     endpoint = f"tcp/{z.host}:{z.port}"
+    credentials = resolve(z.credentials)
     if role == "router":
         conf = zenoh.Config.from_file(str(resolve(z.router_config)))
         conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+        if z.access_control:
+            ensure_credentials(credentials)
+            conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(credentials)))
+            conf.insert_json5("access_control", json.dumps(access_control()))
     else:
         conf = zenoh.Config.from_file(str(resolve(z.client_config)))
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
@@ -106,6 +118,12 @@ def session_config(
         if connect_timeout_s is not None:
             conf.insert_json5("connect/timeout_ms", json.dumps(round(connect_timeout_s * 1000)))
             conf.insert_json5("connect/exit_on_failure", "true")
+        if z.access_control and user is not None:
+            password = ensure_credentials(credentials).get(user)
+            if password is None:
+                raise CredentialsError(f"{credentials} has no password for {user!r}")
+            conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+            conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
     return conf
 
 
@@ -114,14 +132,19 @@ class NoRouter(BusError):
 
 
 def open_session(
-    config: Config, role: Role = "client", connect_timeout_s: float | None = None
+    config: Config,
+    role: Role = "client",
+    connect_timeout_s: float | None = None,
+    user: str | None = USER,
 ) -> zenoh.Session:
-    """Open a session; a client waits for the router unless given a timeout."""
+    """Open a session (a client logged in as `user`); a client waits for the router
+    unless given a timeout."""
     try:
-        return zenoh.open(session_config(config, role, connect_timeout_s))
+        return zenoh.open(session_config(config, role, connect_timeout_s, user))
     except zenoh.ZError as exc:
         where = f"tcp/{config.zenoh.host}:{config.zenoh.port}"
-        raise NoRouter(f"no dume stack answers on {where}: {exc}") from None
+        login = f", or it refused {user!r}'s login" if config.zenoh.access_control else ""
+        raise NoRouter(f"no dume stack answers on {where}{login}: {exc}") from None
 
 
 _TRAFFIC: dict[str, dict[str, Any]] = {
@@ -484,8 +507,9 @@ class Bus:
         role: Role = "client",
         connect_timeout_s: float | None = None,
         guard: TruthGuard | None = None,
+        user: str | None = USER,
     ) -> Bus:
-        session = open_session(config, role, connect_timeout_s)
+        session = open_session(config, role, connect_timeout_s, user)
         return cls(session, config.log.trace_every_s, guard)
 
     def __enter__(self) -> Bus:

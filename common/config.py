@@ -70,12 +70,19 @@ class _Section(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
 
 class ZenohSettings(_Section):
-    """The router's address. Services are clients of one router per stack."""
+    """The router's address. Services are clients of one router per stack.
+
+    access_control: every session logs in (user and password from `credentials`, made
+    at first use) and the router allows each identity only its keys (`common.access`).
+    Off only for a session with a tool that cannot log in, on a host nobody else uses.
+    """
 
     host: str = "127.0.0.1"
     port: Port = 7447
     router_config: str = "deploy/zenoh/router.json5"
     client_config: str = "deploy/zenoh/client.json5"
+    access_control: bool = True
+    credentials: str = "var/secrets/zenoh-users"
 
 
 class Participant(_Section):

@@ -28,6 +28,7 @@ from types import FrameType
 
 import rerun as rr
 
+from common.access import identity_of
 from common.bus import Bus
 from common.config import Config, ConfigError, load_config
 from common.keys import RobotKeys
@@ -139,7 +140,7 @@ def run(
     rec = open_recording(name, config.recording)
     if config.recording.enabled:
         logging.getLogger("dume").addHandler(RerunHandler(rec, name))
-    bus = Bus.open(config, guard=TruthGuard.of(name, config))
+    bus = Bus.open(config, guard=TruthGuard.of(name, config), user=identity_of(name))
     svc = Service(name, config, bus, rec, layout)
     _install_signals(svc.stop)
     try:

@@ -26,6 +26,7 @@ from typing import Any
 
 import msgspec
 
+from common.access import TRUSTED
 from common.bus import AliveWatch, Bus
 from common.config import REPO_ROOT, Config, Overrides, load_config, merged, write_settings
 from common.keys import RobotKeys, service_of_alive_key
@@ -177,7 +178,7 @@ class _Stack:
     def bus(self) -> Bus:
         """A client session on this stack (opened on first use)."""
         if self._bus is None:
-            self._bus = Bus.open(self.config)
+            self._bus = Bus.open(self.config, user=TRUSTED)
             self._alive = self._bus.watch_alive(self.keys.alive_all)
         return self._bus
 
@@ -197,7 +198,7 @@ class _Stack:
         after every service declared its queryables and receives them as current
         declarations, not as news racing the session's own start.
         """
-        own = Bus.open(self.config) if self._bus is None else None
+        own = Bus.open(self.config, user=TRUSTED) if self._bus is None else None
         bus = own or self.bus
         watch = bus.watch_alive(self.keys.alive_all)
         try:

@@ -48,7 +48,7 @@ def test_a_services_bus_refuses_truth_it_was_not_granted(stack: StartStack) -> N
     """A real session with the mission's guard: odometry and the clock are the robot's,
     the base's truth, the world's description and its events are not."""
     s = stack(["sim", "hold"], 'sim.world="small"', *HOLD_COMMANDER)
-    mission = Bus.open(s.config, guard=TruthGuard.of("mission", s.config))
+    mission = Bus.open(s.config, guard=TruthGuard.of("mission", s.config), user="mission")
     try:
         mission.latest(s.keys.odom, Odom).undeclare()
         mission.latest(WORLD_CLOCK, Clock).undeclare()
@@ -61,7 +61,7 @@ def test_a_services_bus_refuses_truth_it_was_not_granted(stack: StartStack) -> N
     finally:
         mission.close()
     # The map's floor-plan prior is granted, and answered by the sim.
-    smap = Bus.open(s.config, guard=TruthGuard.of("semantic_map", s.config))
+    smap = Bus.open(s.config, guard=TruthGuard.of("semantic_map", s.config), user="semantic_map")
     try:
         t0 = time.monotonic()
         world = smap.query(WORLD_DESCRIPTION, None, WorldDescription, 10.0)

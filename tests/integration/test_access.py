@@ -1,0 +1,72 @@
+"""Who may talk to the robot (`common.access`), on a real router: a session without the
+stack's password is refused at the door; a user's session can neither watch the robot's
+sensors nor move it (the rogue-client probe of the hardening issue), while a trusted one
+doing the same does move it, so the test can fail."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+
+from common.access import IDENTITIES, TRUSTED, USER
+from common.bus import Bus, NoRouter
+from common.messages.sim import Odom, StateTruth
+from common.messages.wbc import CmdVel, WbcMode
+from deploy.stack import ProcessStack
+from tests.conftest import StartStack
+from tests.integration.test_wbc_stack import WBC
+
+pytestmark = pytest.mark.integration
+
+
+def test_a_session_without_the_stacks_password_is_refused_at_the_door(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    s = stack(["sim", "wbc"], *WBC, "sim.duration_s=60")
+    with pytest.raises(NoRouter, match="refused"):
+        Bus.open(s.config, connect_timeout_s=2.0, user=None).close()
+    forged = tmp_path / "users"
+    forged.write_text("".join(f"{who}:guessed\n" for who in IDENTITIES))
+    zenoh = msgspec.structs.replace(s.config.zenoh, credentials=str(forged))
+    other = msgspec.structs.replace(s.config, zenoh=zenoh)
+    with pytest.raises(NoRouter, match="refused"):
+        Bus.open(other, connect_timeout_s=2.0, user=TRUSTED).close()
+
+
+def _drive(s: ProcessStack, bus: Bus, source: str, truth_now: StateTruth) -> None:
+    """What the rogue client did: the WBC's mode to walk on `source`, 1.5 s of 0.5 m/s
+    forward at 20 Hz (stamped on the sim's clock), then damp."""
+    mode = bus.publisher(s.keys.wbc_mode, WbcMode)
+    vel = bus.publisher(s.keys.cmd_vel, CmdVel)
+    t = truth_now.stamp_ns
+    mode.put(WbcMode(stamp_ns=t, mode="walk", cmd_vel_source=source))
+    for k in range(30):
+        vel.put(CmdVel(stamp_ns=t + k * 50_000_000, vx=0.5, vy=0.0, wz=0.0, source=source))
+        time.sleep(0.05)
+
+
+def test_a_user_can_neither_watch_nor_move_the_robot_and_a_trusted_client_can(
+    stack: StartStack,
+) -> None:
+    s = stack(["sim", "wbc"], *WBC, "sim.duration_s=600")
+    truth = s.bus.latest(s.keys.state_truth, StateTruth)
+    first = truth.wait(lambda m: m.stamp_ns >= 1_000_000_000, 120)
+    with Bus.open(s.config, user=USER) as user:
+        odom = user.fifo(s.keys.odom, Odom)
+        seen_truth = user.fifo(s.keys.state_truth, StateTruth)
+        _drive(s, user, "rogue", first)
+        user.publisher(s.keys.wbc_mode, WbcMode).put(WbcMode(stamp_ns=first.stamp_ns, mode="damp"))
+        later = truth.wait(lambda m: m.stamp_ns >= first.stamp_ns + 3_000_000_000, 300)
+        assert len(list(odom.drain())) == 0 and len(list(seen_truth.drain())) == 0
+    p0, p1 = np.array(first.base_position_in_world), np.array(later.base_position_in_world)
+    assert np.linalg.norm(p1[:2] - p0[:2]) < 0.02, "the user's commands moved the robot"
+    assert abs(p1[2] - p0[2]) < 0.02, "the user's damp reached the WBC"
+    # The same commands from a client the stack trusts are obeyed: the check above can fail.
+    _drive(s, s.bus, "trial", later)
+    moved = truth.wait(lambda m: m.stamp_ns >= later.stamp_ns + 3_000_000_000, 300)
+    p2 = np.array(moved.base_position_in_world)
+    assert np.linalg.norm(p2[:2] - p1[:2]) > 0.1
