@@ -14,6 +14,11 @@ wait bounded by `mission.input_timeout_s`, a miss logged as a warning, never rai
    both rendered and processed (`wrist_published`), and b − perception's latency is one
    of perception's ticks.
 
+Every wait is taken in slices of `SLICE_S` and given up when `lost()` says a dependency
+of the running job is gone (a killed WBC publishes no odom for b, and the tick waited
+the whole timeout, 30 s, before the request could fail): `wait` then returns False
+(after `robot.begin(b)`) and the loop fails the job `dependency_lost` before its step.
+
 Times are sim time in integer ns; timeouts are wall-clock seconds. No Zenoh: the robot,
 the gate and who is alive come in as small protocols (`BusRobot`, `UpstreamGate` and
 `AliveWatch.alive` in the node).
@@ -22,12 +27,20 @@ the gate and who is alive come in as small protocols (`BusRobot`, `UpstreamGate`
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Collection
 from typing import Protocol
 
 from common.bus import WaitTimeout
 from common.lockstep import AckGate
 from common.messages.base import NS_PER_S
+
+#: The slice a wait is taken in between two looks at `lost()`, wall s.
+SLICE_S = 0.05
+
+
+class Lost(Exception):
+    """A dependency went away during a wait: give the tick up."""
 
 
 class Waitable(Protocol):
@@ -75,8 +88,10 @@ class TickInputs:
         wrist_published: bool,
         timeout_s: float,
         log: logging.Logger,
+        lost: Callable[[], bool] = lambda: False,
     ) -> None:
         self.robot, self.gate = robot, gate
+        self.lost = lost
         self._alive, self._hear = alive, hear
         self.wbc_alive_key = wbc_alive_key
         self.status_period_ns = status_period_ns
@@ -84,23 +99,50 @@ class TickInputs:
         self.timeout_s = timeout_s
         self.log = log
 
-    def wait(self, b: int, first: bool) -> None:
-        """Wait for the inputs of tick b; `first`: the mission's first tick (since start)."""
+    def wait(self, b: int, first: bool) -> bool:
+        """Wait for the inputs of tick b; `first`: the mission's first tick (since start).
+        False when a dependency went away meanwhile (the tick is given up)."""
+        try:
+            self._wait(b, first)
+        except Lost:
+            self.log.warning("t=%.2f s: a dependency went away: inputs not awaited", b / NS_PER_S)
+            self.robot.begin(b)
+            return False
+        return True
+
+    def _sliced(self, attempt: Callable[[float], bool], timeout_s: float) -> bool:
+        """`attempt(slice)` until it succeeds or `timeout_s` has passed; `Lost` when a
+        dependency goes away meanwhile."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            start = time.monotonic()
+            left = deadline - start
+            piece = max(0.0, min(SLICE_S, left))
+            if attempt(piece):
+                return True
+            if self.lost():
+                raise Lost
+            if left <= SLICE_S:
+                return False
+            time.sleep(max(0.0, piece - (time.monotonic() - start)))  # one that gave up early
+
+    def _wait(self, b: int, first: bool) -> None:
         timeout = self.timeout_s
         if first and self.gate.lockstep:  # its first tick: know who runs
             self._hear()
-        try:
-            self.robot.odom.wait_stamp(b, timeout)
-        except WaitTimeout:
+        if not self._sliced(lambda s: _stamped(self.robot.odom, b, s), timeout):
             self.log.warning("no odom for t=%.2f s", b / NS_PER_S)
         if b > 0 and self.wbc_alive_key in self._alive():
             need = ((b - 1) // self.status_period_ns) * self.status_period_ns
-            try:
-                self.robot.wbc.wait_stamp(need, timeout)
-            except WaitTimeout:
+            if not self._sliced(lambda s: _stamped(self.robot.wbc, need, s), timeout):
                 self.log.warning("no wbc/status for t=%.2f s", need / NS_PER_S)
-        missing = self.gate.wait(b, timeout)
-        if missing:
+        missing: list[str] = []
+
+        def gate_met(slice_s: float) -> bool:
+            missing[:] = self.gate.wait(b, slice_s)
+            return not missing
+
+        if not self._sliced(gate_met, timeout):
             self.log.warning("t=%.2f s: no output of %s in time", b / NS_PER_S, missing)
         self.robot.begin(b)
         self._wait_wrist(b, timeout)
@@ -119,5 +161,13 @@ class TickInputs:
             or due % perception.period_ns
         ):
             return
-        if not self.robot.wait_wrist(timeout):
+        if not self._sliced(self.robot.wait_wrist, timeout):
             self.log.warning("t=%.2f s: no wrist detections stamped %d", b / NS_PER_S, due)
+
+
+def _stamped(waitable: Waitable, stamp_ns: int, timeout_s: float) -> bool:
+    try:
+        waitable.wait_stamp(stamp_ns, timeout_s)
+    except WaitTimeout:
+        return False
+    return True

@@ -18,7 +18,9 @@ Each tick b (multiples of `time.participants.mission.period_s`):
    `dependency_lost` (nobody waits for the dead); else the tree ticks once; its outcome,
    stage and progress become the status. A dead sim stops the clock, so no tick comes:
    while the clock stands still the loop checks every 0.1 s wall (`Desk.stalled`) and
-   fails the request `dependency_lost: sim is gone`, stamped at the last tick;
+   fails the request `dependency_lost: sim is gone`, stamped at the last tick; a
+   dependency lost while the tick awaits its inputs (a killed WBC sends no odom) ends
+   the wait and fails it the same way (`TickInputs`);
 4. the mapping jobs (`patrol_desk`): the patrol's requests (`mission/patrol`, a query
    answered once the loop took it; a start refused `busy` while a fetch runs), then one
    step of the running job (`patrol.PatrolRunner`, `explore.ExploreRunner`: walk
@@ -112,6 +114,7 @@ class MissionNode:
             WRIST in cfg.perception.cameras and WRIST in cfg.sim.cameras,
             m.input_timeout_s,
             svc.log,
+            lost=self._dependency_lost,
         )
         self.requests = RequestInbox()
         self._subs = [subscribe(bus, keys.mission_request, self.requests)]
@@ -170,9 +173,15 @@ class MissionNode:
         except Exception:  # a bug: say it, keep serving
             self.svc.log.exception("mission: failing a stalled request raised")
 
+    def _dependency_lost(self) -> bool:
+        """Whether a dependency of the running request or job went away."""
+        request = self.tree.request is not None and self.desk.deps.lost() is not None
+        return request or (self.patrol.job.running and self.patrol.deps.lost() is not None)
+
     def tick(self, b: int) -> None:
         """Inputs as of b, the desks' steps, the robot's outputs, then the status."""
-        self.inputs.wait(b, first=not self.desk.started)
+        if not self.inputs.wait(b, first=not self.desk.started):
+            self._stalled()  # a dependency went away while its inputs were awaited
         changed = self.desk.step(b)
         request = self.tree.request
         self.patrol.step(b, f"mission {request.request_id} is running" if request else "")

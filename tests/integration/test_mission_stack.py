@@ -22,6 +22,7 @@ from common.messages.sim import Clock
 from common.messages.wbc import WbcStatus
 from deploy.stack import ProcessStack
 from tests.conftest import HOLD_COMMANDER, StartStack
+from tests.integration.test_wbc_stack import WBC
 
 pytestmark = pytest.mark.integration
 
@@ -149,6 +150,30 @@ def test_a_sim_that_dies_mid_mission_fails_it_without_waiting_for_a_tick(
     assert done.detail.startswith("sim is gone: the world stopped at t="), done.detail
     assert done.stamp_ns >= running.stamp_ns
     assert s.procs["mission"].poll() is None
+
+
+def test_a_wbc_that_dies_mid_mission_fails_it_with_the_robot_held(
+    stack: StartStack, tmp_path: Path
+) -> None:
+    """The WBC is the robot's legs: killed mid-request, the lockstep clock stops (the sim
+    waits for its command, its watchdog holds the joints) and the mission fails the
+    request `dependency_lost` at once, without a tick; it is not left running."""
+    s = stack(
+        ["sim", "wbc", "semantic_map", "mission"],
+        *WBC, *MAP, *MISSION,
+        "sim.cameras=[]",
+        f'semantic_map.dir="{tmp_path / "map"}"',
+        "mission.mode_timeout_s=100000.0",
+    )  # fmt: skip
+    user = User(s)
+    user.request({"request_id": "r1", "object": "bottle_1", "person": "person_1"})
+    running = user.wait("r1", {"running"}, 120.0)
+    s.kill("wbc")
+    done = user.wait("r1", {"failed", "cancelled", "succeeded"}, 30.0)
+    assert (done.state, done.reason) == ("failed", "dependency_lost"), done
+    assert done.detail.startswith("wbc is gone"), done.detail
+    assert done.stamp_ns >= running.stamp_ns
+    assert s.procs["mission"].poll() is None and s.procs["sim"].poll() is None
 
 
 def test_a_watch_whose_mission_dies_ends_with_dependency_lost_instead_of_waiting(

@@ -163,4 +163,18 @@ def test_missing_inputs_are_logged_and_the_tick_goes_on(caplog: pytest.LogCaptur
         "t=0.05 s: no output of ['navigation'] in time",
         "t=0.05 s: no wrist detections stamped 0",
     ]
-    assert robot.calls == [f"begin {TICK}", "wrist"]
+    assert robot.calls[0] == f"begin {TICK}" and set(robot.calls[1:]) == {"wrist"}
+
+
+def test_a_dependency_lost_while_waiting_gives_the_tick_up_at_once() -> None:
+    """A killed WBC sends no odom for b: the wait ends when the loss is seen (within a
+    slice or two), not after the whole timeout, and the robot still begins b."""
+    robot = FakeRobot()
+    robot.odom.arrives = False
+    rig = Rig(robot=robot)
+    rig.inputs.timeout_s = 30.0
+    looks = iter([False, False, True])
+    rig.inputs.lost = lambda: next(looks, True)
+    assert rig.inputs.wait(TICK, first=False) is False
+    assert len(robot.odom.waited) == 3, "three slices, then the loss"
+    assert robot.calls == [f"begin {TICK}"] and rig.gate.waited == []
