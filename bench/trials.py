@@ -272,6 +272,10 @@ def run_trial(
 
         world = (options or {}).get("world") or "small"
         return explore_run(world, 0 if world_seed is None else world_seed, overrides)
+    if name == "fuzz":  # every key every service takes, fuzzed; no service may crash
+        from bench.trial_fuzz import run_fuzz
+
+        return run_fuzz((options or {}).get("count") or 10_000, world_seed or 0, overrides)
     if name == "fetch":  # the real mission over the full stack, with truth probes
         from bench.trial_fetch import run_fetch
 
@@ -303,4 +307,4 @@ def _nav_trial(
         return person_trial(overrides)
     from bench.trial_goals import goals_trial
 
-    return goals_trial(opts.get("count", 10), world, seed, overrides)
+    return goals_trial(opts.get("count") or 10, world, seed, overrides)

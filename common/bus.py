@@ -499,6 +499,9 @@ class Bus:
         self.guard = guard
         self._servers: list[Server[Any]] = []
         self._tokens: list[zenoh.LivelinessToken] = []
+        #: What this bus takes from outside, in order: (key, type name, "subscribe" or
+        #: "serve"); a service logs it when ready, and the fuzzing trial aims at it.
+        self.inputs: list[tuple[str, str, str]] = []
 
     @classmethod
     def open(
@@ -526,13 +529,27 @@ class Bus:
         if self.guard is not None:
             self.guard.check(key)
 
+    def _takes(self, key: str, type_: type[Any] | None, kind: str) -> None:
+        name = "None" if type_ is None else type_.__name__
+        if (key, name, kind) not in self.inputs:
+            self.inputs.append((key, name, kind))
+
     def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
         self._reads(key)
+        self._takes(key, type_, "subscribe")
         return Latest(self.session, key, type_, history)
 
     def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
         self._reads(key)
+        self._takes(key, type_, "subscribe")
         return Fifo(self.session, key, type_, maxlen)
+
+    def raw(self, key: str, type_: type[Any], callback: Callable[[bytes], None]) -> Any:
+        """Every sample of `key` to `callback` as bytes, on Zenoh's thread (the caller
+        decodes `type_` itself, later, on its own thread)."""
+        self._reads(key)
+        self._takes(key, type_, "subscribe")
+        return self.session.declare_subscriber(key, lambda s: callback(s.payload.to_bytes()))
 
     def serve(
         self,
@@ -540,6 +557,7 @@ class Bus:
         request_type: type[T] | None,
         handler: Callable[[T | None, str], Any],
     ) -> Server[T]:
+        self._takes(key, request_type, "serve")
         server = Server(self.session, key, request_type, handler)
         self._servers.append(server)
         return server

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import faulthandler
+import json
 import logging
 import signal
 import sys
@@ -70,7 +71,7 @@ class Service:
         """Declare the liveliness token: the service now serves what it declared."""
         self.bus.declare_alive(self.keys.alive(self.name))
         self.is_ready = True
-        self.log.info("ready")
+        self.log.info("ready; takes %s", json.dumps(self.bus.inputs))
 
 
 def place(name: str, config: Config) -> CpuLayout:

@@ -18,6 +18,7 @@
     dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
     dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
     dume trial goals [--count 10] | person             random goals; a person stepping in (JSON)
+    dume trial fuzz [--count 10000]                      every key a service takes, fuzzed (JSON)
     dume train-segmenter [--seed S]                         render data, train, export ONNX
     dume train-segmenter --confusion MODEL                  its confusion by range, held out
 
@@ -820,7 +821,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("xy", nargs="*", type=float, help="goto: the goal's X Y, m in the world")
     p.add_argument("--yaw", type=float, default=0.0, help="goto: the goal's yaw, rad")
     p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals")
-    p.add_argument("--count", type=int, default=10, help="goals: how many")
+    p.add_argument(
+        "--count", type=int, default=None, help="goals: how many (10); fuzz: cases a key (10 000)"
+    )
     p.add_argument("--world-seed", type=seed_number, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)

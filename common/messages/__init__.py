@@ -96,5 +96,8 @@ def decode(data: bytes | bytearray | memoryview, type_: type[T], *, key: str = "
     """Deserialize and validate `data` as `type_`; raise `PayloadError` with the reason."""
     try:
         return cast(T, decoder(type_).decode(data))
-    except msgspec.DecodeError as exc:
-        raise PayloadError(getattr(type_, "__name__", str(type_)), str(exc), key) from None
+    except (msgspec.DecodeError, ValueError, RecursionError) as exc:
+        # ValueError: msgpack strings that are not UTF-8 raise UnicodeDecodeError, not
+        # DecodeError (found by `dume trial fuzz`); RecursionError: nesting past the limit.
+        why = str(exc) if isinstance(exc, msgspec.DecodeError) else f"{type(exc).__name__}: {exc}"
+        raise PayloadError(getattr(type_, "__name__", str(type_)), why, key) from None

@@ -45,14 +45,20 @@ cmd_vel) and `tree`.
 
 from __future__ import annotations
 
-import zenoh
+from typing import Any
 
 from common.bus import Bus
 from common.lifelines import Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
 from common.map_frame import MapFrame
 from common.messages.base import NS_PER_S
-from common.messages.mission import MissionRequest, MissionStatus, PatrolRequest, PatrolStatus
+from common.messages.mission import (
+    MissionCancel,
+    MissionRequest,
+    MissionStatus,
+    PatrolRequest,
+    PatrolStatus,
+)
 from common.service import Service
 from services.mission.algorithms import default_algorithms
 from services.mission.behaviours.base import Context
@@ -74,9 +80,9 @@ NAME = "mission"
 DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map")
 
 
-def subscribe(bus: Bus, key: str, inbox: Inbox) -> zenoh.Subscriber[None]:
+def subscribe(bus: Bus, key: str, type_: type[Any], inbox: Inbox) -> Any:
     """Every sample of `key` into `inbox`, raw (on Zenoh's thread)."""
-    return bus.session.declare_subscriber(key, lambda s: inbox.push(s.payload.to_bytes()))
+    return bus.raw(key, type_, inbox.push)
 
 
 #: Localization samples the mission keeps (60 s at 10 Hz): a grasp plan's reaches (the
@@ -117,10 +123,10 @@ class MissionNode:
             lost=self._dependency_lost,
         )
         self.requests = RequestInbox()
-        self._subs = [subscribe(bus, keys.mission_request, self.requests)]
+        self._subs = [subscribe(bus, keys.mission_request, MissionRequest, self.requests)]
         bus.serve(keys.mission_submit, MissionRequest, self.requests.submit)
         self.cancels = Inbox()
-        self._subs.append(subscribe(bus, keys.mission_cancel, self.cancels))
+        self._subs.append(subscribe(bus, keys.mission_cancel, MissionCancel, self.cancels))
         self.status_pub = bus.publisher(keys.mission_status, MissionStatus, "data")
         self.log = MissionLogger(svc.rec, svc.log)
         ctx = Context(self.robot, m, default_algorithms(m), self.log.decision)
