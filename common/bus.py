@@ -42,6 +42,7 @@ from common.truth import TruthGuard
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
+S = TypeVar("S", bound="_Subscription[Any]")
 R = TypeVar("R")
 Role = Literal["client", "router", "peer"]
 Traffic = Literal["control", "data", "bulk"]
@@ -245,12 +246,20 @@ class Throttle:
 
 
 class _Subscription(ABC, Generic[T]):
-    def __init__(self, session: zenoh.Session, key: str, type_: type[T]) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        type_: type[T],
+        stopping: threading.Event | None = None,
+    ) -> None:
         self.key = key
         self.type = type_
         self.received = 0
         self.rejected = 0
         self.last_error: PayloadError | None = None
+        #: Set when the service stops: every wait on this subscription ends (`Bus.interrupt`).
+        self.stopping = stopping or threading.Event()
         self._cond = threading.Condition()
         self._warn = Throttle(REJECT_LOG_EVERY_S)
         self._sub = session.declare_subscriber(key, self._on_sample)
@@ -284,10 +293,17 @@ class Latest(_Subscription[T]):
     """The newest `history` samples. `get()` is the newest; `at(stamp_ns)` the newest at or
     before a sim time (what a lockstep participant must use for its tick)."""
 
-    def __init__(self, session: zenoh.Session, key: str, type_: type[T], history: int) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        type_: type[T],
+        history: int,
+        stopping: threading.Event | None = None,
+    ) -> None:
         self._buf: deque[T] = deque(maxlen=max(1, history))
         self.last_key = ""
-        super().__init__(session, key, type_)
+        super().__init__(session, key, type_, stopping)
 
     def _store(self, msg: T, key: str) -> None:
         self._buf.append(msg)
@@ -309,10 +325,12 @@ class Latest(_Subscription[T]):
         """Block until the newest sample satisfies `predicate`; `WaitTimeout` otherwise."""
         with self._cond:
             ok = self._cond.wait_for(
-                lambda: bool(self._buf) and predicate(self._buf[-1]), timeout_s
+                lambda: (bool(self._buf) and predicate(self._buf[-1])) or self.stopping.is_set(),
+                timeout_s,
             )
-            if not ok:
-                raise WaitTimeout(f"nothing suitable on {self.key} within {timeout_s:.3g} s")
+            if not ok or not (self._buf and predicate(self._buf[-1])):
+                why = "the service stops" if self.stopping.is_set() else f"{timeout_s:.3g} s"
+                raise WaitTimeout(f"nothing suitable on {self.key} within {why}")
             return self._buf[-1]
 
     def wait_stamp(self, stamp_ns: int, timeout_s: float) -> T:
@@ -323,10 +341,17 @@ class Latest(_Subscription[T]):
 class Fifo(_Subscription[T]):
     """Every sample in arrival order (commands, requests, events), up to `maxlen`."""
 
-    def __init__(self, session: zenoh.Session, key: str, type_: type[T], maxlen: int) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        type_: type[T],
+        maxlen: int,
+        stopping: threading.Event | None = None,
+    ) -> None:
         self._q: deque[tuple[str, T]] = deque(maxlen=maxlen)
         self.overflowed = 0
-        super().__init__(session, key, type_)
+        super().__init__(session, key, type_, stopping)
 
     def _store(self, msg: T, key: str) -> None:
         if len(self._q) == self._q.maxlen:
@@ -340,7 +365,7 @@ class Fifo(_Subscription[T]):
     def pop_keyed(self, timeout_s: float = 0.0) -> tuple[str, T] | None:
         with self._cond:
             if not self._q and timeout_s > 0:
-                self._cond.wait_for(lambda: bool(self._q), timeout_s)
+                self._cond.wait_for(lambda: bool(self._q) or self.stopping.is_set(), timeout_s)
             return self._q.popleft() if self._q else None
 
     def drain(self) -> Iterator[T]:
@@ -350,7 +375,8 @@ class Fifo(_Subscription[T]):
     def wait(self, timeout_s: float) -> bool:
         """Block until a sample is waiting (without taking it); False on timeout."""
         with self._cond:
-            return self._cond.wait_for(lambda: bool(self._q), timeout_s)
+            self._cond.wait_for(lambda: bool(self._q) or self.stopping.is_set(), timeout_s)
+            return bool(self._q)
 
 
 class Server(Generic[T]):
@@ -502,6 +528,9 @@ class Bus:
         #: What this bus takes from outside, in order: (key, type name, "subscribe" or
         #: "serve"); a service logs it when ready, and the fuzzing trial aims at it.
         self.inputs: list[tuple[str, str, str]] = []
+        #: Set by `interrupt`: every wait on this bus's subscriptions ends at once.
+        self.stopping = threading.Event()
+        self._subscriptions: list[_Subscription[Any]] = []
 
     @classmethod
     def open(
@@ -537,12 +566,25 @@ class Bus:
     def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
         self._reads(key)
         self._takes(key, type_, "subscribe")
-        return Latest(self.session, key, type_, history)
+        return self._keep(Latest(self.session, key, type_, history, self.stopping))
 
     def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
         self._reads(key)
         self._takes(key, type_, "subscribe")
-        return Fifo(self.session, key, type_, maxlen)
+        return self._keep(Fifo(self.session, key, type_, maxlen, self.stopping))
+
+    def _keep(self, sub: S) -> S:
+        self._subscriptions.append(sub)
+        return sub
+
+    def interrupt(self) -> None:
+        """The service stops: every wait on this bus's subscriptions ends now (raising
+        `WaitTimeout` or returning nothing), so no loop sits out an input's timeout (a
+        lockstep service waiting for a dead WBC's odom took 30 s to stop)."""
+        self.stopping.set()
+        for sub in self._subscriptions:
+            with sub._cond:
+                sub._cond.notify_all()
 
     def raw(self, key: str, type_: type[Any], callback: Callable[[bytes], None]) -> Any:
         """Every sample of `key` to `callback` as bytes, on Zenoh's thread (the caller

@@ -113,11 +113,16 @@ def setup_logging(level: str, name: str) -> None:
     )
 
 
-def _install_signals(stop: threading.Event) -> None:
+def _install_signals(stop: threading.Event, interrupt: Callable[[], None]) -> None:
+    """SIGINT and SIGTERM stop the service: `stop` is set, and every wait on its bus ends
+    (`interrupt`, on a thread of its own: not inside the handler, which may have
+    interrupted the main thread holding a subscription's lock)."""
+
     def handler(signum: int, frame: FrameType | None) -> None:
         del frame
         log.info("signal %s: stopping", signal.Signals(signum).name)
         stop.set()
+        threading.Thread(target=interrupt, name="interrupt", daemon=True).start()
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
@@ -143,7 +148,7 @@ def run(
         logging.getLogger("dume").addHandler(RerunHandler(rec, name))
     bus = Bus.open(config, guard=TruthGuard.of(name, config), user=identity_of(name))
     svc = Service(name, config, bus, rec, layout)
-    _install_signals(svc.stop)
+    _install_signals(svc.stop, bus.interrupt)
     try:
         main(svc)
     except Exception:

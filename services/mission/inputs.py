@@ -16,8 +16,11 @@ wait bounded by `mission.input_timeout_s`, a miss logged as a warning, never rai
 
 Every wait is taken in slices of `SLICE_S` and given up when `lost()` says a dependency
 of the running job is gone (a killed WBC publishes no odom for b, and the tick waited
-the whole timeout, 30 s, before the request could fail): `wait` then returns False
-(after `robot.begin(b)`) and the loop fails the job `dependency_lost` before its step.
+the whole timeout, 30 s, before the request could fail), or the service stops: `wait`
+then returns False (after `robot.begin(b)`) and the loop fails the job
+`dependency_lost` before its step. Odom and the WBC's status are not waited for while
+their publisher is not alive (after a request failed so, the mission waited 30 s a tick
+for the dead WBC's odom, deaf to a stop).
 
 Times are sim time in integer ns; timeouts are wall-clock seconds. No Zenoh: the robot,
 the gate and who is alive come in as small protocols (`BusRobot`, `UpstreamGate` and
@@ -89,9 +92,13 @@ class TickInputs:
         timeout_s: float,
         log: logging.Logger,
         lost: Callable[[], bool] = lambda: False,
+        stopping: Callable[[], bool] = lambda: False,
+        odom_alive_key: str = "",
     ) -> None:
         self.robot, self.gate = robot, gate
-        self.lost = lost
+        self.lost, self.stopping = lost, stopping
+        #: Who publishes odom (the WBC's estimate, or the sim's free joint), "" unknown.
+        self.odom_alive_key = odom_alive_key
         self._alive, self._hear = alive, hear
         self.wbc_alive_key = wbc_alive_key
         self.status_period_ns = status_period_ns
@@ -110,9 +117,12 @@ class TickInputs:
             return False
         return True
 
-    def _sliced(self, attempt: Callable[[float], bool], timeout_s: float) -> bool:
-        """`attempt(slice)` until it succeeds or `timeout_s` has passed; `Lost` when a
-        dependency goes away meanwhile."""
+    def _sliced(
+        self, attempt: Callable[[float], bool], timeout_s: float, producer: str = ""
+    ) -> bool:
+        """`attempt(slice)` until it succeeds or `timeout_s` has passed, or at once when
+        `producer` (an alive key) is not alive: nothing will come; `Lost` when a dependency
+        of the running job goes away or the service stops meanwhile."""
         deadline = time.monotonic() + timeout_s
         while True:
             start = time.monotonic()
@@ -120,9 +130,9 @@ class TickInputs:
             piece = max(0.0, min(SLICE_S, left))
             if attempt(piece):
                 return True
-            if self.lost():
+            if self.lost() or self.stopping():
                 raise Lost
-            if left <= SLICE_S:
+            if left <= SLICE_S or (producer and producer not in self._alive()):
                 return False
             time.sleep(max(0.0, piece - (time.monotonic() - start)))  # one that gave up early
 
@@ -130,11 +140,12 @@ class TickInputs:
         timeout = self.timeout_s
         if first and self.gate.lockstep:  # its first tick: know who runs
             self._hear()
-        if not self._sliced(lambda s: _stamped(self.robot.odom, b, s), timeout):
+        odom, wbc = self.odom_alive_key, self.wbc_alive_key
+        if not self._sliced(lambda s: _stamped(self.robot.odom, b, s), timeout, odom):
             self.log.warning("no odom for t=%.2f s", b / NS_PER_S)
         if b > 0 and self.wbc_alive_key in self._alive():
             need = ((b - 1) // self.status_period_ns) * self.status_period_ns
-            if not self._sliced(lambda s: _stamped(self.robot.wbc, need, s), timeout):
+            if not self._sliced(lambda s: _stamped(self.robot.wbc, need, s), timeout, wbc):
                 self.log.warning("no wbc/status for t=%.2f s", need / NS_PER_S)
         missing: list[str] = []
 

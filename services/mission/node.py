@@ -121,6 +121,8 @@ class MissionNode:
             m.input_timeout_s,
             svc.log,
             lost=self._dependency_lost,
+            stopping=svc.stop.is_set,
+            odom_alive_key=keys.alive("wbc" if cfg.odom_from_estimate() else "sim"),
         )
         self.requests = RequestInbox()
         self._subs = [subscribe(bus, keys.mission_request, MissionRequest, self.requests)]

@@ -113,3 +113,32 @@ def test_the_throttle_says_when_to_log_and_how_many_it_held_back() -> None:
     assert [t.due(100.0 + k)[0] for k in range(1, 5)] == [False] * 4
     assert t.due(105.0) == (True, 4)
     assert t.due(106.0) == (False, 0)
+
+
+def test_a_stopping_service_ends_every_wait_on_its_bus_at_once() -> None:
+    """A lockstep service waiting for a dead WBC's odom sat out its 30 s timeout before it
+    could stop: `interrupt` ends every wait, a `Latest`'s (raises) and a `Fifo`'s."""
+    with _session() as s:
+        bus = Bus(s)
+        latest = bus.latest("test/odom", ErrorReply)
+        fifo = bus.fifo("test/requests", ErrorReply)
+        ended: list[str] = []
+
+        def wait_latest() -> None:
+            try:
+                latest.wait_stamp(1, 60.0)
+            except WaitTimeout as exc:
+                ended.append(str(exc))
+
+        threads = [
+            threading.Thread(target=wait_latest),
+            threading.Thread(target=lambda: ended.append(str(fifo.pop(timeout_s=60.0)))),
+        ]
+        for t in threads:
+            t.start()
+        time.sleep(0.2)
+        bus.interrupt()
+        for t in threads:
+            t.join(timeout=20.0)
+        assert not any(t.is_alive() for t in threads), "a wait sat out its 60 s"
+        assert sorted(ended) == ["None", "nothing suitable on test/odom within the service stops"]
