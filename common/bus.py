@@ -528,6 +528,10 @@ class Bus:
         #: What this bus takes from outside, in order: (key, type name, "subscribe" or
         #: "serve"); a service logs it when ready, and the fuzzing trial aims at it.
         self.inputs: list[tuple[str, str, str]] = []
+        #: Everything this bus did on the network, as (verb, key expression): verbs `put`,
+        #: `subscribe`, `serve`, `query`, `alive` (a token), `watch_alive`. A service logs
+        #: it when it stops: what the router's access list must let it do (`common.access`).
+        self.used: set[tuple[str, str]] = set()
         #: Set by `interrupt`: every wait on this bus's subscriptions ends at once.
         self.stopping = threading.Event()
         self._subscriptions: list[_Subscription[Any]] = []
@@ -552,6 +556,7 @@ class Bus:
 
     def publisher(self, key: str, type_: type[T], traffic: Traffic = "data") -> Publisher[T]:
         del type_  # for the reader and the type checker: what this publisher sends
+        self.used.add(("put", key))
         return Publisher(self.session, key, traffic, self.trace_every_ns)
 
     def _reads(self, key: str) -> None:
@@ -560,6 +565,7 @@ class Bus:
 
     def _takes(self, key: str, type_: type[Any] | None, kind: str) -> None:
         name = "None" if type_ is None else type_.__name__
+        self.used.add((kind, key))
         if (key, name, kind) not in self.inputs:
             self.inputs.append((key, name, kind))
 
@@ -622,6 +628,7 @@ class Bus:
         therefore asked again every `QUERY_RETRY_S` until the deadline.
         """
         self._reads(key)
+        self.used.add(("query", key.split("?", 1)[0]))
         payload = None if request is None else encode(request)
         deadline = time.monotonic() + timeout_s
         while True:
@@ -638,12 +645,15 @@ class Bus:
 
     def declare_alive(self, key: str) -> None:
         """Declare a liveliness token (kept until the bus closes)."""
+        self.used.add(("alive", key))
         self._tokens.append(self.session.liveliness().declare_token(key))
 
     def watch_alive(self, key_expr: str) -> AliveWatch:
+        self.used.add(("watch_alive", key_expr))
         return AliveWatch(self.session, key_expr)
 
     def alive_now(self, key_expr: str, timeout_s: float = 2.0) -> set[str]:
+        self.used.add(("watch_alive", key_expr))
         return alive_now(self.session, key_expr, timeout_s)
 
     def close(self) -> None:
