@@ -770,12 +770,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--person", default=None, help="a person's map id (default: the farthest)")
     p.add_argument(
         "--map",
-        default="truth",
+        default="saved",
         metavar="saved|FILE|truth",
-        help="saved: the world's saved map, the robot's own (var/saved-maps/, then "
-        "deploy/maps/, which ships hall and small seed 0); FILE: a map file (dume map "
-        "--export); truth (the default, for now): the map seeded from the world's truth with "
-        "noise and its floor plan, the ablation standing in for a mapping run",
+        help="saved (the default): the world's saved map, the robot's own (var/saved-maps/, "
+        "then deploy/maps/, which ships hall and small seed 0); FILE: a map file (dume map "
+        "--export); truth: the ablation, the map seeded from the world's truth with noise "
+        "and its floor plan",
     )
     p.add_argument("--timeout", type=float, default=600.0, help="sim seconds for the mission")
     p.set_defaults(func=cmd_demo)
@@ -797,13 +797,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per world")
     p.add_argument("--record", action="store_true", help="write each world's recording")
     p.add_argument(
-        "--map", default="truth", metavar="saved|DIR|explored|truth",
-        help="saved: each world's saved map (var/saved-maps/, then the maps dume ships), the "
-        "world explored from nothing first and its map saved in var/saved-maps/ when it has "
-        "none (tens of minutes a hall); DIR: the same in that folder; explored: every world "
-        "explored first, nothing saved; truth (the default, for now): the map seeded from "
-        "the world's truth with noise and its floor plan, the ablation standing in for a "
-        "mapping run",
+        "--map", default="saved", metavar="saved|DIR|explored|truth",
+        help="saved (the default): each world's saved map (var/saved-maps/, then the maps "
+        "dume ships), the world explored from nothing first and its map saved in "
+        "var/saved-maps/ when it has none (half an hour a hall); DIR: the same in that "
+        "folder; explored: every world explored first, nothing saved; truth: the ablation, "
+        "the map seeded from the world's truth with noise and its floor plan",
     )  # fmt: skip
     p.set_defaults(func=cmd_eval)
 

@@ -384,7 +384,10 @@ def test_the_demo_and_eval_stacks_settings_are_valid_and_say_what_they_run(
             build_parser().parse_args(["demo", "--world-seed", "3", "--map", "saved"]), "demo-x"
         )
     default = build_parser().parse_args(["demo", "--world-seed", "3"])
-    assert load_config(demo_overrides(default, "demo-x")).semantic_map.start == "seed-from-world"
+    assert default.map == "saved", "the robot's own map by default; truth only when asked"
+    with pytest.raises(NoSavedMap, match="hall seed 3"):
+        demo_overrides(default, "demo-x")
+    assert build_parser().parse_args(["eval"]).map == "saved"
     prior = no_saved_maps.parent / "map.json"
     prior.write_text("{}")
     demo = build_parser().parse_args(["demo", "--map", str(prior)])
