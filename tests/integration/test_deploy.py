@@ -145,6 +145,12 @@ def test_dume_up_restarts_a_killed_service_but_never_the_world() -> None:
         assert wait_until(lambda: "perception" in alive(port), 120, poll_s=1.0)
         os.kill(pid_of(run_id, "sim"), signal.SIGKILL)  # the world: never restarted
         assert wait_until(lambda: "sim" not in alive(port), 30, poll_s=0.5)
+
+        def died() -> dict[str, int]:
+            return dict(json.loads(dume("status", "--port", str(port)).stdout)["died"])
+
+        # Its liveliness goes with its socket; supervisord logs the exit when it reaps it.
+        assert wait_until(lambda: "sim" in died(), 30, poll_s=0.5)
         said = dume("status", "--port", str(port))
         assert said.returncode == 1 and json.loads(said.stdout)["missing"] == ["sim"]
         assert json.loads(said.stdout)["died"] == {"perception": 1, "sim": 1}
