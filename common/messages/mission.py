@@ -10,7 +10,11 @@ import msgspec
 
 from common.messages.base import Message, NonNegative, StampNs, Unit
 
-RequestId = Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
+#: Any text without control characters (a NUL, a newline or an escape in an id went into
+#: the logs as they were: `dume trial fuzz`).
+RequestId = Annotated[
+    str, msgspec.Meta(min_length=1, max_length=128, pattern=r"^[^\x00-\x1f\x7f-\x9f]+$")
+]
 #: A map id (`bottle_1`) or a class (`bottle`: the nearest mapped one); "" for none.
 Target = Annotated[str, msgspec.Meta(pattern=r"^([a-z][a-z0-9]*(_[1-9][0-9]*)?)?$", max_length=64)]
 #: What a request asks the robot to do: bring an object to a person (`fetch`), map the

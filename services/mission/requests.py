@@ -47,7 +47,9 @@ def _request_id_of(payload: bytes) -> str:
     except (ValueError, UnicodeDecodeError, RecursionError):
         return ""
     rid = value.get("request_id") if isinstance(value, dict) else None
-    return rid[:128] if isinstance(rid, str) else ""
+    if not isinstance(rid, str):
+        return ""
+    return "".join(c for c in rid if c.isprintable())[:128]  # nothing that forges a log line
 
 
 def parse_request(payload: bytes) -> MissionRequest | Rejection:

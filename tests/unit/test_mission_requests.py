@@ -35,6 +35,13 @@ from tests.unit.mission_fakes import detection, entity, small_world
         (b"[" * 100_000 + b"]" * 100_000, "", "Expected `object`"),
         (b'{"a":' * 100_000 + b"1" + b"}" * 100_000, "", "unknown field `a`"),
         (b'{"request_id": "r3", "x":' + b"[" * 100_000 + b"]" * 100_000 + b"}", "", "`x`"),
+        # an id with control characters would forge log lines: refused, echoed without them
+        (
+            b'{"request_id": "r4\\n2026 mission INFO forged\\u0000", "object": "bottle_1", '
+            b'"person": "person_1"}',
+            "r42026 mission INFO forged",
+            "request_id",
+        ),
     ],
 )
 def test_a_malformed_request_is_rejected_with_its_id_when_it_has_one(
