@@ -1,7 +1,8 @@
 """The whole map in and out as a `MapFile`: `dume/map/export` and `dume/map/import`.
 
 `check_import(mf)` refuses a file the map cannot take with `RequestError("invalid", why)`
-(an id named twice, an entity whose kind and class disagree) before anything changes.
+(of another site or of none, an id named twice, an entity whose kind and class
+disagree) before anything changes; so does `import_map` for a grid it cannot take.
 `import_map(mf, smap, store, views)` then replaces the map with the file's: its entities
 (source `import`), id counters and, when it has one, its occupancy grid as the static
 layer; writes the whole map in one SQLite transaction (`startup.save_all`); leaves the
@@ -27,7 +28,11 @@ log = logging.getLogger("dume.semantic_map")
 
 def check_import(mf: MapFile, site: str = "") -> None:
     """Refuse (`RequestError`, code `invalid`) a file the map cannot take: one of
-    another site than `site`, or inconsistent."""
+    another site than `site` or of none (a file that does not say which world it maps
+    is not taken over a stack's map: `dume trial fuzz` wiped the map with such files),
+    or inconsistent."""
+    if site and not mf.site:
+        raise RequestError("invalid", f"the file names no site; this stack is {site!r}")
     try:
         check_site("the file", mf.site, site)
     except MapSiteError as exc:
@@ -41,18 +46,27 @@ def check_import(mf: MapFile, site: str = "") -> None:
 
 
 def import_map(mf: MapFile, smap: SemanticMap, store: MapStore, views: ViewHistory) -> MapSummary:
-    """Replace the map and its database with the (checked) file's map."""
+    """Replace the map and its database with the (checked) file's map. Everything is
+    built from the file first: one that fails (`RequestError` invalid) changes nothing
+    (a grid of the wrong dtype once failed after the map was cleared)."""
+    occupancy = None
+    try:
+        if mf.occupancy is not None:
+            occ = smap.occupancy
+            occupancy = occupancy_from_grid(
+                mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range, sensed=occ.sensed
+            )
+            occupancy.sensed_static()
+        tracks = tracks_from_file(mf, "import")
+    except ValueError as exc:
+        raise RequestError("invalid", f"the map file cannot be taken: {exc}") from None
     smap.clear()
     smap.ids.counters.update(mf.counters)
-    if mf.occupancy is not None:
-        occ = smap.occupancy
-        smap.occupancy = occupancy_from_grid(
-            mf.occupancy, hits_needed=occ.hits_needed, z_range=occ.z_range, sensed=occ.sensed
-        )
-        smap.occupancy.sensed_static()
+    if occupancy is not None:
+        smap.occupancy = occupancy
         smap.static_source = "file"
     smap.surfaces = smap.surfaces_before = list(mf.supports)
-    for tr in tracks_from_file(mf, "import"):
+    for tr in tracks:
         smap.add(tr)
     save_all(smap, store, {"static_source": smap.static_source})
     views.restart(smap)

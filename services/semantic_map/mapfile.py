@@ -18,7 +18,7 @@ from common.messages import as_numpy, decoder
 from common.messages.semantic_map import MapFile, OccupancyGrid, Source
 from common.messages.world import Cuboid, WorldDescription
 from services.semantic_map.entities import Track
-from services.semantic_map.occupancy import Occupancy
+from services.semantic_map.occupancy import FREE, OCCUPIED, UNKNOWN, Occupancy
 
 
 class MapFileError(ValueError):
@@ -48,7 +48,15 @@ def tracks_from_file(mf: MapFile, source: Source) -> list[Track]:
 
 
 def occupancy_from_grid(grid: OccupancyGrid, **kw: object) -> Occupancy:
-    cells = np.asarray(as_numpy(grid.cells), np.uint8)
+    """The grid as the map's occupancy; `ValueError` saying why when it cannot be one
+    (cells not a 2-D uint8 grid of 0, 100 and 255; a cell size not above 0)."""
+    cells = as_numpy(grid.cells)  # ArrayError (a ValueError): dtype, shape and bytes disagree
+    if cells.dtype != np.uint8 or cells.ndim != 2 or 0 in cells.shape:
+        raise ValueError(f"cells must be a 2-D uint8 grid, not {cells.dtype} {cells.shape}")
+    if not grid.resolution_m > 0.0:
+        raise ValueError(f"the cell size must be above 0 m, not {grid.resolution_m}")
+    if not np.isin(cells, (FREE, OCCUPIED, UNKNOWN)).all():
+        raise ValueError("cells must be 0 (free), 100 (occupied) or 255 (unknown)")
     return Occupancy(cells, grid.resolution_m, grid.origin_xy, **kw)  # type: ignore[arg-type]
 
 

@@ -373,6 +373,7 @@ def test_an_artifact_looked_for_at_its_place_and_not_seen_is_marked_missing(
             entity("can_1", "can", ghost),
         ],
         counters={"bottle": 1, "can": 1},
+        site=s.config.map_site(),
     )
     summary = s.bus.query(MAP_IMPORT, mf, MapSummary, 10.0)
     assert (summary.artifacts, summary.missing) == (2, 0)

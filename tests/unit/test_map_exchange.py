@@ -142,3 +142,38 @@ def test_a_tick_writes_what_changed_and_the_learned_grid_at_most_every_2_s(
     smap.occupancy.integrate(np.array([[1.25, 0.25, 0.5]]))
     committer.close(smap)  # the learned layer as it ends, whatever the time
     assert np.asarray(_stored(path)["grids"]["learned"][0])[10, 12] == 1
+
+
+def test_a_file_whose_grid_cannot_be_taken_changes_nothing_in_memory_or_on_disk(
+    saved: tuple[SemanticMap, MapStore, Path],
+) -> None:
+    """`dume trial fuzz` imported a grid of int64 cells: the map was cleared, then the
+    grid refused. Now the file is built first and refused whole; so is a file naming no
+    site over a stack that has one."""
+    from common.messages import to_wire
+    from common.messages.semantic_map import OccupancyGrid
+
+    smap, store, path = saved
+    views = ViewHistory(period_ns=100 * MS, latency_ns=100 * MS)
+    before, entities = _stored(path), smap.entities("artifact")
+    good = export_map(smap)
+    grids = {
+        "int64 cells": np.zeros((4, 4), np.int64),
+        "a 1-D grid": np.zeros(16, np.uint8),
+        "cells of 7": np.full((4, 4), 7, np.uint8),
+    }
+    for why, cells in grids.items():
+        grid = OccupancyGrid(stamp_ns=0, resolution_m=0.05, origin_xy=(0, 0), cells=to_wire(cells))
+        mf = msgspec.structs.replace(good, occupancy=grid)
+        with pytest.raises(RequestError, match="cannot be taken") as refused:
+            import_map(mf, smap, store, views)
+        assert refused.value.code == "invalid", why
+    zero = OccupancyGrid(
+        stamp_ns=0, resolution_m=0.0, origin_xy=(0, 0), cells=to_wire(np.zeros((4, 4), np.uint8))
+    )
+    with pytest.raises(RequestError, match="cell size"):
+        import_map(msgspec.structs.replace(good, occupancy=zero), smap, store, views)
+    with pytest.raises(RequestError, match="names no site"):
+        check_import(msgspec.structs.replace(good, site=""), "small seed 0")
+    assert _stored(path) == before
+    assert smap.entities("artifact") == entities

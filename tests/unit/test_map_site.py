@@ -87,4 +87,5 @@ def test_a_prior_file_or_an_import_of_another_site_is_refused(tmp_path: Path) ->
         check_import(MapFile(site=HALL_0), HALL_3)
     assert err.value.code == "invalid"
     check_import(MapFile(site=HALL_3), HALL_3)
-    check_import(MapFile(), HALL_3)  # a file from before sites: taken
+    with pytest.raises(RequestError, match="names no site"):
+        check_import(MapFile(), HALL_3)  # a file that does not say which world it maps
