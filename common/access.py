@@ -31,6 +31,7 @@ TLS on links between hosts.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 import tempfile
@@ -143,24 +144,30 @@ def read_credentials(path: Path) -> dict[str, str]:
     return out
 
 
-def ensure_credentials(path: Path) -> dict[str, str]:
-    """The credentials in `path`, made first with a random password per identity when
-    there is no such file (atomically: of processes starting together one writes it,
-    the others read it)."""
+def write_once(path: Path, text: str) -> str:
+    """What `path` holds, writing `text` there first (mode 0600) when there is nothing.
+    Atomic: of processes starting together one writes it, whole, and the others read
+    theirs (a temporary file, then `os.link`, which never replaces)."""
     if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        text = "".join(f"{who}:{secrets.token_urlsafe(24)}\n" for who in IDENTITIES)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".credentials-")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".private-")
         try:
             with os.fdopen(fd, "w") as f:  # mkstemp's file is 0600
                 f.write(text)
                 f.flush()
                 os.fsync(f.fileno())
-            os.link(tmp, path)  # fails if another process made it first: theirs stands
-        except FileExistsError:
-            pass
+            with contextlib.suppress(FileExistsError):  # another made it first: theirs stands
+                os.link(tmp, path)
         finally:
             os.unlink(tmp)
+    return path.read_text()
+
+
+def ensure_credentials(path: Path) -> dict[str, str]:
+    """The credentials in `path`, made first with a random password per identity when
+    there is no such file (`write_once`; its folder the owner's only)."""
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    write_once(path, "".join(f"{who}:{secrets.token_urlsafe(24)}\n" for who in IDENTITIES))
     found = read_credentials(path)
     missing = [who for who in IDENTITIES if who not in found]
     if missing:

@@ -323,12 +323,16 @@ class Latest(_Subscription[T]):
 
     def wait(self, predicate: Callable[[T], bool], timeout_s: float) -> T:
         """Block until the newest sample satisfies `predicate`; `WaitTimeout` otherwise."""
+        met = False
+
+        def done() -> bool:
+            nonlocal met
+            met = bool(self._buf) and predicate(self._buf[-1])
+            return met or self.stopping.is_set()
+
         with self._cond:
-            ok = self._cond.wait_for(
-                lambda: (bool(self._buf) and predicate(self._buf[-1])) or self.stopping.is_set(),
-                timeout_s,
-            )
-            if not ok or not (self._buf and predicate(self._buf[-1])):
+            self._cond.wait_for(done, timeout_s)
+            if not met:
                 why = "the service stops" if self.stopping.is_set() else f"{timeout_s:.3g} s"
                 raise WaitTimeout(f"nothing suitable on {self.key} within {why}")
             return self._buf[-1]
@@ -525,13 +529,11 @@ class Bus:
         self.guard = guard
         self._servers: list[Server[Any]] = []
         self._tokens: list[zenoh.LivelinessToken] = []
-        #: What this bus takes from outside, in order: (key, type name, "subscribe" or
-        #: "serve"); a service logs it when ready, and the fuzzing trial aims at it.
-        self.inputs: list[tuple[str, str, str]] = []
-        #: Everything this bus did on the network, as (verb, key expression): verbs `put`,
-        #: `subscribe`, `serve`, `query`, `alive` (a token), `watch_alive`. A service logs
-        #: it when it stops: what the router's access list must let it do (`common.access`).
-        self.used: set[tuple[str, str]] = set()
+        #: Everything this bus did on the network, in order, as (verb, key expression) ->
+        #: the message type's name ("" where none): verbs `put`, `subscribe`, `serve`,
+        #: `query`, `alive` (a token), `watch_alive`. A service logs it when it stops: what
+        #: the router's access list must let it do (`common.access`).
+        self.used: dict[tuple[str, str], str] = {}
         #: Set by `interrupt`: every wait on this bus's subscriptions ends at once.
         self.stopping = threading.Event()
         self._subscriptions: list[_Subscription[Any]] = []
@@ -555,28 +557,30 @@ class Bus:
         self.close()
 
     def publisher(self, key: str, type_: type[T], traffic: Traffic = "data") -> Publisher[T]:
-        del type_  # for the reader and the type checker: what this publisher sends
-        self.used.add(("put", key))
+        self._uses("put", key, type_)
         return Publisher(self.session, key, traffic, self.trace_every_ns)
 
     def _reads(self, key: str) -> None:
         if self.guard is not None:
             self.guard.check(key)
 
-    def _takes(self, key: str, type_: type[Any] | None, kind: str) -> None:
-        name = "None" if type_ is None else type_.__name__
-        self.used.add((kind, key))
-        if (key, name, kind) not in self.inputs:
-            self.inputs.append((key, name, kind))
+    def _uses(self, verb: str, key: str, type_: type[Any] | None = None) -> None:
+        self.used.setdefault((verb, key), "None" if type_ is None else type_.__name__)
+
+    @property
+    def inputs(self) -> list[tuple[str, str, str]]:
+        """What this bus takes from outside, in order: (key, type name, "subscribe" or
+        "serve"); a service logs it when ready, and the fuzzing trial aims at it."""
+        return [(k, t, v) for (v, k), t in self.used.items() if v in ("subscribe", "serve")]
 
     def latest(self, key: str, type_: type[T], history: int = 1) -> Latest[T]:
         self._reads(key)
-        self._takes(key, type_, "subscribe")
+        self._uses("subscribe", key, type_)
         return self._keep(Latest(self.session, key, type_, history, self.stopping))
 
     def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
         self._reads(key)
-        self._takes(key, type_, "subscribe")
+        self._uses("subscribe", key, type_)
         return self._keep(Fifo(self.session, key, type_, maxlen, self.stopping))
 
     def _keep(self, sub: S) -> S:
@@ -596,7 +600,7 @@ class Bus:
         """Every sample of `key` to `callback` as bytes, on Zenoh's thread (the caller
         decodes `type_` itself, later, on its own thread)."""
         self._reads(key)
-        self._takes(key, type_, "subscribe")
+        self._uses("subscribe", key, type_)
         return self.session.declare_subscriber(key, lambda s: callback(s.payload.to_bytes()))
 
     def serve(
@@ -605,7 +609,7 @@ class Bus:
         request_type: type[T] | None,
         handler: Callable[[T | None, str], Any],
     ) -> Server[T]:
-        self._takes(key, request_type, "serve")
+        self._uses("serve", key, request_type)
         server = Server(self.session, key, request_type, handler)
         self._servers.append(server)
         return server
@@ -628,7 +632,7 @@ class Bus:
         therefore asked again every `QUERY_RETRY_S` until the deadline.
         """
         self._reads(key)
-        self.used.add(("query", key.split("?", 1)[0]))
+        self._uses("query", key.split("?", 1)[0], reply_type)
         payload = None if request is None else encode(request)
         deadline = time.monotonic() + timeout_s
         while True:
@@ -645,15 +649,15 @@ class Bus:
 
     def declare_alive(self, key: str) -> None:
         """Declare a liveliness token (kept until the bus closes)."""
-        self.used.add(("alive", key))
+        self._uses("alive", key)
         self._tokens.append(self.session.liveliness().declare_token(key))
 
     def watch_alive(self, key_expr: str) -> AliveWatch:
-        self.used.add(("watch_alive", key_expr))
+        self._uses("watch_alive", key_expr)
         return AliveWatch(self.session, key_expr)
 
     def alive_now(self, key_expr: str, timeout_s: float = 2.0) -> set[str]:
-        self.used.add(("watch_alive", key_expr))
+        self._uses("watch_alive", key_expr)
         return alive_now(self.session, key_expr, timeout_s)
 
     def close(self) -> None:

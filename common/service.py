@@ -156,7 +156,7 @@ def run(
         return 1
     finally:
         svc.stop.set()
-        log.info("%s used %s", name, json.dumps(sorted(bus.used)))
+        log.info("%s used %s", name, json.dumps(sorted(bus.used)))  # [[verb, key], ...]
         bus.close()
         if config.recording.enabled:
             rec.flush()

@@ -26,6 +26,7 @@ from typing import Literal
 
 import msgspec
 
+from common.access import write_once
 from common.config import REPO_ROOT
 
 RUNS_DIR = REPO_ROOT / "var" / "run"
@@ -178,15 +179,7 @@ def restarts(folder: Path) -> dict[str, int]:
 def ctl_secret(folder: Path) -> str:
     """The run's supervisord control password (`ctl.secret`, the owner's only), made on
     first use."""
-    path = folder / "ctl.secret"
-    with contextlib.suppress(OSError):
-        return path.read_text().strip()
-    folder.mkdir(parents=True, exist_ok=True)
-    secret = secrets.token_hex(16)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "w") as f:
-        f.write(secret)
-    return secret
+    return write_once(folder / "ctl.secret", secrets.token_hex(16)).strip()
 
 
 def current_user() -> str:

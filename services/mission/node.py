@@ -45,9 +45,6 @@ cmd_vel) and `tree`.
 
 from __future__ import annotations
 
-from typing import Any
-
-from common.bus import Bus
 from common.lifelines import Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
 from common.map_frame import MapFrame
@@ -78,11 +75,6 @@ NAME = "mission"
 #: The services a job depends on: the sim (the world and its clock) and the lockstep
 #: participants among these.
 DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map")
-
-
-def subscribe(bus: Bus, key: str, type_: type[Any], inbox: Inbox) -> Any:
-    """Every sample of `key` into `inbox`, raw (on Zenoh's thread)."""
-    return bus.raw(key, type_, inbox.push)
 
 
 #: Localization samples the mission keeps (60 s at 10 Hz): a grasp plan's reaches (the
@@ -125,10 +117,10 @@ class MissionNode:
             odom_alive_key=keys.alive("wbc" if cfg.odom_from_estimate() else "sim"),
         )
         self.requests = RequestInbox()
-        self._subs = [subscribe(bus, keys.mission_request, MissionRequest, self.requests)]
+        self._subs = [bus.raw(keys.mission_request, MissionRequest, self.requests.push)]
         bus.serve(keys.mission_submit, MissionRequest, self.requests.submit)
         self.cancels = Inbox()
-        self._subs.append(subscribe(bus, keys.mission_cancel, MissionCancel, self.cancels))
+        self._subs.append(bus.raw(keys.mission_cancel, MissionCancel, self.cancels.push))
         self.status_pub = bus.publisher(keys.mission_status, MissionStatus, "data")
         self.log = MissionLogger(svc.rec, svc.log)
         ctx = Context(self.robot, m, default_algorithms(m), self.log.decision)

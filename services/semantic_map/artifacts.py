@@ -133,7 +133,7 @@ class ArtifactTracker:
 
     def _near(self, obs: Observation) -> bool:
         """A detection whose class counts: whole in its image and within `class_near_m`."""
-        return obs.whole and obs.range_m <= self.settings.class_near_m
+        return obs.near(self.settings.class_near_m)
 
     def class_conflicts(self, fused: Sequence[Track] | None = None) -> list[tuple[Track, Track]]:
         """(loser, winner) for each perception-made artifact that is another class's

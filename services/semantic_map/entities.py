@@ -152,6 +152,10 @@ class Observation:
     range_m: float = 0.0
     whole: bool = True
 
+    def near(self, near_m: float) -> bool:
+        """Whether its class counts: whole in its image and within `near_m`."""
+        return self.whole and self.range_m <= near_m
+
 
 def measurement_sigma(range_m: float, sigma0_m: float, per_m: float) -> float:
     """A detection's horizontal 1-σ: a floor plus a share of its range."""

@@ -304,11 +304,9 @@ class PeopleTracker:
         assert keep.P is not None and gone.P is not None
         w = np.array([keep.hits, gone.hits], float) / max(keep.hits + gone.hits, 1)
         mean = w[0] * keep.xy + w[1] * gone.xy
-        cov = sum(
-            wi * (tr.P[:2, :2] + np.outer(tr.xy - mean, tr.xy - mean))
-            for wi, tr in zip(w, (keep, gone), strict=True)
-            if tr.P is not None
-        )
+        dk, dg = keep.xy - mean, gone.xy - mean
+        cov = w[0] * (keep.P[:2, :2] + np.outer(dk, dk))
+        cov += w[1] * (gone.P[:2, :2] + np.outer(dg, dg))
         P = np.zeros((4, 4))
         P[:2, :2], P[2:, 2:] = cov, keep.P[2:, 2:]
         self._set(keep, np.concatenate([mean, keep.velocity]), P)
@@ -320,11 +318,10 @@ class PeopleTracker:
             keep.appearance = gone.appearance.copy()
         assert keep.id is not None and gone.id is not None
         for tr in self.tracks:  # who was seen with the one merged away was seen with this one
-            if gone.id in tr.seen_with:
+            if gone.id in tr.seen_with and tr.id is not None:
                 tr.seen_with.discard(gone.id)
                 tr.seen_with.add(keep.id)
-                keep.seen_with.add(tr.id or "")
-        keep.seen_with.discard("")
+                keep.seen_with.add(tr.id)
         self.drop(gone)
 
     def take_merged(self) -> list[tuple[Track, Track, str]]:
@@ -346,7 +343,7 @@ class PeopleTracker:
         if obs.appearance is not None:
             tr.appearance = blend(tr.appearance, obs.appearance)
         tr.hits += 1
-        tr.near_hits += int(obs.whole and obs.range_m <= self.settings.class_near_m)
+        tr.near_hits += int(obs.near(self.settings.class_near_m))
         tr.moving = sure_velocity(tr)
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
