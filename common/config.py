@@ -490,6 +490,11 @@ class ApproachSettings(_Section):
     tol_theta_rad: Positive = 0.05
     #: Both errors within tolerance this long: arrived.
     settle_s: Positive = 0.6
+    #: Blocked short of d_opt (a hip against the support): arrived when the distance error
+    #: is at most `blocked_slack_m` and no sighting came `progress_m` nearer for `stall_s`.
+    blocked_slack_m: Positive = 0.12
+    progress_m: Positive = 0.01
+    stall_s: Positive = 4.0
     #: A sighting older than this no longer drives the base; none this long: re-acquire.
     max_age_s: Positive = 0.35
     lost_after_s: Positive = 1.0

@@ -57,8 +57,9 @@ def test_cmd_vel_round_trips(msg: CmdVel) -> None:
     assert decode(encode(msg), CmdVel) == msg
 
 
+# No lone surrogate (category Cs): it is not UTF-8, and no client can send one.
 @given(
-    st.text(st.characters(exclude_categories=("Cc",)), min_size=1, max_size=128),
+    st.text(st.characters(exclude_categories=("Cc", "Cs")), min_size=1, max_size=128),
     st.from_regex(r"^[a-z]{1,8}(_[1-9][0-9]{0,2})?$", fullmatch=True),
 )
 def test_mission_requests_travel_as_json_and_round_trip(request_id: str, target: str) -> None:

@@ -175,6 +175,49 @@ def test_an_approach_that_cannot_settle_times_out() -> None:
     assert t == pytest.approx(5.0, abs=2 * DT)
 
 
+class Blocked(Plant):
+    """A plant whose base cannot pass x = `stop_x` (a hip against the support's front)."""
+
+    def __init__(self, x: float, stop_x: float) -> None:
+        super().__init__(x, 0.0, 0.0)
+        self.stop_x = stop_x
+        self.moves = 0
+        self.stuck_at: int | None = None  # the move at which it first met the stop
+
+    def move(self, cmd: ApproachCommand, dt: float) -> None:
+        super().move(cmd, dt)
+        self.moves += 1
+        if self.pose[0] >= self.stop_x and self.stuck_at is None:
+            self.stuck_at = self.moves
+        self.pose[0] = min(self.pose[0], self.stop_x)
+
+
+def test_a_base_blocked_a_few_cm_short_arrives_there_saying_so() -> None:
+    short = 0.06  # the hall's can 11 cm deep on a bench: stuck at d = d_opt + 6 cm
+    plant = Blocked(-1.1, stop_x=-(D_OPT_M + short))
+    gains = ApproachSettings()
+    cmds = run(ApproachController(gains), plant, 30.0)
+    end = cmds[-1]
+    assert end.state == "arrived", end
+    assert end.reason.startswith("blocked short of d_opt, no nearer in 4 s: d_obj error +6.0 cm")
+    # It pushed for stall_s (and the camera's delay) after it met the stop, no longer.
+    assert plant.stuck_at is not None
+    pushed_s = (len(cmds) - plant.stuck_at) * DT
+    assert gains.stall_s - 0.2 <= pushed_s <= gains.stall_s + 0.5, pushed_s  # progress_m: 1 cm
+
+
+def test_a_base_blocked_farther_than_the_slack_does_not_arrive() -> None:
+    plant = Blocked(-1.2, stop_x=-(D_OPT_M + 0.2))
+    cmds = run(ApproachController(ApproachSettings(timeout_s=15.0)), plant, 30.0)
+    assert cmds[-1].state == "failed" and "not arrived" in cmds[-1].reason
+
+
+def test_an_unblocked_approach_still_settles_within_tolerance() -> None:
+    plant = Plant(-1.1, 0.0, 0.0)
+    cmds = run(ApproachController(ApproachSettings()), plant, 30.0)
+    assert cmds[-1].state == "arrived" and not cmds[-1].reason.startswith("blocked")
+
+
 @pytest.mark.parametrize(
     "bad",
     [
