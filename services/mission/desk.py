@@ -4,6 +4,8 @@
 
 1. the first step (since the mission started) sets the status `idle` with no request and
    the sim time it started at, so a client whose request was in progress hears it lost;
+   before it, a request the last mission of this run held when it stopped (`journal`)
+   is failed `dependency_lost` by its id, with the stage it was in;
 2. requests drained from the inbox: parsed, refused at once (a `rejected` status
    published stamped b) when malformed, when a mission or a mapping job runs (`busy`;
    `busy_with` names the job), when a dependency is not running (`unavailable`) or when
@@ -41,6 +43,7 @@ from common.messages.base import NS_PER_S
 from common.messages.mission import MissionReason, MissionRequest, MissionState, MissionStatus
 from services.mission.behaviours.abort import halt
 from services.mission.inbox import Inbox
+from services.mission.journal import Journal
 from services.mission.mission_log import MissionLogger
 from services.mission.ports import RobotPort
 from services.mission.requests import (
@@ -101,6 +104,7 @@ class Desk:
         errors: logging.Logger,
         busy_with: Callable[[], str] | None = None,
         jobs: Jobs | None = None,
+        journal: Journal | None = None,
     ) -> None:
         self.tree, self.robot, self.deps, self.board = tree, robot, deps, board
         self.requests, self.cancels = requests, cancels
@@ -111,12 +115,15 @@ class Desk:
         self.busy_with: Callable[[], str] = busy_with or (jobs.busy_with if jobs else lambda: "")
         #: Whether the first step ran (the `idle` status of a (re)start is set).
         self.started = False
+        #: The request held, on disk: a restarted mission says what it lost.
+        self.journal = journal or Journal(None)
 
     # -- the status -----------------------------------------------------------------------
 
     def _publish(self, status: MissionStatus) -> None:
         self.send(status)
         self.log.status(status)
+        self.journal.note(status)
 
     def stalled(self, b: int) -> bool:
         """The clock stopped after tick b (no tick for a while): when a dependency of
@@ -259,6 +266,9 @@ class Desk:
         self.log.at(b)
         if not self.started:  # (re)started: no request is in progress, and clients hear it
             self.started = True
+            if (interrupted := self.journal.take(b)) is not None:
+                self.errors.error("request %s: %s", interrupted.request_id, interrupted.detail)
+                self._publish(interrupted)
             self.board.update(b, "", "idle", detail=f"mission started at t={b / NS_PER_S:.2f} s")
         self._requests(b)
         request = self.tree.request

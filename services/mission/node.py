@@ -63,6 +63,7 @@ from services.mission.desk import Desk
 from services.mission.explore import ExploreRunner
 from services.mission.inbox import Inbox, RequestInbox
 from services.mission.inputs import TickInputs
+from services.mission.journal import Journal
 from services.mission.mission_log import MissionLogger
 from services.mission.patrol import PatrolRunner
 from services.mission.patrol_desk import PatrolDesk
@@ -148,6 +149,7 @@ class MissionNode:
             self.status_pub.put,
             svc.log,
             jobs=self.patrol,
+            journal=Journal.of_run(),
         )
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)
         self.last_b = 0

@@ -8,6 +8,7 @@ A `Desk` over the scripted robot (`mission_fakes`), liveliness fed by hand
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import pytest
 import rerun as rr
@@ -17,6 +18,7 @@ from common.messages import encode
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from services.mission.desk import Desk
 from services.mission.inbox import Inbox, RequestInbox
+from services.mission.journal import FILE, Journal
 from services.mission.mission_log import MissionLogger
 from services.mission.node import DEPENDENCIES
 from services.mission.requests import StatusBoard
@@ -34,7 +36,9 @@ def key_of(name: str) -> str:
 class Rig:
     """A desk, its inboxes, the liveliness it watches and every status it sent."""
 
-    def __init__(self, robot: FakeRobot | None = None, every_s: float = 100.0) -> None:
+    def __init__(
+        self, robot: FakeRobot | None = None, every_s: float = 100.0, journal: Journal | None = None
+    ) -> None:
         self.robot = robot or small_world()
         self.lifelines = Lifelines()
         for name in DEPENDENCIES:
@@ -52,6 +56,7 @@ class Rig:
             MissionLogger(rr.RecordingStream("test", default_enabled=False), LOG),
             self.sent.append,
             LOG,
+            journal=journal,
         )
 
     def tick(self, n: int = 1) -> list[MissionStatus]:
@@ -79,6 +84,43 @@ def test_the_first_tick_says_the_mission_started_with_no_request() -> None:
     assert (status.request_id, status.state, status.stamp_ns) == ("", "idle", 3 * TICK_NS)
     assert status.detail == "mission started at t=0.15 s"
     assert rig.tick(5) == []  # nothing changed, the periodic repeat is not due
+
+
+def test_a_restarted_mission_fails_the_request_its_last_run_held(tmp_path: Path) -> None:
+    """Killed with r1 running, the mission's next start fails r1 by its id, with the
+    stage it was in, before its `idle`: nothing is re-run, nothing silently dropped."""
+    first = Rig(journal=Journal(tmp_path))
+    first.running()
+    assert (tmp_path / FILE).exists()
+    stage = first.sent[-1].behaviour
+    restarted = Rig(journal=Journal(tmp_path))  # the mission process starts again
+    restarted.robot.t = 40 * TICK_NS
+    lost, idle = restarted.tick()
+    assert (lost.request_id, lost.state, lost.reason) == ("r1", "failed", "dependency_lost")
+    assert lost.behaviour == stage and lost.stamp_ns == 40 * TICK_NS
+    assert lost.detail.startswith("mission restarted at t=2.00 s: the request was interrupted in")
+    assert (idle.request_id, idle.state) == ("", "idle")
+    assert not (tmp_path / FILE).exists()
+    assert Rig(journal=Journal(tmp_path)).tick()[0].state == "idle"  # said once
+
+
+def test_a_request_that_ended_leaves_nothing_for_the_next_start(tmp_path: Path) -> None:
+    rig = Rig(journal=Journal(tmp_path))
+    rig.running()
+    rig.cancels.push(encode(MissionCancel(request_id="r1", reason="changed my mind")))
+    rig.tick(3)
+    assert rig.sent[-1].state == "cancelled"
+    assert not (tmp_path / FILE).exists()
+    (status,) = Rig(journal=Journal(tmp_path)).tick()
+    assert status.state == "idle"
+
+
+def test_an_unreadable_journal_is_reported_and_removed(tmp_path: Path) -> None:
+    (tmp_path / FILE).write_bytes(b"\x00garbage")
+    lost, idle = Rig(journal=Journal(tmp_path)).tick()
+    assert (lost.request_id, lost.state, lost.reason) == ("unknown", "failed", "dependency_lost")
+    assert "a stage not known (its record unreadable: " in lost.detail
+    assert idle.state == "idle" and not (tmp_path / FILE).exists()
 
 
 def test_a_request_submitted_by_query_is_in_the_inbox_before_the_reply_goes() -> None:
