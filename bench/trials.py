@@ -272,6 +272,17 @@ def run_trial(
 
         world = (options or {}).get("world") or "small"
         return explore_run(world, 0 if world_seed is None else world_seed, overrides)
+    if name == "faults":  # each service killed or hung in each phase of a fetch
+        from bench.trial_faults import PHASES, SIGNALS, TARGETS, run_faults
+
+        opts = dict(options or {})
+        return run_faults(
+            opts.get("services") or TARGETS,
+            opts.get("phases") or tuple(PHASES),
+            opts.get("signals") or tuple(SIGNALS),
+            opts.get("count") or 5,
+            overrides or {},
+        )
     if name == "fuzz":  # every key every service takes, fuzzed; no service may crash
         from bench.trial_fuzz import run_fuzz
 

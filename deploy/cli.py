@@ -570,11 +570,19 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return run_bench(args.which, args.set, BenchOptions(args.rounds, args.sim_s, args.full))
 
 
+def _names(text: str) -> tuple[str, ...]:
+    """A comma-separated list of names."""
+    return tuple(n.strip() for n in text.split(",") if n.strip())
+
+
 def cmd_trial(args: argparse.Namespace) -> int:
     from bench.eval.run import sigterm_interrupts
     from bench.trials import run_trial
 
-    options: dict[str, object] = {"world": args.world, "count": args.count, "yaw": args.yaw}
+    options: dict[str, object] = {
+        "world": args.world, "count": args.count, "yaw": args.yaw,
+        "services": args.services, "phases": args.phases, "signals": args.signals,
+    }  # fmt: skip
     if args.which == "goto":
         if len(args.xy) != 2:
             print("dume trial goto needs X Y (m, world)", file=sys.stderr)
@@ -821,8 +829,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--yaw", type=float, default=0.0, help="goto: the goal's yaw, rad")
     p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals")
     p.add_argument(
-        "--count", type=int, default=None, help="goals: how many (10); fuzz: cases a key (10 000)"
-    )
+        "--count", type=int, default=None,
+        help="goals: how many (10); fuzz: cases a key (10 000); faults: seeds (5)",
+    )  # fmt: skip
+    p.add_argument("--services", type=_names, default=None, help="faults: A,B (every one)")
+    p.add_argument("--phases", type=_names, default=None, help="faults: A,B (every one)")
+    p.add_argument("--signals", type=_names, default=None, help="faults: kill,stop (both)")
     p.add_argument("--world-seed", type=seed_number, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)
