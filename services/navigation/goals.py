@@ -33,6 +33,8 @@ RAY_STEP_RAD = math.radians(1.0)
 #: Rays leaving within this much of the shortest exit are averaged into the normal, m.
 NORMAL_BAND_M = 0.02
 MAX_RAY_M = 1.5
+#: A ray is out when it stays on free cells this far (the robot's half-width and more), m.
+EXIT_RUN_M = 0.3
 
 
 class GoalError(ValueError):
@@ -54,16 +56,28 @@ class Queued:
 
 
 def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> np.ndarray:
-    """Per direction, the distance (m) from (x, y) to the first free cell along the ray."""
+    """Per direction, the distance (m) from (x, y) to where the ray comes out into open
+    floor: the first free cell from which it stays free for `EXIT_RUN_M` (`MAX_RAY_M`
+    when none within it). A strip of free cells that ends in unknown or occupied cells
+    is no way out: an explored bench's lidar band has one behind it (beams under the top)
+    and its "exit" 1 cm behind the can turned the standoff round the bench's end (hall
+    seed 0), where the hip met the bench 5 cm short of the grasp distance."""
     grid = costmap.grid
-    steps = np.arange(0.0, MAX_RAY_M, 0.2 * grid.resolution)
+    step = 0.2 * grid.resolution
+    steps = np.arange(0.0, MAX_RAY_M + EXIT_RUN_M, step)
     px = x + np.cos(angles)[:, None] * steps[None, :]
     py = y + np.sin(angles)[:, None] * steps[None, :]
     iy, ix, inside = grid.cells(np.stack([px.ravel(), py.ravel()], axis=1))
-    occ = (grid.occupied[iy, ix] & inside).reshape(px.shape)
-    free = ~occ
-    first = np.where(free.any(axis=1), free.argmax(axis=1), len(steps) - 1)
-    out: np.ndarray = steps[first]
+    free = ~(grid.occupied[iy, ix] & inside).reshape(px.shape)
+    run = np.zeros_like(free, dtype=np.int64)  # free steps from each one on, itself included
+    ahead = np.zeros(len(angles), dtype=np.int64)
+    for j in range(len(steps) - 1, -1, -1):
+        ahead = (ahead + 1) * free[:, j]
+        run[:, j] = ahead
+    opens = run >= round(EXIT_RUN_M / step)
+    opens[:, steps >= MAX_RAY_M] = False
+    first = np.where(opens.any(axis=1), opens.argmax(axis=1), 0)
+    out: np.ndarray = np.where(opens.any(axis=1), steps[first], MAX_RAY_M)
     return out
 
 

@@ -9,6 +9,7 @@ import pytest
 from scipy.sparse.csgraph import dijkstra
 
 from common.config import NavigationSettings, PeopleSettings, PlannerSettings
+from common.messages import world
 from services.navigation import native
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.goals import GoalError, handover_pose, standoff_pose
@@ -105,6 +106,23 @@ def test_standoff_poses_are_free_and_face_their_artifact(name: str, seed: int) -
         assert abs(math.remainder(bearing - pose.yaw, math.tau)) < 1e-6
         truth = fz.standoff_pose(world, a.id)  # what the world generator aims for
         assert abs(math.remainder(pose.yaw - truth.yaw, math.tau)) < 0.35
+
+
+def test_an_explored_bench_standoff_faces_its_front_not_the_strip_behind_its_lidar_band() -> None:
+    """As hall seed 0's explored bench: the lidar saw a 15 cm band of the bench's front
+    (occupied), one row of free cells behind it (beams under the top), then unknown; the
+    can on the band. The way out is the front, 15 cm away, not the strip 1 cm behind."""
+    cells = np.full((120, 160), world.FREE, dtype=np.uint8)
+    cells[:40, 40:100] = 255  # unknown: under and behind the bench, never seen
+    cells[39, 40:100] = world.FREE  # the strip behind the band
+    cells[40:43, 40:100] = world.OCCUPIED  # the band: the bench's front panel
+    occ = cells != world.FREE
+    grid = Grid(occ, 0.05, (0.0, 0.0), cells == world.OCCUPIED)
+    cm = build_costmap(grid, FP, CostParams())
+    can = (3.5, 40.5 * 0.05)  # on the band's back row
+    pose = standoff_pose(cm, *can, FP)
+    assert abs(pose.x - can[0]) < 0.05 and pose.y > can[1] + 0.9  # out in front of it
+    assert math.remainder(pose.yaw + math.pi / 2, math.tau) == pytest.approx(0.0, abs=0.02)
 
 
 @pytest.mark.parametrize(("name", "seed"), [("small", 1), ("hall", 1), ("hall", 3)])
