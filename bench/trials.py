@@ -283,6 +283,10 @@ def run_trial(
             opts.get("count") or 5,
             overrides or {},
         )
+    if name == "updown":  # dume up, dume down, again and again: nothing left behind
+        from bench.trial_updown import run_updown
+
+        return run_updown((options or {}).get("count") or 100, overrides)
     if name == "fuzz":  # every key every service takes, fuzzed; no service may crash
         from bench.trial_fuzz import run_fuzz
 

@@ -44,7 +44,15 @@ from typing import Any
 import msgspec
 
 from common.bus import Bus, BusError, NoReply, NoRouter, WaitTimeout
-from common.config import REPO_ROOT, Config, ConfigError, load_config, merged, parse_overrides
+from common.config import (
+    REPO_ROOT,
+    Config,
+    ConfigError,
+    Overrides,
+    load_config,
+    merged,
+    parse_overrides,
+)
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.lifelines import Dependencies
 from common.messages import encode
@@ -153,7 +161,7 @@ def cmd_up(args: argparse.Namespace) -> int:
             parse_overrides(args.set),
             realtime,
             start,
-            map_start(args.map, args.world, args.world_seed),
+            map_start(args.map, args.world, args.world_seed, parse_overrides(args.set)),
             _port(args),
         )
     )
@@ -198,17 +206,20 @@ def cmd_up(args: argparse.Namespace) -> int:
     return 0  # not reached
 
 
-def map_start(map_arg: str | None, world: str, seed: int) -> dict[str, Any]:
+def map_start(
+    map_arg: str | None, world: str, seed: int, overrides: Overrides | None = None
+) -> dict[str, Any]:
     """`dume up --map`'s settings. None: the site's own database, resumed; the first
     time, started from the site's saved map (`deploy.maps`), else empty (`dume map
     --explore` maps it); `truth`: seeded from the world's truth with noise and its floor
     plan (the ablation that stands in for a mapping run); a file: that map (`dume map
     --export`). Each of the last two starts over in a database of its own
     (`<site>-truth`, `<site>-prior`): the site's own map is never overwritten. Only the
-    ablation has the floor plan: the others localize on their own grid."""
+    ablation has the floor plan: the others localize on their own grid. `overrides`: the
+    command line's `--set` (a `semantic_map.dir` of its own is where the map is looked for)."""
     from services.semantic_map.store import database_path, site_slug
 
-    config = load_config({"sim.world": world, "sim.world_seed": seed})
+    config = load_config(merged(overrides or {}, {"sim.world": world, "sim.world_seed": seed}))
     site = config.map_site()
     slug = site_slug(site)
     if map_arg is None:

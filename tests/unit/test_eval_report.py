@@ -458,3 +458,15 @@ def test_the_wilson_interval_and_the_reasons_table() -> None:
 def test_a_report_without_failures_draws_its_reasons_too(tmp_path: Path) -> None:
     write_report(tmp_path, {}, synthetic_results()[:2])
     assert (tmp_path / "reasons.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_dume_up_looks_for_the_sites_database_where_set_puts_the_map(tmp_path: Path) -> None:
+    """`dume up --set semantic_map.dir=D`: the site's map is resumed from D when D has
+    it, and started from the saved map when D has none, whatever var/map/ holds."""
+    from deploy.cli import map_start
+
+    where = {"semantic_map.dir": str(tmp_path)}
+    fresh = map_start(None, "small", 0, where)  # D has no database: the shipped saved map
+    assert (fresh["semantic_map.start"], fresh["semantic_map.name"]) == ("prior", "small-seed-0")
+    (tmp_path / "small-seed-0.sqlite").write_bytes(b"")
+    assert map_start(None, "small", 0, where) == {"semantic_map.floor_plan": "none"}

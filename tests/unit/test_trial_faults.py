@@ -1,0 +1,124 @@
+"""The fault battery's and the up/down trial's own parts, on real processes and files:
+when a fault is injected, what the summary counts, what a run leaves behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from bench.trial_faults import Fault, summary
+from bench.trial_updown import map_state, run_processes
+from common.messages.base import NS_PER_S
+from common.messages.mission import MissionStatus
+from common.messages.sim import Clock
+
+
+class Ctl:
+    """`Supervised.ctl("pid", name)` of a stack whose service is `proc`."""
+
+    def __init__(self, proc: subprocess.Popen[bytes]) -> None:
+        self.proc = proc
+
+    def ctl(self, *args: str) -> str:
+        assert args[0] == "pid"
+        return f"{self.proc.pid}\n"
+
+
+def _status(behaviour: str, t_s: float) -> MissionStatus:
+    return MissionStatus(stamp_ns=round(t_s * NS_PER_S), request_id="r", state="running",
+                         behaviour=behaviour)  # fmt: skip
+
+
+def _clock(t_s: float) -> Clock:
+    return Clock(stamp_ns=round(t_s * NS_PER_S), tick=round(t_s * 1000), mode="lockstep", rtf=1.0)
+
+
+def test_a_fault_waits_for_its_phase_and_its_delay_then_kills_once() -> None:
+    victim = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        fault = Fault(Ctl(victim), "wbc", "approaching", signal.SIGKILL, 1.5)  # type: ignore[arg-type]
+        fault.progress(_status("navigate_to_object", 1.0), _clock(1.0), True)
+        fault.progress(_status("approach_object", 4.0), _clock(4.0), True)  # the phase starts
+        fault.progress(_status("approach_object", 4.0), _clock(5.0), False)  # 1 s in: not yet
+        assert not fault.wall and victim.poll() is None
+        fault.progress(_status("approach_object", 4.0), _clock(5.5), False)
+        assert victim.wait(timeout=10) == -signal.SIGKILL
+        assert (fault.at, fault.sim_ns, fault.pid) == ("approach_object", 5_500_000_000, victim.pid)
+        fault.progress(_status("pose_estimation", 9.0), _clock(9.0), True)  # once
+        assert fault.sim_ns == 5_500_000_000
+    finally:
+        if victim.poll() is None:
+            victim.kill()
+
+
+def _state_becomes(pid: int, states: set[str], timeout_s: float = 5.0) -> bool:
+    """Whether the process's state (its /proc stat letter) is one of `states` within the
+    timeout (a signal is delivered when the kernel next schedules the process)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if Path(f"/proc/{pid}/stat").read_text().split()[2] in states:
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def test_a_stopped_process_is_resumed_when_the_case_ends() -> None:
+    victim = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        fault = Fault(Ctl(victim), "navigation", "navigating", signal.SIGSTOP, 0.0)  # type: ignore[arg-type]
+        fault.progress(_status("navigate_to_object", 0.5), _clock(0.5), True)
+        assert _state_becomes(victim.pid, {"T"})  # stopped
+        fault.resume()
+        assert _state_becomes(victim.pid, {"S", "R"})
+    finally:
+        victim.kill()
+        victim.wait()
+
+
+def test_the_summary_counts_hung_cases_silent_drops_and_falls_the_wbc_survived() -> None:
+    cases: list[dict[str, Any]] = [
+        {"injected": True, "service": "wbc", "signal": "kill", "ended_s": 0.1,
+         "reported_s": 0.1, "hung": False, "fell": True, "map_ok": True},
+        {"injected": True, "service": "navigation", "signal": "kill", "ended_s": 0.2,
+         "reported_s": 12.0, "hung": True, "fell": False, "dropped": True,
+         "drop_reported": False, "map_ok": True},
+        {"injected": True, "service": "perception", "signal": "stop", "ended_s": 0.3,
+         "reported_s": 0.3, "hung": False, "fell": True, "map_ok": False},
+        {"injected": False, "service": "sim", "signal": "kill", "map_ok": True},
+    ]  # fmt: skip
+    s = summary(cases)
+    assert (s["cases"], s["injected"], s["hung"], s["silent_drops"]) == (4, 3, 1, 1)
+    assert (s["falls"], s["falls_wbc_alive"], s["map_ok"]) == (2, 1, "3/4")
+    assert s["ended_p50_s"] == 0.2 and s["reported_p95_s"] is not None
+
+
+def test_a_runs_processes_are_found_by_its_folder(tmp_path: Path) -> None:
+    env = dict(os.environ, DUME_RUN_DIR=str(tmp_path))
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"], env=env)
+    try:
+        assert run_processes(tmp_path) == [f"{sleeper.pid} {sys.executable}"]
+        assert run_processes(tmp_path / "other") == []
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    assert not any(f.startswith(f"{sleeper.pid} ") for f in run_processes(tmp_path))
+
+
+def test_a_map_database_is_checked_and_its_lock_files_named(tmp_path: Path) -> None:
+    db = tmp_path / "m.sqlite"
+    assert map_state(db) == ("no file", -1, [])
+    con = sqlite3.connect(db)
+    con.execute("PRAGMA journal_mode=WAL")
+    con.execute("CREATE TABLE entities (id TEXT)")
+    con.executemany("INSERT INTO entities VALUES (?)", [("a",), ("b",)])
+    con.commit()
+    ok, count, locks = map_state(db)  # open: its WAL is there
+    assert (ok, count) == ("ok", 2) and "m.sqlite-wal" in locks
+    con.close()
+    assert map_state(db) == ("ok", 2, [])  # closed cleanly: no lock files left
