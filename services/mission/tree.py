@@ -45,6 +45,7 @@ import py_trees
 from py_trees.common import Status
 from py_trees.composites import Selector, Sequence
 
+from common.messages.base import NS_PER_S
 from common.messages.mission import STAGES, MissionReason, MissionRequest
 from common.messages.wbc import Grasp, Posture, Release
 from services.mission.behaviours.abort import Abort, halt
@@ -268,8 +269,27 @@ class MissionTree:
                 outcome = Outcome("failed", failure.reason, failure.detail)
             else:
                 outcome = Outcome("failed", "internal", "the tree failed without a reason")
+            outcome = self._with_holding(outcome)
         self._clear()
         return outcome
+
+    def _with_holding(self, outcome: Outcome) -> Outcome:
+        """An unfinished request whose object is in the gripper says so (the controller's
+        last status): a person must know where the object is, and a controller that
+        died holding it may drop it after the status went out."""
+        status = self.ctx.port.wbc_status()
+        if status is None or not status.held:
+            return outcome
+        target = read(self.bb, TARGET)
+        what = (
+            target.map_id if isinstance(target, Target)
+            else self.request.object if self.request is not None else "the object"
+        )  # fmt: skip
+        said = (
+            f"the robot was holding {what} "
+            f"(the controller's status at t={status.stamp_ns / NS_PER_S:.2f} s)"
+        )
+        return Outcome(outcome.state, outcome.reason, f"{outcome.detail}; {said}")
 
     def cancel(self, reason: str) -> Outcome | None:
         """Stop every running leaf and halt; None when no mission runs."""
@@ -282,6 +302,7 @@ class MissionTree:
     def _end(self, outcome: Outcome) -> Outcome | None:
         if self.request is None:
             return None
+        outcome = self._with_holding(outcome)
         self.root.stop(Status.INVALID)
         said = (
             outcome.detail

@@ -189,9 +189,15 @@ def test_a_cancel_at_every_leaf_stops_cleanly(leaf: str) -> None:
         raise AssertionError(f"never reached {leaf}")
     nav_before = robot.active_nav_goals()
     arm_before = len(robot.arm_goals)
+    held = robot.held
     outcome = tree.cancel("user changed their mind")
     robot.advance()
-    assert outcome == Outcome("cancelled", "cancelled", "user changed their mind")
+    assert (outcome.state, outcome.reason) == ("cancelled", "cancelled")
+    assert outcome.detail.startswith("user changed their mind")
+    # where the object is, when the gripper has it: a person must know
+    assert (
+        "; the robot was holding bottle_1 (the controller's status at t=" in outcome.detail
+    ) == held
     for goal_id in nav_before:
         assert goal_id in robot.nav_cancels or "" in robot.nav_cancels
     assert_halted(robot)
@@ -259,7 +265,8 @@ def test_a_person_whose_facing_is_unknown_is_offered_the_object_from_side_after_
     settings = fast_settings(handover_side_timeout_s=1.0, handover_timeout_s=30.0)
     outcome = run(mission(robot, pull=False, settings=settings), robot, max_ticks=6000)
     assert (outcome.state, outcome.reason) == ("failed", "handover_timeout")
-    assert outcome.detail == "nobody took the object in 1 s on this side"
+    assert outcome.detail.startswith("nobody took the object in 1 s on this side; ")
+    assert "the robot was holding bottle_1" in outcome.detail
     bearings = _handover_bearings(robot)
     assert bearings[0] is None  # the bring: on the side it comes to
     first = math.atan2(0.0, -HANDOVER_DISTANCE_M)  # the robot stood on the person's -x side
@@ -277,7 +284,7 @@ def test_the_person_takes_it_on_the_third_side_and_a_known_facing_is_not_searche
     assert len([b for b in _handover_bearings(robot) if b is not None]) == 2
     robot = small_world()  # the facing known (seeded): one offer, the whole patience
     outcome = run(mission(robot, pull=False, settings=settings), robot)
-    assert outcome.detail == "nobody took the object in 3 s"
+    assert outcome.detail.startswith("nobody took the object in 3 s; the robot was holding")
     assert all(b is None for b in _handover_bearings(robot))
 
 
@@ -407,9 +414,12 @@ def test_a_lost_dependency_fails_the_mission_halted_with_its_reason() -> None:
     for _ in range(30):  # walking to the object
         assert tree.tick() is None
         robot.advance()
+    held = robot.held  # the scripted robot is quick: it may have the bottle by now
     outcome = tree.fail("dependency_lost", "navigation is gone")
     robot.advance()
-    assert outcome == Outcome("failed", "dependency_lost", "navigation is gone")
+    assert (outcome.state, outcome.reason) == ("failed", "dependency_lost")
+    assert outcome.detail.startswith("navigation is gone")
+    assert ("; the robot was holding bottle_1" in outcome.detail) == held
     assert_halted(robot)
     assert not tree.busy
     assert tree.fail("dependency_lost", "again") is None  # nothing runs now
