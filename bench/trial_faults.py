@@ -6,8 +6,8 @@ phase for a seeded 0–2 s of sim time, hurts one process: SIGKILL (dead) or SIG
 truth, what the failure policy promises (README, "Nobody waits for the dead"):
 
 - **ended_s**: wall seconds from the fault until the client knows the request is over:
-  a final status for it, or the watch's own `dependency_lost` when the mission or the
-  sim itself went (`bench.eval.run.watch_mission`);
+  a final status for it (when it arrived), or the watch's own `dependency_lost` when the
+  mission or the sim itself went (`bench.eval.run.watch_mission`);
 - **reported_s**: until the mission said so on `mission/status` by the request's id (a
   restarted mission reports the request it held: `services/mission/journal.py`); a case
   with no report within `HUNG_S` is **hung**;
@@ -87,8 +87,14 @@ class Fault:
         self.wall = 0.0  # perf_counter at the fault; 0: not yet
         self.sim_ns = 0
         self.at = ""  # the stage running when it was injected
+        self.final: MissionStatus | None = None  # the request's final status, after it
+        self.final_wall = 0.0  # perf_counter when it arrived
 
     def progress(self, status: MissionStatus | None, clock: Clock, _changed: bool) -> None:
+        if self.wall and status is not None and status.state in TERMINAL and not self.final:
+            # when it arrived: the watch itself returns only after a grace of sim time,
+            # which a stalled clock (a dead WBC: the sim waits for its commands) holds up
+            self.final, self.final_wall = status, time.perf_counter()
         if self.wall or status is None or status.state != "running":
             return
         if status.behaviour == PHASES[self.phase] and self.entered_ns is None:
@@ -150,7 +156,7 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         pair = demo_pair(*read_map(bus))  # what `dume demo` asks for
         request = MissionRequest(request_id=f"fault-{seed}", object=pair.object, person=pair.person)
         record = watch_mission(bus, keys, request, TIMEOUT_S, fault.progress, start_gate=True)
-        ended = time.perf_counter()
+        ended = fault.final_wall or time.perf_counter()
         out |= {"ended": record.ended or (record.changes[-1].state if record.changes else "")}
         if not fault.wall:
             out["outcome"] = (
@@ -182,9 +188,10 @@ def _watch_after(
 ) -> Figures:
     """After the watch ended: the mission's report, the restart, falls and drops."""
     rid = request.request_id
-    final: MissionStatus | None = None
-    said: list[MissionStatus] = []
-    reported = restarted = None
+    final = fault.final
+    said: list[MissionStatus] = [] if final is None else [final]
+    reported = None if final is None else fault.final_wall - fault.wall
+    restarted = None
     low = np.inf
     deadline = time.perf_counter() + RESTART_WAIT_S
     alive_key = keys.alive(fault.service)

@@ -51,7 +51,11 @@ def test_a_fault_waits_for_its_phase_and_its_delay_then_kills_once() -> None:
         assert victim.wait(timeout=10) == -signal.SIGKILL
         assert (fault.at, fault.sim_ns, fault.pid) == ("approach_object", 5_500_000_000, victim.pid)
         fault.progress(_status("pose_estimation", 9.0), _clock(9.0), True)  # once
-        assert fault.sim_ns == 5_500_000_000
+        assert fault.sim_ns == 5_500_000_000 and fault.final is None
+        lost = MissionStatus(stamp_ns=5_550_000_000, request_id="r", state="failed",
+                             reason="dependency_lost", detail="wbc is gone")  # fmt: skip
+        fault.progress(lost, _clock(5.55), True)  # its arrival, not the watch's end
+        assert fault.final == lost and fault.final_wall >= fault.wall
     finally:
         if victim.poll() is None:
             victim.kill()
