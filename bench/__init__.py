@@ -103,7 +103,7 @@ ALL = ("sim", "wbc", "perception", "nav")
 TRIALS = (
     "walk", "turn", "strafe", "random", "reach", "pick", "push", "localize", "localize-off", "slam",
     "goto", "goals", "person", "fetch", "patrol", "explore", "fuzz", "faults",
-    "updown",
+    "updown", "soak",
 )  # fmt: skip
 
 

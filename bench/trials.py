@@ -283,6 +283,10 @@ def run_trial(
             opts.get("count") or 5,
             overrides or {},
         )
+    if name == "soak":  # requests for `minutes` on one stack: memory and files per service
+        from bench.trial_soak import run_soak
+
+        return run_soak(float((options or {}).get("minutes") or 120.0), overrides or {})
     if name == "updown":  # dume up, dume down, again and again: nothing left behind
         from bench.trial_updown import run_updown
 

@@ -593,6 +593,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     options: dict[str, object] = {
         "world": args.world, "count": args.count, "yaw": args.yaw,
         "services": args.services, "phases": args.phases, "signals": args.signals,
+        "minutes": args.minutes,
     }  # fmt: skip
     if args.which == "goto":
         if len(args.xy) != 2:
@@ -846,6 +847,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--services", type=_names, default=None, help="faults: A,B (every one)")
     p.add_argument("--phases", type=_names, default=None, help="faults: A,B (every one)")
     p.add_argument("--signals", type=_names, default=None, help="faults: kill,stop (both)")
+    p.add_argument("--minutes", type=float, default=None, help="soak: wall minutes (120)")
     p.add_argument("--world-seed", type=seed_number, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)
