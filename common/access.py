@@ -5,9 +5,18 @@ Every Zenoh session of a stack logs in to its router with a user name and a pass
 at the door, so it reads nothing and moves nothing. The router then allows each
 identity what it needs and denies everything else (`default_permission: "deny"`):
 
-- the robot's services (`keys.SERVICES`, each its own name) and `trusted` (the tools
-  that run and judge a stack: the demo, the eval, trials, tests; they read the sim's
-  truth and put world events): everything under `dume/**`;
+- each of the robot's services (`keys.SERVICES`, each its own name): exactly the keys it
+  uses (`SERVICE_KEYS`: what it puts, subscribes to, asks, answers; its own liveliness
+  token; its robot's liveliness when it watches it), as each service's own record of
+  what it did says (`Bus.used`, logged at every stop) over demos, evals, explorations,
+  trials and the test suite. The sim's truth (the robot's true pose, the segmentation
+  labels, the world's description) is the sim's to publish; a service reads it only
+  under its named ablation (`truth_keys`): the WBC's `wbc.base_state = "truth"`,
+  perception's `segmenter = "truth"`, the map seeded from the world or given its floor
+  plan, navigation's `map_source = "world"`. So "no truth in the robot's loop" is the
+  router's rule, not only the code's;
+- `trusted` (the tools that run and judge a stack: the demo, the eval, trials, tests;
+  they read the sim's truth and put world events): everything under `dume/**`;
 - `user` (`dume request`, `dume cancel`, `dume status`, `dume map`, or any Zenoh client
   given the user's password): put a request or a cancel, ask the mission to take a
   request or a patrol, read the statuses, the clock, who is alive and the map, export and
@@ -15,9 +24,12 @@ identity what it needs and denies everything else (`default_permission: "deny"`)
   the world.
 
 The ACL is on the router's side of each link: a client's puts, declarations and
-queries are its *ingress*; what the router sends it (samples, replies, tokens) its
-*egress*, and a declaration must lie inside an allowed key (a user's subscriber on
-`dume/**` is refused: they subscribe to the status keys themselves).
+queries are its *ingress*; what the router sends it (samples, replies, tokens, others'
+declarations) its *egress*, and a declaration must lie inside an allowed key (a user's
+subscriber on `dume/**` is refused: they subscribe to the status keys themselves). A
+publisher must also be told of the subscribers on its keys (egress
+`declare_subscriber`), a querier of the queryables: Zenoh filters on the writer's side,
+and a publisher that hears of no subscriber sends its first sample and nothing after.
 
 The credentials are one file of `user:password` lines (the router's dictionary),
 `zenoh.credentials` (in `var/`, outside git, mode 0600), made with random passwords by
@@ -25,8 +37,8 @@ the first session that needs it; every process of the stack reads its own line. 
 host, services and users under one Unix account can all read it: it keeps out other
 accounts and anything that does not have the file, not a process of the same account.
 
-Not yet: a narrower list per service (each service puts and subscribes exactly its keys),
-TLS on links between hosts.
+Not yet: TLS on links between hosts; robots of their own on one router (the lists are
+written for the stack's robot, `config.robot`).
 """
 
 from __future__ import annotations
@@ -38,6 +50,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from common.config import Config, load_config
 from common.keys import ALIVE, ROOT, SERVICES
 
 USER = "user"
@@ -75,6 +88,84 @@ USER_READS = (
 USER_ALIVE = (f"{ALIVE}/**",)
 
 
+#: What each service does on the network (module docstring). Keys are templates: `{r}` is
+#: the robot's prefix (`dume/<robot>`); `alive`: its own token `dume/alive/<robot>/<name>`;
+#: `watch`: it follows `dume/alive/<robot>/*`.
+SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
+    "sim": {
+        "put": ("{r}/camera/*/rgbd", "{r}/camera/*/segmentation_truth", "{r}/scan",
+                "{r}/sim/stats", "{r}/state", "{r}/state_truth", "{r}/odom",
+                f"{ROOT}/world/clock", f"{ROOT}/world/events"),
+        "subscribe": ("{r}/ack/*", "{r}/command", "{r}/wbc/cmd_vel",
+                      f"{ROOT}/world/people_command", f"{ROOT}/world/push"),
+        "serve": ("{r}/description", f"{ROOT}/world/description"),
+        "watch": True,
+    },
+    "wbc": {
+        "put": ("{r}/command", "{r}/odom", "{r}/wbc/status"),
+        "subscribe": ("{r}/state", "{r}/wbc/cmd_vel", "{r}/wbc/mode"),
+        "serve": ("{r}/wbc/arm_goal",),
+        "watch": True,
+    },
+    "perception": {
+        "put": ("{r}/ack/perception", "{r}/perception/detections"),
+        "subscribe": ("{r}/camera/*/rgbd", "{r}/localization", "{r}/odom",
+                      f"{ROOT}/world/clock"),
+        "serve": ("{r}/perception/locate",),
+    },
+    "semantic_map": {
+        "put": ("{r}/ack/semantic_map",),
+        "subscribe": ("{r}/camera/*/rgbd", "{r}/localization", "{r}/mission/patrol/status",
+                      "{r}/perception/detections", "{r}/slam/occupancy", f"{ROOT}/world/clock"),
+        "serve": (f"{ROOT}/map/**",),
+        "watch": True,
+    },
+    "navigation": {
+        "put": ("{r}/ack/navigation", "{r}/nav/path", "{r}/nav/status", "{r}/wbc/cmd_vel"),
+        "subscribe": ("{r}/camera/*/rgbd", "{r}/localization", "{r}/nav/cancel", "{r}/odom",
+                      "{r}/perception/detections", f"{ROOT}/world/clock"),
+        "serve": ("{r}/nav/goal",),
+        "query": (f"{ROOT}/map/artifacts/*", f"{ROOT}/map/occupancy", f"{ROOT}/map/people",
+                  f"{ROOT}/map/people/*"),
+        "watch": True,
+    },
+    "localization": {
+        "put": ("{r}/ack/localization", "{r}/localization", "{r}/slam/occupancy"),
+        "subscribe": ("{r}/odom", "{r}/scan", f"{ROOT}/world/clock"),
+        "query": (f"{ROOT}/map/occupancy",),
+    },
+    "mission": {
+        "put": ("{r}/ack/mission", "{r}/mission/patrol/status", "{r}/mission/status",
+                "{r}/nav/cancel", "{r}/wbc/cmd_vel"),
+        "subscribe": ("{r}/localization", "{r}/mission/cancel", "{r}/mission/request",
+                      "{r}/nav/status", "{r}/odom", "{r}/perception/detections",
+                      "{r}/wbc/status", f"{ROOT}/world/clock"),
+        "serve": ("{r}/mission/patrol", "{r}/mission/submit"),
+        "query": ("{r}/nav/goal", "{r}/wbc/arm_goal", f"{ROOT}/map/artifacts",
+                  f"{ROOT}/map/artifacts/*", f"{ROOT}/map/occupancy", f"{ROOT}/map/people",
+                  f"{ROOT}/map/people/*", f"{ROOT}/map/supports"),
+        "watch": True,
+    },
+}  # fmt: skip
+
+
+def truth_keys(config: Config) -> dict[str, dict[str, tuple[str, ...]]]:
+    """The sim's truth a service may read under its named ablation in `config` (module
+    docstring): service → verb → key templates."""
+    world = f"{ROOT}/world/description"
+    out: dict[str, dict[str, tuple[str, ...]]] = {}
+    if config.wbc.base_state == "truth":
+        out["wbc"] = {"subscribe": ("{r}/state_truth",)}
+    if config.perception.segmenter == "truth":
+        out["perception"] = {"subscribe": ("{r}/camera/*/segmentation_truth",)}
+    m = config.semantic_map
+    if m.start == "seed-from-world" or m.floor_plan == "world":
+        out["semantic_map"] = {"query": (world,)}
+    if config.navigation.map_source == "world":
+        out["navigation"] = {"query": (world,)}
+    return out
+
+
 class CredentialsError(RuntimeError):
     """The stack's credentials file is missing a line or cannot be read or made."""
 
@@ -96,14 +187,60 @@ def _rule(rule_id: str, messages: list[str], flow: str, keys: tuple[str, ...]) -
     }
 
 
-def access_control() -> dict[str, Any]:
-    """The router's `access_control` section (module docstring)."""
+def _service_rules(name: str, spec: dict[str, Any], robot: str) -> list[dict[str, Any]]:
+    """The rules that let service `name` do what `spec` lists, and nothing else."""
+    prefix, alive = f"{ROOT}/{robot}", f"{ALIVE}/{robot}"
+
+    def keys(verb: str) -> tuple[str, ...]:
+        return tuple(sorted({k.format(r=prefix) for k in spec.get(verb, ())}))
+
+    rules = []
+    for verb, flows in (
+        # a publisher hears of the subscribers (egress declarations) or it sends nothing
+        # after its first sample: Zenoh filters on the writer's side
+        ("put", (("ingress", ["put", "delete"]), ("egress", ["declare_subscriber"]))),
+        ("subscribe", (("ingress", ["declare_subscriber"]), ("egress", ["put", "delete"]))),
+        ("query", (("ingress", ["query"]), ("egress", ["reply", "declare_queryable"]))),
+        ("serve", (("ingress", ["declare_queryable", "reply"]), ("egress", ["query"]))),
+    ):
+        if found := keys(verb):
+            for flow, messages in flows:
+                rules.append(_rule(f"{name}-{verb}-{flow}", messages, flow, found))
+    rules.append(_rule(f"{name}-alive", ["liveliness_token"], "ingress", (f"{alive}/{name}",)))
+    if spec.get("watch"):
+        asks = ["declare_liveliness_subscriber", "liveliness_query"]
+        rules.append(_rule(f"{name}-watch", asks, "ingress", (f"{alive}/*",)))
+        rules.append(_rule(f"{name}-watched", ["liveliness_token"], "egress", (f"{alive}/*",)))
+    return rules
+
+
+def _merged(*specs: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for spec in specs:
+        for verb, value in spec.items():
+            out[verb] = value if isinstance(value, bool) else (*out.get(verb, ()), *value)
+    return out
+
+
+def access_control(config: Config | None = None) -> dict[str, Any]:
+    """The router's `access_control` section for the stack of `config` (its robot, and
+    the ablations it names: `truth_keys`; None: the defaults). Module docstring."""
+    config = config or load_config({})
+    truths = truth_keys(config)
     everything = (f"{ROOT}/**",)
-    rules = [
-        _rule("robot", _ALL, "both", everything),
+    rules = [_rule("trusted", _ALL, "both", everything)]
+    subjects = [{"id": "trusted", "usernames": [TRUSTED]}]
+    policies = [{"id": "trusted", "rules": ["trusted"], "subjects": ["trusted"]}]
+    for name in SERVICES:
+        own = _service_rules(name, _merged(SERVICE_KEYS[name], truths.get(name, {})), config.robot)
+        rules += own
+        subjects.append({"id": name, "usernames": [name]})
+        policies.append({"id": name, "rules": [r["id"] for r in own], "subjects": [name]})
+    users = [
         _rule("user-put", ["put", "delete"], "ingress", USER_PUTS),
+        _rule("user-put-to", ["declare_subscriber"], "egress", USER_PUTS),
         _rule("user-ask", ["query"], "ingress", USER_QUERIES),
-        _rule("user-answers", ["reply"], "egress", USER_QUERIES),
+        _rule("user-answers", ["reply", "declare_queryable"], "egress", USER_QUERIES),
         _rule("user-subscribe", ["declare_subscriber"], "ingress", USER_READS),
         _rule("user-read", ["put", "delete"], "egress", USER_READS),
         _rule(
@@ -114,19 +251,15 @@ def access_control() -> dict[str, Any]:
         ),
         _rule("user-alive", ["liveliness_token"], "egress", USER_ALIVE),
     ]
-    user_rules = [r["id"] for r in rules if r["id"].startswith("user-")]
+    rules += users
+    subjects.append({"id": "user", "usernames": [USER]})
+    policies.append({"id": "user", "rules": [r["id"] for r in users], "subjects": ["user"]})
     return {
         "enabled": True,
         "default_permission": "deny",
         "rules": rules,
-        "subjects": [
-            {"id": "robot", "usernames": [*SERVICES, TRUSTED]},
-            {"id": "user", "usernames": [USER]},
-        ],
-        "policies": [
-            {"id": "robot", "rules": ["robot"], "subjects": ["robot"]},
-            {"id": "user", "rules": user_rules, "subjects": ["user"]},
-        ],
+        "subjects": subjects,
+        "policies": policies,
     }
 
 

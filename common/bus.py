@@ -110,7 +110,7 @@ def session_config(
         if z.access_control:
             ensure_credentials(credentials)
             conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(credentials)))
-            conf.insert_json5("access_control", json.dumps(access_control()))
+            conf.insert_json5("access_control", json.dumps(access_control(config)))
     else:
         conf = zenoh.Config.from_file(str(resolve(z.client_config)))
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))

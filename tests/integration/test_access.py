@@ -70,3 +70,27 @@ def test_a_user_can_neither_watch_nor_move_the_robot_and_a_trusted_client_can(
     moved = truth.wait(lambda m: m.stamp_ns >= later.stamp_ns + 3_000_000_000, 300)
     p2 = np.array(moved.base_position_in_world)
     assert np.linalg.norm(p2[:2] - p1[:2]) > 0.1
+
+
+def test_a_service_identity_reaches_only_its_own_keys(stack: StartStack) -> None:
+    """A process logged in as perception (a compromised or buggy one) reads no truth and
+    cannot move the robot; as navigation, it can drive the base (its job) but not the
+    joints. Measured on the sim's truth, with the trusted session's drive as the check
+    that the drive works."""
+    s = stack(["sim", "wbc"], *WBC, "sim.duration_s=600", 'semantic_map.floor_plan="none"')
+    truth = s.bus.latest(s.keys.state_truth, StateTruth)
+    first = truth.wait(lambda m: m.stamp_ns >= 1_000_000_000, 120)
+    with Bus.open(s.config, user="perception") as perception:
+        seen_truth = perception.fifo(s.keys.state_truth, StateTruth)
+        odom = perception.fifo(s.keys.odom, Odom)  # its own input: delivered
+        _drive(s, perception, "rogue", first)
+        later = truth.wait(lambda m: m.stamp_ns >= first.stamp_ns + 3_000_000_000, 300)
+        assert len(list(seen_truth.drain())) == 0, "perception read the sim's truth"
+        assert len(list(odom.drain())) > 0, "perception's own input did not arrive"
+    p0, p1 = np.array(first.base_position_in_world), np.array(later.base_position_in_world)
+    assert np.linalg.norm(p1[:2] - p0[:2]) < 0.02, "perception's commands moved the robot"
+    with Bus.open(s.config, user="navigation") as navigation:
+        joints = navigation.publisher(s.keys.wbc_mode, WbcMode)  # the mode: not navigation's
+        joints.put(WbcMode(stamp_ns=later.stamp_ns, mode="damp"))
+        after = truth.wait(lambda m: m.stamp_ns >= later.stamp_ns + 2_000_000_000, 300)
+    assert abs(after.base_position_in_world[2] - p1[2]) < 0.02, "navigation's damp reached the WBC"
