@@ -19,7 +19,8 @@ and `odom` stamped b (waited for), `Localizer.update`, then `localization` stamp
 T_map_odom, T_map_base with its covariance, the status and the confidence; to rerun, the
 scan over the map, the pose and its 2σ ellipse, the status (`LocalizationLogger`).
 A scan or odom that does not come is said once and the last correction republished
-with status `uncertain`.
+with status `uncertain`. A restarted localization resumes from the last T_map_odom it
+trusted in this run (`resume.Resume`), not from the start pose.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from common.messages.sim import LaserScan, Odom
 from common.service import Service
 from services.localization.localizer import Estimate, Localizer
 from services.localization.matcher import LikelihoodField, scan_points
+from services.localization.resume import Resume
 from services.localization.slam import OCCUPIED, Slam
 from services.localization.telemetry import LocalizationLogger
 
@@ -70,6 +72,7 @@ class LocalizationNode:
         self._grid_every_ns = round(self.s.slam.publish_every_s * NS_PER_S)
         self._closures_said = 0
         self.last: Estimate | None = None
+        self.resume = Resume.of_run()
         self._said = ""
         self._status = ""
 
@@ -113,6 +116,12 @@ class LocalizationNode:
             self.loc = Slam(self.s, self.s.slam, start, (float(T[0, 3]), float(T[1, 3])))
         else:
             self.loc = Localizer(self.s, self._field(grid), start)
+        if (held := self.resume.load()) is not None:
+            self.loc.map_odom = held.map_odom  # odom lived on: it is still in the map there
+            svc.log.warning(
+                "restarted: resuming from the T_map_odom trusted at t=%.2f s, not the start "
+                "pose", held.stamp_ns / NS_PER_S,
+            )  # fmt: skip
         svc.ready()
         self.ticker.run(self.tick)
 
@@ -140,6 +149,8 @@ class LocalizationNode:
         else:
             est = self.loc.update(pts, odom_pose(odom))
         self.last = est
+        if est.status == "ok":
+            self.resume.save(b, (est.map_odom[0], est.map_odom[1], est.map_odom[2]))
         self._publish(b, est, est.status, est.refused)
         self.logger.log(b, est, pts)
 

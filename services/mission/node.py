@@ -75,7 +75,7 @@ NAME = "mission"
 #: The services a running mission depends on (those that are lockstep participants).
 #: The services a job depends on: the sim (the world and its clock) and the lockstep
 #: participants among these.
-DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map")
+DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map", "localization")
 
 
 #: Localization samples the mission keeps (60 s at 10 Hz): a grasp plan's reaches (the

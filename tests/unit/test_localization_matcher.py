@@ -199,3 +199,19 @@ def test_se2_compose_and_inverse() -> None:
     a, b = (1.0, 2.0, 0.5), (-0.3, 0.7, -1.2)
     back = compose(compose(a, b), inverse(b))
     assert back == pytest.approx(a)
+
+
+def test_a_restarted_localizer_goes_on_from_the_correction_it_resumes() -> None:
+    """Odometry lived on through a restart: with the last T_map_odom it trusted (0.2 m
+    off, as drift left it), the new localizer finds the robot where it is, far from the
+    start pose it was told."""
+    s = LocalizationSettings()
+    odom = (3.0, -1.0, 0.4)  # odom's pose now: the robot walked since the start
+    truth = TRUE
+    map_odom = compose(truth, inverse(odom))  # what the old localizer trusted...
+    resumed = (map_odom[0] + 0.2, map_odom[1] - 0.1, map_odom[2] + math.radians(3.0))
+    loc = Localizer(s, FIELD, (0.0, 0.0, 0.0))  # the start pose, metres away
+    loc.map_odom = resumed  # ...and what the restarted one is given
+    est = loc.update(points(cast(truth)), odom)
+    assert est.status == "ok", est.refused
+    assert math.hypot(est.map_base[0] - truth[0], est.map_base[1] - truth[1]) < 0.02
