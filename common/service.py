@@ -24,6 +24,7 @@ import logging
 import signal
 import sys
 import threading
+import tracemalloc
 from collections.abc import Callable, Sequence
 from types import FrameType
 
@@ -126,6 +127,35 @@ def _install_signals(stop: threading.Event, interrupt: Callable[[], None]) -> No
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    signal.signal(
+        signal.SIGUSR2,
+        lambda _s, _f: threading.Thread(target=_memory_report, name="memory", daemon=True).start(),
+    )
+
+
+_last_snapshot: list[tracemalloc.Snapshot] = []
+
+
+def _memory_report() -> None:
+    """On SIGUSR2 (on a thread of its own: the handler may have interrupted the main
+    thread in the logging lock): where the process's Python memory is, to its log: the
+    lines that allocated most, and what grew since the last report. Only while
+    tracemalloc traces (start the service with `PYTHONTRACEMALLOC=5`); a diagnostic for
+    `dume trial soak`'s growth."""
+    if not tracemalloc.is_tracing():
+        log.info("SIGUSR2: tracemalloc is off (PYTHONTRACEMALLOC=5 turns it on)")
+        return
+    snap = tracemalloc.take_snapshot().filter_traces(
+        [tracemalloc.Filter(False, tracemalloc.__file__)]
+    )
+    current, peak = tracemalloc.get_traced_memory()
+    log.info("memory: %.1f MB traced (peak %.1f MB)", current / 1e6, peak / 1e6)
+    for stat in snap.statistics("lineno")[:10]:
+        log.info("memory: %s", stat)
+    if _last_snapshot:
+        for diff in snap.compare_to(_last_snapshot[0], "lineno")[:10]:
+            log.info("memory grew: %s", diff)
+    _last_snapshot[:] = [snap]
 
 
 def run(
