@@ -43,7 +43,7 @@ import numpy as np
 from bench.eval.judge import TERMINAL
 from bench.eval.run import read_map, watch_mission
 from bench.eval.targets import demo_pair
-from common.bus import Fifo
+from common.bus import AliveWatch, Fifo
 from common.config import Overrides, merged
 from common.keys import WORLD_EVENTS, RobotKeys
 from common.messages.base import NS_PER_S
@@ -195,6 +195,7 @@ def _watch_after(
     low = np.inf
     deadline = time.perf_counter() + RESTART_WAIT_S
     alive_key = keys.alive(fault.service)
+    watch = stack.bus.watch_alive(keys.alive_all)  # the token of a restarted one: at once
     while time.perf_counter() < deadline:
         statuses.wait(0.05)
         now = time.perf_counter()
@@ -204,10 +205,11 @@ def _watch_after(
             if final is None and s.request_id == rid and s.state in TERMINAL:
                 final, reported = s, now - fault.wall
         low = _lowest(truth, fault.sim_ns, low)
-        if restarted is None and fault.service != "sim" and _alive(stack, alive_key, fault):
+        if restarted is None and fault.service != "sim" and _alive(stack, alive_key, fault, watch):
             restarted = now - fault.wall
         if final is not None and (restarted is not None or fault.service == "sim"):
             break
+    watch.undeclare()
     time.sleep(AFTER_S)
     low = _lowest(truth, fault.sim_ns, low)
     drops = [e for b in events.drain() for e in b.events
@@ -227,12 +229,16 @@ def _watch_after(
     }
 
 
-def _alive(stack: Supervised, key: str, fault: Fault) -> bool:
-    """The hurt service is alive again: a new process (a stopped one never is)."""
+def _alive(stack: Supervised, key: str, fault: Fault, watch: AliveWatch) -> bool:
+    """The hurt service is alive again: its token is back (the watch hears it at once; a
+    liveliness query can take seconds under load) from a new process (a stopped one
+    never is)."""
     if fault.service == "router":
         return "RUNNING" in stack.ctl("status", "router") and bool(stack.alive())
+    if key not in watch.alive():
+        return False
     pid = stack.ctl("pid", fault.service).strip()
-    return pid.isdigit() and int(pid) not in (0, fault.pid) and fault.service in stack.alive()
+    return pid.isdigit() and int(pid) not in (0, fault.pid)
 
 
 def summary(cases: Sequence[Figures]) -> Figures:
