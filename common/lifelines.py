@@ -41,12 +41,19 @@ class Lifelines:
             return frozenset(self._alive), dict(self._losses)
 
 
+#: This many dependencies (or more), every one of them gone at once: it is the router
+#: (or the host) that went, not each service.
+ROUTER_LOST_AT = 3
+
+
 class Dependencies:
     """The services one job depends on, watched from when it started (`arm`).
 
     `key_of(name)` is the service's liveliness key. `lost()` is None while every one of
     them alive at `arm` is still the same process; else "<name> restarted" (it went away
-    and is back) or "<name> is gone".
+    and is back) or "<name> is gone"; or, every one of `ROUTER_LOST_AT` or more gone
+    together, "the router is gone: every service went at once (…)": the link to them
+    all, not each process (a killed router said "sim is gone: the world stopped").
     """
 
     def __init__(
@@ -72,6 +79,11 @@ class Dependencies:
 
     def lost(self) -> str | None:
         alive, losses = self._lifelines.snapshot()
+        keys = self._keys
+        gone = [n for n, before in self._armed.items()
+                if losses.get(keys[n], 0) > before and keys[n] not in alive]  # fmt: skip
+        if len(gone) >= ROUTER_LOST_AT and len(gone) == len(self._armed):
+            return f"the router is gone: every service went at once ({', '.join(gone)})"
         for name, before in self._armed.items():
             key = self._keys[name]
             if losses.get(key, 0) > before:

@@ -67,3 +67,19 @@ def test_a_dependency_not_running_when_the_job_began_is_missing_not_lost() -> No
     lines.up(key("perception"))
     lines.down(key("perception"))
     assert deps.lost() is None  # it was never part of this job
+
+
+def test_every_dependency_gone_at_once_is_the_router_not_each_service() -> None:
+    names = ["sim", "wbc", "navigation", "mission"]
+    lines = lifelines(*names)
+    deps = Dependencies(lines, names, key)
+    deps.arm()
+    for name in names[:3]:
+        lines.down(key(name))
+    assert deps.lost() == "sim is gone"  # one still there: services, not the link
+    lines.down(key("mission"))
+    assert deps.lost() == (
+        "the router is gone: every service went at once (sim, wbc, navigation, mission)"
+    )
+    lines.up(key("sim"))  # back after the router: that one restarted, the others not yet
+    assert deps.lost() == "sim restarted"
