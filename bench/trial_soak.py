@@ -82,6 +82,7 @@ def run_soak(minutes: float, overrides: Overrides) -> Figures:
     restarted: Counter[str] = Counter()
     outcomes: Counter[str] = Counter()
     wall0 = time.perf_counter()
+    stopped = ""
     try:
         stack.start()
         stack.wait_ready(list(SERVICES), timeout_s=300.0)
@@ -89,6 +90,20 @@ def run_soak(minutes: float, overrides: Overrides) -> Figures:
         arts, people = read_map(bus)
         pairs = [(a.id, p.id) for a in arts for p in people]
         last = [0.0]
+
+        def _one_request(k: int) -> int:
+            obj, person = pairs[k % len(pairs)]
+            request = MissionRequest(request_id=f"soak-{k}", object=obj, person=person)
+            record = watch_mission(bus, keys, request, REQUEST_SIM_S, sample)
+            final = record.changes[-1] if record.changes else None
+            said = f"{final.state} {final.reason}" if final else record.ended or "no status"
+            outcomes[said.strip()] += 1
+            t_min = (time.perf_counter() - wall0) / 60.0
+            now = {n: (s[-1]["rss_kb"] // 1024, s[-1]["fds"], s[-1]["threads"])
+                   for n, s in samples.items() if s}  # fmt: skip
+            print(f"{t_min:6.1f} min request {k} {obj} → {person}: {said}; "
+                  f"RSS MB, fds, threads {now}", file=sys.stderr, flush=True)  # fmt: skip
+            return k + 1
 
         def sample(*_: object) -> None:
             """Every `SAMPLE_S` of wall time (called each sim second by the watch)."""
@@ -106,23 +121,17 @@ def run_soak(minutes: float, overrides: Overrides) -> Figures:
                 samples[name].append({"t_min": round((now - wall0) / 60.0, 2), **figures})
 
         k = 0
-        while time.perf_counter() - wall0 < minutes * 60.0:
-            obj, person = pairs[k % len(pairs)]
-            request = MissionRequest(request_id=f"soak-{k}", object=obj, person=person)
-            record = watch_mission(bus, keys, request, REQUEST_SIM_S, sample)
-            final = record.changes[-1] if record.changes else None
-            said = f"{final.state} {final.reason}" if final else record.ended or "no status"
-            outcomes[said.strip()] += 1
-            t_min = (time.perf_counter() - wall0) / 60.0
-            rss = {n: s[-1]["rss_kb"] // 1024 for n, s in samples.items() if s}
-            print(f"{t_min:6.1f} min request {k} {obj} → {person}: {said}; RSS MB {rss}",
-                  file=sys.stderr, flush=True)  # fmt: skip
-            k += 1
+        while time.perf_counter() - wall0 < minutes * 60.0 and not stopped:
+            try:
+                k = _one_request(k)
+            except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the figures so far still count
+                stopped = "interrupted"
     finally:
         stack.stop(timeout_s=180.0)
         remove_database(db)
     return {
         "trial": "soak",
+        "stopped": stopped,
         "minutes": round((time.perf_counter() - wall0) / 60.0, 1),
         "requests": sum(outcomes.values()),
         "outcomes": dict(outcomes),
