@@ -18,9 +18,11 @@ session closes well inside 2 s.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import faulthandler
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -142,6 +144,12 @@ def _memory_report() -> None:
     lines that allocated most, and what grew since the last report. Only while
     tracemalloc traces (start the service with `PYTHONTRACEMALLOC=5`); a diagnostic for
     `dume trial soak`'s growth."""
+    # Not at the WBC's real-time priority, which its threads inherit: a snapshot takes
+    # seconds of CPU, and at SCHED_FIFO it starved every normal thread on the core (the
+    # Zenoh links of this and another stack's WBC ran out their 10 s lease).
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
     if not tracemalloc.is_tracing():
         log.info("SIGUSR2: tracemalloc is off (PYTHONTRACEMALLOC=5 turns it on)")
         return
