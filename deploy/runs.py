@@ -28,6 +28,7 @@ import msgspec
 
 from common.access import write_once
 from common.config import REPO_ROOT
+from common.runfiles import write_whole
 
 RUNS_DIR = REPO_ROOT / "var" / "run"
 INFO = "run.json"
@@ -105,9 +106,7 @@ def pid_alive(pid: int) -> bool:
 def write_info(folder: Path, info: RunInfo) -> None:
     """Write `run.json` whole (a reader never sees half of it)."""
     folder.mkdir(parents=True, exist_ok=True)
-    tmp = folder / f".{INFO}.tmp"
-    tmp.write_bytes(msgspec.json.encode(info))
-    tmp.replace(folder / INFO)
+    write_whole(folder / INFO, msgspec.json.encode(info))
 
 
 def mark_ended(folder: Path) -> None:

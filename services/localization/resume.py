@@ -4,8 +4,8 @@ restarted localization goes on from it instead of the start pose.
 The WBC's odometry lives on when the localization dies (supervisord restarts it in a few
 seconds), so the last T_map_odom the localization trusted (status `ok`) still places
 odom in the map. It is written to `localization-state.json` in the run's folder at most
-every `EVERY_NS` of sim time (replaced atomically); a localization that starts and finds
-it resumes from it: the matcher searches around the pose it gives (status
+every `EVERY_NS` of sim time (written whole, `common.runfiles`); a localization that
+starts and finds it resumes from it: the matcher searches around the pose it gives (status
 `initialising`, as at the start pose), and the robot walks on where it was. Without it, a
 restart put the robot back at the start pose in the map while it stood 10 m away (the
 fault battery: the request ran on, every scan refused, the sim at a tenth of real time).
@@ -15,12 +15,12 @@ A new run is a new folder: nothing carries over. No run folder: nothing is kept.
 from __future__ import annotations
 
 import contextlib
-import os
 from pathlib import Path
 
 import msgspec
 
 from common.messages.base import NS_PER_S
+from common.runfiles import run_folder, write_whole
 
 FILE = "localization-state.json"
 EVERY_NS = NS_PER_S
@@ -42,15 +42,12 @@ class Resume:
 
     @classmethod
     def of_run(cls) -> Resume:
-        folder = os.environ.get("DUME_RUN_DIR")
-        return cls(Path(folder) if folder else None)
+        return cls(run_folder())
 
     def save(self, stamp_ns: int, map_odom: tuple[float, float, float]) -> None:
         if self.path is None or stamp_ns - self._saved_ns < EVERY_NS:
             return
-        tmp = self.path.with_suffix(".tmp")
-        tmp.write_bytes(msgspec.json.encode(Held(stamp_ns, map_odom)))
-        os.replace(tmp, self.path)
+        write_whole(self.path, msgspec.json.encode(Held(stamp_ns, map_odom)))
         self._saved_ns = stamp_ns
 
     def load(self) -> Held | None:

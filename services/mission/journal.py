@@ -8,21 +8,21 @@ supervisord): its first status fails the request `dependency_lost`, naming the s
 was in and when, and says it is not run again. A client hears what became of its
 request, not only an `idle`; and nothing is re-run behind a person's back.
 
-The file is replaced atomically (`os.replace`): a kill mid-write leaves the old status or
-the new one. A file that cannot be read is reported as an unknown interrupted request
+The file is written whole (`common.runfiles.write_whole`): a kill mid-write leaves the
+old status or the new one. A file that cannot be read is reported as an unknown interrupted request
 and removed. No run folder (a unit test, a bare process): nothing is kept.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
 from pathlib import Path
 
 import msgspec
 
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionStatus
+from common.runfiles import run_folder, write_whole
 
 FILE = "mission-request.json"
 HELD = ("accepted", "running")
@@ -38,18 +38,15 @@ class Journal:
 
     @classmethod
     def of_run(cls) -> Journal:
-        """The journal of this process's run (`DUME_RUN_DIR`, set by every stack)."""
-        folder = os.environ.get("DUME_RUN_DIR")
-        return cls(Path(folder) if folder else None)
+        """The journal of this process's run (`common.runfiles.run_folder`)."""
+        return cls(run_folder())
 
     def note(self, status: MissionStatus) -> None:
         """A status the mission published: held, or its request ended."""
         if self.path is None or not status.request_id:
             return
         if status.state in HELD:
-            tmp = self.path.with_suffix(".tmp")
-            tmp.write_bytes(msgspec.json.encode(status))
-            os.replace(tmp, self.path)
+            write_whole(self.path, msgspec.json.encode(status))
             self._held = status.request_id
         elif status.state in ENDED and status.request_id == self._held:
             self.path.unlink(missing_ok=True)

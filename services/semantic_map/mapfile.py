@@ -17,6 +17,7 @@ import numpy as np
 from common.messages import as_numpy, decoder
 from common.messages.semantic_map import MapFile, OccupancyGrid, Source
 from common.messages.world import Cuboid, WorldDescription
+from common.runfiles import write_whole
 from services.semantic_map.entities import Track
 from services.semantic_map.occupancy import FREE, OCCUPIED, UNKNOWN, Occupancy
 
@@ -37,9 +38,7 @@ def read_map_file(path: Path) -> MapFile:
 def write_map_file(path: Path, mf: MapFile) -> None:
     """Write atomically (a temporary file renamed over the target)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_bytes(msgspec.json.format(msgspec.json.encode(mf), indent=1))
-    tmp.replace(path)
+    write_whole(path, msgspec.json.format(msgspec.json.encode(mf), indent=1))
 
 
 def tracks_from_file(mf: MapFile, source: Source) -> list[Track]:
