@@ -31,11 +31,9 @@ import argparse
 import contextlib
 import os
 import signal
-import sqlite3
 import sys
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -43,6 +41,7 @@ import numpy as np
 from bench.eval.judge import TERMINAL
 from bench.eval.run import read_map, watch_mission
 from bench.eval.targets import demo_pair
+from bench.trial_updown import map_state
 from common.bus import AliveWatch, Fifo
 from common.config import Overrides, merged
 from common.keys import WORLD_EVENTS, RobotKeys
@@ -116,16 +115,6 @@ class Fault:
                 os.kill(self.pid, signal.SIGCONT)
 
 
-def _map_figures(path: Path) -> tuple[bool, int]:
-    """(`PRAGMA integrity_check` says ok, entity rows) of the map's database file."""
-    if not path.exists():
-        return False, -1
-    with contextlib.closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True)) as db:
-        ok = db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
-        count = db.execute("SELECT count(*) FROM entities").fetchone()[0]
-    return ok, int(count)
-
-
 def _lowest(truth: Fifo[StateTruth], after_ns: int, low: float) -> float:
     for s in truth.drain():
         if s.stamp_ns >= after_ns:
@@ -152,7 +141,7 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         statuses = bus.fifo(keys.mission_status, MissionStatus, maxlen=1 << 16)
         truth = bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 18)
         events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=1 << 16)
-        _, before = _map_figures(db)
+        _, before, _ = map_state(db)
         pair = demo_pair(*read_map(bus))  # what `dume demo` asks for
         request = MissionRequest(request_id=f"fault-{seed}", object=pair.object, person=pair.person)
         record = watch_mission(bus, keys, request, TIMEOUT_S, fault.progress, start_gate=True)
@@ -170,8 +159,8 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
     finally:
         fault.resume()
         stack.stop(timeout_s=180.0)
-        ok, count = _map_figures(db)
-        out |= {"map_ok": ok, "map_entities": count}
+        ok, count, _ = map_state(db)
+        out |= {"map_ok": ok == "ok", "map_entities": count}
         remove_database(db)
     return out
 
