@@ -7,6 +7,7 @@ time in integer nanoseconds (`stamp_ns`): the sim ticks at 1 kHz, so stamps are 
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, ClassVar, Literal
 
 import msgspec
@@ -29,6 +30,19 @@ Vec3 = tuple[Finite, Finite, Finite]
 QuatXYZW = tuple[Finite, Finite, Finite, Finite]
 #: A 4×4 homogeneous transform, row-major.
 Mat4 = Annotated[tuple[Finite, ...], msgspec.Meta(min_length=16, max_length=16)]
+
+#: How far a `QuatXYZW`'s norm may be from 1: senders normalise (MuJoCo, pinocchio), a
+#: float32 round trip stays far inside, a zero or garbage quaternion is far outside.
+QUAT_NORM_TOL = 1e-2
+
+
+def check_unit_quaternion(q: tuple[float, ...], field: str) -> None:
+    """Raise ValueError (a validation error when decoding) unless `q` is a unit quaternion:
+    a zero one has no rotation, and every reader would fail on it later, far from here."""
+    norm = math.sqrt(sum(c * c for c in q))
+    if abs(norm - 1.0) > QUAT_NORM_TOL:
+        raise ValueError(f"{field} is not a unit quaternion (norm {norm:.3g})")
+
 
 #: Nanoseconds per second (sim time is integer ns): the one definition, import it from here.
 NS_PER_S = 1_000_000_000
@@ -53,6 +67,9 @@ class Pose(Message, frozen=True):
 
     position: Vec3
     orientation_xyzw: QuatXYZW = (0.0, 0.0, 0.0, 1.0)
+
+    def __post_init__(self) -> None:
+        check_unit_quaternion(self.orientation_xyzw, "orientation_xyzw")
 
 
 class Pose2D(Message, frozen=True):

@@ -22,6 +22,7 @@ from common.messages.base import (
     QuatXYZW,
     StampNs,
     Vec3,
+    check_unit_quaternion,
 )
 
 TimeMode = Literal["lockstep", "realtime"]
@@ -121,6 +122,9 @@ class Odom(Message, frozen=True):
     watchdog: bool = False
     locomotion: Locomotion = "dynamic"
 
+    def __post_init__(self) -> None:
+        check_unit_quaternion(self.base_orientation_xyzw, "base_orientation_xyzw")
+
 
 class StateTruth(Message, frozen=True):
     """`dume/<r>/state_truth`: the base as the simulator knows it (MuJoCo's free joint), at
@@ -136,6 +140,9 @@ class StateTruth(Message, frozen=True):
     base_orientation_xyzw: QuatXYZW
     base_linear_velocity_in_world: Vec3
     base_angular_velocity_in_base: Vec3
+
+    def __post_init__(self) -> None:
+        check_unit_quaternion(self.base_orientation_xyzw, "base_orientation_xyzw")
 
 
 class LaserScan(Message, frozen=True):

@@ -11,9 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.messages import ArrayError, PayloadError, as_numpy, decode, encode, to_wire
+from common.messages.base import Pose
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.navigation import NavGoalRequest, PersonHandover, PoseGoal
-from common.messages.sim import Ack, JointCommand, RobotState, WorldEvents
+from common.messages.sim import Ack, JointCommand, Odom, RobotState, WorldEvents
 from common.messages.wbc import ArmGoalRequest, CmdVel, Posture, Reach
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)
@@ -123,6 +124,25 @@ def test_nan_and_infinity_are_rejected_where_floats_must_be_finite() -> None:
     raw = msgspec.msgpack.encode({"x": math.nan, "y": 0.0, "yaw": 0.0})
     with pytest.raises(PayloadError):
         decode(raw, PoseGoal)
+
+
+def test_a_quaternion_that_is_not_unit_is_rejected() -> None:
+    """A zero quaternion passed every field's check once, and the navigation died on it at
+    its next tick (scipy: zero norm): now it is the payload's error, on the key."""
+    odom = {
+        "stamp_ns": 0, "base_position_in_world": [0.0, 0.0, 0.5],
+        "base_linear_velocity_in_world": [0.0] * 3, "base_angular_velocity_in_base": [0.0] * 3,
+        "gripper_angle": 0.0, "gripper_effort": 0.0,
+    }  # fmt: skip
+    for bad in ([0.0] * 4, [0.0, 0.0, 0.0, 2.0], [1e-9, 0.0, 0.0, 0.0]):
+        raw = msgspec.msgpack.encode(odom | {"base_orientation_xyzw": bad})
+        with pytest.raises(PayloadError, match="not a unit quaternion"):
+            decode(raw, Odom, key="dume/b1/odom")
+        with pytest.raises(PayloadError, match="not a unit quaternion"):
+            decode(msgspec.msgpack.encode({"position": [0.0] * 3, "orientation_xyzw": bad}), Pose)
+    ok = [0.0, 0.0, math.sin(0.3), math.cos(0.3)]
+    got = decode(msgspec.msgpack.encode(odom | {"base_orientation_xyzw": ok}), Odom)
+    assert got.base_orientation_xyzw == pytest.approx(ok)
 
 
 def test_a_negative_stamp_is_rejected() -> None:
