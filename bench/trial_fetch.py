@@ -22,6 +22,7 @@ Nothing here decides for the robot: a failure is the mission's, with its reason.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import tempfile
@@ -34,6 +35,7 @@ import numpy as np
 from bench.eval.judge import MissionRecord, stage_times, static_contacts
 from bench.eval.run import read_world, start_gate_overrides, watch_mission
 from common import robot
+from common.access import services_on
 from common.bus import Bus
 from common.config import Overrides, merged
 from common.geometry import (
@@ -213,19 +215,41 @@ def held_after_pick(record: MissionRecord, samples: list[WbcStatus]) -> bool | N
 
 
 def run_fetch(
-    seed: int = 1, overrides: Overrides | None = None, samples_path: Path | None = None
+    seed: int = 1,
+    overrides: Overrides | None = None,
+    samples_path: Path | None = None,
+    hosts: Overrides | None = None,
 ) -> Figures:
-    """One fetch on a fresh stack; its figures (JSON-ready)."""
+    """One fetch on a fresh stack; its figures (JSON-ready). `hosts`: the stack split
+    over two hosts (`zenoh.side`), with these link settings (`zenoh.certs`,
+    `zenoh.link_port`): two routers, the map behind the link; the trial's own session
+    on the robot's router, where the world's truth is."""
     out: Figures = {"trial": "fetch", "world": "small", "world_seed": seed}
-    with tempfile.TemporaryDirectory(prefix="dume-fetch-") as db:
+    with tempfile.TemporaryDirectory(prefix="dume-fetch-") as db, contextlib.ExitStack() as on:
         settings = merged(fetch_settings(seed, db), overrides or {})
-        with ProcessStack(list(SERVICES), settings) as stack:
-            bus, keys = stack.bus, stack.keys
-            world = read_world(bus, timeout_s=30.0)
-            truth = next(a for a in world.artifacts if a.id == OBJECT)
-            request = MissionRequest(request_id=f"fetch-{seed}", object=OBJECT, person=PERSON)
-            with Probe(bus, keys) as probe:
-                record = watch_mission(bus, keys, request, TIMEOUT_S, start_gate=True)
+        if hosts is None:
+            stack = on.enter_context(ProcessStack(list(SERVICES), settings))
+        else:
+            out["hosts"] = "robot, station"
+            # both hosts' processes first: a service may wait for one behind the link
+            split = [
+                ProcessStack(services_on(n), merged(settings, hosts, {"zenoh.side": n}))
+                for n in ("robot", "station")
+            ]
+            for s in split:
+                on.callback(s.stop)
+                s.spawn("router")
+                for name in s.services:
+                    s.spawn(name)
+            for s in split:
+                s.wait_ready(s.services)
+            stack = split[0]
+        bus, keys = stack.bus, stack.keys
+        world = read_world(bus, timeout_s=30.0)
+        truth = next(a for a in world.artifacts if a.id == OBJECT)
+        request = MissionRequest(request_id=f"fetch-{seed}", object=OBJECT, person=PERSON)
+        with Probe(bus, keys) as probe:
+            record = watch_mission(bus, keys, request, TIMEOUT_S, start_gate=True)
     final = record.changes[-1] if record.changes else None
     handover, samples = handover_figures(record, probe.samples)
     if samples_path is not None:

@@ -37,8 +37,18 @@ the first session that needs it; every process of the stack reads its own line. 
 host, services and users under one Unix account can all read it: it keeps out other
 accounts and anything that does not have the file, not a process of the same account.
 
-Not yet: TLS on links between hosts; robots of their own on one router (the lists are
-written for the stack's robot, `config.robot`).
+Two hosts (`zenoh.side`): each has its router, its own credentials and the lists
+above for the sessions that log in to it; the two routers are linked by mutual TLS
+(`common.certs`). Each router allows the link what the other host's services do
+(`SIDES`), under an identity that needs both the certificate's common name and, on the
+robot's router, the login `station` with the link's secret: the robot's router lets the
+link carry the station's services' keys and a user's, nothing else (not the velocity,
+the joints, the WBC's mode, the world), and the station's lets it carry the robot's
+services' and a user's. A trusted tool (a test, the eval: it reads the sim's truth)
+runs on the robot's host, where the world is; its truth never crosses the link.
+
+Not yet: robots of their own on one router (the lists are written for the stack's
+robot, `config.robot`).
 """
 
 from __future__ import annotations
@@ -50,12 +60,30 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from common.config import Config, load_config
+from common.certs import LINK_USER, cert_files, link_secret
+from common.config import Config, load_config, resolve
 from common.keys import ALIVE, ROOT, SERVICES
+from common.runfiles import write_private
 
 USER = "user"
 TRUSTED = "trusted"
 IDENTITIES = (*SERVICES, USER, TRUSTED)
+#: Which services run on which host when the stack is split in two (`zenoh.side`).
+#: Everything that moves the robot or decides how (the WBC, navigation, the mission and
+#: its visual approach) and what feeds it (the sim or the hardware, localization,
+#: perception) stays on the robot: a slow or lost link never sits inside a control loop,
+#: and the cameras' frames stay on board for the network. The station keeps the
+#: semantic map, the persistent place a fleet shares (`dume/map/…` is robot-free).
+SIDES: dict[str, tuple[str, ...]] = {
+    "robot": ("sim", "wbc", "localization", "perception", "navigation", "mission"),
+    "station": ("semantic_map",),
+}
+
+
+def services_on(side: str) -> tuple[str, ...]:
+    """The services a host of `side` runs (`all`: every one)."""
+    return SERVICES if side == "all" else SIDES[side]
+
 
 _ALL = [
     "put",
@@ -254,6 +282,16 @@ def access_control(config: Config | None = None) -> dict[str, Any]:
     rules += users
     subjects.append({"id": "user", "usernames": [USER]})
     policies.append({"id": "user", "rules": [r["id"] for r in users], "subjects": ["user"]})
+    side = config.zenoh.side
+    if side != "all":  # the link to the other host's router (module docstring)
+        other = "station" if side == "robot" else "robot"
+        carried = [r["id"] for r in rules if r["id"].split("-")[0] in SIDES[other]]
+        carried += [r["id"] for r in users]  # a user's requests, from either host
+        subject: dict[str, Any] = {"id": f"link-{other}", "cert_common_names": [other]}
+        if other == "station":  # the station's router logs in; the robot's is listened to
+            subject["usernames"] = [LINK_USER]
+        subjects.append(subject)
+        policies.append({"id": f"link-{other}", "rules": carried, "subjects": [subject["id"]]})
     return {
         "enabled": True,
         "default_permission": "deny",
@@ -308,3 +346,40 @@ def ensure_credentials(path: Path) -> dict[str, str]:
             f"{path} has no password for {', '.join(missing)} (delete it to make a new one)"
         )
     return found
+
+
+def link_settings(config: Config, credentials: Path) -> dict[str, Any]:
+    """What a router of a split stack (`zenoh.side` robot or station) adds to its Zenoh
+    config for the link to the other host's (module docstring), as config path → value:
+    TLS with its host's certificate, both sides checked; the robot's listens on
+    `link_host:link_port`, and its user dictionary (`credentials` and the station's login
+    with the link's secret) is written beside `credentials`, the owner's only; the
+    station's connects there and logs in. {} for a stack on one host."""
+    z = config.zenoh
+    if z.side == "all":
+        return {}
+    files = cert_files(resolve(z.certs), z.side)
+    tls = {
+        "root_ca_certificate": str(files["ca"]),
+        "listen_certificate": str(files["cert"]),
+        "listen_private_key": str(files["key"]),
+        "connect_certificate": str(files["cert"]),
+        "connect_private_key": str(files["key"]),
+        "enable_mtls": True,
+        "verify_name_on_connect": True,
+    }
+    link = f"tls/{z.link_host}:{z.link_port}"
+    out: dict[str, Any] = {"transport/link/tls": tls}
+    secret = link_secret(files["secret"].parent)
+    if z.side == "robot":
+        users = read_credentials(credentials)
+        users[LINK_USER] = secret
+        dictionary = credentials.with_name(f"{credentials.name}-with-link")
+        write_private(dictionary, "".join(f"{u}:{p}\n" for u, p in users.items()).encode())
+        out["listen/endpoints"] = [f"tcp/{z.host}:{z.port}", link]
+        out["transport/auth/usrpwd/dictionary_file"] = str(dictionary)
+    else:
+        out["connect/endpoints"] = [link]
+        out["transport/auth/usrpwd/user"] = LINK_USER
+        out["transport/auth/usrpwd/password"] = secret
+    return out

@@ -32,7 +32,13 @@ from typing import Any, Generic, Literal, TypeVar
 import msgspec
 import zenoh
 
-from common.access import USER, CredentialsError, access_control, ensure_credentials
+from common.access import (
+    USER,
+    CredentialsError,
+    access_control,
+    ensure_credentials,
+    link_settings,
+)
 from common.config import Config, resolve
 from common.lifelines import Lifelines
 from common.messages import ErrorReply, PayloadError, decode, encode
@@ -111,6 +117,8 @@ def session_config(
             ensure_credentials(credentials)
             conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(credentials)))
             conf.insert_json5("access_control", json.dumps(access_control(config)))
+            for path, value in link_settings(config, credentials).items():
+                conf.insert_json5(path, json.dumps(value))
     else:
         conf = zenoh.Config.from_file(str(resolve(z.client_config)))
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))

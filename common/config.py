@@ -42,6 +42,9 @@ ENV_NOT_SETTINGS = frozenset(
     {"DUME_CONFIG", "DUME_SETTINGS", "DUME_PYTHON", "DUME_RUN_DIR", "DUME_USER",
      "DUME_CTL_PASSWORD"}
 )  # fmt: skip
+#: Environment variables under this prefix are not settings either: `DUME_START_<SERVICE>`
+#: tells supervisord which services a host runs (`deploy.stack.stack_env`).
+ENV_START = "DUME_START_"
 #: Overrides as data: a dotted key path (`"time.participants.wbc.period_s"`) → its value.
 Overrides = Mapping[str, Any]
 
@@ -75,6 +78,13 @@ class ZenohSettings(_Section):
     access_control: every session logs in (user and password from `credentials`, made
     at first use) and the router allows each identity only its keys (`common.access`).
     Off only for a session with a tool that cannot log in, on a host nobody else uses.
+
+    side: the stack on one host (`all`), or one of two hosts linked router to router
+    (`dume up --host robot|station`): the robot runs every service but the map
+    (`common.access.SIDES`), and its router listens for the station's on
+    `link_host:link_port` (TLS, both certificates checked); the station runs the
+    semantic map, and its router connects there. `certs`: the folder of the link's
+    certificates and secret (`dume certs`, `common.certs`).
     """
 
     host: str = "127.0.0.1"
@@ -83,6 +93,19 @@ class ZenohSettings(_Section):
     client_config: str = "deploy/zenoh/client.json5"
     access_control: bool = True
     credentials: str = "var/secrets/zenoh-users"
+    side: Literal["all", "robot", "station"] = "all"
+    link_host: str = "127.0.0.1"
+    link_port: Port = 7448
+    certs: str = "var/secrets/certs"
+
+    def __post_init__(self) -> None:
+        if self.side != "all" and not self.access_control:
+            raise ValueError(
+                f"zenoh.side {self.side!r} needs zenoh.access_control: the link between "
+                "hosts is only ever opened to the other host's router, logged in"
+            )
+        if self.side != "all" and self.link_port == self.port:
+            raise ValueError(f"zenoh.link_port {self.link_port} is the router's own port")
 
 
 class Participant(_Section):
@@ -822,7 +845,8 @@ def _env_overrides(env: Mapping[str, str]) -> list[tuple[list[str], Any]]:
     sections = sorted((f for f in Config.__struct_fields__ if f != "robot"), key=len, reverse=True)
     out: list[tuple[list[str], Any]] = []
     for name, text in sorted(env.items()):
-        if not name.startswith(ENV_PREFIX) or name in ENV_NOT_SETTINGS:
+        not_a_setting = name in ENV_NOT_SETTINGS or name.startswith(ENV_START)
+        if not name.startswith(ENV_PREFIX) or not_a_setting:
             continue
         rest = name[len(ENV_PREFIX) :].lower()
         if rest == "robot":

@@ -45,6 +45,7 @@ import msgspec
 
 from common.bus import Bus, BusError, NoReply, NoRouter, WaitTimeout
 from common.config import (
+    ENV_START,
     REPO_ROOT,
     Config,
     ConfigError,
@@ -52,6 +53,7 @@ from common.config import (
     load_config,
     merged,
     parse_overrides,
+    resolve,
 )
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.lifelines import Dependencies
@@ -163,10 +165,13 @@ def cmd_up(args: argparse.Namespace) -> int:
             start,
             map_start(args.map, args.world, args.world_seed, parse_overrides(args.set)),
             _port(args),
+            {"zenoh.side": args.host} if args.host else {},
         )
     )
     config = load_config(settings)
     port = config.zenoh.port
+    if config.zenoh.side != "all":
+        _check_link(config)
     if listening(config.zenoh.host, port):
         up = [r for r in runs_up() if r.info.port == port]
         who = f"run {up[0].info.run_id}" if up else "another program"
@@ -178,7 +183,11 @@ def cmd_up(args: argparse.Namespace) -> int:
     run_dir = RUNS_DIR / run_id
     run_dir.mkdir(parents=True, exist_ok=True)
     env = stack_env(
-        port=port, run_id=run_id, run_dir=run_dir, settings=settings_env(run_dir, settings)
+        port=port,
+        run_id=run_id,
+        run_dir=run_dir,
+        settings=settings_env(run_dir, settings),
+        side=config.zenoh.side,
     )
     sim = config.sim
     write_info(
@@ -204,6 +213,40 @@ def cmd_up(args: argparse.Namespace) -> int:
     )
     os.execve(exe, [exe, "-c", str(SUPERVISORD_CONF)], env)
     return 0  # not reached
+
+
+def _check_link(config: Config) -> None:
+    """`dume up --host`: this host's certificates are there, and the robot's link port
+    is free, before supervisord starts a router that would only log why it cannot."""
+    from common.certs import CertsError, cert_files
+
+    z = config.zenoh
+    try:
+        cert_files(resolve(z.certs), z.side)
+    except CertsError as exc:
+        raise CliError(str(exc), "`dume certs --help`") from None
+    if z.side == "robot" and listening(z.link_host, z.link_port):
+        raise CliError(
+            f"the link's port tcp/{z.link_host}:{z.link_port} is in use",
+            "stop what holds it, or choose another (`--set zenoh.link_port=7458`, on both hosts)",
+        )
+
+
+def cmd_certs(args: argparse.Namespace) -> int:
+    from common.certs import CA_KEY, SECRET, make_certs
+
+    config = load_config(parse_overrides(args.set))
+    folder = pathlib.Path(args.out) if args.out else resolve(config.zenoh.certs)
+    local = ["localhost", "127.0.0.1"]
+    made = make_certs(folder, [*local, *args.robot_address], [*local, *args.station_address])
+    print(f"dume certs: the link's authority, both hosts' certificates and secret in {folder}/")
+    for host in ("robot", "station"):
+        print(
+            f"  the {host}: copy ca.pem, {host}.pem, {host}-key.pem and {SECRET} to its "
+            f"{config.zenoh.certs}/ (mode 0600 for the key and the secret)"
+        )
+    print(f"  {made[CA_KEY].name} signs them: keep it here, on no host of the robot's")
+    return 0
 
 
 def map_start(
@@ -488,6 +531,8 @@ def _ctl_env(run: Any) -> dict[str, str]:
         DUME_PYTHON=sys.executable,
         DUME_USER=current_user(),
         DUME_CTL_PASSWORD=ctl_secret(run.folder),
+        # supervisorctl reads the same file; which services started is supervisord's
+        **{f"{ENV_START}{s.upper()}": "false" for s in SERVICES},
     )
 
 
@@ -694,7 +739,31 @@ def build_parser() -> argparse.ArgumentParser:
         "with noise and its floor plan (the ablation standing in for a mapping run); "
         "default: this world's own map, resumed (the first time: its saved map, else empty)",
     )
+    p.add_argument(
+        "--host",
+        choices=["robot", "station"],
+        default=None,
+        help="run one host's side of a stack split over two (the station: the semantic "
+        "map; the robot: every other service), "
+        "its router linked to the other's by TLS (`dume certs`; zenoh.link_host, link_port)",
+    )
     p.set_defaults(func=cmd_up)
+
+    p = add("certs", "make the certificates and secret of the link between two hosts")
+    p.add_argument("--out", default=None, help="the folder (default: zenoh.certs)")
+    p.add_argument(
+        "--robot-address",
+        action="append",
+        default=[],
+        metavar="NAME|IP",
+        help="a name or address the station reaches the robot by (its certificate holds "
+        "it; repeatable; localhost and 127.0.0.1 always)",
+    )
+    p.add_argument(
+        "--station-address", action="append", default=[], metavar="NAME|IP",
+        help="the same for the station",
+    )  # fmt: skip
+    p.set_defaults(func=cmd_certs)
 
     p = add("status", "which services are alive and ready; the latest mission status")
     p.add_argument("--wait", type=float, default=0.5, help="seconds to listen for a status")

@@ -26,10 +26,18 @@ from typing import Any
 
 import msgspec
 
-from common.access import TRUSTED
+from common.access import TRUSTED, services_on
 from common.bus import AliveWatch, Bus
-from common.config import REPO_ROOT, Config, Overrides, load_config, merged, write_settings
-from common.keys import RobotKeys, service_of_alive_key
+from common.config import (
+    ENV_START,
+    REPO_ROOT,
+    Config,
+    Overrides,
+    load_config,
+    merged,
+    write_settings,
+)
+from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.recording import new_run_id
 from deploy.runs import (
     RUNS_DIR,
@@ -73,9 +81,13 @@ def stack_env(
     run_dir: Path,
     settings: Mapping[str, str] | None = None,
     base: Mapping[str, str] | None = None,
+    side: str = "all",
 ) -> dict[str, str]:
-    """The environment of every process of one stack."""
+    """The environment of every process of one stack; `side`: the services this host
+    runs (`zenoh.side`), which supervisord starts (`DUME_START_<SERVICE>`)."""
     env = dict(os.environ if base is None else base)
+    on = services_on(side)
+    env.update({f"{ENV_START}{s.upper()}": str(s in on).lower() for s in SERVICES})
     env.update(
         {
             "DUME_PYTHON": sys.executable,
@@ -155,6 +167,7 @@ class _Stack:
             run_id=self.run_id,
             run_dir=self.run_dir,
             settings=settings_env(self.run_dir, self.overrides),
+            side=load_config(self.overrides).zenoh.side,
         )
         self.config: Config = load_config(env=self.env)
         self.keys = RobotKeys(self.config.robot)
@@ -238,7 +251,8 @@ def only_started(services: Sequence[str], overrides: Overrides) -> dict[str, Any
 class ProcessStack(_Stack):
     """The router and some services as child processes (for tests and benchmarks).
 
-    Only the started services are lockstep participants (see `only_started`).
+    Only the started services are lockstep participants (see `only_started`), and on one
+    host of a split stack (`zenoh.side`) the other host's as well.
     """
 
     def __init__(
@@ -251,7 +265,10 @@ class ProcessStack(_Stack):
     ) -> None:
         names = [n for n in services if n in MODULES]
         overrides = overrides or {}
-        super().__init__(merged(overrides, only_started(names, overrides)), port, run_id, names)
+        # one host of two (`zenoh.side`): the other host's services are participants too
+        split = load_config(overrides).zenoh.side != "all"
+        started = only_started(list(MODULES) if split else names, overrides)
+        super().__init__(merged(overrides, started), port, run_id, names)
         self.services = list(services)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 
