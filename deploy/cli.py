@@ -504,7 +504,7 @@ def cmd_runs(args: argparse.Namespace) -> int:
 
 def cmd_logs(args: argparse.Namespace) -> int:
     """The run's folder and files; with a service, its log's last lines (or follow it)."""
-    run = find_run(args.run)
+    run = find_run(args.run, port=args.port)
     if args.service is None:
         print(json.dumps(_run_line(run)))
         for path in sorted(run.folder.iterdir()):
@@ -540,7 +540,7 @@ def cmd_ctl(args: argparse.Namespace) -> int:
     """supervisorctl on a supervised run, with the run's environment."""
     from deploy.stack import SUPERVISORD_CONF
 
-    run = find_run(args.run, supervised=True)
+    run = find_run(args.run, supervised=True, port=args.port)
     if not run.up:
         raise CliError(f"run {run.info.run_id} is not up", "start one with `dume up`")
     exe = os.path.join(os.path.dirname(sys.executable), "supervisorctl")
@@ -553,7 +553,7 @@ def cmd_down(args: argparse.Namespace) -> int:
     """Stop a run that is up: supervisord (or the demo) stops every service."""
     import signal
 
-    run = find_run(args.run)
+    run = find_run(args.run, port=args.port)
     if not run.up:
         raise CliError(f"run {run.info.run_id} is not up", "`dume runs` lists those that are")
     if run.info.kind == "stack":
@@ -576,7 +576,7 @@ def cmd_down(args: argparse.Namespace) -> int:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """The run's recording in rerun's viewer (native, or served to a browser)."""
-    run = find_run(args.run)
+    run = find_run(args.run, port=args.port)
     rrds = sorted(str(p) for p in run.folder.glob("*.rrd"))
     if not rrds:
         raise CliError(

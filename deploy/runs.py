@@ -12,7 +12,9 @@ to the one run that is up when nothing listens on the default port.
 
 from __future__ import annotations
 
+import calendar
 import contextlib
+import math
 import os
 import pwd
 import re
@@ -71,7 +73,14 @@ class Run:
 
     @property
     def up(self) -> bool:
-        return not self.info.ended and pid_alive(self.info.pid)
+        """Not ended, and its process lives: the very process, not a later one that was
+        given its pid (a run whose holder died unmarked left a pid that the system hands
+        out again; `dume down` once sent SIGTERM to another stack's map service so)."""
+        info = self.info
+        if info.ended or not pid_alive(info.pid):
+            return False
+        born = process_started(info.pid)
+        return born is None or born <= iso_seconds(info.started) + PID_SLACK_S
 
     def shown(self) -> str:
         """The folder as a person would type it (relative to the repository)."""
@@ -101,6 +110,35 @@ def pid_alive(pid: int) -> bool:
         stat = Path(f"/proc/{pid}/stat").read_text()
         return stat.rsplit(")", 1)[1].split()[0] != "Z"
     return True
+
+
+#: Seconds a run's holder may have started after the run's `started` (that is written
+#: after the process began; the slack covers the clocks' rounding to whole seconds).
+PID_SLACK_S = 2.0
+
+
+def iso_seconds(stamp: str) -> float:
+    """`now_iso()`'s text as seconds since the epoch (inf when it cannot be read: no
+    process is ruled out by a stamp nobody can read)."""
+    try:
+        return float(calendar.timegm(time.strptime(stamp, "%Y-%m-%dT%H:%M:%SZ")))
+    except ValueError:
+        return math.inf
+
+
+def process_started(pid: int) -> float | None:
+    """When process `pid` started, s since the epoch (the boot time plus its start in
+    clock ticks, /proc); None when it cannot be read."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        btime = next(
+            int(line.split()[1])
+            for line in Path("/proc/stat").read_text().splitlines()
+            if line.startswith("btime ")
+        )
+        return btime + int(fields[19]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError, StopIteration):
+        return None
 
 
 def write_info(folder: Path, info: RunInfo) -> None:
@@ -139,11 +177,18 @@ def runs_up(root: Path = RUNS_DIR) -> list[Run]:
     return [r for r in all_runs(root) if r.up]
 
 
-def find_run(name: str | None, root: Path = RUNS_DIR, supervised: bool = False) -> Run:
+def find_run(
+    name: str | None, root: Path = RUNS_DIR, supervised: bool = False, port: int | None = None
+) -> Run:
     """The run whose id is or starts with `name`; None: the newest (that is up, if any
-    is). `supervised`: only runs under supervisord. `RunNotFound` says what there is."""
-    runs = [r for r in all_runs(root) if r.info.supervised or not supervised]
-    what = "supervised run" if supervised else "run"
+    is). `supervised`: only runs under supervisord; `port`: only runs on that Zenoh port
+    (`--port`). `RunNotFound` says what there is."""
+    runs = [
+        r
+        for r in all_runs(root)
+        if (r.info.supervised or not supervised) and port in (None, r.info.port)
+    ]
+    what = ("supervised run" if supervised else "run") + (f" on port {port}" if port else "")
     if name is None:
         if not runs:
             raise RunNotFound(f"no {what} in {shown(root)}: start one with `dume up`")

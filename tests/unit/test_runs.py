@@ -71,6 +71,26 @@ def test_a_run_is_found_by_id_prefix_or_as_the_newest_up(tmp_path: Path) -> None
         find_run("x", tmp_path)
 
 
+def test_a_pid_the_system_gave_to_a_later_process_is_not_the_run(tmp_path: Path) -> None:
+    """A run whose holder died unmarked left its pid; a process started after the run
+    that got the same pid is not the run (`dume down` once stopped another stack's map
+    service so)."""
+    _run(tmp_path, "20261125-100000-aaaaaa", os.getpid())
+    assert find_run(None, tmp_path).up
+    stale = tmp_path / "20261125-090000-eeeeee"
+    before = "2020-01-01T00:00:00Z"  # long before this process began
+    info = RunInfo(run_id=stale.name, port=7447, pid=os.getpid(), kind="up", world="hall",
+                   world_seed=0, started=before)  # fmt: skip
+    write_info(stale, info)
+    assert [r.info.run_id[-6:] for r in runs_up(tmp_path)] == ["aaaaaa"]
+    assert find_run(None, tmp_path, port=7447).info.run_id.endswith("aaaaaa")
+    _run(tmp_path, "20261125-110000-ffffff", os.getpid(), port=7460)
+    assert find_run(None, tmp_path, port=7447).info.run_id.endswith("aaaaaa")
+    assert find_run(None, tmp_path, port=7460).info.run_id.endswith("ffffff")
+    with pytest.raises(RunNotFound, match="run on port 7470"):
+        find_run(None, tmp_path, port=7470)
+
+
 def test_the_control_secret_is_the_owners_and_stays_the_same(tmp_path: Path) -> None:
     secret = ctl_secret(tmp_path)
     assert len(secret) == 32 and ctl_secret(tmp_path) == secret
