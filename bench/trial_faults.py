@@ -23,6 +23,12 @@ Phases are the mission's stages: navigating (navigate_to_object), approaching
 (approach_object), grasping (pick_object), carrying (bring_to_user), handing over
 (release_object). A request that ends (or fails) before its phase comes is a case that
 did not happen: `injected` false. The router is a target too: every session loses it.
+So is a **slow consumer** (`--services client --signals slow`): a client subscribed to
+everything the robot publishes that stalls `SLOW_S` in its first callback
+(`bench/slow_consumer.py`); nothing of the stack is hurt, and the case measures what its
+stall costs the robot: **clock_stall_s**, the longest wall gap between two sim clocks
+after it started (the lockstep world stalls when the router holds back the sim's
+samples), whether the request still ends well, and falls.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ import argparse
 import contextlib
 import os
 import signal
+import subprocess
 import sys
 import time
 from collections.abc import Sequence
@@ -43,7 +50,7 @@ from bench.eval.run import read_map, watch_mission
 from bench.eval.targets import demo_pair
 from bench.trial_updown import map_state
 from common.bus import AliveWatch, Fifo
-from common.config import Overrides, merged
+from common.config import REPO_ROOT, Overrides, merged
 from common.keys import WORLD_EVENTS, RobotKeys
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionRequest, MissionStatus
@@ -62,8 +69,11 @@ PHASES = {
     "carrying": "bring_to_user",
     "handing_over": "release_object",
 }
-SIGNALS = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP}
-TARGETS = (*SERVICES, "router")
+SIGNALS = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP, "slow": 0}
+#: `client`: the slow consumer (module docstring), hurt by the `slow` "signal" only.
+TARGETS = (*SERVICES, "router", "client")
+#: Wall seconds the slow consumer stalls in its first callback.
+SLOW_S = 5.0
 #: Sim seconds the mission has for the whole request.
 TIMEOUT_S = 300.0
 #: Wall seconds after the fault within which the request must have a final status.
@@ -88,12 +98,19 @@ class Fault:
         self.at = ""  # the stage running when it was injected
         self.final: MissionStatus | None = None  # the request's final status, after it
         self.final_wall = 0.0  # perf_counter when it arrived
+        self.clock_ns, self.clock_wall, self.clock_stall_s = 0, 0.0, 0.0
+        self.consumer: subprocess.Popen[bytes] | None = None
 
     def progress(self, status: MissionStatus | None, clock: Clock, _changed: bool) -> None:
         if self.wall and status is not None and status.state in TERMINAL and not self.final:
             # when it arrived: the watch itself returns only after a grace of sim time,
             # which a stalled clock (a dead WBC: the sim waits for its commands) holds up
             self.final, self.final_wall = status, time.perf_counter()
+        if self.wall:  # the longest wall gap between two clocks since the fault
+            now = time.perf_counter()
+            if clock.stamp_ns > self.clock_ns:
+                self.clock_stall_s = max(self.clock_stall_s, now - self.clock_wall)
+                self.clock_ns, self.clock_wall = clock.stamp_ns, now
         if self.wall or status is None or status.state != "running":
             return
         if status.behaviour == PHASES[self.phase] and self.entered_ns is None:
@@ -102,15 +119,28 @@ class Fault:
             self.inject(status.behaviour, clock.stamp_ns)
 
     def inject(self, stage: str, sim_ns: int) -> None:
-        self.pid = int(self.stack.ctl("pid", self.service).strip() or 0)
-        if self.pid <= 0:
-            return
-        os.kill(self.pid, self.sig)
+        if self.service == "client":  # the slow consumer joins the stack
+            self.consumer = subprocess.Popen(
+                [sys.executable, "-m", "bench.slow_consumer", "--stall", str(SLOW_S)],
+                cwd=REPO_ROOT,
+                env=self.stack.env,
+                stdout=subprocess.DEVNULL,
+            )
+            self.pid = self.consumer.pid
+        else:
+            self.pid = int(self.stack.ctl("pid", self.service).strip() or 0)
+            if self.pid <= 0:
+                return
+            os.kill(self.pid, self.sig)
         self.wall, self.sim_ns, self.at = time.perf_counter(), sim_ns, stage
+        self.clock_ns, self.clock_wall = sim_ns, self.wall
 
     def resume(self) -> None:
-        """A stopped process goes on (so that the stack can stop)."""
-        if self.wall and self.sig == signal.SIGSTOP:
+        """A stopped process goes on (so that the stack can stop); the slow consumer goes."""
+        if self.consumer is not None:
+            self.consumer.kill()
+            self.consumer.wait()
+        elif self.wall and self.sig == signal.SIGSTOP:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(self.pid, signal.SIGCONT)
 
@@ -156,6 +186,7 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         out |= {"injected": True, "at": fault.at, "at_sim_s": round(fault.sim_ns / NS_PER_S, 2),
                 "ended_s": round(ended - fault.wall, 3)}  # fmt: skip
         out |= _watch_after(stack, keys, fault, request, statuses, truth, events, before)
+        out["clock_stall_s"] = round(fault.clock_stall_s, 2)
     finally:
         fault.resume()
         stack.stop(timeout_s=180.0)
@@ -183,7 +214,7 @@ def _watch_after(
     restarted = None
     low = np.inf
     deadline = time.perf_counter() + RESTART_WAIT_S
-    alive_key = keys.alive(fault.service)
+    alive_key = keys.alive(fault.service) if fault.service != "client" else ""
     watch = stack.bus.watch_alive(keys.alive_all)  # the token of a restarted one: at once
     while time.perf_counter() < deadline:
         statuses.wait(0.05)
@@ -194,9 +225,10 @@ def _watch_after(
             if final is None and s.request_id == rid and s.state in TERMINAL:
                 final, reported = s, now - fault.wall
         low = _lowest(truth, fault.sim_ns, low)
-        if restarted is None and fault.service != "sim" and _alive(stack, alive_key, fault, watch):
+        restarts = fault.service not in ("sim", "client")  # nothing restarts either
+        if restarted is None and restarts and _alive(stack, alive_key, fault, watch):
             restarted = now - fault.wall
-        if final is not None and (restarted is not None or fault.service == "sim"):
+        if final is not None and (restarted is not None or not restarts):
             break
     watch.undeclare()
     time.sleep(AFTER_S)
@@ -263,6 +295,8 @@ def run_faults(
     for seed in range(seeds):
         for how in signals:
             for service in services:
+                if (service == "client") != (how == "slow"):
+                    continue  # the slow consumer is no process to signal, nor slow itself
                 for phase in phases:
                     case = run_case(service, phase, seed, how, overrides)
                     cases.append(case)
@@ -277,6 +311,7 @@ def _line(c: Figures) -> str:
     return (
         f"{head} at {c['at']} t={c['at_sim_s']} s: ended {c['ended_s']} s, reported "
         f"{c.get('reported_s')} s ({c.get('final')}), restart {c.get('restart_s')} s, "
-        f"lowest z {c.get('lowest_z_m')} m, dropped {c.get('dropped')}, map ok "
+        f"lowest z {c.get('lowest_z_m')} m, clock stalled {c.get('clock_stall_s')} s, "
+        f"dropped {c.get('dropped')}, map ok "
         f"{c.get('map_ok')} ({c.get('map_before')} → {c.get('map_entities')})"
     )

@@ -920,7 +920,12 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--services", type=_names, default=None, help="faults: A,B (every one)")
     p.add_argument("--phases", type=_names, default=None, help="faults: A,B (every one)")
-    p.add_argument("--signals", type=_names, default=None, help="faults: kill,stop (both)")
+    p.add_argument(
+        "--signals",
+        type=_names,
+        default=None,
+        help="faults: kill,stop,slow (all three; slow goes with the service `client`)",
+    )
     p.add_argument("--minutes", type=float, default=None, help="soak: wall minutes (120)")
     p.add_argument("--world-seed", type=seed_number, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")

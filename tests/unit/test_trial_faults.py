@@ -3,6 +3,7 @@ when a fault is injected, what the summary counts, what a run leaves behind."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import signal
 import sqlite3
@@ -12,6 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench import trial_faults
 from bench.trial_faults import Fault, summary
 from bench.trial_updown import map_state, run_processes
 from common.messages.base import NS_PER_S
@@ -83,6 +85,47 @@ def test_a_stopped_process_is_resumed_when_the_case_ends() -> None:
     finally:
         victim.kill()
         victim.wait()
+
+
+def test_the_slow_consumer_joins_at_the_fault_stalls_and_goes_when_the_case_ends(
+    monkeypatch: Any,
+) -> None:
+    """`client` with the `slow` signal: no process of the stack is signalled; a slow
+    consumer starts at the fault (here a stand-in that sleeps) and is killed at the end;
+    the longest wall gap between clocks after the fault is kept."""
+    started: list[list[str]] = []
+    real = subprocess.Popen
+
+    def popen(args: list[str], **kw: Any) -> subprocess.Popen[bytes]:
+        started.append(list(args))
+        return real([sys.executable, "-c", "import time; time.sleep(60)"])
+
+    monkeypatch.setattr(subprocess, "Popen", popen)
+
+    stack = argparse.Namespace(env=dict(os.environ))  # what the fault reads of its stack
+    fault = Fault(stack, "client", "navigating", 0, 0.0)  # type: ignore[arg-type]
+    fault.progress(_status("navigate_to_object", 0.5), _clock(0.5), True)
+    assert started and started[0][1:3] == ["-m", "bench.slow_consumer"]
+    consumer = fault.consumer
+    assert consumer is not None and consumer.poll() is None and fault.pid == consumer.pid
+    time.sleep(0.3)  # no clock for 0.3 s: the world stalled that long
+    fault.progress(_status("navigate_to_object", 0.5), _clock(0.6), False)
+    fault.progress(_status("navigate_to_object", 0.5), _clock(0.7), False)
+    assert 0.25 < fault.clock_stall_s < 5.0
+    fault.resume()
+    assert consumer.poll() is not None
+
+
+def test_the_battery_pairs_the_slow_consumer_with_slow_only(monkeypatch: Any) -> None:
+    ran: list[tuple[str, str]] = []
+
+    def case(service: str, phase: str, seed: int, how: str, _o: Any) -> dict[str, Any]:
+        ran.append((service, how))
+        return {"service": service, "phase": phase, "signal": how, "seed": seed}
+
+    monkeypatch.setattr(trial_faults, "run_case", case)
+    trial_faults.run_faults(["wbc", "client"], ["navigating"], ["kill", "slow"], 1, {})
+    assert ran == [("wbc", "kill"), ("client", "slow")]
 
 
 def test_the_summary_counts_hung_cases_silent_drops_and_falls_the_wbc_survived() -> None:
