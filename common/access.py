@@ -140,6 +140,7 @@ SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
         "subscribe": ("{r}/camera/*/rgbd", "{r}/localization", "{r}/odom",
                       f"{ROOT}/world/clock"),
         "serve": ("{r}/perception/locate",),
+        "watch": True,  # the localization's token: no waiting for a gone one (map_frame)
     },
     "semantic_map": {
         "put": ("{r}/ack/semantic_map",),

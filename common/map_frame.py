@@ -9,6 +9,11 @@ yaw); `to_odom(H, capture, now)` a pose planned in the map from a capture, back 
 (the mission's grasps). `status(t)` says whether the robot knows where it is (`lost`:
 navigation stops).
 
+Nobody waits for the dead: `wait` waits in slices of `WAIT_SLICE_S` and gives up as soon
+as a localization it once saw alive has lost its liveliness (a SIGSTOPped localization
+made navigation wait its full 30 s timeout at every tick, and the lockstep world crawl:
+1 s of sim time in 7 min). Before it was first seen alive, it waits as before.
+
 Off (`enabled` false) when the stack runs no localization (`localization` is not a
 lockstep participant: the truth ablation, where odom is the map): T_map_odom is the
 identity and the status `ok`. Before the first sample, and while it is missing, the
@@ -17,8 +22,8 @@ identity too (odometry starts at the start pose in the map), status `initialisin
 
 from __future__ import annotations
 
-import contextlib
 import logging
+import time
 
 import numpy as np
 
@@ -30,6 +35,8 @@ from common.messages.localization import Localization, LocalizationStatus
 from common.messages.sim import Odom, StateTruth
 
 NAME = "localization"
+#: Wall seconds between two looks at the localization's liveliness while waiting.
+WAIT_SLICE_S = 0.05
 log = logging.getLogger(__name__)
 
 
@@ -51,6 +58,17 @@ class MapFrame:
         self._latest = (
             bus.latest(keys.localization, Localization, history=history) if self.enabled else None
         )
+        self._alive_key = keys.alive(NAME)
+        self._watch = bus.watch_alive(self._alive_key) if self.enabled else None
+        self._seen_alive = False
+
+    def gone(self) -> bool:
+        """Whether the localization, once seen alive, has lost its liveliness."""
+        if self._watch is None:
+            return False
+        alive = self._alive_key in self._watch.alive()
+        self._seen_alive = self._seen_alive or alive
+        return self._seen_alive and not alive
 
     def due(self, t_ns: int) -> int:
         """The localization tick whose output takes effect at t."""
@@ -65,8 +83,15 @@ class MapFrame:
         if d < 0:
             return True
         if self.lockstep:
-            with contextlib.suppress(WaitTimeout):
-                self._latest.wait_stamp(d, timeout_s)
+            deadline = time.perf_counter() + timeout_s
+            while not self.gone():
+                left = deadline - time.perf_counter()
+                try:
+                    self._latest.wait_stamp(d, max(0.0, min(WAIT_SLICE_S, left)))
+                    break
+                except WaitTimeout:
+                    if left <= WAIT_SLICE_S:
+                        break
         msg = self._latest.at(d)
         return msg is not None and msg.stamp_ns == d
 
