@@ -238,9 +238,7 @@ def run_fetch(
             ]
             for s in split:
                 on.callback(s.stop)
-                s.spawn("router")
-                for name in s.services:
-                    s.spawn(name)
+                s.launch()
             for s in split:
                 s.wait_ready(s.services)
             stack = split[0]

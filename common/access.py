@@ -260,11 +260,13 @@ def access_control(config: Config | None = None) -> dict[str, Any]:
     rules = [_rule("trusted", _ALL, "both", everything)]
     subjects = [{"id": "trusted", "usernames": [TRUSTED]}]
     policies = [{"id": "trusted", "rules": ["trusted"], "subjects": ["trusted"]}]
+    rule_ids: dict[str, list[str]] = {}  # each service's rules, by id
     for name in SERVICES:
         own = _service_rules(name, _merged(SERVICE_KEYS[name], truths.get(name, {})), config.robot)
         rules += own
+        rule_ids[name] = [r["id"] for r in own]
         subjects.append({"id": name, "usernames": [name]})
-        policies.append({"id": name, "rules": [r["id"] for r in own], "subjects": [name]})
+        policies.append({"id": name, "rules": rule_ids[name], "subjects": [name]})
     users = [
         _rule("user-put", ["put", "delete"], "ingress", USER_PUTS),
         _rule("user-put-to", ["declare_subscriber"], "egress", USER_PUTS),
@@ -286,7 +288,7 @@ def access_control(config: Config | None = None) -> dict[str, Any]:
     side = config.zenoh.side
     if side != "all":  # the link to the other host's router (module docstring)
         other = "station" if side == "robot" else "robot"
-        carried = [r["id"] for r in rules if r["id"].split("-")[0] in SIDES[other]]
+        carried = [rid for name in SIDES[other] for rid in rule_ids[name]]
         carried += [r["id"] for r in users]  # a user's requests, from either host
         subject: dict[str, Any] = {"id": f"link-{other}", "cert_common_names": [other]}
         if other == "station":  # the station's router logs in; the robot's is listened to

@@ -1,6 +1,6 @@
 """The certificates and the secret of the link between two hosts (`dume certs`).
 
-When the robot's services and the station's (the map and the mission) run on two hosts,
+When the robot's services and the station's (the semantic map) run on two hosts,
 each host has its own router, and the two routers talk over one link: TLS with both
 sides' certificates checked (mutual TLS), both signed by a certificate authority of the
 deployment's own. On top of TLS the station's router logs in to the robot's (Zenoh's
@@ -36,6 +36,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from common.runfiles import write_private, write_whole
 
+#: The two hosts of a split stack; each certificate's common name is its host's.
 HOSTS = ("robot", "station")
 #: The name the station's router logs in with on the robot's router.
 LINK_USER = "station"
@@ -143,7 +144,7 @@ def make_certs(
     out = {CA: folder / CA, CA_KEY: folder / CA_KEY, SECRET: folder / SECRET}
     write_whole(out[CA], ca.public_bytes(serialization.Encoding.PEM))
     write_private(out[CA_KEY], _key_pem(ca_key))
-    for host, names in (("robot", robot_names), ("station", station_names)):
+    for host, names in zip(HOSTS, (robot_names, station_names), strict=True):
         key = ec.generate_private_key(ec.SECP256R1())
         cert = (
             x509.CertificateBuilder()

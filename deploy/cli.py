@@ -233,14 +233,14 @@ def _check_link(config: Config) -> None:
 
 
 def cmd_certs(args: argparse.Namespace) -> int:
-    from common.certs import CA_KEY, SECRET, make_certs
+    from common.certs import CA_KEY, HOSTS, SECRET, make_certs
 
     config = load_config(parse_overrides(args.set))
     folder = pathlib.Path(args.out) if args.out else resolve(config.zenoh.certs)
     local = ["localhost", "127.0.0.1"]
     made = make_certs(folder, [*local, *args.robot_address], [*local, *args.station_address])
     print(f"dume certs: the link's authority, both hosts' certificates and secret in {folder}/")
-    for host in ("robot", "station"):
+    for host in HOSTS:
         print(
             f"  the {host}: copy ca.pem, {host}.pem, {host}-key.pem and {SECRET} to its "
             f"{config.zenoh.certs}/ (mode 0600 for the key and the secret)"

@@ -272,10 +272,15 @@ class ProcessStack(_Stack):
         self.services = list(services)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 
-    def start(self, timeout_s: float = 60.0) -> ProcessStack:
+    def launch(self) -> ProcessStack:
+        """Spawn the router and the services, without waiting for them (`start` waits)."""
         self.spawn("router")
         for name in self.services:
             self.spawn(name)
+        return self
+
+    def start(self, timeout_s: float = 60.0) -> ProcessStack:
+        self.launch()
         self.wait_ready([s for s in self.services if s in MODULES], timeout_s)
         return self
 

@@ -61,9 +61,7 @@ def stack(tmp_path: Path) -> Iterator[StartStack]:
         )
         s = ProcessStack(services, settings)
         started.append(s)
-        s.spawn("router")
-        for name in services:
-            s.spawn(name)
+        s.launch()
         if wait_for is None:
             wait_for = [n for n in services if n in MODULES and n != "router"]
         s.wait_ready(wait_for, timeout_s)
