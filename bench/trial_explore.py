@@ -69,11 +69,17 @@ def explore_settings(world: str, seed: int, db_dir: str) -> dict[str, Any]:
 def reachable_truth(world: WorldDescription, shape: tuple[int, int], res: float,
                     origin: tuple[float, float]) -> NDArray[np.bool_]:  # fmt: skip
     """The cells of the map's grid the robot could reach and see from its start: the truth's
-    free floor 8-connected to the start, grown by 2 cells (the obstacles' faces)."""
+    free floor inside the hall 8-connected to the start, grown by 2 cells (the obstacles'
+    faces). Inside the hall: its doors open on the floor that goes on to the grid's edge,
+    which the exploration is bounded from (`mission.explore_bounds`)."""
     occupied = truth_on(world, shape, res, origin)
     x, y = world.robot_start.x, world.robot_start.y
     iy, ix = math.floor((y - origin[1]) / res), math.floor((x - origin[0]) / res)
-    labels, _n = ndimage.label(~occupied, structure=np.ones((3, 3)))
+    cy = origin[1] + (np.arange(shape[0]) + 0.5) * res
+    cx = origin[0] + (np.arange(shape[1]) + 0.5) * res
+    (x0, y0), (x1, y1) = world.hall.min_xy, world.hall.max_xy
+    inside = ((cy >= y0) & (cy <= y1))[:, None] & ((cx >= x0) & (cx <= x1))[None, :]
+    labels, _n = ndimage.label(~occupied & inside, structure=np.ones((3, 3)))
     floor = labels == labels[iy, ix]
     return np.asarray(ndimage.binary_dilation(floor, iterations=2), bool)
 

@@ -628,6 +628,9 @@ class MissionSettings(_Section):
     #: The floor plan's tables and benches are seen from a viewpoint within this, m (the
     #: network finds a can on a bench from 2 m with the arm in `look`).
     patrol_see_m: NonNegative = 1.6
+    #: The semantic pass after an exploration looks at each surface from no nearer than
+    #: this (m): nearer, the wrist camera sees a strip of the top.
+    patrol_near_m: NonNegative = 0.8
     #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
     #: looking ahead and down) where it sees the tops of benches that the head camera,
     #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.
@@ -656,6 +659,11 @@ class MissionSettings(_Section):
     #: frontier is left, it fails `budget`.
     explore_max_goals: PositiveInt = 60
     explore_max_s: Positive = 1800.0
+    #: It is done when the last `explore_stall_goals` goals together added less than
+    #: `explore_stall_m2` of known floor, frontiers left or not (0 goals: only when no
+    #: reachable frontier is left).
+    explore_stall_goals: NonNegativeInt = 6
+    explore_stall_m2: NonNegative = 4.0
     #: The arm while exploring: the head camera maps the floor (`look` would let the map
     #: fuse the wrist camera too).
     explore_arm_posture: Literal["look", "stow"] = "stow"

@@ -18,7 +18,10 @@ one at a time, one `step()` per mission tick:
    onto the nearest clear seen floor (`frontiers.step_out_target`); then navigation
    again. No such floor after `MAX_STEP_OUTS` turns: failed `no_route`;
 4. it ends `done` when no reachable frontier is left (the detail: goals walked, the
-   known-free floor, frontiers left that no goal can see); failed `budget` when
+   known-free floor, frontiers left that no goal can see), or when the last
+   `explore_stall_goals` goals together added less than `explore_stall_m2` of known
+   floor (what is left are corners and gaps behind furniture: in the hall of seed 1 the
+   last 20 of 46 goals added under 2 m², 500 s of sim time); failed `budget` when
    `explore_max_goals` goals were chosen and a reachable frontier is left, or when
    `explore_max_s` of sim time passed (even during a goal); failed `unavailable` when
    the map's grid did not come in `GRID_TRIES` ticks in a row.
@@ -102,6 +105,8 @@ class _Tally:
     aimed: list[Point] = field(default_factory=list)
     failed: list[Point] = field(default_factory=list)
     goal: FrontierGoal | None = None
+    #: The known-free floor at each plan that found a goal (m²): what the goals added.
+    known: list[float] = field(default_factory=list)
 
 
 class ExploreRunner(GoalJob):
@@ -214,6 +219,15 @@ class ExploreRunner(GoalJob):
             self.params, t.failed, t.looked, t.aimed, self._within(),
             self.settings.explore_bounds,
         )  # fmt: skip
+        n, least = self.settings.explore_stall_goals, self.settings.explore_stall_m2
+        if found.goal is not None:
+            t.known.append(found.known_free_m2)
+        if found.goal is not None and n and len(t.known) > n:
+            added = t.known[-1] - t.known[-1 - n]
+            if added < least:
+                self._end("done", detail=f"the last {n} goals added {added:.1f} m² of floor "
+                          f"(less than {least:g}): {self.summary()}")  # fmt: skip
+                return None
         if found.goal is None:
             if not found.robot_on_known:
                 self._leave_unknown(grid, xy)

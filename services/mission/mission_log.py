@@ -74,7 +74,8 @@ class MissionLogger:
         self._say("mission/patrol", logging.WARNING if warn else logging.INFO, text)
 
     def route(self, route: Route) -> None:
-        """The patrol's route: its paths and viewpoints, a little above the floor."""
+        """The patrol's route: its paths and viewpoints (and facings), a little above the
+        floor."""
         if not self.on:
             return
         self.rec.log(
@@ -88,3 +89,12 @@ class MissionLogger:
             "world/mission/patrol/viewpoints",
             rr.Points3D([(v[0], v[1], 0.05) for v in route.viewpoints], radii=0.08),
         )
+        if route.facings is not None:  # a surface pass: where each viewpoint looks
+            self.rec.log(
+                "world/mission/patrol/facings",
+                rr.Arrows3D(
+                    origins=[(v[0], v[1], 0.05) for v in route.viewpoints],
+                    vectors=[(np.cos(f), np.sin(f), 0.0) for f in route.facings],
+                    colors=(200, 60, 200),
+                ),
+            )

@@ -4,7 +4,10 @@
 map's occupancy grid as of the tick (`RobotPort.occupancy`), from the base's pose, with a
 viewpoint near each of the floor plan's tables and benches (`floor_supports`; without
 them, the lattice alone): a `Route`, or a `PatrolRefusal` (no odometry or no grid:
-`unavailable`; no free space: `no_route`).
+`unavailable`; no free space: `no_route`). With `surfaces=True` (the semantic pass after
+an exploration) it is `coverage.surface_route`: viewpoints facing the surfaces the map
+saw, seen from `patrol_near_m`-`patrol_see_m` within the wrist camera's view less a
+margin (`VIEW_HALF_ANGLE`); with no surface in the map, the lattice.
 
 `PatrolRunner` walks a route, one `step()` per mission tick, as a `goal_job.GoalJob`
 (the WBC to `walk` obeying navigation, the arm to `patrol_arm_posture` first, each of
@@ -14,6 +17,7 @@ last goal ended. No transport here.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,12 +25,25 @@ import numpy as np
 from common.config import MissionSettings
 from common.messages import as_numpy
 from common.messages.mission import PatrolReason
-from services.mission.coverage import Route, coverage_route, support_targets
+from common.robot_description import CAMERA_MOUNTS
+from services.mission.coverage import Route, coverage_route, support_targets, surface_route
 from services.mission.goal_job import ARM_WAIT_S, LOOK_TURNS, GoalJob, Say, log
 from services.mission.patrol_goals import NavPatrol, patrol_goals
 from services.mission.ports import PortError, RobotPort
 
 __all__ = ["ARM_WAIT_S", "PatrolRefusal", "PatrolRunner", "plan_patrol"]
+
+
+def _half_view(camera: str, margin_rad: float) -> float:
+    """Half the camera's horizontal field of view (its fovy is vertical), less a margin."""
+    mount = CAMERA_MOUNTS[camera]
+    tan_v = math.tan(math.radians(mount.fovy_deg) / 2.0)
+    return math.atan(tan_v * mount.width / mount.height) - margin_rad
+
+
+#: A surface's target counts as seen within this of the wrist camera's facing (rad): its
+#: half view is 36.5°; 6.5° less keeps a can at the image's edge out of the count.
+VIEW_HALF_ANGLE = _half_view("camera_wrist", math.radians(6.5))
 
 
 @dataclass(frozen=True)
@@ -38,7 +55,11 @@ class PatrolRefusal:
 
 
 def plan_patrol(
-    port: RobotPort, settings: MissionSettings, spacing_m: float = 0.0, say: Say = log.info
+    port: RobotPort,
+    settings: MissionSettings,
+    spacing_m: float = 0.0,
+    say: Say = log.info,
+    surfaces: bool = False,
 ) -> Route | PatrolRefusal:
     """The coverage route from the base's pose at the port's tick (module docstring)."""
     xy = port.robot_xy()
@@ -49,23 +70,36 @@ def plan_patrol(
     except PortError as exc:
         return PatrolRefusal("unavailable", f"the map's occupancy grid did not come: {exc}")
     try:
-        surfaces = port.floor_supports()
+        found = port.floor_supports()
     except PortError as exc:
         say(f"no floor plan's supports ({exc}): the viewpoints' lattice only")
-        surfaces = []
+        found = []
     s = settings
+    cells = np.asarray(as_numpy(grid.cells), np.uint8)
+    if surfaces and found:
+        route = surface_route(
+            cells, grid.resolution_m, grid.origin_xy, xy, found, s.patrol_clearance_m,
+            s.patrol_near_m, s.patrol_see_m, VIEW_HALF_ANGLE,
+        )  # fmt: skip
+        unseen = f"; {route.unseen} of their targets no viewpoint sees" if route.unseen else ""
+        say(f"semantic pass: {len(route.viewpoints)} viewpoints facing {len(found)} "
+            f"surfaces{unseen}")  # fmt: skip
+        if route.viewpoints:
+            return route
+    if surfaces:
+        say("no surface to look at from the known floor: the viewpoints' lattice")
     route = coverage_route(
-        np.asarray(as_numpy(grid.cells), np.uint8),
+        cells,
         grid.resolution_m,
         grid.origin_xy,
         xy,
         spacing_m or s.patrol_spacing_m,
         s.patrol_clearance_m,
-        support_targets(surfaces) if surfaces else None,
+        support_targets(found) if found else None,
         s.patrol_see_m,
     )
     if not route.viewpoints:
-        return PatrolRefusal("no_route", "no free space to patrol in the map's grid")
+        return PatrolRefusal("no_route", "no known free floor to patrol in the map's grid")
     return route
 
 
@@ -85,7 +119,7 @@ class PatrolRunner(GoalJob):
 
     def start(self, route: Route) -> None:
         """Walk `route` from the next `step` (the first goal faces along its first path)."""
-        turns = LOOK_TURNS if self.settings.patrol_look_around else 0
+        turns = LOOK_TURNS if self.settings.patrol_look_around else 0  # none with facings
         yaw = self.port.robot_yaw() or 0.0
         self.arm_posture = self.settings.patrol_arm_posture
         self.walker = NavPatrol(route, patrol_goals(route, yaw, turns))

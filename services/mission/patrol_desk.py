@@ -23,8 +23,9 @@ A mapping job (`goal_job.GoalJob`: the patrol's `PatrolRunner`, the exploration'
 2. a dependency that went away or restarted since the job started fails it
    `dependency_lost`; else the job steps once (one that raises is logged and the job
    failed `internal`); an exploration asked for by a request that ended `done` goes on
-   with the semantic pass when `explore_semantic_pass` is set (the patrol's coverage
-   route over the explored map, the same request: stage `semantic_pass`);
+   with the semantic pass when `explore_semantic_pass` is set (a patrol facing the
+   surfaces of the explored map, `plan_patrol(surfaces=True)`, the same request: stage
+   `semantic_pass`);
 3. the queryable's requests are answered with the status after the step, which is also
    what `published(b)` gives the node to put on `mission/patrol/status` at every tick
    (the map waits for it in lockstep, and reads `arm_look` from it).
@@ -274,7 +275,7 @@ class PatrolDesk:
                 and self.settings.explore_semantic_pass):  # fmt: skip
             return
         self._explored = f"explored: {job.detail}"
-        refusal = self._start(PatrolRequest(action="start"))
+        refusal = self._start(PatrolRequest(action="start"), surfaces=True)
         if refusal is not None:
             self.log.patrol(f"semantic pass refused: {refusal.reason}: {refusal.detail}", True)
             job.state, job.reason = "failed", refusal.reason
@@ -309,8 +310,10 @@ class PatrolDesk:
             return PatrolRefusal("unavailable", f"not running: {', '.join(down)}")
         return None
 
-    def _start(self, request: PatrolRequest) -> PatrolRefusal | None:
-        planned = plan_patrol(self.port, self.settings, request.spacing_m, self.log.patrol)
+    def _start(self, request: PatrolRequest, surfaces: bool = False) -> PatrolRefusal | None:
+        planned = plan_patrol(
+            self.port, self.settings, request.spacing_m, self.log.patrol, surfaces
+        )
         if isinstance(planned, PatrolRefusal):
             return planned
         self.runner.start(planned)

@@ -1,14 +1,15 @@
 """The mapping patrol's goals: a coverage route as a sequence of navigation pose goals.
 
 `patrol_goals(route, start_yaw, turns)` turns a `Route` into navigation pose goals: for
-each viewpoint, a walk there (facing along the last stretch of the route's path to it),
-then `turns` turns on the spot of 360°/turns each, so the head camera sweeps the whole
-circle (a turn is a pose goal at the same place with the next yaw: navigation turns in
-place). `NavPatrol` steps through them on the answers it is given: a goal sent, refused,
-or finished (succeeded or not). A walk goal that is refused or fails skips its
-viewpoint (its look-around too) and is counted; a failed turn is passed over. No
-transport and no clock here: the patrol (`services.mission.patrol`) sends the goals and
-feeds the answers back.
+each viewpoint, a walk there (facing along the last stretch of the route's path to it,
+or, on a route with facings, the way its viewpoint faces: a surface pass looks at what
+it came for and does not turn round), then `turns` turns on the spot of 360°/turns
+each, so the head camera sweeps the whole circle (a turn is a pose goal at the same
+place with the next yaw: navigation turns in place). `NavPatrol` steps through them on
+the answers it is given: a goal sent, refused, or finished (succeeded or not). A walk
+goal that is refused or fails skips its viewpoint (its look-around too) and is counted;
+a failed turn is passed over. No transport and no clock here: the patrol
+(`services.mission.patrol`) sends the goals and feeds the answers back.
 """
 
 from __future__ import annotations
@@ -55,11 +56,14 @@ def look_around(k: int, x: float, y: float, yaw: float, turns: int) -> list[Patr
 
 
 def patrol_goals(route: Route, start_yaw: float, turns: int = 3) -> list[PatrolGoal]:
-    """The pose goals that walk `route` and look around at each viewpoint (`turns` = 0:
-    no look-around)."""
+    """The pose goals that walk `route` and look around at each viewpoint (`turns` = 0,
+    or a route with facings: no look-around)."""
     goals: list[PatrolGoal] = []
     yaw = start_yaw
     for k, (vp, path) in enumerate(zip(route.viewpoints, route.paths, strict=True)):
+        if route.facings is not None:
+            goals += look_around(k, float(vp[0]), float(vp[1]), route.facings[k], 0)
+            continue
         yaw = _arrival_yaw(np.asarray(path, float), yaw)
         goals += look_around(k, float(vp[0]), float(vp[1]), yaw, turns)
     return goals

@@ -1,6 +1,7 @@
 """The mapping patrol's route (`services.mission.coverage`) and its pose goals
 (`services.mission.patrol_goals`): how the patrol moves on when navigation answers, the
-viewpoints the floor plan's tables and benches add, a route over the small world."""
+viewpoints the floor plan's tables and benches add, a route over the small world, the
+known floor as the only floor, the semantic pass's viewpoints facing the surfaces."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import numpy as np
 from common.grid import occupied_near
 from common.messages import as_numpy
 from common.messages.world import OCCUPIED, SupportSurface
-from services.mission.coverage import Route, coverage_route, support_targets
+from services.mission.coverage import Route, coverage_route, support_targets, surface_route
+from services.mission.frontiers import UNKNOWN
 from services.mission.patrol_goals import NavPatrol, patrol_goals
 from services.sim.world import generate_world
 
@@ -99,3 +101,56 @@ def test_the_route_over_the_small_world_keeps_off_obstacles_and_joins_up() -> No
     for a, b in itertools.pairwise(route.paths):
         assert np.allclose(a[-1], b[0])
     assert float(np.hypot(*(route.paths[0][0] - np.array(start)))) < 0.2
+
+
+def _room() -> np.ndarray:
+    """A 12 × 6 m room (10 cm cells), walls round it."""
+    cells = np.zeros((60, 120), np.uint8)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = OCCUPIED
+    return cells
+
+
+def test_floor_the_map_does_not_know_is_no_floor_to_patrol() -> None:
+    cells = _room()
+    cells[:, 60:] = UNKNOWN  # the right half never seen
+    route = coverage_route(cells, 0.1, (0.0, 0.0), (2.0, 3.0), 2.0, 0.5)
+    assert route.viewpoints
+    # every viewpoint keeps the clearance from the unknown as from a wall
+    assert all(v[0] <= 6.0 - 0.5 for v in route.viewpoints)
+    assert all((p[:, 0] <= 6.0 - 0.5).all() for p in route.paths)
+
+
+def test_the_semantic_pass_faces_each_surface_from_within_range_with_few_viewpoints() -> None:
+    cells = _room()
+    cells[1:7, 52:68] = OCCUPIED  # a 1.6 × 0.6 m bench against the bottom wall
+    cells[35:45, 20:35] = OCCUPIED  # a 1.5 × 1 m table in the room
+    bench = SupportSurface("surface_1", (6.0, 0.4), (0.8, 0.3), 0.0, 0.9)
+    table = SupportSurface("surface_2", (2.75, 4.0), (0.75, 0.5), 0.0, 0.7)
+    half_fov = math.radians(30)
+    route = surface_route(cells, 0.1, (0.0, 0.0), (9.0, 3.0), [bench, table], 0.5, 0.8, 1.6,
+                          half_fov)  # fmt: skip
+    targets = support_targets([bench, table])
+    assert route.unseen == 0 and route.facings is not None
+    assert 2 <= len(route.viewpoints) < len(targets)  # a viewpoint sees several targets
+    for t in targets:  # each target: some viewpoint sees it within range, in its view
+        assert any(
+            0.8 <= float(np.linalg.norm(t - v)) <= 1.6
+            and abs(math.remainder(math.atan2(t[1] - v[1], t[0] - v[0]) - f, math.tau))
+            <= half_fov + 1e-9
+            for v, f in zip(route.viewpoints, route.facings, strict=True)
+        )
+    # the goals: one walk per viewpoint arriving at its facing, no turning round
+    goals = patrol_goals(route, 0.0, turns=3)
+    assert [g.look for g in goals] == [False] * len(route.viewpoints)
+    assert [g.yaw for g in goals] == route.facings
+    for a, b in itertools.pairwise(route.paths):
+        assert np.allclose(a[-1], b[0])
+
+
+def test_a_surface_seen_only_through_a_wall_is_unseen() -> None:
+    cells = _room()
+    cells[:, 60] = OCCUPIED  # a wall splits the room; the robot is on the left
+    shelf = SupportSurface("surface_1", (7.0, 3.0), (0.5, 0.2), math.pi / 2, 0.9)
+    cells[25:35, 68:72] = OCCUPIED
+    route = surface_route(cells, 0.1, (0.0, 0.0), (2.0, 3.0), [shelf], 0.5, 0.8, 1.6, 0.5)
+    assert route.viewpoints == [] and route.unseen == len(support_targets([shelf]))

@@ -22,7 +22,7 @@ from common.messages import encode, to_wire
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.navigation import NavGoal, PoseGoal
 from common.messages.semantic_map import OccupancyGrid
-from common.messages.world import FREE, OCCUPIED
+from common.messages.world import FREE, OCCUPIED, SupportSurface
 from common.robot import Footprint
 from services.mission.explore import ExploreRunner
 from services.mission.frontiers import UNKNOWN
@@ -131,6 +131,21 @@ def test_its_budget_of_goals_ends_it_failed_with_what_it_did() -> None:
     assert robot.modes[-1] == ("stand", "navigation") and not robot.active_nav_goals()
 
 
+def test_goals_that_add_too_little_floor_end_it_done_with_what_they_added() -> None:
+    room = SensedRoom.make()
+    robot = FakeRobot(xy=(2.0, 3.0), moves=True, occupancy_of=room)
+    job = explorer(robot, explore_stall_goals=2, explore_stall_m2=1000.0)  # never enough
+    job.start()
+    run(robot, job, 5000)
+    assert job.state == "done" and job.reason == ""
+    assert job.detail.startswith("the last 2 goals added ") and "less than 1000" in job.detail
+    assert job.tally.chosen == 2 and len(job.tally.known) == 3
+    everything = explorer(robot, explore_stall_goals=0, explore_stall_m2=1000.0)
+    everything.start()
+    run(robot, everything, 5000)
+    assert everything.detail.startswith("no reachable frontier left")
+
+
 def test_its_budget_of_sim_time_ends_it_even_during_a_goal() -> None:
     robot = FakeRobot(xy=(2.0, 3.0), moves=True, occupancy_of=SensedRoom.make(), nav_ticks=10**6)
     job = explorer(robot, explore_max_s=30.0)
@@ -212,7 +227,7 @@ def test_an_explore_request_runs_on_mission_status_with_its_stage_until_it_succe
 
 
 def test_an_explore_is_cancelled_by_its_request_id_and_blocks_a_fetch_meanwhile() -> None:
-    rig = ExploreRig()
+    rig = ExploreRig(patrol_clearance_m=0.3)  # the patrol after it: on the floor seen by then
     rig.tick()
     rig.requests.push(encode(MissionRequest(request_id="x1", task="explore")))
     rig.tick(40)
@@ -249,6 +264,8 @@ def test_a_request_during_a_fetch_is_busy_and_a_fetch_without_a_person_malformed
 
 def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_request() -> None:
     rig = ExploreRig(explore_semantic_pass=True)
+    # the table as the map saw it: the pass faces it, and does not turn round
+    rig.robot.supports = [SupportSurface("surface_1", (5.75, 3.0), (0.75, 0.5), 0.0, 0.8)]
     rig.tick()
     rig.requests.push(encode(MissionRequest(request_id="x1", task="explore")))
     for _ in range(300):
@@ -262,6 +279,12 @@ def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_r
     assert ours[-1].detail.startswith("explored: no reachable frontier left")
     assert rig.robot.arm_kinds()[-2:] == ["look", "stow"]  # the patrol's arm, then stowed
     assert rig.published[-1].task == "patrol" and rig.published[-1].state == "done"
+    walker = rig.patrol.runner.walker
+    assert walker is not None and walker.route.facings is not None
+    assert 1 <= len(walker.route.viewpoints) <= 4 and not any(g.look for g in walker.goals)
+    for v, yaw in zip(walker.route.viewpoints, walker.route.facings, strict=True):
+        to_table = math.atan2(3.0 - v[1], 5.75 - v[0])
+        assert abs(math.remainder(yaw - to_table, math.tau)) < math.radians(45)
 
 
 def test_a_dependency_lost_while_no_tick_comes_fails_the_exploration_at_once() -> None:

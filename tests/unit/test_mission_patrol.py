@@ -170,6 +170,23 @@ def test_the_route_is_planned_on_the_maps_grid_with_a_viewpoint_near_each_suppor
     assert min(float(np.hypot(v[0] - 6.0, v[1] - 0.4)) for v in near.viewpoints) <= 1.6
 
 
+def test_the_semantic_pass_faces_the_maps_surfaces_or_walks_the_lattice_without_any() -> None:
+    cells = np.zeros((60, 120), np.uint8)
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = OCCUPIED
+    cells[1:7, 52:68] = OCCUPIED
+    grid = OccupancyGrid(stamp_ns=0, resolution_m=0.1, origin_xy=(0.0, 0.0), cells=to_wire(cells))
+    robot = FakeRobot(grid=grid, xy=(2.0, 3.0))
+    said: list[str] = []
+    lattice = plan_patrol(robot, fast_settings(patrol_spacing_m=4.0), say=said.append,
+                          surfaces=True)  # fmt: skip
+    assert isinstance(lattice, Route) and lattice.facings is None
+    assert said == ["no surface to look at from the known floor: the viewpoints' lattice"]
+    robot.supports = [SupportSurface("surface_1", (6.0, 0.4), (0.8, 0.3), 0.0, 0.9)]
+    facing = plan_patrol(robot, fast_settings(), say=said.append, surfaces=True)
+    assert isinstance(facing, Route) and facing.facings is not None
+    assert 1 <= len(facing.viewpoints) <= 2 and said[-1].startswith("semantic pass: ")
+
+
 def test_no_grid_or_no_free_space_is_a_typed_refusal() -> None:
     robot = FakeRobot(map_up=False)
     refused = plan_patrol(robot, fast_settings())
