@@ -9,10 +9,15 @@ truth, what the failure policy promises (README, "Nobody waits for the dead"):
   a final status for it (when it arrived), or the watch's own `dependency_lost` when the
   mission or the sim itself went (`bench.eval.run.watch_mission`);
 - **reported_s**: until the mission said so on `mission/status` by the request's id (a
-  restarted mission reports the request it held: `services/mission/journal.py`); a case
-  with no report within `HUNG_S` is **hung**;
+  restarted mission reports the request it held: `services/mission/journal.py`);
+- **hung**: the client did not know the request was over within `HUNG_S`, or the
+  mission could speak and did not report it within `HUNG_S`. A SIGSTOPped mission or
+  router cannot speak (nobody can reach a frozen mission, nor anything through a frozen
+  router): there the client's own `dependency_lost` is the end, and the case is
+  **mute**, not hung;
 - **restart_s**: until the hurt service was alive again (supervisord restarts all but
-  the sim); **world_restarted**: the sim came back under the run (never allowed);
+  the sim); **world_restarted**: a new sim process came up under the run (never
+  allowed; a SIGSTOPped sim is the same process, frozen);
 - **fell**: the base's lowest height after the fault under `FALL_Z_M` (truth);
 - **dropped** / **drop_reported**: an `ObjectDropped` event after the fault, and whether
   a status after it says what the robot held;
@@ -186,6 +191,7 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         out |= {"injected": True, "at": fault.at, "at_sim_s": round(fault.sim_ns / NS_PER_S, 2),
                 "ended_s": round(ended - fault.wall, 3)}  # fmt: skip
         out |= _watch_after(stack, keys, fault, request, statuses, truth, events, before)
+        out |= verdict(fault.service, fault.sig, out["ended_s"], out["reported_s"])
         out["clock_stall_s"] = round(fault.clock_stall_s, 2)
     finally:
         fault.resume()
@@ -239,9 +245,8 @@ def _watch_after(
     return {
         "final": None if final is None else f"{final.state} {final.reason}: {final.detail}",
         "reported_s": None if reported is None else round(reported, 3),
-        "hung": reported is None or reported > HUNG_S,
         "restart_s": None if restarted is None else round(restarted, 2),
-        "world_restarted": fault.service == "sim" and "RUNNING" in stack.ctl("status", "sim"),
+        "world_restarted": fault.service == "sim" and _new_process(stack, fault),
         "lowest_z_m": None if not np.isfinite(low) else round(float(low), 3),
         "fell": bool(np.isfinite(low) and low < FALL_Z_M),
         "dropped": bool(drops),
@@ -250,16 +255,28 @@ def _watch_after(
     }
 
 
+def verdict(service: str, sig: int, ended_s: float, reported_s: float | None) -> Figures:
+    """Whether the case is mute (the mission cannot speak) and hung (module docstring)."""
+    mute = sig == signal.SIGSTOP and service in ("mission", "router")
+    unreported = reported_s is None or reported_s > HUNG_S
+    return {"mute": mute, "hung": ended_s > HUNG_S or (unreported and not mute)}
+
+
+def _new_process(stack: Supervised, fault: Fault) -> bool:
+    """The hurt service runs again, as a process other than the one hurt."""
+    if "RUNNING" not in stack.ctl("status", fault.service):
+        return False
+    pid = stack.ctl("pid", fault.service).strip()
+    return pid.isdigit() and int(pid) not in (0, fault.pid)
+
+
 def _alive(stack: Supervised, key: str, fault: Fault, watch: AliveWatch) -> bool:
     """The hurt service is alive again: its token is back (the watch hears it at once; a
     liveliness query can take seconds under load) from a new process (a stopped one
     never is)."""
     if fault.service == "router":
         return "RUNNING" in stack.ctl("status", "router") and bool(stack.alive())
-    if key not in watch.alive():
-        return False
-    pid = stack.ctl("pid", fault.service).strip()
-    return pid.isdigit() and int(pid) not in (0, fault.pid)
+    return key in watch.alive() and _new_process(stack, fault)
 
 
 def summary(cases: Sequence[Figures]) -> Figures:
@@ -272,6 +289,7 @@ def summary(cases: Sequence[Figures]) -> Figures:
         "cases": len(cases),
         "injected": len(done),
         "hung": sum(bool(c.get("hung")) for c in done),
+        "mute": sum(bool(c.get("mute")) for c in done),
         "silent_drops": sum(bool(c.get("dropped")) and not c.get("drop_reported") for c in done),
         "falls": sum(bool(c.get("fell")) for c in done),
         "falls_wbc_alive": sum(bool(c.get("fell")) for c in survived),

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from bench import trial_faults
-from bench.trial_faults import Fault, summary
+from bench.trial_faults import Fault, summary, verdict
 from bench.trial_updown import map_state, run_processes
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionStatus
@@ -143,6 +143,18 @@ def test_the_summary_counts_hung_cases_silent_drops_and_falls_the_wbc_survived()
     assert (s["cases"], s["injected"], s["hung"], s["silent_drops"]) == (4, 3, 1, 1)
     assert (s["falls"], s["falls_wbc_alive"], s["map_ok"]) == (2, 1, "3/4")
     assert s["ended_p50_s"] == 0.2 and s["reported_p95_s"] is not None
+
+
+def test_a_frozen_mission_or_router_is_mute_not_hung_and_a_late_end_is_hung() -> None:
+    stop, kill = signal.SIGSTOP, signal.SIGKILL
+    # the client's own dependency_lost ended it at once; the frozen mission said nothing
+    assert verdict("mission", stop, 0.5, None) == {"mute": True, "hung": False}
+    assert verdict("router", stop, 0.6, None) == {"mute": True, "hung": False}
+    # a killed mission is restarted and must report the request it held
+    assert verdict("mission", kill, 0.5, None) == {"mute": False, "hung": True}
+    assert verdict("navigation", stop, 0.5, 0.5) == {"mute": False, "hung": False}
+    assert verdict("navigation", stop, 0.5, 11.0)["hung"]
+    assert verdict("mission", stop, 12.0, None)["hung"]  # the client knew too late
 
 
 def test_a_runs_processes_are_found_by_its_folder(tmp_path: Path) -> None:
