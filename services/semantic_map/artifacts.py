@@ -2,23 +2,33 @@
 
 An artifact does not move, so its estimate is a static Kalman filter on the horizontal
 position: each detection with noise σ(range) pulls the mean by K = P (P + R)⁻¹ and
-shrinks P. One frame's detections are matched to the artifacts of their class greedily by
-distance, each artifact taking at most one detection, inside a gate of
-max(gate_min, gate_sigmas × √(σ_track² + σ_meas²)). A detection that matches nothing
-starts a tentative track; the second hit gives it the next `<class>_<n>`. Tentative tracks
-not seen again within `TENTATIVE_TTL_NS` are dropped (a one-frame false positive never
-gets an id). An artifact moved elsewhere shows up as a new artifact while the old one is
-found missing at its place (`missing`); a false entry the map made itself, from a few
-detections, is dropped instead (`drop`; the rule is the map's, see `mapper`).
+shrinks P; a view cut by the image's border counts with `CUT_SIGMA_GAIN` × its σ (its
+mask's centroid is a part's). The nearest views decide where it is, as a person trusts
+their closest look: the errors of far views are not independent (the head camera sees
+a table's objects from 3-5 m hundreds of times while exploring, each the front face at
+the same angle), so however many they are they must not outweigh a few near ones. Only
+views within `NEAR_BAND_M` of the nearest one fused so far move the estimate, and a view
+nearer than that band restarts it from itself (`Track.best_range_m`; a track read from
+the database or a prior fuses its first view as it comes).
+
+One frame's detections are matched to the artifacts of their class greedily by distance,
+each artifact taking at most one detection, inside a gate of max(gate_min, gate_sigmas ×
+√(σ_track² + σ_meas²)). A detection that matches nothing starts a tentative track; the
+second hit gives it the next `<class>_<n>`. Tentative tracks not seen again within
+`TENTATIVE_TTL_NS` are dropped (a one-frame false positive never gets an id). An artifact
+moved elsewhere shows up as a new artifact while the old one is found missing at its
+place (`missing`); a false entry the map made itself, from a few detections, is dropped
+instead (`drop`; the rule is the map's, see `mapper`).
+
 One object under two classes: the network may call a can on a bench a box from 3 m and a
 can from 1.5 m, which makes two artifacts at one place (their axis points within
 `class_merge_m`, closer than two real objects' centres can be). `class_conflicts()`
 pairs such perception-made artifacts as (loser, winner): the class seen more often whole
 (its mask off the image border) from within `class_near_m` (where the network tells the
-classes apart) wins, then the one with more
-detections; two seen from near fewer than `confirm_hits` times are left alone. A
-tentative track that would give way to a confirmed artifact this way gets no id (it stays
-tentative while seen, and takes an id once its class has the better evidence).
+classes apart) wins, then the one with more detections; two seen from near fewer than
+`confirm_hits` times are left alone. A tentative track that would give way to a confirmed
+artifact this way gets no id (it stays tentative while seen, and takes an id once its
+class has the better evidence).
 """
 
 from __future__ import annotations
@@ -35,6 +45,11 @@ from services.semantic_map.entities import IdBook, Observation, Track
 #: `confirm_hits`, `class_near_m`, `class_merge_m`): how long a tentative track lives
 #: unseen, ns.
 TENTATIVE_TTL_NS = 3_000_000_000
+#: A view moves an artifact's estimate while its range is within this of the nearest
+#: view's, m; a view nearer by more restarts the estimate (the module docstring).
+NEAR_BAND_M = 1.0
+#: A view cut by the image's border: its σ times this.
+CUT_SIGMA_GAIN = 2.0
 
 
 class ArtifactTracker:
@@ -101,13 +116,14 @@ class ArtifactTracker:
                 class_name=obs.class_name,
                 kind="artifact",
                 xy=obs.xy.astype(float).copy(),
-                cov=np.eye(2) * obs.sigma_m**2,
+                cov=np.eye(2) * self._sigma(obs) ** 2,
                 z=obs.z,
                 source="perception",
                 last_seen_ns=stamp_ns,
                 first_seen_ns=stamp_ns,
                 hits=1,
                 near_hits=int(self._near(obs)),
+                best_range_m=obs.range_m,
             )
             if self.settings.confirm_hits <= 1:
                 self._confirm(tr)
@@ -119,12 +135,22 @@ class ArtifactTracker:
         seen = {i for i, t in enumerate(self.tracks) if t.last_seen_ns == stamp_ns}
         return changed, seen
 
+    @staticmethod
+    def _sigma(obs: Observation) -> float:
+        return obs.sigma_m * (1.0 if obs.whole else CUT_SIGMA_GAIN)
+
     def _fuse(self, tr: Track, obs: Observation, stamp_ns: int) -> None:
-        R = np.eye(2) * obs.sigma_m**2
-        K = tr.cov @ np.linalg.inv(tr.cov + R)
-        tr.xy = tr.xy + K @ (obs.xy - tr.xy)
-        tr.cov = (np.eye(2) - K) @ tr.cov
-        tr.z += (obs.z - tr.z) / (tr.hits + 1)  # the height: a plain running mean
+        R = np.eye(2) * self._sigma(obs) ** 2
+        best, r = tr.best_range_m, obs.range_m
+        if best is not None and r < best - NEAR_BAND_M:  # much nearer: start from it
+            tr.xy, tr.cov, tr.z = obs.xy.astype(float).copy(), R, obs.z
+            tr.best_range_m = r
+        elif best is None or r <= best + NEAR_BAND_M:
+            K = tr.cov @ np.linalg.inv(tr.cov + R)
+            tr.xy = tr.xy + K @ (obs.xy - tr.xy)
+            tr.cov = (np.eye(2) - K) @ tr.cov
+            tr.z += (obs.z - tr.z) / (tr.hits + 1)  # the height: a plain running mean
+            tr.best_range_m = r if best is None else min(best, r)
         tr.hits += 1
         tr.near_hits += int(self._near(obs))
         tr.last_seen_ns = stamp_ns

@@ -59,6 +59,8 @@ class Track:
     trusted from there; not stored: a track read from the database starts at 0).
     seen_with: people, the ids of the people detected in one frame with this one (two
     bodies, never one split track; not stored).
+    best_range_m: artifacts, the range of the nearest view fused (m; None: not known, a
+    track read from the database or a prior; not stored).
     """
 
     class_name: str
@@ -85,6 +87,7 @@ class Track:
     #: People: the velocity at the last sighting was sure (extrapolated while unseen).
     moving: bool = False
     seen_with: set[str] = field(default_factory=set)
+    best_range_m: float | None = None
 
     @property
     def confirmed(self) -> bool:

@@ -34,6 +34,31 @@ def test_repeated_noisy_detections_converge_and_noise_grows_with_range() -> None
     assert tr.sigma_m < 0.08 / np.sqrt(30) * 1.01
 
 
+def test_a_few_near_views_outweigh_many_far_ones_that_share_a_bias() -> None:
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
+    truth = np.array([2.0, 1.0])
+    rng = np.random.default_rng(1)
+
+    def view(k: int, rng_m: float, bias: float, whole: bool = True) -> None:
+        sigma = 0.02 + 0.02 * rng_m
+        xy = truth + np.array([bias, 0.0]) + rng.normal(0.0, 0.3 * sigma, 2)
+        obs = Observation("can", xy, 0.8, sigma, range_m=rng_m, whole=whole)
+        tracker.update(k * S, [obs])
+
+    for k in range(200):  # exploring: the same front face from 4 m, 15 cm off
+        view(k, 4.0, 0.15)
+    (tr,) = tracker.confirmed
+    assert abs(tr.xy[0] - 2.15) < 0.02 and tr.best_range_m == 4.0
+    for k in range(200, 205):  # the semantic pass: five views from 1.2 m
+        view(k, 1.2, 0.0)
+    assert np.linalg.norm(tr.xy - truth) < 0.03 and tr.best_range_m == 1.2
+    for k in range(205, 400):  # far views after it move it no more
+        view(k, 4.0, 0.15)
+    assert np.linalg.norm(tr.xy - truth) < 0.03 and tr.hits == 400
+    view(400, 1.5, 0.0, whole=False)  # within the band: it fuses, at twice its σ
+    assert np.linalg.norm(tr.xy - truth) < 0.03
+
+
 def test_a_detection_outside_the_gate_or_of_another_class_is_a_new_artifact() -> None:
     tracker = ArtifactTracker(IdBook({"bottle": 4}), SemanticMapSettings())
     for k in range(2):
