@@ -404,8 +404,9 @@ class SemanticMapSettings(_Section):
     #: A person detection this close to a static obstacle cell is not a person, m.
     person_obstacle_margin_m: NonNegative = 0.1
     #: An artifact or person the map created itself from perception and fused fewer times
-    #: than this is a false entry when looked for at its place and not seen: it is
-    #: deleted (prior, seeded and imported artifacts are only marked missing).
+    #: than this, or an artifact it saw only from beyond `class_near_m`, is a false entry
+    #: when looked for at its place and not seen: it is deleted (prior, seeded and
+    #: imported artifacts are only marked missing). 0: no entry is ever deleted.
     drop_below_observations: NonNegativeInt = 10
     #: People: acceleration noise of the constant-velocity model, m/s², and the weight of
     #: the colour-histogram distance in the association cost.

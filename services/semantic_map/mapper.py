@@ -7,7 +7,9 @@ missing test, and the depth points of the learned obstacles). What changed since
 `take_changes()` (and `take_deletions()`) is what the node writes to the database in one
 transaction.
 False entries: an entity the map created itself (source `perception`) from fewer than
-`drop_below_observations` detections that is then looked for at its place and not seen
+`drop_below_observations` detections, or an artifact it only ever saw from beyond
+`class_near_m` (a can read as a box from 3-5 m while exploring, however often), that is
+then looked for at its place (within `look_range_m`) and not seen
 (`missing_after_frames` looks) is deleted with the reason, not marked missing: a table
 leg read as a box a few times during a patrol should not send the mission searching, and
 a person made of a few stray detections (a split track, a false positive) should not
@@ -206,8 +208,15 @@ class SemanticMap:
         return deleted
 
     def is_false_entry(self, tr: Track) -> bool:
-        """An entity the map made itself from too few detections to be trusted missing."""
-        return tr.source == "perception" and tr.hits < self.settings.drop_below_observations
+        """An entity the map made itself from too few detections, or only from afar, to
+        be trusted missing."""
+        least = self.settings.drop_below_observations  # 0: every entry is kept
+        return tr.source == "perception" and least > 0 and (tr.hits < least or self._only_far(tr))
+
+    def _only_far(self, tr: Track) -> bool:
+        """An artifact this run saw only from beyond `class_near_m` (a track read from the
+        database does not know how near it was seen)."""
+        return tr.best_range_m is not None and tr.best_range_m > self.settings.class_near_m
 
     def find_surfaces(self) -> None:
         """The surfaces the tops layer shows now (kept as they were when it shows none)."""
@@ -442,11 +451,13 @@ class SemanticMap:
         return tr.misses >= self.settings.missing_after_frames
 
     def _false_entry_reason(self, tr: Track) -> str:
-        return (
-            f"a false entry: made from {tr.hits} detection(s) (fewer than "
-            f"{self.settings.drop_below_observations}), then not seen in {tr.misses} "
-            f"looks at its place"
-        )
+        p = self.settings
+        if tr.hits < p.drop_below_observations:
+            made = f"made from {tr.hits} detection(s) (fewer than {p.drop_below_observations})"
+        else:
+            made = (f"seen {tr.hits} times, only from beyond {p.class_near_m:g} m (nearest "
+                    f"{tr.best_range_m:.1f} m)")  # fmt: skip
+        return f"a false entry: {made}, then not seen in {tr.misses} looks at its place"
 
     def _learn(self, dets: Detections, cam: PinholeCamera) -> int:
         """Obstacles seen in this frame's depth, leaving out people and the robot."""

@@ -120,6 +120,19 @@ def test_a_false_entry_made_from_few_detections_is_deleted_when_not_seen() -> No
     assert smap.take_deletions() == ["box_1"]
 
 
+def test_an_artifact_seen_only_from_afar_then_not_seen_from_near_is_deleted() -> None:
+    smap = _map(drop_below=5)
+    far, near = msgspec.structs.replace(_det("box", CAN_XY), d_obj=3.5), _det("can", BOX_XY)
+    for k in range(1, 21):  # a box from 3.5 m twenty times (well observed), a can from near
+        _ingest(smap, k * S, far, msgspec.structs.replace(near, d_obj=1.8))
+    reports = [_ingest(smap, k * S) for k in range(21, 30)]  # then near looks see neither
+    dropped = [d for r in reports for d in r.dropped]
+    assert [i for i, _ in dropped] == ["box_1"]
+    assert "seen 20 times, only from beyond 2 m (nearest 3.5 m)" in dropped[0][1]
+    can = smap.entity("artifact", "can_1")
+    assert can is not None and can.missing_since_ns is not None  # seen from near: missing
+
+
 def test_the_threshold_is_configurable_and_zero_keeps_every_entry() -> None:
     smap = _map(drop_below=0)
     reports = _run(smap)
