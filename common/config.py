@@ -632,6 +632,15 @@ class MissionSettings(_Section):
     #: The semantic pass after an exploration looks at each surface from no nearer than
     #: this (m): nearer, the wrist camera sees a strip of the top.
     patrol_near_m: NonNegative = 0.8
+    #: After the semantic pass, a second look from within `patrol_recheck_see_m` at each
+    #: artifact in doubt: one the map saw only from beyond `patrol_recheck_beyond_m` (the
+    #: map's `class_near_m`: its class is a guess), or one closer than
+    #: `patrol_recheck_pair_m` to another class's (one object read two ways: two real
+    #: ones stand 0.3 m apart or more).
+    patrol_second_look: bool = True
+    patrol_recheck_beyond_m: Positive = 2.0
+    patrol_recheck_pair_m: NonNegative = 0.25
+    patrol_recheck_see_m: Positive = 1.3
     #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
     #: looking ahead and down) where it sees the tops of benches that the head camera,
     #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.

@@ -31,6 +31,9 @@ class MapEntity(Message, frozen=True):
     missing_since_ns: looked for at its place and not seen since then (None: not missing).
     velocity_in_world: (2,) m/s, a person's estimated floor velocity (0 for artifacts).
     observations: detections fused into it so far.
+    nearest_view_m: an artifact's nearest view fused, its range from the camera's base, m
+        (None: not known, as for one seeded or imported); the mapping patrol looks again
+        at one seen only from afar.
     """
 
     id: EntityId
@@ -44,6 +47,7 @@ class MapEntity(Message, frozen=True):
     yaw: Finite = 0.0
     velocity_in_world: tuple[Finite, Finite] = (0.0, 0.0)
     observations: int = 0
+    nearest_view_m: NonNegative | None = None
 
 
 class MapListing(Message, frozen=True):

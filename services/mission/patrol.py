@@ -5,9 +5,15 @@ map's occupancy grid as of the tick (`RobotPort.occupancy`), from the base's pos
 viewpoint near each of the floor plan's tables and benches (`floor_supports`; without
 them, the lattice alone): a `Route`, or a `PatrolRefusal` (no odometry or no grid:
 `unavailable`; no free space: `no_route`). With `surfaces=True` (the semantic pass after
-an exploration) it is `coverage.surface_route`: viewpoints facing the surfaces the map
-saw, seen from `patrol_near_m`-`patrol_see_m` within the wrist camera's view less a
-margin (`VIEW_HALF_ANGLE`); with no surface in the map, the lattice.
+an exploration) it is `coverage.facing_route` on the surfaces' targets: viewpoints
+facing the surfaces the map saw, seen from `patrol_near_m`-`patrol_see_m` within the
+wrist camera's view less a margin (`VIEW_HALF_ANGLE`); with no surface in the map, the
+lattice.
+
+`in_doubt(artifacts, settings)` names the map's artifacts whose class or place a person
+would want to look at again (seen only from afar; two classes at one place), and
+`plan_second_look` the route that faces them from nearer (`coverage.facing_route`): the
+semantic pass's last stage (`patrol_desk`).
 
 `PatrolRunner` walks a route, one `step()` per mission tick, as a `goal_job.GoalJob`
 (the WBC to `walk` obeying navigation, the arm to `patrol_arm_posture` first, each of
@@ -25,8 +31,14 @@ import numpy as np
 from common.config import MissionSettings
 from common.messages import as_numpy
 from common.messages.mission import PatrolReason
+from common.messages.semantic_map import MapEntity
 from common.robot_description import CAMERA_MOUNTS
-from services.mission.coverage import Route, coverage_route, support_targets, surface_route
+from services.mission.coverage import (
+    Route,
+    coverage_route,
+    facing_route,
+    support_targets,
+)
 from services.mission.goal_job import ARM_WAIT_S, LOOK_TURNS, GoalJob, Say, log
 from services.mission.patrol_goals import NavPatrol, patrol_goals
 from services.mission.ports import PortError, RobotPort
@@ -77,8 +89,9 @@ def plan_patrol(
     s = settings
     cells = np.asarray(as_numpy(grid.cells), np.uint8)
     if surfaces and found:
-        route = surface_route(
-            cells, grid.resolution_m, grid.origin_xy, xy, found, s.patrol_clearance_m,
+        route = facing_route(
+            cells, grid.resolution_m, grid.origin_xy, xy, support_targets(found),
+            s.patrol_clearance_m,
             s.patrol_near_m, s.patrol_see_m, VIEW_HALF_ANGLE,
         )  # fmt: skip
         unseen = f"; {route.unseen} of their targets no viewpoint sees" if route.unseen else ""
@@ -101,6 +114,50 @@ def plan_patrol(
     if not route.viewpoints:
         return PatrolRefusal("no_route", "no known free floor to patrol in the map's grid")
     return route
+
+
+def in_doubt(artifacts: list[MapEntity], settings: MissionSettings) -> dict[str, str]:
+    """The artifacts the map made itself that are worth a second look, with why: seen
+    only from beyond `patrol_recheck_beyond_m`, or within `patrol_recheck_pair_m` of an
+    artifact of another class."""
+    s = settings
+    mine = [a for a in artifacts if a.source == "perception"]
+    out: dict[str, str] = {}
+    for a in mine:
+        far = a.nearest_view_m
+        if far is not None and far > s.patrol_recheck_beyond_m:
+            out[a.id] = f"seen only from {far:.1f} m"
+        for b in mine:
+            d = math.dist(a.position_in_world[:2], b.position_in_world[:2])
+            if b.class_name != a.class_name and d < s.patrol_recheck_pair_m:
+                out.setdefault(a.id, f"{d:.2f} m from {b.id}")
+    return out
+
+
+def plan_second_look(
+    port: RobotPort, settings: MissionSettings, say: Say = log.info
+) -> Route | None:
+    """The route facing the artifacts in doubt from within `patrol_recheck_see_m`, or
+    None (none in doubt, none seen from the known floor, or the map did not answer)."""
+    xy = port.robot_xy()
+    try:
+        artifacts = port.mapped_artifacts()
+        grid = port.occupancy() if xy is not None else None
+    except PortError as exc:
+        say(f"no second look: the map did not answer ({exc})")
+        return None
+    doubt = in_doubt(artifacts, settings)
+    if not doubt or xy is None or grid is None:
+        return None
+    where = np.array([a.position_in_world[:2] for a in artifacts if a.id in doubt])
+    s = settings
+    route = facing_route(
+        np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
+        where, s.patrol_clearance_m, s.patrol_near_m, s.patrol_recheck_see_m, VIEW_HALF_ANGLE,
+    )  # fmt: skip
+    said = ", ".join(f"{k} ({why})" for k, why in sorted(doubt.items()))
+    say(f"second look: {len(route.viewpoints)} viewpoints for {said}")
+    return route if route.viewpoints else None
 
 
 class PatrolRunner(GoalJob):

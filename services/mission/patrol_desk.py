@@ -25,7 +25,9 @@ A mapping job (`goal_job.GoalJob`: the patrol's `PatrolRunner`, the exploration'
    failed `internal`); an exploration asked for by a request that ended `done` goes on
    with the semantic pass when `explore_semantic_pass` is set (a patrol facing the
    surfaces of the explored map, `plan_patrol(surfaces=True)`, the same request: stage
-   `semantic_pass`);
+   `semantic_pass`), and a semantic pass that ended done with a second look at the
+   artifacts in doubt when `patrol_second_look` is set and there are any
+   (`plan_second_look`: stage `second_look`);
 3. the queryable's requests are answered with the status after the step, which is also
    what `published(b)` gives the node to put on `mission/patrol/status` at every tick
    (the map waits for it in lockstep, and reads `arm_look` from it).
@@ -57,7 +59,7 @@ from common.messages.mission import (
 from services.mission.explore import ExploreRunner
 from services.mission.goal_job import GoalJob
 from services.mission.mission_log import MissionLogger
-from services.mission.patrol import PatrolRefusal, PatrolRunner, plan_patrol
+from services.mission.patrol import PatrolRefusal, PatrolRunner, plan_patrol, plan_second_look
 from services.mission.ports import RobotPort
 
 #: Wall seconds a start or stop waits for the loop to take it.
@@ -84,7 +86,8 @@ class _Asked:
 @dataclass(frozen=True)
 class JobReport:
     """A request's job as `mission/status` says it: its state, stage (`explore`,
-    `patrol`, `semantic_pass`), progress in [0, 1], the typed reason and a sentence."""
+    `patrol`, `semantic_pass`, `second_look`), progress in [0, 1], the typed reason and a
+    sentence."""
 
     request_id: str
     state: MissionState
@@ -270,9 +273,14 @@ class PatrolDesk:
         return status
 
     def _next_stage(self, job: GoalJob) -> None:
-        """A request's exploration that ended done goes on with the semantic pass."""
-        if not (self.request_id and job is self.explorer and job.state == "done"
-                and self.settings.explore_semantic_pass):  # fmt: skip
+        """A request's exploration that ended done goes on with the semantic pass, and
+        that with the second look."""
+        if not self.request_id or job.state != "done":
+            return
+        if job is self.runner and self.stage == "semantic_pass":
+            self._second_look()
+            return
+        if not (job is self.explorer and self.settings.explore_semantic_pass):
             return
         self._explored = f"explored: {job.detail}"
         refusal = self._start(PatrolRequest(action="start"), surfaces=True)
@@ -282,6 +290,20 @@ class PatrolDesk:
             job.detail = f"the semantic pass could not start: {refusal.detail}"
             return
         self.stage = "semantic_pass"
+
+    def _second_look(self) -> None:
+        """The semantic pass ended done: look again at the artifacts in doubt, if any."""
+        if not self.settings.patrol_second_look:
+            return
+        route = plan_second_look(self.port, self.settings, self.log.patrol)
+        if route is None:
+            return
+        passed = self.runner.walker
+        seen = f"semantic pass: {passed.viewpoint} viewpoints" if passed else ""
+        self._explored = "; ".join(filter(None, (self._explored, seen)))
+        self.runner.start(route)
+        self.log.route(route)
+        self.stage = "second_look"
 
     def _take(self, b: int, request: PatrolRequest, fetch: str) -> PatrolStatus | None:
         """A request taken at tick b: the refusal, or None (answered after the step)."""

@@ -59,6 +59,10 @@ class RobotPort(Protocol):
         """Every mapped, not missing artifact of a class, in any order."""
         ...
 
+    def mapped_artifacts(self) -> list[MapEntity]:
+        """Every mapped, not missing artifact, in any order."""
+        ...
+
     def person(self, person_id: str) -> MapEntity | None:
         """A mapped person by id (None: no such id)."""
         ...

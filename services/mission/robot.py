@@ -172,6 +172,10 @@ class BusRobot:
         found = self._query_map(f"{MAP_ARTIFACTS}?class={class_name}", MapListing)
         return list(found.entities) if isinstance(found, MapListing) else []
 
+    def mapped_artifacts(self) -> list[MapEntity]:
+        found = self._query_map(f"{MAP_ARTIFACTS}?missing=false", MapListing)
+        return list(found.entities) if isinstance(found, MapListing) else []
+
     def person(self, person_id: str) -> MapEntity | None:
         found = self._query_map(map_person(person_id), MapEntity)
         return found if isinstance(found, MapEntity) else None

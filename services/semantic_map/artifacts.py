@@ -8,8 +8,8 @@ their closest look: the errors of far views are not independent (the head camera
 a table's objects from 3-5 m hundreds of times while exploring, each the front face at
 the same angle), so however many they are they must not outweigh a few near ones. Only
 views within `NEAR_BAND_M` of the nearest one fused so far move the estimate, and a view
-nearer than that band restarts it from itself (`Track.best_range_m`; a track read from
-the database or a prior fuses its first view as it comes).
+nearer than that band restarts it from itself (`Track.best_range_m`, stored with it; a
+seeded or imported artifact, which does not know, fuses its first view as it comes).
 
 One frame's detections are matched to the artifacts of their class greedily by distance,
 each artifact taking at most one detection, inside a gate of max(gate_min, gate_sigmas ×

@@ -59,8 +59,8 @@ class Track:
     trusted from there; not stored: a track read from the database starts at 0).
     seen_with: people, the ids of the people detected in one frame with this one (two
     bodies, never one split track; not stored).
-    best_range_m: artifacts, the range of the nearest view fused (m; None: not known, a
-    track read from the database or a prior; not stored).
+    best_range_m: artifacts, the range of the nearest view fused (m; None: not known, as
+    for a seeded or imported artifact; stored as the entity's `nearest_view_m`).
     """
 
     class_name: str
@@ -113,6 +113,7 @@ class Track:
             yaw=self.yaw,
             velocity_in_world=(float(self.velocity[0]), float(self.velocity[1])),
             observations=self.hits,
+            nearest_view_m=self.best_range_m,
         )
 
     @classmethod
@@ -132,6 +133,7 @@ class Track:
             velocity=np.array(e.velocity_in_world, dtype=float),
             appearance=appearance,
             hits=e.observations,
+            best_range_m=e.nearest_view_m,
         )
 
 

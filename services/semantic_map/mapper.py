@@ -214,8 +214,8 @@ class SemanticMap:
         return tr.source == "perception" and least > 0 and (tr.hits < least or self._only_far(tr))
 
     def _only_far(self, tr: Track) -> bool:
-        """An artifact this run saw only from beyond `class_near_m` (a track read from the
-        database does not know how near it was seen)."""
+        """An artifact the map saw only from beyond `class_near_m` (a seeded or imported
+        one does not say how near it was seen, and is no false entry anyway)."""
         return tr.best_range_m is not None and tr.best_range_m > self.settings.class_near_m
 
     def find_surfaces(self) -> None:

@@ -201,6 +201,10 @@ class FakeRobot:
         self._map()
         return [e for e in self.artifacts.values() if e.class_name == class_name]
 
+    def mapped_artifacts(self) -> list[MapEntity]:
+        self._map()
+        return [e for e in self.artifacts.values() if e.missing_since_ns is None]
+
     def person(self, person_id: str) -> MapEntity | None:
         self._map()
         return self.people_.get(person_id)

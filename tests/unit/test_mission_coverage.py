@@ -13,7 +13,7 @@ import numpy as np
 from common.grid import occupied_near
 from common.messages import as_numpy
 from common.messages.world import OCCUPIED, SupportSurface
-from services.mission.coverage import Route, coverage_route, support_targets, surface_route
+from services.mission.coverage import Route, coverage_route, facing_route, support_targets
 from services.mission.frontiers import UNKNOWN
 from services.mission.patrol_goals import NavPatrol, patrol_goals
 from services.sim.world import generate_world
@@ -127,9 +127,8 @@ def test_the_semantic_pass_faces_each_surface_from_within_range_with_few_viewpoi
     bench = SupportSurface("surface_1", (6.0, 0.4), (0.8, 0.3), 0.0, 0.9)
     table = SupportSurface("surface_2", (2.75, 4.0), (0.75, 0.5), 0.0, 0.7)
     half_fov = math.radians(30)
-    route = surface_route(cells, 0.1, (0.0, 0.0), (9.0, 3.0), [bench, table], 0.5, 0.8, 1.6,
-                          half_fov)  # fmt: skip
     targets = support_targets([bench, table])
+    route = facing_route(cells, 0.1, (0.0, 0.0), (9.0, 3.0), targets, 0.5, 0.8, 1.6, half_fov)
     assert route.unseen == 0 and route.facings is not None
     assert 2 <= len(route.viewpoints) < len(targets)  # a viewpoint sees several targets
     for t in targets:  # each target: some viewpoint sees it within range, in its view
@@ -152,5 +151,7 @@ def test_a_surface_seen_only_through_a_wall_is_unseen() -> None:
     cells[:, 60] = OCCUPIED  # a wall splits the room; the robot is on the left
     shelf = SupportSurface("surface_1", (7.0, 3.0), (0.5, 0.2), math.pi / 2, 0.9)
     cells[25:35, 68:72] = OCCUPIED
-    route = surface_route(cells, 0.1, (0.0, 0.0), (2.0, 3.0), [shelf], 0.5, 0.8, 1.6, 0.5)
+    route = facing_route(
+        cells, 0.1, (0.0, 0.0), (2.0, 3.0), support_targets([shelf]), 0.5, 0.8, 1.6, 0.5
+    )
     assert route.viewpoints == [] and route.unseen == len(support_targets([shelf]))

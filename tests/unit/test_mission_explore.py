@@ -15,17 +15,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import msgspec
 import numpy as np
 from numpy.typing import NDArray
 
 from common.messages import encode, to_wire
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.navigation import NavGoal, PoseGoal
-from common.messages.semantic_map import OccupancyGrid
+from common.messages.semantic_map import MapEntity, OccupancyGrid
 from common.messages.world import FREE, OCCUPIED, SupportSurface
 from common.robot import Footprint
 from services.mission.explore import ExploreRunner
 from services.mission.frontiers import UNKNOWN
+from services.mission.patrol import in_doubt
 from services.mission.patrol_desk import PatrolDesk
 from tests.unit.mission_fakes import TICK_NS, FakeRobot, fast_settings
 from tests.unit.test_mission_patrol import LOG, Rig, key_of
@@ -262,18 +264,23 @@ def test_a_request_during_a_fetch_is_busy_and_a_fetch_without_a_person_malformed
     assert "mission f1 is running" in rig.of("x1")[-1].detail
 
 
-def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_request() -> None:
-    rig = ExploreRig(explore_semantic_pass=True)
-    # the table as the map saw it: the pass faces it, and does not turn round
-    rig.robot.supports = [SupportSurface("surface_1", (5.75, 3.0), (0.75, 0.5), 0.0, 0.8)]
+def _explore_to_the_end(rig: ExploreRig) -> tuple[list[MissionStatus], list[str]]:
+    """An explore request run to its end: its statuses and the stages it ran through."""
     rig.tick()
     rig.requests.push(encode(MissionRequest(request_id="x1", task="explore")))
-    for _ in range(300):
+    for _ in range(400):
         rig.tick(25)
         if rig.sent[-1].state in ("succeeded", "failed"):
             break
     ours = rig.of("x1")
-    stages = [s.behaviour for s in ours if s.state == "running"]
+    return ours, [s.behaviour for s in ours if s.state == "running"]
+
+
+def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_request() -> None:
+    rig = ExploreRig(explore_semantic_pass=True)
+    # the table as the map saw it: the pass faces it, and does not turn round
+    rig.robot.supports = [SupportSurface("surface_1", (5.75, 3.0), (0.75, 0.5), 0.0, 0.8)]
+    ours, stages = _explore_to_the_end(rig)
     assert stages[0] == "explore" and stages[-1] == "semantic_pass"
     assert ours[-1].state == "succeeded", ours[-1]
     assert ours[-1].detail.startswith("explored: no reachable frontier left")
@@ -285,6 +292,47 @@ def test_with_the_semantic_pass_the_patrol_walks_the_explored_map_for_the_same_r
     for v, yaw in zip(walker.route.viewpoints, walker.route.facings, strict=True):
         to_table = math.atan2(3.0 - v[1], 5.75 - v[0])
         assert abs(math.remainder(yaw - to_table, math.tau)) < math.radians(45)
+
+
+def test_after_the_semantic_pass_it_looks_again_from_near_at_an_artifact_seen_from_afar() -> None:
+    rig = ExploreRig(explore_semantic_pass=True)
+    rig.robot.supports = [SupportSurface("surface_1", (5.75, 3.0), (0.75, 0.5), 0.0, 0.8)]
+    far = MapEntity(id="box_1", class_name="box", kind="artifact",
+                    position_in_world=(5.4, 2.6, 0.85), uncertainty_m=0.05, last_seen_ns=0,
+                    source="perception", observations=40, nearest_view_m=3.6)  # fmt: skip
+    near = msgspec.structs.replace(
+        far, id="can_1", class_name="can", position_in_world=(6.3, 3.4, 0.85), nearest_view_m=1.2
+    )
+    rig.robot.artifacts = {"box_1": far, "can_1": near}
+    ours, stages = _explore_to_the_end(rig)
+    assert stages[-1] == "second_look" and "semantic_pass" in stages
+    assert ours[-1].state == "succeeded", ours[-1]
+    route = rig.patrol.runner.walker.route  # type: ignore[union-attr]
+    assert route.facings is not None and len(route.viewpoints) == 1  # the box only
+    v, yaw = route.viewpoints[0], route.facings[0]
+    assert 0.8 <= math.dist(v, (5.4, 2.6)) <= 1.3
+    assert abs(math.remainder(yaw - math.atan2(2.6 - v[1], 5.4 - v[0]), math.tau)) < 0.05
+
+
+def test_what_is_in_doubt_is_what_the_map_saw_only_from_afar_or_two_ways_at_one_place() -> None:
+    def art(i: str, cls: str, xy: tuple[float, float], near: float | None,
+            source: str = "perception") -> MapEntity:  # fmt: skip
+        return MapEntity(id=i, class_name=cls, kind="artifact", position_in_world=(*xy, 0.8),
+                         uncertainty_m=0.05, last_seen_ns=0, source=source,  # type: ignore[arg-type]
+                         nearest_view_m=near)  # fmt: skip
+
+    m = fast_settings()
+    arts = [
+        art("box_1", "box", (0.0, 0.0), 3.1),  # only from afar
+        art("can_1", "can", (2.0, 0.0), 1.0),  # a can and a bottle 12 cm apart: one object
+        art("bottle_1", "bottle", (2.12, 0.0), 1.1),
+        art("bottle_2", "bottle", (4.0, 0.0), 1.0),  # fine
+        art("bottle_3", "bottle", (6.0, 0.0), None, source="prior"),  # not the map's own
+        art("can_2", "can", (6.1, 0.0), 4.0, source="prior"),
+    ]
+    doubt = in_doubt(arts, m)
+    assert doubt == {"box_1": "seen only from 3.1 m", "can_1": "0.12 m from bottle_1",
+                     "bottle_1": "0.12 m from can_1"}  # fmt: skip
 
 
 def test_a_dependency_lost_while_no_tick_comes_fails_the_exploration_at_once() -> None:
