@@ -108,6 +108,9 @@ def setup_logging(level: str, name: str) -> None:
     # A native crash (a segfault in a C extension) leaves every thread's Python stack in
     # the service's log instead of a bare "terminated by SIGSEGV" from supervisord.
     faulthandler.enable(file=sys.stderr, all_threads=True)
+    # `kill -USR1 <pid>`: every thread's stack to the log, the process going on (what a
+    # service that does not ack its tick is waiting for).
+    faulthandler.register(signal.SIGUSR1, file=sys.stderr, all_threads=True, chain=False)
     logging.basicConfig(
         level=level,
         format=f"%(asctime)s {name} %(levelname)s %(name)s: %(message)s",
