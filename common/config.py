@@ -671,9 +671,10 @@ class MissionSettings(_Section):
     explore_max_s: Positive = 1800.0
     #: It is done when the last `explore_stall_goals` goals together added less than
     #: `explore_stall_m2` of known floor, frontiers left or not (0 goals: only when no
-    #: reachable frontier is left).
-    explore_stall_goals: NonNegativeInt = 6
-    explore_stall_m2: NonNegative = 4.0
+    #: reachable frontier is left). A hall's exploration has flat stretches of 3-5 goals
+    #: between big gains (a corner cleaned up, then a new aisle): the window is long.
+    explore_stall_goals: NonNegativeInt = 12
+    explore_stall_m2: NonNegative = 2.0
     #: The arm while exploring: the head camera maps the floor (`look` would let the map
     #: fuse the wrist camera too).
     explore_arm_posture: Literal["look", "stow"] = "stow"

@@ -21,7 +21,8 @@ one at a time, one `step()` per mission tick:
    known-free floor, frontiers left that no goal can see), or when the last
    `explore_stall_goals` goals together added less than `explore_stall_m2` of known
    floor (what is left are corners and gaps behind furniture: in the hall of seed 1 the
-   last 20 of 46 goals added under 2 m², 500 s of sim time); failed `budget` when
+   last 20 of 46 goals added under 2 m², 500 s of sim time, while stretches of 3-5
+   goals that add little come between big gains); failed `budget` when
    `explore_max_goals` goals were chosen and a reachable frontier is left, or when
    `explore_max_s` of sim time passed (even during a goal); failed `unavailable` when
    the map's grid did not come in `GRID_TRIES` ticks in a row.
