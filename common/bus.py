@@ -254,14 +254,19 @@ class Throttle:
 
 
 class _Subscription(ABC, Generic[T]):
+    """One key's samples, or several keys' in one inbox (a tuple of keys: a subscriber
+    each; under the router's ACL a publisher hears only of subscribers declared on keys
+    it may put, so one on `dume/b1/ack/*` would hear nothing: `Bus.fifo`)."""
+
     def __init__(
         self,
         session: zenoh.Session,
-        key: str,
+        key: str | tuple[str, ...],
         type_: type[T],
         stopping: threading.Event | None = None,
     ) -> None:
-        self.key = key
+        keys = (key,) if isinstance(key, str) else key
+        self.key = ", ".join(keys)
         self.type = type_
         self.received = 0
         self.rejected = 0
@@ -270,7 +275,7 @@ class _Subscription(ABC, Generic[T]):
         self.stopping = stopping or threading.Event()
         self._cond = threading.Condition()
         self._warn = Throttle(REJECT_LOG_EVERY_S)
-        self._sub = session.declare_subscriber(key, self._on_sample)
+        self._subs = [session.declare_subscriber(k, self._on_sample) for k in keys]
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
@@ -294,7 +299,8 @@ class _Subscription(ABC, Generic[T]):
         """Keep a decoded sample (called with the condition held)."""
 
     def undeclare(self) -> None:
-        self._sub.undeclare()
+        for sub in self._subs:
+            sub.undeclare()
 
 
 class Latest(_Subscription[T]):
@@ -356,7 +362,7 @@ class Fifo(_Subscription[T]):
     def __init__(
         self,
         session: zenoh.Session,
-        key: str,
+        key: str | tuple[str, ...],
         type_: type[T],
         maxlen: int,
         stopping: threading.Event | None = None,
@@ -586,9 +592,12 @@ class Bus:
         self._uses("subscribe", key, type_)
         return self._keep(Latest(self.session, key, type_, history, self.stopping))
 
-    def fifo(self, key: str, type_: type[T], maxlen: int = 1024) -> Fifo[T]:
-        self._reads(key)
-        self._uses("subscribe", key, type_)
+    def fifo(self, key: str | tuple[str, ...], type_: type[T], maxlen: int = 1024) -> Fifo[T]:
+        """Every sample of `key` (or of each of a tuple of keys, in one inbox: a key
+        each, not a wildcard, where the publishers must hear of the subscription)."""
+        for k in (key,) if isinstance(key, str) else key:
+            self._reads(k)
+            self._uses("subscribe", k, type_)
         return self._keep(Fifo(self.session, key, type_, maxlen, self.stopping))
 
     def _keep(self, sub: S) -> S:

@@ -209,10 +209,6 @@ class RobotKeys:
     def ack(self, service: str) -> str:
         return f"{self.prefix}/ack/{_check_chunk(service, 'service')}"
 
-    @property
-    def ack_all(self) -> str:
-        return f"{self.prefix}/ack/*"
-
     def alive(self, service: str) -> str:
         return f"{ALIVE}/{self.robot}/{_check_chunk(service, 'service')}"
 

@@ -53,7 +53,9 @@ class SimStats(Message, frozen=True):
     wall seconds rendering and how many captures. publish_s: putting out everything else
     stamped (state, odom, frames' encoding and sending, clock, recording). waited_s: per
     lockstep participant, the wall seconds the sim waited for it (a wait is booked to the
-    participant that answered last, the one the sim was blocked on).
+    participant that answered last, the one the sim was blocked on). stalls: lockstep
+    waits that ran out (`time.stall_timeout_s`: the sim stepped on without a participant,
+    each logged), 0 in a run that kept lockstep.
     """
 
     stamp_ns: StampNs
@@ -64,6 +66,7 @@ class SimStats(Message, frozen=True):
     captures: dict[str, int]
     publish_s: NonNegative
     waited_s: dict[str, NonNegative]
+    stalls: int = 0
 
     WALL_CLOCK = ("wall_s", "step_s", "render_s", "publish_s", "waited_s")
 

@@ -54,7 +54,11 @@ class SimNode:
         # people commands and liveliness.
         self.out = SimOutputs(bus, keys, cfg, self.core, world, svc.rec, svc.cpus)
         commands = bus.fifo(keys.command, JointCommand, maxlen=256)
-        acks = bus.fifo(keys.ack_all, Ack, maxlen=4096)
+        # A subscriber on each participant's own ack key, not one on `ack/*`: under the
+        # router's ACL a participant hears only of subscribers on keys it may put, and a
+        # Zenoh publisher that hears of none sends nothing (lockstep was lost so).
+        periodic = sorted(n for n, p in cfg.time.participants.items() if p.role == "periodic")
+        acks = bus.fifo(tuple(keys.ack(n) for n in periodic), Ack, maxlen=4096)
         self.intake = CommandIntake(bus, keys, self.core, cfg.wbc.cmd_vel_timeout_s, svc.log)
         self.push_hook = PushHook(bus, svc.log)
         self.people_hook = PeopleHook(bus, svc.log)
@@ -120,8 +124,9 @@ class SimNode:
                 rtf_mark = (now, tick)
                 self.out.sim_log.rtf(tick * self.tick_ns, rtf)
                 self.out.stats(
-                    tick * self.tick_ns, tick, now - wall0, step_s, publish_s, gate.waited_s
-                )
+                    tick * self.tick_ns, tick, now - wall0, step_s, publish_s, gate.waited_s,
+                    gate.stalls,
+                )  # fmt: skip
         self.out.close()
         wall = time.perf_counter() - wall0
         svc.log.info(

@@ -225,14 +225,14 @@ class SimOutputs:
 
     def stats(
         self, t_ns: int, ticks: int, wall_s: float, step_s: float, publish_s: float,
-        waited_s: dict[str, float],
+        waited_s: dict[str, float], stalls: int,
     ) -> None:  # fmt: skip
         """Where the wall time went so far (`SimStats`; rendering on its own thread)."""
         self.sim_stats.put(
             SimStats(
                 stamp_ns=t_ns, ticks=ticks, wall_s=wall_s, step_s=step_s,
                 render_s=self.render.render_s, captures=self.render.captures,
-                publish_s=publish_s, waited_s=dict(waited_s),
+                publish_s=publish_s, waited_s=dict(waited_s), stalls=stalls,
             )
         )  # fmt: skip
 

@@ -14,7 +14,7 @@ import pytest
 
 from common.access import IDENTITIES, TRUSTED, USER
 from common.bus import Bus, NoRouter
-from common.messages.sim import Odom, StateTruth
+from common.messages.sim import Odom, SimStats, StateTruth
 from common.messages.wbc import CmdVel, WbcMode
 from deploy.stack import ProcessStack
 from tests.conftest import StartStack
@@ -70,6 +70,24 @@ def test_a_user_can_neither_watch_nor_move_the_robot_and_a_trusted_client_can(
     moved = truth.wait(lambda m: m.stamp_ns >= later.stamp_ns + 3_000_000_000, 300)
     p2 = np.array(moved.base_position_in_world)
     assert np.linalg.norm(p2[:2] - p1[:2]) > 0.1
+
+
+def test_lockstep_holds_under_the_acl_the_sim_hears_every_participants_ack(
+    stack: StartStack,
+) -> None:
+    """The mission, logged in as itself, is a periodic participant: the sim hears its
+    acks and waits for it, and never steps on without it. (A subscriber on `ack/*` was
+    never announced to a participant under the ACL, so a Zenoh publisher that heard of no
+    subscriber sent no ack: every real service stalled 10 s at start and ran free after.)"""
+    mission = [
+        'time.participants.mission.role="periodic"',
+        "time.participants.mission.period_s=0.05",
+        "time.participants.mission.latency_s=0.05",
+    ]
+    s = stack(["sim", "wbc", "mission"], *WBC, *mission, "sim.duration_s=60")
+    stats = s.bus.latest(s.keys.sim_stats, SimStats)
+    at = stats.wait(lambda m: m.stamp_ns >= 2_000_000_000, 120)
+    assert at.stalls == 0, f"the sim stepped on without a participant: {at}"
 
 
 def test_a_service_identity_reaches_only_its_own_keys(stack: StartStack) -> None:
