@@ -50,13 +50,13 @@ from bench.eval.run import (
 )
 from bench.eval.targets import TargetError, seeded_pair
 from bench.trial_explore import map_alignment, score_map
-from common.bus import BusError
+from common.bus import BusError, Latest
 from common.config import ConfigError, load_config, merged, parse_overrides, resolve
 from common.keys import MAP_EXPORT, MAP_OCCUPANCY
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.semantic_map import MapFile, OccupancyGrid
-from common.messages.sim import Clock
+from common.messages.sim import Clock, SimStats
 from common.messages.world import WorldDescription
 from common.recording import run_dir
 from deploy import maps
@@ -205,10 +205,12 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
     stack = ProcessStack(list(SERVICES), world_overrides(args, seed, map_name))
     wall0 = time.perf_counter()
     step = "start the stack"
+    stats: Latest[SimStats] | None = None
     try:
         stack.start(timeout_s=START_TIMEOUT_S)
         result.setup_wall_s = round(time.perf_counter() - wall0, 2)
         bus, keys = stack.bus, stack.keys
+        stats = bus.latest(keys.sim_stats, SimStats)
         how, path = map_source(args.map, args.world, seed)
         explored = how == "explore"
         if explored:
@@ -233,6 +235,8 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
     except (BusError, PayloadError, TargetError) as exc:
         result.error = f"could not {step}: {exc}"
     finally:
+        if stats is not None and (last := stats.get()) is not None:
+            result.lockstep_stalls = last.stalls
         result.services_down = sorted(
             n for n, p in stack.procs.items() if n != "router" and p.poll() is not None
         )

@@ -182,6 +182,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     setup_wall_s: float = 0.0
     contacts_static: int = 0
     contacts: list[str] = msgspec.field(default_factory=list)
+    lockstep_stalls: int = -1
     drops: int = 0
     services_down: list[str] = msgspec.field(default_factory=list)
     recording: str = ""

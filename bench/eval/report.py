@@ -62,6 +62,7 @@ def summarize(results: Sequence[WorldResult]) -> dict[str, Any]:
         "rtf": round(sim / wall, 3) if wall > 0 else 0.0,
         "contacts_static": sum(r.contacts_static for r in results),
         "drops": sum(r.drops for r in results),
+        "lockstep_stalls": sum(max(r.lockstep_stalls, 0) for r in results),
     }
 
 
@@ -155,7 +156,8 @@ def report_markdown(
         "",
         f"Real-time factor (sim / wall, over the missions): {summary['rtf']:.2f}. "
         f"Contacts with static obstacles: {summary['contacts_static']}; "
-        f"objects dropped: {summary['drops']}.",
+        f"objects dropped: {summary['drops']}; lockstep stalls (the sim stepped on "
+        f"without a participant): {summary['lockstep_stalls']}.",
         *(["", line] if (line := localization_summary(results)) else []),
         "",
         "## Failures",
