@@ -5,7 +5,8 @@ Every Zenoh session of a stack logs in to its router with a user name and a pass
 at the door, so it reads nothing and moves nothing. The router then allows each
 identity what it needs and denies everything else (`default_permission: "deny"`):
 
-- each of the robot's services (`keys.SERVICES`, each its own name): exactly the keys it
+- each of the robot's services (`keys.SERVICES`, each its own identity `<robot>.<service>`,
+  `b1.mission`): exactly the keys it
   uses (`SERVICE_KEYS`: what it puts, subscribes to, asks, answers; its own liveliness
   token; its robot's liveliness when it watches it), as each service's own record of
   what it did says (`Bus.used`, logged at every stop) over demos, evals, explorations,
@@ -47,13 +48,17 @@ the joints, the WBC's mode, the world), and the station's lets it carry the robo
 services' and a user's. A trusted tool (a test, the eval: it reads the sim's truth)
 runs on the robot's host, where the world is; its truth never crosses the link.
 
-Not yet: robots of their own on one router (the lists are written for the stack's
-robot, `config.robot`).
+Robots of their own on one router (`zenoh.robots`: the robots besides the stack's own
+whose services log in here): each robot's services have identities of their own
+(`b2.mission`) and rules over their robot's keys only (`dume/b2/…`, `dume/alive/b2/…`),
+so one robot's services neither see nor command another's; the map (`dume/map/…`) and
+the world are shared. The sim's truth ablations are the stack's own robot's.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import secrets
 import tempfile
@@ -62,12 +67,11 @@ from typing import Any
 
 from common.certs import LINK_USER, cert_files, link_secret
 from common.config import Config, load_config, resolve
-from common.keys import ALIVE, ROOT, SERVICES
+from common.keys import ALIVE, ROOT, SERVICES, RobotKeys
 from common.runfiles import write_private
 
 USER = "user"
 TRUSTED = "trusted"
-IDENTITIES = (*SERVICES, USER, TRUSTED)
 #: Which services run on which host when the stack is split in two (`zenoh.side`).
 #: Everything that moves the robot or decides how (the WBC, navigation, the mission and
 #: its visual approach) and what feeds it (the sim or the hardware, localization,
@@ -199,10 +203,24 @@ class CredentialsError(RuntimeError):
     """The stack's credentials file is missing a line or cannot be read or made."""
 
 
-def identity_of(service: str) -> str:
-    """The user name a process of the stack logs in with: a service's own name; a test's
-    or a tool's stand-in service (`hold`) is trusted."""
-    return service if service in SERVICES else TRUSTED
+def robots_of(config: Config) -> tuple[str, ...]:
+    """The robots whose services log in to the stack's router: its own, then
+    `zenoh.robots`."""
+    others = [r for r in config.zenoh.robots if r != config.robot]
+    for r in (config.robot, *others):
+        RobotKeys(r)  # a name that cannot be a key's chunk is refused here
+    return (config.robot, *dict.fromkeys(others))
+
+
+def identity_of(service: str, robot: str) -> str:
+    """The user name a process of robot `robot`'s stack logs in with: `<robot>.<service>`
+    for a service; a test's or a tool's stand-in service (`hold`) is trusted."""
+    return f"{robot}.{service}" if service in SERVICES else TRUSTED
+
+
+def identities(config: Config) -> tuple[str, ...]:
+    """Every identity of the stack's router: each robot's services, a user, trusted."""
+    return (*(identity_of(s, r) for r in robots_of(config) for s in SERVICES), USER, TRUSTED)
 
 
 def _rule(rule_id: str, messages: list[str], flow: str, keys: tuple[str, ...]) -> dict[str, Any]:
@@ -217,8 +235,10 @@ def _rule(rule_id: str, messages: list[str], flow: str, keys: tuple[str, ...]) -
 
 
 def _service_rules(name: str, spec: dict[str, Any], robot: str) -> list[dict[str, Any]]:
-    """The rules that let service `name` do what `spec` lists, and nothing else."""
+    """The rules that let robot `robot`'s service `name` do what `spec` lists, and
+    nothing else (rule ids start with its identity)."""
     prefix, alive = f"{ROOT}/{robot}", f"{ALIVE}/{robot}"
+    who = identity_of(name, robot)
 
     def keys(verb: str) -> tuple[str, ...]:
         return tuple(sorted({k.format(r=prefix) for k in spec.get(verb, ())}))
@@ -234,12 +254,12 @@ def _service_rules(name: str, spec: dict[str, Any], robot: str) -> list[dict[str
     ):
         if found := keys(verb):
             for flow, messages in flows:
-                rules.append(_rule(f"{name}-{verb}-{flow}", messages, flow, found))
-    rules.append(_rule(f"{name}-alive", ["liveliness_token"], "ingress", (f"{alive}/{name}",)))
+                rules.append(_rule(f"{who}-{verb}-{flow}", messages, flow, found))
+    rules.append(_rule(f"{who}-alive", ["liveliness_token"], "ingress", (f"{alive}/{name}",)))
     if spec.get("watch"):
         asks = ["declare_liveliness_subscriber", "liveliness_query"]
-        rules.append(_rule(f"{name}-watch", asks, "ingress", (f"{alive}/*",)))
-        rules.append(_rule(f"{name}-watched", ["liveliness_token"], "egress", (f"{alive}/*",)))
+        rules.append(_rule(f"{who}-watch", asks, "ingress", (f"{alive}/*",)))
+        rules.append(_rule(f"{who}-watched", ["liveliness_token"], "egress", (f"{alive}/*",)))
     return rules
 
 
@@ -260,13 +280,19 @@ def access_control(config: Config | None = None) -> dict[str, Any]:
     rules = [_rule("trusted", _ALL, "both", everything)]
     subjects = [{"id": "trusted", "usernames": [TRUSTED]}]
     policies = [{"id": "trusted", "rules": ["trusted"], "subjects": ["trusted"]}]
-    rule_ids: dict[str, list[str]] = {}  # each service's rules, by id
-    for name in SERVICES:
-        own = _service_rules(name, _merged(SERVICE_KEYS[name], truths.get(name, {})), config.robot)
-        rules += own
-        rule_ids[name] = [r["id"] for r in own]
-        subjects.append({"id": name, "usernames": [name]})
-        policies.append({"id": name, "rules": rule_ids[name], "subjects": [name]})
+    rule_ids: dict[str, list[str]] = {}  # each of the stack's own services' rules, by id
+    for robot in robots_of(config):
+        for name in SERVICES:
+            spec = SERVICE_KEYS[name]
+            if robot == config.robot:  # the ablations are the stack's own robot's
+                spec = _merged(spec, truths.get(name, {}))
+            own = _service_rules(name, spec, robot)
+            rules += own
+            who = identity_of(name, robot)
+            if robot == config.robot:
+                rule_ids[name] = [r["id"] for r in own]
+            subjects.append({"id": who, "usernames": [who]})
+            policies.append({"id": who, "rules": [r["id"] for r in own], "subjects": [who]})
     users = [
         _rule("user-put", ["put", "delete"], "ingress", USER_PUTS),
         _rule("user-put-to", ["declare_subscriber"], "egress", USER_PUTS),
@@ -337,18 +363,27 @@ def write_once(path: Path, text: str) -> str:
     return path.read_text()
 
 
-def ensure_credentials(path: Path) -> dict[str, str]:
-    """The credentials in `path`, made first with a random password per identity when
-    there is no such file (`write_once`; its folder the owner's only)."""
+def ensure_credentials(path: Path, wanted: tuple[str, ...]) -> dict[str, str]:
+    """The credentials in `path`, made first with a random password per identity of
+    `wanted` when there is no such file (`write_once`; its folder the owner's only); an
+    identity the file lacks (a robot added to `zenoh.robots`, a file from before
+    `<robot>.<service>`) gets a line appended, under a lock, and nothing in it changes."""
     path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-    write_once(path, "".join(f"{who}:{secrets.token_urlsafe(24)}\n" for who in IDENTITIES))
+    write_once(path, "".join(f"{who}:{secrets.token_urlsafe(24)}\n" for who in wanted))
     found = read_credentials(path)
-    missing = [who for who in IDENTITIES if who not in found]
-    if missing:
-        raise CredentialsError(
-            f"{path} has no password for {', '.join(missing)} (delete it to make a new one)"
-        )
-    return found
+    if all(who in found for who in wanted):
+        return found
+    try:
+        with path.open("a+") as f:
+            fcntl.flock(f, fcntl.LOCK_EX)  # another process may be adding the same ones
+            found = read_credentials(path)
+            missing = [who for who in wanted if who not in found]
+            f.write("".join(f"{who}:{secrets.token_urlsafe(24)}\n" for who in missing))
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as exc:
+        raise CredentialsError(f"cannot add identities to {path}: {exc}") from None
+    return read_credentials(path)
 
 
 def link_settings(config: Config, credentials: Path) -> dict[str, Any]:

@@ -37,6 +37,7 @@ from common.access import (
     CredentialsError,
     access_control,
     ensure_credentials,
+    identities,
     link_settings,
 )
 from common.config import Config, resolve
@@ -114,7 +115,7 @@ def session_config(
         conf = zenoh.Config.from_file(str(resolve(z.router_config)))
         conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
         if z.access_control:
-            ensure_credentials(credentials)
+            ensure_credentials(credentials, identities(config))
             conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(credentials)))
             conf.insert_json5("access_control", json.dumps(access_control(config)))
             for path, value in link_settings(config, credentials).items():
@@ -128,7 +129,7 @@ def session_config(
             conf.insert_json5("connect/timeout_ms", json.dumps(round(connect_timeout_s * 1000)))
             conf.insert_json5("connect/exit_on_failure", "true")
         if z.access_control and user is not None:
-            password = ensure_credentials(credentials).get(user)
+            password = ensure_credentials(credentials, identities(config)).get(user)
             if password is None:
                 raise CredentialsError(f"{credentials} has no password for {user!r}")
             conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))

@@ -85,6 +85,10 @@ class ZenohSettings(_Section):
     `link_host:link_port` (TLS, both certificates checked); the station runs the
     semantic map, and its router connects there. `certs`: the folder of the link's
     certificates and secret (`dume certs`, `common.certs`).
+
+    robots: the robots besides the stack's own (`robot`) whose services may log in to
+    this router, each under identities of its own (`b2.mission`) that reach only its
+    keys (`common.access`).
     """
 
     host: str = "127.0.0.1"
@@ -97,6 +101,7 @@ class ZenohSettings(_Section):
     link_host: str = "127.0.0.1"
     link_port: Port = 7448
     certs: str = "var/secrets/certs"
+    robots: list[str] = msgspec.field(default_factory=list)
 
     def __post_init__(self) -> None:
         if self.side != "all" and not self.access_control:

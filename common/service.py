@@ -187,7 +187,8 @@ def run(
     rec = open_recording(name, config.recording)
     if config.recording.enabled:
         logging.getLogger("dume").addHandler(RerunHandler(rec, name))
-    bus = Bus.open(config, guard=TruthGuard.of(name, config), user=identity_of(name))
+    user = identity_of(name, config.robot)
+    bus = Bus.open(config, guard=TruthGuard.of(name, config), user=user)
     svc = Service(name, config, bus, rec, layout)
     _install_signals(svc.stop, bus.interrupt)
     try:

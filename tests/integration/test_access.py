@@ -12,7 +12,7 @@ import msgspec
 import numpy as np
 import pytest
 
-from common.access import IDENTITIES, TRUSTED, USER
+from common.access import TRUSTED, USER, identities, identity_of
 from common.bus import Bus, NoRouter
 from common.messages.sim import Odom, SimStats, StateTruth
 from common.messages.wbc import CmdVel, WbcMode
@@ -30,7 +30,7 @@ def test_a_session_without_the_stacks_password_is_refused_at_the_door(
     with pytest.raises(NoRouter, match="refused"):
         Bus.open(s.config, connect_timeout_s=2.0, user=None).close()
     forged = tmp_path / "users"
-    forged.write_text("".join(f"{who}:guessed\n" for who in IDENTITIES))
+    forged.write_text("".join(f"{who}:guessed\n" for who in identities(s.config)))
     zenoh = msgspec.structs.replace(s.config.zenoh, credentials=str(forged))
     other = msgspec.structs.replace(s.config, zenoh=zenoh)
     with pytest.raises(NoRouter, match="refused"):
@@ -98,7 +98,7 @@ def test_a_service_identity_reaches_only_its_own_keys(stack: StartStack) -> None
     s = stack(["sim", "wbc"], *WBC, "sim.duration_s=600", 'semantic_map.floor_plan="none"')
     truth = s.bus.latest(s.keys.state_truth, StateTruth)
     first = truth.wait(lambda m: m.stamp_ns >= 1_000_000_000, 120)
-    with Bus.open(s.config, user="perception") as perception:
+    with Bus.open(s.config, user=identity_of("perception", s.config.robot)) as perception:
         seen_truth = perception.fifo(s.keys.state_truth, StateTruth)
         odom = perception.fifo(s.keys.odom, Odom)  # its own input: delivered
         _drive(s, perception, "rogue", first)
@@ -107,7 +107,7 @@ def test_a_service_identity_reaches_only_its_own_keys(stack: StartStack) -> None
         assert len(list(odom.drain())) > 0, "perception's own input did not arrive"
     p0, p1 = np.array(first.base_position_in_world), np.array(later.base_position_in_world)
     assert np.linalg.norm(p1[:2] - p0[:2]) < 0.02, "perception's commands moved the robot"
-    with Bus.open(s.config, user="navigation") as navigation:
+    with Bus.open(s.config, user=identity_of("navigation", s.config.robot)) as navigation:
         joints = navigation.publisher(s.keys.wbc_mode, WbcMode)  # the mode: not navigation's
         joints.put(WbcMode(stamp_ns=later.stamp_ns, mode="damp"))
         after = truth.wait(lambda m: m.stamp_ns >= later.stamp_ns + 2_000_000_000, 300)

@@ -7,6 +7,7 @@ import time
 
 import pytest
 
+from common.access import identity_of
 from common.bus import Bus
 from common.keys import WORLD_CLOCK, WORLD_DESCRIPTION, WORLD_EVENTS
 from common.messages.localization import Localization
@@ -48,7 +49,11 @@ def test_a_services_bus_refuses_truth_it_was_not_granted(stack: StartStack) -> N
     """A real session with the mission's guard: odometry and the clock are the robot's,
     the base's truth, the world's description and its events are not."""
     s = stack(["sim", "hold"], 'sim.world="small"', *HOLD_COMMANDER)
-    mission = Bus.open(s.config, guard=TruthGuard.of("mission", s.config), user="mission")
+    mission = Bus.open(
+        s.config,
+        guard=TruthGuard.of("mission", s.config),
+        user=identity_of("mission", s.config.robot),
+    )
     try:
         mission.latest(s.keys.odom, Odom).undeclare()
         mission.latest(WORLD_CLOCK, Clock).undeclare()
@@ -61,7 +66,11 @@ def test_a_services_bus_refuses_truth_it_was_not_granted(stack: StartStack) -> N
     finally:
         mission.close()
     # The map's floor-plan prior is granted, and answered by the sim.
-    smap = Bus.open(s.config, guard=TruthGuard.of("semantic_map", s.config), user="semantic_map")
+    smap = Bus.open(
+        s.config,
+        guard=TruthGuard.of("semantic_map", s.config),
+        user=identity_of("semantic_map", s.config.robot),
+    )
     try:
         t0 = time.monotonic()
         world = smap.query(WORLD_DESCRIPTION, None, WorldDescription, 10.0)

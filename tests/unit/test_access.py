@@ -10,12 +10,12 @@ import pytest
 import zenoh
 
 from common.access import (
-    IDENTITIES,
     USER,
-    CredentialsError,
     access_control,
     ensure_credentials,
+    identities,
     identity_of,
+    read_credentials,
 )
 from common.config import load_config
 from common.keys import (
@@ -27,27 +27,39 @@ from common.keys import (
     RobotKeys,
 )
 
+IDENTITIES = identities(load_config({}))
+
 
 def test_the_credentials_are_made_once_private_and_kept(tmp_path: Path) -> None:
     path = tmp_path / "secrets" / "zenoh-users"
-    first = ensure_credentials(path)
+    first = ensure_credentials(path, IDENTITIES)
     assert set(first) == set(IDENTITIES)
     assert len(set(first.values())) == len(IDENTITIES), "one password each"
     assert stat.S_IMODE(path.stat().st_mode) == 0o600
-    assert ensure_credentials(path) == first, "a second process reads the same"
+    assert ensure_credentials(path, IDENTITIES) == first, "a second process reads the same"
     assert [p.name for p in path.parent.iterdir()] == ["zenoh-users"], "no temporary left"
 
 
-def test_a_credentials_file_missing_an_identity_is_refused(tmp_path: Path) -> None:
+def test_an_identity_the_file_lacks_is_added_and_nothing_else_changes(tmp_path: Path) -> None:
     path = tmp_path / "users"
-    path.write_text("user:x\n")
-    with pytest.raises(CredentialsError, match="no password for sim"):
-        ensure_credentials(path)
+    path.write_text("user:x\nmission:old\n")  # a file from before <robot>.<service>
+    found = ensure_credentials(path, IDENTITIES)
+    assert set(found) == set(IDENTITIES) | {"mission"}
+    assert (found["user"], found["mission"]) == ("x", "old")
+    two = identities(load_config({"zenoh.robots": ["b2"]}))
+    assert ensure_credentials(path, two)["b1.wbc"] == found["b1.wbc"]
+    assert "b2.wbc" in read_credentials(path)
 
 
-def test_services_log_in_as_themselves_and_stand_ins_as_trusted() -> None:
-    assert identity_of("wbc") == "wbc"
-    assert identity_of("hold") == "trusted"
+def test_a_robot_name_that_cannot_be_a_key_is_refused() -> None:
+    with pytest.raises(ValueError, match="robot"):
+        identities(load_config({"zenoh.robots": ["b/2"]}))
+
+
+def test_services_log_in_as_their_robots_and_stand_ins_as_trusted() -> None:
+    assert identity_of("wbc", "b1") == "b1.wbc"
+    assert identity_of("wbc", "b2") == "b2.wbc"
+    assert identity_of("hold", "b1") == "trusted"
 
 
 def _granted(subject: str, *messages: str, flow: str = "", acl: Any = None) -> list[str]:
@@ -62,6 +74,12 @@ def _granted(subject: str, *messages: str, flow: str = "", acl: Any = None) -> l
         for k in rules[rid]["key_exprs"]
         if set(messages) & set(rules[rid]["messages"]) and (not flow or flow in rules[rid]["flows"])
     ]
+
+
+_ALL_MESSAGES = (
+    "put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+    "liveliness_token", "declare_liveliness_subscriber", "liveliness_query",
+)  # fmt: skip
 
 
 def _user_keys(*messages: str) -> list[str]:
@@ -79,7 +97,7 @@ TRUTH = [RobotKeys().state_truth, *(RobotKeys().camera_segmentation_truth(c) for
 def test_no_service_but_the_sim_reads_the_truth_unless_its_ablation_is_on() -> None:
     own = access_control(load_config({"semantic_map.floor_plan": "none"}))  # the robot's own map
     for name in SERVICES:
-        reads = _granted(name, "declare_subscriber", "query", flow="ingress", acl=own)
+        reads = _granted(f"b1.{name}", "declare_subscriber", "query", flow="ingress", acl=own)
         for key in TRUTH:
             assert not _reaches(reads, key) or name == "sim", f"{name} reads {key}"
     ablations = load_config(
@@ -88,19 +106,19 @@ def test_no_service_but_the_sim_reads_the_truth_unless_its_ablation_is_on() -> N
     )  # fmt: skip
     acl = access_control(ablations)
     keys = RobotKeys()
-    assert _reaches(_granted("wbc", "declare_subscriber", acl=acl), keys.state_truth)
+    assert _reaches(_granted("b1.wbc", "declare_subscriber", acl=acl), keys.state_truth)
     seg = keys.camera_segmentation_truth(CAMERAS[0])
-    assert _reaches(_granted("perception", "declare_subscriber", acl=acl), seg)
-    assert _reaches(_granted("semantic_map", "query", acl=acl), WORLD_DESCRIPTION)
-    assert _reaches(_granted("navigation", "query", acl=acl), WORLD_DESCRIPTION)
+    assert _reaches(_granted("b1.perception", "declare_subscriber", acl=acl), seg)
+    assert _reaches(_granted("b1.semantic_map", "query", acl=acl), WORLD_DESCRIPTION)
+    assert _reaches(_granted("b1.navigation", "query", acl=acl), WORLD_DESCRIPTION)
     assert not _reaches(
-        _granted("mission", "declare_subscriber", "query", acl=acl), keys.state_truth
+        _granted("b1.mission", "declare_subscriber", "query", acl=acl), keys.state_truth
     )
 
 
 def test_each_service_puts_only_its_own_outputs() -> None:
     keys = RobotKeys()
-    puts = {name: _granted(name, "put", flow="ingress") for name in SERVICES}
+    puts = {name: _granted(f"b1.{name}", "put", flow="ingress") for name in SERVICES}
     # the joints are the WBC's (and the sim's world), the base velocity navigation's and
     # the mission's: a perception or a map that misbehaves cannot move the robot
     assert [n for n in SERVICES if _reaches(puts[n], keys.command)] == ["wbc"]
@@ -110,7 +128,7 @@ def test_each_service_puts_only_its_own_outputs() -> None:
     assert [n for n in SERVICES if _reaches(puts[n], keys.mission_status)] == ["mission"]
     assert [n for n in SERVICES if _reaches(puts[n], WORLD_EVENTS)] == ["sim"]
     for name in SERVICES:  # its own liveliness, no one else's
-        tokens = _granted(name, "liveliness_token", flow="ingress")
+        tokens = _granted(f"b1.{name}", "liveliness_token", flow="ingress")
         assert tokens == [keys.alive(name)], (name, tokens)
 
 
@@ -138,3 +156,21 @@ def test_a_user_reaches_no_command_no_sensor_and_no_world_key() -> None:
     puts = _user_keys("put")
     for key in (keys.mission_request, keys.mission_cancel, keys.mission_status):
         assert any(zenoh.KeyExpr(g).intersects(zenoh.KeyExpr(key)) for g in puts), key
+
+
+def test_two_robots_on_one_router_reach_only_their_own_keys() -> None:
+    acl = access_control(load_config({"zenoh.robots": ["b2"]}))
+    b1, b2 = RobotKeys("b1"), RobotKeys("b2")
+    for name in SERVICES:
+        mine = _granted(f"b2.{name}", *_ALL_MESSAGES, acl=acl)
+        assert mine, name
+        for key in mine:  # nothing of b1's: its commands, sensors, tokens
+            assert not key.startswith((b1.prefix, f"dume/alive/{b1.robot}")), (name, key)
+    puts = {n: _granted(f"b2.{n}", "put", flow="ingress", acl=acl) for n in SERVICES}
+    assert [n for n in SERVICES if _reaches(puts[n], b2.command)] == ["wbc"]
+    assert not [n for n in SERVICES if _reaches(puts[n], b1.command)]
+    assert not [n for n in SERVICES if _reaches(puts[n], b1.cmd_vel)]
+    # b1's own identities are untouched by the second robot
+    assert _granted("b1.wbc", "put", flow="ingress", acl=acl) == _granted(
+        "b1.wbc", "put", flow="ingress"
+    )

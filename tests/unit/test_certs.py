@@ -73,7 +73,7 @@ def test_the_robots_router_lets_the_link_carry_the_stations_services_and_users_o
                        "usernames": [LINK_USER]}  # fmt: skip
     (policy,) = [p for p in acl["policies"] if p["id"] == "link-station"]
     owners = {r.split("-")[0] for r in policy["rules"]}
-    assert owners == {"semantic_map", "user"}
+    assert owners == {"b1.semantic_map", "user"}
     rules = {r["id"]: r for r in acl["rules"]}
     carried = {k for r in policy["rules"] for k in rules[r]["key_exprs"]}
     for never in ("dume/b1/wbc/cmd_vel", "dume/b1/wbc/mode", "dume/b1/command",
@@ -83,7 +83,8 @@ def test_the_robots_router_lets_the_link_carry_the_stations_services_and_users_o
     (subject,) = [s for s in station["subjects"] if s["id"] == "link-robot"]
     assert subject == {"id": "link-robot", "cert_common_names": ["robot"]}
     (policy,) = [p for p in station["policies"] if p["id"] == "link-robot"]
-    assert {r.split("-")[0] for r in policy["rules"]} == {*services_on("robot"), "user"}
+    robot = {f"b1.{name}" for name in services_on("robot")}
+    assert {r.split("-")[0] for r in policy["rules"]} == {*robot, "user"}
     one_host = access_control(load_config({}))
     assert not [s for s in one_host["subjects"] if s["id"].startswith("link-")]
 
