@@ -72,6 +72,27 @@ def test_a_user_can_neither_watch_nor_move_the_robot_and_a_trusted_client_can(
     assert np.linalg.norm(p2[:2] - p1[:2]) > 0.1
 
 
+def test_another_robots_navigation_on_the_same_router_cannot_move_this_one(
+    stack: StartStack,
+) -> None:
+    """Robot b1's stack on a router that also serves b2 (`zenoh.robots`): b2's navigation,
+    logged in as itself, drives b1's base and damps it; b1 neither moves nor sags, and
+    b2's navigation does not see b1's odometry. (The trusted drive in the user test above
+    moves the same robot, so the check can fail.)"""
+    s = stack(["sim", "wbc"], *WBC, "sim.duration_s=600", 'zenoh.robots=["b2"]')
+    truth = s.bus.latest(s.keys.state_truth, StateTruth)
+    first = truth.wait(lambda m: m.stamp_ns >= 1_000_000_000, 120)
+    with Bus.open(s.config, user=identity_of("navigation", "b2")) as other:
+        odom = other.fifo(s.keys.odom, Odom)
+        _drive(s, other, "navigation", first)
+        other.publisher(s.keys.wbc_mode, WbcMode).put(WbcMode(stamp_ns=first.stamp_ns, mode="damp"))
+        later = truth.wait(lambda m: m.stamp_ns >= first.stamp_ns + 3_000_000_000, 300)
+        assert len(list(odom.drain())) == 0, "b2's navigation read b1's odometry"
+    p0, p1 = np.array(first.base_position_in_world), np.array(later.base_position_in_world)
+    assert np.linalg.norm(p1[:2] - p0[:2]) < 0.02, "b2's navigation moved b1"
+    assert abs(p1[2] - p0[2]) < 0.02, "b2's damp reached b1's WBC"
+
+
 def test_lockstep_holds_under_the_acl_the_sim_hears_every_participants_ack(
     stack: StartStack,
 ) -> None:
