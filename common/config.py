@@ -393,9 +393,13 @@ class SemanticMapSettings(_Section):
     #: Detections an artifact or person needs before it gets an id.
     confirm_hits: PositiveInt = 2
     #: One object under two classes: artifacts closer than `class_merge_m` are one, and
-    #: the class seen more often from within `class_near_m` keeps it, m.
+    #: the class seen more often from within `class_near_m` keeps it, m. One of them never
+    #: seen whole from within `class_near_m` is the same object within `class_merge_far_m`
+    #: (far views sit 10-16 cm off; a second real object there would have been seen from
+    #: where the other was: hall seed 1's ghost can was 6 cm from the box it misread).
     class_near_m: Positive = 2.0
     class_merge_m: NonNegative = 0.05
+    class_merge_far_m: NonNegative = 0.2
     #: Below this score a detection is ignored.
     min_score: Fraction = 0.5
     #: Frames looking at an artifact's place without seeing it before it is missing.

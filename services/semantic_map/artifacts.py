@@ -22,7 +22,10 @@ instead (`drop`; the rule is the map's, see `mapper`).
 
 One object under two classes: the network may call a can on a bench a box from 3 m and a
 can from 1.5 m, which makes two artifacts at one place (their axis points within
-`class_merge_m`, closer than two real objects' centres can be). `class_conflicts()`
+`class_merge_m`, closer than two real objects' centres can be; within `class_merge_far_m`
+when one of them was never seen whole from near: far views sit 10-16 cm off, and such a
+ghost stands behind the real object's face, where the missing test cannot see it
+missing). `class_conflicts()`
 pairs such perception-made artifacts as (loser, winner): the class seen more often whole
 (its mask off the image border) from within `class_near_m` (where the network tells the
 classes apart) wins, then the one with more detections; two seen from near fewer than
@@ -192,9 +195,11 @@ class ArtifactTracker:
             or new.source != old.source
         ):
             return None
-        if math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1]) > p.class_merge_m:
-            return None
         if max(new.near_hits, old.near_hits) < p.confirm_hits:
+            return None
+        far = min(new.near_hits, old.near_hits) == 0  # one was never seen whole from near
+        limit = max(p.class_merge_m, p.class_merge_far_m) if far else p.class_merge_m
+        if math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1]) > limit:
             return None
         return new if (new.near_hits, new.hits) <= (old.near_hits, old.hits) else old
 

@@ -138,7 +138,7 @@ def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> 
         _seen(tracker, k, "can", (2.0, 1.01), 2.5)  # both from far: no evidence
     assert tracker.class_conflicts() == []
     for k in range(4, 8):
-        _seen(tracker, k, "bottle", (2.08, 1.0), 1.0)  # near, but 8 cm away: two objects
+        _seen(tracker, k, "bottle", (2.25, 1.0), 1.0)  # near, but 25 cm away: two objects
     assert tracker.class_conflicts() == []
     prior = ArtifactTracker(IdBook(), SemanticMapSettings())
     for k in range(4):
@@ -147,6 +147,23 @@ def test_no_class_merge_without_near_evidence_apart_or_for_prior_artifacts() -> 
     for k in range(4, 8):
         _seen(prior, k, "box", (0.0, 0.01), 1.0)
     assert prior.class_conflicts() == []  # a prior artifact is the user's word
+
+
+def test_a_ghost_seen_only_from_afar_beside_an_object_seen_near_is_that_object() -> None:
+    # Hall seed 1: box_2 seen from 0.9 m as a box; from 3.1 m, 6-10 cm off, as a can.
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
+    for k in range(16):
+        _seen(tracker, k, "can", (2.06, 1.0), 3.1)
+    for k in range(16, 20):
+        _seen(tracker, k, "box", (2.0, 1.0), 0.9)
+    ((loser, winner),) = tracker.class_conflicts()
+    assert (loser.id, winner.id) == ("can_1", "box_1")
+    # two objects seen from near 8 cm apart stay two
+    both = ArtifactTracker(IdBook(), SemanticMapSettings())
+    for k in range(4):
+        _seen(both, k, "can", (2.08, 1.0), 1.2)
+        _seen(both, k, "box", (2.0, 1.0), 1.2)
+    assert both.class_conflicts() == []
 
 
 def test_a_class_that_gives_way_spends_no_id_until_it_has_the_better_evidence() -> None:
