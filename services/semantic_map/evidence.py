@@ -27,17 +27,25 @@ entities it made itself (`source` perception), which it deletes with the reason.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from common.geometry import FloatArray
 from common.messages.world import SupportSurface
 from services.semantic_map.occupancy import FREE, Occupancy
-from services.semantic_map.supports import inside
+from services.semantic_map.supports import SURFACE_Z_M, inside
 
 #: An artifact's visible centroid above the support's top, m: the flattest artifact (a
 #: box 8 cm tall) shows its top face and front, 4-8 cm up; a mask on the top itself sat
 #: up to 3.5 cm above the top the tops layer measured on the explored small world (the
 #: "box" a table's far edge makes); the tallest artifact stands 0.25 m.
 ABOVE_TOP_M = (0.04, 0.45)
+#: Off every surface, an artifact's visible centroid is at most this above the floor (the
+#: tallest artifact's middle, 0.125 m, and the depth's noise), m; or it stands on a top
+#: within `UNDER_M` (of `TOP_FRAMES` frames, at working height, not above it).
+FLOOR_CENTROID_MAX_M = 0.2
+FLOOR_UNDER_M = 0.1
+UNDER_M = 0.3
+TOP_FRAMES = 3
 #: A place within this of a surface's rectangle is over it, m (the rectangle is the
 #: tops' minimum-area one: a little short of the edge the camera saw).
 SURFACE_MARGIN_M = 0.05
@@ -62,11 +70,16 @@ def surface_under(
     return max(under, key=lambda s: s.top_height) if under else None
 
 
-def artifact_doubt(xy: FloatArray, z: float, surfaces: list[SupportSurface]) -> str:
-    """Why an artifact at (xy, z) (its visible centroid) cannot be one; "" when it can."""
+def artifact_doubt(
+    xy: FloatArray, z: float, surfaces: list[SupportSurface], occupancy: Occupancy | None = None
+) -> str:
+    """Why an artifact at (xy, z) (its visible centroid) cannot be one; "" when it can.
+    Without `occupancy` one off every surface is not judged."""
     s = surface_under(xy, surfaces)
     if s is None:
-        return ""
+        if occupancy is None or z <= FLOOR_CENTROID_MAX_M or not floats(occupancy, xy, z):
+            return ""
+        return f"on no surface, {z:.2f} m over free floor with no top under it to stand on"
     above = z - s.top_height
     if above < ABOVE_TOP_M[0]:
         where = "below" if above < -ABOVE_TOP_M[0] else "flat on"
@@ -89,10 +102,28 @@ def person_doubt(
     return ""
 
 
-def known_floor_near(occupancy: Occupancy, xy: FloatArray, radius_m: float) -> bool:
-    """Whether a cell within `radius_m` of xy is known floor: free in the static layer,
-    or seen as floor by the depth (the merged grid's free cells, but for learned
-    obstacles: a person's own cells are not floor anyway)."""
+def floats(occupancy: Occupancy, xy: FloatArray, z: float) -> bool:
+    """Whether a thing at xy, z would float: the merged grid free within `FLOOR_UNDER_M`
+    of xy, and no top at working height (not above z + 5 cm, seen in `TOP_FRAMES`
+    frames) within `UNDER_M`."""
+    window = _disc(occupancy, xy, FLOOR_UNDER_M)
+    if window is None:
+        return False
+    (y0, y1, x0, x1), disc = window
+    if not np.all(occupancy.cells((slice(y0, y1), slice(x0, x1)))[disc] == FREE):
+        return False
+    window = _disc(occupancy, xy, UNDER_M)
+    assert window is not None
+    (y0, y1, x0, x1), disc = window
+    tz, tn = occupancy.top_z[y0:y1, x0:x1], occupancy.top_n[y0:y1, x0:x1]
+    top = (tn >= TOP_FRAMES) & (tz >= SURFACE_Z_M[0] - 0.1) & (tz <= z + 0.05)
+    return not np.any(top & disc)
+
+
+def _disc(
+    occupancy: Occupancy, xy: FloatArray, radius_m: float
+) -> tuple[tuple[int, int, int, int], NDArray[np.bool_]] | None:
+    """The grid's window round xy (y0, y1, x0, x1) and the disc of `radius_m` in it."""
     res = occupancy.resolution_m
     ix = int(np.floor((float(xy[0]) - occupancy.origin_xy[0]) / res))
     iy = int(np.floor((float(xy[1]) - occupancy.origin_xy[1]) / res))
@@ -100,8 +131,18 @@ def known_floor_near(occupancy: Occupancy, xy: FloatArray, radius_m: float) -> b
     h, w = occupancy.static.shape
     y0, y1, x0, x1 = max(0, iy - r), min(h, iy + r + 1), max(0, ix - r), min(w, ix + r + 1)
     if y0 >= y1 or x0 >= x1:
-        return False
+        return None
     yy, xx = np.mgrid[y0:y1, x0:x1]
-    disc = (yy - iy) ** 2 + (xx - ix) ** 2 <= r * r
+    return (y0, y1, x0, x1), (yy - iy) ** 2 + (xx - ix) ** 2 <= r * r
+
+
+def known_floor_near(occupancy: Occupancy, xy: FloatArray, radius_m: float) -> bool:
+    """Whether a cell within `radius_m` of xy is known floor: free in the static layer,
+    or seen as floor by the depth (the merged grid's free cells, but for learned
+    obstacles: a person's own cells are not floor anyway)."""
+    window = _disc(occupancy, xy, radius_m)
+    if window is None:
+        return False
+    (y0, y1, x0, x1), disc = window
     floor = (occupancy.static[y0:y1, x0:x1] == FREE) | occupancy.seen_free[y0:y1, x0:x1]
     return bool(np.any(floor & disc))

@@ -275,8 +275,9 @@ class SemanticMap:
         return person_doubt(xy, self.surfaces, self.occupancy if sensed else None)
 
     def _doubt_artifact(self, xy: FloatArray, z: float, t: int) -> str:
-        """`evidence.artifact_doubt`, and off every surface beside a person seen lately."""
-        why = artifact_doubt(xy, z, self.surfaces)
+        """`evidence.artifact_doubt` (off every surface, over the floor only once the map
+        knows surfaces), and off every surface beside a person seen lately."""
+        why = artifact_doubt(xy, z, self.surfaces, self.occupancy if self.surfaces else None)
         if why or not self.surfaces or surface_under(xy, self.surfaces) is not None:
             return why
         for tr in self.people.confirmed:

@@ -181,17 +181,20 @@ class Occupancy:
         tn[cells[higher]] = 1
         tn[cells[same]] = np.minimum(tn[cells[same]].astype(np.int64) + 1, 60000)
 
-    def learned_mask(self) -> NDArray[np.bool_]:
-        learned = (self.hits >= self.hits_needed) & (self.static != OCCUPIED)
+    def learned_mask(self, window: tuple[slice, slice] | None = None) -> NDArray[np.bool_]:
+        w = window or (slice(None), slice(None))
+        learned = (self.hits[w] >= self.hits_needed) & (self.static[w] != OCCUPIED)
         if self.beside_static is not None:
-            learned &= ~self.beside_static
-        return learned
+            learned &= ~self.beside_static[w]
+        return np.asarray(learned, bool)
 
-    def cells(self) -> NDArray[np.uint8]:
-        """The merged grid: static, unknown cells seen as floor made free, learned obstacles."""
-        out = self.static.copy()
-        out[(out == UNKNOWN) & self.seen_free] = FREE
-        out[self.learned_mask()] = OCCUPIED
+    def cells(self, window: tuple[slice, slice] | None = None) -> NDArray[np.uint8]:
+        """The merged grid (of a window of rows and columns): static, unknown cells seen
+        as floor made free, learned obstacles."""
+        w = window or (slice(None), slice(None))
+        out = self.static[w].copy()
+        out[(out == UNKNOWN) & self.seen_free[w]] = FREE
+        out[self.learned_mask(w)] = OCCUPIED
         return out
 
     def occupied_at(self, xy: FloatArray) -> NDArray[np.bool_]:

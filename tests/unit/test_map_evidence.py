@@ -50,6 +50,19 @@ def _floor_map() -> Occupancy:
     return occ
 
 
+def test_an_artifact_off_every_surface_stands_on_the_floor_or_on_a_top() -> None:
+    occ = _floor_map()
+    wall_end = np.array([-1.0, -1.0])  # free floor round it, nothing to stand on
+    assert artifact_doubt(wall_end, 0.27, [], occ).startswith("on no surface, 0.27 m over")
+    assert artifact_doubt(wall_end, 0.12, [], occ) == ""  # a bottle on the floor
+    assert artifact_doubt(wall_end, 0.27, [], None) == ""  # no grid: no say
+    occ.top_z[18:22, 18:22], occ.top_n[18:22, 18:22] = 0.7, 4  # a table top seen there
+    assert artifact_doubt(wall_end, 0.8, [], occ) == ""
+    occ.top_n[18:22, 18:22] = 0
+    occ.static[20, 20] = OCCUPIED  # or something under it that is not floor
+    assert artifact_doubt(wall_end, 0.3, [], occ) == ""
+
+
 def test_a_person_stands_on_floor_and_not_in_a_table() -> None:
     occ = _floor_map()
     assert known_floor_near(occ, np.array([0.0, 0.0]), 0.35)
@@ -78,7 +91,10 @@ def _ingest(smap: SemanticMap, t: int, *dets: Detection) -> int:
 
 
 def _explored_map() -> SemanticMap:
-    smap = SemanticMap(SemanticMapSettings(floor_plan="none"), _floor_map(), {})
+    occ = _floor_map()
+    # the table's top edge as the tops layer has it, seen from the side (x 0.5-1.1 m)
+    occ.top_z[30:50, 50:62], occ.top_n[30:50, 50:62] = 0.78, 5
+    smap = SemanticMap(SemanticMapSettings(floor_plan="none"), occ, {})
     smap.static_source = "slam"
     t = TABLE  # the same table, in the room: at (0.8, 0)
     smap.surfaces = [SupportSurface(t.id, (0.8, 0.0), t.half_extents, t.yaw, t.top_height)]
