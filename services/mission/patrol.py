@@ -156,7 +156,8 @@ def plan_second_look(
         where, s.patrol_clearance_m, s.patrol_near_m, s.patrol_recheck_see_m, VIEW_HALF_ANGLE,
     )  # fmt: skip
     said = ", ".join(f"{k} ({why})" for k, why in sorted(doubt.items()))
-    say(f"second look: {len(route.viewpoints)} viewpoints for {said}")
+    unseen = f"; {route.unseen} no viewpoint sees" if route.unseen else ""
+    say(f"second look: {len(route.viewpoints)} viewpoints for {said}{unseen}")
     return route if route.viewpoints else None
 
 
