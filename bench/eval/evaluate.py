@@ -141,6 +141,10 @@ def explored_overrides(world: str, seed: int) -> dict[str, Any]:
     }  # fmt: skip
 
 
+class ExplorationFailed(Exception):
+    """The exploration before a world's request did not succeed: no request is made."""
+
+
 #: Sim seconds an exploration may take (the mission's own budget ends it sooner).
 EXPLORE_TIMEOUT_S = 2400.0
 
@@ -216,6 +220,9 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         if explored:
             step = "explore the world"
             result.exploration = explore_first(stack, read_world(bus), seed, path)
+            if result.exploration["outcome"] != "succeeded":  # no request on half a map
+                e = result.exploration
+                raise ExplorationFailed(f"it ended {e['outcome']}: {e['reason']}")
         step = "read the world and the map"
         world, (arts, people) = read_world(bus), read_map(bus)
         pair = seeded_pair(arts, people, seed)
@@ -232,7 +239,7 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         step = "read the running settings"
         for k, v in read_back(bus, keys).items():
             seen.setdefault(k, set()).add(v)
-    except (BusError, PayloadError, TargetError) as exc:
+    except (BusError, PayloadError, TargetError, ExplorationFailed) as exc:
         result.error = f"could not {step}: {exc}"
     finally:
         if stats is not None and (last := stats.get()) is not None:
