@@ -14,7 +14,7 @@ truth, what the failure policy promises (README, "Nobody waits for the dead"):
   mission could speak and did not report it within `HUNG_S`. A SIGSTOPped mission or
   router cannot speak (nobody can reach a frozen mission, nor anything through a frozen
   router): there the client's own `dependency_lost` is the end, and the case is
-  **mute**, not hung;
+  **mute**, not hung; the slow consumer ends nothing, and is never hung;
 - **restart_s**: until the hurt service was alive again (supervisord restarts all but
   the sim); **world_restarted**: a new sim process came up under the run (never
   allowed; a SIGSTOPped sim is the same process, frozen);
@@ -257,6 +257,8 @@ def _watch_after(
 
 def verdict(service: str, sig: int, ended_s: float, reported_s: float | None) -> Figures:
     """Whether the case is mute (the mission cannot speak) and hung (module docstring)."""
+    if service == "client":  # the slow consumer hurts nothing: the request goes on
+        return {"mute": False, "hung": False}
     mute = sig == signal.SIGSTOP and service in ("mission", "router")
     unreported = reported_s is None or reported_s > HUNG_S
     return {"mute": mute, "hung": ended_s > HUNG_S or (unreported and not mute)}

@@ -155,6 +155,7 @@ def test_a_frozen_mission_or_router_is_mute_not_hung_and_a_late_end_is_hung() ->
     assert verdict("navigation", stop, 0.5, 0.5) == {"mute": False, "hung": False}
     assert verdict("navigation", stop, 0.5, 11.0)["hung"]
     assert verdict("mission", stop, 12.0, None)["hung"]  # the client knew too late
+    assert not verdict("client", 0, 120.6, 120.6)["hung"]  # a slow consumer's fetch goes on
 
 
 def test_a_runs_processes_are_found_by_its_folder(tmp_path: Path) -> None:
