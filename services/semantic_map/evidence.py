@@ -43,7 +43,6 @@ ABOVE_TOP_M = (0.04, 0.45)
 #: tallest artifact's middle, 0.125 m, and the depth's noise), m; or it stands on a top
 #: within `UNDER_M` (of `TOP_FRAMES` frames, at working height, not above it).
 FLOOR_CENTROID_MAX_M = 0.2
-FLOOR_UNDER_M = 0.1
 UNDER_M = 0.3
 TOP_FRAMES = 3
 #: A place within this of a surface's rectangle is over it, m (the rectangle is the
@@ -103,14 +102,14 @@ def person_doubt(
 
 
 def floats(occupancy: Occupancy, xy: FloatArray, z: float) -> bool:
-    """Whether a thing at xy, z would float: the merged grid free within `FLOOR_UNDER_M`
-    of xy, and no top at working height (not above z + 5 cm, seen in `TOP_FRAMES`
-    frames) within `UNDER_M`."""
-    window = _disc(occupancy, xy, FLOOR_UNDER_M)
+    """Whether a thing at xy, z would float: its cell of the merged grid free, and no
+    top at working height (not above z + 5 cm, seen in `TOP_FRAMES` frames) within
+    `UNDER_M`."""
+    window = _disc(occupancy, xy, 0.0)
     if window is None:
         return False
-    (y0, y1, x0, x1), disc = window
-    if not np.all(occupancy.cells((slice(y0, y1), slice(x0, x1)))[disc] == FREE):
+    (y0, y1, x0, x1), _ = window
+    if not np.all(occupancy.cells((slice(y0, y1), slice(x0, x1))) == FREE):
         return False
     window = _disc(occupancy, xy, UNDER_M)
     assert window is not None

@@ -59,7 +59,9 @@ def test_an_artifact_off_every_surface_stands_on_the_floor_or_on_a_top() -> None
     occ.top_z[18:22, 18:22], occ.top_n[18:22, 18:22] = 0.7, 4  # a table top seen there
     assert artifact_doubt(wall_end, 0.8, [], occ) == ""
     occ.top_n[18:22, 18:22] = 0
-    occ.static[20, 20] = OCCUPIED  # or something under it that is not floor
+    occ.static[20, 21] = OCCUPIED  # a wall's end in the next cell: it still floats
+    assert artifact_doubt(wall_end, 0.3, [], occ).startswith("on no surface")
+    occ.static[20, 20] = OCCUPIED  # something under it that is not floor
     assert artifact_doubt(wall_end, 0.3, [], occ) == ""
 
 
