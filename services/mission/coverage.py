@@ -63,13 +63,11 @@ class Route:
     unseen: int = 0
 
 
-def _coarsen(cells: NDArray[np.uint8], factor: int, what: int) -> NDArray[np.bool_]:
-    """Blocks of `factor` × `factor` cells holding any cell that is `what` (or, with
-    `what` = FREE, any that is not)."""
-    ny, nx = (cells.shape[0] // factor) * factor, (cells.shape[1] // factor) * factor
-    c = cells[:ny, :nx]
-    hit = c != FREE if what == FREE else c == what
-    return hit.reshape(ny // factor, factor, nx // factor, factor).any(axis=(1, 3))
+def _coarsen(mask: NDArray[np.bool_], factor: int) -> NDArray[np.bool_]:
+    """Blocks of `factor` × `factor` cells holding any cell of `mask`."""
+    ny, nx = (mask.shape[0] // factor) * factor, (mask.shape[1] // factor) * factor
+    blocks = mask[:ny, :nx].reshape(ny // factor, factor, nx // factor, factor)
+    return np.asarray(blocks.any(axis=(1, 3)), bool)
 
 
 @dataclass(frozen=True)
@@ -81,9 +79,6 @@ class _Floor:
     start: tuple[int, int]
     res: float
     origin: tuple[float, float]
-
-    def cell(self, xy: tuple[float, float] | FloatArray) -> tuple[int, int]:
-        return int((xy[1] - self.origin[1]) / self.res), int((xy[0] - self.origin[0]) / self.res)
 
     def centre(self, iy: int, ix: int) -> FloatArray:
         ox, oy = self.origin
@@ -99,18 +94,18 @@ def _floor(
 ) -> _Floor | None:
     factor = max(1, round(PLAN_RES_M / resolution_m))
     res = resolution_m * factor
-    blocked = _coarsen(cells, factor, FREE)
+    blocked = _coarsen(cells != FREE, factor)  # obstacles and what the map does not know
     safe = ndimage.distance_transform_edt(~blocked) * res > clearance_m
     iy_all, ix_all = np.nonzero(safe)
     if len(iy_all) == 0:
         return None
-    floor = _Floor(safe, _coarsen(cells, factor, OCCUPIED), (0, 0), res, origin_xy)
-    sy, sx = floor.cell(start_xy)
+    sy, sx = int((start_xy[1] - origin_xy[1]) / res), int((start_xy[0] - origin_xy[0]) / res)
     if not (0 <= sy < safe.shape[0] and 0 <= sx < safe.shape[1] and safe[sy, sx]):
         k = int(np.argmin((iy_all - sy) ** 2 + (ix_all - sx) ** 2))
         sy, sx = int(iy_all[k]), int(ix_all[k])
     labels, _n = ndimage.label(safe, structure=np.ones((3, 3)))
-    return _Floor(labels == labels[sy, sx], floor.occupied, (sy, sx), res, origin_xy)
+    occupied = _coarsen(cells == OCCUPIED, factor)
+    return _Floor(labels == labels[sy, sx], occupied, (sy, sx), res, origin_xy)
 
 
 def support_targets(surfaces: Sequence[SupportSurface], step_m: float = 0.5) -> FloatArray:
