@@ -645,9 +645,12 @@ class MissionSettings(_Section):
     #: artifact in doubt: one the map saw only from beyond `patrol_recheck_beyond_m` (the
     #: map's `class_near_m`: its class is a guess), or one closer than
     #: `patrol_recheck_pair_m` to another class's (one object read two ways: two real
-    #: ones stand 0.3 m apart or more).
+    #: ones stand 0.3 m apart or more), or one seen fewer than `patrol_recheck_below`
+    #: times (the map's `drop_below_observations`: a look that misses it deletes it; hall
+    #: seed 2 kept a box seen twice from 1.7 m that no later look came near).
     patrol_second_look: bool = True
     patrol_recheck_beyond_m: Positive = 2.0
+    patrol_recheck_below: NonNegativeInt = 10
     patrol_recheck_pair_m: NonNegative = 0.25
     patrol_recheck_see_m: Positive = 1.3
     #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,

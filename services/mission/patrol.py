@@ -11,7 +11,8 @@ wrist camera's view less a margin (`VIEW_HALF_ANGLE`); with no surface in the ma
 lattice.
 
 `in_doubt(artifacts, settings)` names the map's artifacts whose class or place a person
-would want to look at again (seen only from afar; two classes at one place), and
+would want to look at again (seen only from afar or a few times; two classes at one
+place), and
 `plan_second_look` the route that faces them from nearer (`coverage.facing_route`): the
 semantic pass's last stage (`patrol_desk`).
 
@@ -118,8 +119,8 @@ def plan_patrol(
 
 def in_doubt(artifacts: list[MapEntity], settings: MissionSettings) -> dict[str, str]:
     """The artifacts the map made itself that are worth a second look, with why: seen
-    only from beyond `patrol_recheck_beyond_m`, or within `patrol_recheck_pair_m` of an
-    artifact of another class."""
+    only from beyond `patrol_recheck_beyond_m`, seen fewer than `patrol_recheck_below`
+    times, or within `patrol_recheck_pair_m` of an artifact of another class."""
     s = settings
     mine = [a for a in artifacts if a.source == "perception"]
     out: dict[str, str] = {}
@@ -127,6 +128,8 @@ def in_doubt(artifacts: list[MapEntity], settings: MissionSettings) -> dict[str,
         far = a.nearest_view_m
         if far is not None and far > s.patrol_recheck_beyond_m:
             out[a.id] = f"seen only from {far:.1f} m"
+        elif a.observations < s.patrol_recheck_below:
+            out[a.id] = f"seen {a.observations} times"
         for b in mine:
             d = math.dist(a.position_in_world[:2], b.position_in_world[:2])
             if b.class_name != a.class_name and d < s.patrol_recheck_pair_m:

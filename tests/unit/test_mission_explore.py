@@ -314,12 +314,12 @@ def test_after_the_semantic_pass_it_looks_again_from_near_at_an_artifact_seen_fr
     assert abs(math.remainder(yaw - math.atan2(2.6 - v[1], 5.4 - v[0]), math.tau)) < 0.05
 
 
-def test_what_is_in_doubt_is_what_the_map_saw_only_from_afar_or_two_ways_at_one_place() -> None:
+def test_what_is_in_doubt_is_what_the_map_saw_only_from_afar_a_few_times_or_two_ways() -> None:
     def art(i: str, cls: str, xy: tuple[float, float], near: float | None,
-            source: str = "perception") -> MapEntity:  # fmt: skip
+            source: str = "perception", seen: int = 40) -> MapEntity:  # fmt: skip
         return MapEntity(id=i, class_name=cls, kind="artifact", position_in_world=(*xy, 0.8),
                          uncertainty_m=0.05, last_seen_ns=0, source=source,  # type: ignore[arg-type]
-                         nearest_view_m=near)  # fmt: skip
+                         nearest_view_m=near, observations=seen)  # fmt: skip
 
     m = fast_settings()
     arts = [
@@ -329,10 +329,12 @@ def test_what_is_in_doubt_is_what_the_map_saw_only_from_afar_or_two_ways_at_one_
         art("bottle_2", "bottle", (4.0, 0.0), 1.0),  # fine
         art("bottle_3", "bottle", (6.0, 0.0), None, source="prior"),  # not the map's own
         art("can_2", "can", (6.1, 0.0), 4.0, source="prior"),
+        art("box_2", "box", (8.0, 0.0), 1.7, seen=2),  # twice from near: a false entry?
+        art("box_3", "box", (10.0, 0.0), 1.7, seen=10),  # fine
     ]
     doubt = in_doubt(arts, m)
     assert doubt == {"box_1": "seen only from 3.1 m", "can_1": "0.12 m from bottle_1",
-                     "bottle_1": "0.12 m from can_1"}  # fmt: skip
+                     "bottle_1": "0.12 m from can_1", "box_2": "seen 2 times"}  # fmt: skip
 
 
 def test_a_dependency_lost_while_no_tick_comes_fails_the_exploration_at_once() -> None:
