@@ -3,8 +3,9 @@ nothing, on ray-cast scans (±1.5 cm) and odometry that drifts (3 % long, 0.8° 
 to the left), once per loop-closure registration (`localization.slam.closure_registration`:
 `field`, the correlative search and Gauss-Newton refine on the submap's grid, and `gicp`,
 small_gicp's GICP on the submap's returns): the pose error against the truth (p50, p95,
-max, and over the last 4 m, after the loop closed), the closures taken, the registration's
-wall ms per closure and the wall ms per scan. The same hall and loop are the unit tests'
+max, and over the last 4 m, after the loop closed), the closures taken, the keyframes
+and how many the closures cast into the grid again, the registration's wall ms per
+closure and the wall ms per scan. The same hall and loop are the unit tests'
 (`tests/unit/test_slam.py`).
 """
 
@@ -107,6 +108,8 @@ def bench_slam(settings: Overrides) -> dict[str, Any]:
             "position_error_m": _percentiles(errors),
             "after_closure_max_m": round(max(errors[-40:]), 4),
             "closures": len(slam.closures),
+            "keyframes": len(slam.keyframes),
+            "keyframes_cast_again": slam.recast,
             "closure_ms": _percentiles(slam.closure_ms, digits=1) if slam.closure_ms else {},
             "ms_per_scan": round(1e3 * wall / len(errors), 2),
         }

@@ -73,6 +73,31 @@ def test_a_cell_crossed_more_than_hit_is_free_again() -> None:
     assert cells[ix(0.0), ix(2.5)] == UNKNOWN
 
 
+def test_a_closure_casts_again_only_the_keyframes_it_moved_and_leaves_no_doubled_wall(
+    loop: tuple[Slam, list[float]],
+) -> None:
+    slam, _ = loop
+    assert 0 < slam.recast < len(slam.closures) * len(slam.keyframes)
+    # the grid as kept is the one cast anew from every keyframe, within a quarter cell
+    fresh = ScanGrid.centred(slam.c.half_extent_m, slam.c.resolution_m, slam.c.occupied_ratio)
+    fresh.rebuild(slam.keyframes)
+    kept, anew = slam.grid.cells(), fresh.cells()
+    assert np.mean(kept != anew) < 1e-3
+    # a keyframe moved more than the tolerance is taken out where it was and cast anew
+    origin = (0.0, 0.0)
+    grid = ScanGrid.centred(3.0, 0.05, 0.35)
+    wall = np.array([[2.0, y] for y in np.linspace(-1.0, 1.0, 41)])
+    kf = Keyframe((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), wall, origin)
+    assert grid.recast([kf], 0.0125) == 1
+    kf.pose = (0.005, 0.0, 0.001)  # 5 mm + 1 mrad × 2.2 m: within a quarter cell
+    assert grid.recast([kf], 0.0125) == 0
+    kf.pose = (0.3, 0.0, 0.0)  # the wall 30 cm further: one wall, not two
+    assert grid.recast([kf], 0.0125) == 1
+    once = ScanGrid.centred(3.0, 0.05, 0.35)
+    once.add(kf)
+    assert np.array_equal(grid.hits, once.hits) and np.array_equal(grid.misses, once.misses)
+
+
 def test_a_turn_on_the_spot_keeps_its_heading() -> None:
     """A full turn on the spot (the exploration's look around) with exact odometry: each
     new scan sees walls the keyframes before it saw only in part. Matched against the
