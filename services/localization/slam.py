@@ -27,13 +27,13 @@ is in a map it builds itself, and that map, as Cartographer's 2D pipeline splits
 - **The occupancy grid** (`ScanGrid`): each keyframe's beams cast into the map at its
   pose: a cell a beam ends in counts a hit, one it crosses a miss; a cell is occupied
   when `occupied_ratio` of its counts are hits, free when it was crossed and is not
-  occupied, unknown otherwise. After a closure each keyframe the optimization moved is
-  taken out of the grid at the pose it was cast at and cast again at its new one, so
-  the map never keeps a doubled wall; one whose returns all moved less than
-  `RECAST_CELLS` of a cell stays as cast (the grid is then within that of one cast
-  anew from every keyframe, which took 60 % of a core in a hall exploration, the lockstep
-  waiting on it: closures come every few keyframes and most move the old ones by
-  millimetres).
+  occupied, unknown otherwise (the tracking's local grid alike, over its keyframes).
+  After a closure each keyframe the optimization moved is taken out of the grid at the
+  pose it was cast at and cast again at its new one, so the map never keeps a doubled
+  wall; one whose returns all moved less than `RECAST_CELLS` of a cell stays as cast
+  (the grid is then within that of one cast anew from every keyframe, which took 60 %
+  of a core in a hall exploration, the lockstep waiting on it: closures come every few
+  keyframes and most move the old ones by millimetres).
 
 All (x, y, yaw) in SE(2), the map frame; pure (numpy, scipy, gtsam), no transport:
 `services/localization/node.py` feeds it in `slam` mode, `tests/unit/test_slam.py`
@@ -118,14 +118,16 @@ class ScanGrid:
         ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
         return np.unique(iy[ok] * nx + ix[ok])
 
-    def add(self, kf: Keyframe, weight: float = 1.0) -> None:
-        """Cast one keyframe's beams at its pose: each cell counted once per keyframe
-        (`weight` −1 takes a keyframe out again, at the pose it was cast at)."""
-        if weight < 0:
-            _, pose = self._cast.pop(id(kf), (kf, kf.pose))
-        else:
-            pose = self._cast.setdefault(id(kf), (kf, kf.pose))[1]
-        self._count(kf, pose, weight)
+    def add(self, kf: Keyframe) -> None:
+        """Cast one keyframe's beams at its pose: each cell counted once per keyframe."""
+        pose = self._cast.setdefault(id(kf), (kf, kf.pose))[1]
+        self._count(kf, pose, 1.0)
+
+    def remove(self, kf: Keyframe) -> None:
+        """Take a keyframe out of the counts, at the pose it was cast at (none: a no-op)."""
+        was = self._cast.pop(id(kf), None)
+        if was is not None:
+            self._count(kf, was[1], -1.0)
 
     def recast(self, keyframes: list[Keyframe], tol_m: float) -> int:
         """Every keyframe in the counts at its pose now: one not cast yet is cast, one
@@ -138,7 +140,7 @@ class ScanGrid:
                 d, turned = _moved(kf.pose, was[1])
                 if d + turned * kf.reach_m <= tol_m:
                     continue
-                self.add(kf, -1.0)
+                self.remove(kf)
             self.add(kf)
             cast += 1
         return cast
@@ -339,12 +341,11 @@ class Slam:
         if closure is not None:
             self.closures.append(closure)
             self.recast += self.grid.recast(self.keyframes, RECAST_CELLS * self.grid.resolution_m)
-            self.local.rebuild(self.keyframes[-n:])
         else:
             self.grid.add(kf)
-            self.local.add(kf)
-            if len(self.keyframes) > n:
-                self.local.add(self.keyframes[-n - 1], -1.0)
+        self.local.recast(self.keyframes[-n:], RECAST_CELLS * self.local.resolution_m)
+        if len(self.keyframes) > n:
+            self.local.remove(self.keyframes[-n - 1])
         self._local = self.local.field() or self._local
 
     def _close_loop(self, k: int) -> Closure | None:

@@ -96,6 +96,9 @@ def test_a_closure_casts_again_only_the_keyframes_it_moved_and_leaves_no_doubled
     once = ScanGrid.centred(3.0, 0.05, 0.35)
     once.add(kf)
     assert np.array_equal(grid.hits, once.hits) and np.array_equal(grid.misses, once.misses)
+    grid.remove(kf)  # out where it was cast; a keyframe not in the counts: nothing
+    grid.remove(Keyframe((1.0, 0.0, 0.0), (0.0, 0.0, 0.0), wall, origin))
+    assert not grid.hits.any() and not grid.misses.any()
 
 
 def test_a_turn_on_the_spot_keeps_its_heading() -> None:
