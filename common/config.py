@@ -392,8 +392,10 @@ class SemanticMapSettings(_Section):
     gate_sigmas: Positive = 3.0
     #: Detections an artifact or person needs before it gets an id.
     confirm_hits: PositiveInt = 2
-    #: One object under two classes: artifacts closer than `class_merge_m` are one, and
-    #: the class seen more often from within `class_near_m` keeps it, m. One of them never
+    #: One object in pieces: detections of one class in one frame, and artifacts of one
+    #: class, closer than `class_merge_m` are one (the thinnest two touching stand 4 cm
+    #: apart). One object under two classes: artifacts closer than `class_merge_m` are
+    #: one, and the class seen more often from within `class_near_m` keeps it, m. One never
     #: seen whole from within `class_near_m` is the same object within `class_merge_far_m`
     #: (far views sit 10-16 cm off; a second real object there would have been seen from
     #: where the other was: hall seed 1's ghost can was 6 cm from the box it misread).

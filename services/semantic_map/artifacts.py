@@ -11,6 +11,15 @@ views within `NEAR_BAND_M` of the nearest one fused so far move the estimate, an
 nearer than that band restarts it from itself (`Track.best_range_m`, stored with it; a
 seeded or imported artifact, which does not know, fuses its first view as it comes).
 
+One object in pieces: an occluder or a depth cut splits a bottle's mask into its upper and
+lower parts, two detections of one class at one place in one frame. Detections of one
+class within `class_merge_m` of each other in a frame (closer than two real objects'
+centres can be: the thinnest two touching stand 4 cm apart) are one: the higher score's
+is kept (`pieces`). Otherwise the second piece starts an artifact of its own beside the
+first (hall seed 4: bottle_1 and bottle_7 5 cm apart, their heights 4 cm apart), and two
+artifacts of one class within `class_merge_m` are one object too (`class_conflicts`: the
+one with more near views, then more views, keeps it).
+
 One frame's detections are matched to the artifacts of their class greedily by distance,
 each artifact taking at most one detection, inside a gate of max(gate_min, gate_sigmas ×
 √(σ_track² + σ_meas²)). A detection that matches nothing starts a tentative track; the
@@ -89,6 +98,7 @@ class ArtifactTracker:
     ) -> tuple[list[Track], set[int]]:
         """Fuse one frame. Returns the tracks changed (confirmed ones, to store) and the
         indices (into `self.tracks`, after the update) of the tracks seen in this frame."""
+        observations = pieces(observations, self.settings.class_merge_m)
         pairs: list[tuple[float, int, int]] = []
         for j, obs in enumerate(observations):
             for i, tr in enumerate(self.tracks):
@@ -189,17 +199,18 @@ class ArtifactTracker:
         whose class gives way (a tie goes against `new`); None when they are not one
         object or neither was seen from near `confirm_hits` times."""
         p = self.settings
-        if (
-            new.class_name == old.class_name
-            or new.source != "perception"
-            or new.source != old.source
-        ):
+        if new.source != "perception" or new.source != old.source:
             return None
+        apart = math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1])
+        if new.class_name == old.class_name:  # one object in two pieces (module docstring)
+            if apart > p.class_merge_m:
+                return None
+            return new if (new.near_hits, new.hits) <= (old.near_hits, old.hits) else old
         if max(new.near_hits, old.near_hits) < p.confirm_hits:
             return None
         far = min(new.near_hits, old.near_hits) == 0  # one was never seen whole from near
         limit = max(p.class_merge_m, p.class_merge_far_m) if far else p.class_merge_m
-        if math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1]) > limit:
+        if apart > limit:
             return None
         return new if (new.near_hits, new.hits) <= (old.near_hits, old.hits) else old
 
@@ -213,3 +224,16 @@ class ArtifactTracker:
     def _expire(self, stamp_ns: int) -> None:
         ttl = TENTATIVE_TTL_NS
         self.tracks = [t for t in self.tracks if t.confirmed or stamp_ns - t.last_seen_ns <= ttl]
+
+
+def pieces(observations: list[Observation], within_m: float) -> list[Observation]:
+    """One frame's detections with the pieces of one object made one: of those of a class
+    within `within_m` of each other, the one with the higher score (the first on a tie)."""
+    kept: list[Observation] = []
+    for obs in sorted(observations, key=lambda o: -o.score):
+        if not any(
+            k.class_name == obs.class_name and float(np.linalg.norm(k.xy - obs.xy)) <= within_m
+            for k in kept
+        ):
+            kept.append(obs)
+    return [o for o in observations if any(o is k for k in kept)]

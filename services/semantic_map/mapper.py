@@ -18,7 +18,8 @@ within `person_look_range_m` (the segmenter finds people farther than artifacts)
 Prior, seeded and imported entities, and well-observed ones, are only marked missing
 (artifacts) or kept (people). One object the map made under two classes (a can on a bench
 read as a box from 3 m and as a can from 1.5 m) keeps the class seen from near, and the
-other entry is deleted with the reason (`ArtifactTracker.class_conflicts`).
+other entry is deleted with the reason (`ArtifactTracker.class_conflicts`); so is one of
+two artifacts of one class at one place (an object's mask split in pieces).
 Measurement conventions: an artifact is placed at the detection's axis point (about a
 radius behind the visible surface) at the visible centroid's height; a person at the
 axis point's floor projection; the horizontal noise grows with the range d_obj. Person
@@ -437,6 +438,12 @@ class SemanticMap:
         return out
 
     def _class_reason(self, loser: Track, winner: Track) -> str:
+        if loser.class_name == winner.class_name:
+            apart = float(np.linalg.norm(loser.xy - winner.xy))
+            return (
+                f"the same object as {winner.id}, {apart * 100:.0f} cm apart (seen "
+                f"{winner.hits} and {loser.hits} time(s): one {loser.class_name} in pieces)"
+            )
         return (
             f"the same object as {winner.id}, seen as a {winner.class_name} from within "
             f"{self.settings.class_near_m:g} m {winner.near_hits} time(s) and as a "

@@ -189,3 +189,34 @@ def test_a_view_cut_by_the_image_border_is_no_evidence_of_the_class() -> None:
         )
     assert [t.near_hits for t in tracker.confirmed] == [0, 0]
     assert tracker.class_conflicts() == []
+
+
+def test_one_object_in_pieces_is_one_artifact() -> None:
+    # Hall seed 4: a bottle's mask split in its upper and lower parts, two detections at
+    # one place in one frame; the second piece made bottle_7 5 cm from bottle_1.
+    tracker = ArtifactTracker(IdBook(), SemanticMapSettings())
+    for k in range(4):
+        upper = Observation("bottle", np.array([-5.87, 0.07]), 0.94, 0.03, 0.7, range_m=0.9)
+        lower = Observation("bottle", np.array([-5.85, 0.03]), 0.89, 0.03, 0.9, range_m=0.9)
+        side = Observation("bottle", np.array([-5.85, 0.33]), 0.9, 0.03, 0.9, range_m=0.9)
+        tracker.update(k * S, [upper, lower, side])
+    (one, other) = tracker.confirmed
+    assert (one.hits, other.hits) == (4, 4)
+    assert np.allclose(one.xy, [-5.85, 0.03])  # the piece with the higher score
+    # two artifacts of one class that came to one place are one (the fewer views give way)
+    late = ArtifactTracker(IdBook(), SemanticMapSettings())
+    for k in range(6):
+        _seen(late, k, "bottle", (-5.85, 0.03), 0.9)
+    for k in range(6, 9):  # a piece seen alone, say a gripper in front: 25 cm off, then near
+        _seen(late, k, "bottle", (-5.85, 0.3), 0.9)
+    assert late.class_conflicts() == []  # 27 cm apart: two objects
+    late.tracks[1].xy = np.array([-5.87, 0.07])  # it drifted onto the first
+    ((loser, winner),) = late.class_conflicts()
+    assert (loser.id, winner.id) == ("bottle_2", "bottle_1")
+    # two real bottles side by side, 6 cm apart, seen together: two
+    pair = ArtifactTracker(IdBook(), SemanticMapSettings())
+    for k in range(4):
+        a = Observation("bottle", np.array([1.0, 0.0]), 0.9, 0.03, range_m=1.0)
+        b = Observation("bottle", np.array([1.0, 0.06]), 0.9, 0.03, range_m=1.0)
+        pair.update(k * S, [a, b])
+    assert len(pair.confirmed) == 2 and pair.class_conflicts() == []
