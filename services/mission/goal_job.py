@@ -15,6 +15,8 @@ such jobs; `GoalJob` is what they share, one `step()` per mission tick (sim time
    `nav/status` says the current one ended (a walk refused or failed skips its
    viewpoint, a failed turn is passed over); navigation refusing with a typed error (it
    cannot take goals at all) fails the job `navigation_failed`, no answer `unavailable`;
+   after a walk that arrived, the job holds there `dwell_ns` (0 but for a route that
+   faces what it came for) before the next goal or its end, so the map gets its looks;
 4. done, stopped (`stop`) or failed (`fail`): the navigation goal cancelled, the WBC to
    `stand`, the arm back to `stow`.
 
@@ -79,6 +81,9 @@ class GoalJob(ABC):
         self._arm_goal = ""
         self._arm_since_ns = 0
         self._arm_in_look = False
+        #: How long the job holds at a viewpoint it walked to, and until when, ns.
+        self.dwell_ns = 0
+        self._hold_until_ns = 0
 
     # -- what a job says ------------------------------------------------------------------
 
@@ -122,6 +127,7 @@ class GoalJob(ABC):
         self._started, self._stop = False, ""
         self.travelled_m, self._last_xy = 0.0, None
         self._arm_pending, self._arm_goal, self._arm_in_look = True, "", False
+        self._hold_until_ns = 0
 
     def stop(self, why: str = "stopped by a request") -> None:
         """End at the next `step`: the goal cancelled, the arm stowed, standing."""
@@ -169,11 +175,13 @@ class GoalJob(ABC):
         if self._last_xy is not None:
             self.travelled_m += math.hypot(xy[0] - self._last_xy[0], xy[1] - self._last_xy[1])
         self._last_xy = xy
+        if b < self._hold_until_ns:
+            return  # holding at a viewpoint
         w = self._walker()
         if w is None or not self.running:
             return
         self._step_nav(w)
-        if self.running and w.done:
+        if self.running and w.done and b >= self._hold_until_ns:
             self._walked(w)
 
     def _step_arm(self, b: int) -> None:
@@ -208,6 +216,7 @@ class GoalJob(ABC):
         self._arm_pending = False
 
     def _step_nav(self, w: NavPatrol) -> None:
+        b = self.port.now_ns
         if w.goal_id:
             st = self.port.nav_status(w.goal_id)
             if st is not None and st.state in TERMINAL:
@@ -215,9 +224,14 @@ class GoalJob(ABC):
                 if not ok:
                     log.info("%s goal %s %s: %s %s", self.task, w.goal_id, st.state, st.reason,
                              st.detail)  # fmt: skip
+                walk = w.current is not None and not w.current.look
                 w.finished(ok, f"{st.state}: {st.reason} {st.detail}".strip())
+                if ok and walk:
+                    self._hold_until_ns = b + self.dwell_ns
             if w.goal_id:
                 return
+        if b < self._hold_until_ns:
+            return
         goal = w.current
         if goal is None:
             return

@@ -31,6 +31,7 @@ import numpy as np
 
 from common.config import MissionSettings
 from common.messages import as_numpy
+from common.messages.base import NS_PER_S
 from common.messages.mission import PatrolReason
 from common.messages.semantic_map import MapEntity
 from common.robot_description import CAMERA_MOUNTS
@@ -183,6 +184,8 @@ class PatrolRunner(GoalJob):
         turns = LOOK_TURNS if self.settings.patrol_look_around else 0  # none with facings
         yaw = self.port.robot_yaw() or 0.0
         self.arm_posture = self.settings.patrol_arm_posture
+        facing = route.facings is not None
+        self.dwell_ns = round(self.settings.patrol_dwell_s * NS_PER_S) if facing else 0
         self.walker = NavPatrol(route, patrol_goals(route, yaw, turns))
         self._begin()
 

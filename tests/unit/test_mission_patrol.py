@@ -86,6 +86,33 @@ def test_the_route_is_walked_viewpoint_by_viewpoint_with_the_arm_in_look() -> No
     assert not robot.active_nav_goals()
 
 
+def test_a_route_that_faces_holds_at_each_viewpoint_before_it_walks_on_or_ends() -> None:
+    # the semantic pass and the second look: the map needs its looks at each place
+    robot = FakeRobot()
+    runner = PatrolRunner(robot, fast_settings(patrol_dwell_s=0.5))  # 10 ticks
+    route = _route()
+    runner.start(Route(route.viewpoints, route.paths, facings=[0.0, 1.5, 3.0]))
+    sent: list[int] = []  # the tick each goal went out
+    done = None
+    for k in range(200):
+        runner.step()
+        if len(robot.nav_goals) > len(sent):
+            sent.append(k)
+        if runner.state == "done" and done is None:
+            done = k
+        robot.advance()
+    assert _walks(robot) == VIEWPOINTS and len(robot.nav_goals) == 3  # no turns
+    assert done is not None
+    # a goal takes nav_ticks; then the hold of 10 ticks: the next one (or the end) after
+    gaps = [b - a for a, b in itertools.pairwise([*sent, done])]
+    assert all(g >= robot.nav_ticks + 10 for g in gaps), gaps
+    # a route without facings (the lattice's look-around) does not hold
+    plain = FakeRobot()
+    lattice = PatrolRunner(plain, fast_settings(patrol_dwell_s=0.5))
+    lattice.start(_route())
+    assert lattice.dwell_ns == 0
+
+
 def test_a_refused_viewpoint_is_skipped_with_its_turns() -> None:
     def refuse(goal: NavGoal) -> bool:
         return isinstance(goal, PoseGoal) and (goal.x, goal.y) == VIEWPOINTS[1]
