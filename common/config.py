@@ -651,16 +651,16 @@ class MissionSettings(_Section):
     #: times (the map's `drop_below_observations`: a look that misses it deletes it; hall
     #: seed 2 kept a box seen twice from 1.7 m that no later look came near).
     patrol_second_look: bool = True
+    patrol_recheck_beyond_m: Positive = 2.0
+    patrol_recheck_below: NonNegativeInt = 10
+    patrol_recheck_pair_m: NonNegative = 0.25
+    patrol_recheck_see_m: Positive = 1.3
     #: At each viewpoint of a route that faces what it came for (the semantic pass, the
     #: second look) the patrol holds this long before it walks on or ends, s: the map
     #: counts an artifact missing after `missing_after_frames` looks at its place, and the
     #: second look's last viewpoint ended the route as it arrived (hall seed 4's box_3,
     #: a bench's end read as a box, was looked at again and kept).
     patrol_dwell_s: NonNegative = 1.0
-    patrol_recheck_beyond_m: Positive = 2.0
-    patrol_recheck_below: NonNegativeInt = 10
-    patrol_recheck_pair_m: NonNegative = 0.25
-    patrol_recheck_see_m: Positive = 1.3
     #: The arm's posture while patrolling: `look` holds the wrist camera up (about 1.1 m,
     #: looking ahead and down) where it sees the tops of benches that the head camera,
     #: pitched 20° down under the trunk, cannot see within 2.5 m; `stow` leaves it folded.

@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import gtsam
 import numpy as np
@@ -78,10 +79,10 @@ class Keyframe:
     points: FloatArray
     origin: tuple[float, float]
 
-    @property
+    @cached_property
     def reach_m(self) -> float:
         """The farthest return from the base, m: a move of the pose by (d, θ) moves no
-        return (nor a beam) more than d + θ × this."""
+        return (nor a beam) more than d + θ × this (the returns never change)."""
         if len(self.points) == 0:
             return 0.0
         return float(np.sqrt(np.max(np.einsum("ij,ij->i", self.points, self.points))))

@@ -180,7 +180,7 @@ class GoalJob(ABC):
         w = self._walker()
         if w is None or not self.running:
             return
-        self._step_nav(w)
+        self._step_nav(w, b)
         if self.running and w.done and b >= self._hold_until_ns:
             self._walked(w)
 
@@ -215,8 +215,7 @@ class GoalJob(ABC):
             self.say(f"arm posture {name} {goal.state}: {goal.reason}: walking on")
         self._arm_pending = False
 
-    def _step_nav(self, w: NavPatrol) -> None:
-        b = self.port.now_ns
+    def _step_nav(self, w: NavPatrol, b: int) -> None:
         if w.goal_id:
             st = self.port.nav_status(w.goal_id)
             if st is not None and st.state in TERMINAL:
@@ -228,10 +227,8 @@ class GoalJob(ABC):
                 w.finished(ok, f"{st.state}: {st.reason} {st.detail}".strip())
                 if ok and walk:
                     self._hold_until_ns = b + self.dwell_ns
-            if w.goal_id:
+            if w.goal_id or b < self._hold_until_ns:  # still walking, or holding there
                 return
-        if b < self._hold_until_ns:
-            return
         goal = w.current
         if goal is None:
             return

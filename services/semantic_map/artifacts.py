@@ -195,22 +195,21 @@ class ArtifactTracker:
         return out
 
     def _loser(self, new: Track, old: Track) -> Track | None:
-        """Of two perception-made artifacts of different classes at one place, the one
-        whose class gives way (a tie goes against `new`); None when they are not one
-        object or neither was seen from near `confirm_hits` times."""
+        """Of two perception-made artifacts at one place, the one that gives way (fewer
+        near views, then fewer views; a tie goes against `new`); None when they are not
+        one object: further apart than `class_merge_m` (of one class: one object in
+        pieces), or of two classes and neither seen from near `confirm_hits` times, or
+        further apart than their limit (the module docstring)."""
         p = self.settings
         if new.source != "perception" or new.source != old.source:
             return None
-        apart = math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1])
-        if new.class_name == old.class_name:  # one object in two pieces (module docstring)
-            if apart > p.class_merge_m:
+        limit = p.class_merge_m
+        if new.class_name != old.class_name:
+            if max(new.near_hits, old.near_hits) < p.confirm_hits:
                 return None
-            return new if (new.near_hits, new.hits) <= (old.near_hits, old.hits) else old
-        if max(new.near_hits, old.near_hits) < p.confirm_hits:
-            return None
-        far = min(new.near_hits, old.near_hits) == 0  # one was never seen whole from near
-        limit = max(p.class_merge_m, p.class_merge_far_m) if far else p.class_merge_m
-        if apart > limit:
+            if min(new.near_hits, old.near_hits) == 0:  # one never seen whole from near
+                limit = max(p.class_merge_m, p.class_merge_far_m)
+        if math.hypot(new.xy[0] - old.xy[0], new.xy[1] - old.xy[1]) > limit:
             return None
         return new if (new.near_hits, new.hits) <= (old.near_hits, old.hits) else old
 
@@ -236,4 +235,5 @@ def pieces(observations: list[Observation], within_m: float) -> list[Observation
             for k in kept
         ):
             kept.append(obs)
-    return [o for o in observations if any(o is k for k in kept)]
+    keep = {id(k) for k in kept}
+    return [o for o in observations if id(o) in keep]
