@@ -102,7 +102,7 @@ ALL = ("sim", "wbc", "perception", "nav")
 #: command line lists them without importing the trials' dependencies).
 TRIALS = (
     "walk", "turn", "strafe", "random", "reach", "pick", "push", "localize", "localize-off", "slam",
-    "goto", "goals", "person", "fetch", "patrol", "explore", "fuzz", "faults",
+    "goto", "goals", "person", "crossing", "fetch", "patrol", "explore", "fuzz", "faults",
     "updown", "soak",
 )  # fmt: skip
 

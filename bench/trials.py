@@ -27,7 +27,9 @@ the sim's truth, and every trial reports the odometry's errors against it (`odom
 Navigation's trials run over the full navigation stack instead (`bench.nav_run`):
 - goto X Y [yaw]: one pose goal (`bench.trial_goto`).
 - goals: `count` random goals in a row across the world (`bench.trial_goals`).
-- person: a person steps into the path (hall, seed 3; `bench.nav_person`).
+- person: a person steps into the path (hall, seed 3; `bench.nav_person`); crossing: a
+  person walks across it without stopping; both judged by the speed and separation
+  monitor's rule from truth.
 
 - fetch: one bring-me by the real mission over the full stack, its manipulation measured
   against the sim's truth (approach error, where the jaws closed, pull felt against taken;
@@ -56,7 +58,7 @@ from common.config import Overrides, merged
 from common.geometry import rpy_of_quat_xyzw, wrap_angle
 from common.messages.wbc import Posture, Reach
 
-NAV_TRIALS = ("goto", "goals", "person")
+NAV_TRIALS = ("goto", "goals", "person", "crossing")
 Figures = dict[str, Any]
 
 
@@ -320,10 +322,10 @@ def _nav_trial(
         from bench.trial_goto import goto
 
         return goto(opts["x"], opts["y"], opts.get("yaw", 0.0), world, seed, overrides)
-    if name == "person":
+    if name in ("person", "crossing"):
         from bench.nav_person import person_trial
 
-        return person_trial(overrides)
+        return person_trial(overrides, "step_in" if name == "person" else name)
     from bench.trial_goals import goals_trial
 
     return goals_trial(opts.get("count") or 10, world, seed, overrides)

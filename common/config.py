@@ -467,15 +467,27 @@ class PlannerSettings(_Section):
 class PeopleSettings(_Section):
     """Navigation's speed rules around people (`services/navigation/people.py`).
 
-    Distances m from the robot's footprint, speeds m/s: the cap within `slow_radius_m` of
-    anyone (`slow_speed`) or of the person handed over to (`handover_speed`), and the
-    distance at which a person in the direction of travel stops the robot.
+    Distances m from the robot's footprint, speeds m/s, times s. The slow zone: the cap
+    within `slow_radius_m` of anyone (`slow_speed`) or of the person handed over to
+    (`handover_speed`). The protective separation of ISO/TS 15066
+    (`services/navigation/separation.py`): the reaction time from a camera frame to a
+    command in effect (the head camera's period, perception's and navigation's), the
+    deceleration the trot brakes at, the intrusion distance C (a body's reach beyond the
+    point perception measures), the uncertainties of the person's position Z_d and of the
+    robot's Z_r, the margin on a person's estimated speed, and the speed assumed for a
+    person whose velocity is not known yet (ISO 13855's walking speed).
     """
 
     slow_radius_m: NonNegative = 2.0
     slow_speed: NonNegative = 0.3
-    stop_distance_m: NonNegative = 0.6
     handover_speed: NonNegative = 0.15
+    reaction_s: NonNegative = 0.3
+    brake_decel_mps2: Positive = 0.5
+    intrusion_m: NonNegative = 0.25
+    detection_uncertainty_m: NonNegative = 0.1
+    robot_uncertainty_m: NonNegative = 0.05
+    person_speed_margin_mps: NonNegative = 0.15
+    unknown_person_speed_mps: NonNegative = 1.6
 
 
 class NavigationSettings(_Section):

@@ -17,7 +17,7 @@
     dume bench sim|wbc|nav|stack|all                        print figures (JSON last line)
     dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
     dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
-    dume trial goals [--count 10] | person             random goals; a person stepping in (JSON)
+    dume trial goals [--count 10] | person | crossing     random goals; people in the path (JSON)
     dume trial fuzz [--count 10000]                      every key a service takes, fuzzed (JSON)
     dume train-segmenter [--seed S]                         render data, train, export ONNX
     dume train-segmenter --confusion MODEL                  its confusion by range, held out

@@ -41,12 +41,14 @@ class CostParams:
 
 @dataclass(frozen=True)
 class Person:
-    """A person on the floor: id, position (m, world), yaw (rad; None when unknown)."""
+    """A person on the floor: id, position (m, world), yaw (rad; None when unknown), floor
+    velocity (m/s, world; None while not known: a person just seen)."""
 
     id: str
     x: float
     y: float
     yaw: float | None = None
+    velocity: tuple[float, float] | None = (0.0, 0.0)
 
 
 def clearance(occupied: BoolGrid, resolution: float) -> FloatGrid:

@@ -4,7 +4,8 @@ Logged on change: the goal's state and reason, the speed rule acting (slow, hand
 stop — with the person and their distance), recoveries; at 2 Hz while the robot aligns
 its final heading (within 0.3 m of the goal): the yaw error, the commanded and the
 measured ωz. To rerun: every new plan (`world/nav/plan`), the follower's command and the
-tick's time at 5 Hz (`plots/nav/…`), and the costmap at 1 Hz as a textured quad on the
+tick's time at 5 Hz (`plots/nav/…`), with the speed rule's person: their separation, the
+protective separation at rest and the cap (`plots/nav/separation/…`), and the costmap at 1 Hz as a textured quad on the
 floor of the 3D world (`world/nav/costmap`: lethal red, costs orange).
 """
 
@@ -80,8 +81,10 @@ class NavLogger:
         if rule != self.rule:
             if rule:
                 self.log.info(
-                    "t=%.2f s speed rule %s: %s at %.2f m from the footprint, cap %.2f m/s",
-                    t, rule, out.limit.person_id, out.limit.distance_m, out.limit.speed,
+                    "t=%.2f s speed rule %s: %s at %.2f m from the footprint (protective "
+                    "separation at rest %.2f m), cap %.2f m/s",
+                    t, rule, out.limit.person_id, out.limit.distance_m, out.limit.protective_m,
+                    out.limit.speed,
                 )  # fmt: skip
             else:
                 self.log.info("t=%.2f s speed rule %s released", t, self.rule)
@@ -103,6 +106,12 @@ class NavLogger:
             self.rec.log("plots/nav/cmd/vy", rr.Scalars(float(out.cmd[1])))
             self.rec.log("plots/nav/cmd/wz", rr.Scalars(float(out.cmd[2])))
             self.rec.log("plots/nav/tick_ms", rr.Scalars(tick_ms))
+            lim = out.limit
+            if lim.person_id:  # the person the speed rule acts for: separation and S_p
+                self.rec.log("plots/nav/separation/distance_m", rr.Scalars(lim.distance_m))
+                self.rec.log("plots/nav/separation/protective_m", rr.Scalars(lim.protective_m))
+                if math.isfinite(lim.speed):
+                    self.rec.log("plots/nav/separation/cap_mps", rr.Scalars(lim.speed))
         if b - self.last_costmap >= 1_000_000_000:
             self.last_costmap = b
             self.rec.log("world/nav/costmap", costmap_mesh(cm))

@@ -1,17 +1,25 @@
-"""Speed and separation monitoring around people (in the spirit of ISO/TS 15066).
+"""Speed and separation monitoring around people (ISO/TS 15066's, `separation`).
 
 Distances are from the robot's footprint (arm stowed) to a person's floor position.
-`people_limit` gives the speed cap of one tick (`navigation.people`): `stop` when a person
-is within `stop_distance_m` in the direction of travel (ahead of the footprint along the
-commanded velocity, within ±`TRAVEL_HALF_ANGLE_RAD`); `handover_speed` within
-`slow_radius_m` of the person being handed over to; `slow_speed` within `slow_radius_m`
-of anyone else; otherwise no cap. The caps are met at their boundaries, not only inside
-them: the command goes through acceleration limits and a period of latency, so each cap
-is approached on a braking ramp `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (`BRAKE_DECEL`,
-`BRAKE_LEAD_M`; no cap where that is at or above the base's top speed): the robot enters
-the slow zone at the slow speed, and a person ahead brings it to rest at the stop
-distance plus the lead (`stop` from there) rather than through it; a stop holds until
-the person is `RESUME_MARGIN_M` further. The node logs every change of the active rule.
+`people_limit` gives the speed cap of one tick (`navigation.people`), the tightest of two
+rules per person:
+
+- **the protective separation** (`separation.allowed_speed`): the robot's speed towards
+  the person (its travel direction's component along the line from the footprint's
+  nearest point to them) is at most the speed from which it can react and brake before
+  the separation falls below the standard's S_p, with the person's own speed towards the
+  robot (their estimated velocity plus a margin; a walking pace while unknown). Where
+  even a robot at rest is too close (S_p(0) ≥ the separation, or the allowed speed
+  below `CREEP_MPS`) and it is not moving away: `stop`. A stop holds until the person is
+  `RESUME_MARGIN_M` further than that (their position jitters from frame to frame: no
+  creeping on and off), then the robot goes on by itself;
+- **the slow zone**: `handover_speed` within `slow_radius_m` of the person being handed
+  over to, `slow_speed` within it of anyone else, entered on a braking ramp
+  `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (the command goes through acceleration limits
+  and a period of latency; no cap where that is at or above the base's top speed).
+
+The caps are commanded `TRACKING_MARGIN` below the limits. The node logs every change of
+the active rule, with the person, the separation and S_p at rest.
 """
 
 from __future__ import annotations
@@ -24,17 +32,22 @@ import numpy as np
 from common.config import PeopleSettings
 from services.navigation.costmap import Person
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
+from services.navigation.separation import (
+    SeparationParams,
+    allowed_speed,
+    directed_speed,
+    protective_distance,
+)
 
 Rule = Literal["", "slow", "handover", "stop"]
 
 
-#: Not settings (those are `PeopleSettings`, `navigation.people`): the half angle of the
-#: direction of travel (rad), the braking ramps' deceleration (m/s²) and lead (m), how much
-#: further a person must be to release a stop (m).
-TRAVEL_HALF_ANGLE_RAD = math.radians(60.0)
-BRAKE_DECEL = 0.5
+#: Not settings (those are `PeopleSettings`, `navigation.people`): the slow zone's ramp
+#: lead (m), how much further a person must be to release a stop (m), the least speed
+#: worth commanding towards a person (m/s: below it, a stop).
 BRAKE_LEAD_M = 0.1
 RESUME_MARGIN_M = 0.15
+CREEP_MPS = 0.03
 #: The caps are commanded this fraction below the limits: the trot overshoots a commanded
 #: speed by up to 13 % over 0.5 s (0.306 m/s for 0.27, `dume trial person`).
 TRACKING_MARGIN = 0.2
@@ -42,15 +55,30 @@ TRACKING_MARGIN = 0.2
 
 class SpeedLimit(NamedTuple):
     """speed: cap on the base's translation, m/s (inf: none). rule: which one acts.
-    person_id, distance_m: the person it acts for and their distance from the footprint."""
+    person_id, distance_m: the person it acts for and their distance from the footprint;
+    protective_m: S_p at rest for them (the separation below which the robot stops)."""
 
     speed: float
     rule: Rule
     person_id: str = ""
     distance_m: float = math.inf
+    protective_m: float = 0.0
 
 
 NO_LIMIT = SpeedLimit(math.inf, "")
+
+
+def separation_params(p: PeopleSettings) -> SeparationParams:
+    """The protective separation's terms from the settings."""
+    return SeparationParams(
+        reaction_s=p.reaction_s,
+        decel_mps2=p.brake_decel_mps2,
+        intrusion_m=p.intrusion_m,
+        detection_uncertainty_m=p.detection_uncertainty_m,
+        robot_uncertainty_m=p.robot_uncertainty_m,
+        speed_margin_mps=p.person_speed_margin_mps,
+        unknown_speed_mps=p.unknown_person_speed_mps,
+    )
 
 
 def people_limit(
@@ -65,54 +93,50 @@ def people_limit(
 ) -> SpeedLimit:
     """The tightest cap that people impose now; `direction_world` the intended travel
     direction (unit, world; None when not translating). `top_mps`: the base's top speed
-    (a ramp's cap at or above it is no cap). `stopped`: the last cap was a stop, which
-    then holds until the person is `RESUME_MARGIN_M` further away (their position
-    jitters from frame to frame: no creeping on and off)."""
+    (a cap at or above it is no cap). `stopped`: the last cap was a stop (it holds until
+    the person is `RESUME_MARGIN_M` further than S_p at rest)."""
     if not people:
         return NO_LIMIT
+    sep = separation_params(p)
     pts = np.array([[q.x, q.y] for q in people])
     dist = distance_to_footprint(pose, fp, pts)
     best = NO_LIMIT
     for person, d in zip(people, dist.tolist(), strict=True):
         handing = person.id == handover_id
+        n = bearing(pose, fp, (person.x, person.y))
+        v_h = directed_speed(person.velocity, (-n[0], -n[1]), sep)
+        at_rest = protective_distance(0.0, v_h, sep)
         zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - TRACKING_MARGIN)
-        speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps)
+        speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
+        cos = n[0] * direction_world[0] + n[1] * direction_world[1] if direction_world else 0.0
+        if cos > 0.0:  # moving towards them: the protective separation
+            room = d - (RESUME_MARGIN_M if stopped else 0.0)
+            v_a = allowed_speed(room, v_h, sep)
+            if v_a < CREEP_MPS:
+                return SpeedLimit(0.0, "stop", person.id, d, at_rest)
+            cap = v_a * (1.0 - TRACKING_MARGIN) / cos
+            speed = min(speed, cap if cap < top_mps else math.inf)
         if not math.isfinite(speed):
             continue
-        ahead = direction_world is not None and _ahead(
-            pose, fp, (person.x, person.y), direction_world, TRAVEL_HALF_ANGLE_RAD
-        )
-        if ahead:
-            beyond = d - p.stop_distance_m - (RESUME_MARGIN_M if stopped else 0)
-            to_stop = _ramp(0.0, beyond, top_mps)
-            if to_stop <= 0.0:  # within the stop distance and the lead: at rest
-                return SpeedLimit(0.0, "stop", person.id, d)
-            speed = min(speed, to_stop)
-        cap = SpeedLimit(speed, "handover" if handing else "slow", person.id, d)
-        if cap.speed < best.speed or (cap.speed == best.speed and d < best.distance_m):
-            best = cap
+        limit = SpeedLimit(speed, "handover" if handing else "slow", person.id, d, at_rest)
+        if limit.speed < best.speed or (limit.speed == best.speed and d < best.distance_m):
+            best = limit
     return best
 
 
-def _ramp(v_cap: float, beyond_m: float, top_mps: float) -> float:
+def _ramp(v_cap: float, beyond_m: float, top_mps: float, decel: float) -> float:
     """The speed from which the robot can brake to `v_cap` within `beyond_m` (less the
-    lead); inf when that is at or above `top_mps`, the base's top speed."""
+    lead) at `decel`; inf when that is at or above `top_mps`, the base's top speed."""
     room = beyond_m - BRAKE_LEAD_M
     if room <= 0.0:
         return v_cap
-    v = math.sqrt(v_cap * v_cap + 2.0 * BRAKE_DECEL * room)
+    v = math.sqrt(v_cap * v_cap + 2.0 * decel * room)
     return v if v < top_mps else math.inf
 
 
-def _ahead(
-    pose: Pose,
-    fp: Footprint,
-    xy: tuple[float, float],
-    direction: tuple[float, float],
-    half_angle: float,
-) -> bool:
-    """Whether the person lies in the direction of travel, seen from the footprint's
-    nearest point to them."""
+def bearing(pose: Pose, fp: Footprint, xy: tuple[float, float]) -> tuple[float, float]:
+    """The unit vector (world) from the footprint's nearest point to a person (the
+    robot's heading when they stand on it)."""
     c, s = math.cos(pose.yaw), math.sin(pose.yaw)
     dx, dy = xy[0] - pose.x, xy[1] - pose.y
     u, v = c * dx + s * dy, -s * dx + c * dy
@@ -122,5 +146,5 @@ def _ahead(
     ex, ey = xy[0] - nx, xy[1] - ny
     norm = math.hypot(ex, ey)
     if norm < 1e-6:
-        return True
-    return (ex * direction[0] + ey * direction[1]) / norm >= math.cos(half_angle)
+        return c, s
+    return ex / norm, ey / norm

@@ -15,12 +15,19 @@ not count: a patrol starts with every cell unknown) is a fixed thing the network
 took for a person (a machine's face read as a person in every frame stopped the robot
 0.3 m short of its goal in two hall worlds), and is left out. A real person is a body
 width from the nearest obstacle surface they face the camera across.
+
+Each person seen is a short track (by perception's map id, else the nearest sighting
+within `same_m`): their velocity is the least-squares slope of their positions over the
+last `velocity_window_s`, once those span `velocity_min_span_s` (None before: the speed
+and separation monitor then assumes a walking pace, `separation`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from common.grid import occupied_near
 from common.messages.base import NS_PER_S
@@ -44,6 +51,9 @@ class SeenParams:
     min_height_m: float = 0.6
     #: m: a "person" whose floor point is this close to an occupied cell is not one.
     obstacle_margin_m: float = 0.1
+    #: s: the positions a velocity is fitted to, and the least time they must span.
+    velocity_window_s: float = 0.6
+    velocity_min_span_s: float = 0.25
 
 
 class SeenPeople:
@@ -52,30 +62,58 @@ class SeenPeople:
     def __init__(self, p: SeenParams = SeenParams()) -> None:
         self.p = p
         self._seen: list[tuple[int, Person]] = []
+        self._tracks: dict[str, list[tuple[int, float, float]]] = {}
+        self._count = 0
 
     def update(self, dets: Detections, grid: Grid | None = None) -> None:
         """Replace what the camera showed before with what this frame shows (people
         inside `grid`'s obstacles left out)."""
         fresh = [
-            Person(d.map_id or f"seen_{k + 1}", d.centroid_in_world[0], d.centroid_in_world[1])
-            for k, d in enumerate(dets.detections)
+            (d.map_id, d.centroid_in_world[0], d.centroid_in_world[1])
+            for d in dets.detections
             if d.class_name == "person"
             and d.score >= self.p.min_score
             and d.extent[2] >= self.p.min_height_m
         ]
         if grid is not None and fresh:
-            xy = [(f.x, f.y) for f in fresh]
             inside = occupied_near(
-                grid.known_occupied, grid.resolution, grid.origin, xy, self.p.obstacle_margin_m
-            )
+                grid.known_occupied, grid.resolution, grid.origin,
+                [(x, y) for _, x, y in fresh], self.p.obstacle_margin_m,
+            )  # fmt: skip
             fresh = [f for f, bad in zip(fresh, inside, strict=True) if not bad]
+        people: list[Person] = []
+        for map_id, x, y in fresh:
+            people.append(self._track(map_id, x, y, dets.stamp_ns, {q.id for q in people}))
         # An earlier sighting nobody in this frame matches stays until it expires (the
         # person may be out of view, not gone).
         kept = [
             (t, q) for t, q in self._seen
-            if all(math.hypot(q.x - f.x, q.y - f.y) > self.p.same_m for f in fresh)
+            if all(math.hypot(q.x - f.x, q.y - f.y) > self.p.same_m for f in people)
+            and all(q.id != f.id for f in people)
         ]  # fmt: skip
-        self._seen = kept + [(dets.stamp_ns, f) for f in fresh]
+        self._seen = kept + [(dets.stamp_ns, f) for f in people]
+        live = {q.id for _, q in self._seen}
+        self._tracks = {k: v for k, v in self._tracks.items() if k in live}
+
+    def _track(self, map_id: str | None, x: float, y: float, t_ns: int, taken: set[str]) -> Person:
+        """This sighting on its track (the map's id, else the nearest earlier sighting
+        within `same_m` not `taken` by this frame, else a new one), with its velocity."""
+        pid = map_id
+        if pid is None:
+            near = [
+                (d, q.id) for _, q in self._seen
+                if q.id not in taken and (d := math.hypot(q.x - x, q.y - y)) <= self.p.same_m
+            ]  # fmt: skip
+            if near:
+                pid = min(near)[1]
+            else:
+                self._count += 1
+                pid = f"seen_{self._count}"
+        window = round(self.p.velocity_window_s * NS_PER_S)
+        points = [q for q in self._tracks.get(pid, []) if t_ns - q[0] <= window and q[0] < t_ns]
+        points.append((t_ns, x, y))
+        self._tracks[pid] = points
+        return Person(pid, x, y, None, fitted_velocity(points, self.p.velocity_min_span_s))
 
     def active(self, t_ns: int) -> list[Person]:
         ttl = round(self.p.ttl_s * NS_PER_S)
@@ -84,11 +122,32 @@ class SeenPeople:
 
     def merge(self, mapped: list[Person], t_ns: int) -> list[Person]:
         seen = self.active(t_ns)
+        by_id = {m.id: m for m in mapped}
+        # A person seen too briefly for a velocity of their own keeps the map's (its
+        # tracker's, over their earlier sightings).
+        out = [
+            replace(s, velocity=by_id[s.id].velocity)
+            if s.velocity is None and s.id in by_id else s
+            for s in seen
+        ]  # fmt: skip
         ids = {s.id for s in seen}
-        out = list(seen)
         for m in mapped:
             if m.id in ids:
                 continue  # seen now, wherever the map last had them
             if all(math.hypot(m.x - s.x, m.y - s.y) > self.p.same_m for s in seen):
                 out.append(m)
         return out
+
+
+def fitted_velocity(
+    points: list[tuple[int, float, float]], min_span_s: float
+) -> tuple[float, float] | None:
+    """The least-squares floor velocity (m/s) of (t ns, x, y) points; None when they span
+    less than `min_span_s` or are fewer than 3."""
+    if len(points) < 3 or (points[-1][0] - points[0][0]) / NS_PER_S < min_span_s:
+        return None
+    t = np.array([q[0] for q in points], dtype=float) / NS_PER_S
+    xy = np.array([(q[1], q[2]) for q in points])
+    dt = t - t.mean()
+    slope = dt @ (xy - xy.mean(axis=0)) / float(dt @ dt)
+    return float(slope[0]), float(slope[1])

@@ -124,4 +124,5 @@ def _person(e: MapEntity) -> Person:
     # The map's yaw of a person is where they face when it was estimated; 0.0 is also the
     # default of an entity without one, so it is only trusted when non-zero.
     yaw = e.yaw if e.yaw != 0.0 else None
-    return Person(e.id, e.position_in_world[0], e.position_in_world[1], yaw)
+    vx, vy = e.velocity_in_world
+    return Person(e.id, e.position_in_world[0], e.position_in_world[1], yaw, (vx, vy))

@@ -16,6 +16,7 @@ import pytest
 
 from bench import nav_person
 from common.clients import NavClient
+from common.config import PeopleSettings
 from common.geometry import yaw_of_quat_xyzw
 from common.keys import WORLD_EVENTS
 from common.messages.navigation import (
@@ -25,6 +26,8 @@ from common.messages.navigation import (
 )
 from common.messages.sim import Odom, RobotContact, WorldEvents
 from deploy.stack import ProcessStack
+from services.navigation.people import separation_params
+from services.navigation.separation import protective_distance
 from tests.conftest import StartStack
 
 pytestmark = pytest.mark.integration
@@ -145,13 +148,17 @@ def test_a_person_stepping_into_the_path_slows_and_stops_the_robot_which_then_go
     """The person steps into the path 4.5 m ahead and stands there (`bench.nav_person`):
     the robot slows within 2 m (after a 0.5 s reaction time), and either walks round them
     (the plan avoids people and what the head camera's depth shows) or stops short of
-    them and goes on once they leave; never closer than 0.5 m; it reaches its goal."""
+    them and goes on once they leave; it never moves towards them inside the protective
+    separation of ISO/TS 15066 (judged from truth), nor comes within its value at rest for
+    someone standing; it reaches its goal."""
     services = ["sim", "wbc", "perception", "semantic_map", "navigation"]
     s = stack(services, *HALL_PERSON, _map_dir(tmp_path))
-    f = nav_person.person_step_in(s)
+    f = nav_person.person_scenario(s, "step_in")
     assert f.t_in_s > 0, f
     assert f.state == "succeeded", f
-    assert f.closest_m >= 0.5, f
+    assert f.violations == 0, f
+    sep = separation_params(PeopleSettings())
+    assert f.closest_m >= protective_distance(0.0, 0.0, sep), f
     assert f.fastest_near_mps <= 0.3, f
     # It stopped for them, or its plan took it round them (6 m straight ahead otherwise).
     assert f.slowest_near_mps < 0.05 or f.walked_m > 6.3, f

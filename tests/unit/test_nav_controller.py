@@ -22,7 +22,9 @@ from services.navigation.people import (
     TRACKING_MARGIN,
     SpeedLimit,
     people_limit,
+    separation_params,
 )
+from services.navigation.separation import allowed_speed, protective_distance
 
 DT = 0.05
 FP = Footprint.stowed()
@@ -130,7 +132,11 @@ def test_a_person_ahead_slows_then_stops_the_robot_short_of_them() -> None:
     speed = [float(np.hypot(*o.cmd[:2])) for _, _, o in outs]
     within_2m = [v for g, v in zip(gap, speed, strict=True) if g <= 2.0 - 0.05]
     assert within_2m and max(within_2m) <= 0.3 + 1e-6
-    assert min(gap) >= 0.5
+    # Standing: the protective separation at rest is their speed margin's reach in the
+    # reaction time plus C + Z_d + Z_r (0.445 m); the robot stops short of it, not in it.
+    sep = separation_params(PeopleSettings())
+    at_rest = protective_distance(0.0, sep.speed_margin_mps, sep)
+    assert at_rest <= min(gap) <= at_rest + 0.1
     assert any(o.limit.rule == "stop" for _, _, o in outs)
 
 
@@ -146,22 +152,62 @@ def test_a_base_that_drifted_out_while_turning_walks_back_in_and_arrives() -> No
 
 def test_the_people_caps_are_met_at_their_boundaries_on_a_braking_ramp() -> None:
     p, top = PeopleSettings(), 0.6  # a base whose top speed is 0.6 m/s
+    sep = separation_params(p)
     pose = Pose(0.0, 0.0, 0.0)
 
-    def cap(gap: float, direction: tuple[float, float] | None = (1.0, 0.0)) -> SpeedLimit:
-        return people_limit(pose, direction, [Person("person_1", FP.front + gap, 0.0)], FP, p, top)
+    def cap(gap: float, direction: tuple[float, float] | None = (1.0, 0.0),
+            stopped: bool = False) -> SpeedLimit:  # fmt: skip
+        person = Person("person_1", FP.front + gap, 0.0)
+        return people_limit(pose, direction, [person], FP, p, top, stopped=stopped)
 
     assert cap(4.0).rule == ""  # far: no cap below the top speed
     assert 0.3 < cap(2.3).speed < 0.6  # braking towards the slow zone
     slow = 0.3 * (1.0 - TRACKING_MARGIN)
     assert cap(2.0 + BRAKE_LEAD_M).speed == pytest.approx(slow)  # in it at the slow speed
     assert cap(1.5, None).speed == pytest.approx(slow)  # not moving towards them: just slow
-    assert cap(0.75).speed < slow  # ahead: braking towards the stop distance
-    assert cap(p.stop_distance_m + BRAKE_LEAD_M - 1e-6).rule == "stop"
-    held = p.stop_distance_m + BRAKE_LEAD_M + 0.5 * RESUME_MARGIN_M
+    # Approaching: at most the speed from which it reacts and brakes before S_p.
+    v_h = sep.speed_margin_mps  # standing, known: the estimate's margin only
+    assert cap(0.6).speed == pytest.approx(allowed_speed(0.6, v_h, sep) * (1 - TRACKING_MARGIN))
+    at_rest = protective_distance(0.0, v_h, sep)
+    assert cap(at_rest - 1e-6).rule == "stop" and cap(at_rest - 1e-6).protective_m == at_rest
+    held = at_rest + 0.5 * RESUME_MARGIN_M
     assert cap(held).rule == "slow"
-    assert people_limit(pose, (1.0, 0.0), [Person("p", FP.front + held, 0.0)], FP, p, top,
-                        stopped=True).rule == "stop"  # fmt: skip
+    assert cap(held, stopped=True).rule == "stop"  # released only RESUME_MARGIN_M further
+    assert cap(at_rest + RESUME_MARGIN_M + 0.1, stopped=True).rule == "slow"
+    assert cap(at_rest - 0.1, (-1.0, 0.0)).rule == "slow"  # moving away: no stop
+
+
+def test_a_person_walking_towards_the_robot_stops_it_further_out_than_one_standing() -> None:
+    """The person's own speed towards the robot is in S_p: a walker at 1.2 m/s head-on
+    stops the robot where a standing person lets it creep on; one walking away does not."""
+    p, top = PeopleSettings(), 0.6
+    pose = Pose(0.0, 0.0, 0.0)
+
+    def cap(velocity: tuple[float, float] | None) -> SpeedLimit:
+        person = Person("person_1", FP.front + 0.7, 0.0, None, velocity)
+        return people_limit(pose, (1.0, 0.0), [person], FP, p, top)
+
+    standing, towards, away = cap((0.0, 0.0)), cap((-1.2, 0.0)), cap((1.2, 0.0))
+    assert standing.rule == "slow" and towards.rule == "stop"
+    assert towards.protective_m > 0.7 > standing.protective_m
+    assert away.speed >= standing.speed
+    unknown = cap(None)  # just seen: a walking pace (1.6 m/s) assumed towards the robot
+    assert unknown.rule == "stop" and unknown.protective_m > towards.protective_m
+
+
+def test_a_person_abeam_caps_only_the_speed_towards_them() -> None:
+    """Passing beside a person, the directed speed is the travel's component towards them:
+    the cap on the travel is the allowed speed over that cosine."""
+    p, top = PeopleSettings(), 0.6
+    sep = separation_params(p)
+    pose = Pose(0.0, 0.0, 0.0)
+    person = Person("person_1", 0.0, FP.half_width + 0.6, None, (0.0, 0.0))
+    c = math.cos(math.radians(60.0))
+    direction = (math.sin(math.radians(60.0)), c)  # 60° off the line to them
+    limit = people_limit(pose, direction, [person], FP, p, top)
+    allowed = allowed_speed(0.6, sep.speed_margin_mps, sep) * (1 - TRACKING_MARGIN) / c
+    assert limit.speed == pytest.approx(min(allowed, 0.3 * (1 - TRACKING_MARGIN)))
+    assert people_limit(pose, (1.0, 0.0), [person], FP, p, top).rule == "slow"
 
 
 def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid() -> None:

@@ -163,9 +163,9 @@ def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
     assert people_limit(pose, (1.0, 0.0), ahead(5.0), FP, p, top).rule == ""
     slow = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.5), FP, p, top)
     assert slow.rule == "slow" and slow.speed == pytest.approx(p.slow_speed * (1 - TRACKING_MARGIN))
-    stop = people_limit(pose, (1.0, 0.0), ahead(FP.front + 0.5), FP, p, top)
+    stop = people_limit(pose, (1.0, 0.0), ahead(FP.front + 0.4), FP, p, top)
     assert stop.rule == "stop" and stop.speed == 0.0
-    leaving = people_limit(pose, (-1.0, 0.0), ahead(FP.front + 0.5), FP, p, top)
+    leaving = people_limit(pose, (-1.0, 0.0), ahead(FP.front + 0.4), FP, p, top)
     assert leaving.rule == "slow"
     handing = people_limit(pose, (1.0, 0.0), ahead(FP.front + 1.0), FP, p, top, "person_1")
     assert handing.rule == "handover"

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 
 from common.messages import semantic_map, world
 from common.messages.arrays import to_wire
 from common.messages.perception import Detection, Detections
 from services.navigation.costmap import Person
 from services.navigation.grid import Grid
-from services.navigation.seen_people import SeenPeople
+from services.navigation.seen_people import SeenPeople, fitted_velocity
 
 S = 1_000_000_000
 
@@ -80,3 +83,42 @@ def test_unknown_cells_do_not_hide_a_person() -> None:
     seen = SeenPeople()
     seen.update(_frame(0, _det("person", 1.0, 3.75)), _grid_with_a_machine())
     assert len(seen.active(0)) == 1
+
+
+def test_a_person_seen_walking_gets_their_velocity_once_the_sightings_span_enough_time() -> None:
+    """10 Hz sightings of a walker at 1.0 m/s along +x with 2 cm of jitter: no velocity in
+    the first 0.25 s, then within 0.3 m/s of the truth (4 points), 0.15 m/s once the
+    0.6 s window is full; a second person standing beside keeps a track of their own and
+    about zero."""
+    rng = np.random.default_rng(0)
+    seen = SeenPeople()
+    for k in range(8):
+        t = k * S // 10
+        jitter = rng.normal(0.0, 0.02, 4)
+        seen.update(_frame(t, _det("person", 1.0 + 0.1 * k + jitter[0], 0.0 + jitter[1]),
+                           _det("person", 3.0 + jitter[2], 2.0 + jitter[3])))  # fmt: skip
+        people = {p.id: p for p in seen.active(t)}
+        assert set(people) == {"seen_1", "seen_2"}
+        walker, stander = people["seen_1"], people["seen_2"]
+        if k < 3:
+            assert walker.velocity is None
+            continue
+        assert walker.velocity is not None and stander.velocity is not None
+        tol = 0.15 if k >= 6 else 0.3
+        assert math.dist(walker.velocity, (1.0, 0.0)) < tol
+        assert math.hypot(*stander.velocity) < tol
+
+
+def test_a_person_seen_too_briefly_keeps_the_velocity_the_maps_tracker_has_for_them() -> None:
+    seen = SeenPeople()
+    seen.update(_frame(0, _det("person", 2.0, 0.0, map_id="person_3")))
+    merged = seen.merge([Person("person_3", 2.1, 0.0, None, (0.0, -0.8))], 0)
+    assert [(p.id, p.x, p.velocity) for p in merged] == [("person_3", 2.0, (0.0, -0.8))]
+
+
+def test_a_velocity_is_a_least_squares_slope() -> None:
+    pts = [(k * S // 10, 0.5 * k / 10, -0.2 * k / 10) for k in range(5)]
+    v = fitted_velocity(pts, 0.25)
+    assert v is not None and v == pytest.approx((0.5, -0.2))
+    assert fitted_velocity(pts[:2], 0.05) is None  # two points are no fit
+    assert fitted_velocity(pts[:3], 0.25) is None  # 0.2 s: too short

@@ -6,7 +6,9 @@ The old values are computed here from literals copied from that commit: its sett
 defaults (`common/config.py`), the Params' defaults and the glue that joined them
 (`navigation/navigator.py nav_params`, `node.py`, `wbc/commander.py`). The new ones are
 read from what the services hold once built from `load_config`. Equal means the same
-Python floats, value and type, so every expression computes what it did.
+Python floats, value and type, so every expression computes what it did. (The people
+rule's stop distance and travel cone are gone: the protective separation of ISO/TS 15066
+replaced them, `services/navigation/separation.py`.)
 """
 
 from __future__ import annotations
@@ -42,7 +44,6 @@ OLD_NAVIGATION: dict[str, Any] = {
     "cost_weight": 4.0,
     "slow_radius_m": 2.0,
     "slow_speed": 0.3,
-    "stop_distance_m": 0.6,
     "handover_speed": 0.15,
     "people_in_costmap": True,
     "replan_s": 1.0,
@@ -90,9 +91,7 @@ def old_navigation(n: dict[str, Any]) -> dict[str, Any]:
         # PeopleParams
         "people.slow_radius_m": n["slow_radius_m"],
         "people.slow_speed": n["slow_speed"],
-        "people.stop_distance_m": n["stop_distance_m"],
         "people.handover_speed": n["handover_speed"],
-        "people.travel_half_angle_rad": math.radians(60.0),
         "people.brake_decel": 0.5,
         "people.brake_lead_m": 0.1,
         "people.resume_margin_m": 0.15,
@@ -142,10 +141,8 @@ def received_navigation(nav: Navigator, cost: CostParams) -> dict[str, Any]:
         "planner.start_escape_cost": planner.START_ESCAPE_COST,
         "people.slow_radius_m": p.slow_radius_m,
         "people.slow_speed": p.slow_speed,
-        "people.stop_distance_m": p.stop_distance_m,
         "people.handover_speed": p.handover_speed,
-        "people.travel_half_angle_rad": people.TRAVEL_HALF_ANGLE_RAD,
-        "people.brake_decel": people.BRAKE_DECEL,
+        "people.brake_decel": p.brake_decel_mps2,
         "people.brake_lead_m": people.BRAKE_LEAD_M,
         "people.resume_margin_m": people.RESUME_MARGIN_M,
         "people.tracking_margin": people.TRACKING_MARGIN,
