@@ -231,6 +231,10 @@ class SimSettings(_Section):
     world: Literal["hall", "small"] = "hall"
     world_seed: NonNegativeInt = 0
     walking_people: bool = False
+    #: With `walking_people`: people keep to their routes past the robot and across its
+    #: path, stop only for a robot that comes to them carrying something, and pause rather
+    #: than walk into it (`services/sim/people.py`).
+    bystanders: bool = False
     locomotion: Literal["dynamic", "kinematic"] = "dynamic"
     #: Stop after this much sim time (0: run until stopped).
     duration_s: NonNegative = 0.0

@@ -888,6 +888,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="var/eval/latest", metavar="DIR")
     p.add_argument("--world", choices=["hall", "small"], default="hall")
     p.add_argument("--walking-people", action="store_true", help="the walking-people scenario")
+    p.add_argument(
+        "--bystanders", action="store_true",
+        help="people walk their routes past the robot and across its path, not stopping for it",
+    )  # fmt: skip
     p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per world")
     p.add_argument("--record", action="store_true", help="write each world's recording")
     p.add_argument(

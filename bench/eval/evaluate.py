@@ -74,8 +74,10 @@ START_TIMEOUT_S = 300.0
 STOP_TIMEOUT_S = 60.0
 
 
-def scenario_of(walking: bool) -> str:
-    return "walking people" if walking else "standing people"
+def scenario_of(args: argparse.Namespace) -> str:
+    if getattr(args, "bystanders", False):
+        return "bystanders (walking people who do not stop for the robot)"
+    return "walking people" if args.walking_people else "standing people"
 
 
 def map_source(map_arg: str, world: str, seed: int) -> tuple[str, Path | None]:
@@ -101,7 +103,9 @@ def world_overrides(args: argparse.Namespace, seed: int, map_name: str) -> dict[
         {
             "sim.world": args.world,
             "sim.world_seed": seed,
-            "sim.walking_people": bool(args.walking_people),
+            "sim.walking_people": bool(args.walking_people)
+            or bool(getattr(args, "bystanders", False)),
+            "sim.bystanders": bool(getattr(args, "bystanders", False)),
             "sim.locomotion": "dynamic",
             "semantic_map.start": start,
             "semantic_map.name": map_name,
@@ -201,7 +205,7 @@ def _stage_line(seed: int) -> Progress:
 
 def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) -> WorldResult:
     """One world, start to teardown; never raises for a failed run (only on Ctrl-C)."""
-    scenario = scenario_of(args.walking_people)
+    scenario = scenario_of(args)
     result = WorldResult(world=args.world, world_seed=seed, scenario=scenario)
     # the process in the name too: two evals started in one second keep their own maps
     map_name = f"eval-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{seed}"
@@ -310,7 +314,7 @@ def run_eval(args: argparse.Namespace) -> int:
         return {
             "world": args.world,
             "world seeds": f"{seeds[0]}..{seeds[-1]}" if seeds else "-",
-            "scenario": scenario_of(args.walking_people),
+            "scenario": scenario_of(args),
             "segmenter": ", ".join(sorted(seen.get("segmenter", {"not read"}))),
             "locomotion": ", ".join(sorted(seen.get("locomotion", {"not read"}))),
             "map start": map_start_text(args.map),

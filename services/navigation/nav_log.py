@@ -5,8 +5,9 @@ stop — with the person and their distance), recoveries; at 2 Hz while the robo
 its final heading (within 0.3 m of the goal): the yaw error, the commanded and the
 measured ωz. To rerun: every new plan (`world/nav/plan`), the follower's command and the
 tick's time at 5 Hz (`plots/nav/…`), with the speed rule's person: their separation, the
-protective separation at rest and the cap (`plots/nav/separation/…`), and the costmap at 1 Hz as a textured quad on the
-floor of the 3D world (`world/nav/costmap`: lethal red, costs orange).
+protective separation at rest and the cap (`plots/nav/separation/…`), and the costmap at
+1 Hz as a textured quad on the floor of the 3D world (`world/nav/costmap`: lethal red,
+costs orange).
 """
 
 from __future__ import annotations

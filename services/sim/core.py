@@ -42,7 +42,7 @@ from services.sim import mjcf, scene
 from services.sim.drive import JAW, N_JOINTS, CommandError, JointDrive, joint_addresses, validate
 from services.sim.events import ContactMonitor, DropMonitor
 from services.sim.handover import Handover
-from services.sim.people import People
+from services.sim.people import People, RobotNear
 from services.sim.push import PushError, PushQueue
 from services.sim.sensors import Imu, JointSensors, Lidar, rng_for
 
@@ -60,6 +60,7 @@ class SimCore:
         locomotion: Locomotion = "dynamic",
         watchdog_ms: float = 20.0,
         walking_people: bool = False,
+        bystanders: bool = False,
         sensors: SensorSettings | None = None,
     ) -> None:
         if locomotion not in ("dynamic", "kinematic"):
@@ -85,7 +86,7 @@ class SimCore:
         self.drive = JointDrive(
             self.model, idx, round(watchdog_ms * 1e6), legs_held=locomotion == "kinematic"
         )
-        self.people = People(self.model, world.people, walking_people)
+        self.people = People(self.model, world.people, walking_people, bystanders)
         self.handover = Handover(self.model, world)
         self.contacts = ContactMonitor(self.model, world)
         self.drops = DropMonitor(self.model, self.contacts.artifact_ids)
@@ -164,8 +165,7 @@ class SimCore:
         self.drive.before_step(data, self.time_ns)
         self.drive.write(data)
         self.pushes.apply(data)
-        x, y = data.qpos[self._base_xy].tolist()
-        self.people.update(data, (x, y), self.dt)
+        self.people.update(data, self._robot_near(), self.dt)
         mujoco.mj_step(self.model, data)
         self.tick += 1
         if self.locomotion == "kinematic":
@@ -178,6 +178,18 @@ class SimCore:
         events.extend(self.drops.update(data, found, self.handover.held, stamp))
         self._sense()
         return events
+
+    def _robot_near(self) -> RobotNear:
+        """The robot as people see it (its heading and what it carries only matter to
+        bystanders: not computed for the others)."""
+        x, y = self.data.qpos[self._base_xy].tolist()
+        if not self.people.bystanders:
+            return RobotNear(x, y)
+        qw, qx, qy, qz = self.data.qpos[self._base_q[3:7]].tolist()
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        c = self.contacts.contacts
+        carrying = not bool((c.artifact_on_world | c.artifact_asleep | self.handover.held).all())
+        return RobotNear(x, y, yaw, carrying)
 
     def _sense(self) -> None:
         """Sample the IMU, the encoders and the feet for the state now (every step: the

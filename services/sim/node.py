@@ -46,6 +46,7 @@ class SimNode:
             locomotion=cfg.sim.locomotion,
             watchdog_ms=cfg.sim.watchdog_ms,
             walking_people=cfg.sim.walking_people,
+            bystanders=cfg.sim.bystanders,
             sensors=cfg.sim.sensors,
         )
         self.duration_ns = round(cfg.sim.duration_s * NS_PER_S)

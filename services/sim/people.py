@@ -1,20 +1,31 @@
 """People in the sim: mocap bodies that walk their waypoints and turn to face the robot.
 
 Each person is a small state machine updated every physics step with the robot's base
-position: when the base is within `FACE_RADIUS_M` the person stops and turns towards it
-(a worker waiting for the robot); otherwise a walking person follows the route
+pose (`RobotNear`): when the base is within `FACE_RADIUS_M` the person stops and turns
+towards it (a worker waiting for the robot); otherwise a walking person follows the route
 `position -> waypoints[0] -> ... -> waypoints[-1] -> ... -> position -> ...` at their
 speed (at most `MAX_SPEED_MPS`), pausing `PAUSE_S` at each end of a leg and turning in
 place towards the next one before walking on. Turns run at `TURN_RATE_RADPS`. With
-walking off, or no waypoints, a person only turns. `command` (a test hook) teleports a
-person and/or sends them along given points once, optionally ignoring the robot. The hand
-and the handover are `services.sim.handover`'s; the hand moves with the person's body.
+walking off, or no waypoints, a person only turns.
+
+Bystanders (`bystanders`, with walking on: the changing hall) do not stop for the robot:
+a walking person keeps to their route past it and across its path, and stops to face it
+only when it comes to them holding something (within `COME_M`, its heading within
+`COME_HALF_ANGLE_RAD` of them: the person asked for it, or one who sees it is for them),
+then waits while it stays within `FACE_RADIUS_M`. Nobody walks into a machine: a
+bystander who has come within `YIELD_M` of the robot's base ahead of them (within
+`YIELD_HALF_ANGLE_RAD` of where they walk) pauses until it is clear.
+
+`command` (a test hook) teleports a person and/or sends them along given points once,
+optionally ignoring the robot. The hand and the handover are `services.sim.handover`'s;
+the hand moves with the person's body.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -23,6 +34,10 @@ from common.geometry import wrap_angle
 from common.messages.world import Person
 
 FACE_RADIUS_M = 3.0
+COME_M = 2.0
+COME_HALF_ANGLE_RAD = math.radians(35.0)
+YIELD_M = 1.1
+YIELD_HALF_ANGLE_RAD = math.radians(50.0)
 MAX_SPEED_MPS = 1.2
 TURN_RATE_RADPS = 2.0
 PAUSE_S = 1.0
@@ -45,6 +60,17 @@ class _Walker:
     dirty: bool = True  # the mocap pose needs writing
     once: bool = False  # a commanded walk: the route once, no pauses, then stand
     ignore_robot: bool = False  # walk on even with the robot within FACE_RADIUS_M
+    waiting: bool = False  # a bystander stopped for the robot that came to them
+
+
+class RobotNear(NamedTuple):
+    """What people see of the robot: its base on the floor (m, rad) and whether it holds
+    something up (an artifact off every surface, not in a hand)."""
+
+    x: float
+    y: float
+    yaw: float = 0.0
+    carrying: bool = False
 
 
 def _route(person: Person) -> list[tuple[float, float]]:
@@ -56,8 +82,15 @@ def _route(person: Person) -> list[tuple[float, float]]:
 class People:
     """The people of a world, moved each step (`update`) by writing their mocap poses."""
 
-    def __init__(self, model: mujoco.MjModel, people: tuple[Person, ...], walking: bool) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        people: tuple[Person, ...],
+        walking: bool,
+        bystanders: bool = False,
+    ) -> None:
         self.ids = tuple(p.id for p in people)
+        self.bystanders = bystanders and walking
         self._walkers = [
             _Walker(
                 mocap=int(model.body(p.id).mocapid[0]),
@@ -101,11 +134,18 @@ class People:
         w.leg, w.pause_s, w.speed, w.once = 0, 0.0, speed, True
         w.ignore_robot, w.dirty = ignore_robot, True
 
-    def update(self, data: mujoco.MjData, base_xy: tuple[float, float], dt: float) -> None:
-        """Advance every person by dt seconds with the robot's base at base_xy; write mocap."""
+    def update(self, data: mujoco.MjData, robot: RobotNear, dt: float) -> None:
+        """Advance every person by dt seconds with the robot as given; write mocap."""
         for w in self._walkers:
-            dx, dy = base_xy[0] - w.x, base_xy[1] - w.y
-            if not w.ignore_robot and dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M:
+            dx, dy = robot.x - w.x, robot.y - w.y
+            near = dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M
+            if self.bystanders and w.route and not w.once:
+                w.waiting = near and (w.waiting or _coming_to(robot, w))
+                if w.waiting:
+                    self._turn_towards(w, math.atan2(dy, dx), dt)
+                elif not _in_the_way(robot, w):
+                    self._walk(w, dt)
+            elif not w.ignore_robot and near:
                 self._turn_towards(w, math.atan2(dy, dx), dt)
             elif w.route:
                 self._walk(w, dt)
@@ -147,6 +187,26 @@ class People:
         w.x += step * dx / distance
         w.y += step * dy / distance
         w.dirty = True
+
+
+def _coming_to(robot: RobotNear, w: _Walker) -> bool:
+    """The robot comes to this person holding something: near, heading at them."""
+    dx, dy = w.x - robot.x, w.y - robot.y
+    if not robot.carrying or dx * dx + dy * dy > COME_M * COME_M:
+        return False
+    return abs(wrap_angle(math.atan2(dy, dx) - robot.yaw)) <= COME_HALF_ANGLE_RAD
+
+
+def _in_the_way(robot: RobotNear, w: _Walker) -> bool:
+    """The robot's base stands within `YIELD_M` ahead of where this person walks."""
+    if w.pause_s > 0.0:
+        return False
+    tx, ty = w.route[(w.leg + 1) % len(w.route)]
+    dx, dy = robot.x - w.x, robot.y - w.y
+    if dx * dx + dy * dy > YIELD_M * YIELD_M:
+        return False
+    heading = math.atan2(ty - w.y, tx - w.x)
+    return abs(wrap_angle(math.atan2(dy, dx) - heading)) <= YIELD_HALF_ANGLE_RAD
 
 
 def person_rotation(yaw: float) -> np.ndarray:

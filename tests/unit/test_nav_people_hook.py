@@ -11,7 +11,7 @@ import pytest
 
 from common.messages.sim import PersonCommand
 from common.messages.world import Person
-from services.sim.people import FACE_RADIUS_M, People
+from services.sim.people import FACE_RADIUS_M, People, RobotNear
 from services.sim.people_hook import PeopleHook
 
 XML = """<mujoco><worldbody>
@@ -47,8 +47,8 @@ def _hook(commands: list[PersonCommand]) -> PeopleHook:
 
 def test_a_commanded_person_walks_into_the_robot_s_path_at_their_stamp_and_stands() -> None:
     people, data = _people()
-    robot = (1.0, 1.0)  # within FACE_RADIUS_M: an ordinary person would stop and turn
-    assert math.dist(robot, (2.0, 0.0)) < FACE_RADIUS_M
+    robot = RobotNear(1.0, 1.0)  # within FACE_RADIUS_M: an ordinary person would stop and turn
+    assert math.dist(robot[:2], (2.0, 0.0)) < FACE_RADIUS_M
     hook = _hook([
         PersonCommand(stamp_ns=0, person_id="person_1", position=(2.0, 2.0), yaw=-math.pi / 2),
         PersonCommand(stamp_ns=500_000_000, person_id="person_1", yaw=-math.pi / 2,
@@ -70,5 +70,5 @@ def test_a_command_for_an_unknown_person_is_refused_and_the_sim_goes_on() -> Non
     people, data = _people()
     hook = _hook([PersonCommand(stamp_ns=0, person_id="person_9", position=(1.0, 1.0))])
     hook.apply(0, people)
-    people.update(data, (5.0, 5.0), DT)
+    people.update(data, RobotNear(5.0, 5.0), DT)
     assert hook.applied == 0 and people.pose("person_1")[:2] == (0.0, 0.0)
