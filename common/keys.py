@@ -26,6 +26,8 @@ WORLD_EVENTS = f"{ROOT}/world/events"
 WORLD_PUSH = f"{ROOT}/world/push"
 #: Move a person (`sim.PersonCommand`): tests and evaluation publish, the sim applies.
 WORLD_PEOPLE_COMMAND = f"{ROOT}/world/people_command"
+#: Move an artifact (`sim.ArtifactCommand`): tests and evaluation publish, the sim applies.
+WORLD_ARTIFACT_COMMAND = f"{ROOT}/world/artifact_command"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
 MAP_PEOPLE = f"{ROOT}/map/people"
 MAP_OCCUPANCY = f"{ROOT}/map/occupancy"

@@ -250,7 +250,17 @@ class RobotContact(Message, frozen=True, tag="robot_contact"):
     force: NonNegative
 
 
-WorldEvent = HandoverTaken | ObjectDropped | RobotContact
+class ArtifactMoved(Message, frozen=True, tag="artifact_moved"):
+    """Somebody moved an artifact (the changing hall's hook, `ArtifactCommand`): where its
+    base now is (truth, for evaluation); `away`: out of the hall."""
+
+    stamp_ns: StampNs
+    object_id: EntityId
+    position_in_world: Vec3
+    away: bool = False
+
+
+WorldEvent = HandoverTaken | ObjectDropped | RobotContact | ArtifactMoved
 
 
 class WorldEvents(Message, frozen=True):
@@ -270,11 +280,32 @@ class Push(Message, frozen=True):
     force_in_world: (3,) N on the base body's centre of mass, world axes.
     duration_s: how long, s, in (0, 10]; the impulse is force × duration
         (200 N for 0.1 s = 20 N·s).
+    target: `base`, or an artifact's id: a knock on what the robot carries (a slip).
     """
 
     stamp_ns: StampNs
     force_in_world: Vec3
     duration_s: Annotated[float, msgspec.Meta(gt=0.0, le=10.0)]
+    target: EntityId = "base"
+
+
+class ArtifactCommand(Message, frozen=True):
+    """`dume/world/artifact_command` (tests and evaluation only; the sim alone reads it):
+    somebody moves an artifact, the changing hall's parts moved from bench to bench.
+
+    stamp_ns: sim time it takes effect, at the sim's step then (publish it ahead).
+    artifact_id: the world's artifact (`bottle_1`).
+    position: (3,) m, world: the point its base then rests on (a support's top under it),
+        at rest, upright; None with `away`.
+    yaw: rad, its heading there.
+    away: taken out of the hall (parked beyond its walls, out of every camera's sight).
+    """
+
+    stamp_ns: StampNs
+    artifact_id: EntityId
+    position: Vec3 | None = None
+    yaw: Finite = 0.0
+    away: bool = False
 
 
 class PersonCommand(Message, frozen=True):

@@ -47,6 +47,10 @@ from services.sim.push import PushError, PushQueue
 from services.sim.sensors import Imu, JointSensors, Lidar, rng_for
 
 TICK_NS = 1_000_000
+#: An artifact taken away is parked this far beyond the hall's wall (m); one placed is
+#: set this far above its support (m), to settle on it without starting in contact.
+PARK_M = 20.0
+PLACE_LIFT_M = 0.002
 __all__ = ["TICK_NS", "CommandError", "PushError", "SimCore"]
 
 
@@ -93,6 +97,9 @@ class SimCore:
         self._artifact_q = [int(self.model.joint(a).qposadr[0]) for a in self.drops.ids]
         self._cmd_vel = (0.0, 0.0, 0.0)
         self.pushes = PushQueue(int(self.model.dof_bodyid[idx.qvel[0]]), self.dt)
+        #: Knocks on artifacts (`push(..., target=artifact)`), a queue per artifact body.
+        self.knocks: dict[str, PushQueue] = {}
+        self._artifact_v = [int(self.model.joint(a).dofadr[0]) for a in self.drops.ids]
         if locomotion == "kinematic":
             for foot in robot.FOOT_FRAMES:
                 self.model.geom_condim[self.model.geom(f"{foot}_0").id] = 1
@@ -140,13 +147,48 @@ class SimCore:
             raise CommandError([f"cmd_vel ({vx}, {vy}, {wz}) is not finite"])
         self._cmd_vel = (float(vx), float(vy), float(wz))
 
-    def push(self, force_in_world: ArrayLike, duration_s: float) -> int:
-        """Push the base with `force_in_world` (3,) N at its centre of mass for `duration_s`
-        from the next step on (200 N for 0.1 s = 20 N·s); the number of steps it lasts.
+    def push(self, force_in_world: ArrayLike, duration_s: float, target: str = "base") -> int:
+        """Push the base (or the artifact `target`: a knock) with `force_in_world` (3,) N
+        at its centre of mass for `duration_s` from the next step on (200 N for 0.1 s =
+        20 N·s); the number of steps it lasts.
 
-        Raises PushError for a non-finite force or a duration outside (0, 10] s.
+        Raises PushError for a non-finite force, a duration outside (0, 10] s or a target
+        that is neither the base nor an artifact of the world.
         """
-        return self.pushes.add(force_in_world, duration_s)
+        if target == "base":
+            return self.pushes.add(force_in_world, duration_s)
+        if target not in self.drops.ids:
+            raise PushError(f"no artifact {target!r} to push; the world has {list(self.drops.ids)}")
+        queue = self.knocks.get(target)
+        if queue is None:
+            queue = self.knocks[target] = PushQueue(self.model.body(target).id, self.dt)
+        return queue.add(force_in_world, duration_s)
+
+    def place_artifact(
+        self, artifact_id: str, position: tuple[float, float, float] | None, yaw: float
+    ) -> tuple[float, float, float]:
+        """Somebody moves an artifact: its base onto `position` (m, world: the top of what
+        it stands on), upright at `yaw`, at rest; None: away, parked beyond the hall's
+        walls (in a row, out of every camera's sight). Where its base now is.
+
+        Raises KeyError for an unknown artifact, ValueError for a non-finite position.
+        """
+        if artifact_id not in self.drops.ids:
+            raise KeyError(f"no artifact {artifact_id!r}; the world has {list(self.drops.ids)}")
+        k = self.drops.ids.index(artifact_id)
+        if position is None:
+            (_, y0), (x1, _) = self.world.hall.min_xy, self.world.hall.max_xy
+            position = (x1 + PARK_M + 0.5 * k, y0, 0.0)
+        if not all(math.isfinite(v) for v in (*position, yaw)):
+            raise ValueError(f"an artifact's place must be finite, got {position}, yaw {yaw}")
+        adr, dof = self._artifact_q[k], self._artifact_v[k]
+        x, y, z = (float(v) for v in position)
+        self.data.qpos[adr : adr + 7] = (x, y, z + PLACE_LIFT_M, math.cos(0.5 * yaw), 0.0, 0.0,
+                                         math.sin(0.5 * yaw))  # fmt: skip
+        self.data.qvel[dof : dof + 6] = 0.0
+        self.drops.forget(k)  # settling onto its new support is no drop
+        mujoco.mj_forward(self.model, self.data)
+        return x, y, z
 
     def reset_robot(self, x: float, y: float, yaw: float, posture: str = "stand") -> None:
         """Stand the robot still at (x, y, yaw) in `posture` (start-up and tests only)."""
@@ -165,6 +207,8 @@ class SimCore:
         self.drive.before_step(data, self.time_ns)
         self.drive.write(data)
         self.pushes.apply(data)
+        for queue in self.knocks.values():
+            queue.apply(data)
         self.people.update(data, self._robot_near(), self.dt)
         mujoco.mj_step(self.model, data)
         self.tick += 1

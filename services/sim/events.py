@@ -169,6 +169,11 @@ class DropMonitor:
         self.z_ref: NDArray[np.float64] = np.zeros(len(artifact_ids))
         self._started = False
 
+    def forget(self, k: int) -> None:
+        """Artifact k was moved by hand: its last support is unknown until it rests again
+        (landing on its new one is no drop)."""
+        self.z_ref[k] = -np.inf
+
     def update(
         self, data: mujoco.MjData, contacts: StepContacts, held: BoolArray, stamp_ns: int
     ) -> list[ObjectDropped]:

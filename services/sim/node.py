@@ -6,11 +6,12 @@ whose outputs take effect by t, in realtime sleep until the wall clock reaches t
 everything stamped t (`SimOutputs`: the state, odom at 50 Hz, the cameras at 10 Hz, then
 the clock when due); take the command to step with (in lockstep the command participant's
 answer to the state at t, in realtime the newest); apply it, the kinematic base's
-cmd_vel, and the pushes and people commands due at t; step the physics to t + 1 ms and
-publish the step's world events. The protocol's waits (the start gate, acks, commands,
-stalls, liveliness) are `common.lockstep.SimGate`'s; the physics, people, handover and
-events `SimCore`'s; the cameras are rendered beside the loop, from a snapshot of tick t
-(`RenderWorker`); this module wires them and keeps time.
+cmd_vel, and the pushes, people and artifact commands due at t; step the physics to
+t + 1 ms and publish the step's world events (an artifact moved by its hook among them).
+The protocol's waits (the start gate, acks, commands, stalls, liveliness) are
+`common.lockstep.SimGate`'s; the physics, people, handover and events `SimCore`'s; the
+cameras are rendered beside the loop, from a snapshot of tick t (`RenderWorker`); this
+module wires them and keeps time.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from common.messages.sim import Ack, JointCommand
 from common.messages.world import WorldDescription
 from common.recording import default_blueprint
 from common.service import Service
+from services.sim.artifact_hook import ArtifactHook
 from services.sim.core import SimCore
 from services.sim.intake import CommandIntake
 from services.sim.outputs import SimOutputs, robot_description
@@ -63,6 +65,7 @@ class SimNode:
         self.intake = CommandIntake(bus, keys, self.core, cfg.wbc.cmd_vel_timeout_s, svc.log)
         self.push_hook = PushHook(bus, svc.log)
         self.people_hook = PeopleHook(bus, svc.log)
+        self.artifact_hook = ArtifactHook(bus, svc.log)
         self.gate = SimGate(
             cfg.time,
             alive=bus.watch_alive(keys.alive_all),
@@ -112,8 +115,11 @@ class SimNode:
             self.intake.apply_cmd_vel(t_ns)
             self.push_hook.apply(t_ns, self.core)
             self.people_hook.apply(t_ns, self.core.people)
+            moved = self.artifact_hook.apply(t_ns, self.core)
             t2 = time.perf_counter()
             events = self.core.step()
+            if moved:
+                events = [*moved, *events]
             now = time.perf_counter()
             publish_s += t1 - t0
             step_s += now - t2

@@ -29,15 +29,16 @@ class PushHook(StampedHook[Push]):
         """Start the pushes stamped at or before t, in arrival order."""
         for push in self._due(t_ns):
             try:
-                steps = core.push(push.force_in_world, push.duration_s)
+                steps = core.push(push.force_in_world, push.duration_s, push.target)
             except PushError as exc:
                 self.log.warning("push refused at t=%.3f s: %s", t_ns / NS_PER_S, exc)
                 continue
             self.applied += 1
             self.log.info(
-                "push %s N for %d steps on the base at t=%.3f s%s",
+                "push %s N for %d steps on the %s at t=%.3f s%s",
                 [round(f, 1) for f in push.force_in_world],
                 steps,
+                push.target,
                 t_ns / NS_PER_S,
                 late_note(t_ns, push.stamp_ns),
             )

@@ -21,6 +21,7 @@ import rerun as rr
 from common.geometry import FloatArray, quat_xyzw_to_matrix
 from common.messages import as_numpy
 from common.messages.sim import (
+    ArtifactMoved,
     CameraFrame,
     HandoverTaken,
     ObjectDropped,
@@ -191,6 +192,9 @@ class SimLogger:
                 self.rec.log(
                     "world/events/contacts", rr.Points3D([ev.position_in_world], radii=0.03)
                 )
+            elif isinstance(ev, ArtifactMoved):
+                where = "away" if ev.away else f"to {np.round(ev.position_in_world, 2)}"
+                text = f"artifact moved (truth): {ev.object_id} {where}"
             else:
                 text = str(ev)
             self.rec.log("log/sim/events", rr.TextLog(text, level=rr.TextLogLevel.WARN))
