@@ -32,6 +32,9 @@ class MissionRequest(Message, frozen=True, omit_defaults=True):
     task: `fetch` (the default: a request without it is a fetch) needs `object` and
     `person`; `explore` and `patrol` take neither. A request that breaks this does not
     decode (the mission rejects it `malformed`, saying which field).
+    at_ns: sim time before which the mission does not take it (held until its tick
+    reaches it; a user leaves it out): an evaluation's shift sends each request ahead of
+    its time, so a lockstep run of many requests is as repeatable as one of one.
     """
 
     WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
@@ -39,6 +42,7 @@ class MissionRequest(Message, frozen=True, omit_defaults=True):
     object: Target = ""
     person: Target = ""
     task: Task = "fetch"
+    at_ns: StampNs | None = None
 
     def __post_init__(self) -> None:
         if self.task == "fetch":

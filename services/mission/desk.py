@@ -117,6 +117,8 @@ class Desk:
         self.started = False
         #: The request held, on disk: a restarted mission says what it lost.
         self.journal = journal or Journal(None)
+        #: Requests sent ahead of their `at_ns`, held until the tick reaches it.
+        self.held: list[MissionRequest] = []
 
     # -- the status -----------------------------------------------------------------------
 
@@ -171,9 +173,25 @@ class Desk:
             )
         )
 
-    def _requests(self, b: int) -> None:
+    def _incoming(self, b: int) -> list[MissionRequest | Rejection]:
+        """What arrived, in order, with the requests held for a later tick left out and
+        those held before whose tick came put first (`MissionRequest.at_ns`)."""
+        due = [r for r in self.held if r.at_ns is None or r.at_ns <= b]
+        self.held = [r for r in self.held if r.at_ns is not None and r.at_ns > b]
+        out: list[MissionRequest | Rejection] = list(due)
         for payload in self.requests.drain():
             parsed = parse_request(payload)
+            if isinstance(parsed, MissionRequest) and parsed.at_ns is not None and parsed.at_ns > b:
+                self.log.request(
+                    f"request {parsed.request_id}: held until t={parsed.at_ns / 1e9:.2f} s"
+                )
+                self.held.append(parsed)
+                continue
+            out.append(parsed)
+        return out
+
+    def _requests(self, b: int) -> None:
+        for parsed in self._incoming(b):
             if isinstance(parsed, Rejection):
                 self._reject(b, parsed)
                 continue

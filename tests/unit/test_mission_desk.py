@@ -149,6 +149,21 @@ def test_a_submitted_request_is_accepted_then_runs() -> None:
     assert rig.tree.request == REQUEST
 
 
+def test_a_request_sent_ahead_of_its_time_is_held_until_the_tick_reaches_it() -> None:
+    """A shift's next request arrives before its `at_ns`: nothing happens until the
+    mission's tick is there, then it is taken as if it arrived then."""
+    rig = Rig()
+    rig.tick()
+    at = rig.robot.now_ns + 5 * TICK_NS
+    rig.requests.submit(MissionRequest(request_id="r2", object="bottle_1",
+                                       person="person_1", at_ns=at), "")  # fmt: skip
+    assert rig.tick(5) == [] and rig.desk.held
+    assert rig.robot.now_ns == at
+    accepted, running = rig.tick()
+    assert (accepted.stamp_ns, accepted.request_id, accepted.state) == (at, "r2", "accepted")
+    assert running.state == "running" and not rig.desk.held
+
+
 def test_a_dependency_that_goes_down_fails_the_running_request_and_refuses_new_ones() -> None:
     rig = Rig()
     rig.running()
