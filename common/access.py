@@ -127,7 +127,7 @@ SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
     "sim": {
         "put": ("{r}/camera/*/rgbd", "{r}/camera/*/segmentation_truth", "{r}/scan",
                 "{r}/sim/stats", "{r}/state", "{r}/state_truth", "{r}/odom",
-                f"{ROOT}/world/clock", f"{ROOT}/world/events"),
+                f"{ROOT}/world/clock", f"{ROOT}/world/events", f"{ROOT}/world/people"),
         "subscribe": ("{r}/ack/*", "{r}/command", "{r}/wbc/cmd_vel",
                       f"{ROOT}/world/people_command", f"{ROOT}/world/push",
                       f"{ROOT}/world/artifact_command"),

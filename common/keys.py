@@ -26,6 +26,8 @@ WORLD_EVENTS = f"{ROOT}/world/events"
 WORLD_PUSH = f"{ROOT}/world/push"
 #: Move a person (`sim.PersonCommand`): tests and evaluation publish, the sim applies.
 WORLD_PEOPLE_COMMAND = f"{ROOT}/world/people_command"
+#: Where the people are (`sim.PeopleTruth`, truth): the sim publishes, evaluation reads.
+WORLD_PEOPLE = f"{ROOT}/world/people"
 #: Move an artifact (`sim.ArtifactCommand`): tests and evaluation publish, the sim applies.
 WORLD_ARTIFACT_COMMAND = f"{ROOT}/world/artifact_command"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"

@@ -263,6 +263,23 @@ class ArtifactMoved(Message, frozen=True, tag="artifact_moved"):
 WorldEvent = HandoverTaken | ObjectDropped | RobotContact | ArtifactMoved
 
 
+class PersonTruth(Message, frozen=True):
+    """One person as the sim moves them: floor point (m), heading (rad), velocity (m/s)."""
+
+    id: EntityId
+    position: tuple[Finite, Finite]
+    yaw: Finite
+    velocity: tuple[Finite, Finite]
+
+
+class PeopleTruth(Message, frozen=True):
+    """`dume/world/people`: where every person is, at the lidar's rate, for whoever
+    listens (truth: evaluation and tests only, the separation from people judged)."""
+
+    stamp_ns: StampNs
+    people: list[PersonTruth]
+
+
 class WorldEvents(Message, frozen=True):
     """`dume/world/events`: events of one tick (truth: evaluation and tests only)."""
 

@@ -6,11 +6,12 @@ truth just before it), the base's truth (`state_truth`) at `sim.odom_hz` and `od
 it unless the WBC estimates the base (`Config.odom_from_estimate`), the lidar's scan at
 its rate (`sim.sensors.lidar`), each camera's RGB-D frame at `sim.camera_hz` and its
 truth segmentation (`sim.segmentation_truth`) (each rendered only for someone who looks:
-a subscriber or the recording's kept frames), the recording's poses every 40 ms, and
-last the clock (when due), so a participant woken by the clock finds its inputs as of t
-in (the WBC's `odom`, when it estimates, comes after its tick: its consumers wait for
-the stamp). `events` puts out a step's world events. The recording (rerun) is logged
-alongside. Called from the sim's loop thread only.
+a subscriber or the recording's kept frames), the people's truth (`world/people`) with
+the scan for whoever listens, the recording's poses every 40 ms, and last the clock
+(when due), so a participant woken by the clock finds its inputs as of t in (the WBC's
+`odom`, when it estimates, comes after its tick: its consumers wait for the stamp).
+`events` puts out a step's world events. The recording (rerun) is logged alongside.
+Called from the sim's loop thread only.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import rerun as rr
 from common import robot
 from common.bus import Bus
 from common.config import Config
-from common.keys import WORLD_CLOCK, WORLD_EVENTS, RobotKeys
+from common.keys import WORLD_CLOCK, WORLD_EVENTS, WORLD_PEOPLE, RobotKeys
 from common.messages import to_wire
 from common.messages.base import NS_PER_S
 from common.messages.sim import (
@@ -30,6 +31,8 @@ from common.messages.sim import (
     Clock,
     LaserScan,
     Odom,
+    PeopleTruth,
+    PersonTruth,
     RobotDescription,
     RobotState,
     SegmentationTruth,
@@ -124,6 +127,7 @@ class SimOutputs:
         )
         self.scan = bus.publisher(keys.scan, LaserScan, "data")
         self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
+        self.people_truth = bus.publisher(WORLD_PEOPLE, PeopleTruth, "data")
         self.sim_stats = bus.publisher(keys.sim_stats, SimStats, "data")
         self.rgbd = {c: bus.publisher(keys.camera_rgbd(c), CameraFrame, "bulk") for c in cameras}
         self.truth = {
@@ -170,6 +174,8 @@ class SimOutputs:
                 self.state_truth.put(truth)
         if t_ns % self.lidar_period_ns == 0:
             self.scan.put(self._scan(t_ns))
+            if self.people_truth.has_subscribers():
+                self.people_truth.put(self._people(t_ns))
             if self.sim_log.enabled:
                 state = state or self.core.robot_state(tick)
                 self.sim_log.state(t_ns, state, truth or self.core.state_truth())
@@ -183,6 +189,15 @@ class SimOutputs:
             self.clock.put(
                 Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf)
             )
+
+    def _people(self, t_ns: int) -> PeopleTruth:
+        people = self.core.people
+        out = []
+        for pid in people.ids:
+            x, y, yaw = people.pose(pid)
+            out.append(PersonTruth(id=pid, position=(x, y), yaw=yaw,
+                                   velocity=people.velocity(pid)))  # fmt: skip
+        return PeopleTruth(stamp_ns=t_ns, people=out)
 
     def _scan(self, t_ns: int) -> LaserScan:
         lidar = self.core.lidar

@@ -61,6 +61,8 @@ class _Walker:
     once: bool = False  # a commanded walk: the route once, no pauses, then stand
     ignore_robot: bool = False  # walk on even with the robot within FACE_RADIUS_M
     waiting: bool = False  # a bystander stopped for the robot that came to them
+    vx: float = 0.0  # the last step's velocity, m/s (world)
+    vy: float = 0.0
 
 
 class RobotNear(NamedTuple):
@@ -108,6 +110,11 @@ class People:
         w = self._walkers[self.ids.index(person_id)]
         return w.x, w.y, w.yaw
 
+    def velocity(self, person_id: str) -> tuple[float, float]:
+        """A person's floor velocity over the last step, m/s (world)."""
+        w = self._walkers[self.ids.index(person_id)]
+        return w.vx, w.vy
+
     def command(
         self,
         person_id: str,
@@ -137,6 +144,7 @@ class People:
     def update(self, data: mujoco.MjData, robot: RobotNear, dt: float) -> None:
         """Advance every person by dt seconds with the robot as given; write mocap."""
         for w in self._walkers:
+            x0, y0 = w.x, w.y
             dx, dy = robot.x - w.x, robot.y - w.y
             near = dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M
             if self.bystanders and w.route and not w.once:
@@ -149,6 +157,7 @@ class People:
                 self._turn_towards(w, math.atan2(dy, dx), dt)
             elif w.route:
                 self._walk(w, dt)
+            w.vx, w.vy = (w.x - x0) / dt, (w.y - y0) / dt
             if w.dirty:
                 data.mocap_pos[w.mocap, 0] = w.x
                 data.mocap_pos[w.mocap, 1] = w.y

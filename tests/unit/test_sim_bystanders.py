@@ -44,6 +44,7 @@ def test_a_bystander_walks_on_past_a_robot_beside_their_route() -> None:
     bystander, data = _walker(True)
     xs = _run(bystander, data, robot, 5.0)
     assert xs[-1] == pytest.approx(5.0, abs=0.05)  # 5 s at 1 m/s, no stop
+    assert bystander.velocity("person_1") == pytest.approx((1.0, 0.0))  # the truth's velocity
 
 
 def test_a_bystander_stops_for_a_robot_that_comes_to_them_carrying_something() -> None:
