@@ -30,6 +30,7 @@ from common.messages.world import (
     Cuboid,
     Cylinder,
     Person,
+    Rgba,
     RobotStart,
     SupportSurface,
     WorldDescription,
@@ -127,10 +128,22 @@ class _Sampler:
             return None
         return RobotStart(point[0], point[1], uniform(self.rng, -math.pi, math.pi))
 
-    def artifacts(self, classes: Sequence[ArtifactClass], tries: int = 80) -> list[Artifact] | None:
-        # The pick pose's footprint must stay off the surface: see feasibility.footprint_free.
+    def depth_max(self) -> float:
+        """How far in from a surface's edge an artifact may stand: the pick pose's
+        footprint must stay off the surface (see feasibility.footprint_free)."""
         room = robot.D_OPT_M - self.footprint.front - fz.GOAL_MARGIN_M - self.grid.resolution
-        depth_max = min(EDGE_DEPTH_M[1], room - 0.01)
+        return min(EDGE_DEPTH_M[1], room - 0.01)
+
+    def pick_poses(self, artifact: Artifact, surface: SupportSurface) -> list[fz.Pose2D] | None:
+        """The artifact's standoff poses, when the robot can stand at them (else None)."""
+        poses = [
+            fz.standoff_pose_for(artifact, surface, distance, robot.THETA_OPT_RAD)
+            for distance in (robot.STANDOFF_DISTANCE_M, robot.D_OPT_M)
+        ]
+        return poses if all(self.goal_ok(pose) for pose in poses) else None
+
+    def artifacts(self, classes: Sequence[ArtifactClass], tries: int = 80) -> list[Artifact] | None:
+        depth_max = self.depth_max()
         counts: dict[str, int] = {}
         placed: list[Artifact] = []
         for cls in classes:
@@ -143,11 +156,8 @@ class _Sampler:
                     for a in placed
                 ):
                     continue
-                poses = [
-                    fz.standoff_pose_for(artifact, surface, distance, robot.THETA_OPT_RAD)
-                    for distance in (robot.STANDOFF_DISTANCE_M, robot.D_OPT_M)
-                ]
-                if all(self.goal_ok(pose) for pose in poses):
+                poses = self.pick_poses(artifact, surface)
+                if poses is not None:
                     counts[cls] = counts.get(cls, 0) + 1
                     placed.append(artifact)
                     self.goals.extend(poses)
@@ -157,10 +167,16 @@ class _Sampler:
         return placed
 
     def _on_edge(
-        self, cls: ArtifactClass, surface: SupportSurface, n: int, depth_max: float
+        self,
+        cls: ArtifactClass,
+        surface: SupportSurface,
+        n: int,
+        depth_max: float,
+        body: tuple[Cylinder | Cuboid, float, Rgba] | None = None,
     ) -> Artifact | None:
-        """An artifact near one of the surface's long edges (local +-y), or None if none fits."""
-        shape, mass, rgba = artifact_body(self.rng, cls)
+        """An artifact near one of the surface's long edges (local +-y), or None if none
+        fits; `body`: its shape, mass and colour (None: drawn for a new one)."""
+        shape, mass, rgba = body or artifact_body(self.rng, cls)
         depth_min = max(EDGE_DEPTH_M[0], _footprint_radius(shape) + 0.02)
         if depth_max < depth_min:
             return None
@@ -325,3 +341,32 @@ def generate_world(seed: int, name: str = "hall", walking_people: bool = False) 
             return world
         log.debug("world %s seed %d sample %d dropped: %s", name, seed, attempt + 1, problems)
     raise WorldGenerationError(name, seed, problems)
+
+
+def new_place(
+    world: WorldDescription,
+    artifact_id: str,
+    rng: np.random.Generator,
+    taken: Sequence[tuple[float, float]],
+    avoid_surface: str = "",
+    tries: int = 80,
+) -> tuple[tuple[float, float, float], float, str] | None:
+    """Where somebody could put an artifact down instead (the changing hall): a spot near
+    a long edge of a surface other than `avoid_surface`, `ARTIFACT_SPACING_M` clear of
+    the points `taken`, from which the robot could pick it, as the generator places
+    artifacts: (its base's point, yaw, the surface's id), or None when none fits."""
+    art = next(a for a in world.artifacts if a.id == artifact_id)
+    sampler = _Sampler(rng, Layout(world.hall, world.obstacles, world.surfaces))
+    sampler.start_label = sampler.label_at(world.robot_start.x, world.robot_start.y)
+    surfaces = [s for s in world.surfaces if s.id != avoid_surface]
+    depth_max = sampler.depth_max()
+    for _ in range(tries if surfaces else 0):
+        surface = surfaces[int(rng.integers(len(surfaces)))]
+        spot = sampler._on_edge(
+            art.object_class, surface, 0, depth_max, (art.shape, art.mass, art.rgba)
+        )
+        if spot is None or any(math.dist(spot.position[:2], q) < ARTIFACT_SPACING_M for q in taken):
+            continue
+        if sampler.pick_poses(spot, surface) is not None:
+            return spot.position, spot.yaw, surface.id
+    return None

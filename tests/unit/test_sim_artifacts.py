@@ -9,6 +9,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; before mujoco i
 import logging
 import math
 
+import numpy as np
 import pytest
 
 from common.messages.sim import ArtifactCommand, ObjectDropped, WorldEvent
@@ -16,7 +17,7 @@ from common.messages.world import WorldDescription
 from services.sim.artifact_hook import ArtifactHook
 from services.sim.core import PushError, SimCore
 from services.sim.sensors import ideal_sensors
-from services.sim.world import generate_world
+from services.sim.world import ARTIFACT_SPACING_M, generate_world, new_place
 
 
 @pytest.fixture(scope="module")
@@ -107,3 +108,19 @@ def test_the_hook_moves_at_the_stamp_reports_the_move_and_refuses_a_bad_command(
         ("bottle_1", (1.0, -1.0, 0.0), False)
     ]
     assert hook.applied == 1
+
+
+def test_a_new_place_is_on_another_support_clear_of_the_others_and_pickable() -> None:
+    """Where somebody puts a hall artifact down instead: on another surface's top, near a
+    long edge, 0.3 m clear of every other artifact; the same seed, the same place."""
+    hall = generate_world(0)
+    art = hall.artifacts[0]
+    taken = [a.position[:2] for a in hall.artifacts]
+    got = new_place(hall, art.id, np.random.default_rng(1), taken, art.surface_id)
+    assert got is not None
+    (x, y, z), _yaw, surface_id = got
+    assert surface_id != art.surface_id
+    top = next(s for s in hall.surfaces if s.id == surface_id)
+    assert z == pytest.approx(top.top_height)
+    assert all(math.dist((x, y), q) >= ARTIFACT_SPACING_M for q in taken)
+    assert new_place(hall, art.id, np.random.default_rng(1), taken, art.surface_id) == got
