@@ -17,9 +17,9 @@ closest approach of the footprint to them and the robot's speed then, the fastes
 slowest 0.5 s mean speed while they have been within 2 m for that window and a 0.5 s
 reaction time before it, the length walked, whether and when they moved, contacts, the
 goal's end state; and the speed and separation monitor's own rule judged from truth
-(`separation_figures`): the samples where the robot moved towards them closer than the
-protective separation S_p of its true speed and theirs (`violations`), and the least
-margin d − S_p while it moved towards them.
+(`bench.separation.SeparationWatch`): the samples where the robot moved towards them
+closer than the protective separation S_p of its true speed and theirs (`violations`),
+and the least margin d − S_p while it moved towards them.
 """
 
 from __future__ import annotations
@@ -27,23 +27,29 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
 from bench.nav_run import nav_stack, send_goal
+from bench.separation import SeparationWatch, truth_separation
 from common.bus import Latest
-from common.config import REPO_ROOT, Overrides, load_config, merged
+from common.config import REPO_ROOT, Overrides, merged
 from common.keys import WORLD_DESCRIPTION, WORLD_EVENTS, WORLD_PEOPLE_COMMAND
 from common.messages.navigation import NavStatus, PoseGoal
-from common.messages.sim import PersonCommand, RobotContact, StateTruth, WorldEvents
+from common.messages.sim import (
+    PeopleTruth,
+    PersonCommand,
+    PersonTruth,
+    RobotContact,
+    StateTruth,
+    WorldEvents,
+)
 from common.messages.world import WorldDescription
 from common.robot import Footprint
 from deploy.stack import ProcessStack
 from services.navigation.grid import Pose, distance_to_footprint
-from services.navigation.people import bearing, separation_params
-from services.navigation.separation import SeparationParams, directed_speed, protective_distance
 
 SETTINGS = {
     "sim.world": "hall",
@@ -54,9 +60,7 @@ SETTINGS = {
 }
 WALK_MPS = 1.0
 WINDOW = 25  # samples: 0.5 s at 50 Hz
-#: m/s: the robot's speed towards a person below which it counts as at rest (the trot's
-#: sway while it stands).
-AT_REST_MPS = 0.05
+
 SAMPLE_NS = 20_000_000  # the base's truth, every 20 ms
 Leg = Callable[[int], tuple[float, float] | None]
 
@@ -103,45 +107,6 @@ def leg_velocity(
         return WALK_MPS * (b[0] - a[0]) / length, WALK_MPS * (b[1] - a[1]) / length
 
     return velocity
-
-
-def separation_figures(
-    samples: list[StateTruth],
-    person_at: Callable[[int], tuple[float, float]],
-    person_velocity: Callable[[int], tuple[float, float]],
-    fp: Footprint,
-    sep: SeparationParams,
-) -> dict[str, Any]:
-    """The speed and separation monitor's rule judged from truth: at each sample the
-    robot's and the person's true speeds towards each other (no estimate, so no speed
-    margin), the protective separation S_p they make, and the separation d. A violation
-    is a sample where the robot moved towards them (faster than `AT_REST_MPS`) with
-    d < S_p; a person walking into a robot at rest is none (the standard's protective
-    stop). Also the least margin d − S_p while it moved towards them, and the robot's
-    speed at the closest approach."""
-    truth = replace(sep, speed_margin_mps=0.0)
-    violations, margin = 0, math.inf
-    closest, speed_at_closest = math.inf, 0.0
-    for m in samples:
-        pose = Pose.of_odom(m)
-        xy = person_at(m.stamp_ns)
-        d = float(distance_to_footprint(pose, fp, np.array([xy]))[0])
-        n = bearing(pose, fp, xy)
-        v = m.base_linear_velocity_in_world[:2]
-        v_r = v[0] * n[0] + v[1] * n[1]
-        v_h = directed_speed(person_velocity(m.stamp_ns), (-n[0], -n[1]), truth)
-        if d < closest:
-            closest, speed_at_closest = d, math.hypot(*v)
-        if v_r > AT_REST_MPS:
-            gap = d - protective_distance(v_r, v_h, truth)
-            margin = min(margin, gap)
-            violations += gap < 0.0
-    return {
-        "violations": violations,
-        "least_margin_m": margin,
-        "closest_m": closest,
-        "speed_at_closest_mps": speed_at_closest,
-    }
 
 
 @dataclass
@@ -280,9 +245,15 @@ def person_scenario(
         return f
     fp = Footprint.stowed()
     walks = script.walks
-    sep = separation_params(load_config().navigation.people)
-    for k, v in separation_figures(samples, walks.at, walks.velocity, fp, sep).items():
-        setattr(f, k, v)
+    watch = SeparationWatch(truth_separation(), fp)
+    for m in samples:
+        t = m.stamp_ns
+        there = PersonTruth(
+            id="person_2", position=walks.at(t), yaw=0.0, velocity=walks.velocity(t)
+        )
+        watch.add(m, PeopleTruth(stamp_ns=t, people=[there]))
+    f.violations, f.least_margin_m = watch.violations, watch.least_margin_m
+    f.closest_m, f.speed_at_closest_mps = watch.closest_m, watch.speed_at_closest_mps
     dist = np.array([
         float(distance_to_footprint(Pose.of_odom(m), fp, np.array([walks.at(m.stamp_ns)]))[0])
         for m in samples

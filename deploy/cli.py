@@ -14,6 +14,7 @@
     dume map [--explore | --patrol | --export FILE | --import FILE]   the semantic map (JSON)
     dume demo [--world-seed N] [--object ID --person ID]    bring an object, print a JSON line
     dume eval --worlds N --seed S --out DIR                 N worlds judged from truth: a report
+    dume eval --shift --worlds W --requests M               a shift of M requests per world
     dume bench sim|wbc|nav|stack|all                        print figures (JSON last line)
     dume trial walk|turn|strafe|random|reach|pick|push [--world-seed N]   a trial (JSON)
     dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
@@ -618,6 +619,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
+    if args.shift:
+        from bench.eval.shift import run_shift
+
+        return run_shift(args)
     from bench.eval.evaluate import run_eval
 
     return run_eval(args)
@@ -892,7 +897,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--bystanders", action="store_true",
         help="people walk their routes past the robot and across its path, not stopping for it",
     )  # fmt: skip
-    p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per world")
+    p.add_argument("--timeout", type=float, default=300.0, help="sim seconds per request")
+    p.add_argument(
+        "--shift", action="store_true",
+        help="a shift per world: --requests on one stack, the hall changing between them",
+    )  # fmt: skip
+    p.add_argument("--requests", type=int, default=10, help="--shift: requests per world")
+    p.add_argument(
+        "--no-changes", dest="changes", action="store_false",
+        help="--shift: nobody moves an artifact between requests",
+    )  # fmt: skip
     p.add_argument("--record", action="store_true", help="write each world's recording")
     p.add_argument(
         "--map", default="saved", metavar="saved|DIR|explored|truth",

@@ -1,0 +1,377 @@
+"""`dume eval --shift --worlds W --requests M --seed S`: a shift of requests per world on
+one stack, in a hall that changes between them, judged from the simulator's truth.
+
+World i is seed S + i. Each world gets one stack, started as `dume eval` starts it (the
+world's saved map; a world with none explored first; `--map truth` the ablation), that
+serves M requests one after another:
+
+- **the request** (`shift_request`, seeded by the world seed and the request's number):
+  a mapped artifact that still stands where the map has it (truth: within
+  `MATCH_M`, not handed over earlier in the shift) for a mapped person other than the last
+  request's; one in `CLASS_EVERY` asks by class ("a can": the mission picks the nearest
+  mapped one);
+- **the changing hall** (`--changes`, on by default): before each request after the
+  first, somebody moves an artifact not handed over yet (the requested one half the
+  time, when it can be) onto another support (`services.sim.world.new_place`), through
+  the sim's hook (`dume/world/artifact_command`); with `--bystanders` the people walk
+  their routes past the robot all shift long;
+- **time**: the move and the request go out stamped ahead of their sim time (the move
+  `MOVE_AFTER_S` after the last request ended, the request `REQUEST_AFTER_S`:
+  `MissionRequest.at_ns`), so a lockstep shift repeats as one request does.
+
+Each request is judged as `dume eval` judges one (`bench.eval.judge.evaluate`) against
+the truth of the moment: the artifacts where the moves put them, the people where
+`dume/world/people` has them when the request goes out. A class request succeeded when
+the requested person took any artifact of that class. Over the whole shift the robot's
+separation from every person is judged from truth (`SeparationWatch`: the least
+separation, the robot's speed then, and the speed and separation monitor's own rule:
+moving towards a person closer than the protective separation of both true speeds is a
+violation). The report is `dume eval`'s, one row per request, with the shift's
+separation figures and moves added.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+
+from bench.eval.evaluate import (
+    START_TIMEOUT_S,
+    STOP_TIMEOUT_S,
+    ExplorationFailed,
+    _say,
+    _stage_line,
+    explore_first,
+    map_source,
+    map_start_text,
+    scenario_of,
+    world_overrides,
+)
+from bench.eval.judge import MissionRecord, WorldResult, evaluate
+from bench.eval.report import json_safe, write_report
+from bench.eval.run import read_map, read_world, request_result, sigterm_interrupts, watch_mission
+from bench.eval.targets import Pair, TargetError
+from bench.separation import SeparationWatch, truth_separation
+from common.bus import BusError, Fifo, Latest
+from common.config import ConfigError, resolve
+from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_PEOPLE
+from common.messages import PayloadError
+from common.messages.mission import MissionRequest
+from common.messages.semantic_map import MapEntity
+from common.messages.sim import (
+    ArtifactCommand,
+    HandoverTaken,
+    PeopleTruth,
+    SimStats,
+    StateTruth,
+)
+from common.messages.world import WorldDescription
+from deploy.demo import SERVICES
+from deploy.runs import shown
+from deploy.stack import ProcessStack
+from services.semantic_map.store import database_path, remove_database
+from services.sim.world import new_place
+
+#: m: a mapped artifact stands for the truth artifact nearest to it within this.
+MATCH_M = 0.3
+#: Every this many requests, one asks by class.
+CLASS_EVERY = 3
+#: Sim seconds after the last request ended that the move, then the request, take effect.
+MOVE_AFTER_S = 1.0
+REQUEST_AFTER_S = 2.5
+
+
+# -- the request ----------------------------------------------------------------------------
+
+
+def present_artifacts(
+    artifacts: Sequence[MapEntity], where: dict[str, tuple[float, float, float]], gone: set[str]
+) -> list[tuple[MapEntity, str]]:
+    """The mapped artifacts that still stand where the map has them: (entity, the truth
+    artifact it stands for), the truth one of the same class, not `gone`, within
+    `MATCH_M` on the floor; sorted by map id."""
+    out = []
+    for e in sorted(artifacts, key=lambda e: e.id):
+        if e.missing_since_ns is not None:
+            continue
+        best, best_d = "", MATCH_M
+        for tid, (x, y, _) in where.items():
+            d = math.hypot(x - e.position_in_world[0], y - e.position_in_world[1])
+            if tid not in gone and tid.split("_")[0] == e.class_name and d <= best_d:
+                best, best_d = tid, d
+        if best:
+            out.append((e, best))
+    return out
+
+
+def shift_request(
+    present: Sequence[tuple[MapEntity, str]],
+    people: Sequence[MapEntity],
+    seed: int,
+    k: int,
+    last_person: str = "",
+) -> tuple[Pair, str]:
+    """Request k of world `seed`'s shift: the pair, and the truth artifact asked for (""
+    for a class request). Raises TargetError when nothing can be asked."""
+    folks = sorted((p for p in people if p.missing_since_ns is None), key=lambda p: p.id)
+    if not present or not folks:
+        raise TargetError(f"the map holds {len(present)} present artifacts, {len(folks)} people")
+    rng = random.Random(seed * 1000 + k)
+    entity, truth = rng.choice(list(present))
+    others = [p for p in folks if p.id != last_person] or folks
+    who = rng.choice(others)
+    if k % CLASS_EVERY == CLASS_EVERY - 1:
+        return Pair(entity.class_name, who.id, math.nan), ""
+    d = math.dist(entity.position_in_world[:2], who.position_in_world[:2])
+    return Pair(entity.id, who.id, d), truth
+
+
+class Follow:
+    """The truth samples of a shift, paired: each people sample with the base's newest
+    state at or before it."""
+
+    def __init__(self, people: Fifo[PeopleTruth], base: Latest[StateTruth], watch: SeparationWatch):
+        self.people, self.base, self.watch = people, base, watch
+
+    def drain(self) -> None:
+        base = self.base.get()
+        for sample in self.people.drain():
+            if base is not None:
+                self.watch.add(base, sample)
+
+
+# -- the shift ------------------------------------------------------------------------------
+
+
+@dataclass
+class Truth:
+    """The world as the shift has changed it: where each artifact stands now, which were
+    handed over, where the people are."""
+
+    world: WorldDescription
+    where: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    gone: set[str] = field(default_factory=set)
+    moves: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.where = {a.id: a.position for a in self.world.artifacts}
+
+    def now(self, people: PeopleTruth | None) -> WorldDescription:
+        """The world description with the artifacts and people where they are now."""
+        arts = tuple(
+            msgspec.structs.replace(a, position=self.where[a.id])
+            for a in self.world.artifacts
+            if a.id not in self.gone
+        )
+        folks = self.world.people
+        if people is not None:
+            at = {p.id: p.position for p in people.people}
+            folks = tuple(msgspec.structs.replace(p, position=at.get(p.id, p.position))
+                          for p in folks)  # fmt: skip
+        return msgspec.structs.replace(self.world, artifacts=arts, people=folks)
+
+
+def class_verdict(result: WorldResult, record: MissionRecord, class_name: str) -> None:
+    """A class request succeeded when the requested person took any artifact of it."""
+    took = [
+        e for e in record.events
+        if isinstance(e, HandoverTaken) and e.person_id == result.truth_person
+        and e.object_id.split("_")[0] == class_name
+    ]  # fmt: skip
+    if took:
+        result.outcome = "succeeded"
+        result.truth_object = took[0].object_id
+        result.truth_reason = f"{took[0].person_id} took {took[0].object_id} (a {class_name})"
+        result.agree = result.mission_state == "succeeded"
+
+
+def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult]) -> dict[str, Any]:
+    """One world's shift, start to teardown: its requests' results appended to `out`;
+    the world's shift figures (separation, moves)."""
+    scenario = scenario_of(args)
+    map_name = f"shift-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{seed}"
+    overrides = world_overrides(args, seed, map_name)
+    stack = ProcessStack(list(SERVICES), overrides)
+    watch = SeparationWatch(truth_separation(overrides))
+    figures: dict[str, Any] = {"world_seed": seed}
+    rng = np.random.default_rng(seed)
+    truth: Truth | None = None
+    step = "start the stack"
+    try:
+        stack.start(timeout_s=START_TIMEOUT_S)
+        bus, keys = stack.bus, stack.keys
+        stats = bus.latest(keys.sim_stats, SimStats)
+        follow = Follow(bus.fifo(WORLD_PEOPLE, PeopleTruth, maxlen=1 << 16),
+                        bus.latest(keys.state_truth, StateTruth), watch)  # fmt: skip
+        people_now = bus.latest(WORLD_PEOPLE, PeopleTruth)
+        mover = bus.publisher(WORLD_ARTIFACT_COMMAND, ArtifactCommand, "control")
+        how, path = map_source(args.map, args.world, seed)
+        gated = True
+        if how == "explore":
+            step = "explore the world"
+            e = explore_first(stack, read_world(bus), seed, path)
+            figures["exploration"] = e
+            gated = False
+            if e["outcome"] != "succeeded":
+                raise ExplorationFailed(f"it ended {e['outcome']}: {e['reason']}")
+        truth = Truth(read_world(bus))
+        last_person, end_ns = "", 0
+        for k in range(args.requests):
+            step = f"make request {k + 1}"
+            follow.drain()
+            arts, people = read_map(bus)
+            present = present_artifacts(arts, truth.where, truth.gone)
+            pair, asked = shift_request(present, people, seed, k, last_person)
+            at_ns = None
+            if not gated:
+                at_ns = end_ns + round(REQUEST_AFTER_S * 1e9)
+                if args.changes:
+                    move(truth, mover, rng, asked, end_ns + round(MOVE_AFTER_S * 1e9))
+            result = WorldResult(world=args.world, world_seed=seed, scenario=scenario)
+            world_now = truth.now(people_now.get())
+            request_result(result, pair, arts, people, world_now)
+            if asked:
+                result.truth_object = asked
+            result.object = f"{pair.object} (#{k + 1})"
+            request = MissionRequest(request_id=f"shift-{seed}-{k + 1}", object=pair.object,
+                                     person=pair.person, at_ns=at_ns)  # fmt: skip
+            step = f"run request {k + 1}"
+            record = watch_mission(bus, keys, request, args.timeout, _stage_line(seed),
+                                   start_gate=gated)  # fmt: skip
+            gated = False
+            evaluate(result, record, world_now)
+            if not asked:
+                class_verdict(result, record, pair.object)
+            truth.gone |= {h.object_id for h in record.events if isinstance(h, HandoverTaken)}
+            end_ns = max(record.end_ns, (record.changes[-1].stamp_ns if record.changes else 0))
+            last_person = pair.person
+            out.append(result)
+            ok = sum(r.succeeded for r in out)
+            _say(
+                f"  [{seed} #{k + 1}] {pair.object} → {pair.person}: {result.outcome} "
+                f"(mission {result.mission_state or '-'}) sim {result.sim_time_s:.1f} s | "
+                f"{ok}/{len(out)} succeeded"
+                + (f" | {result.failure}" if not result.succeeded else "")
+            )
+        follow.drain()
+        if (last := stats.get()) is not None:
+            figures["lockstep_stalls"] = last.stalls
+    except (BusError, PayloadError, TargetError, ExplorationFailed) as exc:
+        figures["error"] = f"could not {step}: {exc}"
+        _say(f"  [{seed}] {figures['error']}")
+    finally:
+        stack.stop(timeout_s=STOP_TIMEOUT_S)
+        remove_database(database_path(stack.config.semantic_map, map_name))
+    figures["separation"] = watch.figures()
+    figures["moves"] = list(truth.moves) if truth is not None else []
+    figures["logs"] = shown(stack.run_dir)
+    return figures
+
+
+def move(truth: Truth, mover: Any, rng: np.random.Generator, asked: str, at_ns: int) -> None:
+    """Somebody moves an artifact before the next request (the asked one half the time):
+    onto another support, sent ahead of its time; recorded in `truth`."""
+    left = sorted(a for a in truth.where if a not in truth.gone)
+    if not left:
+        return
+    pick = asked if asked and rng.random() < 0.5 else left[int(rng.integers(len(left)))]
+    surface = next((a.surface_id for a in truth.world.artifacts if a.id == pick), "")
+    taken = [p[:2] for a, p in truth.where.items() if a != pick and a not in truth.gone]
+    spot = new_place(truth.world, pick, rng, taken, surface)
+    if spot is None:
+        return
+    position, yaw, on = spot
+    mover.put(ArtifactCommand(stamp_ns=at_ns, artifact_id=pick, position=position, yaw=yaw))
+    truth.where[pick] = position
+    truth.moves.append(f"{pick} onto {on} at {at_ns / 1e9:.1f} s")
+    _say(f"    moved {pick} onto {on} (at {at_ns / 1e9:.1f} s)")
+
+
+def run_shift(args: argparse.Namespace) -> int:
+    """`dume eval --shift`: every world's shift, the report after each world."""
+    out = resolve(args.out)
+    seeds = [args.seed + i for i in range(args.worlds)]
+    results: list[WorldResult] = []
+    shifts: list[dict[str, Any]] = []
+    wall0 = time.perf_counter()
+    stopped = ""
+
+    def settings() -> dict[str, Any]:
+        return {
+            "world": args.world,
+            "world seeds": f"{seeds[0]}..{seeds[-1]}" if seeds else "-",
+            "scenario": scenario_of(args),
+            "shift": f"{args.requests} requests per world on one stack, one in {CLASS_EVERY} "
+            f"by class; {'an artifact moved before each' if args.changes else 'no moves'}",
+            "map start": map_start_text(args.map),
+            "timeout per request": f"{args.timeout:.0f} s sim",
+            "extra settings": ", ".join(args.set) or "none",
+            "wall time": f"{time.perf_counter() - wall0:.0f} s",
+            **({"stopped early": stopped} if stopped else {}),
+        }
+
+    def report() -> dict[str, Any]:
+        summary = write_report(out, settings(), results)
+        write_shift_section(out, shifts)
+        return summary
+
+    _say(
+        f"dume eval --shift: {len(seeds)} {args.world} worlds × {args.requests} requests, out {out}"
+    )
+    summary: dict[str, Any] = {}
+    with sigterm_interrupts():
+        try:
+            for seed in seeds:
+                shifts.append(run_shift_world(args, seed, results))
+                summary = report()
+        except KeyboardInterrupt:
+            stopped = "interrupted"
+        except ConfigError as exc:
+            stopped = f"the settings no longer load (changed during the run?): {exc}"
+    if stopped:
+        summary = report()
+    print(json.dumps(json_safe({**summary, "shifts": shifts, "out": str(out), "stopped": stopped})))
+    if stopped:
+        return 130 if stopped == "interrupted" else 2
+    return 0 if results and not any("error" in s for s in shifts) else 1
+
+
+def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
+    """The shift's own figures after the report: separation per world, the moves."""
+    lines = [
+        "",
+        "## The shift",
+        "",
+        "Separation from people, judged from truth over the whole shift (the footprint's "
+        "distance to each person; a violation: the robot moving towards a person closer "
+        "than the protective separation of both true speeds, the monitor's own rule).",
+        "",
+        "| seed | truth samples | violations | least margin, m | closest, m (who) "
+        "| robot speed then, m/s | moves | error |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for s in shifts:
+        sep = s.get("separation", {})
+        lines.append(
+            f"| {s['world_seed']} | {sep.get('samples', 0)} | {sep.get('violations', 0)} | "
+            f"{sep.get('least_margin_m', math.nan)} | {sep.get('closest_m', math.nan)} "
+            f"({sep.get('closest_person', '-')}) | {sep.get('speed_at_closest_mps', math.nan)} | "
+            f"{len(s.get('moves', []))} | {s.get('error', '')} |"
+        )
+    moves = [f"- seed {s['world_seed']}: {m}" for s in shifts for m in s.get("moves", [])]
+    if moves:
+        lines += ["", "Moves (truth):", "", *moves]
+    with (out / "report.md").open("a") as f:
+        f.write("\n".join(lines) + "\n")
+    (out / "shift.json").write_text(json.dumps(json_safe(list(shifts)), indent=2) + "\n")

@@ -1,0 +1,82 @@
+"""The robot's separation from people judged from the simulator's truth, as the speed and
+separation monitor's own rule has it (`services.navigation.separation`).
+
+`SeparationWatch.add(base, people)` takes one moment: the base's truth (`state_truth`)
+and every person's (`world/people`: floor point and velocity). Per person: the
+separation d (the stowed footprint's distance to their floor point), the robot's speed
+towards them and theirs towards it, both true (so no margin on a person's estimated
+speed: `truth_separation`); a violation is a moment when the robot moved towards them
+(faster than `AT_REST_MPS`) with d below the protective separation S_p of both speeds. A
+person walking into a robot at rest is none (the standard's protective stop). Kept: the
+violations, the least margin d − S_p while moving towards someone, the least separation,
+who it was and the robot's speed then. `dume trial person|crossing` and `dume eval
+--shift` use it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common.config import Overrides, load_config
+from common.messages.sim import PeopleTruth, StateTruth
+from common.robot import Footprint
+from services.navigation.grid import Pose, distance_to_footprint
+from services.navigation.people import bearing, separation_params
+from services.navigation.separation import SeparationParams, directed_speed, protective_distance
+
+#: m/s: a robot slower than this towards a person is at rest (the trot's sway).
+AT_REST_MPS = 0.05
+
+
+@dataclass
+class SeparationWatch:
+    """The robot's separation from every person over a shift (truth samples: the base,
+    `state_truth`; the people, `world/people`)."""
+
+    sep: SeparationParams
+    fp: Footprint = field(default_factory=Footprint.stowed)
+    samples: int = 0
+    violations: int = 0
+    least_margin_m: float = math.inf
+    closest_m: float = math.inf
+    speed_at_closest_mps: float = math.nan
+    closest_person: str = ""
+
+    def add(self, base: StateTruth, people: PeopleTruth) -> None:
+        """One moment: the base and every person, as of one stamp."""
+        pose = Pose.of_odom(base)
+        v = base.base_linear_velocity_in_world[:2]
+        self.samples += 1
+        for p in people.people:
+            xy = (p.position[0], p.position[1])
+            d = float(distance_to_footprint(pose, self.fp, np.array([xy]))[0])
+            n = bearing(pose, self.fp, xy)
+            v_r = v[0] * n[0] + v[1] * n[1]
+            v_h = directed_speed(p.velocity, (-n[0], -n[1]), self.sep)
+            if d < self.closest_m:
+                self.closest_m, self.closest_person = d, p.id
+                self.speed_at_closest_mps = math.hypot(*v)
+            if v_r > AT_REST_MPS:
+                margin = d - protective_distance(v_r, v_h, self.sep)
+                self.least_margin_m = min(self.least_margin_m, margin)
+                self.violations += margin < 0.0
+
+    def figures(self) -> dict[str, Any]:
+        return {
+            "samples": self.samples,
+            "violations": self.violations,
+            "least_margin_m": round(self.least_margin_m, 3),
+            "closest_m": round(self.closest_m, 3),
+            "closest_person": self.closest_person,
+            "speed_at_closest_mps": round(self.speed_at_closest_mps, 3),
+        }
+
+
+def truth_separation(overrides: Overrides | None = None) -> SeparationParams:
+    """The monitor's own rule, for the truth: its terms, no margin on a known speed."""
+    sep = separation_params(load_config(overrides or {}).navigation.people)
+    return SeparationParams(**{**sep.__dict__, "speed_margin_mps": 0.0})

@@ -1,0 +1,106 @@
+"""`dume eval --shift`'s pure parts: the requests, the truth of the moment, the separation."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.eval.judge import MissionRecord, WorldResult
+from bench.eval.shift import (
+    CLASS_EVERY,
+    Truth,
+    class_verdict,
+    present_artifacts,
+    shift_request,
+)
+from bench.separation import SeparationWatch
+from common.messages.mission import MissionRequest
+from common.messages.semantic_map import MapEntity
+from common.messages.sim import HandoverTaken, PeopleTruth, PersonTruth, StateTruth
+from services.navigation.separation import SeparationParams, protective_distance
+from services.sim.world import generate_world
+
+
+def _entity(eid: str, x: float, y: float, kind: str = "artifact") -> MapEntity:
+    return MapEntity(id=eid, class_name=eid.split("_")[0], kind=kind,  # type: ignore[arg-type]
+                     position_in_world=(x, y, 0.8), uncertainty_m=0.05, last_seen_ns=0,
+                     source="perception")  # fmt: skip
+
+
+def test_only_artifacts_that_still_stand_where_the_map_has_them_are_asked_for() -> None:
+    where = {"bottle_1": (1.0, 0.0, 0.8), "bottle_2": (5.0, 0.0, 0.8), "can_1": (3.0, 0.0, 0.8)}
+    mapped = [
+        _entity("bottle_7", 1.1, 0.0),  # bottle_1, 10 cm off
+        _entity("bottle_8", 4.0, 0.0),  # bottle_2 moved away from here: 1 m
+        _entity("box_1", 3.0, 0.0),  # the can is no box
+        _entity("can_4", 3.0, 0.1),  # can_1, but handed over already
+    ]
+    present = present_artifacts(mapped, where, gone={"can_1"})
+    assert [(e.id, t) for e, t in present] == [("bottle_7", "bottle_1")]
+
+
+def test_a_shift_asks_by_class_every_third_request_and_for_someone_else_each_time() -> None:
+    present = [(_entity("bottle_1", 1.0, 0.0), "bottle_1"), (_entity("can_1", 3.0, 0.0), "can_1")]
+    people = [_entity("person_1", 0.0, 0.0, "person"), _entity("person_2", 5.0, 0.0, "person")]
+    last = ""
+    for k in range(6):
+        pair, asked = shift_request(present, people, 7, k, last)
+        assert pair.person != last
+        if k % CLASS_EVERY == CLASS_EVERY - 1:
+            assert pair.object in ("bottle", "can") and asked == ""
+        else:
+            assert pair.object == asked and asked in ("bottle_1", "can_1")
+        last = pair.person
+    assert shift_request(present, people, 7, 4, "x") == shift_request(present, people, 7, 4, "x")
+
+
+def test_the_truth_of_the_moment_has_the_moved_artifacts_and_walking_people() -> None:
+    truth = Truth(generate_world(0, "small"))
+    truth.where["bottle_1"] = (-2.0, 1.0, 0.0)
+    moving = PersonTruth(id="person_1", position=(1.5, -1.0), yaw=0.0, velocity=(0.5, 0.0))
+    walked = PeopleTruth(stamp_ns=0, people=[moving])
+    now = truth.now(walked)
+    assert now.artifacts[0].position == (-2.0, 1.0, 0.0)
+    assert now.people[0].position == (1.5, -1.0)
+    truth.gone.add("bottle_1")
+    assert truth.now(None).artifacts == ()
+
+
+def _base(x: float, vx: float) -> StateTruth:
+    return StateTruth(stamp_ns=0, base_position_in_world=(x, 0.0, 0.5),
+                      base_orientation_xyzw=(0.0, 0.0, 0.0, 1.0),
+                      base_linear_velocity_in_world=(vx, 0.0, 0.0),
+                      base_angular_velocity_in_base=(0.0, 0.0, 0.0))  # fmt: skip
+
+
+def test_moving_towards_a_person_inside_the_protective_separation_is_a_violation() -> None:
+    """A person standing at x = 2: at 0.2 m/s from 1.48 m the robot keeps S_p (0.52 m);
+    at 0.6 m/s from 0.68 m it does not (S_p 0.94 m); at rest or moving away, never."""
+    sep = SeparationParams(speed_margin_mps=0.0)
+    watch = SeparationWatch(sep)
+    standing = [PersonTruth(id="person_1", position=(2.0, 0.0), yaw=0.0, velocity=(0.0, 0.0))]
+    person = PeopleTruth(stamp_ns=0, people=standing)
+    watch.add(_base(0.0, 0.2), person)
+    assert watch.violations == 0
+    assert watch.least_margin_m == pytest.approx(
+        1.478 - protective_distance(0.2, 0.0, sep), abs=1e-3
+    )
+    watch.add(_base(0.8, 0.0), person)  # at rest
+    watch.add(_base(0.8, -0.5), person)  # moving away
+    assert watch.violations == 0
+    watch.add(_base(0.8, 0.6), person)
+    f = watch.figures()
+    assert f["violations"] == 1 and f["least_margin_m"] < 0 and f["samples"] == 4
+    assert f["closest_m"] == pytest.approx(0.678, abs=1e-3) and f["closest_person"] == "person_1"
+
+
+def test_a_class_request_succeeds_when_the_person_took_any_artifact_of_that_class() -> None:
+    record = MissionRecord(
+        request=MissionRequest(request_id="r", object="can", person="person_2"), start_ns=0,
+        events=[HandoverTaken(stamp_ns=5, person_id="person_1", object_id="can_2")],
+    )  # fmt: skip
+    result = WorldResult(world="hall", world_seed=0, scenario="", truth_person="person_1")
+    class_verdict(result, record, "can")
+    assert result.succeeded and result.truth_object == "can_2"
+    other = WorldResult(world="hall", world_seed=0, scenario="", truth_person="person_1")
+    class_verdict(other, record, "bottle")
+    assert not other.succeeded
