@@ -124,3 +124,21 @@ def test_a_new_place_is_on_another_support_clear_of_the_others_and_pickable() ->
     assert z == pytest.approx(top.top_height)
     assert all(math.dist((x, y), q) >= ARTIFACT_SPACING_M for q in taken)
     assert new_place(hall, art.id, np.random.default_rng(1), taken, art.surface_id) == got
+
+
+def test_bystanders_see_the_robot_carrying_only_what_is_held_up_off_every_surface() -> None:
+    """The sim tells people the robot carries something when an artifact is off every
+    surface and in no hand (in the gripper, in practice): here, one let fall through the
+    air; the bottle on its table is not carried."""
+    walking = generate_world(0, "small", walking_people=True)
+    core = SimCore(walking, locomotion="kinematic", walking_people=True, bystanders=True,
+                   sensors=ideal_sensors())  # fmt: skip
+    _run(core, 0.3)
+    near = core._robot_near()
+    assert not near.carrying
+    assert (near.x, near.y) == pytest.approx(
+        (walking.robot_start.x, walking.robot_start.y), abs=0.05
+    )
+    core.place_artifact("bottle_1", (-2.0, 1.5, 1.5), 0.0)
+    _run(core, 0.05)
+    assert core._robot_near().carrying
