@@ -303,7 +303,9 @@ class Push(Message, frozen=True):
     stamp_ns: StampNs
     force_in_world: Vec3
     duration_s: Annotated[float, msgspec.Meta(gt=0.0, le=10.0)]
-    target: EntityId = "base"
+    target: Annotated[
+        str, msgspec.Meta(pattern=r"^(base|[a-z][a-z0-9]*_[1-9][0-9]*)$", max_length=64)
+    ] = "base"
 
 
 class ArtifactCommand(Message, frozen=True):
