@@ -646,6 +646,11 @@ class MissionSettings(_Section):
     #: Recovery: re-picks after a grasp lost or failed; instances tried for a class request.
     repick_budget: NonNegativeInt = 2
     max_candidates: PositiveInt = 3
+    #: An object found at none of its candidates' places is looked for elsewhere once
+    #: (`services/mission/search.py`): at most `search_places` places (its last, where
+    #: its class was seen within `search_recent_s`, the supports nearest first); 0: never.
+    search_places: NonNegativeInt = 6
+    search_recent_s: Positive = 600.0
     approach_gains: ApproachSettings = msgspec.field(default_factory=ApproachSettings)
     pull_detector: PullSettings = msgspec.field(default_factory=PullSettings)
     #: The mapping patrol (`dume map --patrol`): viewpoint spacing and the clearance kept

@@ -45,6 +45,8 @@ cmd_vel) and `tree`.
 
 from __future__ import annotations
 
+import msgspec
+
 from common.lifelines import Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
 from common.map_frame import MapFrame
@@ -163,8 +165,16 @@ class MissionNode:
             except Exception:  # a bug: say it, stop the robot, keep serving
                 self.svc.log.exception("mission tick at t=%.2f s failed", b / NS_PER_S)
             finally:
-                self.patrol_pub.put(self.patrol.published(b))  # every tick: the map waits
+                self.patrol_pub.put(self._patrol_status(b))  # every tick: the map waits
                 self.ticker.ack(b)
+
+    def _patrol_status(self, b: int) -> PatrolStatus:
+        """The jobs' status at b, saying `arm_look` too while a fetch's search holds the
+        arm up (the map fuses the wrist camera then)."""
+        status = self.patrol.published(b)
+        if self.tree.arm_look and not status.arm_look:
+            status = msgspec.structs.replace(status, arm_look=True)
+        return status
 
     def _stalled(self) -> None:
         """No tick for a while: a request whose sim (or another dependency) is gone ends

@@ -7,9 +7,13 @@
           regrasp (Recover: grasp_lost | grasp_failed, budget repick_budget)
             fetch_and_carry (sequence)
               next_instance (Recover: object_not_found | navigation_failed,
-                             budget max_candidates - 1, while candidates remain)
+                             budget max_candidates - 1, while candidates remain; then,
+                             once, object_not_found: a search, when search_places)
                 find_object (sequence)
-                  navigate_to_object: select_target, mode walk/navigation, ArtifactStandoff
+                  navigate_to_object: look_elsewhere (only when a search is asked: the
+                                      places the object may be now, walked with the
+                                      arm up until the map sees it: the only candidate),
+                                      select_target, mode walk/navigation, ArtifactStandoff
                   approach_object: mode walk/mission, Posture(look), approach (eq. 3)
                   pose_estimation: mode manipulate, estimate_grasp
               pick_object: Release (open), Posture(ready), then grasp_it: Reach(plan)
@@ -57,6 +61,8 @@ from services.mission.behaviours.base import (
     FAILURE,
     GRASP_PLAN,
     REQUEST,
+    SEARCH,
+    SEARCHED,
     SIDE,
     TARGET,
     Context,
@@ -71,6 +77,7 @@ from services.mission.behaviours.handover import FeelPull, FirstSide, next_side
 from services.mission.behaviours.motion import BackOff, NavigateTo, PersonAhead, SetMode
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
 from services.mission.behaviours.request import ResolvePerson, SelectTarget, WaitForRequest
+from services.mission.behaviours.search import LookElsewhere
 from services.mission.recovery import Recover
 
 REPICK_REASONS = frozenset({"grasp_lost", "grasp_failed"})
@@ -84,14 +91,19 @@ def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
 def build_tree(ctx: Context) -> Sequence:
     """The tree of the module docstring, its leaves bound to `ctx`."""
     s = ctx.settings
-    bb = blackboard("recovery", (CANDIDATE, GRASP_PLAN, DETECTION, TARGET))
+    bb = blackboard("recovery", (CANDIDATE, GRASP_PLAN, DETECTION, TARGET, SEARCH, SEARCHED))
 
-    def next_candidate(_failure: Failure) -> bool:
+    def next_candidate(failure: Failure) -> bool:
         candidates = read(bb, CANDIDATES) or []
         index = int(read(bb, CANDIDATE, 0)) + 1
-        if index >= len(candidates):
+        if index < len(candidates):
+            bb.set(CANDIDATE, index)
+            return True
+        # Every candidate missed at its place: look elsewhere, once per request.
+        if failure.reason != "object_not_found" or read(bb, SEARCHED) or not s.search_places:
             return False
-        bb.set(CANDIDATE, index)
+        bb.set(SEARCH, True)
+        bb.set(SEARCHED, True)
         return True
 
     def forget_grasp(failure: Failure) -> bool:
@@ -105,6 +117,7 @@ def build_tree(ctx: Context) -> Sequence:
     st = STAGES
     navigate = _seq(
         st[0],
+        LookElsewhere(ctx, st[0]),
         SelectTarget(ctx),
         SetMode(ctx, "walk", "navigation", st[0]),
         NavigateTo(ctx, "artifact", st[0]),
@@ -189,7 +202,7 @@ def build_tree(ctx: Context) -> Sequence:
         "next_instance",
         _seq("find_object", navigate, approach, pose),
         NEXT_INSTANCE_REASONS,
-        max(0, s.max_candidates - 1),
+        max(0, s.max_candidates - 1) + (1 if s.search_places else 0),
         ctx.decide,
         next_candidate,
     )
@@ -247,6 +260,11 @@ class MissionTree:
     @property
     def busy(self) -> bool:
         return self.request is not None
+
+    @property
+    def arm_look(self) -> bool:
+        """A search holds the arm up to look (the map fuses the wrist camera meanwhile)."""
+        return any(isinstance(b, LookElsewhere) and b.arm_look for b in self.root.iterate())
 
     def start(self, request: MissionRequest) -> None:
         if self.request is not None:

@@ -65,9 +65,9 @@ def fused_cameras(cameras: list[str], patrol_cameras: list[str], arm_up: bool) -
 
 
 def patrol_holds_look(status: PatrolStatus | None) -> bool:
-    """Whether the mission's patrol status (`mission/patrol/status`) says a running patrol
-    holds the arm in `look` (None: no status, no mission: no)."""
-    return status is not None and status.state == "running" and status.arm_look
+    """Whether the mission's patrol status (`mission/patrol/status`) says the arm is held
+    in `look` to map (a running patrol's, or a fetch's search; None: no status, no)."""
+    return status is not None and status.arm_look
 
 
 def perception_due(b: int, gate: UpstreamGate) -> tuple[int, int | None]:

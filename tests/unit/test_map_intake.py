@@ -119,7 +119,8 @@ def test_the_missions_patrol_status_says_when_the_arm_is_up() -> None:
     assert not patrol_holds_look(None)  # no mission, or nothing from it yet
     assert patrol_holds_look(PatrolStatus(stamp_ns=0, state="running", arm_look=True))
     assert not patrol_holds_look(PatrolStatus(stamp_ns=0, state="running", arm_look=False))
-    assert not patrol_holds_look(PatrolStatus(stamp_ns=0, state="done", arm_look=True))
+    # a fetch's search holds the arm up with no job running: the mission says so too
+    assert patrol_holds_look(PatrolStatus(stamp_ns=0, state="idle", arm_look=True))
 
 
 def test_perception_is_waited_for_only_as_a_live_periodic_producer_in_lockstep() -> None:

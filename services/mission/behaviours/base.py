@@ -40,8 +40,11 @@ SIDE = "side"  # tuple[float, int] | None: the bearing round the person first tr
 DETECTION = "detection"  # tuple[int, Detection] | None: the grasp's detection
 GRASP_PLAN = "grasp_plan"  # a GraspPlan
 FAILURE = "failure"  # Failure | None
+SEARCH = "search"  # bool: look elsewhere before the next try (every candidate missed)
+SEARCHED = "searched"  # bool: this request looked elsewhere already
 ALL_KEYS = (
-    REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE
+    REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
+    SEARCH, SEARCHED,
 )  # fmt: skip
 
 

@@ -1,0 +1,130 @@
+"""`LookElsewhere`: the object was not where the map said; look where it may be now.
+
+The fetch's first leaf. It does nothing (SUCCESS at once) unless the tree's recovery
+asked for a search (`SEARCH` on the blackboard: every candidate was tried and not found
+at its place). Then it plans the places (`services.mission.search.places_to_look`: its
+last place, where the map saw its class lately, the supports nearest first), the route
+facing them from within `patrol_recheck_see_m` (`coverage.facing_route`, as the second
+look plans), and walks it as the patrol walks a route (`patrol.PatrolRunner`: the arm up
+in `look`, a hold at each viewpoint; the map fuses the wrist camera meanwhile, the node
+saying `arm_look`). After every tick it asks the map whether the object is there now
+(`search.found`): found, the walk stops and the found artifact becomes the only
+candidate (SUCCESS: the fetch goes on to it); the route walked without it,
+`object_not_found` naming the places looked at. Halted, it stops the walk.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from py_trees.common import Status
+
+from common.messages import as_numpy
+from services.mission.behaviours.base import (
+    CANDIDATE,
+    CANDIDATES,
+    REQUEST,
+    SEARCH,
+    Context,
+    MissionBehaviour,
+)
+from services.mission.coverage import facing_route
+from services.mission.patrol import VIEW_HALF_ANGLE, PatrolRunner
+from services.mission.ports import PortError
+from services.mission.search import Place, found, places_to_look
+from services.mission.targets import class_of, is_map_id
+
+
+class LookElsewhere(MissionBehaviour):
+    WRITES = (CANDIDATES, CANDIDATE, SEARCH)
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("look_elsewhere", ctx, stage)
+        self.runner: PatrolRunner | None = None
+        self.places: list[Place] = []
+        self.known: set[str] | None = None
+        self.tried: list[str] = []
+        self.class_name = ""
+        self.hit = ""
+
+    @property
+    def arm_look(self) -> bool:
+        """The search holds the arm up to look (the map fuses the wrist camera)."""
+        return self.runner is not None and self.runner.arm_look
+
+    def update(self) -> Status:
+        if not self.get(SEARCH):
+            return Status.SUCCESS
+        if self.runner is None:
+            return self._start()
+        runner = self.runner
+        runner.step()
+        if runner.running and not self.hit:
+            try:
+                hit = found(self.port.artifacts_of_class(self.class_name), self.class_name,
+                            self.started_ns, self.tried, self.known)  # fmt: skip
+            except PortError:
+                hit = None
+            if hit is not None:
+                self.hit = hit.id
+                self.ctx.decide(f"search: {hit.id} seen at {hit.position_in_world[:2]}")
+                runner.stop(f"found {hit.id}")
+        if runner.running:
+            st = runner.status(self.port.now_ns)
+            self.fraction = min(0.99, st.waypoint / max(1, st.waypoints))
+            return Status.RUNNING
+        return self._end()
+
+    def _start(self) -> Status:
+        request = self.get(REQUEST)
+        self.tried = list(self.get(CANDIDATES) or [])
+        name = request.object
+        self.class_name = class_of(name) if is_map_id(name) else name
+        s = self.settings
+        xy = self.port.robot_xy()
+        try:
+            listing = self.port.artifacts_of_class(self.class_name)
+            supports = self.port.floor_supports()
+            grid = self.port.occupancy()
+            last = self.port.artifact(name) if is_map_id(name) else None
+        except PortError as exc:
+            return self.fail("unavailable", f"the semantic map did not answer: {exc}")
+        if xy is None:
+            return self.fail("object_not_found", "no search: the robot does not know where it is")
+        self.known = {a.id for a in listing} if is_map_id(name) else None
+        last_xy = (last.position_in_world[0], last.position_in_world[1]) if last else None
+        self.places = places_to_look(
+            last_xy, self.class_name, listing, supports, xy, self.port.now_ns,
+            s.search_recent_s, s.search_places, skip=self.tried,
+        )  # fmt: skip
+        route = facing_route(
+            np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
+            np.array([p.xy for p in self.places]).reshape(-1, 2), s.patrol_clearance_m,
+            s.patrol_near_m, s.patrol_recheck_see_m, VIEW_HALF_ANGLE,
+        )  # fmt: skip
+        said = "; ".join(p.why for p in self.places)
+        if not route.viewpoints:
+            return self.fail("object_not_found", f"{name} not at its place, and no viewpoint "
+                             f"sees where else to look ({said})")  # fmt: skip
+        self.ctx.decide(f"search for {name}: {len(route.viewpoints)} viewpoint(s): {said}")
+        self.runner = PatrolRunner(self.port, self.settings, self.ctx.decide)
+        self.runner.start(route)
+        return Status.RUNNING
+
+    def _end(self) -> Status:
+        request = self.get(REQUEST)
+        hit, said = self.hit, "; ".join(p.why for p in self.places)
+        self.set(SEARCH, False)
+        if hit:
+            self.set(CANDIDATES, [hit])
+            self.set(CANDIDATE, 0)
+            self.ctx.decide(f"search: fetching {hit} for {request.object}")
+            return Status.SUCCESS
+        return self.fail("object_not_found", f"{request.object} not found; looked at: {said}")
+
+    def terminate(self, new_status: Status) -> None:
+        runner = self.runner
+        if runner is not None and runner.running:
+            runner.stop("the fetch stopped")
+            runner.step()
+        if new_status != Status.RUNNING:
+            self.runner, self.hit, self.places = None, "", []

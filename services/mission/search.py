@@ -1,0 +1,112 @@
+"""Where to look for an object that is not where the map says, and when it is found.
+
+A person who does not find a part where it usually lies looks round that place first,
+then where they last saw such parts, then on the benches nearby, then everywhere else.
+`places_to_look` orders the places so, at most `max_places` of them:
+
+1. the object's last place (the map's, where the approach did not find it): the whole
+   support it stood on is looked at again, from a viewpoint of its own;
+2. the other places the map saw an artifact of its class within `recent_s`, nearest
+   first (someone may have put it beside its like);
+3. the supports (tables, benches, pallets: `dume/map/supports`) not yet among the places,
+   nearest first: those nearby, then the rest of the hall (the semantic pass's surfaces).
+
+A place is a point on the floor to look at with why it is looked at; the mission walks
+viewpoints facing them (`coverage.facing_route`, as the second look does) with the arm up.
+`found` says, after each look, whether the map now has the object: an artifact of the
+class, not missing, seen since the search began, not one the fetch already tried; for a
+request by id, also not one the map already knew when the search began (the object
+moved makes a new entry where it now stands; an old one is another object of its
+class). Pure: no transport.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import NamedTuple
+
+from common.messages.semantic_map import MapEntity
+from common.messages.world import SupportSurface
+
+
+class Place(NamedTuple):
+    """A point on the floor to look at (m, world), and why."""
+
+    xy: tuple[float, float]
+    why: str
+
+
+def _on(surface: SupportSurface, xy: tuple[float, float], margin_m: float = 0.2) -> bool:
+    """Whether a floor point lies over the surface's top (within `margin_m` of it)."""
+    c, s = math.cos(surface.yaw), math.sin(surface.yaw)
+    dx, dy = xy[0] - surface.centre_xy[0], xy[1] - surface.centre_xy[1]
+    u, v = c * dx + s * dy, -s * dx + c * dy
+    hx, hy = surface.half_extents
+    return abs(u) <= hx + margin_m and abs(v) <= hy + margin_m
+
+
+def places_to_look(
+    last_xy: tuple[float, float] | None,
+    class_name: str,
+    artifacts: Iterable[MapEntity],
+    supports: Sequence[SupportSurface],
+    robot_xy: tuple[float, float],
+    now_ns: int,
+    recent_s: float,
+    max_places: int,
+    skip: Iterable[str] = (),
+) -> list[Place]:
+    """The places of the module docstring, in order, `max_places` at most; `skip`: map ids
+    whose places are not worth a look (the candidates already tried there)."""
+    out: list[Place] = []
+    covered: set[str] = set()
+
+    def add(xy: tuple[float, float], why: str) -> None:
+        if len(out) >= max_places:
+            return
+        under = next((s.id for s in supports if _on(s, xy)), "")
+        if under and under in covered:
+            return  # that support is looked at already
+        if any(math.dist(xy, p.xy) < 0.5 for p in out):
+            return
+        if under:
+            covered.add(under)
+        out.append(Place(xy, why + (f" (on {under})" if under and under not in why else "")))
+
+    if last_xy is not None:
+        add(last_xy, "where the map had it")
+    skipped = set(skip)
+    recent_ns = round(recent_s * 1e9)
+    seen = [
+        a for a in artifacts
+        if a.class_name == class_name and a.missing_since_ns is None and a.id not in skipped
+        and now_ns - a.last_seen_ns <= recent_ns
+    ]  # fmt: skip
+    for a in sorted(seen, key=lambda a: math.dist(a.position_in_world[:2], robot_xy)):
+        ago = (now_ns - a.last_seen_ns) / 1e9
+        add((a.position_in_world[0], a.position_in_world[1]),
+            f"a {class_name} seen there {ago:.0f} s ago ({a.id})")  # fmt: skip
+    for s in sorted(supports, key=lambda s: math.dist(s.centre_xy, robot_xy)):
+        if s.id not in covered:
+            add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, not looked at yet")
+    return out
+
+
+def found(
+    artifacts: Iterable[MapEntity],
+    class_name: str,
+    since_ns: int,
+    tried: Iterable[str],
+    known: Iterable[str] | None,
+) -> MapEntity | None:
+    """The artifact the search found (module docstring), nearest to nothing in
+    particular: the most recently seen; None while there is none. `known`: the ids the
+    map had when the search began (a request by id), None for a request by class."""
+    skip = set(tried) | set(known or ())
+    fresh = [
+        a for a in artifacts
+        if a.class_name == class_name and a.missing_since_ns is None and a.id not in skip
+        and a.last_seen_ns >= since_ns
+    ]  # fmt: skip
+    return max(fresh, key=lambda a: (a.last_seen_ns, a.id)) if fresh else None

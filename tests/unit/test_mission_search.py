@@ -1,0 +1,105 @@
+"""Looking for an object that is not where the map says (`services/mission/search.py`,
+the tree's `look_elsewhere`), pure and scripted."""
+
+from __future__ import annotations
+
+import msgspec
+
+from common.messages.mission import MissionRequest
+from common.messages.navigation import ArtifactStandoff, PoseGoal
+from common.messages.semantic_map import MapEntity
+from common.messages.world import SupportSurface
+from services.mission.search import found, places_to_look
+from tests.unit.mission_fakes import FakeRobot, entity, small_world
+from tests.unit.test_mission_tree import mission
+
+S = 1_000_000_000
+
+
+def _surface(sid: str, x: float, y: float) -> SupportSurface:
+    return SupportSurface(id=sid, centre_xy=(x, y), half_extents=(0.6, 0.3), yaw=0.0,
+                          top_height=0.8)  # fmt: skip
+
+
+def _seen(e: MapEntity, t_ns: int, missing: bool = False) -> MapEntity:
+    return msgspec.structs.replace(e, last_seen_ns=t_ns, missing_since_ns=t_ns if missing else None)
+
+
+def test_the_places_go_from_its_last_place_to_its_likes_to_the_supports_nearest_first() -> None:
+    supports = [_surface("bench_1", 6.0, 0.0), _surface("table_1", 2.0, 0.0),
+                _surface("table_2", 2.0, 4.0)]  # fmt: skip
+    listing = [
+        _seen(entity("bottle_1", 2.1, 0.2), 0, missing=True),  # the one asked for: gone
+        _seen(entity("bottle_2", 6.2, 0.1), 100 * S),  # its like, seen lately on bench_1
+        _seen(entity("bottle_3", -3.0, 0.0), 0),  # seen long ago: no reason to look there
+        _seen(entity("can_1", 2.0, 4.0), 100 * S),  # another class
+    ]
+    places = places_to_look((2.1, 0.2), "bottle", listing, supports, (0.0, 0.0), 200 * S,
+                            recent_s=150.0, max_places=5, skip=["bottle_1"])  # fmt: skip
+    assert [p.why for p in places] == [
+        "where the map had it (on table_1)",
+        "a bottle seen there 100 s ago (bottle_2) (on bench_1)",
+        "table_2, not looked at yet",
+    ]
+    assert places[0].xy == (2.1, 0.2)
+    few = places_to_look(None, "bottle", listing, supports, (0.0, 0.0), 200 * S, 150.0, 1)
+    assert [p.why for p in few] == ["a bottle seen there 100 s ago (bottle_2) (on bench_1)"]
+
+
+def test_found_is_a_new_sighting_of_the_class_for_an_id_and_any_untried_for_a_class() -> None:
+    start = 50 * S
+    old = _seen(entity("bottle_2", 6.2, 0.1), 60 * S)  # known before, seen again
+    new = _seen(entity("bottle_9", 4.0, 3.0), 70 * S)  # the moved one, a new entry
+    stale = _seen(entity("bottle_8", 1.0, 1.0), 10 * S)  # not seen since the search began
+    gone = _seen(entity("bottle_7", 1.0, 1.0), 80 * S, missing=True)
+    listing = [old, new, stale, gone]
+    known = {"bottle_1", "bottle_2", "bottle_8", "bottle_7"}
+    assert found(listing, "bottle", start, ["bottle_1"], known) == new  # by id: new only
+    assert found([old, stale], "bottle", start, ["bottle_1"], known) is None
+    assert found([old, stale], "bottle", start, ["bottle_1"], None) == old  # by class
+    assert found([old], "bottle", start, ["bottle_2"], None) is None  # tried already
+    assert found(listing, "can", start, [], None) is None
+
+
+def _moved_bottle() -> FakeRobot:
+    """bottle_1 is mapped at (3, 0) but someone put it on the other table."""
+    robot = small_world(artifacts={"bottle_1": entity("bottle_1", 3.0, 0.0)}, visible={"bottle_9"})
+    robot.supports = [_surface("table_1", 3.3, 0.0), _surface("table_2", -1.0, 3.0)]
+    return robot
+
+
+def test_an_object_moved_to_another_support_is_looked_for_and_fetched_there() -> None:
+    robot = _moved_bottle()
+    tree = mission(robot)
+    for _ in range(3000):
+        outcome = tree.tick()
+        robot.advance()
+        if tree.arm_look and "bottle_9" not in robot.artifacts:
+            # the wrist camera, held up by the search, shows it on table_2: a new entry
+            robot.artifacts["bottle_9"] = _seen(entity("bottle_9", -1.0, 2.8), robot.now_ns)
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    walks = [g for _, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert walks, "the search walked to a viewpoint"
+    assert [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)] == [
+        "bottle_1",
+        "bottle_9",
+    ]
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any(d.startswith("search for bottle_1") for d in decisions), decisions
+    assert any("search: fetching bottle_9 for bottle_1" in d for d in decisions)
+
+
+def test_an_object_taken_away_fails_object_not_found_naming_the_places_looked_at() -> None:
+    robot = _moved_bottle()
+    tree = mission(robot, MissionRequest(request_id="r", object="bottle_1", person="person_1"))
+    for _ in range(3000):
+        outcome = tree.tick()
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and (outcome.state, outcome.reason) == ("failed", "object_not_found")
+    assert "looked at: where the map had it (on table_1)" in outcome.detail
+    assert "table_2, not looked at yet" in outcome.detail
+    assert not tree.arm_look
