@@ -63,7 +63,7 @@ from bench.eval.report import json_safe, write_report
 from bench.eval.run import read_map, read_world, request_result, sigterm_interrupts, watch_mission
 from bench.eval.targets import Pair, TargetError
 from bench.separation import SeparationWatch, truth_separation
-from common.bus import BusError, Fifo, Latest
+from common.bus import BusError, Fifo
 from common.config import ConfigError, resolve
 from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_PEOPLE
 from common.messages import PayloadError
@@ -138,17 +138,30 @@ def shift_request(
 
 
 class Follow:
-    """The truth samples of a shift, paired: each people sample with the base's newest
-    state at or before it."""
+    """The truth samples of a shift, paired by stamp: each people sample (the lidar's
+    rate) with the base's truth of the same stamp (`state_truth`, at a multiple of it);
+    a people sample whose base has not come yet waits for the next `drain`."""
 
-    def __init__(self, people: Fifo[PeopleTruth], base: Latest[StateTruth], watch: SeparationWatch):
+    def __init__(self, people: Fifo[PeopleTruth], base: Fifo[StateTruth], watch: SeparationWatch):
         self.people, self.base, self.watch = people, base, watch
+        self._people: list[PeopleTruth] = []
+        self._base: dict[int, StateTruth] = {}
 
     def drain(self) -> None:
-        base = self.base.get()
-        for sample in self.people.drain():
-            if base is not None:
+        self._people.extend(self.people.drain())
+        for b in self.base.drain():
+            self._base[b.stamp_ns] = b
+        left: list[PeopleTruth] = []
+        for sample in self._people:
+            base = self._base.get(sample.stamp_ns)
+            if base is None:
+                left.append(sample)
+            else:
                 self.watch.add(base, sample)
+        newest = max(self._base, default=-1)
+        self._people = [p for p in left if p.stamp_ns > newest]  # its base never came
+        oldest = min((p.stamp_ns for p in self._people), default=newest)
+        self._base = {t: b for t, b in self._base.items() if t >= oldest}
 
 
 # -- the shift ------------------------------------------------------------------------------
@@ -213,7 +226,7 @@ def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult])
         bus, keys = stack.bus, stack.keys
         stats = bus.latest(keys.sim_stats, SimStats)
         follow = Follow(bus.fifo(WORLD_PEOPLE, PeopleTruth, maxlen=1 << 16),
-                        bus.latest(keys.state_truth, StateTruth), watch)  # fmt: skip
+                        bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 19), watch)  # fmt: skip
         people_now = bus.latest(WORLD_PEOPLE, PeopleTruth)
         mover = bus.publisher(WORLD_ARTIFACT_COMMAND, ArtifactCommand, "control")
         how, path = map_source(args.map, args.world, seed)

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import msgspec
 import pytest
 
 from bench.eval.judge import MissionRecord, WorldResult
 from bench.eval.shift import (
     CLASS_EVERY,
+    Follow,
     Truth,
     class_verdict,
     present_artifacts,
@@ -104,3 +106,34 @@ def test_a_class_request_succeeds_when_the_person_took_any_artifact_of_that_clas
     other = WorldResult(world="hall", world_seed=0, scenario="", truth_person="person_1")
     class_verdict(other, record, "bottle")
     assert not other.succeeded
+
+
+class _Fifo:
+    def __init__(self) -> None:
+        self.items: list[object] = []
+
+    def drain(self) -> list[object]:
+        out, self.items = self.items, []
+        return out
+
+
+def test_people_samples_are_judged_with_the_base_of_their_own_stamp() -> None:
+    """The base walks towards a standing person; each people sample (every 100 ms) is
+    paired with the base at its stamp, not the newest: one whose base has not come yet
+    waits for the next drain."""
+    people, base = _Fifo(), _Fifo()
+    watch = SeparationWatch(SeparationParams(speed_margin_mps=0.0))
+    follow = Follow(people, base, watch)  # type: ignore[arg-type]
+    standing = [PersonTruth(id="person_1", position=(2.0, 0.0), yaw=0.0, velocity=(0.0, 0.0))]
+    for k in range(10):  # base every 20 ms at 0.5 m/s from x = 0
+        t = k * 20_000_000
+        base.items.append(msgspec.structs.replace(_base(0.5 * t / 1e9, 0.5), stamp_ns=t))
+    people.items += [
+        PeopleTruth(stamp_ns=t, people=standing) for t in (0, 100_000_000, 200_000_000)
+    ]
+    follow.drain()
+    assert watch.samples == 2  # 0 and 100 ms; 200 ms's base has not come yet
+    base.items.append(msgspec.structs.replace(_base(0.1, 0.5), stamp_ns=200_000_000))
+    follow.drain()
+    assert watch.samples == 3
+    assert watch.closest_m == pytest.approx(2.0 - 0.1 - watch.fp.front, abs=1e-6)
