@@ -907,6 +907,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-changes", dest="changes", action="store_false",
         help="--shift: nobody moves an artifact between requests",
     )  # fmt: skip
+    p.add_argument(
+        "--slips", type=float, default=0.2, metavar="F",
+        help="--shift: the fraction of carries knocked (seeded)",
+    )  # fmt: skip
     p.add_argument("--record", action="store_true", help="write each world's recording")
     p.add_argument(
         "--map", default="saved", metavar="saved|DIR|explored|truth",

@@ -15,6 +15,9 @@ serves M requests one after another:
   time, when it can be) onto another support (`services.sim.world.new_place`), through
   the sim's hook (`dume/world/artifact_command`); with `--bystanders` the people walk
   their routes past the robot all shift long;
+- **slips** (`--slips F`, the fraction of requests): a knock on the object the robot
+  carries, 3 s into the carry (`Knock`, the sim's push hook on the artifact): recovered
+  when the request still succeeded, else the mission's reason says why;
 - **time**: the move and the request go out stamped ahead of their sim time (the move
   `MOVE_AFTER_S` after the last request ended, the request `REQUEST_AFTER_S`:
   `MissionRequest.at_ns`), so a lockstep shift repeats as one request does.
@@ -65,14 +68,16 @@ from bench.eval.targets import Pair, TargetError
 from bench.separation import SeparationWatch, truth_separation
 from common.bus import BusError, Fifo
 from common.config import ConfigError, resolve
-from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_PEOPLE
+from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_PEOPLE, WORLD_PUSH
 from common.messages import PayloadError
-from common.messages.mission import MissionRequest
+from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.semantic_map import MapEntity
 from common.messages.sim import (
     ArtifactCommand,
+    Clock,
     HandoverTaken,
     PeopleTruth,
+    Push,
     SimStats,
     StateTruth,
 )
@@ -87,6 +92,10 @@ from services.sim.world import new_place
 MATCH_M = 0.3
 #: Every this many requests, one asks by class.
 CLASS_EVERY = 3
+#: A slip: the knock's force sideways (N), how long (s), how long after the carry began (s).
+KNOCK_N = 20.0
+KNOCK_S = 0.1
+KNOCK_AFTER_S = 3.0
 #: Sim seconds after the last request ended that the move, then the request, take effect.
 MOVE_AFTER_S = 1.0
 REQUEST_AFTER_S = 2.5
@@ -229,6 +238,7 @@ def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult])
                         bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 19), watch)  # fmt: skip
         people_now = bus.latest(WORLD_PEOPLE, PeopleTruth)
         mover = bus.publisher(WORLD_ARTIFACT_COMMAND, ArtifactCommand, "control")
+        pusher = bus.publisher(WORLD_PUSH, Push, "control")
         how, path = map_source(args.map, args.world, seed)
         gated = True
         if how == "explore":
@@ -260,12 +270,20 @@ def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult])
             request = MissionRequest(request_id=f"shift-{seed}-{k + 1}", object=pair.object,
                                      person=pair.person, at_ns=at_ns)  # fmt: skip
             step = f"run request {k + 1}"
-            record = watch_mission(bus, keys, request, args.timeout, _stage_line(seed),
+            knock = Knock(pusher, asked, rng.random() < args.slips, _stage_line(seed))
+            record = watch_mission(bus, keys, request, args.timeout, knock.on_progress,
                                    start_gate=gated)  # fmt: skip
+
             gated = False
             evaluate(result, record, world_now)
             if not asked:
                 class_verdict(result, record, pair.object)
+            if knock.at_ns:  # a slip: recovered when it still succeeded, else said why
+                figures.setdefault("knocks", []).append({
+                    "request": k + 1, "object": asked, "at_s": knock.at_ns / 1e9,
+                    "dropped": result.drops, "outcome": result.outcome,
+                    "mission": f"{result.mission_state} {result.mission_reason}".strip(),
+                })  # fmt: skip
             truth.gone |= {h.object_id for h in record.events if isinstance(h, HandoverTaken)}
             end_ns = max(record.end_ns, (record.changes[-1].stamp_ns if record.changes else 0))
             last_person = pair.person
@@ -290,6 +308,27 @@ def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult])
     figures["moves"] = list(truth.moves) if truth is not None else []
     figures["logs"] = shown(stack.run_dir)
     return figures
+
+
+class Knock:
+    """A slip (`--slips`, the fraction of requests): once the request's status enters
+    `bring_to_user` (the robot carries its object), a knock on the object asked for
+    (`KNOCK_N` sideways for `KNOCK_S`, `KNOCK_AFTER_S` later; a request by class has no
+    object known to knock). `on_progress` also prints the stage lines."""
+
+    def __init__(self, pusher: Any, target: str, armed: bool, line: Any) -> None:
+        self.pusher, self.target, self.armed, self.line = pusher, target, armed, line
+        self.at_ns = 0
+
+    def on_progress(self, status: MissionStatus | None, clock: Clock, changed: bool) -> None:
+        self.line(status, clock, changed)
+        if not (self.armed and self.target and changed and status is not None):
+            return
+        if status.behaviour == "bring_to_user" and not self.at_ns:
+            self.at_ns = status.stamp_ns + round(KNOCK_AFTER_S * 1e9)
+            self.pusher.put(Push(stamp_ns=self.at_ns, force_in_world=(0.0, KNOCK_N, 0.0),
+                                 duration_s=KNOCK_S, target=self.target))  # fmt: skip
+            _say(f"    knocked {self.target} at {self.at_ns / 1e9:.1f} s")
 
 
 def move(truth: Truth, mover: Any, rng: np.random.Generator, asked: str, at_ns: int) -> None:
@@ -326,7 +365,8 @@ def run_shift(args: argparse.Namespace) -> int:
             "world seeds": f"{seeds[0]}..{seeds[-1]}" if seeds else "-",
             "scenario": scenario_of(args),
             "shift": f"{args.requests} requests per world on one stack, one in {CLASS_EVERY} "
-            f"by class; {'an artifact moved before each' if args.changes else 'no moves'}",
+            f"by class; {'an artifact moved before each' if args.changes else 'no moves'}; "
+            f"{args.slips:.0%} of the carries knocked",
             "map start": map_start_text(args.map),
             "timeout per request": f"{args.timeout:.0f} s sim",
             "extra settings": ", ".join(args.set) or "none",
@@ -385,6 +425,13 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
     moves = [f"- seed {s['world_seed']}: {m}" for s in shifts for m in s.get("moves", [])]
     if moves:
         lines += ["", "Moves (truth):", "", *moves]
+    knocks = [
+        f"- seed {s['world_seed']} request {k['request']}: {k['object']} knocked at "
+        f"{k['at_s']:.1f} s; drops {k['dropped']}; {k['outcome']} (mission {k['mission']})"
+        for s in shifts for k in s.get("knocks", [])
+    ]  # fmt: skip
+    if knocks:
+        lines += ["", "Slips (a knock on what the robot carried):", "", *knocks]
     with (out / "report.md").open("a") as f:
         f.write("\n".join(lines) + "\n")
     (out / "shift.json").write_text(json.dumps(json_safe(list(shifts)), indent=2) + "\n")
