@@ -9,15 +9,23 @@ from bench.eval.judge import MissionRecord, WorldResult
 from bench.eval.shift import (
     CLASS_EVERY,
     Follow,
+    Knock,
     Truth,
     class_verdict,
     present_artifacts,
     shift_request,
 )
 from bench.separation import SeparationWatch
-from common.messages.mission import MissionRequest
+from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.semantic_map import MapEntity
-from common.messages.sim import HandoverTaken, PeopleTruth, PersonTruth, StateTruth
+from common.messages.sim import (
+    Clock,
+    HandoverTaken,
+    PeopleTruth,
+    PersonTruth,
+    Push,
+    StateTruth,
+)
 from services.navigation.separation import SeparationParams, protective_distance
 from services.sim.world import generate_world
 
@@ -137,3 +145,30 @@ def test_people_samples_are_judged_with_the_base_of_their_own_stamp() -> None:
     follow.drain()
     assert watch.samples == 3
     assert watch.closest_m == pytest.approx(2.0 - 0.1 - watch.fp.front, abs=1e-6)
+
+
+class _Pub:
+    def __init__(self) -> None:
+        self.sent: list[Push] = []
+
+    def put(self, msg: Push) -> None:
+        self.sent.append(msg)
+
+
+def test_a_slip_knocks_the_carried_object_once_three_seconds_into_the_carry() -> None:
+    def status(t_s: float, behaviour: str) -> MissionStatus:
+        return MissionStatus(stamp_ns=round(t_s * 1e9), request_id="r", state="running",
+                             behaviour=behaviour)  # fmt: skip
+
+    clock = Clock(stamp_ns=0, tick=0, mode="lockstep", rtf=1.0)
+    pub, lines = _Pub(), []
+    knock = Knock(pub, "bottle_2", True, lambda *a: lines.append(a))
+    for t, b in ((1.0, "pick_object"), (10.0, "bring_to_user"), (11.0, "bring_to_user")):
+        knock.on_progress(status(t, b), clock, True)
+    assert [(m.target, m.stamp_ns) for m in pub.sent] == [("bottle_2", 13_000_000_000)]
+    assert len(lines) == 3  # the stage lines still go out
+    unarmed, by_class = Knock(_Pub(), "bottle_2", False, print), Knock(_Pub(), "", True, print)
+    for k in (unarmed, by_class):
+        k.on_progress(status(10.0, "bring_to_user"), clock, False)
+        k.on_progress(status(10.0, "bring_to_user"), clock, True)
+        assert not k.pusher.sent and not k.at_ns
