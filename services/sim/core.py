@@ -181,6 +181,13 @@ class SimCore:
             position = (x1 + PARK_M + 0.5 * k, y0, 0.0)
         if not all(math.isfinite(v) for v in (*position, yaw)):
             raise ValueError(f"an artifact's place must be finite, got {position}, yaw {yaw}")
+        (x0, y0), (x1, y1) = self.world.hall.min_xy, self.world.hall.max_xy
+        inside = x0 - PARK_M <= position[0] <= x1 + PARK_M + 0.5 * len(self.drops.ids)
+        if not (inside and y0 - PARK_M <= position[1] <= y1 + PARK_M and 0.0 <= position[2] <= 3.0):
+            raise ValueError(
+                f"an artifact's place must be on the hall's floor or a support (z 0-3 m), "
+                f"got {tuple(round(v, 3) for v in position)}"
+            )
         adr, dof = self._artifact_q[k], self._artifact_v[k]
         x, y, z = (float(v) for v in position)
         self.data.qpos[adr : adr + 7] = (x, y, z + PLACE_LIFT_M, math.cos(0.5 * yaw), 0.0, 0.0,

@@ -76,6 +76,10 @@ def test_a_bad_move_or_knock_is_refused_and_changes_nothing(world: WorldDescript
         core.place_artifact("bottle_9", (0.0, 0.0, 0.0), 0.0)
     with pytest.raises(ValueError, match="finite"):
         core.place_artifact("bottle_1", (math.nan, 0.0, 0.0), 0.0)
+    with pytest.raises(ValueError, match="hall's floor"):  # a huge value would blow MuJoCo up
+        core.place_artifact("bottle_1", (1e300, 0.0, 0.0), 0.0)
+    with pytest.raises(ValueError, match="hall's floor"):
+        core.place_artifact("bottle_1", (0.0, 0.0, -2.0), 0.0)
     with pytest.raises(PushError, match="bottle_9"):
         core.push((1.0, 0.0, 0.0), 0.1, target="bottle_9")
     assert core.truth_positions()["bottle_1"] == before

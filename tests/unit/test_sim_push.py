@@ -99,6 +99,7 @@ def test_a_standing_robot_held_by_pd_is_moved_sideways_by_a_push(
     [
         ((math.nan, 0.0, 0.0), 0.1),
         ((0.0, math.inf, 0.0), 0.1),
+        ((0.0, 1e300, 0.0), 0.1),  # finite, but it would blow the physics up
         ((1.0, 2.0), 0.1),
         ((1.0, 2.0, 3.0), 0.0),
         ((1.0, 2.0, 3.0), -0.1),
