@@ -19,7 +19,8 @@ from numpy.typing import ArrayLike
 from common.geometry import FloatArray
 
 #: The longest push accepted, s (a push is an impulse, not a steady load), and the
-#: strongest, N (a disturbance, not a catapult: a huge force blows the physics up).
+#: strongest along each axis, N (a disturbance, not a catapult: a huge force blows the
+#: physics up).
 MAX_DURATION_S = 10.0
 MAX_FORCE_N = 5000.0
 
@@ -52,8 +53,8 @@ class PushQueue:
         force = np.asarray(force_in_world, dtype=float)
         if force.shape != (3,) or not np.all(np.isfinite(force)):
             raise PushError(f"a push needs a finite force (3,) in N, got {force.tolist()}")
-        if float(np.linalg.norm(force)) > MAX_FORCE_N:
-            raise PushError(f"a push is at most {MAX_FORCE_N:g} N, got {force.tolist()}")
+        if float(np.max(np.abs(force))) > MAX_FORCE_N:
+            raise PushError(f"a push is at most {MAX_FORCE_N:g} N a side, got {force.tolist()}")
         if not (math.isfinite(duration_s) and 0.0 < duration_s <= MAX_DURATION_S):
             raise PushError(f"a push lasts (0, {MAX_DURATION_S}] s, got {duration_s}")
         steps = max(1, round(duration_s / self.dt))
