@@ -81,7 +81,7 @@ def places_to_look(
     seen = [
         a for a in artifacts
         if a.class_name == class_name and a.missing_since_ns is None and a.id not in skipped
-        and now_ns - a.last_seen_ns <= recent_ns
+        and 0 <= now_ns - a.last_seen_ns <= recent_ns and a.last_seen_ns > 0
     ]  # fmt: skip
     for a in sorted(seen, key=lambda a: math.dist(a.position_in_world[:2], robot_xy)):
         ago = (now_ns - a.last_seen_ns) / 1e9
@@ -99,14 +99,16 @@ def found(
     since_ns: int,
     tried: Iterable[str],
     known: Iterable[str] | None,
+    now_ns: int | None = None,
 ) -> MapEntity | None:
     """The artifact the search found (module docstring), nearest to nothing in
     particular: the most recently seen; None while there is none. `known`: the ids the
-    map had when the search began (a request by id), None for a request by class."""
+    map had when the search began (a request by id), None for a request by class; a
+    sighting stamped after `now_ns` is no sighting (a clock other than this run's)."""
     skip = set(tried) | set(known or ())
     fresh = [
         a for a in artifacts
         if a.class_name == class_name and a.missing_since_ns is None and a.id not in skip
-        and a.last_seen_ns >= since_ns
+        and since_ns <= a.last_seen_ns and (now_ns is None or a.last_seen_ns <= now_ns)
     ]  # fmt: skip
     return max(fresh, key=lambda a: (a.last_seen_ns, a.id)) if fresh else None

@@ -42,8 +42,18 @@ def write_map_file(path: Path, mf: MapFile) -> None:
 
 
 def tracks_from_file(mf: MapFile, source: Source) -> list[Track]:
-    """The file's entities as confirmed tracks, renamed to `source` (`prior` or `import`)."""
-    return [Track.from_message(msgspec.structs.replace(e, source=source)) for e in mf.entities]
+    """The file's entities as confirmed tracks, renamed to `source` (`prior` or `import`).
+    Their stamps are another run's clock: each is not seen since this run started
+    (`last_seen_ns` 0), and one missing in the file is missing since before it (0). A
+    file's stamp of 500 s read in a run at 200 s was "seen 300 s from now": a person of
+    the file counted as seen lately, and artifacts as seen after a search began."""
+    return [
+        Track.from_message(msgspec.structs.replace(
+            e, source=source, last_seen_ns=0,
+            missing_since_ns=None if e.missing_since_ns is None else 0,
+        ))
+        for e in mf.entities
+    ]  # fmt: skip
 
 
 def occupancy_from_grid(grid: OccupancyGrid, **kw: object) -> Occupancy:

@@ -177,3 +177,24 @@ def test_a_file_whose_grid_cannot_be_taken_changes_nothing_in_memory_or_on_disk(
         check_import(msgspec.structs.replace(good, site=""), "small seed 0")
     assert _stored(path) == before
     assert smap.entities("artifact") == entities
+
+
+def test_a_map_files_stamps_are_another_runs_clock_and_read_as_before_this_one() -> None:
+    """A saved map's entity seen at 500 s of its run is, in this run, not seen since it
+    started (0); one missing there is missing since before (0), not since 500 s."""
+    from common.messages.semantic_map import MapEntity
+    from services.semantic_map.mapfile import tracks_from_file
+
+    def e(eid: str, missing: int | None) -> MapEntity:
+        return MapEntity(id=eid, class_name="bottle", kind="artifact",
+                         position_in_world=(1.0, 2.0, 0.8), uncertainty_m=0.05,
+                         last_seen_ns=500 * NS_PER_S, source="perception",
+                         missing_since_ns=missing)  # fmt: skip
+
+    mf = MapFile(stamp_ns=600 * NS_PER_S, site="hall seed 0",
+                 entities=[e("bottle_1", None), e("bottle_2", 550 * NS_PER_S)])  # fmt: skip
+    tracks = tracks_from_file(mf, "prior")
+    assert [(t.id, t.last_seen_ns, t.missing_since_ns, t.source) for t in tracks] == [
+        ("bottle_1", 0, None, "prior"),
+        ("bottle_2", 0, 0, "prior"),
+    ]

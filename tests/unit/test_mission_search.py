@@ -59,6 +59,10 @@ def test_found_is_a_new_sighting_of_the_class_for_an_id_and_any_untried_for_a_cl
     assert found([old, stale], "bottle", start, ["bottle_1"], None) == old  # by class
     assert found([old], "bottle", start, ["bottle_2"], None) is None  # tried already
     assert found(listing, "can", start, [], None) is None
+    # a stamp from another run's clock (a saved map's, later than now) is no sighting
+    later = _seen(entity("bottle_6", 2.0, 2.0), 500 * S)
+    assert found([later], "bottle", start, [], None, now_ns=200 * S) is None
+    assert places_to_look(None, "bottle", [later], [], (0.0, 0.0), 200 * S, 600.0, 3) == []
 
 
 def _moved_bottle() -> FakeRobot:

@@ -61,7 +61,7 @@ class LookElsewhere(MissionBehaviour):
         if runner.running and not self.hit:
             try:
                 hit = found(self.port.artifacts_of_class(self.class_name), self.class_name,
-                            self.started_ns, self.tried, self.known)  # fmt: skip
+                            self.started_ns, self.tried, self.known, self.port.now_ns)  # fmt: skip
             except PortError:
                 hit = None
             if hit is not None:
