@@ -14,7 +14,8 @@ then where they last saw such parts, then on the benches nearby, then everywhere
 A place is a point on the floor to look at with why it is looked at; the mission walks
 viewpoints facing them (`coverage.facing_route`, as the second look does) with the arm up.
 `found` says, after each look, whether the map now has the object: an artifact of the
-class, not missing, seen since the search began, not one the fetch already tried; for a
+class, not missing, seen since the search began over a support or at a place looked at,
+not one the fetch already tried; for a
 request by id, also not one the map already knew when the search began (the object
 moved makes a new entry where it now stands; an old one is another object of its
 class). Pure: no transport.
@@ -93,6 +94,17 @@ def places_to_look(
     return out
 
 
+#: m: a sighting this near a place looked at counts even off every known support.
+NEAR_PLACE_M = 0.75
+
+
+def _near(a: MapEntity, places: Sequence[Place], supports: Sequence[SupportSurface]) -> bool:
+    xy = (a.position_in_world[0], a.position_in_world[1])
+    return any(_on(s, xy) for s in supports) or any(
+        math.dist(xy, p.xy) <= NEAR_PLACE_M for p in places
+    )
+
+
 def found(
     artifacts: Iterable[MapEntity],
     class_name: str,
@@ -100,15 +112,21 @@ def found(
     tried: Iterable[str],
     known: Iterable[str] | None,
     now_ns: int | None = None,
+    where: tuple[Sequence[Place], Sequence[SupportSurface]] | None = None,
 ) -> MapEntity | None:
     """The artifact the search found (module docstring), nearest to nothing in
     particular: the most recently seen; None while there is none. `known`: the ids the
     map had when the search began (a request by id), None for a request by class; a
-    sighting stamped after `now_ns` is no sighting (a clock other than this run's)."""
+    sighting stamped after `now_ns` is no sighting (a clock other than this run's).
+    `where`: the places looked at and the supports: a sighting counts only over a
+    support or within `NEAR_PLACE_M` of a place (a "bottle" the network saw in the
+    aisle while the robot walked is not where anyone puts one: hall seed 0's shift
+    fetched such a one, and it was not there)."""
     skip = set(tried) | set(known or ())
     fresh = [
         a for a in artifacts
         if a.class_name == class_name and a.missing_since_ns is None and a.id not in skip
         and since_ns <= a.last_seen_ns and (now_ns is None or a.last_seen_ns <= now_ns)
+        and (where is None or _near(a, *where))
     ]  # fmt: skip
     return max(fresh, key=lambda a: (a.last_seen_ns, a.id)) if fresh else None

@@ -9,7 +9,7 @@ from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PoseGoal
 from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
-from services.mission.search import found, places_to_look
+from services.mission.search import Place, found, places_to_look
 from tests.unit.mission_fakes import FakeRobot, entity, small_world
 from tests.unit.test_mission_tree import mission
 
@@ -59,6 +59,12 @@ def test_found_is_a_new_sighting_of_the_class_for_an_id_and_any_untried_for_a_cl
     assert found([old, stale], "bottle", start, ["bottle_1"], None) == old  # by class
     assert found([old], "bottle", start, ["bottle_2"], None) is None  # tried already
     assert found(listing, "can", start, [], None) is None
+    # only over a support or at a place looked at: not a "bottle" seen in the aisle
+    aisle = _seen(entity("bottle_9", -4.4, 0.1), 70 * S)
+    bench = [_surface("bench_2", 4.0, 3.2)]
+    places = [Place((6.0, 0.0), "where the map had it")]
+    assert found([aisle, new], "bottle", start, [], known, where=(places, bench)) == new
+    assert found([aisle], "bottle", start, [], known, where=(places, bench)) is None
     # a stamp from another run's clock (a saved map's, later than now) is no sighting
     later = _seen(entity("bottle_6", 2.0, 2.0), 500 * S)
     assert found([later], "bottle", start, [], None, now_ns=200 * S) is None

@@ -19,6 +19,7 @@ import numpy as np
 from py_trees.common import Status
 
 from common.messages import as_numpy
+from common.messages.world import SupportSurface
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
@@ -41,6 +42,7 @@ class LookElsewhere(MissionBehaviour):
         super().__init__("look_elsewhere", ctx, stage)
         self.runner: PatrolRunner | None = None
         self.places: list[Place] = []
+        self.supports: list[SupportSurface] = []
         self.known: set[str] | None = None
         self.tried: list[str] = []
         self.class_name = ""
@@ -61,7 +63,8 @@ class LookElsewhere(MissionBehaviour):
         if runner.running and not self.hit:
             try:
                 hit = found(self.port.artifacts_of_class(self.class_name), self.class_name,
-                            self.started_ns, self.tried, self.known, self.port.now_ns)  # fmt: skip
+                            self.started_ns, self.tried, self.known, self.port.now_ns,
+                            (self.places, self.supports))  # fmt: skip
             except PortError:
                 hit = None
             if hit is not None:
@@ -91,6 +94,7 @@ class LookElsewhere(MissionBehaviour):
         if xy is None:
             return self.fail("object_not_found", "no search: the robot does not know where it is")
         self.known = {a.id for a in listing} if is_map_id(name) else None
+        self.supports = list(supports)
         last_xy = (last.position_in_world[0], last.position_in_world[1]) if last else None
         self.places = places_to_look(
             last_xy, self.class_name, listing, supports, xy, self.port.now_ns,
