@@ -303,12 +303,16 @@ def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult])
     except (BusError, PayloadError, TargetError, ExplorationFailed) as exc:
         figures["error"] = f"could not {step}: {exc}"
         _say(f"  [{seed}] {figures['error']}")
+    except KeyboardInterrupt:  # the report keeps this world's figures so far
+        figures["error"] = f"interrupted during: {step}"
+        stopped.append(figures)
+        raise
     finally:
         stack.stop(timeout_s=STOP_TIMEOUT_S)
         remove_database(database_path(stack.config.semantic_map, map_name))
-    figures["separation"] = watch.figures()
-    figures["moves"] = list(truth.moves) if truth is not None else []
-    figures["logs"] = shown(stack.run_dir)
+        figures["separation"] = watch.figures()
+        figures["moves"] = list(truth.moves) if truth is not None else []
+        figures["logs"] = shown(stack.run_dir)
     return figures
 
 
@@ -388,7 +392,7 @@ def run_shift(args: argparse.Namespace) -> int:
     with sigterm_interrupts():
         try:
             for seed in seeds:
-                shifts.append(run_shift_world(args, seed, results))
+                shifts.append(run_shift_world(args, seed, results, shifts))
                 summary = report()
         except KeyboardInterrupt:
             stopped = "interrupted"
