@@ -220,9 +220,12 @@ def class_verdict(result: WorldResult, record: MissionRecord, class_name: str) -
         result.agree = result.mission_state == "succeeded"
 
 
-def run_shift_world(args: argparse.Namespace, seed: int, out: list[WorldResult]) -> dict[str, Any]:
+def run_shift_world(
+    args: argparse.Namespace, seed: int, out: list[WorldResult], stopped: list[dict[str, Any]]
+) -> dict[str, Any]:
     """One world's shift, start to teardown: its requests' results appended to `out`;
-    the world's shift figures (separation, moves)."""
+    the world's shift figures (separation, moves). Interrupted, the figures so far go to
+    `stopped` (completed as the teardown ends) before the interrupt goes on."""
     scenario = scenario_of(args)
     map_name = f"shift-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{seed}"
     overrides = world_overrides(args, seed, map_name)
