@@ -217,7 +217,14 @@ def class_verdict(result: WorldResult, record: MissionRecord, class_name: str) -
         result.outcome = "succeeded"
         result.truth_object = took[0].object_id
         result.truth_reason = f"{took[0].person_id} took {took[0].object_id} (a {class_name})"
-        result.agree = result.mission_state == "succeeded"
+    else:
+        what = [f"{e.person_id} took {e.object_id}" for e in record.events
+                if isinstance(e, HandoverTaken)]  # fmt: skip
+        result.truth_reason = (
+            f"{result.truth_person or 'the person asked'} took no {class_name} "
+            f"({'; '.join(what) or 'no handover happened'})"
+        )
+    result.agree = (result.mission_state == "succeeded") == result.succeeded
 
 
 def run_shift_world(

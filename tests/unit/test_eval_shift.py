@@ -114,6 +114,7 @@ def test_a_class_request_succeeds_when_the_person_took_any_artifact_of_that_clas
     other = WorldResult(world="hall", world_seed=0, scenario="", truth_person="person_1")
     class_verdict(other, record, "bottle")
     assert not other.succeeded
+    assert other.truth_reason == "person_1 took no bottle (person_1 took can_2)"
 
 
 class _Fifo:
