@@ -30,6 +30,8 @@ from services.navigation.separation import SeparationParams, directed_speed, pro
 
 #: m/s: a robot slower than this towards a person is at rest (the trot's sway).
 AT_REST_MPS = 0.05
+#: Violations kept whole for the report (the count goes on).
+KEEP = 20
 
 
 @dataclass
@@ -45,6 +47,8 @@ class SeparationWatch:
     closest_m: float = math.inf
     speed_at_closest_mps: float = math.nan
     closest_person: str = ""
+    #: The first `KEEP` violations, each as it was: when, who, d, S_p, the two speeds.
+    kept: list[dict[str, Any]] = field(default_factory=list)
 
     def add(self, base: StateTruth, people: PeopleTruth) -> None:
         """One moment: the base and every person, as of one stamp."""
@@ -61,9 +65,17 @@ class SeparationWatch:
                 self.closest_m, self.closest_person = d, p.id
                 self.speed_at_closest_mps = math.hypot(*v)
             if v_r > AT_REST_MPS:
-                margin = d - protective_distance(v_r, v_h, self.sep)
+                s_p = protective_distance(v_r, v_h, self.sep)
+                margin = d - s_p
                 self.least_margin_m = min(self.least_margin_m, margin)
-                self.violations += margin < 0.0
+                if margin < 0.0:
+                    self.violations += 1
+                    if len(self.kept) < KEEP:
+                        self.kept.append({
+                            "t_s": round(base.stamp_ns / 1e9, 2), "person": p.id,
+                            "d_m": round(d, 3), "s_p_m": round(s_p, 3),
+                            "v_robot_mps": round(v_r, 3), "v_person_mps": round(v_h, 3),
+                        })  # fmt: skip
 
     def figures(self) -> dict[str, Any]:
         return {
@@ -73,6 +85,7 @@ class SeparationWatch:
             "closest_m": round(self.closest_m, 3),
             "closest_person": self.closest_person,
             "speed_at_closest_mps": round(self.speed_at_closest_mps, 3),
+            "violations_kept": list(self.kept),
         }
 
 

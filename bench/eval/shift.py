@@ -441,6 +441,14 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
     moves = [f"- seed {s['world_seed']}: {m}" for s in shifts for m in s.get("moves", [])]
     if moves:
         lines += ["", "Moves (truth):", "", *moves]
+    kept = [
+        f"- seed {s['world_seed']} t={v['t_s']} s: {v['person']} at {v['d_m']} m, S_p "
+        f"{v['s_p_m']} m, robot {v['v_robot_mps']} m/s towards them, they "
+        f"{v['v_person_mps']} m/s towards it"
+        for s in shifts for v in s.get("separation", {}).get("violations_kept", [])
+    ]  # fmt: skip
+    if kept:
+        lines += ["", "Separation violations (the first of each world, from truth):", "", *kept]
     knocks = [
         f"- seed {s['world_seed']} request {k['request']}: {k['object']} knocked at "
         f"{k['at_s']:.1f} s; drops {k['dropped']}; {k['outcome']} (mission {k['mission']})"
