@@ -254,6 +254,8 @@ class MissionTree:
         self.ctx = ctx
         reset_blackboard()
         self.root = build_tree(ctx)
+        #: The search leaves, found once (the node asks `arm_look` at every tick).
+        self._searches = [b for b in self.root.iterate() if isinstance(b, LookElsewhere)]
         self.bb = blackboard("mission_tree", (REQUEST,))
         self.request: MissionRequest | None = None
 
@@ -264,7 +266,7 @@ class MissionTree:
     @property
     def arm_look(self) -> bool:
         """A search holds the arm up to look (the map fuses the wrist camera meanwhile)."""
-        return any(isinstance(b, LookElsewhere) and b.arm_look for b in self.root.iterate())
+        return any(b.arm_look for b in self._searches)
 
     def start(self, request: MissionRequest) -> None:
         if self.request is not None:
