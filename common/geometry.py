@@ -11,8 +11,14 @@ on first use (importing `scipy.spatial` takes about 0.2 s).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from common.messages.world import SupportSurface
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -122,3 +128,13 @@ def yaw_only(T: npt.ArrayLike) -> FloatArray:
 def wrap_angle(angle: float) -> float:
     """Angle wrapped to [-pi, pi)."""
     return float((angle + np.pi) % (2.0 * np.pi) - np.pi)
+
+
+def on_surface(
+    p: Sequence[float] | npt.NDArray[np.float64], s: SupportSurface, margin_m: float = 0.0
+) -> bool:
+    """Whether the floor point p (x, y) lies on surface s's rectangle grown by `margin_m`."""
+    c, si = np.cos(s.yaw), np.sin(s.yaw)
+    dx, dy = float(p[0]) - s.centre_xy[0], float(p[1]) - s.centre_xy[1]
+    u, v = c * dx + si * dy, -si * dx + c * dy
+    return bool(abs(u) <= s.half_extents[0] + margin_m and abs(v) <= s.half_extents[1] + margin_m)

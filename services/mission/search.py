@@ -27,8 +27,12 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import NamedTuple
 
+from common.geometry import on_surface
 from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
+
+#: m: a point this near a support's top counts as on it.
+ON_MARGIN_M = 0.2
 
 
 class Place(NamedTuple):
@@ -36,15 +40,6 @@ class Place(NamedTuple):
 
     xy: tuple[float, float]
     why: str
-
-
-def _on(surface: SupportSurface, xy: tuple[float, float], margin_m: float = 0.2) -> bool:
-    """Whether a floor point lies over the surface's top (within `margin_m` of it)."""
-    c, s = math.cos(surface.yaw), math.sin(surface.yaw)
-    dx, dy = xy[0] - surface.centre_xy[0], xy[1] - surface.centre_xy[1]
-    u, v = c * dx + s * dy, -s * dx + c * dy
-    hx, hy = surface.half_extents
-    return abs(u) <= hx + margin_m and abs(v) <= hy + margin_m
 
 
 def places_to_look(
@@ -66,7 +61,7 @@ def places_to_look(
     def add(xy: tuple[float, float], why: str) -> None:
         if len(out) >= max_places:
             return
-        under = next((s.id for s in supports if _on(s, xy)), "")
+        under = next((s.id for s in supports if on_surface(xy, s, ON_MARGIN_M)), "")
         if under and under in covered:
             return  # that support is looked at already
         if any(math.dist(xy, p.xy) < 0.5 for p in out):
@@ -100,7 +95,7 @@ NEAR_PLACE_M = 0.75
 
 def _near(a: MapEntity, places: Sequence[Place], supports: Sequence[SupportSurface]) -> bool:
     xy = (a.position_in_world[0], a.position_in_world[1])
-    return any(_on(s, xy) for s in supports) or any(
+    return any(on_surface(xy, s, ON_MARGIN_M) for s in supports) or any(
         math.dist(xy, p.xy) <= NEAR_PLACE_M for p in places
     )
 

@@ -29,10 +29,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from common.geometry import FloatArray
+from common.geometry import FloatArray, on_surface
 from common.messages.world import SupportSurface
 from services.semantic_map.occupancy import FREE, Occupancy
-from services.semantic_map.supports import SURFACE_Z_M, inside
+from services.semantic_map.supports import SURFACE_Z_M
 
 #: An artifact's visible centroid above the support's top, m: the flattest artifact (a
 #: box 8 cm tall) shows its top face and front, 4-8 cm up; a mask on the top itself sat
@@ -65,7 +65,7 @@ def surface_under(
     xy: FloatArray, surfaces: list[SupportSurface], margin_m: float = SURFACE_MARGIN_M
 ) -> SupportSurface | None:
     """The surface whose rectangle (grown by `margin_m`) holds `xy` (the highest one)."""
-    under = [s for s in surfaces if inside(xy, s, margin_m)]
+    under = [s for s in surfaces if on_surface(xy, s, margin_m)]
     return max(under, key=lambda s: s.top_height) if under else None
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 
 import cv2
 import numpy as np
@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from common.bus import RequestError
+from common.geometry import on_surface
 from common.messages.world import SupportSurface, WorldDescription
 
 #: Wall seconds a query waits for the world description.
@@ -90,23 +91,15 @@ def _numbered(surfaces: Iterable[SupportSurface]) -> list[SupportSurface]:
     ]
 
 
-def inside(
-    p: Sequence[float] | NDArray[np.float64], s: SupportSurface, margin_m: float = 0.0
-) -> bool:
-    """Whether the point p (x, y) lies on surface s's rectangle grown by `margin_m`."""
-    c, si = np.cos(s.yaw), np.sin(s.yaw)
-    dx, dy = float(p[0]) - s.centre_xy[0], float(p[1]) - s.centre_xy[1]
-    u, v = c * dx + si * dy, -si * dx + c * dy
-    return bool(abs(u) <= s.half_extents[0] + margin_m and abs(v) <= s.half_extents[1] + margin_m)
-
-
 def with_kept(found: list[SupportSurface], kept: list[SupportSurface]) -> list[SupportSurface]:
     """`found` (this run's tops) and those of `kept` (a saved map's) it shows nothing of:
     no centre of either inside the other."""
     if not kept:
         return found
     extra = [
-        k for k in kept if not any(inside(k.centre_xy, f) or inside(f.centre_xy, k) for f in found)
+        k
+        for k in kept
+        if not any(on_surface(k.centre_xy, f) or on_surface(f.centre_xy, k) for f in found)
     ]
     return _numbered([*found, *extra]) if extra else found
 
