@@ -20,8 +20,8 @@ import numpy as np
 
 from bench.raycast import ANGLES, T_BASE_LIDAR, Box, overlap_grid, slab_ranges
 from common.config import LocalizationSettings, Overrides, load_config
+from common.scan import scan_points
 from services.localization.localizer import compose, inverse
-from services.localization.matcher import scan_points
 from services.localization.slam import ScanGrid, Slam
 
 HALL: list[Box] = [

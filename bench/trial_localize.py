@@ -38,8 +38,9 @@ from common.map_frame import odom_pose
 from common.messages import as_numpy
 from common.messages.sim import LaserScan, Odom, StateTruth
 from common.messages.world import WorldDescription
+from common.scan import scan_points
 from services.localization.localizer import Localizer, compose
-from services.localization.matcher import LikelihoodField, scan_points
+from services.localization.matcher import LikelihoodField
 from services.localization.slam import Slam
 
 Figures = dict[str, Any]

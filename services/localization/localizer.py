@@ -2,7 +2,7 @@
 consumer composes, T_map_base = T_map_odom · T_odom_base (REP 105's frames).
 
 `Localizer.update(points, odom_pose)` per scan (points in the base's floor plane,
-`matcher.scan_points`; `odom_pose` the odometry's (x, y, yaw) at the scan's stamp):
+`common.scan.scan_points`; `odom_pose` the odometry's (x, y, yaw) at the scan's stamp):
 
 1. predict: the base in the map is the last correction applied to the odometry;
 2. seed: the prediction itself, or, before the first match and after being lost, the

@@ -10,10 +10,10 @@ loss, seeded by a correlative search when the pose is in doubt).
   gradient at any point. A beam's end costs its distance to the boundary on either
   side: an unsigned field (nothing inside) let the range noise pull the scan into the
   walls, by up to a wall's depth where one wall alone holds an axis.
-- `scan_points`: a `LaserScan`'s returns as points in the base's floor plane (the
-  lidar's mount applied; the trunk's roll and pitch, up to 4–5° while walking, shorten
-  a horizontal range by under 4 mm per metre and are left out: levelling the scan with
-  the odometry's attitude measured no better).
+- the scan's returns come as points in the base's floor plane (`common.scan.scan_points`;
+  the trunk's roll and pitch, up to 4–5° while walking, shorten a horizontal range by
+  under 4 mm per metre and are left out: levelling the scan with the odometry's
+  attitude measured no better).
 - `refine(field, points, pose)`: the pose (x, y, yaw) minimising Σ ρ(d(T·p)), ρ Huber at
   `huber_m`, and no pull at all beyond 3 `huber_m` in front of the map's obstacles or
   `huber_m` inside them: a beam on a person or on clutter the map does not have, or one
@@ -124,23 +124,6 @@ class LikelihoodField:
             g[inside, 0] = bilinear(self.grad_x)
             g[inside, 1] = bilinear(self.grad_y)
         return d, g
-
-
-def scan_points(
-    ranges: FloatArray,
-    angle_min: float,
-    angle_increment: float,
-    T_base_lidar: FloatArray,
-    stride: int = 1,
-) -> FloatArray:
-    """The scan's returns (0 = none) as (n, 2) points in the base's floor plane."""
-    r = np.asarray(ranges, dtype=float)[::stride]
-    a = angle_min + angle_increment * np.arange(0, len(ranges), stride)
-    hit = r > 0.0
-    r, a = r[hit], a[hit]
-    p = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
-    T = np.asarray(T_base_lidar, dtype=float).reshape(4, 4)
-    return (p @ T[:3, :3].T + T[:3, 3])[:, :2]
 
 
 def transform(points: FloatArray, pose: Pose2) -> FloatArray:

@@ -40,9 +40,10 @@ from common.messages.base import NS_PER_S
 from common.messages.localization import Localization
 from common.messages.semantic_map import OccupancyGrid
 from common.messages.sim import LaserScan, Odom
+from common.scan import scan_points
 from common.service import Service
 from services.localization.localizer import Estimate, Localizer
-from services.localization.matcher import LikelihoodField, scan_points
+from services.localization.matcher import LikelihoodField
 from services.localization.resume import Resume
 from services.localization.slam import OCCUPIED, Slam
 from services.localization.telemetry import LocalizationLogger

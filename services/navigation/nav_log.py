@@ -5,7 +5,8 @@ stop — with the person and their distance), recoveries; at 2 Hz while the robo
 its final heading (within 0.3 m of the goal): the yaw error, the commanded and the
 measured ωz. To rerun: every new plan (`world/nav/plan`), the follower's command and the
 tick's time at 5 Hz (`plots/nav/…`), with the speed rule's person: their separation, the
-protective separation at rest and the cap (`plots/nav/separation/…`), and the costmap at
+protective separation at rest and the cap (`plots/nav/separation/…`), the lidar's bodies
+the map lacks and its tracks (`world/nav/scan_people`, at every scan), and the costmap at
 1 Hz as a textured quad on the floor of the 3D world (`world/nav/costmap`: lethal red,
 costs orange).
 """
@@ -20,12 +21,15 @@ import numpy as np
 import rerun as rr
 
 from common.recording import is_recording, stamp
-from services.navigation.costmap import Costmap
+from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import Pose
+from services.navigation.scan_people import Body
 
 PLAN_Z = 0.05
 #: The costmap's height in the 3D view, m: just above the floor, under the map's cells.
 COSTMAP_Z = 0.005
+#: The lidar's plane, m (about: the trunk's height varies with the gait).
+SCAN_Z = 0.5
 
 
 def costmap_mesh(cm: Costmap) -> rr.Mesh3D:
@@ -59,6 +63,7 @@ class NavLogger:
         self.recovery = ""
         self.last_costmap = -(10**18)
         self.last_align = -(10**18)
+        self.tracks: set[str] = set()
 
     def tick(
         self,
@@ -116,6 +121,38 @@ class NavLogger:
         if b - self.last_costmap >= 1_000_000_000:
             self.last_costmap = b
             self.rec.log("world/nav/costmap", costmap_mesh(cm))
+
+    def scan(self, b: int, bodies: list[Body], tracks: list[Person]) -> None:
+        """The lidar's bodies (their extent as a ring) and its tracks (id, velocity); a
+        new track is said once."""
+        ids = {q.id for q in tracks}
+        for q in tracks:
+            if q.id not in self.tracks:
+                self.log.info(
+                    "t=%.2f s lidar: %s at (%.2f, %.2f), a body the map lacks", b / 1e9, q.id,
+                    q.x, q.y,
+                )  # fmt: skip
+        self.tracks = ids
+        if not self.on:
+            return
+        stamp(self.rec, b)
+        self.rec.log(
+            "world/nav/scan_people/bodies",
+            rr.Points3D(
+                [[q.x, q.y, SCAN_Z] for q in bodies],
+                radii=[q.extent_m / 2 for q in bodies],
+                colors=[(250, 200, 40)],
+            ),
+        )
+        self.rec.log(
+            "world/nav/scan_people/tracks",
+            rr.Arrows3D(
+                origins=[[q.x, q.y, SCAN_Z] for q in tracks],
+                vectors=[[*(q.velocity or (0.0, 0.0)), 0.0] for q in tracks],
+                labels=[q.id for q in tracks],
+                colors=[(250, 120, 40)],
+            ),
+        )
 
     def _align(self, b: int, pose: Pose, nav: Any, out: Any, wz_measured: float) -> None:
         if out.state != "active" or nav.goal is None or out.remaining_m > 0.3:

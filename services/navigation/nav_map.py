@@ -3,11 +3,14 @@
 Times are ns of sim time; positions m in the world frame. `adopt` takes a grid and the
 map's people as of a sim time (a new grid shape starts an empty short-lived layer); the
 short-lived depth layer (`layer`, marked and cleared by `depth.DepthFeed`) and the people
-layer (`people`: the map's people with those perception sees over them, `SeenPeople`;
-in the costmap when `people_in_costmap`, always in `Costmap.people` for the speed rules)
-are combined by `build` (`costmap.build_costmap`). `costmap` is None until a grid is in;
-`map_at` is the sim time the map in use is as of (goals queued before it resolve against
-it).
+layer (`people`: the map's people with those perception sees over them, `SeenPeople`,
+and the lidar's tracks over those, `scan_people`; in the costmap when
+`people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
+`build` (`costmap.build_costmap`). The lidar's tracks move a little at every scan: the
+costmap is rebuilt when a person came or went or moved `REBUILD_MOVE_M` since the last
+build, and otherwise only its people (what the speed rules read) are the newest.
+`costmap` is None until a grid is in; `map_at` is the sim time the map in use is as of
+(goals queued before it resolve against it).
 
 Threads: the loop's only; the goal queryable's thread reads `costmap` (a new object on
 every rebuild, never changed in place) without a lock.
@@ -16,11 +19,19 @@ every rebuild, never changed in place) without a lock.
 from __future__ import annotations
 
 import logging
+import math
+from dataclasses import replace
 
+from common.geometry import FloatArray
 from common.messages.perception import Detections
 from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
-from services.navigation.grid import Footprint, Grid
+from services.navigation.grid import Footprint, Grid, Pose
+from services.navigation.scan_people import ScanPeople, merge_scan
 from services.navigation.seen_people import SeenPeople
+
+#: m: a person this far from where the costmap last had them (or one come or gone) has
+#: the costmap rebuilt; the speed rules always read the newest positions.
+REBUILD_MOVE_M = 0.1
 
 
 class NavMap:
@@ -42,6 +53,12 @@ class NavMap:
         self.people: list[Person] = []
         self.map_people: list[Person] = []
         self.seen = SeenPeople()
+        self.scan = ScanPeople(fp)
+        #: The map's people with the camera's over them (the lidar's go over these).
+        self.known: list[Person] = []
+        self.scanned: list[Person] = []
+        #: The people the costmap was last built with.
+        self.built: list[Person] = []
         self.costmap: Costmap | None = None
         #: The sim time the map in use is as of (goals queued before it resolve against it).
         self.map_at = 0
@@ -54,11 +71,27 @@ class NavMap:
             )
             self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
         self.grid, self.map_people, self.map_at = grid, people, as_of
-        self.people = self.seen.merge(people, t_ns)
+        self.known = self.seen.merge(people, t_ns)
+        self._layer()
         self.costmap = self.build(t_ns)
+
+    def _layer(self) -> bool:
+        """The people layer from the known people and the lidar's tracks; whether it
+        changed enough for a rebuild (`REBUILD_MOVE_M`). Without one, the costmap's
+        people are the new ones all the same."""
+        self.people = merge_scan(self.known, self.scanned, self.scan.p.same_m)
+        before = {q.id: q for q in self.built}
+        material = len(before) != len(self.people) or any(
+            (b := before.get(q.id)) is None or math.hypot(q.x - b.x, q.y - b.y) >= REBUILD_MOVE_M
+            for q in self.people
+        )
+        if not material and self.costmap is not None:
+            self.costmap = replace(self.costmap, people=tuple(self.people))
+        return material
 
     def build(self, t_ns: int) -> Costmap:
         assert self.grid is not None  # called once a grid is in
+        self.built = list(self.people)
         people = self.people if self.people_in_costmap else []
         cm = build_costmap(self.grid, self.fp, self.cost_params, self.layer.active(t_ns), people)
         # The speed rules always see every person, whether or not the plan avoids them.
@@ -71,6 +104,15 @@ class NavMap:
             self.seen.update(d, self.grid)
         return self.seen.active(b) != before
 
+    def see_scan(self, points: FloatArray, pose: Pose, b: int) -> bool:
+        """One lidar scan's returns (n, 2, map frame) taken at b with the robot at `pose`;
+        whether the costmap is to be rebuilt."""
+        if self.grid is None:
+            return False
+        self.scan.update(points, self.grid, pose, b)
+        self.scanned = self.scan.people(b)
+        return self._layer()
+
     def take(
         self, fresh: tuple[Grid, list[Person], int] | None, seen_changed: bool, b: int
     ) -> bool:
@@ -80,7 +122,8 @@ class NavMap:
         if fresh is not None:
             self.adopt(*fresh, b)
         elif seen_changed and self.grid is not None:
-            self.people = self.seen.merge(self.map_people, b)
+            self.known = self.seen.merge(self.map_people, b)
+            self._layer()
             return True
         return False
 

@@ -6,7 +6,8 @@ The node builds the parts from the config and the bus, runs the loop and publish
   own thread) and adopted `MAP_ADOPT_S` after the tick it is as of;
 - `nav_map.NavMap`: the map in use, its short-lived depth layer (`depth.DepthFeed`, the
   head camera at 10 Hz), its people layer (the map's, with those perception sees:
-  `perceived.PerceptionFeed`, `seen_people.SeenPeople`) and the costmap;
+  `perceived.PerceptionFeed`, `seen_people.SeenPeople`; the lidar's bodies the map lacks,
+  `scan_people.ScanPeople`, the speed monitor's protective field) and the costmap;
 - `intake.GoalIntake`: goals (on the `nav/goal` queryable's thread, resolved as of the
   sender's tick, or queued until the map is in: `timeout` after `MAP_WAIT_S`) and
   cancels, started by the loop at their effective tick;
@@ -15,7 +16,8 @@ The node builds the parts from the config and the bus, runs the loop and publish
 Each tick b (multiples of `time.participants.navigation.period_s`): the odom stamped b
 (waited for: 50 Hz), put in the map with the localization due at b
 (`common.map_frame.MapFrame`; standing still while it is `lost`), the depth layer, the
-map to adopt, perception's people due by b, the cancels; until the map is in, idle
+lidar's scan stamped b at the scan rate (waited for: the sim puts it just after the
+odom), the map to adopt, perception's people due by b, the cancels; until the map is in, idle
 ("waiting for the map": zero cmd_vel, a queued goal `active`); else the goal due, a
 handover goal following its person on a new map, the costmap rebuilt when a layer
 changed, `Navigator.tick` (its `clear` recovery empties the depth layer); then
@@ -35,11 +37,12 @@ from common.bus import WaitTimeout
 from common.geometry import yaw_of
 from common.lockstep import PeriodicTicker
 from common.map_frame import MapFrame
-from common.messages import to_wire
+from common.messages import as_numpy, to_wire
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavCancel, NavGoalRequest, NavPath, NavStatus
-from common.messages.sim import CameraFrame, Odom
+from common.messages.sim import CameraFrame, LaserScan, Odom
 from common.messages.wbc import CmdVel
+from common.scan import scan_points
 from common.service import Service
 from services.navigation.costmap import CostParams
 from services.navigation.depth import DepthFeed
@@ -97,6 +100,9 @@ class NavNode:
             self.depth = DepthFeed(
                 frames, self.camera, camera_period_ns, self.fp, log, INPUT_TIMEOUT_S
             )
+        self.scans = bus.latest(keys.scan, LaserScan, history=4)
+        self.scan_period_ns = round(NS_PER_S / cfg.sim.sensors.lidar.rate_hz)
+        self.scans_alive = True
         cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
         # People seen by perception (the head camera), applied at their stamp + latency.
         self.perception = PerceptionFeed(bus, keys, cfg, self.camera, INPUT_TIMEOUT_S)
@@ -138,6 +144,7 @@ class NavNode:
         pose = Pose(float(T_map_base[0, 3]), float(T_map_base[1, 3]), yaw_of(T_map_base[:3, :3]))
         self.pose = pose
         changed = self.depth is not None and self.depth.update(b, pose, T_map_base, m.grid, m.layer)
+        changed = self._scan(b, pose, T_map_base) or changed
         fresh = self.feed.tick(b) if self.feed is not None else None
         seen_changed = m.see(self.perception.due(b), b)  # every tick: lockstep waits here
         changed = m.take(fresh, seen_changed, b) or changed
@@ -163,6 +170,30 @@ class NavNode:
         tick_ms = (time.perf_counter() - t0) * 1e3
         wz = odom.base_angular_velocity_in_base[2]
         self.log.tick(b, pose, self.nav, out, m.costmap, tick_ms, wz)
+
+    def _scan(self, b: int, pose: Pose, T_map_base: np.ndarray) -> bool:
+        """The lidar's scan stamped b (at its rate) into the people layer; whether the
+        costmap is to be rebuilt. A scan that does not come is said and skipped, and not
+        waited for again until one comes."""
+        if b % self.scan_period_ns:
+            return False
+        if self.scans_alive:
+            try:
+                self.scans.wait_stamp(b, INPUT_TIMEOUT_S)
+            except WaitTimeout:
+                self.svc.log.warning("no scan for t=%.2f s: the lidar's people go stale", b / 1e9)
+                self.scans_alive = False
+        scan = self.scans.at(b)
+        if scan is None or scan.stamp_ns != b:
+            return False
+        self.scans_alive = True
+        T = np.asarray(scan.T_base_lidar).reshape(4, 4)
+        ranges = np.asarray(as_numpy(scan.ranges), dtype=float)
+        pts = scan_points(ranges, scan.angle_min, scan.angle_increment, T)
+        world = pts @ T_map_base[:2, :2].T + T_map_base[:2, 3]
+        changed = self.map.see_scan(world, pose, b)
+        self.log.scan(b, self.map.scan.bodies, self.map.scanned)
+        return changed
 
     def _publish(
         self,

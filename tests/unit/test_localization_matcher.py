@@ -16,8 +16,9 @@ from bench import raycast
 from bench.raycast import slab_ranges
 from common import robot
 from common.config import LocalizationSettings
+from common.scan import scan_points
 from services.localization.localizer import Localizer, compose, inverse
-from services.localization.matcher import LikelihoodField, refine, scan_points, search
+from services.localization.matcher import LikelihoodField, refine, search
 
 RES = 0.05
 ORIGIN = (-1.0, -1.0)

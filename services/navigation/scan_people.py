@@ -1,0 +1,268 @@
+"""People the lidar sees: the protective field of the speed and separation monitor.
+
+The head camera looks ahead only, and the map's people arrive a second or more late: a
+person walking beside or behind the robot, or standing where the camera does not look, is
+unknown to the speed rules. The trunk's 270° planar lidar sweeps the plane at about 0.5 m
+(people's legs; above the pallets, below the tables' tops) ten times a second, and is
+what ISO/TS 15066 robots watch their protective field with. `ScanPeople.update(points,
+grid, pose, t)` takes one scan's returns in the map frame:
+
+- returns on the world the map knows are left out: within `static_margin_m` (the
+  localization's and the range's error) of a cell that is occupied (walls, machines,
+  shelves' uprights, the tables' legs) or in the unknown beyond what the map has seen
+  (a map still being made, in exploration). An unknown island of at most
+  `island_m2` inside seen floor is floor: the shadow a body standing there cast while
+  the map was made (the map leaves people out; the cells under their feet are never
+  seen free), where a person is likely to stand again. Returns beyond `range_m` of the
+  footprint are left out too;
+- the rest are cut into clusters where consecutive returns (beam order) are more than
+  `gap_m` apart, and clusters whose centroids lie within `join_m` are joined (a
+  person's two legs, a wall's return between them);
+- a cluster of at least `min_points` returns, at most `max_extent_m` across, whose
+  centroid is outside the footprint (`robot_margin_m` round it: the robot's own arm
+  and what it carries), is a body that could be a person; larger ones (a trolley, a
+  parked load) are obstacles, the depth layer's business. Its floor point is the
+  centroid of its returns: the near side of the legs, so a little in front of the
+  person's centre (distances err on the safe side);
+- each is put on a track (the nearest track's position extrapolated to now within
+  `gate_m`, else a new `scan_<k>`), whose velocity is the least-squares slope of its
+  positions over `velocity_window_s` (`seen_people.fitted_velocity`; None until they span
+  `velocity_min_span_s`: the monitor then takes a walking pace). A track not seen for
+  `ttl_s` ends (a body that left the field went behind the robot or out of range).
+
+Every track is a person to the speed rules, as ISO 13855's protective field treats
+anything that enters it: something the map lacks that is the size of a person. A
+standing one costs the robot no more than its protective separation at rest. The tracks
+join the people layer in `NavMap` (`merge_scan`): a track within `same_m` of a person the
+layer already has is that person seen now (the lidar's 10 Hz position and its velocity
+win), the rest are added under their own ids.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import ndimage
+
+from common.geometry import FloatArray
+from common.messages.base import NS_PER_S
+from services.navigation.costmap import Person
+from services.navigation.grid import BoolGrid, Footprint, Grid, Pose, distance_to_footprint
+from services.navigation.seen_people import fitted_velocity
+
+
+@dataclass(frozen=True)
+class ScanParams:
+    """Which returns make a body and how bodies are tracked (see the module docstring).
+    Not settings: tuned with the lidar (0.5° beams, ±15 mm) and the people's size."""
+
+    static_margin_m: float = 0.15
+    island_m2: float = 1.0
+    range_m: float = 5.0
+    gap_m: float = 0.12
+    join_m: float = 0.45
+    min_points: int = 3
+    max_extent_m: float = 0.8
+    robot_margin_m: float = 0.05
+    gate_m: float = 0.6
+    ttl_s: float = 0.5
+    velocity_window_s: float = 0.6
+    velocity_min_span_s: float = 0.25
+    #: A track this close to a person the layer has is that person (`merge_scan`).
+    same_m: float = 0.6
+
+
+@dataclass(frozen=True)
+class Body:
+    """One cluster of returns: its centroid (m, map), extent (m, the largest distance of
+    a return from the centroid, doubled) and how many returns."""
+
+    x: float
+    y: float
+    extent_m: float
+    points: int
+
+
+def off_map(points: FloatArray, clearance: FloatArray, grid: Grid, margin_m: float) -> FloatArray:
+    """The points (n, 2, map) farther than `margin_m` from the world the map knows
+    (`clearance`: each cell's distance to it, `static_clearance`); points off the grid are
+    left out (nothing is known there)."""
+    if len(points) == 0:
+        return points
+    ix = np.floor((points[:, 0] - grid.origin[0]) / grid.resolution).astype(np.int64)
+    iy = np.floor((points[:, 1] - grid.origin[1]) / grid.resolution).astype(np.int64)
+    ny, nx = grid.shape
+    inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+    keep = np.zeros(len(points), dtype=bool)
+    keep[inside] = clearance[iy[inside], ix[inside]] > margin_m
+    out: FloatArray = points[keep]
+    return out
+
+
+def static_cells(grid: Grid, island_m2: float) -> BoolGrid:
+    """The cells of the world the map knows: occupied, or unknown but for islands of at
+    most `island_m2` (8-connected; one inside a machine is no matter: the lidar cannot
+    see in)."""
+    solid = grid.known_occupied
+    unknown = grid.occupied & ~solid
+    if not unknown.any():
+        return solid.copy()
+    labels, count = ndimage.label(unknown, structure=np.ones((3, 3), dtype=bool))
+    sizes = np.bincount(labels.ravel(), minlength=count + 1) * grid.resolution**2
+    small = sizes <= island_m2
+    small[0] = False
+    out: BoolGrid = solid | (unknown & ~small[labels])
+    return out
+
+
+def static_clearance(grid: Grid, island_m2: float) -> FloatArray:
+    """Each cell's distance (m) from its centre to the nearest static cell
+    (`static_cells`), less half a cell (that cell's square, not its centre)."""
+    dist = ndimage.distance_transform_edt(~static_cells(grid, island_m2)) * grid.resolution
+    out: FloatArray = np.maximum(dist - 0.5 * grid.resolution, 0.0)
+    return out
+
+
+def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
+    """The clusters of `points` (n, 2, beam order): split where consecutive points are more
+    than `gap_m` apart, joined where centroids are within `join_m`; those of at least
+    `min_points` and at most `max_extent_m` across."""
+    if len(points) == 0:
+        return []
+    step = np.hypot(*np.diff(points, axis=0).T)
+    cuts = np.flatnonzero(step > p.gap_m) + 1
+    groups = [g for g in np.split(points, cuts) if len(g)]
+    joined: list[FloatArray] = []
+    for g in groups:
+        c = g.mean(axis=0)
+        for k, h in enumerate(joined):
+            if float(np.hypot(*(h.mean(axis=0) - c))) <= p.join_m:
+                joined[k] = np.vstack([h, g])
+                break
+        else:
+            joined.append(g)
+    out = []
+    for g in joined:
+        if len(g) < p.min_points:
+            continue
+        c = g.mean(axis=0)
+        extent = 2.0 * float(np.max(np.hypot(*(g - c).T)))
+        if extent <= p.max_extent_m:
+            out.append(Body(float(c[0]), float(c[1]), extent, len(g)))
+    return out
+
+
+@dataclass
+class _Track:
+    id: str
+    points: list[tuple[int, float, float]]
+    velocity: tuple[float, float] | None = None
+
+    @property
+    def last(self) -> tuple[int, float, float]:
+        return self.points[-1]
+
+    def predicted(self, t_ns: int) -> tuple[float, float]:
+        t, x, y = self.last
+        if self.velocity is None:
+            return x, y
+        dt = (t_ns - t) / NS_PER_S
+        return x + self.velocity[0] * dt, y + self.velocity[1] * dt
+
+
+class ScanPeople:
+    """The lidar's tracks of bodies the map lacks (sim time); see the module docstring."""
+
+    def __init__(self, fp: Footprint, p: ScanParams = ScanParams()) -> None:
+        self.fp, self.p = fp, p
+        self.tracks: list[_Track] = []
+        self._count = 0
+        self._grid: Grid | None = None
+        self._clearance: FloatArray = np.zeros((0, 0))
+        #: The last scan's bodies (for the log).
+        self.bodies: list[Body] = []
+
+    def update(self, points: FloatArray, grid: Grid, pose: Pose, t_ns: int) -> None:
+        """One scan's returns (n, 2, map frame, beam order) at `t_ns`, the robot at `pose`."""
+        p = self.p
+        if grid is not self._grid:
+            self._grid, self._clearance = grid, static_clearance(grid, p.island_m2)
+        pts = off_map(points, self._clearance, grid, p.static_margin_m)
+        if len(pts):
+            d = distance_to_footprint(pose, self.fp, pts)
+            pts = pts[d <= p.range_m]
+        found = bodies(pts, p)
+        if found:
+            xy = np.array([(b.x, b.y) for b in found])
+            mine = distance_to_footprint(pose, self.fp, xy) <= p.robot_margin_m
+            found = [b for b, m in zip(found, mine.tolist(), strict=True) if not m]
+        self.bodies = found
+        self._associate(found, t_ns)
+
+    def _associate(self, found: list[Body], t_ns: int) -> None:
+        p = self.p
+        ttl = round(p.ttl_s * NS_PER_S)
+        live = [tr for tr in self.tracks if t_ns - tr.last[0] <= ttl]
+        pairs = sorted(
+            (math.hypot(b.x - px, b.y - py), i, k)
+            for i, b in enumerate(found)
+            for k, tr in enumerate(live)
+            for px, py in [tr.predicted(t_ns)]
+        )
+        body_track: dict[int, int] = {}
+        taken: set[int] = set()
+        for dist, i, k in pairs:  # nearest first, each body and track once
+            if dist > p.gate_m:
+                break
+            if i in body_track or k in taken:
+                continue
+            body_track[i] = k
+            taken.add(k)
+        window = round(p.velocity_window_s * NS_PER_S)
+        for i, b in enumerate(found):
+            if i in body_track:
+                tr = live[body_track[i]]
+            else:
+                self._count += 1
+                tr = _Track(f"scan_{self._count}", [])
+                live.append(tr)
+            tr.points = [q for q in tr.points if t_ns - q[0] <= window and q[0] < t_ns]
+            tr.points.append((t_ns, b.x, b.y))
+            tr.velocity = fitted_velocity(tr.points, p.velocity_min_span_s)
+        self.tracks = live
+
+    def people(self, t_ns: int) -> list[Person]:
+        """The tracks alive at `t_ns`, as people (at their last position)."""
+        ttl = round(self.p.ttl_s * NS_PER_S)
+        return [
+            Person(tr.id, tr.last[1], tr.last[2], None, tr.velocity)
+            for tr in self.tracks
+            if t_ns - tr.last[0] <= ttl
+        ]
+
+
+def merge_scan(people: list[Person], scanned: list[Person], same_m: float) -> list[Person]:
+    """The people layer with the lidar's tracks: a person with a track within `same_m` (the
+    nearest, each track once) is seen there now, with the track's velocity once it has
+    one; the tracks no person claims are added under their own ids."""
+    out = list(people)
+    free = list(range(len(scanned)))
+    pairs = sorted(
+        (math.hypot(q.x - s.x, q.y - s.y), i, k)
+        for i, q in enumerate(people)
+        for k, s in enumerate(scanned)
+    )
+    claimed: set[int] = set()
+    for dist, i, k in pairs:
+        if dist > same_m:
+            break
+        if i in claimed or k not in free:
+            continue
+        s = scanned[k]
+        velocity = s.velocity if s.velocity is not None else people[i].velocity
+        out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity)
+        claimed.add(i)
+        free.remove(k)
+    return out + [scanned[k] for k in free]

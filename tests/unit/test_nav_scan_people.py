@@ -1,0 +1,198 @@
+"""Navigation's protective field: people the lidar sees where the map knows nothing.
+
+Scans are ray-cast here against circles (a person's legs at the lidar's height, 0.07 m
+radius, 0.2 m apart) and the map's own walls, from the lidar's mount on the base.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from common import robot
+from common.scan import scan_points
+from services.navigation.costmap import CostParams, Person
+from services.navigation.grid import Footprint, Grid, Pose
+from services.navigation.nav_map import NavMap
+from services.navigation.scan_people import (
+    ScanParams,
+    ScanPeople,
+    bodies,
+    merge_scan,
+    static_cells,
+)
+
+S = 1_000_000_000
+RES = 0.05
+ANGLES = np.linspace(-math.radians(135), math.radians(135), 541)
+T_BASE_LIDAR = robot.LIDAR_MOUNT.T_parent_lidar
+FP = Footprint.stowed()
+
+
+def _room(unknown: list[tuple[slice, slice]] | None = None) -> Grid:
+    """A 12 m square room centred on the origin, walls one cell thick; `unknown`: blocks
+    of cells (iy, ix slices) the map has not seen."""
+    n = round(12.0 / RES)
+    occ = np.zeros((n, n), dtype=bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    solid = occ.copy()
+    for block in unknown or []:
+        occ[block] = True
+    return Grid(occ, RES, (-6.0, -6.0), solid)
+
+
+def _scan(pose: Pose, legs: list[tuple[float, float]], room_half: float = 5.95) -> np.ndarray:
+    """The ranges from the lidar on the base at `pose`: circles of 0.07 m at `legs`, the
+    room's walls at ±`room_half` (their inner faces)."""
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    ox = pose.x + c * T_BASE_LIDAR[0, 3] - s * T_BASE_LIDAR[1, 3]
+    oy = pose.y + s * T_BASE_LIDAR[0, 3] + c * T_BASE_LIDAR[1, 3]
+    a = ANGLES + pose.yaw
+    dx, dy = np.cos(a), np.sin(a)
+    with np.errstate(divide="ignore"):
+        tx = np.where(dx > 0, (room_half - ox) / dx, (-room_half - ox) / dx)
+        ty = np.where(dy > 0, (room_half - oy) / dy, (-room_half - oy) / dy)
+    r = np.minimum(tx, ty)
+    for lx, ly in legs:
+        fx, fy = ox - lx, oy - ly
+        b = fx * dx + fy * dy
+        disc = b * b - (fx * fx + fy * fy - 0.07**2)
+        t = np.where(disc >= 0, -b - np.sqrt(np.maximum(disc, 0.0)), np.inf)
+        r = np.where((t > 0) & (t < r), t, r)
+    return r
+
+
+def _points(pose: Pose, legs: list[tuple[float, float]]) -> np.ndarray:
+    """The scan as points in the map frame (what the node gives `ScanPeople`)."""
+    base = scan_points(_scan(pose, legs), float(ANGLES[0]), float(ANGLES[1] - ANGLES[0]),
+                       T_BASE_LIDAR)  # fmt: skip
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    return base @ np.array([[c, s], [-s, c]]) + np.array([pose.x, pose.y])
+
+
+def _person(x: float, y: float) -> list[tuple[float, float]]:
+    return [(x, y + 0.1), (x, y - 0.1)]
+
+
+def test_a_person_standing_beside_the_robot_is_one_body_and_the_walls_none() -> None:
+    tracker = ScanPeople(FP)
+    pose = Pose(0.0, 0.0, 0.0)
+    tracker.update(_points(pose, _person(0.2, 1.2)), _room(), pose, 0)
+    assert len(tracker.bodies) == 1
+    b = tracker.bodies[0]
+    # The near side of the legs: a little towards the robot from the person's centre.
+    assert b.x == pytest.approx(0.2, abs=0.1) and 1.05 < b.y < 1.2
+    assert b.extent_m < 0.5
+    (p,) = tracker.people(0)
+    assert p.id == "scan_1" and p.velocity is None  # not known yet: a walking pace assumed
+
+
+def test_bodies_left_out_where_the_map_knows_the_world() -> None:
+    pose = Pose(0.0, 0.0, 0.0)
+    # Legs against the wall (within the margin), and legs in a large unknown area.
+    legs = _person(5.85, 0.0) + _person(-2.0, 3.0)
+    unknown = [(slice(160, 240), slice(50, 110))]  # 3 m × 4 m round (-2, 3): unexplored
+    tracker = ScanPeople(FP)
+    tracker.update(_points(pose, legs), _room(unknown), pose, 0)
+    assert tracker.bodies == []
+    # The same area as a small island of unknown (a body's shadow in the map): floor.
+    island = [(slice(177, 183), slice(77, 83))]  # 0.3 m × 0.3 m at (-2, 3)
+    tracker = ScanPeople(FP)
+    tracker.update(_points(pose, _person(-2.0, 3.0)), _room(island), pose, 0)
+    assert len(tracker.bodies) == 1
+
+
+def test_static_cells_keep_the_unexplored_and_drop_small_islands() -> None:
+    grid = _room([(slice(10, 110), slice(10, 110)), (slice(150, 154), slice(150, 154))])
+    st = static_cells(grid, island_m2=1.0)
+    assert st[50, 50] and not st[151, 151] and st[0, 5]
+
+
+def test_the_clusters_of_a_wall_a_few_returns_and_two_legs() -> None:
+    p = ScanParams()
+    wall = np.column_stack([np.full(40, 2.0), np.linspace(-1.0, 1.0, 40)])
+    stray = np.array([[3.0, 3.0], [3.01, 3.0]])
+    legs = np.array([[1.0, 0.1], [1.0, 0.12], [1.0, 0.14], [1.0, -0.1], [1.0, -0.12], [1.0, -0.14]])
+    out = bodies(np.vstack([wall, stray, legs]), p)
+    assert len(out) == 1 and out[0].points == 6 and out[0].x == pytest.approx(1.0)
+
+
+def test_a_walking_person_keeps_one_track_with_their_velocity() -> None:
+    tracker = ScanPeople(FP)
+    pose = Pose(0.0, 0.0, 0.0)
+    grid = _room()
+    for k in range(8):  # 1 m/s along −y, 2 m to the robot's left and ahead, 10 Hz
+        t = k * S // 10
+        tracker.update(_points(pose, _person(2.0, 3.0 - 0.1 * k)), grid, pose, t)
+    (p,) = tracker.people(7 * S // 10)
+    assert p.id == "scan_1"
+    assert p.velocity is not None
+    assert p.velocity[0] == pytest.approx(0.0, abs=0.1)
+    assert p.velocity[1] == pytest.approx(-1.0, abs=0.1)
+    # Out of the field: the track ends after its time to live.
+    tracker.update(_points(pose, []), grid, pose, 8 * S // 10)
+    assert tracker.people(8 * S // 10)
+    tracker.update(_points(pose, []), grid, pose, 14 * S // 10)
+    assert tracker.people(14 * S // 10) == []
+
+
+def test_two_people_crossing_keep_their_ids() -> None:
+    tracker = ScanPeople(FP)
+    pose = Pose(0.0, 0.0, 0.0)
+    grid = _room()
+    first: dict[str, float] = {}
+    for k in range(12):  # 1 m/s each way, passing 0.4 m apart at k = 10
+        t = k * S // 10
+        legs = _person(2.0 + 0.1 * k, 2.2) + _person(4.0 - 0.1 * k, 1.8)
+        tracker.update(_points(pose, legs), grid, pose, t)
+        if k == 0:
+            first = {p.id: p.y for p in tracker.people(t)}
+    people = tracker.people(11 * S // 10)
+    assert len(people) == 2 and {p.id for p in people} == set(first)
+    for p in people:  # each on their own line, still, at their own speed
+        assert p.y == pytest.approx(first[p.id], abs=0.15)  # the near side of the legs
+        assert p.velocity is not None
+        assert abs(p.velocity[0]) == pytest.approx(1.0, abs=0.15)
+        assert (p.velocity[0] > 0) == (first[p.id] > 2.0)
+
+
+def test_what_the_robot_carries_is_not_a_person() -> None:
+    tracker = ScanPeople(FP)
+    pose = Pose(1.0, 0.0, 0.0)
+    # A small object just off the footprint's front face (the arm's load): within the margin.
+    held = [(1.0 + FP.front + 0.09, 0.0)]
+    tracker.update(_points(pose, held), _room(), pose, 0)
+    assert tracker.bodies == []
+
+
+def test_merge_puts_a_track_on_the_person_it_is_and_adds_the_rest() -> None:
+    known = [Person("person_2", 3.0, 1.0, velocity=(0.0, 0.0)), Person("person_1", -4.0, 0.0)]
+    scanned = [
+        Person("scan_4", 3.2, 0.9, velocity=(0.5, 0.0)),
+        Person("scan_5", 0.0, 2.0, velocity=None),
+    ]
+    out = merge_scan(known, scanned, same_m=0.6)
+    assert [(p.id, p.x, p.y, p.velocity) for p in out] == [
+        ("person_2", 3.2, 0.9, (0.5, 0.0)),
+        ("person_1", -4.0, 0.0, (0.0, 0.0)),
+        ("scan_5", 0.0, 2.0, None),
+    ]
+
+
+def test_the_nav_map_rebuilds_for_a_person_come_or_moved_not_for_jitter() -> None:
+    import logging
+
+    m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
+    grid = _room()
+    m.adopt(grid, [], 0, 0)
+    pose = Pose(0.0, 0.0, 0.0)
+    assert m.see_scan(_points(pose, _person(2.0, 2.0)), pose, 0)  # came: rebuild
+    m.rebuild(0)
+    built = m.costmap
+    assert built is not None and [p.id for p in built.people] == ["scan_1"]
+    assert not m.see_scan(_points(pose, _person(2.02, 2.0)), pose, S // 10)  # 2 cm
+    assert m.costmap is not None and m.costmap.cost is built.cost  # same costs …
+    assert m.costmap.people[0].x > built.people[0].x  # … the newest position
+    assert m.see_scan(_points(pose, _person(2.2, 2.0)), pose, 2 * S // 10)  # 0.2 m: rebuild
