@@ -59,6 +59,10 @@ NAME = "navigation"
 #: Wall seconds to wait for a tick's input (odom, a depth frame, perception, the map
 #: fetch, the tick a goal is stamped at); NavigationSettings has no setting for it.
 INPUT_TIMEOUT_S = 30.0
+#: Wall seconds a tick waits for its scan, and how many scan periods old the newest may be
+#: for scans to count as flowing (else none is waited for: the lidar is gone).
+SCAN_WAIT_S = 2.0
+SCAN_FLOWING = 3
 
 
 class NavNode:
@@ -102,7 +106,6 @@ class NavNode:
             )
         self.scans = bus.latest(keys.scan, LaserScan, history=4)
         self.scan_period_ns = round(NS_PER_S / cfg.sim.sensors.lidar.rate_hz)
-        self.scans_alive = True
         cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
         # People seen by perception (the head camera), applied at their stamp + latency.
         self.perception = PerceptionFeed(bus, keys, cfg, self.camera, INPUT_TIMEOUT_S)
@@ -173,20 +176,20 @@ class NavNode:
 
     def _scan(self, b: int, pose: Pose, T_map_base: np.ndarray) -> bool:
         """The lidar's scan stamped b (at its rate) into the people layer; whether the
-        costmap is to be rebuilt. A scan that does not come is said and skipped, and not
-        waited for again until one comes."""
+        costmap is to be rebuilt. It is waited for (lockstep: the same scans in every run)
+        while scans flow (one stamped within `SCAN_FLOWING` periods before b came); one
+        that does not come in `SCAN_WAIT_S` is said and skipped, and the tracks go stale."""
         if b % self.scan_period_ns:
             return False
-        if self.scans_alive:
+        newest = self.scans.get()
+        if newest is None or newest.stamp_ns >= b - SCAN_FLOWING * self.scan_period_ns:
             try:
-                self.scans.wait_stamp(b, INPUT_TIMEOUT_S)
+                self.scans.wait_stamp(b, SCAN_WAIT_S)
             except WaitTimeout:
                 self.svc.log.warning("no scan for t=%.2f s: the lidar's people go stale", b / 1e9)
-                self.scans_alive = False
         scan = self.scans.at(b)
         if scan is None or scan.stamp_ns != b:
             return False
-        self.scans_alive = True
         T = np.asarray(scan.T_base_lidar).reshape(4, 4)
         ranges = np.asarray(as_numpy(scan.ranges), dtype=float)
         pts = scan_points(ranges, scan.angle_min, scan.angle_increment, T)
