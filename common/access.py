@@ -157,7 +157,7 @@ SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
     "navigation": {
         "put": ("{r}/ack/navigation", "{r}/nav/path", "{r}/nav/status", "{r}/wbc/cmd_vel"),
         "subscribe": ("{r}/camera/*/rgbd", "{r}/localization", "{r}/nav/cancel", "{r}/odom",
-                      "{r}/perception/detections", f"{ROOT}/world/clock"),
+                      "{r}/perception/detections", "{r}/scan", f"{ROOT}/world/clock"),
         "serve": ("{r}/nav/goal",),
         "query": (f"{ROOT}/map/artifacts/*", f"{ROOT}/map/occupancy", f"{ROOT}/map/people",
                   f"{ROOT}/map/people/*"),
