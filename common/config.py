@@ -615,6 +615,11 @@ class MissionSettings(_Section):
     reach_miss_max_m: Positive = 0.06
     grasp_timeout_s: Positive = 8.0
     release_timeout_s: Positive = 5.0
+    #: A Reach or Posture sent with a mapped person within `arm_slow_m` of the base (m;
+    #: 0: never) moves at `arm_slow_speed` of the arm's speeds: the handover's (its person
+    #: 1.3 m off) and any near a bystander.
+    arm_slow_m: NonNegative = 1.6
+    arm_slow_speed: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 0.5
     #: After the grasp, the object is lifted this far straight up before stowing, m.
     lift_m: NonNegative = 0.10
     #: The whole visual approach (the controller re-acquires and fails by itself sooner).

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
+
+import msgspec
 
 from common.messages.base import Finite, Mat4, Message, NonNegative, StampNs, Vec3
+
+#: A goal's share of the arm's speeds (0, 1]: a client slows the arm near people.
+SpeedShare = Annotated[float, msgspec.Meta(gt=0.0, le=1.0)]
 
 WbcModeName = Literal["damp", "stand", "walk", "manipulate"]
 
@@ -44,6 +49,7 @@ class Reach(Message, frozen=True, tag="reach"):
     the localization's T_odom_map (`services.mission.robot.BusRobot.send_arm_goal`).
     approach_axis: unit vector in H's frame along which the gripper approaches;
     pregrasp_m: the approach starts this far back along it.
+    speed: the share of the arm's speeds it moves at (the mission's, near people).
     """
 
     H: Mat4
@@ -51,6 +57,7 @@ class Reach(Message, frozen=True, tag="reach"):
     stamp_ns: StampNs
     approach_axis: Vec3 = (1.0, 0.0, 0.0)
     pregrasp_m: NonNegative = 0.08
+    speed: SpeedShare = 1.0
 
 
 class Grasp(Message, frozen=True, tag="grasp"):
@@ -64,9 +71,11 @@ class Release(Message, frozen=True, tag="release"):
 
 
 class Posture(Message, frozen=True, tag="posture"):
-    """Go to a named arm posture: stow, ready, look, handover."""
+    """Go to a named arm posture: stow, ready, look, handover; at `speed`, the share of
+    the arm's joint rate (the mission's, near people)."""
 
     name: Literal["stow", "ready", "look", "handover"]
+    speed: SpeedShare = 1.0
 
 
 ArmGoal = Reach | Grasp | Release | Posture

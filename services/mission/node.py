@@ -97,6 +97,7 @@ class MissionNode:
         self.robot = BusRobot(
             bus, keys, m.query_timeout_s, latency, m.sighting_gate_m,
             MapFrame(bus, keys, cfg, history=MAP_FRAME_HISTORY),
+            (m.arm_slow_m, m.arm_slow_speed),
         )  # fmt: skip
         self.gate = UpstreamGate(bus, keys, cfg)
         self.gate.watch("navigation", self.robot.nav)

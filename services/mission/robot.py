@@ -13,7 +13,8 @@ effect at the tick plus the mission's latency, so the same seed gives the same r
 the tree (or the patrol) commands during a tick is published by `end(b)` stamped b:
 cmd_vel from source `mission` every tick (zero unless a behaviour set it), carrying the
 mode when one was asked for (one key: the WBC gets the mode no later than the velocity).
-Nav cancels go out at once.
+Nav cancels go out at once. A Reach or a Posture sent while a mapped person stands within
+`arm_slow_m` of the base goes at `arm_slow_speed` of the arm's speeds (`ArmSlowdown`).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from common.messages.wbc import (
     ArmGoal,
     CmdVel,
     GoalStatus,
+    Posture,
     Reach,
     WbcMode,
     WbcModeName,
@@ -80,8 +82,11 @@ class BusRobot:
         latency_ns: dict[str, int],
         sighting_gate_m: float = 0.35,
         map_frame: MapFrame | None = None,
+        arm_slow: tuple[float, float] = (0.0, 1.0),
     ) -> None:
         self.bus, self.keys = bus, keys
+        #: (m, share): a person this near the base slows Reach and Posture to the share.
+        self.arm_slow_m, self.arm_slow_speed = arm_slow
         self.timeout_s = query_timeout_s
         self.sighting_gate_m = sighting_gate_m
         self.perception_latency_ns = latency_ns.get("perception", 0)
@@ -249,7 +254,27 @@ class BusRobot:
             H_map = np.asarray(goal.H, dtype=float).reshape(4, 4)
             H = self.map_frame.to_odom(H_map, goal.stamp_ns, self._t)
             goal = msgspec.structs.replace(goal, H=tuple(H.ravel().tolist()))
+        if isinstance(goal, (Reach, Posture)) and self.arm_slow_speed < goal.speed:
+            near = self.person_near(self.arm_slow_m)
+            if near:
+                log.info(
+                    "t=%.2f s %s near (%s): the arm at %.0f %% of its speeds", self._t / 1e9,
+                    near, type(goal).__name__, 100 * self.arm_slow_speed,
+                )  # fmt: skip
+                goal = msgspec.structs.replace(goal, speed=self.arm_slow_speed)
         return self._arm.send(goal, effective_ns=self._effective)
+
+    def person_near(self, radius_m: float) -> str:
+        """The id of a mapped person within `radius_m` of the base (the nearest), or ""."""
+        xy = self.robot_xy()
+        if xy is None or radius_m <= 0.0:
+            return ""
+        near = []
+        for e in self.people():
+            d = float(np.hypot(e.position_in_world[0] - xy[0], e.position_in_world[1] - xy[1]))
+            if d <= radius_m:
+                near.append((d, e.id))
+        return min(near)[1] if near else ""
 
     def wbc_status(self) -> WbcStatus | None:
         # Stamped before the tick: the controller surely published it (lockstep) and the

@@ -19,6 +19,9 @@ reached (a frozen pose or joint target), so Grasp after Reach keeps the gripper 
 - Posture(name): the arm joints move to `common.robot.POSTURES[name]` on a quintic; the
   jaw takes the posture's angle unless it is gripping.
 
+A Reach's or a Posture's `speed` (0, 1] scales its speeds and rates (the mission slows
+the arm near people); the tolerances and timeouts run from the motion's end as before.
+
 Pure: plain values in and out, time from the caller (ns of sim time).
 """
 
@@ -179,7 +182,7 @@ class ArmActions:
         elif isinstance(goal, Release):
             self.jaw, self._jaw_angle = "open", robot.GRIPPER_OPEN
         elif isinstance(goal, Posture):
-            self._start_joints(robot.POSTURES[goal.name][ARM], now_ns, obs.q_arm)
+            self._start_joints(robot.POSTURES[goal.name][ARM], now_ns, obs.q_arm, goal.speed)
             if self.jaw != "grip":
                 angle = float(robot.POSTURES[goal.name][-1])
                 self.jaw = "open" if angle < robot.GRIPPER_CLOSED - 0.1 else "closed"
@@ -205,8 +208,9 @@ class ArmActions:
         self._segments, t0, T_prev = [], now_ns, obs.T_world_tcp.copy()
         for k, T in enumerate(waypoints):
             dist, angle = pose_error(T_prev, T)
-            speed = p.approach_speed_m_s if k == 1 else p.reach_speed_m_s
-            duration = max(dist / speed, angle / p.reach_rate_rad_s, p.min_segment_s)
+            speed = (p.approach_speed_m_s if k == 1 else p.reach_speed_m_s) * goal.speed
+            rate = p.reach_rate_rad_s * goal.speed
+            duration = max(dist / speed, angle / rate, p.min_segment_s)
             self._segments.append((t0, PoseSegment(T_prev, T, duration)))
             t0 += round(duration * NS_PER_S)
             T_prev = T
@@ -214,12 +218,15 @@ class ArmActions:
         if self.jaw != "grip":
             self.jaw, self._jaw_angle = "open", robot.GRIPPER_OPEN
 
-    def _start_joints(self, q_goal: FloatArray, now_ns: int, q_now: FloatArray) -> None:
+    def _start_joints(
+        self, q_goal: FloatArray, now_ns: int, q_now: FloatArray, speed: float = 1.0
+    ) -> None:
         self._segments, self.T_goal, self._T_hold = [], None, None
         self._q_from, self._q_to = np.array(q_now, dtype=float), np.array(q_goal, dtype=float)
         span = float(np.max(np.abs(self._q_to - self._q_from)))
         self._q_t0 = now_ns
-        self._q_dur = max(span / self.params.joint_rate_rad_s, self.params.min_segment_s)
+        rate = self.params.joint_rate_rad_s * speed
+        self._q_dur = max(span / rate, self.params.min_segment_s)
 
     def _preempt(self, reason: str, now_ns: int, obs: ArmObservation) -> None:
         """End the active goal; the arm keeps the reference it reached."""

@@ -194,3 +194,22 @@ def test_the_grasp_detector_ignores_a_jaw_blocked_without_effort() -> None:
         det.update(True, -0.01, 0.0, 3.0, 0.001)
     assert det.empty and not det.held
     assert math.isclose(robot.GRIPPER_CLOSED, 0.0)
+
+
+def test_a_goal_at_half_speed_takes_twice_as_long_on_the_same_path() -> None:
+    start, goal_T = make_T(np.eye(3), [0.3, 0.0, 0.8]), make_T(np.eye(3), [0.9, 0.0, 0.9])
+    ends = []
+    for speed in (1.0, 0.5):
+        a = ArmActions(WbcSettings())
+        reach = Reach(H=tuple(goal_T.ravel()), frame="world", stamp_ns=0, pregrasp_m=0.1,  # type: ignore[arg-type]
+                      speed=speed)  # fmt: skip
+        a.start("g1", reach, 0, obs(start), no_pose)
+        ends.append([t0 + round(seg.duration * 1e9) for t0, seg in a._segments])
+    assert ends[1] == pytest.approx([2 * e for e in ends[0]], abs=2)
+    q0 = robot.POSTURES["stand"][ARM]
+    durations = []
+    for speed in (1.0, 0.5):
+        a = ArmActions(WbcSettings())
+        a.start("g2", Posture(name="handover", speed=speed), 0, obs(q_arm=q0), no_pose)
+        durations.append(a._q_dur)
+    assert durations[1] == pytest.approx(2 * durations[0])
