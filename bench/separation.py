@@ -9,8 +9,9 @@ speed: `truth_separation`); a violation is a moment when the robot moved towards
 (faster than `AT_REST_MPS`) with d below the protective separation S_p of both speeds. A
 person walking into a robot at rest is none (the standard's protective stop). Kept: the
 violations, the least margin d − S_p while moving towards someone, the least separation,
-who it was and the robot's speed then. `dume trial person|crossing` and `dume eval
---shift` use it.
+who it was and the robot's speed then, and at every moment the tightest person's d and
+S_p (`series`, the shift's plots). `dume trial person|crossing` and `dume eval --shift`
+use it.
 """
 
 from __future__ import annotations
@@ -49,12 +50,16 @@ class SeparationWatch:
     closest_person: str = ""
     #: The first `KEEP` violations, each as it was: when, who, d, S_p, the two speeds.
     kept: list[dict[str, Any]] = field(default_factory=list)
+    #: Every moment's tightest person (least d − S_p): (t s, d m, S_p m, base speed m/s),
+    #: S_p of the robot's speed towards them (0 moving away) and theirs (the plots).
+    series: list[tuple[float, float, float, float]] = field(default_factory=list)
 
     def add(self, base: StateTruth, people: PeopleTruth) -> None:
         """One moment: the base and every person, as of one stamp."""
         pose = Pose.of_odom(base)
         v = base.base_linear_velocity_in_world[:2]
         self.samples += 1
+        tightest: tuple[float, float, float] | None = None  # (d − S_p, d, S_p)
         for p in people.people:
             xy = (p.position[0], p.position[1])
             d = float(distance_to_footprint(pose, self.fp, np.array([xy]))[0])
@@ -64,6 +69,9 @@ class SeparationWatch:
             if d < self.closest_m:
                 self.closest_m, self.closest_person = d, p.id
                 self.speed_at_closest_mps = math.hypot(*v)
+            s_now = protective_distance(v_r if v_r > AT_REST_MPS else 0.0, v_h, self.sep)
+            if tightest is None or d - s_now < tightest[0]:
+                tightest = (d - s_now, d, s_now)
             if v_r > AT_REST_MPS:
                 s_p = protective_distance(v_r, v_h, self.sep)
                 margin = d - s_p
@@ -76,6 +84,8 @@ class SeparationWatch:
                             "d_m": round(d, 3), "s_p_m": round(s_p, 3),
                             "v_robot_mps": round(v_r, 3), "v_person_mps": round(v_h, 3),
                         })  # fmt: skip
+        if tightest is not None:
+            self.series.append((base.stamp_ns / 1e9, tightest[1], tightest[2], math.hypot(*v)))
 
     def figures(self) -> dict[str, Any]:
         return {

@@ -64,10 +64,11 @@ from bench.eval.evaluate import (
 from bench.eval.judge import MissionRecord, WorldResult, evaluate
 from bench.eval.report import json_safe, write_report
 from bench.eval.run import read_map, read_world, request_result, sigterm_interrupts, watch_mission
+from bench.eval.shift_plots import ShiftPlots, map_accuracy
 from bench.eval.targets import Pair, TargetError
 from bench.separation import SeparationWatch, truth_separation
 from common.bus import BusError, Fifo
-from common.config import ConfigError, resolve
+from common.config import ConfigError, load_config, resolve
 from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_PEOPLE, WORLD_PUSH
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
@@ -238,7 +239,8 @@ def run_shift_world(
     overrides = world_overrides(args, seed, map_name)
     stack = ProcessStack(list(SERVICES), overrides)
     watch = SeparationWatch(truth_separation(overrides))
-    figures: dict[str, Any] = {"world_seed": seed}
+    plots = ShiftPlots(load_config(overrides).navigation.people.slow_radius_m)
+    figures: dict[str, Any] = {"world_seed": seed, "map_accuracy": []}
     rng = np.random.default_rng(seed)
     truth: Truth | None = None
     step = "start the stack"
@@ -266,6 +268,12 @@ def run_shift_world(
             step = f"make request {k + 1}"
             follow.drain()
             arts, people = read_map(bus)
+            there = {a: p for a, p in truth.where.items() if a not in truth.gone}
+            within, current = map_accuracy(arts, there)
+            plots.accuracy.append((end_ns / 1e9, within, current))
+            figures["map_accuracy"].append({"request": k + 1, "t_s": round(end_ns / 1e9, 1),
+                                            "within_10cm": round(within, 3),
+                                            "current": round(current, 3)})  # fmt: skip
             present = present_artifacts(arts, truth.where, truth.gone)
             pair, asked = shift_request(present, people, seed, k, last_person)
             at_ns = None
@@ -287,6 +295,7 @@ def run_shift_world(
                                    start_gate=gated)  # fmt: skip
 
             gated = False
+            plots.changes.extend(record.changes)
             evaluate(result, record, world_now)
             if not asked:
                 class_verdict(result, record, pair.object)
@@ -322,6 +331,10 @@ def run_shift_world(
         remove_database(database_path(stack.config.semantic_map, map_name))
         figures["separation"] = watch.figures()
         figures["moves"] = list(truth.moves) if truth is not None else []
+        plots_path = resolve(args.out) / f"shift-seed-{seed}.rrd"
+        plots_path.parent.mkdir(parents=True, exist_ok=True)
+        plots.write(plots_path, watch.series)
+        figures["plots"] = str(plots_path)
         figures["logs"] = shown(stack.run_dir)
     return figures
 
@@ -449,6 +462,23 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
     ]  # fmt: skip
     if kept:
         lines += ["", "Separation violations (the first of each world, from truth):", "", *kept]
+    accuracy = [
+        f"| {s['world_seed']} | {a['request']} | {a['t_s']} | {a['within_10cm']:.0%} "
+        f"| {a['current']:.0%} |"
+        for s in shifts for a in s.get("map_accuracy", [])
+    ]  # fmt: skip
+    if accuracy:
+        lines += [
+            "", "The map's accuracy before each request (truth: the artifacts there that it "
+            "has within 10 cm; its entries that stand where an artifact of their class is):",
+            "", "| seed | request | sim time, s | within 10 cm | current |",
+            "|---|---|---|---|---|", *accuracy,
+        ]  # fmt: skip
+    plots = [f"- seed {s['world_seed']}: `{Path(s['plots']).name}`" for s in shifts
+             if s.get("plots")]  # fmt: skip
+    if plots:
+        lines += ["", "Plots (rerun recordings: the stage by time, the separation with S_p "
+                  "and the slow zone, the map's accuracy):", "", *plots]  # fmt: skip
     knocks = [
         f"- seed {s['world_seed']} request {k['request']}: {k['object']} knocked at "
         f"{k['at_s']:.1f} s; drops {k['dropped']}; {k['outcome']} (mission {k['mission']})"

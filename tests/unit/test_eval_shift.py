@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import msgspec
 import pytest
 
@@ -28,6 +30,8 @@ from common.messages.sim import (
 )
 from services.navigation.separation import SeparationParams, protective_distance
 from services.sim.world import generate_world
+
+S = 1_000_000_000
 
 
 def _entity(eid: str, x: float, y: float, kind: str = "artifact") -> MapEntity:
@@ -175,3 +179,37 @@ def test_a_slip_knocks_the_carried_object_once_three_seconds_into_the_carry() ->
         k.on_progress(status(10.0, "bring_to_user"), clock, False)
         k.on_progress(status(10.0, "bring_to_user"), clock, True)
         assert not k.pusher.sent and not k.at_ns
+
+
+def test_the_map_accuracy_counts_artifacts_within_10_cm_and_entries_still_true() -> None:
+    from bench.eval.shift_plots import map_accuracy
+
+    def entity(eid: str, x: float, missing: bool = False) -> MapEntity:
+        e = _entity(eid, x, 0.0)
+        return msgspec.structs.replace(e, missing_since_ns=0) if missing else e
+
+    where = {"bottle_1": (0.05, 0.0, 0.8), "can_1": (3.0, 0.0, 0.8)}
+    # bottle right; can_1's entry stale (2 m off); a box entry for nothing there;
+    # a missing entry not counted either way.
+    arts = [entity("bottle_1", 0.0), entity("can_1", 1.0), entity("box_1", 5.0),
+            entity("can_2", 3.0, missing=True)]  # fmt: skip
+    within, current = map_accuracy(arts, where)
+    assert within == 0.5 and current == pytest.approx(1 / 3)
+    assert map_accuracy([], {}) == (1.0, 1.0)
+
+
+def test_the_shift_plots_are_a_rerun_recording_of_separation_stages_and_accuracy(
+    tmp_path: Path,
+) -> None:
+    from bench.eval.shift_plots import ShiftPlots
+
+    plots = ShiftPlots(slow_zone_m=2.0)
+    plots.changes = [
+        MissionStatus(stamp_ns=0, request_id="r1", state="running", behaviour="navigate_to_object"),
+        MissionStatus(stamp_ns=5 * S, request_id="r1", state="failed", reason="grasp_failed"),
+    ]
+    plots.accuracy = [(0.0, 1.0, 1.0), (6.0, 0.5, 0.8)]
+    series = [(0.1 * k, 2.0 - 0.01 * k, 0.5, 0.3) for k in range(100)]
+    path = tmp_path / "shift-seed-0.rrd"
+    plots.write(path, series)
+    assert path.stat().st_size > 1000
