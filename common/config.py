@@ -645,6 +645,9 @@ class MissionSettings(_Section):
     #: is farther than this from straight ahead at the handover distance (m).
     handover_check_s: NonNegative = 1.0
     handover_tol_m: Positive = 0.12
+    #: A person not seen at the handover pose: after a turn round on the spot, stand this
+    #: long saying "looking for <person>" before walking to where the map last had them.
+    person_ask_s: NonNegative = 10.0
     #: After the release: walk backwards at this speed (m/s) for this long.
     back_off_speed: Positive = 0.15
     back_off_s: NonNegative = 1.0

@@ -74,7 +74,14 @@ from services.mission.behaviours.base import (
     reset_blackboard,
 )
 from services.mission.behaviours.handover import FeelPull, FirstSide, next_side
-from services.mission.behaviours.motion import BackOff, NavigateTo, PersonAhead, SetMode
+from services.mission.behaviours.motion import (
+    BackOff,
+    LookForPerson,
+    NavigateTo,
+    PersonAhead,
+    SeenThere,
+    SetMode,
+)
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
 from services.mission.behaviours.request import ResolvePerson, SelectTarget, WaitForRequest
 from services.mission.behaviours.search import LookElsewhere
@@ -181,10 +188,20 @@ def build_tree(ctx: Context) -> Sequence:
             memory=True,
             children=[
                 PersonAhead(ctx, st[4]),
-                NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
+                _seq(
+                    "to_them_again",
+                    Selector("look_if_unseen", memory=True, children=[
+                        SeenThere(ctx, st[4]),
+                        _seq("look_round",
+                             SetMode(ctx, "walk", "mission", st[4], name="mode_walk_look"),
+                             LookForPerson(ctx, st[4]),
+                             SetMode(ctx, "walk", "navigation", st[4], name="mode_walk_on")),
+                    ]),
+                    NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
+                ),
             ],
         ),
-    )
+    )  # fmt: skip
     release = _seq(
         st[5],
         SetMode(ctx, "stand", "navigation", st[5]),
@@ -344,7 +361,7 @@ class MissionTree:
         if self.request is None or not isinstance(tip, MissionBehaviour) or not tip.stage:
             return "", "" if tip is None else tip.name, 0.0
         index = STAGES.index(tip.stage)
-        return tip.stage, tip.name, min(1.0, (index + tip.fraction) / len(STAGES))
+        return tip.stage, tip.say or tip.name, min(1.0, (index + tip.fraction) / len(STAGES))
 
     def text(self) -> str:
         """The tree with every node's status, as text (for the log and rerun)."""

@@ -98,6 +98,13 @@ class FakeRobot:
     #: The person's mapped place moves this far (m, +y) once the robot first stands at
     #: the handover pose.
     person_shift_m: float = 0.0
+    #: The person walked here (x, y) before the robot came: at the handover pose the map
+    #: does not see them; once the robot has turned `seen_after_turn_rad` on the spot it
+    #: sees them there. None: seen where they are whenever the robot stands facing them.
+    person_walked_to: tuple[float, float] | None = None
+    seen_after_turn_rad: float = math.pi / 2
+    _turned: float = 0.0
+    _facing: str = ""
     #: Where each wrist_detection call looked for the target (its mapped place or None).
     looked_near: list[tuple[float, float] | None] = field(default_factory=list)
     nav_ticks: int = 3
@@ -161,6 +168,14 @@ class FakeRobot:
             c, s = math.cos(self.yaw), math.sin(self.yaw)
             self.xy = (self.xy[0] + (c * vx - s * vy) * dt, self.xy[1] + (s * vx + c * vy) * dt)
             self.yaw = math.remainder(self.yaw + wz * dt, math.tau)
+            self._turned += abs(wz) * dt
+            if self.person_walked_to is not None and self._turned >= self.seen_after_turn_rad:
+                for pid, p in self.people_.items():
+                    x, y = self.person_walked_to
+                    self.people_[pid] = msgspec.structs.replace(
+                        p, position_in_world=(x, y, 0.0), last_seen_ns=self.t
+                    )
+                self.person_walked_to = None
         self._cmd = (0.0, 0.0, 0.0)
         self.t += TICK_NS
         if self._pending_mode is not None and self.modes_work:
@@ -207,7 +222,10 @@ class FakeRobot:
 
     def person(self, person_id: str) -> MapEntity | None:
         self._map()
-        return self.people_.get(person_id)
+        p = self.people_.get(person_id)
+        if p is not None and person_id == self._facing and self.person_walked_to is None:
+            return msgspec.structs.replace(p, last_seen_ns=self.t)  # seen now
+        return p
 
     def people(self) -> list[MapEntity]:
         self._map()
@@ -301,6 +319,7 @@ class FakeRobot:
         assert isinstance(goal, PersonHandover)
         p = self.people_[goal.person_id].position_in_world
         self.xy, self.yaw = (p[0] - HANDOVER_DISTANCE_M, p[1]), 0.0
+        self._facing = goal.person_id  # the head camera sees them from close by, if there
         if self.person_shift_m:
             moved = (p[0], p[1] + self.person_shift_m, p[2])
             self.people_[goal.person_id] = msgspec.structs.replace(

@@ -444,3 +444,38 @@ def test_a_leaf_writes_only_the_blackboard_keys_it_declares() -> None:
     Declared("declared", ctx, "navigate_to_object").update()
     assert read(Declared("reader", ctx, "x").bb, PERSON) == "person_9"
     assert Sneaky("failing", ctx, "x").fail("internal", "a reason") == Status.FAILURE
+
+
+@pytest.mark.parametrize("seen_after", [math.pi / 2, None])
+def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
+    seen_after: float | None,
+) -> None:
+    """At the handover pose the map does not see the person: the robot turns round on
+    the spot saying it is looking for them. Seen a quarter turn in, it walks to where they
+    were seen; never seen, it asks, then walks to where the map last had them."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (1.0, 3.0)
+    robot.seen_after_turn_rad = seen_after if seen_after is not None else 100.0
+    tree = mission(robot)
+    said: list[str] = []
+    outcome = None
+    for _ in range(6000):
+        outcome = tree.tick()
+        said.append(tree.where()[1])
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded"
+    assert "looking for person_1" in said
+    turned = sum(abs(c[2]) for c in robot.cmds) * 0.05
+    sent = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert len(sent) == 2  # there, then to them again
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    if seen_after is not None:
+        assert turned == pytest.approx(math.pi / 2, abs=0.1)
+        assert any("person_1 seen at (1.00, 3.00)" in d for d in decisions)
+        assert "looking for person_1: not seen round here" not in said
+    else:
+        assert turned == pytest.approx(math.tau, abs=0.1)
+        assert "looking for person_1: not seen round here" in said
+        assert any("walking to where the map last had them" in d for d in decisions)

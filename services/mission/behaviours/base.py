@@ -42,9 +42,10 @@ GRASP_PLAN = "grasp_plan"  # a GraspPlan
 FAILURE = "failure"  # Failure | None
 SEARCH = "search"  # bool: look elsewhere before the next try (every candidate missed)
 SEARCHED = "searched"  # bool: this request looked elsewhere already
+UNSEEN = "unseen"  # bool: the person was not seen at their mapped place: look round
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
-    SEARCH, SEARCHED,
+    SEARCH, SEARCHED, UNSEEN,
 )  # fmt: skip
 
 
@@ -117,11 +118,14 @@ class MissionBehaviour(py_trees.behaviour.Behaviour):
         self.fraction = 0.0
         self.bb = blackboard(name, (FAILURE, *self.WRITES))
         self.started_ns = 0
+        #: What the status says while this leaf runs, when not its name (a sentence).
+        self.say = ""
 
     def initialise(self) -> None:
         self.started_ns = self.port.now_ns
         self.fraction = 0.0
         self.feedback_message = ""
+        self.say = ""
 
     def elapsed_s(self) -> float:
         """Sim seconds since this activation began."""

@@ -10,11 +10,20 @@
   (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
   (or failing while the goal is active) it cancels its goal.
 - `PersonAhead`: at the handover pose, stand `handover_check_s` (the head camera's
-  fresh sightings of the person reach the map), then check that the person's latest
-  mapped place is `HANDOVER_DISTANCE_M` straight ahead within `handover_tol_m`; when not,
-  FAILURE, a condition (no mission failure): the tree walks to the person again. The map
-  can hold a person some tenths of a metre off until it sees them from close by, and the
-  person's hand takes only what is held out within 0.25 m of it.
+  fresh sightings of the person reach the map), then check that the map saw the person
+  meanwhile and that their latest mapped place is `HANDOVER_DISTANCE_M` straight ahead
+  within `handover_tol_m`; when not, FAILURE, a condition (no mission failure): the tree
+  walks to the person again, after looking round for them when they were not seen
+  (`UNSEEN`). The map can hold a person some tenths of a metre off until it sees them
+  from close by, and the person's hand takes only what is held out within 0.25 m of it.
+- `SeenThere`: SUCCESS unless the person was not seen at their place (`UNSEEN`).
+- `LookForPerson`: the person was not where the map had them. Turn on the spot once
+  round (`LOOK_RATE_RAD_S`, cmd_vel from the mission) while the head camera sweeps the
+  floor round it, asking the map each tick whether it saw them since the look began;
+  then stand `person_ask_s` saying "looking for <person>" (a person near may answer by
+  stepping into view). Seen: SUCCESS, and the walk to them goes to where they were seen;
+  never seen: SUCCESS all the same, walking to where the map last had them (the handover
+  waits for them there and ends `handover_timeout` when nobody comes).
 - `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission).
 """
 
@@ -29,7 +38,7 @@ from common.messages.mission import MissionReason
 from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover
 from common.messages.wbc import WbcModeName
 from common.robot import HANDOVER_DISTANCE_M
-from services.mission.behaviours.base import PERSON, SIDE, Context, MissionBehaviour
+from services.mission.behaviours.base import PERSON, SIDE, UNSEEN, Context, MissionBehaviour
 from services.mission.behaviours.handover import side_bearing
 from services.mission.ports import PortError, Refused, Unavailable
 
@@ -138,7 +147,13 @@ class NavigateTo(MissionBehaviour):
         self.active = False
 
 
+#: rad/s: the turn on the spot that looks round for a person.
+LOOK_RATE_RAD_S = 0.4
+
+
 class PersonAhead(MissionBehaviour):
+    WRITES = (UNSEEN,)
+
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("person_ahead", ctx, stage)
 
@@ -156,6 +171,13 @@ class PersonAhead(MissionBehaviour):
         if person is None or xy is None or yaw is None:
             self.feedback_message = "cannot check: presenting where navigation stopped"
             return Status.SUCCESS
+        if person.last_seen_ns < self.started_ns and not self.get(UNSEEN):
+            self.ctx.decide(
+                f"{person_id} not seen at their place in {self.elapsed_s():.1f} s here: "
+                "looking round for them"
+            )
+            self.set(UNSEEN, True)
+            return Status.FAILURE
         dx = person.position_in_world[0] - xy[0]
         dy = person.position_in_world[1] - xy[1]
         ahead = math.cos(yaw) * dx + math.sin(yaw) * dy
@@ -169,6 +191,71 @@ class PersonAhead(MissionBehaviour):
             f"({ahead:.2f} m ahead, {left:+.2f} m left): walking to them again"
         )
         return Status.FAILURE
+
+
+class SeenThere(MissionBehaviour):
+    """SUCCESS unless the person was not seen at their mapped place (`UNSEEN`)."""
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("seen_there", ctx, stage)
+
+    def update(self) -> Status:
+        return Status.FAILURE if self.get(UNSEEN) else Status.SUCCESS
+
+
+class LookForPerson(MissionBehaviour):
+    """Turn once round, then ask, until the map sees the person (the module docstring)."""
+
+    WRITES = (UNSEEN,)
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("look_for_person", ctx, stage)
+        self.turned = 0.0
+        self.last_yaw: float | None = None
+        self.asked_ns: int | None = None
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
+
+    def update(self) -> Status:
+        pid = str(self.get(PERSON))
+        try:
+            person = self.port.person(pid)
+        except Unavailable:
+            person = None
+        if person is not None and person.last_seen_ns >= self.started_ns:
+            x, y = person.position_in_world[:2]
+            self.ctx.decide(f"{pid} seen at ({x:.2f}, {y:.2f}) after {self.elapsed_s():.1f} s")
+            return self._done()
+        yaw = self.port.robot_yaw()
+        if yaw is not None and self.last_yaw is not None:
+            self.turned += abs(math.remainder(yaw - self.last_yaw, math.tau))
+        self.last_yaw = yaw
+        if self.turned < math.tau and self.asked_ns is None:
+            self.port.command_velocity(0.0, 0.0, LOOK_RATE_RAD_S)
+            self.say = f"looking for {pid}"
+            self.fraction = 0.5 * self.turned / math.tau
+            return Status.RUNNING
+        self.port.command_velocity(0.0, 0.0, 0.0)
+        if self.asked_ns is None:
+            self.asked_ns = self.port.now_ns
+            self.ctx.decide(f"{pid} not seen in a turn round their place: asking for them")
+        self.say = f"looking for {pid}: not seen round here"
+        waited = (self.port.now_ns - self.asked_ns) / 1e9
+        if waited < self.settings.person_ask_s:
+            self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
+            return Status.RUNNING
+        self.ctx.decide(f"{pid} not seen: walking to where the map last had them")
+        return self._done()
+
+    def _done(self) -> Status:
+        self.port.command_velocity(0.0, 0.0, 0.0)
+        self.set(UNSEEN, False)
+        return Status.SUCCESS
+
+    def terminate(self, new_status: Status) -> None:
+        self.port.command_velocity(0.0, 0.0, 0.0)
 
 
 class BackOff(MissionBehaviour):
