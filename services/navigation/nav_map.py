@@ -6,7 +6,9 @@ short-lived depth layer (`layer`, marked and cleared by `depth.DepthFeed`) and t
 layer (`people`: the map's people with those perception sees over them, `SeenPeople`,
 and the lidar's tracks over those, `scan_people`; in the costmap when
 `people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
-`build` (`costmap.build_costmap`). The lidar's tracks move a little at every scan: the
+`build` (`costmap.build_costmap`); a person the map or the camera has whose place the
+lidar sees free (`ScanView.clear_at`), or who is inside the robot's footprint, is left
+out of the layer and said once. The lidar's tracks move a little at every scan: the
 costmap is rebuilt when a person came or went or moved `REBUILD_MOVE_M` since the last
 build, and otherwise only its people (what the speed rules read) are the newest.
 `costmap` is None until a grid is in; `map_at` is the sim time the map in use is as of
@@ -22,11 +24,13 @@ import logging
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from common.geometry import FloatArray
 from common.messages.perception import Detections
 from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
-from services.navigation.grid import Footprint, Grid, Pose
-from services.navigation.scan_people import ScanPeople, merge_scan
+from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
+from services.navigation.scan_people import ScanPeople, ScanView, merge_scan
 from services.navigation.seen_people import SeenPeople
 
 #: m: a person this far from where the costmap last had them (or one come or gone) has
@@ -59,6 +63,11 @@ class NavMap:
         self.scanned: list[Person] = []
         #: The people the costmap was last built with.
         self.built: list[Person] = []
+        #: The newest scan and pose (what says where nobody stands), and the people left
+        #: out for it (id → why, said once).
+        self.view: ScanView | None = None
+        self.pose: Pose | None = None
+        self.left_out: dict[str, str] = {}
         self.costmap: Costmap | None = None
         #: The sim time the map in use is as of (goals queued before it resolve against it).
         self.map_at = 0
@@ -79,7 +88,8 @@ class NavMap:
         """The people layer from the known people and the lidar's tracks; whether it
         changed enough for a rebuild (`REBUILD_MOVE_M`). Without one, the costmap's
         people are the new ones all the same."""
-        self.people = merge_scan(self.known, self.scanned, self.scan.p.same_m)
+        people = merge_scan(self.known, self.scanned, self.scan.p.same_m)
+        self.people = [q for q in people if q.id.startswith("scan_") or not self._absent(q)]
         before = {q.id: q for q in self.built}
         material = len(before) != len(self.people) or any(
             (b := before.get(q.id)) is None or math.hypot(q.x - b.x, q.y - b.y) >= REBUILD_MOVE_M
@@ -88,6 +98,24 @@ class NavMap:
         if not material and self.costmap is not None:
             self.costmap = replace(self.costmap, people=tuple(self.people))
         return material
+
+    def _absent(self, q: Person) -> bool:
+        """Whether the newest scan or the robot's own body says `q` is not there (said
+        once per person and reason)."""
+        why = ""
+        at = np.array([[q.x, q.y]])
+        if self.pose is not None and distance_to_footprint(self.pose, self.fp, at)[0] <= 0.0:
+            why = "inside the robot's footprint"
+        elif self.view is not None and self.view.clear_at(q.x, q.y):
+            why = "the lidar sees free floor there"
+        if why and self.left_out.get(q.id) != why:
+            self.log.info("%s at (%.2f, %.2f) left out of the people layer: %s", q.id, q.x, q.y,
+                          why)  # fmt: skip
+        if why:
+            self.left_out[q.id] = why
+        else:
+            self.left_out.pop(q.id, None)
+        return bool(why)
 
     def build(self, t_ns: int) -> Costmap:
         assert self.grid is not None  # called once a grid is in
@@ -104,9 +132,12 @@ class NavMap:
             self.seen.update(d, self.grid)
         return self.seen.active(b) != before
 
-    def see_scan(self, points: FloatArray, pose: Pose, b: int) -> bool:
-        """One lidar scan's returns (n, 2, map frame) taken at b with the robot at `pose`;
-        whether the costmap is to be rebuilt."""
+    def see_scan(
+        self, points: FloatArray, pose: Pose, b: int, view: ScanView | None = None
+    ) -> bool:
+        """One lidar scan's returns (n, 2, map frame) taken at b with the robot at `pose`
+        (`view`: its rays, for where nobody stands); whether the costmap is to be rebuilt."""
+        self.view, self.pose = view, pose
         if self.grid is None:
             return False
         self.scan.update(points, self.grid, pose, b)

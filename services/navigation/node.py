@@ -28,6 +28,7 @@ never by when a message happened to arrive.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -53,6 +54,7 @@ from services.navigation.nav_log import NavLogger
 from services.navigation.nav_map import NavMap
 from services.navigation.navigator import Navigator, TickOutput
 from services.navigation.perceived import PerceptionFeed
+from services.navigation.scan_people import ScanView
 from services.navigation.sources import MapSource, Source, WorldSource, wait_for_world
 
 NAME = "navigation"
@@ -194,7 +196,13 @@ class NavNode:
         ranges = np.asarray(as_numpy(scan.ranges), dtype=float)
         pts = scan_points(ranges, scan.angle_min, scan.angle_increment, T)
         world = pts @ T_map_base[:2, :2].T + T_map_base[:2, 3]
-        changed = self.map.see_scan(world, pose, b)
+        T_map_lidar = T_map_base @ T
+        view = ScanView(
+            (float(T_map_lidar[0, 3]), float(T_map_lidar[1, 3])),
+            math.atan2(T_map_lidar[1, 0], T_map_lidar[0, 0]),
+            scan.angle_min, scan.angle_increment, ranges, scan.range_max,
+        )  # fmt: skip
+        changed = self.map.see_scan(world, pose, b, view)
         self.log.scan(b, self.map.scan.bodies, self.map.scanned)
         return changed
 

@@ -36,6 +36,14 @@ standing one costs the robot no more than its protective separation at rest. The
 join the people layer in `NavMap` (`merge_scan`): a track within `same_m` of a person the
 layer already has is that person seen now (the lidar's 10 Hz position and its velocity
 win), the rest are added under their own ids.
+
+The scan also says where nobody stands (`ScanView.clear_at`): a person the layer has
+from the map or the camera whose place every beam round it passes `beyond_m` beyond (the
+floor there is seen free in the lidar's plane, where every standing person has legs) is
+not there any more: the map's tracker holds a person who walked out of view at their
+last place, or carried along their last velocity, for seconds to minutes. `NavMap`
+leaves such people out of its layer (the map itself is not changed), and those whose
+place is inside the robot's own footprint, where nobody can stand.
 """
 
 from __future__ import annotations
@@ -152,6 +160,36 @@ def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
         if extent <= p.max_extent_m:
             out.append(Body(float(c[0]), float(c[1]), extent, len(g)))
     return out
+
+
+@dataclass(frozen=True)
+class ScanView:
+    """One scan as rays in the map: the lidar's origin (m) and heading (rad), its beams'
+    angles (from the heading) and ranges (m, 0: no return within `range_max`)."""
+
+    origin: tuple[float, float]
+    heading: float
+    angle_min: float
+    angle_increment: float
+    ranges: FloatArray
+    range_max: float
+
+    def clear_at(self, x: float, y: float, radius_m: float = 0.25, beyond_m: float = 0.3) -> bool:
+        """Whether the beams at a body of `radius_m` at (x, y) all pass at least `beyond_m`
+        beyond it (a beam with no return passes); False where the scan cannot say (out of
+        its field or range, or a beam lost)."""
+        dx, dy = x - self.origin[0], y - self.origin[1]
+        dist = math.hypot(dx, dy)
+        if dist <= radius_m or dist + beyond_m >= self.range_max:
+            return False
+        bearing = math.remainder(math.atan2(dy, dx) - self.heading, math.tau)
+        half = math.asin(min(1.0, radius_m / dist))
+        k0 = math.ceil((bearing - half - self.angle_min) / self.angle_increment)
+        k1 = math.floor((bearing + half - self.angle_min) / self.angle_increment)
+        if k0 < 0 or k1 >= len(self.ranges) or k1 < k0:
+            return False
+        r = self.ranges[k0 : k1 + 1]
+        return bool(np.all((r == 0.0) | (r >= dist + beyond_m)))
 
 
 @dataclass

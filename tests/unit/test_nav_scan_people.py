@@ -19,6 +19,7 @@ from services.navigation.nav_map import NavMap
 from services.navigation.scan_people import (
     ScanParams,
     ScanPeople,
+    ScanView,
     bodies,
     merge_scan,
     static_cells,
@@ -196,3 +197,39 @@ def test_the_nav_map_rebuilds_for_a_person_come_or_moved_not_for_jitter() -> Non
     assert m.costmap is not None and m.costmap.cost is built.cost  # same costs …
     assert m.costmap.people[0].x > built.people[0].x  # … the newest position
     assert m.see_scan(_points(pose, _person(2.2, 2.0)), pose, 2 * S // 10)  # 0.2 m: rebuild
+
+
+def _view(pose: Pose, legs: list[tuple[float, float]]) -> ScanView:
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    origin = (pose.x + c * T_BASE_LIDAR[0, 3], pose.y + s * T_BASE_LIDAR[0, 3])
+    step = float(ANGLES[1] - ANGLES[0])
+    return ScanView(origin, pose.yaw, float(ANGLES[0]), step, _scan(pose, legs), 10.0)
+
+
+def test_the_scan_says_where_nobody_stands_and_not_where_it_cannot_see() -> None:
+    pose = Pose(0.0, 0.0, 0.0)
+    view = _view(pose, _person(2.0, 1.0))
+    assert not view.clear_at(2.0, 1.0)  # their legs stop the beams
+    assert not view.clear_at(2.1, 1.2)  # the map's estimate a little off: still them
+    assert view.clear_at(2.0, -1.5)  # the beams go on to the wall
+    assert not view.clear_at(-2.0, 0.0)  # behind the lidar: out of its field
+    assert not view.clear_at(3.0, 1.5)  # in the legs' shadow: the scan cannot say
+
+
+def test_the_nav_map_leaves_out_people_the_lidar_sees_gone_or_inside_the_robot() -> None:
+    import logging
+
+    m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
+    pose = Pose(0.0, 0.0, 0.0)
+    mapped = [
+        Person("person_1", 2.0, -1.5),  # walked off: the floor there is seen free
+        Person("person_2", 2.0, 1.0),  # still there
+        Person("person_3", 0.1, 0.0),  # the tracker carried them into the robot
+    ]
+    m.adopt(_room(), mapped, 0, 0)
+    m.see_scan(_points(pose, _person(2.0, 1.0)), pose, 0, _view(pose, _person(2.0, 1.0)))
+    assert [q.id for q in m.people] == ["person_2"]
+    assert m.left_out == {
+        "person_1": "the lidar sees free floor there",
+        "person_3": "inside the robot's footprint",
+    }
