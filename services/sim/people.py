@@ -14,7 +14,10 @@ only when it comes to them holding something (within `COME_M`, its heading withi
 `COME_HALF_ANGLE_RAD` of them: the person asked for it, or one who sees it is for them),
 then waits while it stays within `FACE_RADIUS_M`. Nobody walks into a machine: a
 bystander who has come within `YIELD_M` of the robot's base ahead of them (within
-`YIELD_HALF_ANGLE_RAD` of where they walk) pauses until it is clear.
+`YIELD_HALF_ANGLE_RAD` of where they walk) pauses until it is clear, and after
+`GIVE_WAY_S` of that turns back along their route (a person does not wait for ever on
+a robot that waits for them: the two stood facing each other for good in the changing
+hall's shift, the robot's goal inside their safety zone).
 
 `command` (a test hook) teleports a person and/or sends them along given points once,
 optionally ignoring the robot. The hand and the handover are `services.sim.handover`'s;
@@ -41,6 +44,7 @@ YIELD_HALF_ANGLE_RAD = math.radians(50.0)
 MAX_SPEED_MPS = 1.2
 TURN_RATE_RADPS = 2.0
 PAUSE_S = 1.0
+GIVE_WAY_S = 4.0
 #: Closer than this to the next point counts as there (the last step lands on it).
 ARRIVE_M = 1e-9
 
@@ -61,6 +65,7 @@ class _Walker:
     once: bool = False  # a commanded walk: the route once, no pauses, then stand
     ignore_robot: bool = False  # walk on even with the robot within FACE_RADIUS_M
     waiting: bool = False  # a bystander stopped for the robot that came to them
+    yielding_s: float = 0.0  # how long a bystander has paused for the robot in the way
     vx: float = 0.0  # the last step's velocity, m/s (world)
     vy: float = 0.0
 
@@ -151,7 +156,12 @@ class People:
                 w.waiting = near and (w.waiting or _coming_to(robot, w))
                 if w.waiting:
                     self._turn_towards(w, math.atan2(dy, dx), dt)
-                elif not _in_the_way(robot, w):
+                elif _in_the_way(robot, w):
+                    w.yielding_s += dt
+                    if w.yielding_s >= GIVE_WAY_S:
+                        _turn_back(w)
+                else:
+                    w.yielding_s = 0.0
                     self._walk(w, dt)
             elif not w.ignore_robot and near:
                 self._turn_towards(w, math.atan2(dy, dx), dt)
@@ -196,6 +206,14 @@ class People:
         w.x += step * dx / distance
         w.y += step * dy / distance
         w.dirty = True
+
+
+def _turn_back(w: _Walker) -> None:
+    """Walk the route the other way from here: towards the point last left."""
+    n = len(w.route)
+    w.route = w.route[::-1]
+    w.leg = (n - 2 - w.leg) % n  # route[leg] was the point left: now the one walked to
+    w.yielding_s = 0.0
 
 
 def _coming_to(robot: RobotNear, w: _Walker) -> bool:

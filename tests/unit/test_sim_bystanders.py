@@ -73,6 +73,17 @@ def test_a_bystander_stops_for_a_robot_that_comes_to_them_carrying_something() -
 def test_a_bystander_pauses_rather_than_walk_into_the_robot_and_goes_on_once_it_moved() -> None:
     people, data = _walker(True)
     in_the_way = RobotNear(3.0, 0.0, math.pi / 2)  # standing across the route
-    xs = _run(people, data, in_the_way, 6.0)
+    xs = _run(people, data, in_the_way, 5.0)  # less than GIVE_WAY_S after the stop
     assert max(xs) <= 3.0 - 1.1 + 0.002 and xs[-1] > 1.5  # stopped 1.1 m short of its base
     assert _run(people, data, RobotNear(3.0, 2.0, math.pi / 2), 1.5)[-1] > 3.0  # gone: on
+
+
+def test_a_bystander_kept_waiting_by_the_robot_turns_back_along_their_route() -> None:
+    people, data = _walker(True)
+    in_the_way = RobotNear(3.0, 0.0, math.pi / 2)
+    xs = _run(people, data, in_the_way, 8.0)
+    stop = max(xs)
+    assert stop <= 3.0 - 1.1 + 0.002
+    # Stopped 1.9 s in, waited GIVE_WAY_S, turned (π at 2 rad/s), then walked back.
+    assert xs[-1] == pytest.approx(stop - 0.53, abs=0.05)
+    assert people.velocity("person_1") == pytest.approx((-1.0, 0.0), abs=1e-6)
