@@ -49,6 +49,8 @@ BLOCKED_LOOKAHEAD_M = 1.5
 ROTATE_S = 3.0
 BACKOFF_S = 1.5
 BACKOFF_SPEED = 0.15
+#: The path pose this many ahead gives the direction of travel (the people rules).
+PROBE_POSES = 10
 
 
 @dataclass(frozen=True)
@@ -207,12 +209,19 @@ class Navigator:
             self.cmd = self.follower.stop(self.dt) if self.follower else np.zeros(3)
             return self._blocked(t_ns, pose, cm, NO_LIMIT, new_plan)
         f = self.follower
-        # The people cap needs the direction of travel: take the follower's, uncapped.
-        probe = f.poses[min(f.index + 10, len(f.poses) - 1), :2] - np.array([pose.x, pose.y])
-        norm = float(np.hypot(*probe))
-        direction = (probe[0] / norm, probe[1] / norm) if norm > 1e-3 else None
+        # The people cap needs the direction of travel: the follower's, uncapped, and,
+        # as the base may move along any of them in the next moment (a trot round a bend
+        # lags the path), the path's nearer poses and the heading.
+        ways = []
+        for k in (PROBE_POSES, 3, 6):
+            ahead = f.poses[min(f.index + k, len(f.poses) - 1), :2] - np.array([pose.x, pose.y])
+            norm = float(np.hypot(*ahead))
+            if norm > 1e-3:
+                ways.append((float(ahead[0] / norm), float(ahead[1] / norm)))
+        direction = ways[0] if ways else None
+        also = (*ways[1:], (math.cos(pose.yaw), math.sin(pose.yaw))) if ways else ()
         limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
-                             g.handover_id, self.limit_rule == "stop")  # fmt: skip
+                             g.handover_id, self.limit_rule == "stop", also)  # fmt: skip
         self.limit_rule = limit.rule
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
                      g.tol_xy, g.tol_yaw)  # fmt: skip

@@ -90,9 +90,12 @@ def people_limit(
     top_mps: float,
     handover_id: str = "",
     stopped: bool = False,
+    also: tuple[tuple[float, float], ...] = (),
 ) -> SpeedLimit:
     """The tightest cap that people impose now; `direction_world` the intended travel
-    direction (unit, world; None when not translating). `top_mps`: the base's top speed
+    direction (unit, world; None when not translating), `also` other directions the base
+    may move in over the next moment (unit: the path's next poses, the heading), the one
+    most towards each person counting. `top_mps`: the base's top speed
     (a cap at or above it is no cap). `stopped`: the last cap was a stop (it holds until
     the person is `RESUME_MARGIN_M` further than S_p at rest)."""
     if not people:
@@ -108,7 +111,8 @@ def people_limit(
         at_rest = protective_distance(0.0, v_h, sep)
         zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - TRACKING_MARGIN)
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
-        cos = n[0] * direction_world[0] + n[1] * direction_world[1] if direction_world else 0.0
+        ways = (direction_world, *also) if direction_world else ()
+        cos = max((n[0] * u[0] + n[1] * u[1] for u in ways), default=0.0)
         if cos > 0.0:  # moving towards them: the protective separation
             room = d - (RESUME_MARGIN_M if stopped else 0.0)
             v_a = allowed_speed(room, v_h, sep)

@@ -275,3 +275,16 @@ def test_a_person_walking_across_the_path_never_finds_the_robot_inside_its_separ
     assert out.state == "succeeded", out
     assert worst >= 0.0, worst
     assert "stop" in rules or "slow" in rules
+
+
+def test_a_person_towards_any_way_the_base_may_move_caps_it() -> None:
+    """The path runs along +x, the person stands half a metre off the footprint's front
+    left corner, nearer the heading (π/4: the trot turning onto the path): the heading
+    counts."""
+    p = NavigationSettings().people
+    pose = Pose(0.0, 0.0, math.pi / 4)
+    person = Person("person_1", 0.8, 0.7, velocity=(0.0, 0.0))
+    along = people_limit(pose, (1.0, 0.0), [person], FP, p, 1.0)
+    turning = people_limit(pose, (1.0, 0.0), [person], FP, p, 1.0,
+                           also=((math.cos(pose.yaw), math.sin(pose.yaw)),))  # fmt: skip
+    assert turning.speed < along.speed
