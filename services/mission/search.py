@@ -11,8 +11,11 @@ then where they last saw such parts, then on the benches nearby, then everywhere
 3. the supports (tables, benches, pallets: `dume/map/supports`) not yet among the places,
    nearest first: those nearby, then the rest of the hall (the semantic pass's surfaces).
 
-A place is a point on the floor to look at with why it is looked at; the mission walks
-viewpoints facing them (`coverage.facing_route`, as the second look does) with the arm up.
+A place is a point on the floor to look at with why it is looked at, and, for a place on
+a support, the points along that support's top `STRETCH_M` apart (`along`: a viewpoint
+facing one point sees a stretch of a top; an object moved along its table by 0.6 m was
+not in view of its old place, and the search ended there); the mission walks viewpoints
+facing them all (`coverage.facing_route`, as the second look does) with the arm up.
 `found` says, after each look, whether the map now has the object: an artifact of the
 class, not missing, seen since the search began over a support or at a place looked at,
 not one the fetch already tried; for a
@@ -33,13 +36,36 @@ from common.messages.world import SupportSurface
 
 #: m: a point this near a support's top counts as on it.
 ON_MARGIN_M = 0.2
+#: m: a support's top is looked at every this far along it.
+STRETCH_M = 0.6
 
 
 class Place(NamedTuple):
-    """A point on the floor to look at (m, world), and why."""
+    """A point on the floor to look at (m, world), and why; `also`: the other points of
+    the place (along its support's top)."""
 
     xy: tuple[float, float]
     why: str
+    also: tuple[tuple[float, float], ...] = ()
+
+    @property
+    def points(self) -> list[tuple[float, float]]:
+        return [self.xy, *self.also]
+
+
+def along(s: SupportSurface) -> list[tuple[float, float]]:
+    """Points on the top's long axis, `STRETCH_M` apart, centred on it (the centre alone
+    for a top shorter than that)."""
+    long_x = s.half_extents[0] >= s.half_extents[1]
+    half = max(s.half_extents)
+    n = max(1, math.ceil(2 * half / STRETCH_M))
+    step = 2 * half / n
+    c, si = math.cos(s.yaw), math.sin(s.yaw)
+    ux, uy = (c, si) if long_x else (-si, c)
+    return [
+        (s.centre_xy[0] + ux * u, s.centre_xy[1] + uy * u)
+        for u in (-half + step * (k + 0.5) for k in range(n))
+    ]
 
 
 def places_to_look(
@@ -66,9 +92,12 @@ def places_to_look(
             return  # that support is looked at already
         if any(math.dist(xy, p.xy) < 0.5 for p in out):
             return
+        also: tuple[tuple[float, float], ...] = ()
         if under:
             covered.add(under)
-        out.append(Place(xy, why + (f" (on {under})" if under and under not in why else "")))
+            top = next(s for s in supports if s.id == under)
+            also = tuple(q for q in along(top) if math.dist(q, xy) > STRETCH_M / 2)
+        out.append(Place(xy, why + (f" (on {under})" if under and under not in why else ""), also))
 
     if last_xy is not None:
         add(last_xy, "where the map had it")
@@ -96,7 +125,7 @@ NEAR_PLACE_M = 0.75
 def _near(a: MapEntity, places: Sequence[Place], supports: Sequence[SupportSurface]) -> bool:
     xy = (a.position_in_world[0], a.position_in_world[1])
     return any(on_surface(xy, s, ON_MARGIN_M) for s in supports) or any(
-        math.dist(xy, p.xy) <= NEAR_PLACE_M for p in places
+        math.dist(xy, q) <= NEAR_PLACE_M for p in places for q in p.points
     )
 
 

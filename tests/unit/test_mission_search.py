@@ -4,12 +4,13 @@ the tree's `look_elsewhere`), pure and scripted."""
 from __future__ import annotations
 
 import msgspec
+import numpy as np
 
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PoseGoal
 from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
-from services.mission.search import Place, found, places_to_look
+from services.mission.search import Place, along, found, places_to_look
 from tests.unit.mission_fakes import FakeRobot, entity, small_world
 from tests.unit.test_mission_tree import mission
 
@@ -113,3 +114,16 @@ def test_an_object_taken_away_fails_object_not_found_naming_the_places_looked_at
     assert "looked at: where the map had it (on table_1)" in outcome.detail
     assert "table_2, not looked at yet" in outcome.detail
     assert not tree.arm_look
+
+
+def test_a_place_on_a_support_is_looked_at_along_its_whole_top() -> None:
+    long = SupportSurface(id="table_1", centre_xy=(2.0, 0.0), half_extents=(0.3, 0.9),
+                          yaw=0.0, top_height=0.8)  # fmt: skip
+    # Its long axis is y: three stretches.
+    assert np.allclose(along(long), [(2.0, -0.6), (2.0, 0.0), (2.0, 0.6)])
+    places = places_to_look((2.0, 0.65), "bottle", [], [long], (0.0, 0.0), 0, 60.0, 3)
+    assert places[0].xy == (2.0, 0.65)
+    assert np.allclose(places[0].also, [(2.0, -0.6), (2.0, 0.0)])  # the rest of the top
+    # A sighting at the far end counts as at a place looked at, support or not.
+    far = _seen(entity("bottle_2", 2.0, -0.7), 5 * S)
+    assert found([far], "bottle", 1 * S, [], None, 10 * S, (places, [])) == far

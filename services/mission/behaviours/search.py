@@ -102,7 +102,8 @@ class LookElsewhere(MissionBehaviour):
         )  # fmt: skip
         route = facing_route(
             np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
-            np.array([p.xy for p in self.places]).reshape(-1, 2), s.patrol_clearance_m,
+            np.array([q for p in self.places for q in p.points]).reshape(-1, 2),
+            s.patrol_clearance_m,
             s.patrol_near_m, s.patrol_recheck_see_m, VIEW_HALF_ANGLE,
         )  # fmt: skip
         said = "; ".join(p.why for p in self.places)
