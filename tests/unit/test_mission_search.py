@@ -102,6 +102,26 @@ def test_an_object_moved_to_another_support_is_looked_for_and_fetched_there() ->
     assert any("search: fetching bottle_9 for bottle_1" in d for d in decisions)
 
 
+def test_a_moved_object_the_map_saw_on_the_way_is_still_the_one_fetched() -> None:
+    """The head camera saw the bottle at its new place on the way to its old one (a new
+    entry before the search began): made since the request began, it may be the object."""
+    robot = _moved_bottle()
+    tree = mission(robot)
+    outcome = None
+    for k in range(3000):
+        outcome = tree.tick()
+        robot.advance()
+        if k == 2:
+            robot.artifacts["bottle_9"] = _seen(entity("bottle_9", -1.0, 2.8), robot.now_ns)
+        if tree.arm_look:  # the search's look at table_2 sees it again
+            robot.artifacts["bottle_9"] = _seen(robot.artifacts["bottle_9"], robot.now_ns)
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert standoffs == ["bottle_1", "bottle_9"]
+
+
 def test_an_object_taken_away_fails_object_not_found_naming_the_places_looked_at() -> None:
     robot = _moved_bottle()
     tree = mission(robot, MissionRequest(request_id="r", object="bottle_1", person="person_1"))

@@ -43,9 +43,10 @@ FAILURE = "failure"  # Failure | None
 SEARCH = "search"  # bool: look elsewhere before the next try (every candidate missed)
 SEARCHED = "searched"  # bool: this request looked elsewhere already
 UNSEEN = "unseen"  # bool: the person was not seen at their mapped place: look round
+KNOWN = "known"  # list[str]: the map's artifacts of the class when the request began
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
-    SEARCH, SEARCHED, UNSEEN,
+    SEARCH, SEARCHED, UNSEEN, KNOWN,
 )  # fmt: skip
 
 

@@ -19,6 +19,7 @@ from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
     FACING,
+    KNOWN,
     PERSON,
     REQUEST,
     TARGET,
@@ -41,7 +42,7 @@ class WaitForRequest(MissionBehaviour):
 
 
 class SelectTarget(MissionBehaviour):
-    WRITES = (CANDIDATES, TARGET)
+    WRITES = (CANDIDATES, TARGET, KNOWN)
 
     def __init__(self, ctx: Context) -> None:
         super().__init__("select_target", ctx, stage="navigate_to_object")
@@ -58,6 +59,13 @@ class SelectTarget(MissionBehaviour):
                 return self.fail("unknown_object", f"no mapped artifact is {request.object!r}")
             candidates = [e.id for e in found[: max(1, self.settings.max_candidates)]]
             self.set(CANDIDATES, candidates)
+            # What the map had of the class as the request began: an entry made since may
+            # be the object, moved (the search's `found`).
+            try:
+                like = self.port.artifacts_of_class(targets.class_of(found[0].id))
+            except Unavailable:
+                like = list(found)
+            self.set(KNOWN, sorted(e.id for e in like))
             self.ctx.decide(f"object {request.object!r}: candidates {candidates}")
         index = int(self.get(CANDIDATE, 0))
         if index >= len(candidates):

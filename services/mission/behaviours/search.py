@@ -8,7 +8,8 @@ facing them from within `patrol_recheck_see_m` (`coverage.facing_route`, as the 
 look plans), and walks it as the patrol walks a route (`patrol.PatrolRunner`: the arm up
 in `look`, a hold at each viewpoint; the map fuses the wrist camera meanwhile, the node
 saying `arm_look`). After every tick it asks the map whether the object is there now
-(`search.found`): found, the walk stops and the found artifact becomes the only
+(`search.found`; for a request by id, an entry the map made since the request began,
+`KNOWN`): found, the walk stops and the found artifact becomes the only
 candidate (SUCCESS: the fetch goes on to it); the route walked without it,
 `object_not_found` naming the places looked at. Halted, it stops the walk.
 """
@@ -23,6 +24,7 @@ from common.messages.world import SupportSurface
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
+    KNOWN,
     REQUEST,
     SEARCH,
     Context,
@@ -93,7 +95,12 @@ class LookElsewhere(MissionBehaviour):
             return self.fail("unavailable", f"the semantic map did not answer: {exc}")
         if xy is None:
             return self.fail("object_not_found", "no search: the robot does not know where it is")
-        self.known = {a.id for a in listing} if is_map_id(name) else None
+        # A request by id: the entries the map had when the request began are other
+        # objects of the class; one made since may be the object, moved (the head camera
+        # may see it at its new place on the way, before the search begins).
+        known = self.get(KNOWN)
+        at_start = set(known) if known is not None else {a.id for a in listing}
+        self.known = at_start if is_map_id(name) else None
         self.supports = list(supports)
         last_xy = (last.position_in_world[0], last.position_in_world[1]) if last else None
         self.places = places_to_look(
