@@ -62,8 +62,11 @@ import fcntl
 import os
 import secrets
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
+
+import zenoh
 
 from common.certs import LINK_USER, cert_files, link_secret
 from common.config import Config, load_config, resolve
@@ -262,6 +265,25 @@ def _service_rules(name: str, spec: dict[str, Any], robot: str) -> list[dict[str
         rules.append(_rule(f"{who}-watch", asks, "ingress", (f"{alive}/*",)))
         rules.append(_rule(f"{who}-watched", ["liveliness_token"], "egress", (f"{alive}/*",)))
     return rules
+
+
+def not_allowed(
+    config: Config, name: str, used: Iterable[tuple[str, str]]
+) -> list[tuple[str, str]]:
+    """What of `used` ((verb, key) as `Bus.used` has them) service `name`'s rule does not
+    let through the router: a subscription it denies hears nothing and says nothing (the
+    lidar's scan for navigation, once). Verbs other than put, subscribe, query and
+    serve are not checked; a service without a rule has everything denied."""
+    spec = _merged(SERVICE_KEYS.get(name, {}), truth_keys(config).get(name, {}))
+    prefix = f"{ROOT}/{config.robot}"
+    out = []
+    for verb, key in used:
+        if verb not in ("put", "subscribe", "query", "serve"):
+            continue
+        allowed = [zenoh.KeyExpr(k.format(r=prefix)) for k in spec.get(verb, ())]
+        if not any(a.includes(zenoh.KeyExpr(key)) for a in allowed):
+            out.append((verb, key))
+    return out
 
 
 def _merged(*specs: dict[str, Any]) -> dict[str, Any]:

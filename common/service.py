@@ -32,7 +32,7 @@ from types import FrameType
 
 import rerun as rr
 
-from common.access import identity_of
+from common.access import identity_of, not_allowed
 from common.bus import Bus
 from common.config import Config, ConfigError, load_config
 from common.keys import RobotKeys
@@ -75,6 +75,12 @@ class Service:
         self.bus.declare_alive(self.keys.alive(self.name))
         self.is_ready = True
         self.log.info("ready; takes %s", json.dumps(self.bus.inputs))
+        if self.config.zenoh.access_control:
+            for verb, key in not_allowed(self.config, self.name, self.bus.used):
+                self.log.warning(
+                    "%s %s: its access rule (common.access) does not allow it; the router "
+                    "lets nothing through", verb, key,
+                )  # fmt: skip
 
 
 def place(name: str, config: Config) -> CpuLayout:

@@ -15,6 +15,7 @@ from common.access import (
     ensure_credentials,
     identities,
     identity_of,
+    not_allowed,
     read_credentials,
 )
 from common.config import load_config
@@ -174,3 +175,19 @@ def test_two_robots_on_one_router_reach_only_their_own_keys() -> None:
     assert _granted("b1.wbc", "put", flow="ingress", acl=acl) == _granted(
         "b1.wbc", "put", flow="ingress"
     )
+
+
+def test_what_a_service_uses_beyond_its_rule_is_named() -> None:
+    """The lidar's scan, before navigation's rule had it: the subscription heard nothing."""
+    config = load_config({})
+    used = [("subscribe", "dume/b1/odom"), ("subscribe", "dume/b1/camera/camera_head/rgbd"),
+            ("put", "dume/b1/wbc/cmd_vel"), ("alive", "dume/alive/b1/navigation"),
+            ("subscribe", "dume/b1/state_truth"), ("put", "dume/b1/command")]  # fmt: skip
+    assert not_allowed(config, "navigation", used) == [
+        ("subscribe", "dume/b1/state_truth"),
+        ("put", "dume/b1/command"),
+    ]
+    # An ablation's truth is allowed where the settings name it.
+    truth = load_config({"wbc.base_state": "truth"})
+    assert not_allowed(truth, "wbc", [("subscribe", "dume/b1/state_truth")]) == []
+    assert not_allowed(config, "wbc", [("subscribe", "dume/b1/state_truth")]) != []
