@@ -60,6 +60,7 @@ from services.mission.behaviours.base import (
     DETECTION,
     FAILURE,
     GRASP_PLAN,
+    PERSON,
     REQUEST,
     SEARCH,
     SEARCHED,
@@ -300,6 +301,9 @@ class MissionTree:
             return None
         if self.root.status == Status.SUCCESS:
             outcome = Outcome("succeeded", "", f"{self.request.object} handed over")
+            target, person = read(self.bb, TARGET), read(self.bb, PERSON)
+            if isinstance(target, Target):
+                self.ctx.handed[target.map_id] = (str(person), self.ctx.port.now_ns)
         else:
             failure = read(self.bb, FAILURE)
             if isinstance(failure, Failure):

@@ -479,3 +479,23 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         assert turned == pytest.approx(math.tau, abs=0.1)
         assert "looking for person_1: not seen round here" in said
         assert any("walking to where the map last had them" in d for d in decisions)
+
+
+def test_an_object_handed_over_is_no_candidate_again_and_asked_for_by_id_says_where_it_went() -> (
+    None
+):
+    robot = small_world()
+    robot.artifacts["bottle_2"] = entity("bottle_2", 1.5, -0.5)
+    robot.visible.add("bottle_2")
+    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_1"))
+    assert run(tree, robot).state == "succeeded"
+    assert tree.ctx.handed["bottle_1"][0] == "person_1"
+    # The map still has bottle_1 where it was: a request by class takes the other one.
+    tree.start(MissionRequest(request_id="r2", object="bottle", person="person_1"))
+    assert run(tree, robot).state == "succeeded"
+    standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert standoffs == ["bottle_1", "bottle_2"]
+    tree.start(MissionRequest(request_id="r3", object="bottle_1", person="person_1"))
+    outcome = run(tree, robot)
+    assert (outcome.state, outcome.reason) == ("failed", "unknown_object")
+    assert "bottle_1 was handed over to person_1" in outcome.detail

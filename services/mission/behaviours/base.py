@@ -82,6 +82,10 @@ class Context:
     settings: MissionSettings
     algorithms: Algorithms
     decide: Decide = field(default=lambda text: logging.getLogger("dume.mission").info(text))
+    #: The objects this mission service handed over (map id → to whom, when, sim ns): a
+    #: request by class never fetches one again, and one by id is told where it went
+    #: (the map keeps its entry where it last saw it: in a hand, or on its old support).
+    handed: dict[str, tuple[str, int]] = field(default_factory=dict)
 
 
 def blackboard(name: str, writes: Sequence[str] = ()) -> py_trees.blackboard.Client:

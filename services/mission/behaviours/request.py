@@ -55,8 +55,18 @@ class SelectTarget(MissionBehaviour):
                 found = targets.object_candidates(self.port, request.object)
             except Unavailable as exc:
                 return self.fail("unavailable", f"the semantic map did not answer: {exc}")
+            handed = self.ctx.handed
+            gone = [e.id for e in found if e.id in handed]
+            found = [e for e in found if e.id not in handed]
+            if not found and gone:
+                person, at = handed[gone[0]]
+                return self.fail("unknown_object", f"{gone[0]} was handed over to {person} at "
+                                 f"t={at / 1e9:.1f} s")  # fmt: skip
             if not found:
                 return self.fail("unknown_object", f"no mapped artifact is {request.object!r}")
+            if gone:
+                self.ctx.decide(f"object {request.object!r}: {', '.join(gone)} handed over "
+                                "already, not a candidate")  # fmt: skip
             candidates = [e.id for e in found[: max(1, self.settings.max_candidates)]]
             self.set(CANDIDATES, candidates)
             # What the map had of the class as the request began: an entry made since may

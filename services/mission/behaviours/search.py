@@ -81,7 +81,7 @@ class LookElsewhere(MissionBehaviour):
 
     def _start(self) -> Status:
         request = self.get(REQUEST)
-        self.tried = list(self.get(CANDIDATES) or [])
+        self.tried = list(self.get(CANDIDATES) or []) + list(self.ctx.handed)
         name = request.object
         self.class_name = class_of(name) if is_map_id(name) else name
         s = self.settings
