@@ -479,10 +479,13 @@ class PeopleSettings(_Section):
     deceleration the trot brakes at, the intrusion distance C (a body's reach beyond the
     point perception measures), the uncertainties of the person's position Z_d and of the
     robot's Z_r, the margin on a person's estimated speed, and the speed assumed for a
-    person whose velocity is not known yet (ISO 13855's walking speed).
+    person whose velocity is not known yet (ISO 13855's walking speed). A goal blocked
+    with a person within `slow_radius_m` of the footprint or of the goal waits `wait_s`
+    longer before its recoveries (people move on; backing into them does not help).
     """
 
     slow_radius_m: NonNegative = 2.0
+    wait_s: NonNegative = 20.0
     slow_speed: NonNegative = 0.3
     handover_speed: NonNegative = 0.15
     reaction_s: NonNegative = 0.3

@@ -12,7 +12,9 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   time, so a person who stays leads to a replan around them, then to recovery);
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
   follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad;
-- when blocked for `blocked_timeout_s` (no plan, or no progress), recoveries in order:
+- when blocked for `blocked_timeout_s` (no plan, or no progress; `people.wait_s` longer
+  while a person is within `people.slow_radius_m` of the footprint or of the goal,
+  "waiting for <person>": people move), recoveries in order:
   clear the short-lived layer, rotate in place (`ROTATE_S`), back off (`BACKOFF_S`), each
   followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
   ever found);
@@ -35,7 +37,7 @@ from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
-from services.navigation.grid import Footprint, Pose
+from services.navigation.grid import Footprint, Pose, distance_to_footprint
 from services.navigation.people import NO_LIMIT, SpeedLimit, people_limit
 from services.navigation.planner import Plan, PlanError, plan
 
@@ -247,7 +249,11 @@ class Navigator:
     ) -> TickOutput:
         if self.blocked_since is None:
             self.blocked_since = t_ns
-        if t_ns - self.blocked_since < self.n.blocked_timeout_s * NS_PER_S:
+        who = limit.person_id if limit.rule == "stop" else self._person_near(pose, cm)
+        wait_s = self.n.blocked_timeout_s + (self.n.people.wait_s if who else 0.0)
+        if t_ns - self.blocked_since < wait_s * NS_PER_S:
+            if who and t_ns - self.blocked_since >= self.n.blocked_timeout_s * NS_PER_S:
+                self.detail = f"waiting for {who} to pass"
             return self._out(limit, new_plan)
         if not self.recoveries:
             reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
@@ -259,6 +265,22 @@ class Navigator:
         self.recovery_until = t_ns + round(span[self.recovery] * NS_PER_S)
         self.detail = f"recovery: {self.recovery}"
         return self._out(limit, new_plan)
+
+    def _person_near(self, pose: Pose, cm: Costmap) -> str:
+        """The nearest person within the slow radius of the footprint or of the goal
+        ("" when none; not the one a handover goes to): one who may block the way."""
+        if self.goal is None:
+            return ""
+        people = [q for q in cm.people if q.id != self.goal.handover_id]
+        if not people:
+            return ""
+        pts = np.array([[q.x, q.y] for q in people])
+        d = distance_to_footprint(pose, self.fp, pts)
+        g = self.goal.pose
+        d_goal = np.hypot(pts[:, 0] - g.x, pts[:, 1] - g.y)
+        near = np.minimum(d, d_goal)
+        k = int(np.argmin(near))
+        return people[k].id if near[k] <= self.n.people.slow_radius_m else ""
 
     def _recover(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
         """Rotate or back off until the recovery's time is up (clear is one tick: the node

@@ -288,3 +288,24 @@ def test_a_person_towards_any_way_the_base_may_move_caps_it() -> None:
     turning = people_limit(pose, (1.0, 0.0), [person], FP, p, 1.0,
                            also=((math.cos(pose.yaw), math.sin(pose.yaw)),))  # fmt: skip
     assert turning.speed < along.speed
+
+
+def test_a_person_standing_in_the_way_is_waited_for_before_any_recovery() -> None:
+    """A person stands half a metre ahead (the base, held here, makes no progress): the
+    goal, blocked after `blocked_timeout_s` without progress, waits `people.wait_s` past
+    its blocked timeout, saying whom for, before its first recovery."""
+    n = NavigationSettings()
+    person = Person("person_1", FP.front + 0.5, 0.0, velocity=(0.0, 0.0))
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    cm = type(floor)(floor.grid, floor.cost, floor.occupied, floor.clearance, (person,))
+    nav = Navigator(FP, n, DT)
+    nav.start(GoalSpec("g", Pose(5.0, 0.0, 0.0), 0.1, 0.1), 0)
+    first, said = None, set()
+    for k in range(round(40 / DT)):
+        out = nav.tick(round(k * DT * 1e9), Pose(0.0, 0.0, 0.0), cm)
+        said.add(out.detail)
+        if out.recovery:
+            first = k * DT
+            break
+    assert first == pytest.approx(2 * n.blocked_timeout_s + n.people.wait_s, abs=2 * DT)
+    assert "waiting for person_1 to pass" in said
