@@ -155,6 +155,9 @@ class SemanticMap:
         self._deleted: list[str] = []
         self._counters_dirty = False
         self.grid_dirty = False
+        #: A person's id merged away → the id kept (one person whose track split): a
+        #: request for the old id still finds them (`entity`). This run's only.
+        self.aliases: dict[str, str] = {}
 
     # -- contents ------------------------------------------------------------------------
 
@@ -177,8 +180,11 @@ class SemanticMap:
         return sorted((t.to_message() for t in tracker.confirmed), key=_id_order)
 
     def entity(self, kind: EntityKind, entity_id: str) -> MapEntity | None:
+        """The entity of that id, or (a person) of the id it was merged into."""
         tracker = self.people if kind == "person" else self.artifacts
-        tr = tracker.by_id(entity_id)
+        tr = tracker.by_id(
+            resolve_alias(self.aliases, entity_id) if kind == "person" else entity_id
+        )
         return None if tr is None else tr.to_message()
 
     def tracks(self) -> list[Track]:
@@ -367,6 +373,9 @@ class SemanticMap:
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)
         splits = self.people.take_merged()
+        for keep, gone, _ in splits:
+            if keep.id is not None and gone.id is not None:
+                self.aliases[gone.id] = keep.id
         report.dropped += self._delete(
             [(gone, f"the same person as {keep.id}: {why}") for keep, gone, why in splits]
         )
@@ -494,6 +503,15 @@ def _mask_fits(det: Detection, image: tuple[int, ...] | None = None) -> bool:
     if det.mask.shape != (v1 - v0, u1 - u0) or u1 <= u0 or v1 <= v0 or u0 < 0 or v0 < 0:
         return False
     return image is None or (v1 <= image[0] and u1 <= image[1])
+
+
+def resolve_alias(aliases: dict[str, str], entity_id: str) -> str:
+    """The id `entity_id` was merged into, through every later merge (itself when none)."""
+    seen = {entity_id}
+    while entity_id in aliases and aliases[entity_id] not in seen:
+        entity_id = aliases[entity_id]
+        seen.add(entity_id)
+    return entity_id
 
 
 def _id_order(e: MapEntity) -> tuple[str, int]:

@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
 from common.messages.world import SupportSurface
-from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.mapper import SemanticMap, resolve_alias
 
 #: Views kept: a consumer at most a few ticks behind the map still finds its own.
 KEPT = 16
@@ -38,11 +39,15 @@ class MapView:
     grid_version: tuple[int, int]
     occupancy: OccupancyGrid
     surfaces: tuple[SupportSurface, ...] = ()
+    #: A person's id merged away → the id kept (`SemanticMap.aliases`).
+    aliases: Mapping[str, str] = field(default_factory=dict)
 
     def entities(self, kind: EntityKind) -> list[MapEntity]:
         return list(self.people if kind == "person" else self.artifacts)
 
     def entity(self, kind: EntityKind, entity_id: str) -> MapEntity | None:
+        if kind == "person":
+            entity_id = resolve_alias(dict(self.aliases), entity_id)
         return next((e for e in self.entities(kind) if e.id == entity_id), None)
 
     def grid(self) -> OccupancyGrid:
@@ -63,6 +68,7 @@ def view_of(smap: SemanticMap, tick_ns: int, previous: MapView | None) -> MapVie
         grid_version=version,
         occupancy=previous.occupancy if same_grid and previous else smap.grid(),
         surfaces=tuple(smap.surfaces),
+        aliases=dict(smap.aliases),
     )
 
 

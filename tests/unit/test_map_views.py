@@ -80,3 +80,26 @@ def test_at_is_split_off_the_selector_and_checked() -> None:
     assert queries.split_at(f"{key}?class=can") == (f"{key}?class=can", None)
     with pytest.raises(RequestError, match="integer nanoseconds"):
         queries.split_at(f"{key}?at=soon")
+
+
+def test_a_person_merged_into_another_is_found_under_their_old_id() -> None:
+    """The map found person_21 and person_2 one person and kept person_2: a request for
+    person_21 still finds them, in the map now and as of a tick (not as an alias loop)."""
+    from services.semantic_map.mapper import resolve_alias
+
+    smap = _map()
+    person = Track(
+        class_name="person", kind="person", xy=np.array([1.0, 2.0]), cov=np.eye(2) * 1e-2,
+        z=0.0, source="perception", id="person_2",
+    )  # fmt: skip
+    smap.add(person)
+    smap.aliases.update({"person_21": "person_2", "person_30": "person_21"})
+    assert resolve_alias(smap.aliases, "person_30") == "person_2"
+    assert resolve_alias({"a_1": "a_2", "a_2": "a_1"}, "a_1") == "a_2"  # a loop ends
+    got = smap.entity("person", "person_21")
+    assert got is not None and got.id == "person_2"
+    view = view_of(smap, 0, None)
+    got = queries.one(view, "person", "dume/map/people/person_30")
+    assert got.id == "person_2"
+    with pytest.raises(RequestError):
+        queries.one(view, "person", "dume/map/people/person_9")

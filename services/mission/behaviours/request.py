@@ -28,6 +28,7 @@ from services.mission.behaviours.base import (
     Target,
 )
 from services.mission.ports import Unavailable
+from services.mission.targets import is_map_id
 
 
 class WaitForRequest(MissionBehaviour):
@@ -117,6 +118,8 @@ class ResolvePerson(MissionBehaviour):
         if person is None:
             return self.fail("unknown_person", f"no mapped person is {request.person!r}")
         self.set(PERSON, person.id)
+        if person.id != request.person and is_map_id(request.person):
+            self.ctx.decide(f"{request.person} is {person.id} now: the map found them one person")
         # 0.0 is also the yaw of an entity without one (`navigation.sources._person`)
         self.set(FACING, person.yaw != 0.0)
         self.feedback_message = f"person {person.id}"
