@@ -84,7 +84,13 @@ from services.mission.behaviours.motion import (
     SetMode,
 )
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
-from services.mission.behaviours.request import ResolvePerson, SelectTarget, WaitForRequest
+from services.mission.behaviours.request import (
+    HandsFree,
+    ResolvePerson,
+    SelectTarget,
+    StillHolding,
+    WaitForRequest,
+)
 from services.mission.behaviours.search import LookElsewhere
 from services.mission.recovery import Recover
 
@@ -226,7 +232,18 @@ def build_tree(ctx: Context) -> Sequence:
     )
     fetch = Recover(
         "regrasp",
-        _seq("fetch_and_carry", find, pick, bring),
+        _seq(
+            "fetch_and_carry",
+            Selector(
+                "have_it",
+                memory=True,
+                children=[
+                    StillHolding(ctx),
+                    _seq("find_and_pick", HandsFree(ctx), find, pick),
+                ],
+            ),
+            bring,
+        ),
         REPICK_REASONS,
         s.repick_budget,
         ctx.decide,
@@ -304,6 +321,7 @@ class MissionTree:
             target, person = read(self.bb, TARGET), read(self.bb, PERSON)
             if isinstance(target, Target):
                 self.ctx.handed[target.map_id] = (str(person), self.ctx.port.now_ns)
+            self.ctx.holding = None
         else:
             failure = read(self.bb, FAILURE)
             if isinstance(failure, Failure):
@@ -322,6 +340,8 @@ class MissionTree:
         if status is None or not status.held:
             return outcome
         target = read(self.bb, TARGET)
+        if isinstance(target, Target) and self.request is not None:
+            self.ctx.holding = (target.map_id, self.request.request_id)
         what = (
             target.map_id if isinstance(target, Target)
             else self.request.object if self.request is not None else "the object"

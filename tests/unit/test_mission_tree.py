@@ -499,3 +499,22 @@ def test_an_object_handed_over_is_no_candidate_again_and_asked_for_by_id_says_wh
     outcome = run(tree, robot)
     assert (outcome.state, outcome.reason) == ("failed", "unknown_object")
     assert "bottle_1 was handed over to person_1" in outcome.detail
+
+
+def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_and_blocks_others() -> None:
+    robot = small_world()
+    robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
+    robot.visible.add("can_1")
+    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
+    first = run(tree, robot)
+    assert (first.state, first.reason) == ("failed", "unknown_person")
+    assert robot.held and tree.ctx.holding == ("bottle_1", "r1")
+    tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
+    busy = run(tree, robot)
+    assert (busy.state, busy.reason) == ("failed", "busy")
+    assert "still holds bottle_1 from request r1" in busy.detail
+    standoffs = len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)])
+    tree.start(MissionRequest(request_id="r3", object="bottle", person="person_1"))
+    assert run(tree, robot).state == "succeeded"
+    assert len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]) == standoffs
+    assert tree.ctx.holding is None and "bottle_1" in tree.ctx.handed

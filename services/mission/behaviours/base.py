@@ -86,6 +86,10 @@ class Context:
     #: request by class never fetches one again, and one by id is told where it went
     #: (the map keeps its entry where it last saw it: in a hand, or on its old support).
     handed: dict[str, tuple[str, int]] = field(default_factory=dict)
+    #: What the robot still held when a request ended unfinished (map id, the request's
+    #: id): the next request that asks for it brings it without a fetch, and one that
+    #: asks for something else fails `busy` saying what the gripper holds.
+    holding: tuple[str, str] | None = None
 
 
 def blackboard(name: str, writes: Sequence[str] = ()) -> py_trees.blackboard.Client:

@@ -103,6 +103,57 @@ class SelectTarget(MissionBehaviour):
         return Status.SUCCESS
 
 
+class StillHolding(MissionBehaviour):
+    """SUCCESS when the robot still holds, from a request that ended unfinished
+    (`Context.holding`), the object this request asks for (that id, or one of that
+    class): the fetch is skipped and the bring goes on with it. FAILURE otherwise."""
+
+    WRITES = (TARGET, CANDIDATES)
+
+    def __init__(self, ctx: Context) -> None:
+        super().__init__("still_holding", ctx, stage="navigate_to_object")
+
+    def update(self) -> Status:
+        held = self.ctx.holding
+        if held is None:
+            return Status.FAILURE
+        wbc = self.port.wbc_status()
+        if wbc is not None and not wbc.held:
+            self.ctx.holding = None  # somebody took it from the gripper meanwhile
+            return Status.FAILURE
+        map_id, rid = held
+        request: MissionRequest = self.get(REQUEST)
+        name = request.object
+        if name != map_id and (is_map_id(name) or targets.class_of(map_id) != name):
+            return Status.FAILURE
+        self.set(TARGET, Target(map_id, targets.class_of(map_id), None))
+        self.set(CANDIDATES, [map_id])
+        self.ctx.decide(f"still holding {map_id} from request {rid}: bringing it, no fetch")
+        return Status.SUCCESS
+
+
+class HandsFree(MissionBehaviour):
+    """Fails `busy` while the robot still holds an object from a request that ended
+    unfinished that this request does not ask for (`StillHolding` did not take it): the
+    gripper cannot pick another, and a person must know where the first one is."""
+
+    def __init__(self, ctx: Context) -> None:
+        super().__init__("hands_free", ctx, stage="navigate_to_object")
+
+    def update(self) -> Status:
+        held = self.ctx.holding
+        wbc = self.port.wbc_status()
+        if held is None or (wbc is not None and not wbc.held):
+            self.ctx.holding = None
+            return Status.SUCCESS
+        map_id, rid = held
+        return self.fail(
+            "busy",
+            f"the robot still holds {map_id} from request {rid}: ask for "
+            f"{map_id} (or a {targets.class_of(map_id)}) to be brought first",
+        )
+
+
 class ResolvePerson(MissionBehaviour):
     WRITES = (PERSON, FACING)
 
