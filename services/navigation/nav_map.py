@@ -6,11 +6,12 @@ short-lived depth layer (`layer`, marked and cleared by `depth.DepthFeed`) and t
 layer (`people`: the map's people with those perception sees over them, `SeenPeople`,
 and the lidar's tracks over those, `scan_people`; in the costmap when
 `people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
-`build` (`costmap.build_costmap`); a person the map or the camera has whose place the
-lidar sees free (`ScanView.clear_at`), or who is inside the robot's footprint, is left
-out of the layer and said once. The lidar's tracks move a little at every scan: the
-costmap is rebuilt when a person came or went or moved `REBUILD_MOVE_M` since the last
-build, and otherwise only its people (what the speed rules read) are the newest.
+`build` (`costmap.build_costmap`); a person the map alone has (the camera has not seen
+them for `CAMERA_FRESH_S`) whose place the lidar sees free (`ScanView.clear_at`), or who
+is inside the robot's footprint, is left out of the layer and said once. The lidar's
+tracks move a little at every scan: the costmap is rebuilt when a person came or went
+or moved `REBUILD_MOVE_M` since the last build, and otherwise only its people (what the
+speed rules read) are the newest.
 `costmap` is None until a grid is in; `map_at` is the sim time the map in use is as of
 (goals queued before it resolve against it).
 
@@ -36,6 +37,8 @@ from services.navigation.seen_people import SeenPeople
 #: m: a person this far from where the costmap last had them (or one come or gone) has
 #: the costmap rebuilt; the speed rules always read the newest positions.
 REBUILD_MOVE_M = 0.1
+#: s: a person the camera saw this recently is there, whatever the map's tracker says.
+CAMERA_FRESH_S = 2.0
 
 
 class NavMap:
@@ -63,6 +66,8 @@ class NavMap:
         self.scanned: list[Person] = []
         #: The people the costmap was last built with.
         self.built: list[Person] = []
+        #: The tick being handled (what "recently seen" counts from).
+        self.now = 0
         #: The newest scan and pose (what says where nobody stands), and the people left
         #: out for it (id → why, said once).
         self.view: ScanView | None = None
@@ -80,6 +85,7 @@ class NavMap:
             )
             self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
         self.grid, self.map_people, self.map_at = grid, people, as_of
+        self.now = t_ns
         self.known = self.seen.merge(people, t_ns)
         self._layer()
         self.costmap = self.build(t_ns)
@@ -89,7 +95,11 @@ class NavMap:
         changed enough for a rebuild (`REBUILD_MOVE_M`). Without one, the costmap's
         people are the new ones all the same."""
         people = merge_scan(self.known, self.scanned, self.scan.p.same_m)
-        self.people = [q for q in people if q.id.startswith("scan_") or not self._absent(q)]
+        fresh = self.seen.seen_since(self.now - round(CAMERA_FRESH_S * 1e9))
+        self.people = [
+            q for q in people
+            if q.id.startswith("scan_") or q.id in fresh or not self._absent(q)
+        ]  # fmt: skip
         before = {q.id: q for q in self.built}
         material = len(before) != len(self.people) or any(
             (b := before.get(q.id)) is None or math.hypot(q.x - b.x, q.y - b.y) >= REBUILD_MOVE_M
@@ -137,7 +147,7 @@ class NavMap:
     ) -> bool:
         """One lidar scan's returns (n, 2, map frame) taken at b with the robot at `pose`
         (`view`: its rays, for where nobody stands); whether the costmap is to be rebuilt."""
-        self.view, self.pose = view, pose
+        self.view, self.pose, self.now = view, pose, b
         if self.grid is None:
             return False
         self.scan.update(points, self.grid, pose, b)
@@ -153,6 +163,7 @@ class NavMap:
         if fresh is not None:
             self.adopt(*fresh, b)
         elif seen_changed and self.grid is not None:
+            self.now = b
             self.known = self.seen.merge(self.map_people, b)
             self._layer()
             return True

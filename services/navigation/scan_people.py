@@ -38,12 +38,14 @@ layer already has is that person seen now (the lidar's 10 Hz position and its ve
 win), the rest are added under their own ids.
 
 The scan also says where nobody stands (`ScanView.clear_at`): a person the layer has
-from the map or the camera whose place every beam round it passes `beyond_m` beyond (the
-floor there is seen free in the lidar's plane, where every standing person has legs) is
-not there any more: the map's tracker holds a person who walked out of view at their
-last place, or carried along their last velocity, for seconds to minutes. `NavMap`
-leaves such people out of its layer (the map itself is not changed), and those whose
-place is inside the robot's own footprint, where nobody can stand.
+from the map only (the camera has not seen them for `NavMap`'s `CAMERA_FRESH_S`) whose
+place every beam within 0.6 m of it passes 0.3 m beyond (the floor there is seen free in
+the lidar's plane, where every standing person has legs; the map places a standing
+person up to a few decimetres off their legs, and 0.25 m left real people out in the
+bystanders' shift) is not there any more: the map's tracker holds a person who walked
+out of view at their last place, or carried along their last velocity, for seconds to
+minutes. `NavMap` leaves such people out of its layer (the map itself is not changed),
+and those the map alone places inside the robot's own footprint.
 """
 
 from __future__ import annotations
@@ -174,7 +176,7 @@ class ScanView:
     ranges: FloatArray
     range_max: float
 
-    def clear_at(self, x: float, y: float, radius_m: float = 0.25, beyond_m: float = 0.3) -> bool:
+    def clear_at(self, x: float, y: float, radius_m: float = 0.6, beyond_m: float = 0.3) -> bool:
         """Whether the beams at a body of `radius_m` at (x, y) all pass at least `beyond_m`
         beyond it (a beam with no return passes); False where the scan cannot say (out of
         its field or range, or a beam lost)."""

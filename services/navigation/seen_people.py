@@ -115,6 +115,10 @@ class SeenPeople:
         self._tracks[pid] = points
         return Person(pid, x, y, None, fitted_velocity(points, self.p.velocity_min_span_s))
 
+    def seen_since(self, t_ns: int) -> set[str]:
+        """The ids of the people detected at or after `t_ns`."""
+        return {q.id for t, q in self._seen if t >= t_ns}
+
     def active(self, t_ns: int) -> list[Person]:
         ttl = round(self.p.ttl_s * NS_PER_S)
         self._seen = [(t, q) for t, q in self._seen if t_ns - t <= ttl]

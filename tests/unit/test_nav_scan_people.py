@@ -211,6 +211,7 @@ def test_the_scan_says_where_nobody_stands_and_not_where_it_cannot_see() -> None
     view = _view(pose, _person(2.0, 1.0))
     assert not view.clear_at(2.0, 1.0)  # their legs stop the beams
     assert not view.clear_at(2.1, 1.2)  # the map's estimate a little off: still them
+    assert not view.clear_at(2.0, 1.45)  # 0.35 m off their legs (the shift's standing ones)
     assert view.clear_at(2.0, -1.5)  # the beams go on to the wall
     assert not view.clear_at(-2.0, 0.0)  # behind the lidar: out of its field
     assert not view.clear_at(3.0, 1.5)  # in the legs' shadow: the scan cannot say
