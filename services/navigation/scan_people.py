@@ -177,9 +177,10 @@ class ScanView:
     range_max: float
 
     def clear_at(self, x: float, y: float, radius_m: float = 0.6, beyond_m: float = 0.3) -> bool:
-        """Whether the beams at a body of `radius_m` at (x, y) all pass at least `beyond_m`
-        beyond it (a beam with no return passes); False where the scan cannot say (out of
-        its field or range, or a beam lost)."""
+        """Whether the beams at a body of `radius_m` at (x, y) all return from at least
+        `beyond_m` beyond it; False where the scan cannot say: out of its field or range,
+        or a beam without a return (lost, or masked where it meets the robot's own legs:
+        a person behind the lidar's ±100° is not seen gone)."""
         dx, dy = x - self.origin[0], y - self.origin[1]
         dist = math.hypot(dx, dy)
         if dist <= radius_m or dist + beyond_m >= self.range_max:
@@ -191,7 +192,7 @@ class ScanView:
         if k0 < 0 or k1 >= len(self.ranges) or k1 < k0:
             return False
         r = self.ranges[k0 : k1 + 1]
-        return bool(np.all((r == 0.0) | (r >= dist + beyond_m)))
+        return bool(np.all(r >= dist + beyond_m))
 
 
 @dataclass

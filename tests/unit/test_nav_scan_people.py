@@ -234,3 +234,13 @@ def test_the_nav_map_leaves_out_people_the_lidar_sees_gone_or_inside_the_robot()
         "person_1": "the lidar sees free floor there",
         "person_3": "inside the robot's footprint",
     }
+
+
+def test_beams_without_a_return_say_nothing_of_who_stands_there() -> None:
+    """Masked where they meet the robot's legs (or lost), they are no free floor."""
+    pose = Pose(0.0, 0.0, 0.0)
+    view = _view(pose, [])
+    assert view.clear_at(2.0, -1.5)
+    masked = ScanView(view.origin, view.heading, view.angle_min, view.angle_increment,
+                      np.zeros_like(view.ranges), view.range_max)  # fmt: skip
+    assert not masked.clear_at(2.0, -1.5)
