@@ -118,13 +118,10 @@ class NavMap:
             why = "inside the robot's footprint"
         elif self.view is not None and self.view.clear_at(q.x, q.y):
             why = "the lidar sees free floor there"
-        if why and self.left_out.get(q.id) != why:
+        if why and self.left_out.get(q.id) != why:  # said once per person and reason
             self.log.info("%s at (%.2f, %.2f) left out of the people layer: %s", q.id, q.x, q.y,
                           why)  # fmt: skip
-        if why:
             self.left_out[q.id] = why
-        else:
-            self.left_out.pop(q.id, None)
         return bool(why)
 
     def build(self, t_ns: int) -> Costmap:
