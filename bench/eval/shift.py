@@ -429,6 +429,11 @@ def run_shift(args: argparse.Namespace) -> int:
     return 0 if results and not any("error" in s for s in shifts) else 1
 
 
+def _part(title: str, items: list[str]) -> list[str]:
+    """A titled list of the report: a blank line, the title, a blank line, the items."""
+    return ["", title, "", *items]
+
+
 def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
     """The shift's own figures after the report: separation per world, the moves."""
     lines = [
@@ -453,7 +458,7 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
         )
     moves = [f"- seed {s['world_seed']}: {m}" for s in shifts for m in s.get("moves", [])]
     if moves:
-        lines += ["", "Moves (truth):", "", *moves]
+        lines += _part("Moves (truth):", moves)
     kept = [
         f"- seed {s['world_seed']} t={v['t_s']} s: {v['person']} at {v['d_m']} m, S_p "
         f"{v['s_p_m']} m, robot {v['v_robot_mps']} m/s towards them, they "
@@ -461,7 +466,7 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
         for s in shifts for v in s.get("separation", {}).get("violations_kept", [])
     ]  # fmt: skip
     if kept:
-        lines += ["", "Separation violations (the first of each world, from truth):", "", *kept]
+        lines += _part("Separation violations (the first of each world, from truth):", kept)
     accuracy = [
         f"| {s['world_seed']} | {a['request']} | {a['t_s']} | {a['within_10cm']:.0%} "
         f"| {a['current']:.0%} |"
@@ -477,15 +482,15 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
     plots = [f"- seed {s['world_seed']}: `{Path(s['plots']).name}`" for s in shifts
              if s.get("plots")]  # fmt: skip
     if plots:
-        lines += ["", "Plots (rerun recordings: the stage by time, the separation with S_p "
-                  "and the slow zone, the map's accuracy):", "", *plots]  # fmt: skip
+        lines += _part("Plots (rerun recordings: the stage by time, the separation with S_p "
+                       "and the slow zone, the map's accuracy):", plots)  # fmt: skip
     knocks = [
         f"- seed {s['world_seed']} request {k['request']}: {k['object']} knocked at "
         f"{k['at_s']:.1f} s; drops {k['dropped']}; {k['outcome']} (mission {k['mission']})"
         for s in shifts for k in s.get("knocks", [])
     ]  # fmt: skip
     if knocks:
-        lines += ["", "Slips (a knock on what the robot carried):", "", *knocks]
+        lines += _part("Slips (a knock on what the robot carried):", knocks)
     with (out / "report.md").open("a") as f:
         f.write("\n".join(lines) + "\n")
     (out / "shift.json").write_text(json.dumps(json_safe(list(shifts)), indent=2) + "\n")

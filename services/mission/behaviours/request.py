@@ -28,7 +28,6 @@ from services.mission.behaviours.base import (
     Target,
 )
 from services.mission.ports import Unavailable
-from services.mission.targets import is_map_id
 
 
 class WaitForRequest(MissionBehaviour):
@@ -70,13 +69,15 @@ class SelectTarget(MissionBehaviour):
                                 "already, not a candidate")  # fmt: skip
             candidates = [e.id for e in found[: max(1, self.settings.max_candidates)]]
             self.set(CANDIDATES, candidates)
-            # What the map had of the class as the request began: an entry made since may
-            # be the object, moved (the search's `found`).
-            try:
-                like = self.port.artifacts_of_class(targets.class_of(found[0].id))
-            except Unavailable:
-                like = list(found)
-            self.set(KNOWN, sorted(e.id for e in like))
+            if targets.is_map_id(request.object):
+                # What the map had of the class as the request began: an entry made since
+                # may be the object, moved (the search's `found`; a request by class
+                # takes any).
+                try:
+                    like = self.port.artifacts_of_class(targets.class_of(request.object))
+                except Unavailable:
+                    like = list(found)
+                self.set(KNOWN, sorted(e.id for e in like))
             self.ctx.decide(f"object {request.object!r}: candidates {candidates}")
         index = int(self.get(CANDIDATE, 0))
         if index >= len(candidates):
@@ -103,6 +104,16 @@ class SelectTarget(MissionBehaviour):
         return Status.SUCCESS
 
 
+def held_from_before(leaf: MissionBehaviour) -> tuple[str, str] | None:
+    """(map id, request id) of the object the gripper still holds from a request that
+    ended unfinished (`Context.holding`), None when none; forgotten once the controller
+    says the gripper holds nothing (somebody took it meanwhile)."""
+    wbc = leaf.port.wbc_status()
+    if leaf.ctx.holding is not None and wbc is not None and not wbc.held:
+        leaf.ctx.holding = None
+    return leaf.ctx.holding
+
+
 class StillHolding(MissionBehaviour):
     """SUCCESS when the robot still holds, from a request that ended unfinished
     (`Context.holding`), the object this request asks for (that id, or one of that
@@ -114,17 +125,13 @@ class StillHolding(MissionBehaviour):
         super().__init__("still_holding", ctx, stage="navigate_to_object")
 
     def update(self) -> Status:
-        held = self.ctx.holding
+        held = held_from_before(self)
         if held is None:
-            return Status.FAILURE
-        wbc = self.port.wbc_status()
-        if wbc is not None and not wbc.held:
-            self.ctx.holding = None  # somebody took it from the gripper meanwhile
             return Status.FAILURE
         map_id, rid = held
         request: MissionRequest = self.get(REQUEST)
         name = request.object
-        if name != map_id and (is_map_id(name) or targets.class_of(map_id) != name):
+        if name != map_id and (targets.is_map_id(name) or targets.class_of(map_id) != name):
             return Status.FAILURE
         self.set(TARGET, Target(map_id, targets.class_of(map_id), None))
         self.set(CANDIDATES, [map_id])
@@ -141,10 +148,8 @@ class HandsFree(MissionBehaviour):
         super().__init__("hands_free", ctx, stage="navigate_to_object")
 
     def update(self) -> Status:
-        held = self.ctx.holding
-        wbc = self.port.wbc_status()
-        if held is None or (wbc is not None and not wbc.held):
-            self.ctx.holding = None
+        held = held_from_before(self)
+        if held is None:
             return Status.SUCCESS
         map_id, rid = held
         return self.fail(
@@ -169,7 +174,7 @@ class ResolvePerson(MissionBehaviour):
         if person is None:
             return self.fail("unknown_person", f"no mapped person is {request.person!r}")
         self.set(PERSON, person.id)
-        if person.id != request.person and is_map_id(request.person):
+        if person.id != request.person and targets.is_map_id(request.person):
             self.ctx.decide(f"{request.person} is {person.id} now: the map found them one person")
         # 0.0 is also the yaw of an entity without one (`navigation.sources._person`)
         self.set(FACING, person.yaw != 0.0)
