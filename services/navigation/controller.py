@@ -10,7 +10,10 @@ caller's cap (people). The heading follows the path's direction (the B1 walks fo
 faster than sideways) and turns to the goal's yaw over the last `HEADING_BLEND_M`; a
 large heading error holds translation back until the robot has turned. The velocity
 goes to `base_yaw` (vx, vy scaled together to their limits, so the direction is kept)
-and through per-axis acceleration limits.
+and through per-axis acceleration limits. With a `guard` (`body_guard.BodyGuard`), a
+command that would sweep the body onto an obstacle becomes the translation without the
+turn (and without the turn-first hold), else the turn alone, else a stand; a refused axis
+stops at once.
 
 The final align: once inside the position tolerance the follower latches `aligning`
 (released if the base drifts `ALIGN_RELEASE_M` beyond the tolerance, or out of it with
@@ -33,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from common.config import ControllerSettings
+from services.navigation.body_guard import BodyGuard
 from services.navigation.grid import Pose
 
 Vec3 = NDArray[np.float64]
@@ -48,6 +52,7 @@ MIN_SPEED = 0.05  # m/s, the least speed commanded while following
 K_POSITION = 1.2  # 1/s, distance to the goal → speed on the last poses
 MIN_TURN_RATE = 0.25  # rad/s, the least ωz while aligning
 ALIGN_RELEASE_M = 0.05  # m beyond the tolerance that releases the align
+CRAB_MPS = 0.2  # m/s, the most while walking on unturned (sideways, backwards: the guard)
 
 
 class FollowOutput(NamedTuple):
@@ -116,6 +121,7 @@ class Follower:
         speed_cap: float,
         tol_xy: float,
         tol_yaw: float,
+        guard: BodyGuard | None = None,
     ) -> FollowOutput:
         p = self.p
         self.index = self._progress(pose.x, pose.y)
@@ -148,6 +154,7 @@ class Follower:
             wz = math.copysign(max(abs(wz), MIN_TURN_RATE), yaw_err)
         direction: tuple[float, float] | None = None
         vx = vy = 0.0
+        crab = (0.0, 0.0)  # the translation without the turn-first hold (the guard's)
         if not inside:
             ex, ey = float(target[0] - pose.x), float(target[1] - pose.y)
             norm = math.hypot(ex, ey)
@@ -162,13 +169,19 @@ class Follower:
                     K_POSITION * to_goal if self.index >= len(self.poses) - 2 else math.inf,
                     speed_cap,
                 )
+                least = min(MIN_SPEED, speed_cap) if speed_cap > 0 else 0.0
+                crab = self._translation(direction, min(max(speed, least), CRAB_MPS), pose.yaw)
                 if abs(yaw_err) > TURN_FIRST_RAD and blend > 0.5:
                     speed *= max(0.0, 1.0 - (abs(yaw_err) - TURN_FIRST_RAD) / 0.5)
-                if speed_cap > 0:
-                    speed = max(speed, min(MIN_SPEED, speed_cap))
-                vx, vy = to_base((speed * direction[0], speed * direction[1]), pose.yaw)
-                vx, vy = scale_to_limits(vx, vy, p.v_max[0], p.v_max[1])
+                vx, vy = self._translation(direction, max(speed, least), pose.yaw)
         want = np.array([vx, vy, wz])
+        if guard is not None and not guard.ok(want, yaw_err):
+            # The turn or the step would take the body onto an obstacle (`body_guard`):
+            # walk on along the path with the heading it has, else turn on the spot, else
+            # stand (blocked: the navigator's recoveries take over).
+            ways = (np.array([*crab, 0.0]), np.array([0.0, 0.0, wz]))
+            want = next((c for c in ways if c.any() and guard.ok(c, yaw_err)), np.zeros(3))
+            self.cmd = np.where(want == 0.0, 0.0, self.cmd)  # a refused axis stops now
         self.cmd = limit_accel(self.cmd, want, p.a_max, dt)
         slow = float(np.hypot(self.cmd[0], self.cmd[1])) < 0.05
         arrived = to_goal <= tol_xy and abs(goal_err) <= tol_yaw and slow
@@ -182,6 +195,13 @@ class Follower:
             inside,
             yaw_err,
         )
+
+    def _translation(
+        self, direction: tuple[float, float], speed: float, yaw: float
+    ) -> tuple[float, float]:
+        """(vx, vy) in the base's yaw frame for `speed` along the world `direction`."""
+        vx, vy = to_base((speed * direction[0], speed * direction[1]), yaw)
+        return scale_to_limits(vx, vy, self.p.v_max[0], self.p.v_max[1])
 
     def stop(self, dt: float) -> Vec3:
         """Brake to rest within the acceleration limits."""

@@ -18,6 +18,8 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   clear the short-lived layer, rotate in place (`ROTATE_S`), back off (`BACKOFF_S`), each
   followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
   ever found);
+- every command, the follower's, a turn under a people stop and the recoveries', goes
+  through the body guard (`body_guard`): it may not sweep the footprint onto obstacles;
 - `goal_timeout_s` of sim time on one goal: `failed: timeout`;
 - `retarget` moves the goal's pose (a handover whose person's estimate moved): replan.
 `cancel` brings the command to zero at once (the WBC's own acceleration limits shape it).
@@ -35,6 +37,7 @@ from numpy.typing import NDArray
 from common.config import NavigationSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
+from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
@@ -46,9 +49,10 @@ Recovery = Literal["", "clear", "rotate", "backoff"]
 
 #: Not settings (the navigator's are in `NavigationSettings`): how far ahead a lethal cell
 #: on the path means a replan (m), how long the rotate and back-off recoveries last (s),
-#: and the back-off's speed (m/s).
+#: the rotation's rate (rad/s) and the back-off's speed (m/s).
 BLOCKED_LOOKAHEAD_M = 1.5
 ROTATE_S = 3.0
+ROTATE_RATE = 0.5
 BACKOFF_S = 1.5
 BACKOFF_SPEED = 0.15
 #: The path pose this many ahead gives the direction of travel (the people rules).
@@ -225,11 +229,13 @@ class Navigator:
         limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
                              g.handover_id, self.limit_rule == "stop", also)  # fmt: skip
         self.limit_rule = limit.rule
+        guard = BodyGuard(cm.occupied, cm.grid, self.fp, pose)
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
-                     g.tol_xy, g.tol_yaw)  # fmt: skip
+                     g.tol_xy, g.tol_yaw, guard)  # fmt: skip
         self.cmd = out.cmd
         if limit.rule == "stop":
-            self.cmd = np.array([0.0, 0.0, out.cmd[2]])
+            turn = np.array([0.0, 0.0, out.cmd[2]])
+            self.cmd = turn if guard.ok(turn) else np.zeros(3)
             f.cmd = self.cmd.copy()
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
@@ -294,13 +300,16 @@ class Navigator:
             self.best_remaining = math.inf
             self.best_yaw_error = math.inf
             return self._out()
-        if rec == "rotate":
-            self.cmd = np.array([0.0, 0.0, 0.5])
+        guard = BodyGuard(cm.occupied, cm.grid, self.fp, pose)
+        if rec == "rotate":  # either way round, whichever the body has room for
+            turns = (np.array([0.0, 0.0, w]) for w in (ROTATE_RATE, -ROTATE_RATE))
+            self.cmd = next((c for c in turns if guard.ok(c)), np.zeros(3))
         elif rec == "backoff":
             back = Pose(
                 pose.x - 0.3 * math.cos(pose.yaw), pose.y - 0.3 * math.sin(pose.yaw), pose.yaw
             )
-            free = cm.cost_at(back.x, back.y) >= 0
-            self.cmd = np.array([-BACKOFF_SPEED if free else 0.0, 0.0, 0.0])
+            step = np.array([-BACKOFF_SPEED, 0.0, 0.0])
+            free = cm.cost_at(back.x, back.y) >= 0 and guard.ok(step)
+            self.cmd = step if free else np.zeros(3)
         out = self._out()
         return out._replace(recovery=rec)

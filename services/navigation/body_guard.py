@@ -1,0 +1,88 @@
+"""The body guard: where a command takes the footprint in the next moment must stay off
+obstacles.
+
+The planner keeps the base's centreline half a width (and a margin) from obstacles, which
+is what a body walking along its path needs. But the body is longer than it is wide (front
+0.52 m, back 0.62 m from the base origin) and the follower turns it to the path's heading
+wherever it stands: on hall seed 0's shift a turn in place next to a pallet swept the hips
+into it (50 hip and thigh contacts on pallet_3 in 45 s), the whole-body controller's
+reference ran 10 cm ahead of the pinned base, and the pallet shoved the robot towards a
+standing person at 0.45 m/s while navigation commanded no translation at all.
+
+`BodyGuard(occupied, grid, fp, pose)` takes one tick's obstacles (static and short-lived:
+people have their own rules) and the base's pose. `ok(cmd)` rolls a command (vx, vy, ωz
+in the base's yaw frame, held constant) forward over `HORIZON_S` in `STEPS` poses and
+counts the footprint's points, grown by `MARGIN_M`, on occupied cells (or off the grid) at
+each; the command is fine when no pose along it has more than the pose now (free stays
+free, and a body already touching may only move off). Given the heading error a turn is
+for, the whole turn in place is checked too (`SWEEP_STEP_RAD` apart): a turn round that
+can only end with a corner in a pallet is not begun. `Follower.step` asks it of what it
+wants and, when refused, of the translation without the turn (walking along the path with
+the heading it has: the base walks sideways and backwards too), then of the turn without
+the translation; else it stands. A robot that can do none is blocked, and the navigator's
+recoveries (themselves guarded) and replans take over.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from services.navigation.grid import BoolGrid, Footprint, Grid, Pose, footprint_points
+
+#: Not settings: how far ahead (s) and in how many poses a command is rolled out, and how
+#: far beyond the footprint (m) a body point counts.
+HORIZON_S = 0.5
+STEPS = 5
+MARGIN_M = 0.02
+#: rad between the headings checked along a whole turn.
+SWEEP_STEP_RAD = 0.1
+
+
+class BodyGuard:
+    """One tick's check of commands against the obstacles; see the module docstring."""
+
+    def __init__(self, occupied: BoolGrid, grid: Grid, fp: Footprint, pose: Pose) -> None:
+        self.occupied, self.grid, self.pose = occupied, grid, pose
+        self.local = footprint_points(fp, MARGIN_M, 0.5 * grid.resolution)
+        self.now = self._touching(pose.x, pose.y, pose.yaw)
+
+    def _touching(self, x: float, y: float, yaw: float) -> int:
+        """How many of the footprint's points at (x, y, yaw) lie on obstacles or off the grid."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        pts = np.empty_like(self.local)
+        pts[:, 0] = x + c * self.local[:, 0] - s * self.local[:, 1]
+        pts[:, 1] = y + s * self.local[:, 0] + c * self.local[:, 1]
+        iy, ix, inside = self.grid.cells(pts)
+        return int(np.count_nonzero(self.occupied[iy, ix] | ~inside))
+
+    def rollout(self, cmd: NDArray[np.float64] | tuple[float, float, float]) -> list[Pose]:
+        """The poses (`STEPS`, the last `HORIZON_S` ahead) the command takes the base to."""
+        vx, vy, wz = (float(v) for v in cmd)
+        dt = HORIZON_S / STEPS
+        x, y, yaw = self.pose.x, self.pose.y, self.pose.yaw
+        out = []
+        for _ in range(STEPS):
+            mid = yaw + 0.5 * wz * dt  # midpoint heading: the arc, not its chord's start
+            c, s = math.cos(mid), math.sin(mid)
+            x, y, yaw = x + (c * vx - s * vy) * dt, y + (s * vx + c * vy) * dt, yaw + wz * dt
+            out.append(Pose(x, y, yaw))
+        return out
+
+    def ok(
+        self, cmd: NDArray[np.float64] | tuple[float, float, float], turn_rad: float = 0.0
+    ) -> bool:
+        """Whether the command keeps the body off obstacles it is not on now; with
+        `turn_rad` (the heading error the turn is for), whether the whole turn, in place
+        and the command's way round, does too (one that would end stuck is not begun)."""
+        if not any(abs(float(v)) > 1e-9 for v in cmd):
+            return True
+        poses = self.rollout(cmd)
+        wz = float(cmd[2])
+        if wz and turn_rad and math.copysign(1.0, wz) == math.copysign(1.0, turn_rad):
+            n = max(1, math.ceil(abs(turn_rad) / SWEEP_STEP_RAD))
+            yaws = self.pose.yaw + np.linspace(turn_rad / n, turn_rad, n)
+            poses += [Pose(self.pose.x, self.pose.y, float(y)) for y in yaws]
+        return all(self._touching(p.x, p.y, p.yaw) <= self.now for p in poses)

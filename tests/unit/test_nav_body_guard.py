@@ -1,0 +1,115 @@
+"""The body guard: a turn or a step that would sweep the footprint onto an obstacle is not
+commanded (hall seed 0's shift: a turn in place beside a pallet ground the hips into it).
+
+The scene: the base at the origin facing +x, a pallet-sized block behind its left side
+(0.16 m from the footprint's side), and a path straight back to the west, past the block
+(0.4 m from its centreline, the planner's clearance): the follower wants to turn round
+first, and either way round a corner of the body swings into the block.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common.config import ControllerSettings, NavigationSettings
+from services.navigation.body_guard import BodyGuard
+from services.navigation.controller import Follower
+from services.navigation.costmap import CostParams, build_costmap
+from services.navigation.grid import Footprint, Grid, Pose, footprint_free
+from services.navigation.navigator import GoalSpec, Navigator
+
+DT = 0.05
+FP = Footprint.stowed()
+RES = 0.05
+ORIGIN = (-3.0, -4.0)
+
+
+def _grid(side: float = 1.0) -> Grid:
+    """The block behind the base's left side (`side` −1: its right)."""
+    occ = np.zeros((int(6.0 / RES), int(6.0 / RES)), dtype=bool)
+    xs = ORIGIN[0] + (np.arange(occ.shape[1]) + 0.5) * RES
+    ys = side * (ORIGIN[1] + (np.arange(occ.shape[0]) + 0.5) * RES)  # mirrored for −1
+    block = (ys[:, None] >= 0.4) & (ys[:, None] <= 1.2) & (xs[None, :] >= -1.2)
+    occ[block & (xs[None, :] <= 0.0)] = True
+    return Grid(occ, RES, ORIGIN)
+
+
+GRID = _grid()
+COSTMAP = build_costmap(GRID, FP, CostParams())
+START = Pose(0.0, 0.0, 0.0)
+
+
+def _west() -> np.ndarray:
+    xs = np.linspace(0.0, -2.0, 41)
+    return np.column_stack([xs, np.zeros_like(xs), np.full_like(xs, math.pi)])
+
+
+def _step(pose: Pose, cmd: np.ndarray) -> Pose:
+    vx, vy, wz = (float(v) for v in cmd)
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    return Pose(pose.x + (c * vx - s * vy) * DT, pose.y + (s * vx + c * vy) * DT,
+                math.remainder(pose.yaw + wz * DT, math.tau))  # fmt: skip
+
+
+def _touches(pose: Pose) -> bool:
+    return not footprint_free(COSTMAP.occupied, GRID, pose, FP, 0.0)
+
+
+def _run(guarded: bool, ticks: int = 400) -> tuple[list[Pose], bool]:
+    f = Follower(_west(), ControllerSettings())
+    pose, cmd, poses = START, np.zeros(3), []
+    for _ in range(ticks):
+        pose = _step(pose, cmd)  # the last tick's command acts now
+        poses.append(pose)
+        guard = BodyGuard(COSTMAP.occupied, GRID, FP, pose) if guarded else None
+        out = f.step(pose, DT, 0.0, math.inf, 0.1, 0.1, guard)
+        cmd = out.cmd
+        if out.arrived:
+            return poses, True
+    return poses, False
+
+
+def test_the_scene_starts_free_and_an_unguarded_turn_sweeps_the_body_into_the_block() -> None:
+    assert not _touches(START)
+    poses, _ = _run(guarded=False)
+    assert any(_touches(p) for p in poses)
+
+
+def test_guarded_the_robot_walks_sideways_clear_of_the_block_then_turns_and_arrives() -> None:
+    poses, arrived = _run(guarded=True)
+    assert arrived
+    assert not [p for p in poses if _touches(p)]
+    # It walked backwards along the path with its heading kept, and turned once clear.
+    first_turned = next(k for k, p in enumerate(poses) if abs(p.yaw) > 0.1)
+    assert poses[first_turned].x < -0.9
+
+
+def test_free_stays_free_and_a_body_already_touching_may_only_move_off() -> None:
+    guard = BodyGuard(COSTMAP.occupied, GRID, FP, START)
+    assert guard.now == 0
+    assert not guard.ok((0.0, 0.0, -0.8))  # the rear corner swings into the block
+    assert guard.ok((0.0, 0.0, 0.8))  # the front one reaches it only later:
+    assert not guard.ok((0.0, 0.0, 0.8), math.pi)  # the whole turn round is refused
+    assert guard.ok((-0.5, 0.0, 0.0))  # backwards, along it
+    assert guard.ok((0.0, -0.3, 0.0))  # sideways, away from it
+    assert guard.ok((0.0, 0.0, 0.0))
+    inside = Pose(0.0, 0.3, 0.0)  # the rear corner already in the block
+    touching = BodyGuard(COSTMAP.occupied, GRID, FP, inside)
+    assert touching.now > 0
+    assert touching.ok((0.0, -0.3, 0.0))  # off it
+    assert not touching.ok((0.0, 0.3, 0.0))  # further in
+
+
+def test_the_rotate_recovery_turns_the_way_the_body_has_room_for() -> None:
+    for side, way in ((1.0, 1.0), (-1.0, -1.0)):  # its default (anticlockwise), else the other
+        grid = _grid(side)
+        cm = build_costmap(grid, FP, CostParams())
+        nav = Navigator(FP, NavigationSettings(), DT)
+        nav.start(GoalSpec("g", Pose(3.0, 0.0, 0.0), 0.1, 0.1), 0)
+        nav.recovery, nav.recovery_until = "rotate", 10**12
+        out = nav.tick(1, START, cm)
+        assert out.recovery == "rotate"
+        assert math.copysign(1.0, out.cmd[2]) == way, side
+        assert BodyGuard(cm.occupied, grid, FP, START).ok(out.cmd)
