@@ -23,19 +23,21 @@ serves M requests one after another:
   `MissionRequest.at_ns`), so a lockstep shift repeats as one request does.
 
 Each request is judged as `dume eval` judges one (`bench.eval.judge.evaluate`) against
-the truth of the moment: the artifacts where the moves put them, the people where
-`dume/world/people` has them when the request goes out. A class request succeeded when
-the requested person took any artifact of that class. Over the whole shift the robot's
-separation from every person is judged from truth (`SeparationWatch`: the least
-separation, the robot's speed then, and the speed and separation monitor's own rule:
-moving towards a person closer than the protective separation of both true speeds is a
-violation). The report is `dume eval`'s, one row per request, with the shift's
-separation figures and moves added.
+the truth of the moment: the artifacts where the moves put them; the requested person is
+the one nearest the map's estimate of them where `dume/world/people` had everyone when
+the map last saw them (`whom`: walking people are far from a stale estimate). A class
+request succeeded when the requested person took any artifact of that class. Over the
+whole shift the robot's separation from every person is judged from truth
+(`SeparationWatch`: the least separation, the robot's speed then, and the speed and
+separation monitor's own rule: moving towards a person closer than the protective
+separation of both true speeds is a violation). The report is `dume eval`'s, one row per
+request, with the shift's separation figures and moves added.
 """
 
 from __future__ import annotations
 
 import argparse
+import bisect
 import json
 import math
 import os
@@ -62,6 +64,7 @@ from bench.eval.evaluate import (
     world_overrides,
 )
 from bench.eval.judge import MissionRecord, WorldResult, evaluate
+from bench.eval.judge import truth_person as match_person
 from bench.eval.report import json_safe, write_report
 from bench.eval.run import read_map, read_world, request_result, sigterm_interrupts, watch_mission
 from bench.eval.shift_plots import ShiftPlots, map_accuracy
@@ -91,6 +94,8 @@ from services.sim.world import new_place
 
 #: m: a mapped artifact stands for the truth artifact nearest to it within this.
 MATCH_M = 0.3
+#: ns between the people samples kept for the whole shift (who a mapped person is).
+HISTORY_EVERY_NS = 250_000_000
 #: Every this many requests, one asks by class.
 CLASS_EVERY = 3
 #: A slip: the knock's force sideways (N), how long (s), how long after the carry began (s).
@@ -152,15 +157,29 @@ def shift_request(
 class Follow:
     """The truth samples of a shift, paired by stamp: each people sample (the lidar's
     rate) with the base's truth of the same stamp (`state_truth`, at a multiple of it);
-    a people sample whose base has not come yet waits for the next `drain`."""
+    a people sample whose base has not come yet waits for the next `drain`. Every
+    `HISTORY_EVERY_NS` a people sample is kept for the whole shift (`people_at`)."""
 
     def __init__(self, people: Fifo[PeopleTruth], base: Fifo[StateTruth], watch: SeparationWatch):
         self.people, self.base, self.watch = people, base, watch
         self._people: list[PeopleTruth] = []
         self._base: dict[int, StateTruth] = {}
+        self.history: list[PeopleTruth] = []
+
+    def people_at(self, t_ns: int) -> PeopleTruth | None:
+        """The kept people sample nearest to sim time `t_ns` (None before any)."""
+        if not self.history:
+            return None
+        k = bisect.bisect_left([h.stamp_ns for h in self.history], t_ns)
+        near = self.history[max(0, k - 1) : k + 1]
+        return min(near, key=lambda h: abs(h.stamp_ns - t_ns))
 
     def drain(self) -> None:
-        self._people.extend(self.people.drain())
+        fresh = self.people.drain()
+        for sample in fresh:
+            if not self.history or sample.stamp_ns - self.history[-1].stamp_ns >= HISTORY_EVERY_NS:
+                self.history.append(sample)
+        self._people.extend(fresh)
         for b in self.base.drain():
             self._base[b.stamp_ns] = b
         left: list[PeopleTruth] = []
@@ -205,6 +224,23 @@ class Truth:
             folks = tuple(msgspec.structs.replace(p, position=at.get(p.id, p.position))
                           for p in folks)  # fmt: skip
         return msgspec.structs.replace(self.world, artifacts=arts, people=folks)
+
+
+def whom(
+    result: WorldResult, person: str, people: list[MapEntity], follow: Follow, truth: Truth
+) -> None:
+    """The truth person a mapped person stands for: the one nearest to the map's estimate
+    where the people were when the map last saw them (`last_seen_ns`), not at the
+    request (a walking person is metres from their last sighting: 4.5 m on hall seed 0's
+    shift, and the request was judged for whoever stood nearest the stale estimate)."""
+    who = next((p for p in people if p.id == person), None)
+    then = follow.people_at(who.last_seen_ns) if who is not None and who.last_seen_ns else None
+    if who is None or then is None:
+        return
+    match = match_person(truth.now(then), who.position_in_world[:2])
+    if match is not None:
+        result.truth_person = match.id
+        result.truth_match_m = (result.truth_match_m[0], round(match.distance_m, 3))
 
 
 def class_verdict(result: WorldResult, record: MissionRecord, class_name: str) -> None:
@@ -284,6 +320,7 @@ def run_shift_world(
             result = WorldResult(world=args.world, world_seed=seed, scenario=scenario)
             world_now = truth.now(people_now.get())
             request_result(result, pair, arts, people, world_now)
+            whom(result, pair.person, people, follow, truth)
             if asked:
                 result.truth_object = asked
             result.object = f"{pair.object} (#{k + 1})"

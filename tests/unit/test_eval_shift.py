@@ -7,6 +7,7 @@ from pathlib import Path
 import msgspec
 import pytest
 
+from bench.eval import judge
 from bench.eval.judge import MissionRecord, WorldResult
 from bench.eval.shift import (
     CLASS_EVERY,
@@ -16,6 +17,7 @@ from bench.eval.shift import (
     class_verdict,
     present_artifacts,
     shift_request,
+    whom,
 )
 from bench.separation import SeparationWatch
 from common.messages.mission import MissionRequest, MissionStatus
@@ -152,6 +154,34 @@ def test_people_samples_are_judged_with_the_base_of_their_own_stamp() -> None:
     follow.drain()
     assert watch.samples == 3
     assert watch.closest_m == pytest.approx(2.0 - 0.1 - watch.fp.front, abs=1e-6)
+
+
+def test_the_person_asked_for_is_who_stood_at_the_maps_estimate_when_it_last_saw_them() -> None:
+    """Two people: person_1 stood at (1, 1) when the map last saw "person_7" there (t = 2
+    s) and has walked 4 m on since; person_2 now stands next to that stale estimate. The
+    request is for person_1, not for whoever is nearest the estimate at the request."""
+    truth = Truth(generate_world(0, "hall"))  # five people: the others stay where they stand
+    people, base = _Fifo(), _Fifo()
+    follow = Follow(people, base, SeparationWatch(SeparationParams()))  # type: ignore[arg-type]
+    for k in range(41):  # 10 s at 4 Hz: person_1 walks along x from (1, 1); person_2 comes
+        t = k * 250_000_000
+        walker = PersonTruth(id="person_1", position=(1.0 + 0.4 * t / S, 1.0), yaw=0.0,
+                             velocity=(0.4, 0.0))  # fmt: skip
+        comer = PersonTruth(id="person_2", position=(3.0 - 0.18 * t / S, 1.2), yaw=0.0,
+                            velocity=(-0.18, 0.0))  # fmt: skip
+        people.items.append(PeopleTruth(stamp_ns=t, people=[walker, comer]))
+    follow.drain()
+    assert follow.people_at(2 * S + 10) is not None
+    mapped = msgspec.structs.replace(_entity("person_7", 1.8, 1.0, "person"), last_seen_ns=2 * S)
+    result = WorldResult(world="small", world_seed=0, scenario="bystanders")
+    result.truth_person, result.truth_match_m = "person_2", (0.0, 0.2)  # nearest at t = 10 s
+    now = follow.people_at(10 * S)
+    assert now is not None
+    stale = judge.truth_person(truth.now(now), (1.8, 1.0))
+    assert stale is not None and stale.id == "person_2"  # nearest the estimate at the request
+    whom(result, "person_7", [mapped], follow, truth)
+    assert result.truth_person == "person_1"
+    assert result.truth_match_m[1] == pytest.approx(0.0, abs=1e-6)
 
 
 class _Pub:
