@@ -68,6 +68,9 @@ class FollowOutput(NamedTuple):
     aligning: bool = False
     #: rad, the heading reference minus the base's yaw (the goal's yaw when aligning).
     yaw_error: float = 0.0
+    #: What the body guard made of a refused command: "" (none refused), "unturned"
+    #: (the translation without the turn), "turn only" or "stand".
+    guarded: str = ""
 
 
 def limit_accel(prev: Vec3, want: Vec3, a_max: Sequence[float], dt: float) -> Vec3:
@@ -175,12 +178,16 @@ class Follower:
                     speed *= max(0.0, 1.0 - (abs(yaw_err) - TURN_FIRST_RAD) / 0.5)
                 vx, vy = self._translation(direction, max(speed, least), pose.yaw)
         want = np.array([vx, vy, wz])
+        guarded = ""
         if guard is not None and not guard.ok(want, yaw_err):
             # The turn or the step would take the body onto an obstacle (`body_guard`):
             # walk on along the path with the heading it has, else turn on the spot, else
             # stand (blocked: the navigator's recoveries take over).
-            ways = (np.array([*crab, 0.0]), np.array([0.0, 0.0, wz]))
-            want = next((c for c in ways if c.any() and guard.ok(c, yaw_err)), np.zeros(3))
+            ways = {"unturned": np.array([*crab, 0.0]), "turn only": np.array([0.0, 0.0, wz])}
+            guarded, want = next(
+                ((k, c) for k, c in ways.items() if c.any() and guard.ok(c, yaw_err)),
+                ("stand", np.zeros(3)),
+            )
             self.cmd = np.where(want == 0.0, 0.0, self.cmd)  # a refused axis stops now
         self.cmd = limit_accel(self.cmd, want, p.a_max, dt)
         slow = float(np.hypot(self.cmd[0], self.cmd[1])) < 0.05
@@ -194,6 +201,7 @@ class Follower:
             direction,
             inside,
             yaw_err,
+            guarded,
         )
 
     def _translation(

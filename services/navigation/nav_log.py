@@ -1,7 +1,8 @@
 """What navigation tells a person, in the log and in rerun, on the sim-time timeline.
 
 Logged on change: the goal's state and reason, the speed rule acting (slow, handover,
-stop — with the person and their distance), recoveries; at 2 Hz while the robot aligns
+stop — with the person and their distance), the body guard's answer to a refused command
+(walking on unturned, turning only, standing), recoveries; at 2 Hz while the robot aligns
 its final heading (within 0.3 m of the goal): the yaw error, the commanded and the
 measured ωz. To rerun: every new plan (`world/nav/plan`), the follower's command and the
 tick's time at 5 Hz (`plots/nav/…`), with the speed rule's person: their separation, the
@@ -61,6 +62,7 @@ class NavLogger:
         self.rule = ""
         self.state = ""
         self.recovery = ""
+        self.guarded = ""
         self.last_costmap = -(10**18)
         self.last_align = -(10**18)
         self.tracks: set[str] = set()
@@ -95,6 +97,13 @@ class NavLogger:
             else:
                 self.log.info("t=%.2f s speed rule %s released", t, self.rule)
             self.rule = rule
+        if out.guarded != self.guarded:
+            if out.guarded:
+                self.log.info("t=%.2f s body guard: %s (the command would sweep the body onto "
+                              "an obstacle)", t, out.guarded)  # fmt: skip
+            else:
+                self.log.info("t=%.2f s body guard released", t)
+            self.guarded = out.guarded
         if out.recovery != self.recovery:
             if out.recovery:
                 self.log.warning("t=%.2f s goal %s recovery: %s", t, goal_id, out.recovery)

@@ -84,6 +84,8 @@ class TickOutput(NamedTuple):
     new_plan: Plan | None
     limit: SpeedLimit
     recovery: Recovery
+    #: The body guard's answer to a refused command this tick ("": none refused).
+    guarded: str = ""
 
 
 class Navigator:
@@ -105,6 +107,7 @@ class Navigator:
         self.recovery: Recovery = ""
         self.total_m = 0.0
         self.limit_rule = ""
+        self.guarded = ""
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
@@ -158,7 +161,7 @@ class Navigator:
             progress, remaining = 1.0, 0.0
         return TickOutput(
             self.cmd.copy(), self.state, self.reason, self.detail, progress, remaining,
-            new_plan, limit, self.recovery,
+            new_plan, limit, self.recovery, self.guarded,
         )  # fmt: skip
 
     def _replan(self, t_ns: int, pose: Pose, cm: Costmap) -> Plan | None:
@@ -193,6 +196,7 @@ class Navigator:
         return bool(np.any(cm.cost[iy, ix] < 0) | np.any(~inside))
 
     def tick(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
+        self.guarded = ""
         if self.state != "active" or self.goal is None:
             self.cmd = np.zeros(3)
             return self._out()
@@ -233,9 +237,12 @@ class Navigator:
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
                      g.tol_xy, g.tol_yaw, guard)  # fmt: skip
         self.cmd = out.cmd
+        self.guarded = out.guarded
         if limit.rule == "stop":
             turn = np.array([0.0, 0.0, out.cmd[2]])
             self.cmd = turn if guard.ok(turn) else np.zeros(3)
+            if not self.cmd.any() and turn.any():
+                self.guarded = "stand"
             f.cmd = self.cmd.copy()
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
@@ -304,6 +311,7 @@ class Navigator:
         if rec == "rotate":  # either way round, whichever the body has room for
             turns = (np.array([0.0, 0.0, w]) for w in (ROTATE_RATE, -ROTATE_RATE))
             self.cmd = next((c for c in turns if guard.ok(c)), np.zeros(3))
+            self.guarded = "" if self.cmd.any() else "stand"
         elif rec == "backoff":
             back = Pose(
                 pose.x - 0.3 * math.cos(pose.yaw), pose.y - 0.3 * math.sin(pose.yaw), pose.yaw
@@ -311,5 +319,6 @@ class Navigator:
             step = np.array([-BACKOFF_SPEED, 0.0, 0.0])
             free = cm.cost_at(back.x, back.y) >= 0 and guard.ok(step)
             self.cmd = step if free else np.zeros(3)
+            self.guarded = "" if free else "stand"
         out = self._out()
         return out._replace(recovery=rec)

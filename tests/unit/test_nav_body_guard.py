@@ -57,29 +57,31 @@ def _touches(pose: Pose) -> bool:
     return not footprint_free(COSTMAP.occupied, GRID, pose, FP, 0.0)
 
 
-def _run(guarded: bool, ticks: int = 400) -> tuple[list[Pose], bool]:
+def _run(guarded: bool, ticks: int = 400) -> tuple[list[Pose], bool, list[str]]:
     f = Follower(_west(), ControllerSettings())
-    pose, cmd, poses = START, np.zeros(3), []
+    pose, cmd, poses, said = START, np.zeros(3), [], []
     for _ in range(ticks):
         pose = _step(pose, cmd)  # the last tick's command acts now
         poses.append(pose)
         guard = BodyGuard(COSTMAP.occupied, GRID, FP, pose) if guarded else None
         out = f.step(pose, DT, 0.0, math.inf, 0.1, 0.1, guard)
         cmd = out.cmd
+        said.append(out.guarded)
         if out.arrived:
-            return poses, True
-    return poses, False
+            return poses, True, said
+    return poses, False, said
 
 
 def test_the_scene_starts_free_and_an_unguarded_turn_sweeps_the_body_into_the_block() -> None:
     assert not _touches(START)
-    poses, _ = _run(guarded=False)
+    poses, _, _ = _run(guarded=False)
     assert any(_touches(p) for p in poses)
 
 
 def test_guarded_the_robot_walks_sideways_clear_of_the_block_then_turns_and_arrives() -> None:
-    poses, arrived = _run(guarded=True)
+    poses, arrived, said = _run(guarded=True)
     assert arrived
+    assert said[0] == "unturned" and said[-1] == ""
     assert not [p for p in poses if _touches(p)]
     # It walked backwards along the path with its heading kept, and turned once clear.
     first_turned = next(k for k, p in enumerate(poses) if abs(p.yaw) > 0.1)
