@@ -175,7 +175,7 @@ class Follow:
         return min(near, key=lambda h: abs(h.stamp_ns - t_ns))
 
     def drain(self) -> None:
-        fresh = self.people.drain()
+        fresh = list(self.people.drain())
         for sample in fresh:
             if not self.history or sample.stamp_ns - self.history[-1].stamp_ns >= HISTORY_EVERY_NS:
                 self.history.append(sample)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
@@ -129,9 +130,9 @@ class _Fifo:
     def __init__(self) -> None:
         self.items: list[object] = []
 
-    def drain(self) -> list[object]:
+    def drain(self) -> Iterator[object]:  # a generator, as `common.bus.Fifo.drain`
         out, self.items = self.items, []
-        return out
+        yield from out
 
 
 def test_people_samples_are_judged_with_the_base_of_their_own_stamp() -> None:
