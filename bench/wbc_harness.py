@@ -113,11 +113,18 @@ RefsAt = Callable[[float, WbcState], WbcReferences]
 
 
 def simulate(
-    model: mujoco.MjModel, data: mujoco.MjData, seconds: float, refs_at: RefsAt
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    seconds: float,
+    refs_at: RefsAt,
+    on_start: Callable[[WholeBodyController], object] | None = None,
 ) -> tuple[Log, WholeBodyController, float]:
-    """Run the loop; return the log, the controller and the wall time, s."""
+    """Run the loop; return the log, the controller and the wall time, s. `on_start` is
+    handed the controller before the first tick (a test that disturbs its state)."""
     idx = mjcf.mj_indices(model)
     ctrl = WholeBodyController(clock=time.perf_counter)
+    if on_start is not None:
+        on_start(ctrl)
     log = Log()
     dt = model.opt.timestep
     n = round(seconds / dt)

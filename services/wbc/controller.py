@@ -11,7 +11,11 @@ model lacks) are fed forward from v_des. The jaw is position-controlled, or torq
 closing on an object (`gripper_effort`), outside the QP's answer. The `gripper_tcp` task
 adds integral action on its position (`tcp_ki`, bounded): a held object the model does
 not know would otherwise sag the gripper by 1–3 cm. Only what the active tasks need is
-computed: no `gripper_tcp` Jacobian or drift without a TCP target.
+computed: no `gripper_tcp` Jacobian or drift without a TCP target. While walking, the CoM
+reference integrates the commanded velocity, leading the CoM by at most `tracking_slack_m`;
+when the translation asked for stops, the lead keeps only its part along the CoM's motion
+and within its stopping distance (braking at `stop_decel_mps2`), and the reference is
+held there, so a stop is a stop even after a walk that was held back.
 
 Values in and out mirror `common.messages.sim.RobotState` and `JointCommand` field by
 field. The controller reads no clock: pass `clock` (e.g. `time.perf_counter`) to get the
@@ -31,7 +35,7 @@ from common.config import GaitSettings
 from common.geometry import FloatArray, wrap_angle, yaw_of
 from common.robot import joint_damping, joint_frictionloss
 from services.wbc import constraints as cons
-from services.wbc.gait import TrotGait
+from services.wbc.gait import STOP_THRESHOLD, TrotGait
 from services.wbc.model import RobotModel
 from services.wbc.qp import (
     QpParams,
@@ -96,6 +100,8 @@ class WholeBodyController:
         self.solver = self._make_solver()
         self.problem = new_problem(self.model.nv, self.qp_params)
         self.ref_xy = np.zeros(2)
+        #: No translation was asked last tick (the stop's re-anchoring, `_set_targets`).
+        self._still = True
         self.ref_yaw = 0.0
         self._initialised = False
         self.qp_failures = 0
@@ -194,11 +200,22 @@ class WholeBodyController:
         v_world = (c * vx - s * vy, s * vx + c * vy)
         com_x, com_y = m.com[0], m.com[1]
         rx, ry = self.ref_xy
+        still = math.hypot(refs.cmd_vel[0], refs.cmd_vel[1]) < STOP_THRESHOLD
         if gait.walking:
             rx, ry = rx + v_world[0] * dt, ry + v_world[1] * dt
             lx, ly = rx - com_x, ry - com_y
             dist = math.hypot(lx, ly)
-            if dist > g.tracking_slack_m:
+            if still and not self._still:
+                # The translation asked for just stopped: of the lead, only its part along
+                # the CoM's motion and within its stopping distance at `stop_decel_mps2`
+                # is kept, and the reference held there. A lead left by a walk that was
+                # held back (a pallet against the hips) was chased at 0.2-0.45 m/s after
+                # navigation had stopped the base for a person.
+                speed = math.hypot(m.vcom[0], m.vcom[1])
+                ux, uy = (m.vcom[0] / speed, m.vcom[1] / speed) if speed > 1e-3 else (0.0, 0.0)
+                ahead = min(max(lx * ux + ly * uy, 0.0), speed * speed / (2 * g.stop_decel_mps2))
+                rx, ry = com_x + ahead * ux, com_y + ahead * uy
+            elif dist > g.tracking_slack_m:
                 k = g.tracking_slack_m / dist
                 rx, ry = com_x + lx * k, com_y + ly * k
         else:
@@ -209,6 +226,7 @@ class WholeBodyController:
             rx += min(max(cx - rx, -lim), lim)
             ry += min(max(cy - ry, -lim), lim)
         self.ref_xy[0], self.ref_xy[1] = rx, ry
+        self._still = still
         self.ref_yaw += wz * dt
         R_base = m.frames[robot.BASE_FRAME].R
         yaw_err = wrap_angle(self.ref_yaw - math.atan2(R_base[1, 0], R_base[0, 0]))

@@ -104,4 +104,5 @@ class WbcGains:
     jaw_kp: float = 20.0
     jaw_kd: float = 0.5
     tracking_slack_m: float = 0.1  # the walking CoM reference never leads by more
+    stop_decel_mps2: float = 1.0  # a stop keeps the lead within the CoM's stopping distance
     friction_v: float = 0.05  # rad/s: the dry-friction feed-forward's smoothing

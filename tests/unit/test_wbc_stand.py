@@ -15,7 +15,7 @@ from bench.wbc_harness import (
     summary,
 )
 from common import robot
-from services.wbc.controller import WbcReferences, WbcState
+from services.wbc.controller import WbcReferences, WbcState, WholeBodyController
 
 
 def walk(seconds: float, cmd: tuple[float, float, float], payload_kg: float = 0.0) -> Figures:
@@ -62,6 +62,33 @@ def test_trotting_sideways_strafes() -> None:
     out = walk(5.5, (0.0, 0.2, 0.0))
     assert not out["fell"]
     assert 0.8 < out["drift_m"] < 1.1 and abs(out["distance_m"]) < 0.15
+
+
+@pytest.mark.slow
+def test_a_stop_after_a_walk_that_was_held_back_does_not_chase_the_lead() -> None:
+    """A walk at 0.25 m/s whose CoM reference is left 0.1 m to the side (a pallet held
+    the hips: hall seed 0's shift), then a turn in place: the base may brake, but not walk
+    the 0.1 m sideways (before: 0.114 m at up to 0.34 m/s, towards a person)."""
+    model = floor_spec().compile()
+    data = mujoco.MjData(model)
+    set_initial_pose(model, data, robot.standing_q())
+    ctrl: list[WholeBodyController] = []
+
+    def refs_at(t: float, state: WbcState) -> WbcReferences:
+        if t < 0.5:
+            return WbcReferences(cmd_vel=np.zeros(3))
+        if t < 2.0:
+            if abs(t - 1.9) < 1e-3 and ctrl:  # held back: the lead goes sideways
+                ctrl[0].ref_xy[:] = ctrl[0].model.com[:2] + np.array([0.0, 0.1])
+            return WbcReferences(cmd_vel=np.array([0.25, 0.0, 0.0]))
+        return WbcReferences(cmd_vel=np.array([0.0, 0.0, -0.8 if t < 3.5 else 0.0]))
+
+    log, controller, _ = simulate(model, data, 5.0, refs_at, on_start=ctrl.append)
+    pos = np.array(log.pos)
+    k0 = int(np.searchsorted(np.array(log.t), 2.0))
+    sideways = pos[-1, 1] - pos[k0, 1]
+    assert abs(sideways) < 0.05, sideways
+    assert pos[:, 2].min() > 0.4 and controller.qp_failures == 0
 
 
 @pytest.mark.slow
