@@ -30,7 +30,14 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from services.navigation.grid import BoolGrid, Footprint, Grid, Pose, footprint_points
+from services.navigation.grid import (
+    BoolGrid,
+    Footprint,
+    Grid,
+    Pose,
+    footprint_hits,
+    footprint_points,
+)
 
 #: Not settings: how far ahead (s) and in how many poses a command is rolled out, and how
 #: far beyond the footprint (m) a body point counts.
@@ -51,12 +58,8 @@ class BodyGuard:
 
     def _touching(self, x: float, y: float, yaw: float) -> int:
         """How many of the footprint's points at (x, y, yaw) lie on obstacles or off the grid."""
-        c, s = math.cos(yaw), math.sin(yaw)
-        pts = np.empty_like(self.local)
-        pts[:, 0] = x + c * self.local[:, 0] - s * self.local[:, 1]
-        pts[:, 1] = y + s * self.local[:, 0] + c * self.local[:, 1]
-        iy, ix, inside = self.grid.cells(pts)
-        return int(np.count_nonzero(self.occupied[iy, ix] | ~inside))
+        return int(np.count_nonzero(footprint_hits(self.occupied, self.grid, Pose(x, y, yaw),
+                                                   self.local)))  # fmt: skip
 
     def rollout(self, cmd: NDArray[np.float64] | tuple[float, float, float]) -> list[Pose]:
         """The poses (`STEPS`, the last `HORIZON_S` ahead) the command takes the base to."""

@@ -134,12 +134,21 @@ def footprint_free(
 ) -> bool:
     """Whether the footprint at `pose`, grown by `margin`, lies on free cells inside the grid."""
     local = footprint_points(fp, margin, 0.5 * grid.resolution)
+    return not footprint_hits(occupied, grid, pose, local).any()
+
+
+def footprint_hits(
+    occupied: BoolGrid, grid: Grid, pose: Pose, local: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Per point of `local` (n, 2, the base frame: `footprint_points`) placed at `pose`:
+    whether it lies on an occupied cell or off the grid."""
     c, s = math.cos(pose.yaw), math.sin(pose.yaw)
     xy = np.empty_like(local)
     xy[:, 0] = pose.x + c * local[:, 0] - s * local[:, 1]
     xy[:, 1] = pose.y + s * local[:, 0] + c * local[:, 1]
     iy, ix, inside = grid.cells(xy)
-    return bool(inside.all() and not occupied[iy, ix].any())
+    hits: NDArray[np.bool_] = occupied[iy, ix] | ~inside
+    return hits
 
 
 def distance_to_footprint(
