@@ -12,8 +12,9 @@ large heading error holds translation back until the robot has turned. The veloc
 goes to `base_yaw` (vx, vy scaled together to their limits, so the direction is kept)
 and through per-axis acceleration limits. With a `guard` (`body_guard.BodyGuard`), a
 command that would sweep the body onto an obstacle becomes the translation without the
-turn (and without the turn-first hold), else the turn alone, else a stand; a refused axis
-stops at once.
+turn (and without the turn-first hold), else the turn alone, else the turn the other way
+round, else a stand; a refused axis stops at once, and a fallback is kept a moment
+(`GUARD_HOLD_S`) before the full command is asked again.
 
 The final align: once inside the position tolerance the follower latches `aligning`
 (released if the base drifts `ALIGN_RELEASE_M` beyond the tolerance, or out of it with
@@ -53,6 +54,8 @@ K_POSITION = 1.2  # 1/s, distance to the goal → speed on the last poses
 MIN_TURN_RATE = 0.25  # rad/s, the least ωz while aligning
 ALIGN_RELEASE_M = 0.05  # m beyond the tolerance that releases the align
 CRAB_MPS = 0.2  # m/s, the most while walking on unturned (sideways, backwards: the guard)
+CRAB_AHEAD_RAD = 0.3  # rad off the heading within which unturned is not "crab"
+GUARD_HOLD_S = 0.5  # s a body guard's answer other than the full command is kept
 
 
 class FollowOutput(NamedTuple):
@@ -66,10 +69,11 @@ class FollowOutput(NamedTuple):
     lookahead: tuple[float, float]
     direction: tuple[float, float] | None
     aligning: bool = False
-    #: rad, the heading reference minus the base's yaw (the goal's yaw when aligning).
+    #: rad, the turn still to do to the heading reference (the goal's yaw when
+    #: aligning), signed the way it turns (the long way when the guard turned it so).
     yaw_error: float = 0.0
     #: What the body guard made of a refused command: "" (none refused), "unturned"
-    #: (the translation without the turn), "turn only" or "stand".
+    #: (the translation without the turn), "turn only", "the other way round" or "stand".
     guarded: str = ""
 
 
@@ -99,12 +103,14 @@ class Follower:
         self.set_path(poses)
         self.cmd: Vec3 = np.zeros(3)
         self.aligning = False
+        self.held, self.hold_s = "", 0.0  # the body guard's last answer, kept a moment
 
     def set_path(self, poses: NDArray[np.float64]) -> None:
         self.poses = poses
         seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
         self.s = np.concatenate([[0.0], np.cumsum(seg)])
         self.index = 0
+        self.held, self.hold_s = "", 0.0
 
     def remaining(self) -> float:
         return float(self.s[-1] - self.s[self.index])
@@ -173,22 +179,16 @@ class Follower:
                     speed_cap,
                 )
                 least = min(MIN_SPEED, speed_cap) if speed_cap > 0 else 0.0
-                crab = self._translation(direction, min(max(speed, least), CRAB_MPS), pose.yaw)
+                # Sideways or backwards the trot is slow; nearly ahead, the speed stands.
+                crab_mps = CRAB_MPS if abs(yaw_err) > CRAB_AHEAD_RAD else math.inf
+                crab = self._translation(direction, min(max(speed, least), crab_mps), pose.yaw)
                 if abs(yaw_err) > TURN_FIRST_RAD and blend > 0.5:
                     speed *= max(0.0, 1.0 - (abs(yaw_err) - TURN_FIRST_RAD) / 0.5)
                 vx, vy = self._translation(direction, max(speed, least), pose.yaw)
         want = np.array([vx, vy, wz])
         guarded = ""
-        if guard is not None and not guard.ok(want, yaw_err):
-            # The turn or the step would take the body onto an obstacle (`body_guard`):
-            # walk on along the path with the heading it has, else turn on the spot, else
-            # stand (blocked: the navigator's recoveries take over).
-            ways = {"unturned": np.array([*crab, 0.0]), "turn only": np.array([0.0, 0.0, wz])}
-            guarded, want = next(
-                ((k, c) for k, c in ways.items() if c.any() and guard.ok(c, yaw_err)),
-                ("stand", np.zeros(3)),
-            )
-            self.cmd = np.where(want == 0.0, 0.0, self.cmd)  # a refused axis stops now
+        if guard is not None:
+            guarded, want, yaw_err = self._guarded(guard, want, crab, yaw_err, dt)
         self.cmd = limit_accel(self.cmd, want, p.a_max, dt)
         slow = float(np.hypot(self.cmd[0], self.cmd[1])) < 0.05
         arrived = to_goal <= tol_xy and abs(goal_err) <= tol_yaw and slow
@@ -203,6 +203,44 @@ class Follower:
             yaw_err,
             guarded,
         )
+
+    def _guarded(
+        self, guard: BodyGuard, want: Vec3, crab: tuple[float, float], yaw_err: float, dt: float
+    ) -> tuple[str, Vec3, float]:
+        """What the body guard lets through of `want`: (its answer, the command, the turn
+        still to do the way it turns). Refused, in order: the translation along the path
+        without the turn, the turn alone, the turn the other way round (the body is
+        longer behind than ahead: one way round may sweep a corner into a pallet where the
+        other does not), else stand. An answer other than the full command is kept
+        `GUARD_HOLD_S` before the full command is asked again (it flipped at the tick's
+        rate along a pallet's edge); one the guard refuses is dropped at once."""
+        wz = float(want[2])
+        other = -math.copysign(max(abs(wz), MIN_TURN_RATE), yaw_err)
+        ways: dict[str, tuple[Vec3, float]] = {
+            "": (want, yaw_err),
+            "unturned": (np.array([*crab, 0.0]), yaw_err),
+            "turn only": (np.array([0.0, 0.0, wz]), yaw_err),
+            "the other way round": (
+                np.array([0.0, 0.0, other if abs(yaw_err) > 1e-3 else 0.0]),
+                yaw_err - math.copysign(math.tau, yaw_err),
+            ),
+        }
+        self.hold_s = max(0.0, self.hold_s - dt)
+        order = list(ways)
+        if self.held in ways and self.hold_s > 0.0:
+            order.remove(self.held)
+            order.insert(0, self.held)
+        label, cmd, turn = "stand", np.zeros(3), yaw_err
+        for k in order:
+            c, t = ways[k]
+            if (k == "" or c.any()) and guard.ok(c, t):
+                label, cmd, turn = k, c, t
+                break
+        if label != self.held:
+            self.held, self.hold_s = label, GUARD_HOLD_S if label else 0.0
+        if label:
+            self.cmd = np.where(cmd * self.cmd > 0.0, self.cmd, 0.0)  # a refused axis stops now
+        return label, cmd, turn
 
     def _translation(
         self, direction: tuple[float, float], speed: float, yaw: float

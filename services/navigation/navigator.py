@@ -11,7 +11,8 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
 - follow with `Follower`, capped by `people_limit` (a stop for a person counts as blocked
   time, so a person who stays leads to a replan around them, then to recovery);
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
-  follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad;
+  follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad (a turn the
+  body guard sends the other way round counts from where it began);
 - when blocked for `blocked_timeout_s` (no plan, or no progress; `people.wait_s` longer
   while a person is within `people.slow_radius_m` of the footprint or of the goal,
   "waiting for <person>": people move), recoveries in order:
@@ -196,7 +197,7 @@ class Navigator:
         return bool(np.any(cm.cost[iy, ix] < 0) | np.any(~inside))
 
     def tick(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
-        self.guarded = ""
+        was_guarded, self.guarded = self.guarded, ""
         if self.state != "active" or self.goal is None:
             self.cmd = np.zeros(3)
             return self._out()
@@ -248,6 +249,8 @@ class Navigator:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
             return self._out(limit, new_plan)
         yaw_error = abs(out.yaw_error)
+        if out.guarded == "the other way round" != was_guarded:
+            self.best_yaw_error = yaw_error  # the long way round counts from here (no progress)
         if out.remaining_m < self.best_remaining - 0.05 or yaw_error < self.best_yaw_error - 0.05:
             self.best_remaining = min(self.best_remaining, out.remaining_m)
             self.best_yaw_error = yaw_error

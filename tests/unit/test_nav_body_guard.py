@@ -115,3 +115,69 @@ def test_the_rotate_recovery_turns_the_way_the_body_has_room_for() -> None:
         assert out.recovery == "rotate"
         assert math.copysign(1.0, out.cmd[2]) == way, side
         assert BodyGuard(cm.occupied, grid, FP, START).ok(out.cmd)
+
+
+def _post_grid() -> Grid:
+    """A table leg (10 cm square) behind the base's left, 0.7 m from its centre."""
+    occ = np.zeros((120, 120), dtype=bool)
+    xs = -3.0 + (np.arange(120) + 0.5) * RES
+    cx, cy = 0.7 * math.cos(2.4), 0.7 * math.sin(2.4)
+    occ[(np.abs(xs[:, None] - cy) <= 0.05) & (np.abs(xs[None, :] - cx) <= 0.05)] = True
+    return Grid(occ, RES, (-3.0, -3.0))
+
+
+def test_a_turn_the_body_has_no_room_for_one_way_round_goes_the_other_way() -> None:
+    # The goal: where the base stands, facing 1.5 rad to its right. Turning right swings
+    # the rear-left corner into the leg; turning left the long way (4.8 rad) clears it.
+    grid = _post_grid()
+    cm = build_costmap(grid, FP, CostParams())
+    guard = BodyGuard(cm.occupied, grid, FP, START)
+    assert guard.now == 0
+    assert not guard.ok((0.0, 0.0, -0.5), -1.5) and guard.ok((0.0, 0.0, 0.5), -1.5 + math.tau)
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(0.0, 0.0, -1.5), 0.1, 0.1), 0)
+    pose, cmd, said, recoveries = START, np.zeros(3), [], []
+    for k in range(800):
+        pose = _step(pose, cmd)
+        out = nav.tick(int(k * DT * 1e9), pose, cm)
+        cmd = out.cmd
+        said.append(out.guarded)
+        recoveries.append(out.recovery)
+        assert footprint_free(cm.occupied, grid, pose, FP, 0.0), (k, pose)
+        if out.state != "active":
+            break
+    assert out.state == "succeeded", out
+    assert "the other way round" in said
+    assert not any(recoveries)  # a long turn is progress, not a block
+    assert abs(math.remainder(pose.yaw + 1.5, math.tau)) <= 0.1
+
+
+def test_along_a_wall_the_guards_answer_is_kept_a_moment_not_flipped_each_tick() -> None:
+    # A path 5 m along a wall 6 cm beyond the body's side, the pose seen with 1 cm and
+    # 0.02 rad of noise: turns toward the wall are refused now and then.
+    occ = np.zeros((120, 200), dtype=bool)
+    occ[-3.0 + (np.arange(120) + 0.5) * RES >= 0.30, :] = True
+    grid = Grid(occ, RES, (-3.0, -3.0))
+    xs = np.linspace(0.0, 5.0, 101)
+    f = Follower(np.column_stack([xs, 0.02 * np.sin(2.0 * xs), 0.0 * xs]), ControllerSettings())
+    rng = np.random.default_rng(0)
+    pose, cmd, said = START, np.zeros(3), []
+    for _ in range(600):
+        pose = _step(pose, cmd)
+        seen = Pose(*(np.array([pose.x, pose.y, pose.yaw]) + rng.normal(0, [0.01, 0.01, 0.02])))
+        out = f.step(seen, DT, 0.0, math.inf, 0.1, 0.1, BodyGuard(occ, grid, FP, seen))
+        cmd, arrived = out.cmd, out.arrived
+        said.append(out.guarded)
+        assert footprint_free(occ, grid, pose, FP, 0.0), pose
+        if arrived:
+            break
+    assert arrived and "unturned" in said
+    assert len(said) * DT < 5.0 / ControllerSettings().v_max[0] + 3.0  # walked on, not crabbed
+    back = [k for k in range(1, len(said)) if said[k] == "" and said[k - 1]]
+    began = [k for k in range(1, len(said)) if said[k] == "unturned" and not said[k - 1]]
+    # Each time back to the full command, the fallback had lasted GUARD_HOLD_S, 0.5 s (without
+    # the hold, 1 or 2 ticks: 9 flips in 11 s).
+    assert back
+    for k in back:
+        start = max(b for b in began if b < k)
+        assert (k - start) * DT >= 0.4, (start, k)
