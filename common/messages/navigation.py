@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from typing import Annotated, Literal
+
+import msgspec
 
 from common.messages.arrays import Array
 from common.messages.base import EntityId, Finite, Message, NonNegative, StampNs, Unit
+
+#: A speed cap, m/s: at least 0, inf for none (NaN fails).
+Cap = Annotated[float, msgspec.Meta(ge=0.0)]
 
 
 class PoseGoal(Message, frozen=True, tag="pose"):
@@ -93,6 +99,14 @@ class NavStatus(Message, frozen=True):
     detail: str = ""
     progress: Unit = 0.0
     remaining_m: NonNegative = 0.0
+    #: The speed and separation monitor's caps (m/s; inf: none) on a translation along
+    #: the base's axes, ahead, behind, left, right, for what drives the base without a
+    #: goal (the mission's cmd_vel); `cap_person`: who sets the tightest. 0 while
+    #: navigation does not know where the robot is (localization lost).
+    caps_mps: tuple[Cap, Cap, Cap, Cap] = (
+        math.inf, math.inf, math.inf, math.inf,
+    )  # fmt: skip
+    cap_person: str = ""
 
 
 class NavPath(Message, frozen=True):

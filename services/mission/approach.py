@@ -22,6 +22,10 @@ acceleration limits. The gains, limits and times are settings (`ApproachSettings
 - failed (latched, with a reason): reacquiring found nothing within `reacquire_s`, or no
   arrival within `timeout_s` of `reset` — the controller never freezes.
 
+A command the caller could not give in full (`hold`: a person near the base, the speed
+and separation monitor's caps) is no stall: the blocked arrival waits `stall_s` from the
+hold, and the time held does not count against `timeout_s`.
+
 Pure: sightings and sim time (seconds) in, a command out; no clock reads, no transport.
 """
 
@@ -35,6 +39,8 @@ from common.config import ApproachSettings
 from common.robot import D_OPT_M, THETA_OPT_RAD
 
 ApproachState = Literal["tracking", "reacquiring", "arrived", "failed"]
+#: Not a setting: holds (`hold`) at most this far apart (s) are one span of being held.
+HELD_GAP_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -87,6 +93,16 @@ class ApproachController:
         self._backed_m = 0.0
         self._latched: ApproachCommand | None = None
         self._nearest: Sighting | None = None  # the nearest sighting, by progress_m steps
+        self._held_at = -math.inf  # when the base was last held back (`hold`)
+        self._held_s = 0.0  # for how long in all
+
+    def hold(self, t_s: float) -> None:
+        """The command of sim time `t_s` was held back (a person near the base: the speed
+        and separation monitor's caps): no progress while held is a block, and the time
+        held does not count against `timeout_s`."""
+        if 0.0 < t_s - self._held_at <= HELD_GAP_S:
+            self._held_s += t_s - self._held_at
+        self._held_at = t_s
 
     @property
     def last_sighting(self) -> Sighting | None:
@@ -114,7 +130,7 @@ class ApproachController:
             if self._last is None or seen.stamp_s > self._last.stamp_s:
                 self._on_new_sighting(seen)
             self._last = seen
-        elapsed = t_s - self._t0
+        elapsed = t_s - self._t0 - self._held_s
         if elapsed > g.timeout_s:
             return self._latch("failed", f"not arrived {elapsed:.1f} s after the start")
         age = math.inf if self._last is None else t_s - self._last.stamp_s
@@ -200,7 +216,7 @@ class ApproachController:
         return (
             g.tol_d_m < e_d <= g.blocked_slack_m
             and abs(e_t) <= g.tol_theta_rad
-            and t_s - near.stamp_s >= g.stall_s
+            and t_s - max(near.stamp_s, self._held_at) >= g.stall_s
         )
 
     # -- helpers ------------------------------------------------------------------------

@@ -109,8 +109,10 @@ class RobotPort(Protocol):
         """Ask for a mode and a cmd_vel source (published after the tick, stamped with it)."""
         ...
 
-    def command_velocity(self, vx: float, vy: float, wz: float) -> None:
-        """This tick's cmd_vel from source `mission` (zero unless set again next tick)."""
+    def command_velocity(self, vx: float, vy: float, wz: float) -> str:
+        """This tick's cmd_vel from source `mission` (zero unless set again next tick),
+        within navigation's people caps (`NavStatus.caps_mps`); who held it back ("" when
+        nobody did: "localization" while navigation does not know where the robot is)."""
         ...
 
     def send_arm_goal(self, goal: ArmGoal) -> str:

@@ -15,6 +15,10 @@ cmd_vel from source `mission` every tick (zero unless a behaviour set it), carry
 mode when one was asked for (one key: the WBC gets the mode no later than the velocity).
 Nav cancels go out at once. A Reach or a Posture sent while a mapped person stands within
 `arm_slow_m` of the base goes at `arm_slow_speed` of the arm's speeds (`ArmSlowdown`).
+The mission's own cmd_vel (the approach, the back-off, the look round) is held within
+the speed and separation monitor's caps that navigation publishes on `nav/status` for
+each of the base's axes (`within_caps`): navigation's people, lidar tracks included,
+guard every base motion, not only its goals.
 """
 
 from __future__ import annotations
@@ -63,6 +67,23 @@ from services.mission.ports import Unavailable, WristSighting
 
 log = logging.getLogger("dume.mission")
 
+Vel = tuple[float, float, float]
+
+
+def within_caps(cmd: Vel, caps: tuple[float, ...] | None) -> tuple[Vel, bool]:
+    """(vx, vy, ωz) with vx within (−behind, ahead) and vy within (−right, left) of
+    navigation's caps (`NavStatus.caps_mps`; None: none known), and whether it was cut.
+    The mission drives along one axis at a time (the approach, the back-off, the look
+    round), so each axis's cap is its directed speed's."""
+    if caps is None:
+        return cmd, False
+    ahead, behind, left, right = caps
+    vx, vy, wz = cmd
+    cx = min(vx, ahead) if vx > 0.0 else max(vx, -behind)
+    cy = min(vy, left) if vy > 0.0 else max(vy, -right)
+    return (cx, cy, wz), (cx, cy) != (vx, vy)
+
+
 NAME = "mission"
 WRIST = "camera_wrist"
 #: Refusals that mean "no such thing" rather than "cannot answer now".
@@ -108,6 +129,7 @@ class BusRobot:
         self._cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
         self._t = 0
         self._cmd = (0.0, 0.0, 0.0)
+        self._held = ""  # who the last command was held back for
         self._mode: tuple[WbcModeName, str] | None = None
 
     # -- the tick -------------------------------------------------------------------------
@@ -232,8 +254,19 @@ class BusRobot:
     def set_mode(self, mode: WbcModeName, cmd_vel_source: str) -> None:
         self._mode = (mode, cmd_vel_source)
 
-    def command_velocity(self, vx: float, vy: float, wz: float) -> None:
-        self._cmd = (float(vx), float(vy), float(wz))
+    def command_velocity(self, vx: float, vy: float, wz: float) -> str:
+        status = self.nav.at(self._t - self.nav_latency_ns)
+        caps = status.caps_mps if status is not None else None
+        self._cmd, held = within_caps((float(vx), float(vy), float(wz)), caps)
+        if not held:
+            self._held = ""
+            return ""
+        who = (status.cap_person if status is not None else "") or "localization"
+        if who != self._held:
+            log.info("t=%.2f s the base held back for %s: (%.2f, %.2f) m/s asked, caps %s",
+                     self._t / 1e9, who, vx, vy, caps)  # fmt: skip
+        self._held = who
+        return who
 
     def hold_arm(self, reason: str) -> None:
         """Leaving `manipulate` freezes the arm's joints where they are (the controller

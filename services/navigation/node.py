@@ -53,11 +53,13 @@ from services.navigation.map_feed import MapFeed
 from services.navigation.nav_log import NavLogger
 from services.navigation.nav_map import NavMap
 from services.navigation.navigator import Navigator, TickOutput
+from services.navigation.people import base_caps
 from services.navigation.perceived import PerceptionFeed
 from services.navigation.scan_people import ScanView
 from services.navigation.sources import MapSource, Source, WorldSource, wait_for_world
 
 NAME = "navigation"
+Caps = tuple[float, float, float, float]
 #: Wall seconds to wait for a tick's input (odom, a depth frame, perception, the map
 #: fetch, the tick a goal is stamped at); NavigationSettings has no setting for it.
 INPUT_TIMEOUT_S = 30.0
@@ -96,6 +98,9 @@ class NavNode:
         if isinstance(self.source, WorldSource):  # truth: there at once, and static
             self.map.adopt(self.source.grid(), self.source.people(), 0, 0)
         self.nav = Navigator(self.fp, n, self.period_s)
+        #: The caps on the base's axes for other drivers (`people.base_caps`), as published.
+        self.caps: Caps = (math.inf,) * 4
+        self.cap_person = ""
         self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.map_frame = MapFrame(bus, keys, cfg)
@@ -159,6 +164,7 @@ class NavNode:
             self.intake.done(b, m.costmap, pose)
             return
         if self.map_frame.status(b) == "lost":  # it does not know where it is: stand
+            self.caps, self.cap_person = (0.0,) * 4, ""  # nor where people are from it
             self._publish(b, np.zeros(3), None, "localization lost", self.intake.queued(b))
             self.intake.done(b, m.costmap, pose)
             return
@@ -168,6 +174,7 @@ class NavNode:
         if changed:
             m.rebuild(b)
         out = self.nav.tick(b, pose, m.costmap)
+        self._caps(b, pose)
         if out.recovery == "clear" and self.nav.recovery == "clear":
             m.clear(b)
         self._publish(b, out.cmd, out)
@@ -175,6 +182,29 @@ class NavNode:
         tick_ms = (time.perf_counter() - t0) * 1e3
         wz = odom.base_angular_velocity_in_base[2]
         self.log.tick(b, pose, self.nav, out, m.costmap, tick_ms, wz)
+
+    def _caps(self, b: int, pose: Pose) -> None:
+        """The speed and separation monitor's caps on the base's axes for what drives it
+        without a goal (`people.base_caps`, on `nav/status`); a change is logged."""
+        cm, n = self.map.costmap, self.svc.config.navigation
+        if cm is None:
+            return
+        stopped = tuple(c == 0.0 for c in self.caps)
+        limits = base_caps(pose, cm.people, self.fp, n.people, n.controller.v_max[0], stopped)
+        ahead, behind, left, right = (lim.speed for lim in limits)
+        caps = (ahead, behind, left, right)
+        tight = min(limits, key=lambda lim: lim.speed)
+        person = tight.person_id if math.isfinite(tight.speed) else ""
+        if (tuple(c == 0.0 for c in caps), person) != (stopped, self.cap_person):
+            said = ", ".join(
+                f"{w} {c:.2f}"
+                for w, c in zip(("ahead", "behind", "left", "right"), caps, strict=True)
+                if math.isfinite(c)
+            )
+            self.svc.log.info("t=%.2f s base caps for other drivers: %s", b / NS_PER_S,
+                              f"{said} m/s ({person}, {tight.distance_m:.2f} m)" if person
+                              else "none")  # fmt: skip
+        self.caps, self.cap_person = caps, person
 
     def _scan(self, b: int, pose: Pose, T_map_base: np.ndarray) -> bool:
         """The lidar's scan stamped b (at its rate) into the people layer; whether the
@@ -219,9 +249,14 @@ class NavNode:
             CmdVel(stamp_ns=b, vx=float(cmd[0]), vy=float(cmd[1]), wz=float(cmd[2]), source=NAME)
         )
         goal_id = queued or self.nav.goal_id
+        caps, person = self.caps, self.cap_person
         if out is None:
             state = "active" if queued else self.nav.state
-            self.status_pub.put(NavStatus(stamp_ns=b, goal_id=goal_id, state=state, detail=detail))
+            status = NavStatus(
+                stamp_ns=b, goal_id=goal_id, state=state, detail=detail,
+                caps_mps=caps, cap_person=person,
+            )  # fmt: skip
+            self.status_pub.put(status)
             return
         if out.new_plan is not None:
             self.path_pub.put(
@@ -240,6 +275,8 @@ class NavNode:
                 detail=out.detail,
                 progress=out.progress,
                 remaining_m=out.remaining_m,
+                caps_mps=caps,
+                cap_person=person,
             )
         )
 

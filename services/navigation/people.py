@@ -113,7 +113,7 @@ def people_limit(
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
         ways = (direction_world, *also) if direction_world else ()
         cos = max((n[0] * u[0] + n[1] * u[1] for u in ways), default=0.0)
-        if cos > 0.0:  # moving towards them: the protective separation
+        if cos > 1e-6:  # moving towards them (not along or away): the protective separation
             room = d - (RESUME_MARGIN_M if stopped else 0.0)
             v_a = allowed_speed(room, v_h, sep)
             if v_a < CREEP_MPS:
@@ -126,6 +126,29 @@ def people_limit(
         if limit.speed < best.speed or (limit.speed == best.speed and d < best.distance_m):
             best = limit
     return best
+
+
+#: The base's axes in its own frame, as `base_caps` orders them: ahead, behind, left, right.
+AXES = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
+
+
+def base_caps(
+    pose: Pose,
+    people: tuple[Person, ...] | list[Person],
+    fp: Footprint,
+    p: PeopleSettings,
+    top_mps: float,
+    stopped: tuple[bool, ...] = (False,) * 4,
+) -> tuple[SpeedLimit, ...]:
+    """`people_limit` for a translation along each of the base's axes (`AXES`): the caps
+    on whatever drives the base other than a goal (the mission's visual approach, its
+    back-off, the exploration's steps), which navigation publishes on `nav/status`.
+    `stopped`: per axis, whether its last cap was a stop (the same hysteresis)."""
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    return tuple(
+        people_limit(pose, (c * u - s * v, s * u + c * v), people, fp, p, top_mps, "", st)
+        for (u, v), st in zip(AXES, stopped, strict=True)
+    )
 
 
 def _ramp(v_cap: float, beyond_m: float, top_mps: float, decel: float) -> float:

@@ -50,6 +50,7 @@ from common.robot import HANDOVER_DISTANCE_M
 from services.mission.algorithms import Algorithms
 from services.mission.behaviours.base import Context
 from services.mission.ports import Refused, Unavailable, WristSighting
+from services.mission.robot import within_caps
 
 TICK_NS = 50_000_000
 #: Navigation fails a goal whose map has not come in 30 s (`navigation.intake.MAP_WAIT_S`).
@@ -148,6 +149,9 @@ class FakeRobot:
     cmds: list[tuple[float, float, float]] = field(default_factory=list)
     arm_holds: int = 0
     held: bool = False
+    #: Navigation's people caps (ahead, behind, left, right; None: none) and their person.
+    caps_mps: tuple[float, float, float, float] | None = None
+    cap_person: str = ""
     mode: WbcModeName = "stand"
     source: str = "navigation"
     _cmd: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -342,8 +346,9 @@ class FakeRobot:
         self.modes.append((mode, cmd_vel_source))
         self._pending_mode = (mode, cmd_vel_source)
 
-    def command_velocity(self, vx: float, vy: float, wz: float) -> None:
-        self._cmd = (vx, vy, wz)
+    def command_velocity(self, vx: float, vy: float, wz: float) -> str:
+        self._cmd, held = within_caps((vx, vy, wz), self.caps_mps)
+        return self.cap_person if held else ""
 
     def hold_arm(self, reason: str) -> None:
         self.arm_holds += 1
@@ -450,6 +455,10 @@ class StubApproach:
 
     def reset(self, t_s: float) -> None:
         self.seen = self.lost = 0
+
+    def hold(self, t_s: float) -> None:
+        """Held back (navigation's people caps): no nearer, so no arrival yet."""
+        self.seen = min(self.seen, 1)
 
     def step(self, t_s: float, seen: object | None) -> StubCommand:
         if seen is None:

@@ -260,3 +260,35 @@ def test_gains_refuse_nonsense() -> None:
         ApproachSettings(k_d=-1.0)
     with pytest.raises(ValueError, match="lost_after_s"):
         ApproachSettings(max_age_s=2.0, lost_after_s=1.0)
+
+
+def test_a_base_held_back_for_a_person_is_no_stall_and_arrives_once_let_go() -> None:
+    # A person beside the object holds the base 6 cm short (navigation's caps: ahead 0)
+    # for 12 s, longer than stall_s and than a 10 s timeout; then they walk off.
+    gains = ApproachSettings(timeout_s=10.0)
+    ctrl = ApproachController(gains)
+    plant = Plant(-1.1, 0.0, 0.0)
+    ctrl.reset(0.0)
+    frames: list[Sighting] = []
+    newest: Sighting | None = None
+    cmd = None
+    held_until, stop_x = 15.0, -(D_OPT_M + 0.06)
+    for k in range(round(40.0 / DT)):
+        t = k * DT
+        if k % round(CAMERA_PERIOD / DT) == 0:
+            frames.append(plant.sense(t))
+        while frames and frames[0].stamp_s + DELAY <= t + 1e-9:
+            newest = frames.pop(0)
+        cmd = ctrl.step(t, newest)
+        if cmd.state in ("arrived", "failed"):
+            break
+        vx = cmd.vx
+        if t < held_until and plant.pose[0] >= stop_x and vx > 0.0:
+            vx = 0.0  # what `within_caps` lets through
+            ctrl.hold(t)
+        plant.move(ApproachCommand(vx, cmd.vy, cmd.wz, cmd.state), DT)
+    assert cmd is not None and cmd.state == "arrived", cmd
+    assert not cmd.reason.startswith("blocked"), cmd.reason
+    assert t > held_until
+    e_d, _ = ctrl.errors() or (math.inf, 0.0)
+    assert abs(e_d) <= gains.tol_d_m

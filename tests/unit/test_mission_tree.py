@@ -518,3 +518,27 @@ def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_and_bloc
     assert run(tree, robot).state == "succeeded"
     assert len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]) == standoffs
     assert tree.ctx.holding is None and "bottle_1" in tree.ctx.handed
+
+
+def test_an_approach_held_back_for_a_person_says_so_waits_and_goes_on_once_let_go() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    held_ticks = 0
+    for _ in range(2000):
+        if tree.where()[0] == "approach_object" and held_ticks < 30:
+            robot.caps_mps, robot.cap_person = (0.0, 0.3, 0.3, 0.3), "person_2"
+            held_ticks += 1
+        else:
+            robot.caps_mps, robot.cap_person = None, ""
+        outcome = tree.tick()
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    assert held_ticks == 30  # held for 30 ticks, and it neither arrived nor failed then
+    decided = tree.ctx.decisions  # type: ignore[attr-defined]
+    held = [k for k, d in enumerate(decided) if "held back for person_2" in d]
+    assert held and any("no longer held back" in d for d in decided[held[0] :])
+    i = robot.modes.index(("walk", "mission"))
+    forward = [c for c in robot.cmds[i:] if c[0] > 0.0]
+    assert forward and all(c[0] == 0.2 for c in forward)  # once let go, as asked

@@ -4,7 +4,9 @@
   else the one at its mapped place, of its class or, failing that, of any artifact class)
   becomes a `Sighting` (none when older than `sighting_max_age_s`); the
   approach controller (eq. 3, with its own re-acquire: turn, back off) turns it into
-  cmd_vel, sent as source `mission` (the tree set the mode before). `arrived` → stop,
+  cmd_vel, sent as source `mission` (the tree set the mode before) within navigation's
+  people caps (a command held back for a person is said, and is no stall for the
+  controller: `ApproachController.hold`). `arrived` → stop,
   SUCCESS; `failed` → stop, `object_not_found` with the controller's reason. It never
   freezes: the controller fails by itself, and `approach_timeout_s` bounds it. Stopped
   other than by arriving, it hands the base back to navigation (mode walk/navigation).
@@ -37,12 +39,14 @@ class Approach(MissionBehaviour):
         super().__init__("approach", ctx, stage)
         self.controller: Any = None
         self.state = ""
+        self.held = ""
 
     def initialise(self) -> None:
         super().initialise()
         self.controller = self.ctx.algorithms.approacher()
         self.controller.reset(self.port.now_ns / NS_PER_S)
         self.state = ""
+        self.held = ""  # who the base is held back for (navigation's people caps)
 
     def update(self) -> Status:
         now_ns = self.port.now_ns
@@ -72,8 +76,16 @@ class Approach(MissionBehaviour):
             return self.fail(
                 "object_not_found", f"no arrival at {target.map_id} in {self.elapsed_s():.0f} s"
             )
-        self.port.command_velocity(cmd.vx, cmd.vy, cmd.wz)
+        held = self.port.command_velocity(cmd.vx, cmd.vy, cmd.wz)
+        if held:
+            self.controller.hold(now_ns / NS_PER_S)
+        if held != self.held:
+            self.ctx.decide(f"approach {target.map_id}: held back for {held}" if held else
+                            f"approach {target.map_id}: no longer held back")  # fmt: skip
+            self.held = held
         self.feedback_message = f"{cmd.state} {cmd.reason}".rstrip()
+        if held:
+            self.feedback_message += f" (held back for {held})"
         return Status.RUNNING
 
     def terminate(self, new_status: Status) -> None:
