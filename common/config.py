@@ -203,6 +203,9 @@ class LidarSettings(_Section):
     range_max_m: Positive = 10.0
     range_noise_m: NonNegative = 0.015
     dropout: Unit = 0.01
+    #: Its twin on the trunk's back (`common.robot.LIDAR_REAR_MOUNT`, on `scan_rear`):
+    #: the two fields cover all round (navigation's protective field).
+    rear: bool = True
 
 
 class DepthNoiseSettings(_Section):

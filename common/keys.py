@@ -119,6 +119,11 @@ class RobotKeys:
         return f"{self.prefix}/scan"
 
     @property
+    def scan_rear(self) -> str:
+        """The rear lidar's planar scan (`LaserScan`; `sim.sensors.lidar.rear`)."""
+        return f"{self.prefix}/scan_rear"
+
+    @property
     def command(self) -> str:
         return f"{self.prefix}/command"
 

@@ -147,6 +147,15 @@ LIDAR_MOUNT = LidarMount(
     BASE_FRAME,
     make_T(np.eye(3), (0.46, 0.0, -0.03)),
 )
+#: Its twin on the trunk's back face, facing back (behind the rear hips' rotors, which
+#: reach x = −0.44 m): between them the two 270° fields cover all round, as an industrial
+#: platform's two scanners do. The front one's ±100° left a person walking up from behind
+#: unseen (hall seed 0's shift, 132° off the heading).
+LIDAR_REAR_MOUNT = LidarMount(
+    "lidar_rear",
+    BASE_FRAME,
+    make_T(np.diag([-1.0, -1.0, 1.0]), (-0.46, 0.0, -0.03)),
+)
 
 # --- joint dynamics: dume's choices where the URDF has none -----------------------------
 # Reflected rotor inertia (kg m^2): B1 legs have geared rotors (the knee the most), which

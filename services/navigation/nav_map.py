@@ -70,7 +70,8 @@ class NavMap:
         self.now = 0
         #: The newest scan and pose (what says where nobody stands), and the people left
         #: out for it (id → why, said once).
-        self.view: ScanView | None = None
+        #: The newest scans' rays (front, rear), for where nobody stands.
+        self.views: tuple[ScanView, ...] = ()
         self.pose: Pose | None = None
         self.left_out: dict[str, str] = {}
         self.costmap: Costmap | None = None
@@ -116,7 +117,7 @@ class NavMap:
         at = np.array([[q.x, q.y]])
         if self.pose is not None and distance_to_footprint(self.pose, self.fp, at)[0] <= 0.0:
             why = "inside the robot's footprint"
-        elif self.view is not None and self.view.clear_at(q.x, q.y):
+        elif any(v.clear_at(q.x, q.y) for v in self.views):
             why = "the lidar sees free floor there"
         if why and self.left_out.get(q.id) != why:  # said once per person and reason
             self.log.info("%s at (%.2f, %.2f) left out of the people layer: %s", q.id, q.x, q.y,
@@ -140,11 +141,17 @@ class NavMap:
         return self.seen.active(b) != before
 
     def see_scan(
-        self, points: FloatArray, pose: Pose, b: int, view: ScanView | None = None
+        self,
+        points: FloatArray,
+        pose: Pose,
+        b: int,
+        views: ScanView | list[ScanView] | tuple[ScanView, ...] = (),
     ) -> bool:
-        """One lidar scan's returns (n, 2, map frame) taken at b with the robot at `pose`
-        (`view`: its rays, for where nobody stands); whether the costmap is to be rebuilt."""
-        self.view, self.pose, self.now = view, pose, b
+        """The lidars' returns (n, 2, map frame, each scan's in beam order) taken at b with
+        the robot at `pose` (`views`: their rays, for where nobody stands: a place any
+        one of them sees free); whether the costmap is to be rebuilt."""
+        self.views = (views,) if isinstance(views, ScanView) else tuple(views)
+        self.pose, self.now = pose, b
         if self.grid is None:
             return False
         self.scan.update(points, self.grid, pose, b)

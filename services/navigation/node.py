@@ -16,9 +16,10 @@ The node builds the parts from the config and the bus, runs the loop and publish
 Each tick b (multiples of `time.participants.navigation.period_s`): the odom stamped b
 (waited for: 50 Hz), put in the map with the localization due at b
 (`common.map_frame.MapFrame`; standing still while it is `lost`), the depth layer, the
-lidar's scan stamped b at the scan rate (waited for: the sim puts it just after the
-odom), the map to adopt, perception's people due by b, the cancels; until the map is in, idle
-("waiting for the map": zero cmd_vel, a queued goal `active`); else the goal due, a
+lidars' scans stamped b at the scan rate (the trunk's front one and its rear twin:
+waited for, the sim puts them just after the odom), the map to adopt, perception's
+people due by b, the cancels; until the map is in, idle ("waiting for the map": zero
+cmd_vel, a queued goal `active`); else the goal due, a
 handover goal following its person on a new map, the costmap rebuilt when a layer
 changed, `Navigator.tick` (its `clear` recovery empties the depth layer); then
 `wbc/cmd_vel` (source `navigation`) and `nav/status` stamped b, `nav/path` on a new
@@ -111,7 +112,10 @@ class NavNode:
             self.depth = DepthFeed(
                 frames, self.camera, camera_period_ns, self.fp, log, INPUT_TIMEOUT_S
             )
-        self.scans = bus.latest(keys.scan, LaserScan, history=4)
+        #: The lidars' scans: the trunk's front one, and its rear twin when the robot has it.
+        self.scans = [bus.latest(keys.scan, LaserScan, history=4)]
+        if cfg.sim.sensors.lidar.rear:
+            self.scans.append(bus.latest(keys.scan_rear, LaserScan, history=4))
         self.scan_period_ns = round(NS_PER_S / cfg.sim.sensors.lidar.rate_hz)
         cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
         # People seen by perception (the head camera), applied at their stamp + latency.
@@ -207,32 +211,38 @@ class NavNode:
         self.caps, self.cap_person = caps, person
 
     def _scan(self, b: int, pose: Pose, T_map_base: np.ndarray) -> bool:
-        """The lidar's scan stamped b (at its rate) into the people layer; whether the
-        costmap is to be rebuilt. It is waited for (lockstep: the same scans in every run)
-        while scans flow (one stamped within `SCAN_FLOWING` periods before b came); one
-        that does not come in `SCAN_WAIT_S` is said and skipped, and the tracks go stale."""
+        """The lidars' scans stamped b (at their rate) into the people layer, the front's
+        returns then the rear's; whether the costmap is to be rebuilt. Each is waited for
+        (lockstep: the same scans in every run) while its scans flow (one stamped within
+        `SCAN_FLOWING` periods before b came); one that does not come in `SCAN_WAIT_S` is
+        said and skipped, and the tracks go stale."""
         if b % self.scan_period_ns:
             return False
-        newest = self.scans.get()
-        if newest is None or newest.stamp_ns >= b - SCAN_FLOWING * self.scan_period_ns:
-            try:
-                self.scans.wait_stamp(b, SCAN_WAIT_S)
-            except WaitTimeout:
-                self.svc.log.warning("no scan for t=%.2f s: the lidar's people go stale", b / 1e9)
-        scan = self.scans.at(b)
-        if scan is None or scan.stamp_ns != b:
+        worlds, views = [], []
+        for scans in self.scans:
+            newest = scans.get()
+            if newest is None or newest.stamp_ns >= b - SCAN_FLOWING * self.scan_period_ns:
+                try:
+                    scans.wait_stamp(b, SCAN_WAIT_S)
+                except WaitTimeout:
+                    self.svc.log.warning("no %s for t=%.2f s: its people go stale",
+                                         scans.key.rsplit("/", 1)[-1], b / 1e9)  # fmt: skip
+            scan = scans.at(b)
+            if scan is None or scan.stamp_ns != b:
+                continue
+            T = np.asarray(scan.T_base_lidar).reshape(4, 4)
+            ranges = np.asarray(as_numpy(scan.ranges), dtype=float)
+            pts = scan_points(ranges, scan.angle_min, scan.angle_increment, T)
+            worlds.append(pts @ T_map_base[:2, :2].T + T_map_base[:2, 3])
+            T_map_lidar = T_map_base @ T
+            views.append(ScanView(
+                (float(T_map_lidar[0, 3]), float(T_map_lidar[1, 3])),
+                math.atan2(T_map_lidar[1, 0], T_map_lidar[0, 0]),
+                scan.angle_min, scan.angle_increment, ranges, scan.range_max,
+            ))  # fmt: skip
+        if not worlds:
             return False
-        T = np.asarray(scan.T_base_lidar).reshape(4, 4)
-        ranges = np.asarray(as_numpy(scan.ranges), dtype=float)
-        pts = scan_points(ranges, scan.angle_min, scan.angle_increment, T)
-        world = pts @ T_map_base[:2, :2].T + T_map_base[:2, 3]
-        T_map_lidar = T_map_base @ T
-        view = ScanView(
-            (float(T_map_lidar[0, 3]), float(T_map_lidar[1, 3])),
-            math.atan2(T_map_lidar[1, 0], T_map_lidar[0, 0]),
-            scan.angle_min, scan.angle_increment, ranges, scan.range_max,
-        )  # fmt: skip
-        changed = self.map.see_scan(world, pose, b, view)
+        changed = self.map.see_scan(np.vstack(worlds), pose, b, views)
         self.log.scan(b, self.map.scan.bodies, self.map.scanned)
         return changed
 

@@ -19,7 +19,8 @@ friction a turn in place bends a hip by 0.17 rad), and foot contacts mean little
 disturbance the controller must survive; `services.sim.push`).
 The state carries what the robot's sensors measure (`services.sim.sensors`): joints and
 feet as the encoders and force sensors read them, and the IMU, sampled after every step
-(the bias walks whether or not anyone reads it); `lidar.scan(data)` casts the scan.
+(the bias walks whether or not anyone reads it); `lidar.scan(data)` casts the scan
+(`lidar_rear` the rear scanner's).
 Time is exact: `time_ns = tick * 1_000_000`.
 """
 
@@ -107,6 +108,12 @@ class SimCore:
         self.imu = Imu(s.imu, self.dt, rng_for(world.seed, "imu"))
         self.joint_sensors = JointSensors(s.joints, rng_for(world.seed, "joints"))
         self.lidar = Lidar(self.model, s.lidar, rng_for(world.seed, "lidar"))
+        #: The trunk's rear scanner (None when `sim.sensors.lidar.rear` is off).
+        self.lidar_rear = (
+            Lidar(self.model, s.lidar, rng_for(world.seed, "lidar_rear"), robot.LIDAR_REAR_MOUNT)
+            if s.lidar.rear
+            else None
+        )
         self._imu_adr = mjcf.imu_sensor_addresses(self.model)
         self._measured: _Measured | None = None
         start = world.robot_start

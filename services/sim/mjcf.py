@@ -44,6 +44,7 @@ from common.robot_description import (
     IMU_FRAME,
     JOINT_NAMES,
     LIDAR_MOUNT,
+    LIDAR_REAR_MOUNT,
     MOVER_LINK,
     ROOT_JOINT,
     STATOR_LINK,
@@ -197,20 +198,21 @@ def imu_sensor_addresses(model: mujoco.MjModel) -> tuple[slice, slice]:
 
 def _add_sensors(spec: mujoco.MjSpec) -> None:
     """The IMU (MuJoCo's gyro and accelerometer at site `IMU_FRAME`, read as the step's
-    first stage computes them, noise added by `services.sim.sensors`) and the lidar's
-    site (its rays are cast by `sensors.Lidar`)."""
+    first stage computes them, noise added by `services.sim.sensors`) and the lidars'
+    sites, front and rear (their rays are cast by `sensors.Lidar`)."""
     spec.body(IMU_FRAME).add_site(name=IMU_FRAME, size=[0.01, 0, 0], group=SENSOR_SITE_GROUP)
     site = mujoco.mjtObj.mjOBJ_SITE
     for name, kind in IMU_SENSORS:
         spec.add_sensor(name=name, type=kind, objtype=site, objname=IMU_FRAME)
-    T = LIDAR_MOUNT.T_parent_lidar
-    spec.body(LIDAR_MOUNT.parent_frame).add_site(
-        name=LIDAR_MOUNT.name,
-        pos=list(T[:3, 3]),
-        quat=_wxyz(T[:3, :3]),
-        size=[0.02, 0, 0],
-        group=SENSOR_SITE_GROUP,  # not drawn: the cameras must not see it
-    )
+    for mount in (LIDAR_MOUNT, LIDAR_REAR_MOUNT):
+        T = mount.T_parent_lidar
+        spec.body(mount.parent_frame).add_site(
+            name=mount.name,
+            pos=list(T[:3, 3]),
+            quat=_wxyz(T[:3, :3]),
+            size=[0.02, 0, 0],
+            group=SENSOR_SITE_GROUP,  # not drawn: the cameras must not see it
+        )
 
 
 def _add_cameras(spec: mujoco.MjSpec) -> None:

@@ -48,7 +48,7 @@ from services.sim.cameras import CameraRig
 from services.sim.core import SimCore
 from services.sim.render_worker import RenderWorker, Shot
 from services.sim.rerun_scene import SceneLogger
-from services.sim.sensors import DepthNoise
+from services.sim.sensors import DepthNoise, Lidar
 from services.sim.sim_log import SimLogger
 
 #: The recording's body poses are logged this often, ns of sim time.
@@ -126,6 +126,7 @@ class SimOutputs:
             and "wbc" in config.time.participants
         )
         self.scan = bus.publisher(keys.scan, LaserScan, "data")
+        self.scan_rear = bus.publisher(keys.scan_rear, LaserScan, "data")
         self.world_events = bus.publisher(WORLD_EVENTS, WorldEvents, "data")
         self.people_truth = bus.publisher(WORLD_PEOPLE, PeopleTruth, "data")
         self.sim_stats = bus.publisher(keys.sim_stats, SimStats, "data")
@@ -145,7 +146,10 @@ class SimOutputs:
             DepthNoise(noise, world.seed) if noise.enabled else None,
         )  # fmt: skip
         self.lidar_period_ns = round(NS_PER_S / s.sensors.lidar.rate_hz)
-        self.T_base_lidar = tuple(robot.LIDAR_MOUNT.T_parent_lidar.ravel().tolist())
+        self.T_base_lidar = {
+            m.name: tuple(m.T_parent_lidar.ravel().tolist())
+            for m in (robot.LIDAR_MOUNT, robot.LIDAR_REAR_MOUNT)
+        }
 
     def begin(self, world: WorldDescription) -> None:
         """The recording at t = 0: the scene's geometry and the world's layout."""
@@ -173,7 +177,9 @@ class SimOutputs:
                 truth = self.core.state_truth()
                 self.state_truth.put(truth)
         if t_ns % self.lidar_period_ns == 0:
-            self.scan.put(self._scan(t_ns))
+            self.scan.put(self._scan(t_ns, self.core.lidar))
+            if self.core.lidar_rear is not None:
+                self.scan_rear.put(self._scan(t_ns, self.core.lidar_rear))
             if self.people_truth.has_subscribers():
                 self.people_truth.put(self._people(t_ns))
             if self.sim_log.enabled:
@@ -199,11 +205,11 @@ class SimOutputs:
                                    velocity=people.velocity(pid)))  # fmt: skip
         return PeopleTruth(stamp_ns=t_ns, people=out)
 
-    def _scan(self, t_ns: int) -> LaserScan:
-        lidar = self.core.lidar
+    def _scan(self, t_ns: int, lidar: Lidar) -> LaserScan:
         ranges = lidar.scan(self.core.data)
         if self.sim_log.enabled:
-            self.sim_log.scan(t_ns, lidar.angles, ranges, lidar.T_world_lidar(self.core.data))
+            T_world_lidar = lidar.T_world_lidar(self.core.data)
+            self.sim_log.scan(t_ns, lidar.angles, ranges, T_world_lidar, lidar.mount.name)
         return LaserScan(
             stamp_ns=t_ns,
             angle_min=float(lidar.angles[0]),
@@ -211,7 +217,7 @@ class SimOutputs:
             range_min=lidar.s.range_min_m,
             range_max=lidar.s.range_max_m,
             ranges=to_wire(ranges),
-            T_base_lidar=self.T_base_lidar,
+            T_base_lidar=self.T_base_lidar[lidar.mount.name],
         )
 
     def _shots(self, t_ns: int) -> list[Shot]:

@@ -8,7 +8,7 @@ service gets (the truth travels on `…_truth` keys, for evaluation).
 - `JointSensors`: absolute encoders quantise the joint angles to 2π / counts; the drives'
   velocity estimates carry white noise; the feet's force sensors carry white noise and
   report contact above a threshold.
-- `Lidar`: a planar scan cast with `mujoco.mj_multiRay` from the `lidar` site against
+- `Lidar`: a planar scan cast with `mujoco.mj_multiRay` from a lidar's site against
   every geom; beams that meet the robot itself, or nothing within range, read 0 (no
   return); the others get range noise; some are lost at random.
 - `DepthNoise`: a stereo camera's depth: σ(z) = k z², no return across depth edges
@@ -105,14 +105,22 @@ class JointSensors:
 
 
 class Lidar:
-    """The planar scanner at the model's `lidar` site: `scan(data)` → ranges (m, float32,
-    0 = no return), beam k at `angles[k]` (rad, counter-clockwise from the site's x)."""
+    """The planar scanner at a mount's site (`robot.LIDAR_MOUNT`, the trunk's front, or
+    `LIDAR_REAR_MOUNT`): `scan(data)` → ranges (m, float32, 0 = no return), beam k at
+    `angles[k]` (rad, counter-clockwise from the site's x)."""
 
-    def __init__(self, model: mujoco.MjModel, s: LidarSettings, rng: np.random.Generator):
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        s: LidarSettings,
+        rng: np.random.Generator,
+        mount: robot.LidarMount | None = None,
+    ):
         self.model, self.s, self.rng = model, s, rng
-        self.site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, robot.LIDAR_MOUNT.name)
+        self.mount = mount or robot.LIDAR_MOUNT
+        self.site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, self.mount.name)
         if self.site < 0:
-            raise KeyError(f"the model has no site {robot.LIDAR_MOUNT.name!r}")
+            raise KeyError(f"the model has no site {self.mount.name!r}")
         half = math.radians(s.fov_deg) / 2.0
         self.angles: FloatArray = np.linspace(-half, half, s.beams)
         self.angle_increment = float(self.angles[1] - self.angles[0])

@@ -119,9 +119,15 @@ class SimLogger:
         return self.enabled and self.frames.dense_logged(t_ns)
 
     def scan(
-        self, t_ns: int, angles: FloatArray, ranges: FloatArray, T_world_lidar: FloatArray
+        self,
+        t_ns: int,
+        angles: FloatArray,
+        ranges: FloatArray,
+        T_world_lidar: FloatArray,
+        lidar: str = "lidar",
     ) -> None:
-        """One scan's returns in the world, by the lidar's true pose (`SCAN_EVERY_NS`)."""
+        """One scan's returns in the world, by the lidar's true pose (`SCAN_EVERY_NS`);
+        the rear lidar's on `world/truth/scan_rear`."""
         if not self.enabled or t_ns % SCAN_EVERY_NS:
             return
         hit = ranges > 0.0
@@ -129,7 +135,8 @@ class SimLogger:
         local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
         points = local @ T_world_lidar[:3, :3].T + T_world_lidar[:3, 3]
         stamp(self.rec, t_ns)
-        self.rec.log("world/truth/scan", rr.Points3D(points, radii=0.015, colors=(255, 80, 40)))
+        path = "world/truth/scan" + lidar.removeprefix("lidar")
+        self.rec.log(path, rr.Points3D(points, radii=0.015, colors=(255, 80, 40)))
 
     def camera(self, t_ns: int, frame: CameraFrame, truth: SegmentationTruth | None) -> None:
         if not self.enabled:

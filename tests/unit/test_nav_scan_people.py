@@ -244,3 +244,20 @@ def test_beams_without_a_return_say_nothing_of_who_stands_there() -> None:
     masked = ScanView(view.origin, view.heading, view.angle_min, view.angle_increment,
                       np.zeros_like(view.ranges), view.range_max)  # fmt: skip
     assert not masked.clear_at(2.0, -1.5)
+
+
+def test_the_rear_lidar_says_who_is_gone_behind_the_robot_where_the_front_one_cannot() -> None:
+    import logging
+
+    pose = Pose(0.0, 0.0, 0.0)
+    # The rear lidar (0.46 m behind the base, facing back) sees what the front one would
+    # from the base turned round.
+    rear = _view(Pose(0.0, 0.0, math.pi), [])
+    front = _view(pose, [])
+    assert rear.origin[0] == pytest.approx(-T_BASE_LIDAR[0, 3])
+    assert not front.clear_at(-2.0, 0.5) and rear.clear_at(-2.0, 0.5)
+    for views, kept in (([front], ["person_4"]), ([front, rear], [])):
+        m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
+        m.adopt(_room(), [Person("person_4", -2.0, 0.5)], 0, 0)  # walked off behind it
+        m.see_scan(_points(pose, []), pose, 0, views)
+        assert [q.id for q in m.people] == kept

@@ -38,13 +38,14 @@ def step(core: SimCore, law: StandHold) -> None:
     core.step()
 
 
-def wall_scene() -> tuple[mujoco.MjModel, mujoco.MjData]:
-    """The robot standing at the origin facing +x, a wall's face at x = WALL_X."""
+def wall_scene(side: float = 1.0) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The robot standing at the origin facing +x, a wall's face at x = WALL_X (`side`
+    −1: at x = −WALL_X, behind it)."""
     spec = mjcf.robot_spec()
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[20, 20, 0.1])
     spec.worldbody.add_geom(
         name="wall", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.1, WALL_HALF_Y, 0.6],
-        pos=[WALL_X + 0.1, 0.0, 0.6],
+        pos=[side * (WALL_X + 0.1), 0.0, 0.6],
     )  # fmt: skip
     model = spec.compile()
     data = mujoco.MjData(model)
@@ -69,6 +70,39 @@ def test_the_ideal_lidar_measures_the_wall_and_masks_the_robot() -> None:
     # Beams far behind meet the robot's own legs: masked, no return.
     behind = np.abs(a) > math.radians(110.0)
     assert behind.any() and np.all(r[behind] == 0.0)
+
+
+def test_the_rear_lidar_measures_the_wall_behind_and_the_two_fields_cover_all_round() -> None:
+    model, data = wall_scene(side=-1.0)
+    rear = Lidar(model, ideal_sensors().lidar, rng_for(0, "lidar_rear"), robot.LIDAR_REAR_MOUNT)
+    T = rear.T_world_lidar(data)
+    assert T[0, 3] == pytest.approx(-0.46, abs=1e-6) and T[0, 0] == pytest.approx(-1.0)
+    r = rear.scan(data).astype(float)
+    a = rear.angles  # from the rear lidar's x: straight back
+    on_wall = np.abs(a) < math.atan2(WALL_HALF_Y - 0.05, WALL_X + T[0, 3])
+    np.testing.assert_allclose(r[on_wall], (WALL_X + T[0, 3]) / np.cos(a[on_wall]), atol=1e-4)
+    assert np.all(r[np.abs(a) > math.radians(110.0)] == 0.0)  # its own legs, ahead: masked
+    # Every heading round the base is in one field or the other, beyond the legs.
+    front = Lidar(model, ideal_sensors().lidar, rng_for(0, "lidar"))
+    seen = []
+    for lidar in (front, rear):
+        Tl = lidar.T_world_lidar(data)
+        heading = math.atan2(Tl[1, 0], Tl[0, 0])
+        clear = lidar.angles[~_masked(lidar, data)]  # beams past the robot's own body
+        seen.append(np.unique(np.floor(np.mod(clear + heading, math.tau) / math.radians(5.0))))
+    assert len(seen[0]) < 50  # the front one alone: 270° less its legs
+    assert len(np.union1d(*seen)) == 72  # together: every 5° sector round the robot
+
+
+def _masked(lidar: Lidar, data: mujoco.MjData) -> np.ndarray:
+    """The beams that meet the robot's own body (cast against the robot alone)."""
+    r = np.zeros(len(lidar.angles), dtype=np.int32)
+    d = np.zeros(len(lidar.angles))
+    R = data.site_xmat[lidar.site].reshape(3, 3)
+    vec = np.ascontiguousarray((R @ lidar._local).T).ravel()
+    mujoco.mj_multiRay(lidar.model, data, data.site_xpos[lidar.site].copy(), vec, None, 1, -1,
+                       r, d, None, len(lidar.angles), lidar.s.range_max_m)  # fmt: skip
+    return (r >= 0) & lidar._robot_geom[np.maximum(r, 0)]
 
 
 def test_the_lidar_noise_and_dropouts_have_their_settings_size() -> None:
