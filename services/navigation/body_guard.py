@@ -9,18 +9,25 @@ into it (50 hip and thigh contacts on pallet_3 in 45 s), the whole-body controll
 reference ran 10 cm ahead of the pinned base, and the pallet shoved the robot towards a
 standing person at 0.45 m/s while navigation commanded no translation at all.
 
-`BodyGuard(occupied, grid, fp, pose)` takes one tick's obstacles (static and short-lived:
-people have their own rules) and the base's pose. `ok(cmd)` rolls a command (vx, vy, ωz
-in the base's yaw frame, held constant) forward over `HORIZON_S` in `STEPS` poses and
-counts the footprint's points, grown by `MARGIN_M`, on occupied cells (or off the grid) at
-each; the command is fine when no pose along it has more than the pose now (free stays
-free, and a body already touching may only move off). Given the heading error a turn is
-for, the whole turn in place is checked too (`SWEEP_STEP_RAD` apart): a turn round that
-can only end with a corner in a pallet is not begun. `Follower.step` asks it of what it
-wants and, when refused, of the translation without the turn (walking along the path with
-the heading it has: the base walks sideways and backwards too), then of the turn without
-the translation; else it stands. A robot that can do none is blocked, and the navigator's
-recoveries (themselves guarded) and replans take over.
+`BodyGuard(solid, grid, fp, pose)` takes one tick's obstacles known to be there (the
+static layer's occupied cells and the short-lived layer's: `Costmap.solid`; people have
+their own rules) and the base's pose. Unknown cells, and the world beyond the grid, are
+no obstacle to it: the planner keeps the walk off them, but a body turning over floor
+nobody has seen yet hits nothing the map knows of (the depth layer sees what is there).
+Counted as obstacles, they held an exploring robot still at its first turn on the spot
+for 57 s (the small world from nothing: 20 min of wall time, three times the walk).
+
+`ok(cmd)` rolls a command (vx, vy, ωz in the base's yaw frame, held constant) forward
+over `HORIZON_S` in `STEPS` poses and counts the footprint's points, grown by `MARGIN_M`,
+on those cells at each; the command is fine when no pose along it has more than the pose
+now (free stays free, and a body already touching may only move off). Given the heading
+error a turn is for, the whole turn in place is checked too (`SWEEP_STEP_RAD` apart): a
+turn round that can only end with a corner in a pallet is not begun. `Follower.step`
+asks it of what it wants and, when refused, of the translation without the turn (walking
+along the path with the heading it has: the base walks sideways and backwards too), then
+of the turn without the translation, then of the turn the other way round; else it
+stands. A robot that can do none is blocked, and the navigator's recoveries (themselves
+guarded) and replans take over.
 """
 
 from __future__ import annotations
@@ -51,15 +58,15 @@ SWEEP_STEP_RAD = 0.1
 class BodyGuard:
     """One tick's check of commands against the obstacles; see the module docstring."""
 
-    def __init__(self, occupied: BoolGrid, grid: Grid, fp: Footprint, pose: Pose) -> None:
-        self.occupied, self.grid, self.pose = occupied, grid, pose
+    def __init__(self, solid: BoolGrid, grid: Grid, fp: Footprint, pose: Pose) -> None:
+        self.occupied, self.grid, self.pose = solid, grid, pose
         self.local = footprint_points(fp, MARGIN_M, 0.5 * grid.resolution)
         self.now = self._touching(pose.x, pose.y, pose.yaw)
 
     def _touching(self, x: float, y: float, yaw: float) -> int:
-        """How many of the footprint's points at (x, y, yaw) lie on obstacles or off the grid."""
-        return int(np.count_nonzero(footprint_hits(self.occupied, self.grid, Pose(x, y, yaw),
-                                                   self.local)))  # fmt: skip
+        """How many of the footprint's points at (x, y, yaw) lie on obstacles."""
+        hits = footprint_hits(self.occupied, self.grid, Pose(x, y, yaw), self.local, False)
+        return int(np.count_nonzero(hits))
 
     def rollout(self, cmd: NDArray[np.float64] | tuple[float, float, float]) -> list[Pose]:
         """The poses (`STEPS`, the last `HORIZON_S` ahead) the command takes the base to."""

@@ -128,8 +128,11 @@ class ObstacleLayer:
 class Costmap:
     """The combined costs with what they came from; `cost[iy, ix]` as the module says.
 
-    occupied: static ∪ short-lived obstacle cells (for footprint checks).
+    occupied: static ∪ short-lived obstacle cells (for footprint checks; the static layer
+    counts its unknown cells: the robot never walks where nobody looked).
     clearance: m from each cell to the nearest of them.
+    solid: what is known to be there, the static layer's occupied cells (not its unknown
+    ones) ∪ the short-lived ones: what a body swinging round can hit (the body guard).
     """
 
     grid: Grid
@@ -137,6 +140,7 @@ class Costmap:
     occupied: BoolGrid
     clearance: FloatGrid
     people: tuple[Person, ...]
+    solid: BoolGrid
 
     def cost_at(self, x: float, y: float) -> float:
         cell = self.grid.cell(x, y)
@@ -152,8 +156,9 @@ def build_costmap(
 ) -> Costmap:
     """Static grid + short-lived obstacle cells + people → one costmap."""
     occupied = grid.occupied if obstacles is None else (grid.occupied | obstacles)
+    solid = grid.known_occupied if obstacles is None else (grid.known_occupied | obstacles)
     dist = clearance(occupied, grid.resolution)
     cost = inflate(dist, fp, params)
     if people:
         cost = combine(cost, people_cost(grid, people, params))
-    return Costmap(grid, cost, occupied, dist, tuple(people or ()))
+    return Costmap(grid, cost, occupied, dist, tuple(people or ()), solid)

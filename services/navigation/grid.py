@@ -138,16 +138,22 @@ def footprint_free(
 
 
 def footprint_hits(
-    occupied: BoolGrid, grid: Grid, pose: Pose, local: NDArray[np.float64]
+    occupied: BoolGrid,
+    grid: Grid,
+    pose: Pose,
+    local: NDArray[np.float64],
+    off_grid: bool = True,
 ) -> NDArray[np.bool_]:
     """Per point of `local` (n, 2, the base frame: `footprint_points`) placed at `pose`:
-    whether it lies on an occupied cell or off the grid."""
+    whether it lies on an occupied cell, or off the grid (when `off_grid`)."""
     c, s = math.cos(pose.yaw), math.sin(pose.yaw)
     xy = np.empty_like(local)
     xy[:, 0] = pose.x + c * local[:, 0] - s * local[:, 1]
     xy[:, 1] = pose.y + s * local[:, 0] + c * local[:, 1]
     iy, ix, inside = grid.cells(xy)
-    hits: NDArray[np.bool_] = occupied[iy, ix] | ~inside
+    hits: NDArray[np.bool_] = occupied[iy, ix] & inside
+    if off_grid:
+        hits |= ~inside
     return hits
 
 

@@ -131,7 +131,7 @@ class NavMap:
         people = self.people if self.people_in_costmap else []
         cm = build_costmap(self.grid, self.fp, self.cost_params, self.layer.active(t_ns), people)
         # The speed rules always see every person, whether or not the plan avoids them.
-        return Costmap(cm.grid, cm.cost, cm.occupied, cm.clearance, tuple(self.people))
+        return replace(cm, people=tuple(self.people))
 
     def see(self, due: list[Detections], b: int) -> bool:
         """The head camera's people detections due by b; whether the people seen changed."""

@@ -234,7 +234,7 @@ class Navigator:
         limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
                              g.handover_id, self.limit_rule == "stop", also)  # fmt: skip
         self.limit_rule = limit.rule
-        guard = BodyGuard(cm.occupied, cm.grid, self.fp, pose)
+        guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
                      g.tol_xy, g.tol_yaw, guard)  # fmt: skip
         self.cmd = out.cmd
@@ -310,7 +310,7 @@ class Navigator:
             self.best_remaining = math.inf
             self.best_yaw_error = math.inf
             return self._out()
-        guard = BodyGuard(cm.occupied, cm.grid, self.fp, pose)
+        guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         if rec == "rotate":  # either way round, whichever the body has room for
             turns = (np.array([0.0, 0.0, w]) for w in (ROTATE_RATE, -ROTATE_RATE))
             self.cmd = next((c for c in turns if guard.ok(c)), np.zeros(3))

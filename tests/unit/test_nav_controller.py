@@ -6,6 +6,7 @@ trot at tiny rates, does not turn at all below a dead band.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -130,7 +131,7 @@ def test_a_goal_behind_the_robot_is_reached_without_any_recovery() -> None:
 def test_a_person_ahead_slows_then_stops_the_robot_short_of_them() -> None:
     person = Person("person_1", 4.0, 0.0, math.pi)
     cm = build_costmap(_open_floor(), FP, CostParams(), people=[])
-    cm = type(cm)(cm.grid, cm.cost, cm.occupied, cm.clearance, (person,))
+    cm = dataclasses.replace(cm, people=(person,))
     nav = Navigator(FP, NavigationSettings(), DT)
     nav.start(GoalSpec("g", Pose(5.5, 0.0, 0.0), 0.1, 0.1), 0)
     outs = _run(nav, Pose(0.0, 0.0, 0.0), lambda _t, _p: cm, 400)
@@ -253,7 +254,7 @@ def test_a_person_walking_across_the_path_never_finds_the_robot_inside_its_separ
         walked = min(max(t - 1.5, 0.0), 4.0)  # from (3, 2) to (3, -2), starting at 1.5 s
         moving = 1.5 <= t < 5.5
         person = Person("person_1", 3.0, 2.0 - walked, None, (0.0, -1.0) if moving else (0.0, 0.0))
-        cm = type(floor)(floor.grid, floor.cost, floor.occupied, floor.clearance, (person,))
+        cm = dataclasses.replace(floor, people=(person,))
         out = nav.tick(round(t * 1e9), pose, cm)
         rules.add(out.limit.rule)
         late.append(out.cmd)
@@ -297,7 +298,7 @@ def test_a_person_standing_in_the_way_is_waited_for_before_any_recovery() -> Non
     n = NavigationSettings()
     person = Person("person_1", FP.front + 0.5, 0.0, velocity=(0.0, 0.0))
     floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
-    cm = type(floor)(floor.grid, floor.cost, floor.occupied, floor.clearance, (person,))
+    cm = dataclasses.replace(floor, people=(person,))
     nav = Navigator(FP, n, DT)
     nav.start(GoalSpec("g", Pose(5.0, 0.0, 0.0), 0.1, 0.1), 0)
     first, said = None, set()
