@@ -129,7 +129,7 @@ USER_ALIVE = (f"{ALIVE}/**",)
 SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
     "sim": {
         "put": ("{r}/camera/*/rgbd", "{r}/camera/*/segmentation_truth", "{r}/scan",
-                "{r}/sim/stats", "{r}/state", "{r}/state_truth", "{r}/odom",
+                "{r}/scan_rear", "{r}/sim/stats", "{r}/state", "{r}/state_truth", "{r}/odom",
                 f"{ROOT}/world/clock", f"{ROOT}/world/events", f"{ROOT}/world/people"),
         "subscribe": ("{r}/ack/*", "{r}/command", "{r}/wbc/cmd_vel",
                       f"{ROOT}/world/people_command", f"{ROOT}/world/push",
@@ -160,7 +160,8 @@ SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
     "navigation": {
         "put": ("{r}/ack/navigation", "{r}/nav/path", "{r}/nav/status", "{r}/wbc/cmd_vel"),
         "subscribe": ("{r}/camera/*/rgbd", "{r}/localization", "{r}/nav/cancel", "{r}/odom",
-                      "{r}/perception/detections", "{r}/scan", f"{ROOT}/world/clock"),
+                      "{r}/perception/detections", "{r}/scan", "{r}/scan_rear",
+                      f"{ROOT}/world/clock"),
         "serve": ("{r}/nav/goal",),
         "query": (f"{ROOT}/map/artifacts/*", f"{ROOT}/map/occupancy", f"{ROOT}/map/people",
                   f"{ROOT}/map/people/*"),

@@ -116,6 +116,8 @@ class NavNode:
         self.scans = [bus.latest(keys.scan, LaserScan, history=4)]
         if cfg.sim.sensors.lidar.rear:
             self.scans.append(bus.latest(keys.scan_rear, LaserScan, history=4))
+        #: The scans none of which has come, after one wait for the first: not waited for.
+        self.scans_absent: set[int] = set()
         self.scan_period_ns = round(NS_PER_S / cfg.sim.sensors.lidar.rate_hz)
         cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
         # People seen by perception (the head camera), applied at their stamp + latency.
@@ -215,18 +217,23 @@ class NavNode:
         returns then the rear's; whether the costmap is to be rebuilt. Each is waited for
         (lockstep: the same scans in every run) while its scans flow (one stamped within
         `SCAN_FLOWING` periods before b came); one that does not come in `SCAN_WAIT_S` is
-        said and skipped, and the tracks go stale."""
+        said and skipped, and the tracks go stale. A lidar none of whose scans ever came
+        is waited for once, then not until one comes."""
         if b % self.scan_period_ns:
             return False
         worlds, views = [], []
-        for scans in self.scans:
+        for k, scans in enumerate(self.scans):
             newest = scans.get()
+            if newest is None and k in self.scans_absent:
+                continue  # never came, nor since its wait timed out: a lidar that is not there
             if newest is None or newest.stamp_ns >= b - SCAN_FLOWING * self.scan_period_ns:
                 try:
                     scans.wait_stamp(b, SCAN_WAIT_S)
                 except WaitTimeout:
                     self.svc.log.warning("no %s for t=%.2f s: its people go stale",
                                          scans.key.rsplit("/", 1)[-1], b / 1e9)  # fmt: skip
+                    if newest is None:
+                        self.scans_absent.add(k)
             scan = scans.at(b)
             if scan is None or scan.stamp_ns != b:
                 continue

@@ -144,6 +144,7 @@ def test_a_user_reaches_no_command_no_sensor_and_no_world_key() -> None:
         keys.odom,
         keys.state_truth,
         keys.scan,
+        keys.scan_rear,
         keys.nav_goal,
         keys.ack("wbc"),
         *(keys.camera_rgbd(c) for c in CAMERAS),
