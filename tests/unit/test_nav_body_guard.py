@@ -205,3 +205,32 @@ def test_unknown_floor_is_no_obstacle_to_a_turn() -> None:
         if out.state != "active":
             break
     assert out.state == "succeeded", out
+
+
+def test_an_align_with_no_room_to_turn_walks_to_the_goals_own_point_and_turns_there() -> None:
+    # A patrol's look round: the goal's point has room to turn, but the loose tolerance
+    # let the base stop 0.36 m short of it, its back 2 cm from a post: either way round a
+    # rear corner meets the post.
+    occ = np.zeros((80, 80), dtype=bool)
+    xs = -2.0 + (np.arange(80) + 0.5) * RES
+    occ[np.ix_(np.abs(xs) <= 0.05, (xs >= -0.7) & (xs <= -0.65))] = True
+    grid = Grid(occ, RES, (-2.0, -2.0))
+    cm = build_costmap(grid, FP, CostParams())
+    guard = BodyGuard(cm.solid, grid, FP, START)
+    assert guard.now == 0
+    assert not guard.ok((0.0, 0.0, 0.5), math.pi / 2)
+    assert not guard.ok((0.0, 0.0, -0.5), math.pi / 2 - math.tau)
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(0.36, 0.0, math.pi / 2), 0.4, 0.1), 0)
+    pose, cmd, said = START, np.zeros(3), []
+    for k in range(600):
+        pose = _step(pose, cmd)
+        out = nav.tick(int(k * DT * 1e9), pose, cm)
+        cmd = out.cmd
+        said.append(out.guarded)
+        assert out.recovery == "", (k, out)
+        assert footprint_free(cm.solid, grid, pose, FP, 0.0), (k, pose)
+        if out.state != "active":
+            break
+    assert out.state == "succeeded", out
+    assert said[0] == "unturned" and pose.x > 0.05  # in as far as it took to turn
