@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from common.config import REPO_ROOT
 from common.keys import WORLD_CLOCK
 from common.messages.sim import Clock, Odom
 from deploy.stack import free_port
@@ -171,40 +170,3 @@ def test_the_truth_ablation_demo_names_the_truths_entities() -> None:
     assert out.returncode == 1
     assert "seed-from-world (truth + noise: the ablation)" in out.stderr
     assert "bottle_9" in str(_last_json(out)["reason"])
-
-
-@pytest.mark.slow
-@pytest.mark.timeout(2400)  # a whole job: minutes of wall time on 2 cores
-def test_eval_runs_one_small_world_and_reports_it_judged_from_truth(tmp_path: Path) -> None:
-    out = dume(
-        "eval",
-        "--worlds",
-        "1",
-        "--world",
-        "small",
-        "--seed",
-        "0",
-        "--map",
-        "saved",
-        "--out",
-        str(tmp_path),
-        timeout=3000,
-    )
-    summary = _last_json(out)
-    assert out.returncode == 0, out.stderr[-4000:]
-    assert summary["worlds"] == 1
-    doc = json.loads((tmp_path / "results.json").read_text())
-    assert doc["settings"]["segmenter"] == "network"
-    assert doc["settings"]["locomotion"] == "dynamic"
-    assert doc["settings"]["map start"].startswith("each world's saved map in var/saved-maps/")
-    (world,) = doc["worlds"]
-    assert world["object"] == "bottle_1"  # the map's ids: the robot's own map's
-    assert (world["truth_object"], world["truth_person"]) == ("bottle_1", "person_1")
-    assert world["outcome"] == "succeeded", world
-    assert world["agree"] and world["stages_passed"][-1] == "release_object"
-    assert summary["succeeded"] == 1 and summary["success_rate"] == 1.0
-    report = (tmp_path / "report.md").read_text()
-    assert "**Success: 1/1 (100 %; 95 % interval 21-100 %, Wilson)**" in report
-    assert (tmp_path / "stage_times.png").exists() and (tmp_path / "outcomes.png").exists()
-    assert (tmp_path / "worlds" / "seed-0.png").exists()
-    assert world["logs"].startswith("var/run/") and (REPO_ROOT / world["logs"] / "sim.log").exists()

@@ -1,63 +1,65 @@
-"""The whole job, twice: the small world's bring-me succeeds, and the same seed gives the
-same run.
+"""The whole job through `dume eval`, twice: the small world's bring-me succeeds as the
+report says, and the same seed gives the same run.
 
-Each run is a fresh stack of every service in lockstep (the eval's settings: the network
-segmenter, dynamic locomotion, the map seeded from the world; recording on), the request
-handed to the mission before the sim starts (`watch_mission(start_gate=True)`). The first
-must succeed as the sim's truth sees it (the bottle in the person's hand, nothing
-dropped) through the paper's stages in order, leaving a recording; the mission's status
-timeline (every change, as published) and the base's trajectory at 10 Hz must be the
-same bit for bit in both, and so the runs' digests.
+Each run is `dume eval --worlds 1 --world small --seed 0 --map saved`, as a user types
+it: a fresh stack of every service in lockstep (the network segmenter, dynamic
+locomotion) on the world's saved map (explored from nothing, shipped in `deploy/maps/`:
+no floor plan, the pose estimated on the map's own grid), the request handed to the
+mission before the sim starts. The first, recorded, must succeed as the sim's truth
+judges it (bottle_1 in person_1's hand, nothing dropped) through the paper's stages in
+order, with its report, plots, recording and logs. The two runs' digests (`run_digest`:
+every status change as published and the base's trajectory at 10 Hz, bit for bit) must
+be the same.
 """
 
 from __future__ import annotations
 
-import argparse
+import json
 from pathlib import Path
+from typing import Any
 
-import msgspec
 import pytest
 
-from bench.eval.evaluate import SERVICES, world_overrides
-from bench.eval.judge import MissionRecord, run_digest
-from bench.eval.run import read_map, watch_mission
-from bench.eval.targets import seeded_pair
-from common.messages.mission import STAGES, MissionRequest
-from common.messages.sim import HandoverTaken, ObjectDropped
-from deploy.stack import ProcessStack
+from common.config import REPO_ROOT
+from common.messages.mission import STAGES
+from tests.conftest import dume
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
-def bring_me(tmp_path: Path, run: int) -> MissionRecord:
-    args = argparse.Namespace(world="small", walking_people=False, record=True, set=[])
-    overrides = world_overrides(args, 0, f"determinism-{run}") | {
-        "semantic_map.dir": str(tmp_path / f"map-{run}"),
-        "recording.dir": str(tmp_path / f"recordings-{run}"),
-    }
-    with ProcessStack(list(SERVICES), overrides) as s:
-        arts, people = read_map(s.bus)
-        pair = seeded_pair(arts, people, 0)
-        request = MissionRequest(request_id="same-seed", object=pair.object, person=pair.person)
-        return watch_mission(s.bus, s.keys, request, 300.0, start_gate=True)
+def eval_small_world(out: Path, *extra: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """One `dume eval` of the small world into `out`: its summary line and its world."""
+    run = dume("eval", "--worlds", "1", "--world", "small", "--seed", "0", "--map", "saved",
+               "--out", str(out), *extra, timeout=3000)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-4000:]
+    assert run.stdout.strip(), run.stderr[-3000:]
+    summary = json.loads(run.stdout.strip().splitlines()[-1])
+    (world,) = json.loads((out / "results.json").read_text())["worlds"]
+    return summary, world
 
 
 @pytest.mark.timeout(3600)  # two whole jobs: minutes of wall time each on 2 cores
-def test_the_bring_me_succeeds_and_the_same_seed_gives_the_same_run(tmp_path: Path) -> None:
-    first = bring_me(tmp_path, 1)
-    stages = list(dict.fromkeys(c.behaviour for c in first.changes if c.behaviour))
-    assert first.changes and first.changes[-1].state == "succeeded", (first.changes[-1:], stages)
-    assert stages == list(STAGES)
-    taken = [e for e in first.events if isinstance(e, HandoverTaken)]
-    assert [(e.object_id, e.person_id) for e in taken] == [("bottle_1", "person_1")]
-    assert not [e for e in first.events if isinstance(e, ObjectDropped)]
-    assert list((tmp_path / "recordings-1").glob("*/mission.rrd"))
+def test_the_bring_me_succeeds_as_the_report_says_and_the_same_seed_gives_the_same_run(
+    tmp_path: Path,
+) -> None:
+    summary, first = eval_small_world(tmp_path / "first", "--record")
+    doc = json.loads((tmp_path / "first" / "results.json").read_text())
+    assert doc["settings"]["segmenter"] == "network"
+    assert doc["settings"]["locomotion"] == "dynamic"
+    assert doc["settings"]["map start"].startswith("each world's saved map in var/saved-maps/")
+    assert summary["worlds"] == 1 and summary["succeeded"] == 1
+    assert first["object"] == "bottle_1"  # the map's ids: the robot's own map's
+    assert (first["truth_object"], first["truth_person"]) == ("bottle_1", "person_1")
+    assert first["outcome"] == "succeeded", first
+    assert first["agree"] and first["stages_passed"] == list(STAGES)
+    assert first["drops"] == 0
+    report = (tmp_path / "first" / "report.md").read_text()
+    assert "**Success: 1/1 (100 %; 95 % interval 21-100 %, Wilson)**" in report
+    for plot in ("stage_times.png", "outcomes.png", "worlds/seed-0.png"):
+        assert (tmp_path / "first" / plot).exists(), plot
+    assert first["logs"].startswith("var/run/") and (REPO_ROOT / first["logs"] / "sim.log").exists()
+    assert list((REPO_ROOT / first["recording"]).glob("mission.rrd")), first["recording"]
 
-    second = bring_me(tmp_path, 2)
-    timeline = [[msgspec.to_builtins(c) for c in r.changes] for r in (first, second)]
-    assert timeline[0] == timeline[1]
-    assert len(first.trajectory) > 100
-    n = min(len(first.trajectory), len(second.trajectory))
-    diverged = next((i for i in range(n) if first.trajectory[i] != second.trajectory[i]), None)
-    assert diverged is None, (first.trajectory[diverged], second.trajectory[diverged])
-    assert run_digest(first) == run_digest(second)
+    _, second = eval_small_world(tmp_path / "second", "--record")  # as like as can be
+    assert second["outcome"] == "succeeded"
+    assert second["digest"] == first["digest"], (first["stage_times_s"], second["stage_times_s"])
