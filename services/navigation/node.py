@@ -191,7 +191,8 @@ class NavNode:
 
     def _caps(self, b: int, pose: Pose) -> None:
         """The speed and separation monitor's caps on the base's axes for what drives it
-        without a goal (`people.base_caps`, on `nav/status`); a change is logged."""
+        without a goal (`people.base_caps`, on `nav/status`); an axis stopped or released
+        is logged (with who and how near)."""
         cm, n = self.map.costmap, self.svc.config.navigation
         if cm is None:
             return
@@ -201,7 +202,7 @@ class NavNode:
         caps = (ahead, behind, left, right)
         tight = min(limits, key=lambda lim: lim.speed)
         person = tight.person_id if math.isfinite(tight.speed) else ""
-        if (tuple(c == 0.0 for c in caps), person) != (stopped, self.cap_person):
+        if tuple(c == 0.0 for c in caps) != stopped:  # an axis stopped or released
             said = ", ".join(
                 f"{w} {c:.2f}"
                 for w, c in zip(("ahead", "behind", "left", "right"), caps, strict=True)
