@@ -215,9 +215,9 @@ class Follower:
         still to do the way it turns). Refused, in order: the translation along the path
         without the turn (aligning, inside a loose tolerance: to the goal's own point,
         where its sender made room: a patrol's viewpoint 0.36 m off could not turn), the
-        turn alone, the turn the other way round (the body is
-        longer behind than ahead: one way round may sweep a corner into a pallet where the
-        other does not), else stand. An answer other than the full command is kept
+        turn alone, the turn the other way round (the body is longer behind than ahead:
+        one way round may sweep a corner into a pallet where the other does not), else
+        stand. An answer other than the full command is kept
         `GUARD_HOLD_S` before the full command is asked again (it flipped at the tick's
         rate along a pallet's edge); one the guard refuses is dropped at once."""
         wz = float(want[2])

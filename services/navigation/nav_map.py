@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -68,9 +69,8 @@ class NavMap:
         self.built: list[Person] = []
         #: The tick being handled (what "recently seen" counts from).
         self.now = 0
-        #: The newest scan and pose (what says where nobody stands), and the people left
-        #: out for it (id → why, said once).
-        #: The newest scans' rays (front, rear), for where nobody stands.
+        #: The newest scans' rays (front, rear) and pose (what says where nobody stands),
+        #: and the people left out for it (id → why, said once).
         self.views: tuple[ScanView, ...] = ()
         self.pose: Pose | None = None
         self.left_out: dict[str, str] = {}
@@ -145,12 +145,12 @@ class NavMap:
         points: FloatArray,
         pose: Pose,
         b: int,
-        views: ScanView | list[ScanView] | tuple[ScanView, ...] = (),
+        views: Sequence[ScanView] = (),
     ) -> bool:
         """The lidars' returns (n, 2, map frame, each scan's in beam order) taken at b with
         the robot at `pose` (`views`: their rays, for where nobody stands: a place any
         one of them sees free); whether the costmap is to be rebuilt."""
-        self.views = (views,) if isinstance(views, ScanView) else tuple(views)
+        self.views = tuple(views)
         self.pose, self.now = pose, b
         if self.grid is None:
             return False

@@ -228,7 +228,7 @@ def test_the_nav_map_leaves_out_people_the_lidar_sees_gone_or_inside_the_robot()
         Person("person_3", 0.1, 0.0),  # the tracker carried them into the robot
     ]
     m.adopt(_room(), mapped, 0, 0)
-    m.see_scan(_points(pose, _person(2.0, 1.0)), pose, 0, _view(pose, _person(2.0, 1.0)))
+    m.see_scan(_points(pose, _person(2.0, 1.0)), pose, 0, [_view(pose, _person(2.0, 1.0))])
     assert [q.id for q in m.people] == ["person_2"]
     assert m.left_out == {
         "person_1": "the lidar sees free floor there",
