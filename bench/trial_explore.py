@@ -190,6 +190,7 @@ def explore_run(
         "outcome": last.state if last else "none",
         "reason": last.reason if last else record.ended,
         "detail": last.detail if last else record.ended,
+        "ended": record.ended,  # why the watch stopped early ("" when the job ended)
         "sim_s": round(sim_s, 1),
         "wall_s": round(record.wall_s, 1),
         "rtf": round(sim_s / record.wall_s, 3) if record.wall_s > 0 else None,
@@ -199,6 +200,9 @@ def explore_run(
         "travelled_m": round(job.travelled_m, 1),
         **score_map(grid, truth, map_alignment(grid, truth)),
     }
+    if out["outcome"] != "succeeded":
+        out["logs"] = str(s.run_dir)
+        out["troubles"] = s.troubles()
     if grid_out:
         cells = np.asarray(as_numpy(grid.cells), np.uint8)
         shape, res, origin = cells.shape, grid.resolution_m, grid.origin_xy

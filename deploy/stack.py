@@ -248,6 +248,20 @@ def only_started(services: Sequence[str], overrides: Overrides) -> dict[str, Any
     return {"time.participants": {n: msgspec.to_builtins(p) for n, p in kept.items()}}
 
 
+def troubles_in(log: str) -> list[str]:
+    """A service log's WARNING and ERROR lines and its tracebacks, whole."""
+    said: list[str] = []
+    in_traceback = False
+    for line in log.splitlines():
+        if line.startswith(("Traceback", "During handling")):
+            in_traceback = True
+        if (in_traceback and line) or " WARNING " in line or " ERROR " in line:
+            said.append(line)
+        if in_traceback and line and not line.startswith((" ", "Traceback", "During")):
+            in_traceback = False  # the exception's own line ends it
+    return said
+
+
 class ProcessStack(_Stack):
     """The router and some services as child processes (for tests and benchmarks).
 
@@ -308,6 +322,16 @@ class ProcessStack(_Stack):
     def log_text(self, name: str) -> str:
         path = self.run_dir / f"{name.replace('.', '_')}.log"
         return path.read_text(errors="replace") if path.exists() else ""
+
+    def troubles(self, lines: int = 12) -> dict[str, list[str]]:
+        """Each service's last `lines` WARNING/ERROR lines and traceback lines (its log's,
+        for a failed run's report: CI keeps nothing else of it); services with none left
+        out."""
+        out: dict[str, list[str]] = {}
+        for name in self.procs:
+            if said := troubles_in(self.log_text(name)):
+                out[name] = said[-lines:]
+        return out
 
     def stop(self, timeout_s: float = 5.0) -> dict[str, int | None]:
         """SIGINT everything (services first, the router last); SIGKILL what lingers."""

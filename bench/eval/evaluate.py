@@ -254,6 +254,8 @@ def run_world(args: argparse.Namespace, seed: int, seen: dict[str, set[str]]) ->
         stack.stop(timeout_s=STOP_TIMEOUT_S)
         remove_database(database_path(stack.config.semantic_map, map_name))
     result.logs = shown(stack.run_dir)
+    if not result.succeeded:
+        result.troubles = stack.troubles()
     if args.record:
         folder = run_dir(stack.config.recording, stack.run_id)
         result.recording = shown(folder)

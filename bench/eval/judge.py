@@ -148,7 +148,8 @@ class WorldResult(msgspec.Struct, kw_only=True):
     contacts_static: robot contacts with static obstacles (`contacts`: who touched what).
     drops: objects that fell (`ObjectDropped`). services_down: stack processes that had
     exited by the end of the run. recording: the run's recording folder ("" when off).
-    logs: the run's folder (its services' logs, `deploy.runs`). picture: the world from
+    logs: the run's folder (its services' logs, `deploy.runs`); troubles: a failed run's
+    warnings, errors and tracebacks from them (`ProcessStack.troubles`). picture: the world from
     above with the run on it, relative to the report (`pictures.world_picture`);
     failure_frames: the cameras around a failure, drawn from the recording (`--record`).
     digest: the run's fingerprint (`run_digest`): the same seed gives the same digest.
@@ -187,6 +188,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     services_down: list[str] = msgspec.field(default_factory=list)
     recording: str = ""
     logs: str = ""
+    troubles: dict[str, list[str]] = msgspec.field(default_factory=dict)
     picture: str = ""
     failure_frames: list[str] = msgspec.field(default_factory=list)
     error: str = ""
