@@ -191,6 +191,7 @@ def explore_run(
         "reason": last.reason if last else record.ended,
         "detail": last.detail if last else record.ended,
         "ended": record.ended,  # why the watch stopped early ("" when the job ended)
+        "watch_lapses": record.lapses,  # this client's own link, gone and back (sim s)
         "sim_s": round(sim_s, 1),
         "wall_s": round(record.wall_s, 1),
         "rtf": round(sim_s / record.wall_s, 3) if record.wall_s > 0 else None,

@@ -189,6 +189,9 @@ class WorldResult(msgspec.Struct, kw_only=True):
     recording: str = ""
     logs: str = ""
     troubles: dict[str, list[str]] = msgspec.field(default_factory=dict)
+    #: Sim times (s) at which the evaluating client's own link lapsed and the watch went
+    #: on (`bench.eval.run.OwnLink`): statuses may be missing there, the digest differ.
+    watch_lapses: list[float] = msgspec.field(default_factory=list)
     picture: str = ""
     failure_frames: list[str] = msgspec.field(default_factory=list)
     error: str = ""
@@ -239,6 +242,9 @@ class MissionRecord:
     events: list[WorldEvent] = field(default_factory=list)
     ended: str = ""
     wall_s: float = 0.0
+    #: The sim times (s) at which this watcher's own link lapsed and came back
+    #: (`bench.eval.run.OwnLink`): what it heard meanwhile may lack a status or two.
+    lapses: list[float] = field(default_factory=list)
     #: The base every `TRAJECTORY_EVERY_NS` of sim time from the request on: (stamp_ns,
     #: x, y, z, qx, qy, qz, qw) from the sim's truth (`state_truth`).
     trajectory: list[tuple[float, ...]] = field(default_factory=list)
@@ -300,6 +306,7 @@ def evaluate(result: WorldResult, record: MissionRecord, world: WorldDescription
     result.stage_times_s = {k: round(v, 3) for k, v in times.items()}
     result.sim_time_s = round(sim_s, 3)
     result.wall_time_s = round(record.wall_s, 2)
+    result.watch_lapses = list(record.lapses)
     result.rtf = round(sim_s / record.wall_s, 3) if record.wall_s > 0 else 0.0
     result.contacts_static = len(contacts)
     result.contacts = [f"{c.body}-{c.other}@{c.stamp_ns / 1e9:.1f}s" for c in contacts]

@@ -9,7 +9,12 @@ world's events and the clock, sends the request once the mission's subscriber ma
 and follows it to a final state, a sim-time timeout (then it cancels the request), a
 clock that stops, or a dependency lost: the sim or the mission going away or restarting
 (their liveliness), or the mission saying it has no request in progress after it had
-ours, end the watch at once with `dependency_lost: <who> …` (nobody waits for the dead);
+ours, end the watch with `dependency_lost: <who> …` (nobody waits for the dead). A
+token that went is first doubted (`OwnLink`): when every watched token is back and the
+clock ran on within `LAPSE_GRACE_S` of wall time, it was this watcher's own link that
+lapsed (the router cut off a client that stalled 0.5 s or outlived its 1 s lease: a
+loaded CI machine, a SIGSTOP), not the robot's: the watch goes on, the lapse kept in the
+record; a final status that comes meanwhile ends it as usual.
 `on_progress` sees every status change and every sim second. It never sleeps on wall
 time except in waits with timeouts. `sigterm_interrupts` turns
 SIGTERM into KeyboardInterrupt so that a killed demo or eval still stops its stack.
@@ -19,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import time
 from collections.abc import Callable, Iterator
 from types import FrameType
@@ -65,6 +71,47 @@ DEPENDENCY_LOST = "dependency_lost"
 START_GATE = "client"
 #: The services a watch of one request depends on: the clock's and the request's.
 WATCHED = ("sim", "mission")
+#: Wall seconds a lost token is doubted (`OwnLink`): every watched token back and the
+#: clock on within it, the watcher's own link lapsed. Well inside the fault trial's
+#: `HUNG_S` (a hung mission's loss ends a watch about 1 + 5 s after the SIGSTOP).
+LAPSE_GRACE_S = 5.0
+
+
+class OwnLink:
+    """Whose loss a lost dependency is: the service's, or this watcher's own link's.
+
+    A client whose session the router closed (it read nothing for 0.5 s, or said nothing
+    for its 1 s lease) reconnects by itself, its subscriptions and the tokens it sees
+    come back, and it counts every token as gone once (`Lifelines`): as if every
+    service had restarted. `verdict` tells them apart: "fine" (nothing lost), "doubt"
+    (lost, not yet known whose), "lapse" (every watched token is back and the clock ran
+    past where it stood at the loss: the world went on; the caller re-arms), "lost"
+    (`grace_s` of wall time went by otherwise: a service's loss). A sim restarted
+    under us starts its clock again from 0, and a mission restarted under us reports
+    our request itself, so neither passes for a lapse.
+    """
+
+    def __init__(self, grace_s: float = LAPSE_GRACE_S) -> None:
+        self.grace_s = grace_s
+        self._since: float | None = None
+        self._at_ns = 0
+        #: The sim time (ns) of each lapse the watch went on through.
+        self.lapses: list[int] = []
+
+    def verdict(self, lost: bool, now_s: float, clock_ns: int, all_back: bool) -> str:
+        """`lost`: a watched token went since the watch was armed; `now_s`: wall time
+        (monotonic); `clock_ns`: the newest clock; `all_back`: every watched token is
+        alive now."""
+        if not lost:
+            self._since = None
+            return "fine"
+        if self._since is None:
+            self._since, self._at_ns = now_s, clock_ns
+        if all_back and clock_ns > self._at_ns:
+            self.lapses.append(self._at_ns)
+            self._since = None
+            return "lapse"
+        return "lost" if now_s - self._since >= self.grace_s else "doubt"
 
 
 @contextlib.contextmanager
@@ -221,6 +268,7 @@ def _follow(
     rid = record.request.request_id
     last_second, final_ns, last_tick = -1, -1, time.monotonic()
     seen: list[MissionStatus] = []
+    link = OwnLink()
     while True:
         statuses.wait(0.1)
         forgotten = False
@@ -233,7 +281,20 @@ def _follow(
             record.events.extend(batch.events)
         poses.sample(record)
         changes = transitions(seen, rid)
-        lost = deps.lost() or (
+        gone = deps.lost()
+        c = clock.get()
+        doubt = link.verdict(gone is not None, time.monotonic(), c.stamp_ns if c else 0,
+                             not deps.missing())  # fmt: skip
+        if doubt == "lapse":
+            deps.arm()
+            record.lapses.append(link.lapses[-1] / 1e9)
+            print(f"  watch: this client's own link lapsed at t={record.lapses[-1]:.1f} s "
+                  f"({gone}); the stack went on", file=sys.stderr, flush=True)  # fmt: skip
+        elif doubt == "doubt" and changes and changes[-1].state in TERMINAL and final_ns < 0:
+            record.changes = changes  # the mission's own verdict on its loss
+            record.end_ns = max(record.end_ns, changes[-1].stamp_ns)
+            return
+        lost = (gone if doubt == "lost" else None) or (
             "mission restarted: it has no request in progress" if forgotten else None
         )
         if lost is not None and final_ns < 0:
@@ -241,10 +302,8 @@ def _follow(
             seen.extend(s for s in statuses.drain() if s.request_id == rid)
             record.changes = transitions(seen, rid)
             record.ended = f"{DEPENDENCY_LOST}: {lost}"
-            c = clock.get()
             record.end_ns = max(record.end_ns, c.stamp_ns if c else 0)
             return
-        c = clock.get()
         if c is None:
             continue
         if c.stamp_ns > record.end_ns:
