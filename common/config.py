@@ -628,8 +628,13 @@ class MissionSettings(_Section):
     arm_slow_speed: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 0.5
     #: After the grasp, the object is lifted this far straight up before stowing, m.
     lift_m: NonNegative = 0.10
-    #: The whole visual approach (the controller re-acquires and fails by itself sooner).
+    #: The whole visual approach (the controller re-acquires and fails by itself sooner),
+    #: not counting the time its commands were held back for people (the speed and
+    #: separation monitor's caps), which is bounded on its own: a person who stays in the
+    #: way is waited for `approach_held_max_s` in all, then the approach fails
+    #: `blocked_by_person`.
     approach_timeout_s: Positive = 90.0
+    approach_held_max_s: Positive = 120.0
     #: Pose estimation: stand still this long, then wait this long for a detection.
     settle_s: NonNegative = 0.5
     detection_timeout_s: Positive = 3.0

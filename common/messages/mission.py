@@ -85,6 +85,7 @@ MissionReason = Literal[
     # a mission that ran and stopped (state `failed` or `cancelled`)
     "navigation_failed",  # navigation refused the goal or did not reach it
     "object_not_found",  # approach or pose estimation could not see the object
+    "blocked_by_person",  # a person stayed in the base's way longer than it waits for them
     "grasp_pose_failed",  # no grasp possible from what was seen, or its reach stopped far short
     "arm_failed",  # an arm goal (posture, reach, release) failed or timed out
     "grasp_failed",  # the reach to the grasp, the jaw or the lift failed (re-picked first)

@@ -105,6 +105,11 @@ class ApproachController:
         self._held_at = t_s
 
     @property
+    def held_s(self) -> float:
+        """Sim seconds held back since `reset` (`hold`), in all."""
+        return self._held_s
+
+    @property
     def last_sighting(self) -> Sighting | None:
         """The newest usable sighting since `reset`."""
         return self._last

@@ -6,7 +6,8 @@
         mission (sequence)
           regrasp (Recover: grasp_lost | grasp_failed, budget repick_budget)
             fetch_and_carry (sequence)
-              next_instance (Recover: object_not_found | navigation_failed,
+              next_instance (Recover: object_not_found | navigation_failed |
+                             blocked_by_person,
                              budget max_candidates - 1, while candidates remain; then,
                              once, object_not_found: a search, when search_places)
                 find_object (sequence)
@@ -95,7 +96,7 @@ from services.mission.behaviours.search import LookElsewhere
 from services.mission.recovery import Recover
 
 REPICK_REASONS = frozenset({"grasp_lost", "grasp_failed"})
-NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed"})
+NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed", "blocked_by_person"})
 
 
 def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:

@@ -450,15 +450,19 @@ class StubApproach:
     """Arrives after 3 sightings; fails after 5 ticks without one (its re-acquire)."""
 
     def __init__(self) -> None:
-        self.seen = 0
-        self.lost = 0
+        self.reset(0.0)
 
     def reset(self, t_s: float) -> None:
         self.seen = self.lost = 0
+        self.held_s, self._held_at = 0.0, -math.inf
 
     def hold(self, t_s: float) -> None:
-        """Held back (navigation's people caps): no nearer, so no arrival yet."""
+        """Held back (navigation's people caps): no nearer, so no arrival yet; the time
+        held counted as the real controller counts it."""
         self.seen = min(self.seen, 1)
+        if 0.0 < t_s - self._held_at <= 0.5:
+            self.held_s += t_s - self._held_at
+        self._held_at = t_s
 
     def step(self, t_s: float, seen: object | None) -> StubCommand:
         if seen is None:

@@ -8,7 +8,9 @@
   people caps (a command held back for a person is said, and is no stall for the
   controller: `ApproachController.hold`). `arrived` → stop,
   SUCCESS; `failed` → stop, `object_not_found` with the controller's reason. It never
-  freezes: the controller fails by itself, and `approach_timeout_s` bounds it. Stopped
+  freezes: the controller fails by itself, and `approach_timeout_s` bounds it (the time
+  held back for people not counted: `approach_held_max_s` bounds that, then it fails
+  `blocked_by_person`, and a request by class tries the next instance). Stopped
   other than by arriving, it hands the base back to navigation (mode walk/navigation).
 - `EstimateGrasp`: standing still (`settle_s`), the first wrist detection captured after
   that → `grasp_from_detection` → ᴮH_G composed with the base pose at capture: a
@@ -71,10 +73,20 @@ class Approach(MissionBehaviour):
         if cmd.state == "failed":
             self.port.command_velocity(0.0, 0.0, 0.0)
             return self.fail("object_not_found", cmd.reason or f"{target.map_id} not acquired")
-        if self.elapsed_s() > self.settings.approach_timeout_s:
+        held_s = self.controller.held_s
+        if self.elapsed_s() - held_s > self.settings.approach_timeout_s:
+            self.port.command_velocity(0.0, 0.0, 0.0)
+            also = f" ({held_s:.0f} s more held back for people)" if held_s >= 1.0 else ""
+            return self.fail(
+                "object_not_found",
+                f"no arrival at {target.map_id} in {self.elapsed_s() - held_s:.0f} s{also}",
+            )
+        if held_s > self.settings.approach_held_max_s:
             self.port.command_velocity(0.0, 0.0, 0.0)
             return self.fail(
-                "object_not_found", f"no arrival at {target.map_id} in {self.elapsed_s():.0f} s"
+                "blocked_by_person",
+                f"{target.map_id} not reached: held back for {self.held or 'people'} "
+                f"{held_s:.0f} s in all",
             )
         held = self.port.command_velocity(cmd.vx, cmd.vy, cmd.wz)
         if held:
