@@ -520,20 +520,32 @@ def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_and_bloc
     assert tree.ctx.holding is None and "bottle_1" in tree.ctx.handed
 
 
-def test_an_approach_held_back_for_a_person_says_so_waits_and_goes_on_once_let_go() -> None:
-    robot = small_world()
-    tree = mission(robot)
+def _approach_held(
+    robot: FakeRobot,
+    tree: MissionTree,
+    held_for: int,
+    caps: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
+) -> tuple[Outcome | None, int]:
+    """Tick until the end, the base held back (`caps`) for person_2 the first `held_for`
+    ticks of the approach: the outcome, and the ticks held."""
     held_ticks = 0
-    for _ in range(2000):
-        if tree.where()[0] == "approach_object" and held_ticks < 30:
-            robot.caps_mps, robot.cap_person = (0.0, 0.3, 0.3, 0.3), "person_2"
+    for _ in range(4000):
+        if tree.where()[0] == "approach_object" and held_ticks < held_for:
+            robot.caps_mps, robot.cap_person = caps, "person_2"
             held_ticks += 1
         else:
             robot.caps_mps, robot.cap_person = None, ""
         outcome = tree.tick()
         robot.advance()
         if outcome is not None:
-            break
+            return outcome, held_ticks
+    return None, held_ticks
+
+
+def test_an_approach_held_back_for_a_person_says_so_waits_and_goes_on_once_let_go() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    outcome, held_ticks = _approach_held(robot, tree, 30, (0.0, 0.3, 0.3, 0.3))
     assert outcome is not None and outcome.state == "succeeded", outcome
     assert held_ticks == 30  # held for 30 ticks, and it neither arrived nor failed then
     decided = tree.ctx.decisions  # type: ignore[attr-defined]
@@ -544,35 +556,18 @@ def test_an_approach_held_back_for_a_person_says_so_waits_and_goes_on_once_let_g
     assert forward and all(c[0] == 0.2 for c in forward)  # once let go, as asked
 
 
-def _approach_held(robot: FakeRobot, tree: MissionTree, held_for: int) -> Outcome | None:
-    """Tick until the end, the base held back for person_2 the first `held_for` ticks of
-    the approach."""
-    held_ticks = 0
-    for _ in range(4000):
-        if tree.where()[0] == "approach_object" and held_ticks < held_for:
-            robot.caps_mps, robot.cap_person = (0.0, 0.0, 0.0, 0.0), "person_2"
-            held_ticks += 1
-        else:
-            robot.caps_mps, robot.cap_person = None, ""
-        outcome = tree.tick()
-        robot.advance()
-        if outcome is not None:
-            return outcome
-    return None
-
-
 def test_time_held_back_for_a_person_does_not_count_against_the_approachs_timeout() -> None:
     # 5 s of approach allowed (fast_settings), held 8 s (160 ticks of 50 ms), then let go
     robot = small_world()
     tree = mission(robot, settings=fast_settings(approach_held_max_s=60.0))
-    outcome = _approach_held(robot, tree, 160)
+    outcome, _ = _approach_held(robot, tree, 160)
     assert outcome is not None and outcome.state == "succeeded", outcome
 
 
 def test_a_person_who_stays_in_the_way_fails_the_approach_after_the_held_bound() -> None:
     robot = small_world()
     tree = mission(robot, settings=fast_settings(approach_held_max_s=3.0))
-    outcome = _approach_held(robot, tree, 10_000)
+    outcome, _ = _approach_held(robot, tree, 10_000)
     assert outcome is not None and (outcome.state, outcome.reason) == (
         "failed", "blocked_by_person"), outcome  # fmt: skip
     assert "bottle_1 not reached: held back for person_2 3 s in all" in outcome.detail
