@@ -68,6 +68,7 @@ def import_map(mf: MapFile, smap: SemanticMap, store: MapStore, views: ViewHisto
     smap.surfaces = smap.surfaces_before = list(mf.supports)
     for tr in tracks:
         smap.add(tr)
+    smap.forget_people_in_static()
     save_all(smap, store, {"static_source": smap.static_source})
     views.restart(smap)
     log.info("imported a map: %d entities", len(mf.entities))

@@ -161,6 +161,14 @@ class SemanticMap:
 
     # -- contents ------------------------------------------------------------------------
 
+    def forget_people_in_static(self) -> int:
+        """A sensed static layer read back: the blobs of the people the map has made
+        unknown (`Occupancy.forget_people`); how many cells."""
+        if self.static_source not in ("slam", "file"):
+            return 0
+        people = np.array([t.xy for t in self.people.tracks], float).reshape(-1, 2)
+        return self.occupancy.forget_people(people)
+
     def add(self, track: Track) -> None:
         """A known entity (prior, seed, database, import)."""
         (self.people if track.kind == "person" else self.artifacts).add(track)

@@ -94,25 +94,46 @@ class Occupancy:
         building's: unknown (nobody saw the floor they stand on)."""
         if cells.shape != self.static.shape:
             raise ValueError(f"static layer {cells.shape} does not match {self.static.shape}")
-        cells = np.array(cells, dtype=np.uint8)
-        if people is not None and len(people):
-            occupied = cells == OCCUPIED
-            blobs = occupied & ~without_blobs(occupied, PERSON_BLOB_M / self.resolution_m)
-            labels, _n = ndimage.label(blobs, structure=np.ones((3, 3), bool))
-            ix, iy, inside = self.cells_of(np.asarray(people, float))
-            reach = round(0.5 * PERSON_BLOB_M / self.resolution_m)
-            theirs: set[int] = set()
-            for x, y in zip(ix[inside], iy[inside], strict=True):
-                window = labels[
-                    max(0, y - reach) : y + reach + 1, max(0, x - reach) : x + reach + 1
-                ]
-                theirs |= set(np.unique(window[window > 0]).tolist())
-            if theirs:
-                cells[np.isin(labels, list(theirs))] = UNKNOWN
-        self.static = cells
+        self.static = self._without_people(np.array(cells, dtype=np.uint8), people)
         self.static_occupied = self.static == OCCUPIED
         self.sensed_static()
         self.version += 1
+
+    def forget_people(self, people: FloatArray) -> int:
+        """A sensed static layer read back (a saved map, a map file, a resumed database)
+        with the people the map has, (n, 2) m: their blobs become unknown, as
+        `adopt_static` makes them; how many cells. A map saved after its last SLAM grid
+        was taken kept them (the hall's shipped map: 4 of its 5 people, 46-55 cells
+        each), and there the lidar's protective field left out the legs of a person
+        standing at their place (`services.navigation.scan_people`, `static_margin_m`)."""
+        cleared = self._without_people(self.static.copy(), people)
+        n = int(np.count_nonzero(cleared != self.static))
+        if n:
+            self.static = cleared
+            self.static_occupied = self.static == OCCUPIED
+            self.version += 1
+        self.sensed_static()
+        return n
+
+    def _without_people(
+        self, cells: NDArray[np.uint8], people: FloatArray | None
+    ) -> NDArray[np.uint8]:
+        """`cells` (changed in place) with each blob (at most `PERSON_BLOB_M` across)
+        within `PERSON_BLOB_M` / 2 of a person of `people` unknown."""
+        if people is None or not len(people):
+            return cells
+        occupied = cells == OCCUPIED
+        blobs = occupied & ~without_blobs(occupied, PERSON_BLOB_M / self.resolution_m)
+        labels, _n = ndimage.label(blobs, structure=np.ones((3, 3), bool))
+        ix, iy, inside = self.cells_of(np.asarray(people, float).reshape(-1, 2))
+        reach = round(0.5 * PERSON_BLOB_M / self.resolution_m)
+        theirs: set[int] = set()
+        for x, y in zip(ix[inside], iy[inside], strict=True):
+            window = labels[max(0, y - reach) : y + reach + 1, max(0, x - reach) : x + reach + 1]
+            theirs |= set(np.unique(window[window > 0]).tolist())
+        if theirs:
+            cells[np.isin(labels, list(theirs))] = UNKNOWN
+        return cells
 
     def sensed_static(self) -> None:
         """The static layer is a sensor's map (the SLAM's, a map file's), not a floor plan:

@@ -126,6 +126,7 @@ def open_map(
     smap.surfaces = smap.surfaces_before = surfaces
     for tr in tracks:
         smap.add(tr)
+    smap.forget_people_in_static()
     smap.site = site
     save_all(smap, store, {"start": s.start, "static_source": source})
     return smap, f"new map {store.path.name} of {site!r} from {s.start}: {len(tracks)} entities"
@@ -181,8 +182,7 @@ def _resume(
     smap.stamp_ns = int(snap.meta.get("stamp_ns", "0"))
     smap.static_source = _static_source(snap.meta.get("static_source", "none"))
     smap.surfaces = smap.surfaces_before = _SURFACES.decode(snap.meta.get("supports", "[]"))
-    if smap.static_source in ("slam", "file"):
-        occ.sensed_static()
+    smap.forget_people_in_static()  # a sensed layer's: `furniture`, `beside_static` too
     smap.site = site or snap.meta.get("site", "")
     if site and not snap.meta.get("site"):
         store.commit(meta={"site": site})  # from before sites were kept: it is this one's now

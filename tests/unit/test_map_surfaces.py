@@ -187,3 +187,58 @@ def test_a_mapped_person_standing_leaves_no_obstacle_in_the_lidar_map() -> None:
     assert (occ.static[40:48, 40:48] == 255).all()
     assert (occ.static[10:16, 10:16] == 100).all()
     assert (occ.static[40:48, 50:80] == 100).all()
+
+
+def _person_blob_map(s: SemanticMapSettings) -> SemanticMap:
+    """A SLAM map (as saved after its last grid was taken) holding a standing person's
+    blob at x, y 0.0-0.4 with that person mapped there, a pillar's blob and a bench."""
+    from services.semantic_map.entities import Track
+
+    occ = Occupancy.unknown(s.grid_half_extent_m, RES)
+    static = np.zeros(occ.static.shape, np.uint8)
+    c = round(s.grid_half_extent_m / RES)  # the cell of x, y = 0
+    static[c : c + 8, c : c + 8] = 100  # the person's blob
+    static[c - 30 : c - 24, c - 30 : c - 24] = 100  # a pillar 1.5 m off
+    static[c : c + 8, c + 10 : c + 40] = 100  # a bench from x 0.5, 1.5 m long
+    occ.static[:] = static
+    occ.static_occupied = static == 100
+    smap = SemanticMap(s, occ, {})
+    smap.static_source = "slam"
+    smap.add(Track(class_name="person", kind="person", xy=np.array([0.2, 0.2]),
+                   cov=np.eye(2) * 1e-2, z=0.0, source="perception", id="person_1"))  # fmt: skip
+    return smap
+
+
+def test_a_saved_lidar_map_read_back_leaves_out_the_blob_of_a_person_it_has(
+    tmp_path: Path,
+) -> None:
+    """Resumed from its database, or started from its file, the map's static layer has the
+    person's blob unknown (the lidar's protective field then sees their legs there), the
+    pillar and the bench as they were."""
+    s = SemanticMapSettings(floor_plan="none", grid_half_extent_m=2.0)
+    c = round(2.0 / RES)
+    store = MapStore(tmp_path / "m.sqlite")
+    save_all(_person_blob_map(s), store, {"start": "empty", "static_source": "slam"})
+    store.close()
+    write_map_file(tmp_path / "saved.json", export_map(_person_blob_map(s)))
+    prior = msgspec.structs.replace(s, start="prior", prior_file=str(tmp_path / "saved.json"))
+    for how, got in (
+        ("resumed", open_map(s, MapStore(tmp_path / "m.sqlite"), lambda: None)[0]),
+        ("from its file", open_map(prior, MapStore(tmp_path / "p.sqlite"), lambda: None)[0]),
+    ):
+        static = got.occupancy.static
+        assert (static[c : c + 8, c : c + 8] == 255).all(), how
+        assert (static[c - 30 : c - 24, c - 30 : c - 24] == 100).all(), how
+        assert (static[c : c + 8, c + 10 : c + 40] == 100).all(), how
+        assert not got.occupancy.furniture[c : c + 8, c : c + 8].any(), how
+        assert got.occupancy.furniture[c : c + 8, c + 10 : c + 40].all(), how
+
+
+def test_forgetting_people_changes_nothing_where_nobody_is_mapped() -> None:
+    s = SemanticMapSettings(floor_plan="none", grid_half_extent_m=2.0)
+    smap = _person_blob_map(s)
+    before, version = smap.occupancy.static.copy(), smap.occupancy.version
+    assert smap.occupancy.forget_people(np.array([[-1.0, 1.0]])) == 0
+    assert np.array_equal(smap.occupancy.static, before) and smap.occupancy.version == version
+    assert smap.occupancy.forget_people(np.array([[0.25, 0.1]])) == 64
+    assert smap.occupancy.version == version + 1
