@@ -42,6 +42,7 @@ from services.navigation.grid import (
     Footprint,
     Grid,
     Pose,
+    distance_to_footprint,
     footprint_hits,
     footprint_points,
 )
@@ -96,3 +97,44 @@ class BodyGuard:
             yaws = self.pose.yaw + np.linspace(turn_rad / n, turn_rad, n)
             poses += [Pose(self.pose.x, self.pose.y, float(y)) for y in yaws]
         return all(self._touching(p.x, p.y, p.yaw) <= self.now for p in poses)
+
+
+def what_is_near(
+    solid: BoolGrid, static: BoolGrid, grid: Grid, fp: Footprint, pose: Pose, within_m: float = 0.1
+) -> str:
+    """The guard's obstacles within `within_m` of the footprint at `pose`, for a person
+    reading why it refused: how many cells, of which layer (`static`: the map's; the
+    rest of `solid` the short-lived depth layer's), and where the nearest lies in the
+    base's frame. Only when the guard's answer changes (a window of the grid round the
+    base, not the whole of it)."""
+    reach = max(fp.front, fp.back, fp.half_width) + within_m + grid.resolution
+    centre = grid.cell(pose.x, pose.y)
+    if centre is None:
+        return "the base is off the map"
+    n = math.ceil(reach / grid.resolution)
+    iy0, ix0 = max(0, centre[0] - n), max(0, centre[1] - n)
+    window = solid[iy0 : centre[0] + n + 1, ix0 : centre[1] + n + 1]
+    iy, ix = np.nonzero(window)
+    if not len(iy):
+        return f"nothing within {within_m:.2f} m"
+    iy, ix = iy + iy0, ix + ix0
+    xy = np.column_stack(
+        [
+            grid.origin[0] + (ix + 0.5) * grid.resolution,
+            grid.origin[1] + (iy + 0.5) * grid.resolution,
+        ]
+    )
+    d = distance_to_footprint(pose, fp, xy)
+    near = d <= within_m
+    if not near.any():
+        return f"nothing within {within_m:.2f} m"
+    mapped = int(np.count_nonzero(static[iy[near], ix[near]]))
+    k = int(np.argmin(d))
+    c, sn = math.cos(pose.yaw), math.sin(pose.yaw)
+    dx, dy = xy[k, 0] - pose.x, xy[k, 1] - pose.y
+    ahead, left = c * dx + sn * dy, -sn * dx + c * dy
+    return (
+        f"{int(near.sum())} cells within {within_m:.2f} m ({mapped} the map's, "
+        f"{int(near.sum()) - mapped} the depth's), the nearest {d[k]:.2f} m off at "
+        f"{ahead:+.2f} m ahead, {left:+.2f} m left"
+    )

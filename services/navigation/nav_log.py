@@ -22,6 +22,7 @@ import numpy as np
 import rerun as rr
 
 from common.recording import is_recording, stamp
+from services.navigation.body_guard import what_is_near
 from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import Pose
 from services.navigation.scan_people import Body
@@ -99,8 +100,9 @@ class NavLogger:
             self.rule = rule
         if out.guarded != self.guarded:
             if out.guarded:
+                near = what_is_near(cm.solid, cm.grid.known_occupied, cm.grid, nav.fp, pose)
                 self.log.info("t=%.2f s body guard: %s (the command would sweep the body onto "
-                              "an obstacle)", t, out.guarded)  # fmt: skip
+                              "an obstacle; %s)", t, out.guarded, near)  # fmt: skip
             else:
                 self.log.info("t=%.2f s body guard released", t)
             self.guarded = out.guarded

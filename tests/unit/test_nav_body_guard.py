@@ -234,3 +234,25 @@ def test_an_align_with_no_room_to_turn_walks_to_the_goals_own_point_and_turns_th
             break
     assert out.state == "succeeded", out
     assert said[0] == "unturned" and pose.x > 0.05  # in as far as it took to turn
+
+
+def test_what_is_near_says_how_many_cells_of_which_layer_and_where_the_nearest_is() -> None:
+    import re
+
+    from services.navigation.body_guard import what_is_near
+
+    static = GRID.occupied  # the block 0.16 m beside the body's left side at START
+    assert what_is_near(static, static, GRID, FP, START) == "nothing within 0.10 m"
+    solid = static.copy()
+    cell = GRID.cell(0.53, 0.03)  # a depth cell just beyond the body's front
+    assert cell is not None
+    solid[cell] = True
+    said = what_is_near(solid, static, GRID, FP, START)
+    assert said.startswith("1 cells within 0.10 m (0 the map's, 1 the depth's)"), said
+    ahead, left = (float(v) for v in re.findall(r"([+-]\d\.\d\d) m (?:ahead|left)", said))
+    assert abs(ahead - 0.525) < 0.006 and abs(left - 0.025) < 0.006, said
+    moved = what_is_near(solid, static, GRID, FP, Pose(0.0, 0.1, 0.0))  # 6 cm from the block
+    mapped, depth = (
+        int(v) for v in re.findall(r"\((\d+) the map's, (\d+) the depth's\)", moved)[0]
+    )
+    assert mapped > 0 and depth == 1, moved
