@@ -89,11 +89,13 @@ class NavLogger:
         rule = out.limit.rule
         if rule != self.rule:
             if rule:
+                who = next((q for q in cm.people if q.id == out.limit.person_id), None)
                 self.log.info(
-                    "t=%.2f s speed rule %s: %s at %.2f m from the footprint (protective "
+                    "t=%.2f s speed rule %s: %s%s at %.2f m from the footprint (protective "
                     "separation at rest %.2f m), cap %.2f m/s",
-                    t, rule, out.limit.person_id, out.limit.distance_m, out.limit.protective_m,
-                    out.limit.speed,
+                    t, rule, out.limit.person_id,
+                    f" at ({who.x:.2f}, {who.y:.2f})" if who is not None else "",
+                    out.limit.distance_m, out.limit.protective_m, out.limit.speed,
                 )  # fmt: skip
             else:
                 self.log.info("t=%.2f s speed rule %s released", t, self.rule)

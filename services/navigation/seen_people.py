@@ -7,7 +7,10 @@ in front of the person's centre, so distances err on the safe side; at least
 `min_height_m` of points tall, a person's size), each for `ttl_s` of sim time after it
 was last seen, and `merge` puts them over the map's people: a map person with a seen
 person's id (perception associated the detection with it), or within `same_m` of a
-seen one, is that person, seen now: the seen position wins.
+seen one, is that person, seen now: the seen position wins. A sighting perception gave
+no id takes the map person's within `named_m` (hall seed 5: the camera's `seen_5`
+replaced person_3, the handover's own person, in the layer, and the handover stood
+14 s under the bystanders' stop rule 0.99 m from them, then failed blocked).
 
 A person cannot stand inside a machine: a detection whose floor point lies within
 `obstacle_margin_m` of a cell the map's grid knows to be occupied (unknown cells do
@@ -45,6 +48,8 @@ class SeenParams:
     #: while it walks round them (the map may have lost them meanwhile).
     ttl_s: float = 30.0
     same_m: float = 1.0
+    #: m: a sighting without a map id this close to a map person takes their id (`merge`).
+    named_m: float = 0.6
     min_score: float = 0.5
     #: m, the least height of a detection's points for a person (a head camera sees a
     #: person close by from the floor up; a short blob is something else, e.g. the arm).
@@ -64,6 +69,8 @@ class SeenPeople:
         self._seen: list[tuple[int, Person]] = []
         self._tracks: dict[str, list[tuple[int, float, float]]] = {}
         self._count = 0
+        #: The map ids the last `merge` gave sightings without one (`_named`).
+        self._names: dict[str, str] = {}
 
     def update(self, dets: Detections, grid: Grid | None = None) -> None:
         """Replace what the camera showed before with what this frame shows (people
@@ -116,8 +123,9 @@ class SeenPeople:
         return Person(pid, x, y, None, fitted_velocity(points, self.p.velocity_min_span_s))
 
     def seen_since(self, t_ns: int) -> set[str]:
-        """The ids of the people detected at or after `t_ns`."""
-        return {q.id for t, q in self._seen if t >= t_ns}
+        """The ids of the people detected at or after `t_ns` (as the last `merge` named
+        them)."""
+        return {self._names.get(q.id, q.id) for t, q in self._seen if t >= t_ns}
 
     def active(self, t_ns: int) -> list[Person]:
         ttl = round(self.p.ttl_s * NS_PER_S)
@@ -125,7 +133,7 @@ class SeenPeople:
         return [q for _, q in self._seen]
 
     def merge(self, mapped: list[Person], t_ns: int) -> list[Person]:
-        seen = self.active(t_ns)
+        seen = self._named(self.active(t_ns), mapped)
         by_id = {m.id: m for m in mapped}
         # A person seen too briefly for a velocity of their own keeps the map's (its
         # tracker's, over their earlier sightings).
@@ -140,6 +148,27 @@ class SeenPeople:
                 continue  # seen now, wherever the map last had them
             if all(math.hypot(m.x - s.x, m.y - s.y) > self.p.same_m for s in seen):
                 out.append(m)
+        return out
+
+    def _named(self, seen: list[Person], mapped: list[Person]) -> list[Person]:
+        """A sighting perception gave no map id (`seen_<k>`) within `named_m` of a map
+        person no sighting names is that person, under their id (nearest pairs first,
+        each once): the id is who they are to the rules (a handover's person is kept
+        apart from the bystanders by it); the map's position is dropped either way."""
+        named = {q.id for q in seen}
+        pairs = sorted(
+            (d, i, m.id)
+            for i, q in enumerate(seen) if q.id.startswith("seen_")
+            for m in mapped if m.id not in named
+            if (d := math.hypot(m.x - q.x, m.y - q.y)) <= self.p.named_m
+        )  # fmt: skip
+        out, taken = list(seen), set()
+        self._names = {}
+        for _d, i, mid in pairs:
+            if out[i].id.startswith("seen_") and mid not in taken:
+                self._names[out[i].id] = mid
+                out[i] = replace(out[i], id=mid)
+                taken.add(mid)
         return out
 
 

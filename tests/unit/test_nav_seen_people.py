@@ -122,3 +122,26 @@ def test_a_velocity_is_a_least_squares_slope() -> None:
     assert v is not None and v == pytest.approx((0.5, -0.2))
     assert fitted_velocity(pts[:2], 0.05) is None  # two points are no fit
     assert fitted_velocity(pts[:3], 0.25) is None  # 0.2 s: too short
+
+
+def test_a_sighting_without_a_map_id_beside_a_map_person_is_that_person_under_their_id() -> None:
+    """Hall seed 5: the camera saw the handover's person with no map id: `seen_5` took
+    their place in the layer under its own id, and the handover's rules, which go by id,
+    no longer knew them. Within `named_m` the map's id is theirs, the nearest first; a
+    sighting farther off, or a second one by the same map person, keeps its own."""
+    seen = SeenPeople()
+    seen.update(_frame(0, _det("person", 1.75, -1.95), _det("person", 4.0, 4.0),
+                       _det("person", 2.1, -2.5)))  # fmt: skip
+    mapped = [Person("person_3", 1.89, -2.03), Person("person_1", 6.0, 6.0)]
+    merged = seen.merge(mapped, 0)
+    got = sorted((p.id, p.x, p.y) for p in merged)
+    assert got == [("person_1", 6.0, 6.0), ("person_3", 1.75, -1.95), ("seen_2", 4.0, 4.0),
+                   ("seen_3", 2.1, -2.5)]  # fmt: skip
+    assert seen.seen_since(0) == {"person_3", "seen_2", "seen_3"}  # as the layer names them
+
+
+def test_a_map_person_a_sighting_already_names_gives_no_second_sighting_their_id() -> None:
+    seen = SeenPeople()
+    seen.update(_frame(0, _det("person", 1.9, -2.0, map_id="person_3"), _det("person", 1.5, -2.2)))
+    merged = seen.merge([Person("person_3", 1.89, -2.03)], 0)
+    assert sorted(p.id for p in merged) == ["person_3", "seen_1"]
