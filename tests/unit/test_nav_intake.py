@@ -4,6 +4,7 @@ first tick with one or failed after `MAP_WAIT_S`; cancels; goals as of their tic
 from __future__ import annotations
 
 import logging
+import math
 import threading
 
 import numpy as np
@@ -226,3 +227,20 @@ def test_a_handover_goal_follows_its_person_once_the_map_has_them_elsewhere() ->
     # Somebody else moving changes nothing.
     rig.intake.follow_person(4 * PERIOD, cm, rig.pose, [Person("person_2", 3.0, 3.0)])
     assert rig.nav.goal == moved
+
+
+def test_a_handover_goal_faces_its_person_within_a_few_centimetres_sideways() -> None:
+    """Hall seed 7: the goal's 0.1 rad let the person stand 0.13 m to the side at 1.37 m;
+    the mission's handover check (0.12 m) failed and the goal once more was already
+    there. A handover's yaw tolerance keeps them within `HANDOVER_SIDEWAYS_M`."""
+    from common import robot
+    from services.navigation.intake import HANDOVER_SIDEWAYS_M
+
+    cm = _costmap()
+    rig = _Rig(costmap=cm)
+    rig.goal(PersonHandover(person_id="person_1"))
+    rig.intake.start_due(PERIOD, cm, rig.pose, 0)
+    goal = rig.nav.goal
+    assert goal is not None and goal.tol_yaw < 0.1
+    sideways = robot.HANDOVER_DISTANCE_M * math.tan(goal.tol_yaw)
+    assert sideways == pytest.approx(HANDOVER_SIDEWAYS_M, abs=1e-9)
