@@ -25,9 +25,11 @@ error a turn is for, the whole turn in place is checked too (`SWEEP_STEP_RAD` ap
 turn round that can only end with a corner in a pallet is not begun. `Follower.step`
 asks it of what it wants and, when refused, of the translation without the turn (walking
 along the path with the heading it has: the base walks sideways and backwards too), then
-of the turn without the translation, then of the turn the other way round; else it
-stands. A robot that can do none is blocked, and the navigator's recoveries (themselves
-guarded) and replans take over.
+of the turn without the translation, then of the turn the other way round, then, with
+the body touching already, of a step straight away from where it touches (hall seed 5:
+walked 2-3 cm along a bench, every turn and the walk on refused, it stood until the
+goal failed); else it stands. A robot that can do none is blocked, and the navigator's
+recoveries (themselves guarded) and replans take over.
 """
 
 from __future__ import annotations
@@ -63,6 +65,17 @@ class BodyGuard:
         self.occupied, self.grid, self.pose = solid, grid, pose
         self.local = footprint_points(fp, MARGIN_M, 0.5 * grid.resolution)
         self.now = self._touching(pose.x, pose.y, pose.yaw)
+
+    def away(self) -> tuple[float, float] | None:
+        """The unit direction (base frame) away from where the body touches now: from
+        the mean of its points on obstacles towards the base; None when it touches
+        nothing (or is pressed on all sides alike)."""
+        if not self.now:
+            return None
+        hits = footprint_hits(self.occupied, self.grid, self.pose, self.local, False)
+        u, v = self.local[np.asarray(hits, bool)].mean(axis=0)
+        norm = math.hypot(u, v)
+        return None if norm < 1e-6 else (float(-u / norm), float(-v / norm))
 
     def _touching(self, x: float, y: float, yaw: float) -> int:
         """How many of the footprint's points at (x, y, yaw) lie on obstacles."""

@@ -57,6 +57,7 @@ CRAB_MPS = 0.2  # m/s, the most while walking on unturned (sideways, backwards: 
 CRAB_AHEAD_RAD = 0.3  # rad off the heading within which unturned is not "crab"
 GUARD_HOLD_S = 0.5  # s a body guard's answer other than the full command is kept
 CENTRE_M = 0.03  # m from the goal's point beyond which an align the guard refuses walks in
+STEP_CLEAR_MPS = 0.1  # m/s, a body touching an obstacle steps away from it (the guard's last)
 
 
 class FollowOutput(NamedTuple):
@@ -74,7 +75,8 @@ class FollowOutput(NamedTuple):
     #: aligning), signed the way it turns (the long way when the guard turned it so).
     yaw_error: float = 0.0
     #: What the body guard made of a refused command: "" (none refused), "unturned"
-    #: (the translation without the turn), "turn only", "the other way round" or "stand".
+    #: (the translation without the turn), "turn only", "the other way round", "step
+    #: clear" (away from where the body touches) or "stand".
     guarded: str = ""
 
 
@@ -216,12 +218,14 @@ class Follower:
         without the turn (aligning, inside a loose tolerance: to the goal's own point,
         where its sender made room: a patrol's viewpoint 0.36 m off could not turn), the
         turn alone, the turn the other way round (the body is longer behind than ahead:
-        one way round may sweep a corner into a pallet where the other does not), else
-        stand. An answer other than the full command is kept
-        `GUARD_HOLD_S` before the full command is asked again (it flipped at the tick's
-        rate along a pallet's edge); one the guard refuses is dropped at once."""
+        one way round may sweep a corner into a pallet where the other does not), a step
+        away from where the body touches (only while it does), else stand. An answer
+        other than the full command is kept `GUARD_HOLD_S` before the full command is
+        asked again (it flipped at the tick's rate along a pallet's edge); one the guard
+        refuses is dropped at once."""
         wz = float(want[2])
         other = -math.copysign(max(abs(wz), MIN_TURN_RATE), yaw_err)
+        away = guard.away()
         ways: dict[str, tuple[Vec3, float]] = {
             "": (want, yaw_err),
             "unturned": (np.array([*crab, 0.0]), yaw_err),
@@ -229,6 +233,12 @@ class Follower:
             "the other way round": (
                 np.array([0.0, 0.0, other if abs(yaw_err) > 1e-3 else 0.0]),
                 yaw_err - math.copysign(math.tau, yaw_err),
+            ),
+            "step clear": (
+                np.array([STEP_CLEAR_MPS * away[0], STEP_CLEAR_MPS * away[1], 0.0])
+                if away is not None
+                else np.zeros(3),
+                yaw_err,
             ),
         }
         self.hold_s = max(0.0, self.hold_s - dt)

@@ -256,3 +256,37 @@ def test_what_is_near_says_how_many_cells_of_which_layer_and_where_the_nearest_i
         int(v) for v in re.findall(r"\((\d+) the map's, (\d+) the depth's\)", moved)[0]
     )
     assert mapped > 0 and depth == 1, moved
+
+
+def _bench_on_the_right() -> Grid:
+    """A bench along the body's right side from x −1.5 to 1.5, its face 1 cm beyond the
+    side at START (inside the guard's 2 cm margin: the body touches it)."""
+    occ = np.zeros((int(6.0 / RES), int(6.0 / RES)), dtype=bool)
+    xs = ORIGIN[0] + (np.arange(occ.shape[1]) + 0.5) * RES
+    ys = ORIGIN[1] + (np.arange(occ.shape[0]) + 0.5) * RES
+    face = -(FP.half_width + 0.01)
+    occ[(ys[:, None] <= face - 0.5 * RES) & (ys[:, None] >= face - 0.6)
+        & (np.abs(xs[None, :]) <= 1.5)] = True  # fmt: skip
+    return Grid(occ, RES, ORIGIN)
+
+
+def test_a_body_touching_a_bench_with_no_turn_either_way_steps_clear_of_it() -> None:
+    """Hall seed 5: 2-3 cm along a bench, a turn either way sweeps a corner into it and
+    there is no walk on: the guard stood until the goal failed. It steps away from the
+    bench instead, until the body is clear of it."""
+    grid = _bench_on_the_right()
+    cm = build_costmap(grid, FP, CostParams())
+    guard = BodyGuard(cm.solid, grid, FP, START)
+    assert guard.now > 0
+    assert not guard.ok((0.0, 0.0, -0.5), -1.0) and not guard.ok((0.0, 0.0, 0.5), 2 * math.pi - 1.0)
+    away = guard.away()
+    assert away is not None and away[1] > 0.95  # to the left, off the bench
+    f = Follower(_west(), ControllerSettings())
+    label, cmd, _turn = f._guarded(guard, np.array([0.0, 0.0, -0.5]), (0.0, 0.0), -1.0, DT)
+    assert label == "step clear" and abs(cmd[0]) < 0.03 and cmd[1] > 0.09 and cmd[2] == 0.0
+    pose = START
+    for _ in range(30):  # 1.5 s at 0.1 m/s: 15 cm to the left
+        pose = _step(pose, cmd)
+    clear = BodyGuard(cm.solid, grid, FP, pose)
+    assert clear.now == 0 and clear.away() is None
+    assert BodyGuard(cm.solid, grid, FP, START).now > 0  # it was the step that cleared it
