@@ -25,11 +25,11 @@ error a turn is for, the whole turn in place is checked too (`SWEEP_STEP_RAD` ap
 turn round that can only end with a corner in a pallet is not begun. `Follower.step`
 asks it of what it wants and, when refused, of the translation without the turn (walking
 along the path with the heading it has: the base walks sideways and backwards too), then
-of the turn without the translation, then of the turn the other way round, then, with
-the body touching already, of a step straight away from where it touches (hall seed 5:
-walked 2-3 cm along a bench, every turn and the walk on refused, it stood until the
-goal failed); else it stands. A robot that can do none is blocked, and the navigator's
-recoveries (themselves guarded) and replans take over.
+of the turn without the translation, then of the turn the other way round, then of a
+step straight away from where the body touches, or from the nearest obstacle within
+`ROOM_M` (hall seed 5: walked 2-3 cm along a bench, every turn and the walk on refused,
+it stood until the goal failed); else it stands. A robot that can do none is blocked,
+and the navigator's recoveries (themselves guarded) and replans take over.
 """
 
 from __future__ import annotations
@@ -56,24 +56,38 @@ STEPS = 5
 MARGIN_M = 0.02
 #: rad between the headings checked along a whole turn.
 SWEEP_STEP_RAD = 0.1
+#: m: the room a turn in place needs beside the body (its rear corner swings 0.67 m from
+#: the base, the side is 0.24 m off it): an obstacle this near is stepped away from when
+#: nothing else is let through (`away`).
+ROOM_M = 0.45
 
 
 class BodyGuard:
     """One tick's check of commands against the obstacles; see the module docstring."""
 
     def __init__(self, solid: BoolGrid, grid: Grid, fp: Footprint, pose: Pose) -> None:
-        self.occupied, self.grid, self.pose = solid, grid, pose
+        self.occupied, self.grid, self.pose, self.fp = solid, grid, pose, fp
         self.local = footprint_points(fp, MARGIN_M, 0.5 * grid.resolution)
         self.now = self._touching(pose.x, pose.y, pose.yaw)
 
-    def away(self) -> tuple[float, float] | None:
-        """The unit direction (base frame) away from where the body touches now: from
-        the mean of its points on obstacles towards the base; None when it touches
-        nothing (or is pressed on all sides alike)."""
-        if not self.now:
-            return None
-        hits = footprint_hits(self.occupied, self.grid, self.pose, self.local, False)
-        u, v = self.local[np.asarray(hits, bool)].mean(axis=0)
+    def away(self, room_m: float = ROOM_M) -> tuple[float, float] | None:
+        """The unit direction (base frame) away from the obstacle that keeps the body from
+        turning: where it touches now (from the mean of its points on obstacles towards
+        the base), else the nearest within `room_m` of the footprint (from the middle of
+        its nearest face towards the base origin); None when there is none, or it presses
+        on all sides alike."""
+        if self.now:
+            hits = footprint_hits(self.occupied, self.grid, self.pose, self.local, False)
+            u, v = self.local[np.asarray(hits, bool)].mean(axis=0)
+        else:
+            near = _near_cells(self.occupied, self.grid, self.fp, self.pose, room_m)
+            if near is None:
+                return None
+            xy, d = near
+            face = xy[d <= d.min() + self.grid.resolution].mean(axis=0)  # the nearest face
+            c, s = math.cos(self.pose.yaw), math.sin(self.pose.yaw)
+            dx, dy = face[0] - self.pose.x, face[1] - self.pose.y
+            u, v = c * dx + s * dy, -s * dx + c * dy
         norm = math.hypot(u, v)
         return None if norm < 1e-6 else (float(-u / norm), float(-v / norm))
 
@@ -112,42 +126,49 @@ class BodyGuard:
         return all(self._touching(p.x, p.y, p.yaw) <= self.now for p in poses)
 
 
+def _near_cells(
+    solid: BoolGrid, grid: Grid, fp: Footprint, pose: Pose, within_m: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The centres (n, 2, m) of `solid`'s cells within `within_m` of the footprint at
+    `pose` and their distances to it; None when there are none (a window of the grid
+    round the base, not the whole of it)."""
+    reach = max(fp.front, fp.back, fp.half_width) + within_m + grid.resolution
+    centre = grid.cell(pose.x, pose.y)
+    if centre is None:
+        return None
+    n = math.ceil(reach / grid.resolution)
+    iy0, ix0 = max(0, centre[0] - n), max(0, centre[1] - n)
+    iy, ix = np.nonzero(solid[iy0 : centre[0] + n + 1, ix0 : centre[1] + n + 1])
+    if not len(iy):
+        return None
+    xy = np.column_stack([grid.origin[0] + (ix + ix0 + 0.5) * grid.resolution,
+                          grid.origin[1] + (iy + iy0 + 0.5) * grid.resolution])  # fmt: skip
+    d = distance_to_footprint(pose, fp, xy)
+    near = d <= within_m
+    return (xy[near], d[near]) if near.any() else None
+
+
 def what_is_near(
     solid: BoolGrid, static: BoolGrid, grid: Grid, fp: Footprint, pose: Pose, within_m: float = 0.1
 ) -> str:
     """The guard's obstacles within `within_m` of the footprint at `pose`, for a person
     reading why it refused: how many cells, of which layer (`static`: the map's; the
     rest of `solid` the short-lived depth layer's), and where the nearest lies in the
-    base's frame. Only when the guard's answer changes (a window of the grid round the
-    base, not the whole of it)."""
-    reach = max(fp.front, fp.back, fp.half_width) + within_m + grid.resolution
-    centre = grid.cell(pose.x, pose.y)
-    if centre is None:
+    base's frame. Only when the guard's answer changes."""
+    if grid.cell(pose.x, pose.y) is None:
         return "the base is off the map"
-    n = math.ceil(reach / grid.resolution)
-    iy0, ix0 = max(0, centre[0] - n), max(0, centre[1] - n)
-    window = solid[iy0 : centre[0] + n + 1, ix0 : centre[1] + n + 1]
-    iy, ix = np.nonzero(window)
-    if not len(iy):
+    found = _near_cells(solid, grid, fp, pose, within_m)
+    if found is None:
         return f"nothing within {within_m:.2f} m"
-    iy, ix = iy + iy0, ix + ix0
-    xy = np.column_stack(
-        [
-            grid.origin[0] + (ix + 0.5) * grid.resolution,
-            grid.origin[1] + (iy + 0.5) * grid.resolution,
-        ]
-    )
-    d = distance_to_footprint(pose, fp, xy)
-    near = d <= within_m
-    if not near.any():
-        return f"nothing within {within_m:.2f} m"
-    mapped = int(np.count_nonzero(static[iy[near], ix[near]]))
+    xy, d = found
+    iy, ix, _inside = grid.cells(xy)
+    mapped = int(np.count_nonzero(static[iy, ix]))
     k = int(np.argmin(d))
     c, sn = math.cos(pose.yaw), math.sin(pose.yaw)
     dx, dy = xy[k, 0] - pose.x, xy[k, 1] - pose.y
     ahead, left = c * dx + sn * dy, -sn * dx + c * dy
     return (
-        f"{int(near.sum())} cells within {within_m:.2f} m ({mapped} the map's, "
-        f"{int(near.sum()) - mapped} the depth's), the nearest {d[k]:.2f} m off at "
+        f"{len(d)} cells within {within_m:.2f} m ({mapped} the map's, "
+        f"{len(d) - mapped} the depth's), the nearest {d[k]:.2f} m off at "
         f"{ahead:+.2f} m ahead, {left:+.2f} m left"
     )

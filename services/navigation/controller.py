@@ -219,7 +219,8 @@ class Follower:
         where its sender made room: a patrol's viewpoint 0.36 m off could not turn), the
         turn alone, the turn the other way round (the body is longer behind than ahead:
         one way round may sweep a corner into a pallet where the other does not), a step
-        away from where the body touches (only while it does), else stand. An answer
+        away from where the body touches or from the nearest obstacle in the way of a turn
+        (`body_guard.ROOM_M`), else stand. An answer
         other than the full command is kept `GUARD_HOLD_S` before the full command is
         asked again (it flipped at the tick's rate along a pallet's edge); one the guard
         refuses is dropped at once."""

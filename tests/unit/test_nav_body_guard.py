@@ -273,7 +273,7 @@ def _bench_on_the_right() -> Grid:
 def test_a_body_touching_a_bench_with_no_turn_either_way_steps_clear_of_it() -> None:
     """Hall seed 5: 2-3 cm along a bench, a turn either way sweeps a corner into it and
     there is no walk on: the guard stood until the goal failed. It steps away from the
-    bench instead, until the body is clear of it."""
+    bench instead, until there is room to turn."""
     grid = _bench_on_the_right()
     cm = build_costmap(grid, FP, CostParams())
     guard = BodyGuard(cm.solid, grid, FP, START)
@@ -288,5 +288,9 @@ def test_a_body_touching_a_bench_with_no_turn_either_way_steps_clear_of_it() -> 
     for _ in range(30):  # 1.5 s at 0.1 m/s: 15 cm to the left
         pose = _step(pose, cmd)
     clear = BodyGuard(cm.solid, grid, FP, pose)
-    assert clear.now == 0 and clear.away() is None
-    assert BodyGuard(cm.solid, grid, FP, START).now > 0  # it was the step that cleared it
+    assert clear.now == 0  # no longer touching, and still short of room to turn:
+    step = clear.away()
+    assert step is not None and step[1] > 0.95  # it steps on away from the bench
+    roomy = BodyGuard(cm.solid, grid, FP, Pose(0.0, 0.5, 0.0))
+    assert roomy.away() is None  # 0.5 m off: room enough, nothing to step from
+    assert roomy.ok((0.0, 0.0, -0.5), -1.0)  # and the turn is let through
