@@ -57,7 +57,7 @@ CRAB_MPS = 0.2  # m/s, the most while walking on unturned (sideways, backwards: 
 CRAB_AHEAD_RAD = 0.3  # rad off the heading within which unturned is not "crab"
 GUARD_HOLD_S = 0.5  # s a body guard's answer other than the full command is kept
 CENTRE_M = 0.03  # m from the goal's point beyond which an align the guard refuses walks in
-STEP_CLEAR_MPS = 0.1  # m/s, a body touching an obstacle steps away from it (the guard's last)
+STEP_CLEAR_MPS = 0.1  # m/s, the guard's last way out: a step away from the obstacle in the way
 
 
 class FollowOutput(NamedTuple):
@@ -76,7 +76,7 @@ class FollowOutput(NamedTuple):
     yaw_error: float = 0.0
     #: What the body guard made of a refused command: "" (none refused), "unturned"
     #: (the translation without the turn), "turn only", "the other way round", "step
-    #: clear" (away from where the body touches) or "stand".
+    #: clear" (away from the obstacle the body touches or has no room to turn by) or "stand".
     guarded: str = ""
 
 
@@ -220,14 +220,12 @@ class Follower:
         turn alone, the turn the other way round (the body is longer behind than ahead:
         one way round may sweep a corner into a pallet where the other does not), a step
         away from where the body touches or from the nearest obstacle in the way of a turn
-        (`body_guard.ROOM_M`), else stand. An answer
-        other than the full command is kept `GUARD_HOLD_S` before the full command is
-        asked again (it flipped at the tick's rate along a pallet's edge); one the guard
-        refuses is dropped at once."""
+        (`body_guard.ROOM_M`), else stand. An answer other than the full command is kept
+        `GUARD_HOLD_S` before the full command is asked again (it flipped at the tick's
+        rate along a pallet's edge); one the guard refuses is dropped at once."""
         wz = float(want[2])
         other = -math.copysign(max(abs(wz), MIN_TURN_RATE), yaw_err)
-        away = guard.away()
-        ways: dict[str, tuple[Vec3, float]] = {
+        ways: dict[str, tuple[Vec3, float] | None] = {
             "": (want, yaw_err),
             "unturned": (np.array([*crab, 0.0]), yaw_err),
             "turn only": (np.array([0.0, 0.0, wz]), yaw_err),
@@ -235,12 +233,7 @@ class Follower:
                 np.array([0.0, 0.0, other if abs(yaw_err) > 1e-3 else 0.0]),
                 yaw_err - math.copysign(math.tau, yaw_err),
             ),
-            "step clear": (
-                np.array([STEP_CLEAR_MPS * away[0], STEP_CLEAR_MPS * away[1], 0.0])
-                if away is not None
-                else np.zeros(3),
-                yaw_err,
-            ),
+            "step clear": None,  # looked for only when asked (`_step_clear`): seldom
         }
         self.hold_s = max(0.0, self.hold_s - dt)
         order = list(ways)
@@ -249,7 +242,7 @@ class Follower:
             order.insert(0, self.held)
         label, cmd, turn = "stand", np.zeros(3), yaw_err
         for k in order:
-            c, t = ways[k]
+            c, t = ways[k] or (self._step_clear(guard), yaw_err)
             if (k == "" or c.any()) and guard.ok(c, t):
                 label, cmd, turn = k, c, t
                 break
@@ -258,6 +251,15 @@ class Follower:
         if label:
             self.cmd = np.where(cmd * self.cmd > 0.0, self.cmd, 0.0)  # a refused axis stops now
         return label, cmd, turn
+
+    @staticmethod
+    def _step_clear(guard: BodyGuard) -> Vec3:
+        """The guard's last way out: `STEP_CLEAR_MPS` away from where the body touches or
+        from the nearest obstacle in the way of a turn (`BodyGuard.away`); none without."""
+        away = guard.away()
+        if away is None:
+            return np.zeros(3)
+        return np.array([STEP_CLEAR_MPS * away[0], STEP_CLEAR_MPS * away[1], 0.0])
 
     def _translation(
         self, direction: tuple[float, float], speed: float, yaw: float

@@ -107,7 +107,6 @@ def open_map(
         surfaces = list(mf.supports)
         if mf.occupancy is not None:
             occ, source = occupancy_from_grid(mf.occupancy, **occ_kw), "file"
-            occ.sensed_static()
     if occ is None and (s.start == "seed-from-world" or s.floor_plan == "world"):
         w = world()
         if w is None and s.start == "seed-from-world":
