@@ -59,9 +59,15 @@ class GraspPlanLike(Protocol):
 
 
 class PullFeeler(Protocol):
+    pull_n: float  # the last sample's pull toward the person, N (logged)
+    across_n: float  # its change of force across that direction, N (logged)
+    effort_change_nm: float  # its jaw effort change, N·m (logged)
+
     def reset(self, status: WbcStatus) -> None: ...
 
     def update(self, status: WbcStatus) -> bool: ...
+
+    def pulled_within(self, t_ns: int, window_s: float) -> bool: ...
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ and the jaw's effort changes as the object is tugged between the pads. `update` 
 True once
 
     pull = (F − F₀) · toward ≥ `force_n`, or
-    pull ≥ `force_n` / 2 and |effort − effort₀| ≥ `effort_nm`, or
+    pull ≥ `force_n` / 2 and |effort − effort₀| ≥ `effort_nm` and the change of force
+        across `toward` is no larger than the pull (within 45° of it), or
     F · toward ≥ `absolute_n` (a person who took hold before the baseline was taken:
     holding still, the load is the object's weight, across `toward`),
 
@@ -21,7 +22,11 @@ faster than the debounce has taken it, where an object that slips out has not be
 toward anyone.
 Recorded in `bench.trial_fetch`: holding still, F · toward stays within ±1.5 N (0.12 N
 noise); a person's pull reaches +13..15 N within 0.4 s of their grip closing; the jaw's
-effort stays at its cap throughout, so the force does the work.
+effort stays at its cap throughout, so the force does the work. The effort clause's
+direction test is from the hall (seed 5): the person's hand, reaching for the can at
+0.8 m/s, knocked it before its grip closed; the jaw's effort changed and the force
+changed as much sideways and up as toward the person (≈ 2 N each): without the test
+that tripped, the jaws opened, and the can fell.
 
 Pure: statuses in (their sim-time stamps are the clock), a bool out.
 """
@@ -72,6 +77,7 @@ class PullDetector:
         self.tripped = False
         self.pull_n = 0.0  # the last sample's pull, N (for logging)
         self.effort_change_nm = 0.0  # the last sample's |effort − effort₀|, N·m
+        self.across_n = 0.0  # the last sample's change of force across `toward`, N
         self.tripped_at_ns: int | None = None
         self.last_pull_ns: int | None = None  # the last sample pulling ≥ force_n / 2
 
@@ -107,13 +113,16 @@ class PullDetector:
         if not (np.all(np.isfinite(F)) and math.isfinite(effort)):
             self._since_ns = None
             return False
-        self.pull_n = float((F - self._F0) @ self.toward)
+        change = F - self._F0
+        self.pull_n = float(change @ self.toward)
+        self.across_n = float(np.linalg.norm(change - self.pull_n * self.toward))
         self.effort_change_nm = abs(effort - self._e0)
         if self.pull_n >= 0.5 * self.force_n:
             self.last_pull_ns = status.stamp_ns
+        tugged = self.effort_change_nm >= self.effort_nm and self.across_n <= self.pull_n
         pulling = (
             self.pull_n >= self.force_n
-            or (self.pull_n >= 0.5 * self.force_n and self.effort_change_nm >= self.effort_nm)
+            or (self.pull_n >= 0.5 * self.force_n and tugged)
             or float(F @ self.toward) >= self.absolute_n
         )
         if not pulling:

@@ -97,6 +97,20 @@ def test_a_weaker_pull_trips_it_when_the_jaw_effort_changes_too() -> None:
     assert feed(PullDetector(), w, efforts) > 100
 
 
+def test_a_hand_knocking_the_object_as_it_reaches_does_not_trip_it() -> None:
+    """Hall seed 5: the reaching hand knocked the can; the effort changed, and the force
+    as much sideways and up as toward the person. Not a pull: the jaws must stay shut."""
+    w = noisy(300, 0.2)
+    w[100:, :3] += np.array([2.2, -1.8, 1.9])  # ≥ force_n / 2 toward, more across it
+    efforts = np.full(300, -2.0)
+    efforts[100:] = -2.8
+    detector = PullDetector()
+    assert feed(detector, w, efforts) == -1
+    assert detector.across_n > detector.pull_n >= 0.5 * detector.force_n
+    w[100:, :3] = HELD[:3] + np.array([2.2, -0.8, 0.6])  # the same effort, mostly toward
+    assert feed(PullDetector(), w, efforts) > 100
+
+
 def test_a_person_already_pulling_when_the_baseline_is_taken_still_trips_it() -> None:
     w = noisy(200, 0.3)
     w[:, 0] += 16.0  # the person took hold while the arm was settling (trial seed 2)

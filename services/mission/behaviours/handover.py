@@ -24,6 +24,7 @@ from typing import Any
 
 from py_trees.common import Status
 
+from services.mission.algorithms import PullFeeler
 from services.mission.behaviours.base import (
     FACING,
     PERSON,
@@ -37,7 +38,7 @@ from services.mission.behaviours.base import (
 class FeelPull(MissionBehaviour):
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("feel_pull", ctx, stage)
-        self.detector: Any = None
+        self.detector: PullFeeler | None = None
         self.baseline = False
         self.last_stamp = -1
 
@@ -54,32 +55,33 @@ class FeelPull(MissionBehaviour):
         if self.elapsed_s() > limit:
             here = "" if facing else " on this side"
             return self.fail("handover_timeout", f"nobody took the object in {limit:.0f} s{here}")
-        status = self.port.wbc_status()
-        if status is None or status.stamp_ns == self.last_stamp:
+        status, detector = self.port.wbc_status(), self.detector
+        if status is None or detector is None or status.stamp_ns == self.last_stamp:
             return Status.RUNNING
         self.last_stamp = status.stamp_ns
         if not status.held:
             if self.baseline and (
-                self.detector.update(status)
-                or self.detector.pulled_within(status.stamp_ns, s.handover_taken_window_s)
+                detector.update(status)
+                or detector.pulled_within(status.stamp_ns, s.handover_taken_window_s)
             ):
                 self.ctx.decide(
                     f"handover: the object left the jaws while pulled "
-                    f"({self.detector.pull_n:+.1f} N toward the person): taken"
+                    f"({detector.pull_n:+.1f} N toward the person): taken"
                 )
                 return Status.SUCCESS
             return self.fail("grasp_lost", "the object slipped out while presenting it")
         if not self.baseline:
             if self.elapsed_s() >= s.settle_s:
-                self.detector.reset(status)
+                detector.reset(status)
                 self.baseline = True
                 self.ctx.decide("handover: holding still, waiting for the pull")
             self.feedback_message = "holding still"
             return Status.RUNNING
-        if self.detector.update(status):
+        if detector.update(status):
             self.ctx.decide(
-                f"handover: pull felt (effort {status.gripper_effort:.2f} N·m, "
-                f"force {status.gripper_wrench[:3]})"
+                f"handover: pull felt ({detector.pull_n:+.1f} N toward the person, "
+                f"{detector.across_n:.1f} N across; effort change "
+                f"{detector.effort_change_nm:.2f} N·m, force {status.gripper_wrench[:3]})"
             )
             return Status.SUCCESS
         self.feedback_message = "waiting for the pull"
