@@ -7,6 +7,10 @@ watcher still counts: its token went, then came back). `Dependencies.lost()` nam
 first one that went away since the job started, as a sentence for the typed reason
 `dependency_lost` ("mission restarted", "navigation is gone").
 
+`OwnLink` tells a lost token from the watcher's own Zenoh link lapsing (a client the
+router cut off sees every token go and come back), for a client that follows a job
+from outside the stack (`dume eval`'s watch, `dume request --wait`).
+
 Pure bookkeeping: `common.bus.AliveWatch` feeds a `Lifelines` from Zenoh's liveliness
 subscriber; a unit test feeds it by hand.
 """
@@ -89,3 +93,46 @@ class Dependencies:
             if losses.get(key, 0) > before:
                 return f"{name} restarted" if key in alive else f"{name} is gone"
         return None
+
+
+#: Wall seconds a lost token is doubted (`OwnLink`): every watched token back and the
+#: clock on within it, the watcher's own link lapsed. Well inside the fault trial's
+#: `HUNG_S` (a hung mission's loss ends a watch about 1 + 5 s after the SIGSTOP).
+LAPSE_GRACE_S = 5.0
+
+
+class OwnLink:
+    """Whose loss a lost dependency is: the service's, or this watcher's own link's.
+
+    A client whose session the router closed (it read nothing for 0.5 s, or said nothing
+    for its 1 s lease) reconnects by itself, its subscriptions and the tokens it sees
+    come back, and it counts every token as gone once (`Lifelines`): as if every
+    service had restarted. `verdict` tells them apart: "fine" (nothing lost), "doubt"
+    (lost, not yet known whose), "lapse" (every watched token is back and the clock ran
+    past where it stood at the loss: the world went on; the caller re-arms), "lost"
+    (`grace_s` of wall time went by otherwise: a service's loss). A sim restarted
+    under us starts its clock again from 0, and a mission restarted under us reports
+    our request itself, so neither passes for a lapse.
+    """
+
+    def __init__(self, grace_s: float = LAPSE_GRACE_S) -> None:
+        self.grace_s = grace_s
+        self._since: float | None = None
+        self._at_ns = 0
+        #: The sim time (ns) of each lapse the watch went on through.
+        self.lapses: list[int] = []
+
+    def verdict(self, lost: bool, now_s: float, clock_ns: int, all_back: bool) -> str:
+        """`lost`: a watched token went since the watch was armed; `now_s`: wall time
+        (monotonic); `clock_ns`: the newest clock; `all_back`: every watched token is
+        alive now."""
+        if not lost:
+            self._since = None
+            return "fine"
+        if self._since is None:
+            self._since, self._at_ns = now_s, clock_ns
+        if all_back and clock_ns > self._at_ns:
+            self.lapses.append(self._at_ns)
+            self._since = None
+            return "lapse"
+        return "lost" if now_s - self._since >= self.grace_s else "doubt"

@@ -57,7 +57,7 @@ from common.config import (
     resolve,
 )
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
-from common.lifelines import Dependencies
+from common.lifelines import Dependencies, OwnLink
 from common.messages import encode
 from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
 from deploy.maps import NoSavedMap, saved_map, start_from
@@ -376,11 +376,23 @@ def _submit(config: Config, request: MissionRequest, wait: bool, timeout_s: floa
         print(json.dumps({"request_id": request.request_id, "sent": msgspec.to_builtins(request)}))
         # Without --wait: until the mission took it or refused it (its first status).
         deadline = time.monotonic() + (timeout_s if wait else SUBMIT_TIMEOUT_S)
-        ours = False
+        ours, link, newest_ns = False, OwnLink(), 0
         while time.monotonic() < deadline:
             status = statuses.pop(timeout_s=0.2)
+            if status is not None and status.request_id == request.request_id:
+                newest_ns = max(newest_ns, status.stamp_ns)
             # Nobody waits for the dead: a mission gone, restarted or without our request.
-            lost = mission.lost() or ("mission is not running" if mission.missing() else None)
+            # A lost token is doubted a while: this client's own link may have lapsed (the
+            # mission's token back and our request's statuses going on: it has).
+            gone = mission.lost()
+            verdict = link.verdict(
+                gone is not None, time.monotonic(), newest_ns, not mission.missing()
+            )
+            if verdict == "lapse":
+                mission.arm()
+            lost = gone if verdict == "lost" else None
+            if lost is None and mission.missing() and verdict == "fine":
+                lost = "mission is not running"
             if status is not None and status.request_id != request.request_id:
                 if ours and status.state == "idle":
                     lost = "mission restarted: it has no request in progress"

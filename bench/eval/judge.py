@@ -190,7 +190,7 @@ class WorldResult(msgspec.Struct, kw_only=True):
     logs: str = ""
     troubles: dict[str, list[str]] = msgspec.field(default_factory=dict)
     #: Sim times (s) at which the evaluating client's own link lapsed and the watch went
-    #: on (`bench.eval.run.OwnLink`): statuses may be missing there, the digest differ.
+    #: on (`common.lifelines.OwnLink`): statuses may be missing there, the digest differ.
     watch_lapses: list[float] = msgspec.field(default_factory=list)
     picture: str = ""
     failure_frames: list[str] = msgspec.field(default_factory=list)
@@ -243,7 +243,7 @@ class MissionRecord:
     ended: str = ""
     wall_s: float = 0.0
     #: The sim times (s) at which this watcher's own link lapsed and came back
-    #: (`bench.eval.run.OwnLink`): what it heard meanwhile may lack a status or two.
+    #: (`common.lifelines.OwnLink`): what it heard meanwhile may lack a status or two.
     lapses: list[float] = field(default_factory=list)
     #: The base every `TRAJECTORY_EVERY_NS` of sim time from the request on: (stamp_ns,
     #: x, y, z, qx, qy, qz, qw) from the sim's truth (`state_truth`).

@@ -50,7 +50,7 @@ from common.keys import (
     WORLD_EVENTS,
     RobotKeys,
 )
-from common.lifelines import Dependencies
+from common.lifelines import Dependencies, OwnLink
 from common.messages.localization import Localization
 from common.messages.mission import MissionCancel, MissionReceipt, MissionRequest, MissionStatus
 from common.messages.perception import Detections
@@ -71,47 +71,6 @@ DEPENDENCY_LOST = "dependency_lost"
 START_GATE = "client"
 #: The services a watch of one request depends on: the clock's and the request's.
 WATCHED = ("sim", "mission")
-#: Wall seconds a lost token is doubted (`OwnLink`): every watched token back and the
-#: clock on within it, the watcher's own link lapsed. Well inside the fault trial's
-#: `HUNG_S` (a hung mission's loss ends a watch about 1 + 5 s after the SIGSTOP).
-LAPSE_GRACE_S = 5.0
-
-
-class OwnLink:
-    """Whose loss a lost dependency is: the service's, or this watcher's own link's.
-
-    A client whose session the router closed (it read nothing for 0.5 s, or said nothing
-    for its 1 s lease) reconnects by itself, its subscriptions and the tokens it sees
-    come back, and it counts every token as gone once (`Lifelines`): as if every
-    service had restarted. `verdict` tells them apart: "fine" (nothing lost), "doubt"
-    (lost, not yet known whose), "lapse" (every watched token is back and the clock ran
-    past where it stood at the loss: the world went on; the caller re-arms), "lost"
-    (`grace_s` of wall time went by otherwise: a service's loss). A sim restarted
-    under us starts its clock again from 0, and a mission restarted under us reports
-    our request itself, so neither passes for a lapse.
-    """
-
-    def __init__(self, grace_s: float = LAPSE_GRACE_S) -> None:
-        self.grace_s = grace_s
-        self._since: float | None = None
-        self._at_ns = 0
-        #: The sim time (ns) of each lapse the watch went on through.
-        self.lapses: list[int] = []
-
-    def verdict(self, lost: bool, now_s: float, clock_ns: int, all_back: bool) -> str:
-        """`lost`: a watched token went since the watch was armed; `now_s`: wall time
-        (monotonic); `clock_ns`: the newest clock; `all_back`: every watched token is
-        alive now."""
-        if not lost:
-            self._since = None
-            return "fine"
-        if self._since is None:
-            self._since, self._at_ns = now_s, clock_ns
-        if all_back and clock_ns > self._at_ns:
-            self.lapses.append(self._at_ns)
-            self._since = None
-            return "lapse"
-        return "lost" if now_s - self._since >= self.grace_s else "doubt"
 
 
 @contextlib.contextmanager

@@ -3,7 +3,7 @@ token is back and the clock ran on within the grace; otherwise the service's los
 
 from __future__ import annotations
 
-from bench.eval.run import OwnLink
+from common.lifelines import OwnLink
 
 S = 1_000_000_000
 
