@@ -133,7 +133,7 @@ SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
                 f"{ROOT}/world/clock", f"{ROOT}/world/events", f"{ROOT}/world/people"),
         "subscribe": ("{r}/ack/*", "{r}/command", "{r}/wbc/cmd_vel",
                       f"{ROOT}/world/people_command", f"{ROOT}/world/push",
-                      f"{ROOT}/world/artifact_command"),
+                      f"{ROOT}/world/artifact_command", f"{ROOT}/world/movable_command"),
         "serve": ("{r}/description", f"{ROOT}/world/description"),
         "watch": True,
     },

@@ -30,6 +30,9 @@ WORLD_PEOPLE_COMMAND = f"{ROOT}/world/people_command"
 WORLD_PEOPLE = f"{ROOT}/world/people"
 #: Move an artifact (`sim.ArtifactCommand`): tests and evaluation publish, the sim applies.
 WORLD_ARTIFACT_COMMAND = f"{ROOT}/world/artifact_command"
+#: Leave a movable in the hall (`sim.MovableCommand`): tests and evaluation publish, the sim
+#: applies.
+WORLD_MOVABLE_COMMAND = f"{ROOT}/world/movable_command"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
 MAP_PEOPLE = f"{ROOT}/map/people"
 MAP_OCCUPANCY = f"{ROOT}/map/occupancy"

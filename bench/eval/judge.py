@@ -92,9 +92,9 @@ def events_of(events: Iterable[WorldEvent], kind: str) -> list[WorldEvent]:
 
 
 def static_contacts(events: Iterable[WorldEvent], world: WorldDescription) -> list[RobotContact]:
-    """The robot's contacts with static obstacles (walls, tables, racks…), not with the
-    floor, artifacts or people."""
-    obstacles = {o.id for o in world.obstacles}
+    """The robot's contacts with the world's obstacles (walls, tables, racks…, and a
+    movable left in an aisle: a trolley), not with the floor, artifacts or people."""
+    obstacles = {o.id for o in world.obstacles} | {m.id for m in world.movables}
     return [e for e in events if isinstance(e, RobotContact) and e.other in obstacles]
 
 

@@ -260,7 +260,19 @@ class ArtifactMoved(Message, frozen=True, tag="artifact_moved"):
     away: bool = False
 
 
-WorldEvent = HandoverTaken | ObjectDropped | RobotContact | ArtifactMoved
+class MovableMoved(Message, frozen=True, tag="movable_moved"):
+    """Somebody left a movable (a trolley) somewhere (the changing hall's hook,
+    `MovableCommand`): where its centre now stands and its heading (truth, for
+    evaluation); `away`: parked beyond the hall's walls again."""
+
+    stamp_ns: StampNs
+    movable_id: EntityId
+    position_in_world: tuple[Finite, Finite]
+    yaw: Finite = 0.0
+    away: bool = False
+
+
+WorldEvent = HandoverTaken | ObjectDropped | RobotContact | ArtifactMoved | MovableMoved
 
 
 class PersonTruth(Message, frozen=True):
@@ -323,6 +335,26 @@ class ArtifactCommand(Message, frozen=True):
     stamp_ns: StampNs
     artifact_id: EntityId
     position: Vec3 | None = None
+    yaw: Finite = 0.0
+    away: bool = False
+
+
+class MovableCommand(Message, frozen=True):
+    """`dume/world/movable_command` (tests and evaluation only; the sim alone reads it):
+    somebody leaves a movable (`WorldDescription.movables`: a trolley) in the hall, or
+    takes it away again.
+
+    stamp_ns: sim time it takes effect, at the sim's step then (publish it ahead).
+    movable_id: the world's movable (`trolley_1`).
+    position: (2,) m, world: where its centre then stands, on the hall's floor (the
+        caller chooses free floor: `services.sim.world.aisle_spot`); None with `away`.
+    yaw: rad, its heading there.
+    away: parked beyond the hall's walls again.
+    """
+
+    stamp_ns: StampNs
+    movable_id: EntityId
+    position: tuple[Finite, Finite] | None = None
     yaw: Finite = 0.0
     away: bool = False
 

@@ -15,7 +15,7 @@ import msgspec
 
 from common.messages.arrays import Array
 
-ObstacleKind = Literal["wall", "rack", "bench", "table", "pallet", "machine"]
+ObstacleKind = Literal["wall", "rack", "bench", "table", "pallet", "machine", "trolley"]
 ArtifactClass = Literal["bottle", "can", "box"]
 
 #: An RGBA colour, each channel in [0, 1].
@@ -225,6 +225,9 @@ class WorldDescription(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     robot_start: the robot's pose at t = 0.
     lighting: the lights.
     occupancy: the static obstacles on a grid.
+    movables: obstacles somebody may leave in an aisle (a trolley: the changing hall),
+        parked beyond the hall's walls (`centre`) until the sim's hook moves one in
+        (`dume/world/obstacle_command`); on no floor plan and not in `occupancy`.
     """
 
     name: str
@@ -237,3 +240,4 @@ class WorldDescription(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     robot_start: RobotStart
     lighting: Lighting
     occupancy: OccupancyGrid
+    movables: tuple[Obstacle, ...] = ()

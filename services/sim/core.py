@@ -204,6 +204,37 @@ class SimCore:
         mujoco.mj_forward(self.model, self.data)
         return x, y, z
 
+    def place_movable(
+        self, movable_id: str, position: tuple[float, float] | None, yaw: float
+    ) -> tuple[float, float]:
+        """Somebody leaves a movable (`WorldDescription.movables`: a trolley) standing at
+        `position` (m, world, on the hall's floor) turned to `yaw`; None: parked again
+        beyond the walls, where it started. Where its centre now is. Nothing checks what it
+        lands on: the caller chooses free floor (`world.aisle_spot`).
+
+        Raises KeyError for an unknown movable, ValueError for a place off the floor.
+        """
+        movable = next((m for m in self.world.movables if m.id == movable_id), None)
+        if movable is None:
+            have = [m.id for m in self.world.movables]
+            raise KeyError(f"no movable {movable_id!r}; the world has {have}")
+        if position is None:
+            position, yaw = (movable.centre[0], movable.centre[1]), movable.yaw
+        (x0, y0), (x1, y1) = self.world.hall.min_xy, self.world.hall.max_xy
+        parked = position == (movable.centre[0], movable.centre[1])
+        if not all(math.isfinite(v) for v in (*position, yaw)) or not (
+            parked or (x0 <= position[0] <= x1 and y0 <= position[1] <= y1)
+        ):
+            raise ValueError(
+                f"a movable's place must be on the hall's floor, got {position}, yaw {yaw}"
+            )
+        mocap = int(self.model.body_mocapid[self.model.body(movable_id).id])
+        x, y = float(position[0]), float(position[1])
+        self.data.mocap_pos[mocap] = (x, y, movable.centre[2])
+        self.data.mocap_quat[mocap] = (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
+        mujoco.mj_forward(self.model, self.data)
+        return x, y
+
     def reset_robot(self, x: float, y: float, yaw: float, posture: str = "stand") -> None:
         """Stand the robot still at (x, y, yaw) in `posture` (start-up and tests only)."""
         self.data.qpos[self._robot_qpos] = mjcf.q_pin_to_mj(robot.standing_q(posture, x, y, yaw))

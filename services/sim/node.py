@@ -21,11 +21,11 @@ import time
 from common import keys as K
 from common.lockstep import SimGate
 from common.messages.base import NS_PER_S
-from common.messages.sim import Ack, JointCommand
+from common.messages.sim import Ack, JointCommand, WorldEvent
 from common.messages.world import WorldDescription
 from common.recording import default_blueprint
 from common.service import Service
-from services.sim.artifact_hook import ArtifactHook
+from services.sim.artifact_hook import ArtifactHook, MovableHook
 from services.sim.core import SimCore
 from services.sim.intake import CommandIntake
 from services.sim.outputs import SimOutputs, robot_description
@@ -66,6 +66,7 @@ class SimNode:
         self.push_hook = PushHook(bus, svc.log)
         self.people_hook = PeopleHook(bus, svc.log)
         self.artifact_hook = ArtifactHook(bus, svc.log)
+        self.movable_hook = MovableHook(bus, svc.log)
         self.gate = SimGate(
             cfg.time,
             alive=bus.watch_alive(keys.alive_all),
@@ -115,7 +116,8 @@ class SimNode:
             self.intake.apply_cmd_vel(t_ns)
             self.push_hook.apply(t_ns, self.core)
             self.people_hook.apply(t_ns, self.core.people)
-            moved = self.artifact_hook.apply(t_ns, self.core)
+            moved: list[WorldEvent] = [*self.artifact_hook.apply(t_ns, self.core)]
+            moved += self.movable_hook.apply(t_ns, self.core)
             t2 = time.perf_counter()
             events = self.core.step()
             if moved:

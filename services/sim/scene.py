@@ -2,8 +2,9 @@
 
 Every named thing in the world is one MuJoCo body named by its id: obstacles are static
 bodies (tables drawn as a top on four legs, the rest as solid boxes), artifacts are free
-bodies, people are mocap bodies, and the world is built into `mjcf.robot_spec()`,
-so the robot keeps its unprefixed names, its root at the start pose. A geom's instance is
+bodies, people and the movables (a trolley, parked beyond the walls) are mocap bodies,
+and the world is built into `mjcf.robot_spec()`, so the robot keeps its unprefixed
+names, its root at the start pose. A geom's instance is
 its root body's name, which is how `segmentation_ids` labels pixels.
 
 Physics: timestep 1 ms with `implicitfast` (stable with the actuators' damping at no extra
@@ -118,8 +119,12 @@ def _floor(spec: mujoco.MjSpec, world: WorldDescription) -> None:
     )
 
 
-def _obstacle(spec: mujoco.MjSpec, ob: Obstacle) -> None:
-    body = spec.worldbody.add_body(name=ob.id, pos=list(ob.centre), quat=_quat_yaw(ob.yaw))
+def _obstacle(spec: mujoco.MjSpec, ob: Obstacle, movable: bool = False) -> None:
+    """A static obstacle's body; a movable's (a trolley) is a mocap body: the sim's hook
+    sets it down elsewhere (`SimCore.place_movable`), and nothing pushes it."""
+    body = spec.worldbody.add_body(
+        name=ob.id, pos=list(ob.centre), quat=_quat_yaw(ob.yaw), mocap=movable
+    )
     mat = _material(spec, f"{ob.id}_mat", ob.rgba)
     hx, hy, hz = ob.half_size
     if ob.kind != "table":
@@ -348,6 +353,8 @@ def build_scene(world: WorldDescription, *, with_robot: bool = True) -> mujoco.M
     _floor(spec, world)
     for ob in world.obstacles:
         _obstacle(spec, ob)
+    for ob in world.movables:
+        _obstacle(spec, ob, movable=True)
     for art in world.artifacts:
         _artifact(spec, art)
     for person in world.people:
@@ -365,7 +372,8 @@ def compile_scene(world: WorldDescription, *, with_robot: bool = True) -> mujoco
 def segmentation_ids(
     model: mujoco.MjModel, world: WorldDescription | None = None
 ) -> SegmentationTable:
-    """Instance labels of every geom: artifacts, people, obstacles, then the robot; 0 for none.
+    """Instance labels of every geom: artifacts, people, obstacles, movables, then the robot;
+    0 for none.
 
     A geom's instance is its root body's name; the robot's bodies are `ROBOT_INSTANCE`.
     With `world`, labels follow its order (artifacts first, from 1), the same for every
@@ -374,7 +382,7 @@ def segmentation_ids(
     robot_root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.BASE_FRAME)
     if world is not None:
         ids = [a.id for a in world.artifacts] + [p.id for p in world.people]
-        ids += [o.id for o in world.obstacles]
+        ids += [o.id for o in world.obstacles] + [m.id for m in world.movables]
     else:
         roots = sorted({int(r) for r in model.body_rootid[1:]} - {robot_root})
         ids = [model.body(r).name for r in roots]

@@ -24,6 +24,7 @@ from common.messages.sim import (
     ArtifactMoved,
     CameraFrame,
     HandoverTaken,
+    MovableMoved,
     ObjectDropped,
     RobotContact,
     RobotState,
@@ -50,8 +51,11 @@ class SimLogger:
         self._annotated: set[str] = set()
         #: The base's true pose by stamp (the newest `BASES_KEPT`): where to draw a camera.
         self._bases: dict[int, FloatArray] = {}
+        #: Each movable's half extents (m), to draw it where it is left.
+        self._movables: dict[str, tuple[float, float, float]] = {}
 
     def world(self, world: WorldDescription) -> None:
+        self._movables = {m.id: m.half_size for m in world.movables}
         if not self.enabled:
             return
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)  # MuJoCo's
@@ -185,6 +189,26 @@ class SimLogger:
         ids = labels.astype(np.uint8) if labels.max(initial=0) < 256 else labels.astype(np.uint16)
         self.rec.log(f"{path}/segmentation_truth", rr.SegmentationImage(ids))
 
+    def _movable(self, ev: MovableMoved) -> None:
+        """The movable's box where it now stands (truth); cleared when parked away."""
+        path = f"world/movables/{ev.movable_id}"
+        half = self._movables.get(ev.movable_id)
+        if ev.away or half is None:
+            self.rec.log(path, rr.Clear(recursive=False))
+            return
+        x, y = ev.position_in_world
+        turn = rr.Quaternion(xyzw=(0.0, 0.0, math.sin(0.5 * ev.yaw), math.cos(0.5 * ev.yaw)))
+        self.rec.log(
+            path,
+            rr.Boxes3D(
+                centers=[(x, y, half[2])],
+                half_sizes=[half],
+                quaternions=[turn],
+                labels=[ev.movable_id],
+                colors=[(60, 85, 130)],
+            ),
+        )
+
     def events(self, t_ns: int, events: list[WorldEvent]) -> None:
         if not self.enabled:
             return
@@ -202,6 +226,10 @@ class SimLogger:
             elif isinstance(ev, ArtifactMoved):
                 where = "away" if ev.away else f"to {np.round(ev.position_in_world, 2)}"
                 text = f"artifact moved (truth): {ev.object_id} {where}"
+            elif isinstance(ev, MovableMoved):
+                where = "parked away" if ev.away else f"left at {np.round(ev.position_in_world, 2)}"
+                text = f"movable moved (truth): {ev.movable_id} {where}"
+                self._movable(ev)
             else:
                 text = str(ev)
             self.rec.log("log/sim/events", rr.TextLog(text, level=rr.TextLogLevel.WARN))

@@ -21,14 +21,18 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 
+import msgspec
 import numpy as np
 
 from common import robot
+from common.messages import as_numpy
 from common.messages.world import (
     Artifact,
     ArtifactClass,
     Cuboid,
     Cylinder,
+    Hall,
+    Obstacle,
     Person,
     Rgba,
     RobotStart,
@@ -311,7 +315,76 @@ def _sample(
         robot_start=start,
         lighting=lighting(rng, layout.hall),
         occupancy=sampler.grid,
+        movables=parked_movables(layout.hall) if name == "hall" else (),
     )
+
+
+#: A trolley's half extents (m): a loaded cart 1.0 × 0.6 m, 0.9 m tall (the trunk's
+#: lidars and the cameras see it), and its colour.
+TROLLEY_HALF_M = (0.5, 0.3, 0.45)
+TROLLEY_RGBA = (0.22, 0.33, 0.52, 1.0)
+#: Movables are parked this far beyond the hall's −x wall (m), out of every sensor's reach.
+MOVABLE_PARK_M = 20.0
+
+
+def parked_movables(hall: Hall) -> tuple[Obstacle, ...]:
+    """The hall's movables, parked (`WorldDescription.movables`): one trolley. Drawn from
+    no random stream, so the rest of a seed's world is what it was without them."""
+    hz = TROLLEY_HALF_M[2]
+    centre = (hall.min_xy[0] - MOVABLE_PARK_M, hall.min_xy[1], hz)
+    return (Obstacle("trolley_1", "trolley", centre, TROLLEY_HALF_M, 0.0, TROLLEY_RGBA),)
+
+
+#: An aisle spot for a movable: at most this far from the nearest static obstacle (m: in
+#: an aisle or beside furniture, not in the open), this far from the robot, a person or
+#: an artifact (m), and its footprint this far clear of obstacles (m).
+AISLE_NEAR_M = 1.2
+AISLE_KEEP_M = 1.5
+AISLE_MARGIN_M = 0.1
+
+
+def aisle_spot(
+    world: WorldDescription,
+    movable_id: str,
+    rng: np.random.Generator,
+    robot_pose: tuple[float, float, float],
+    keep_clear: Sequence[tuple[float, float]] = (),
+    tries: int = 200,
+) -> tuple[float, float, float] | None:
+    """Where somebody could leave the movable `movable_id` in an aisle (the changing
+    hall): (x, y, yaw) on free floor within `AISLE_NEAR_M` of the static obstacles, its
+    footprint `AISLE_MARGIN_M` clear of them, `AISLE_KEEP_M` from the robot and the points
+    `keep_clear` (people, artifacts), and every goal of the world (each artifact's standoff
+    and pick pose, each person's handover pose) still reachable from the robot's pose with
+    it there; None when no such spot was drawn in `tries`."""
+    movable = next(m for m in world.movables if m.id == movable_id)
+    grid = world.occupancy
+    near = fz.clearance(grid)
+    xs, ys = fz.cell_centres(grid)
+    iy, ix = np.nonzero(
+        (near > 0.5 * movable.half_size[1] + AISLE_MARGIN_M) & (near <= AISLE_NEAR_M)
+    )
+    x, y, yaw = robot_pose
+    others = [(x, y), *keep_clear]
+    for _ in range(tries if len(iy) else 0):
+        k = int(rng.integers(len(iy)))
+        cx, cy, cyaw = float(xs[ix[k]]), float(ys[iy[k]]), float(rng.uniform(-math.pi, math.pi))
+        if any(math.dist((cx, cy), q) < AISLE_KEEP_M for q in others):
+            continue
+        placed = msgspec.structs.replace(movable, centre=(cx, cy, movable.centre[2]), yaw=cyaw)
+        hx, hy = movable.half_size[0] + AISLE_MARGIN_M, movable.half_size[1] + AISLE_MARGIN_M
+        box = fz.rect_mask(xs, ys, (cx, cy), cyaw, (-hx, hx), (-hy, hy))
+        if np.any(as_numpy(grid.cells)[box] != fz.FREE):
+            continue
+        with_it = msgspec.structs.replace(
+            world,
+            obstacles=(*world.obstacles, placed),
+            occupancy=fz.rasterize(world.hall, (*world.obstacles, placed), grid.resolution),
+            robot_start=RobotStart(x, y, yaw),
+        )
+        if not fz.check_paths(with_it):
+            return cx, cy, cyaw
+    return None
 
 
 def _small_start(rng: np.random.Generator, layout: Layout) -> RobotStart:
