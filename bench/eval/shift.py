@@ -13,8 +13,11 @@ serves M requests one after another:
 - **the changing hall** (`--changes`, on by default): before each request after the
   first, somebody moves an artifact not handed over yet (the requested one half the
   time, when it can be) onto another support (`services.sim.world.new_place`), through
-  the sim's hook (`dume/world/artifact_command`); with `--bystanders` the people walk
-  their routes past the robot all shift long;
+  the sim's hook (`dume/world/artifact_command`), and half the time somebody leaves the
+  hall's trolley in an aisle (`leave_trolley`: `services.sim.world.aisle_spot`, clear of
+  the robot, the people and the artifacts, every goal still reachable round it;
+  `dume/world/movable_command`), where the robot's map has floor; with `--bystanders`
+  the people walk their routes past the robot all shift long;
 - **slips** (`--slips F`, the fraction of requests): a knock on the object the robot
   carries, 3 s into the carry (`Knock`, the sim's push hook on the artifact): recovered
   when the request still succeeded, else the mission's reason says why;
@@ -72,7 +75,8 @@ from bench.eval.targets import Pair, TargetError
 from bench.separation import SeparationWatch, truth_separation
 from common.bus import BusError, Fifo
 from common.config import ConfigError, load_config, resolve
-from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_PEOPLE, WORLD_PUSH
+from common.geometry import yaw_of_quat_xyzw
+from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_MOVABLE_COMMAND, WORLD_PEOPLE, WORLD_PUSH
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.semantic_map import MapEntity
@@ -80,6 +84,7 @@ from common.messages.sim import (
     ArtifactCommand,
     Clock,
     HandoverTaken,
+    MovableCommand,
     PeopleTruth,
     Push,
     SimStats,
@@ -90,7 +95,7 @@ from deploy.demo import SERVICES
 from deploy.runs import shown
 from deploy.stack import ProcessStack
 from services.semantic_map.store import database_path, remove_database
-from services.sim.world import new_place
+from services.sim.world import aisle_spot, new_place
 
 #: m: a mapped artifact stands for the truth artifact nearest to it within this.
 MATCH_M = 0.3
@@ -288,6 +293,9 @@ def run_shift_world(
                         bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 19), watch)  # fmt: skip
         people_now = bus.latest(WORLD_PEOPLE, PeopleTruth)
         mover = bus.publisher(WORLD_ARTIFACT_COMMAND, ArtifactCommand, "control")
+        trolleys = bus.publisher(WORLD_MOVABLE_COMMAND, MovableCommand, "control")
+        base_now = bus.latest(keys.state_truth, StateTruth)
+        trolley_rng = np.random.default_rng([seed, TROLLEY_STREAM])  # the moves' draws unchanged
         pusher = bus.publisher(WORLD_PUSH, Push, "control")
         how, path = map_source(args.map, args.world, seed)
         gated = True
@@ -317,6 +325,8 @@ def run_shift_world(
                 at_ns = end_ns + round(REQUEST_AFTER_S * 1e9)
                 if args.changes:
                     move(truth, mover, rng, asked, end_ns + round(MOVE_AFTER_S * 1e9))
+                    leave_trolley(truth, trolleys, trolley_rng, base_now.get(),
+                                  people_now.get(), end_ns + round(MOVE_AFTER_S * 1e9))  # fmt: skip
             result = WorldResult(world=args.world, world_seed=seed, scenario=scenario)
             world_now = truth.now(people_now.get())
             request_result(result, pair, arts, people, world_now)
@@ -414,6 +424,40 @@ def move(truth: Truth, mover: Any, rng: np.random.Generator, asked: str, at_ns: 
     truth.where[pick] = position
     truth.moves.append(f"{pick} onto {on} at {at_ns / 1e9:.1f} s")
     _say(f"    moved {pick} onto {on} (at {at_ns / 1e9:.1f} s)")
+
+
+#: The trolley's draws come from their own stream of the world's seed, and it is left in
+#: an aisle before this share of the requests after the first.
+TROLLEY_STREAM = 7
+TROLLEY_SHARE = 0.5
+
+
+def leave_trolley(
+    truth: Truth,
+    mover: Any,
+    rng: np.random.Generator,
+    base: StateTruth | None,
+    people: PeopleTruth | None,
+    at_ns: int,
+) -> None:
+    """Somebody leaves the hall's trolley in an aisle before the next request (half the
+    time; a world with no movable, none): a spot clear of the robot, the people and the
+    artifacts where they are now, with every goal still reachable round it
+    (`aisle_spot`), sent ahead of its time; recorded in `truth`."""
+    if not truth.world.movables or base is None or rng.random() >= TROLLEY_SHARE:
+        return
+    trolley = truth.world.movables[0].id
+    now = truth.now(people)
+    x, y, _ = base.base_position_in_world
+    clear = [p.position[:2] for p in now.people] + [a.position[:2] for a in now.artifacts]
+    pose = (x, y, yaw_of_quat_xyzw(base.base_orientation_xyzw))
+    spot = aisle_spot(now, trolley, rng, pose, clear)
+    if spot is None:
+        return
+    sx, sy, yaw = spot
+    mover.put(MovableCommand(stamp_ns=at_ns, movable_id=trolley, position=(sx, sy), yaw=yaw))
+    truth.moves.append(f"{trolley} left at ({sx:.1f}, {sy:.1f}) at {at_ns / 1e9:.1f} s")
+    _say(f"    left {trolley} in an aisle at ({sx:.1f}, {sy:.1f}) (at {at_ns / 1e9:.1f} s)")
 
 
 def run_shift(args: argparse.Namespace) -> int:

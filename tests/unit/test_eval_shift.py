@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
+import numpy as np
 import pytest
 
 from bench.eval import judge
@@ -16,6 +18,7 @@ from bench.eval.shift import (
     Knock,
     Truth,
     class_verdict,
+    leave_trolley,
     present_artifacts,
     shift_request,
     whom,
@@ -210,6 +213,28 @@ def test_a_slip_knocks_the_carried_object_once_three_seconds_into_the_carry() ->
         k.on_progress(status(10.0, "bring_to_user"), clock, False)
         k.on_progress(status(10.0, "bring_to_user"), clock, True)
         assert not k.pusher.sent and not k.at_ns
+
+
+def test_the_trolley_is_left_in_an_aisle_half_the_time_clear_of_everyone_and_recorded() -> None:
+    hall = generate_world(0)
+    start = hall.robot_start
+    base = StateTruth(stamp_ns=0, base_position_in_world=(start.x, start.y, 0.5),
+                      base_orientation_xyzw=(0.0, 0.0, math.sin(start.yaw / 2),
+                                             math.cos(start.yaw / 2)),
+                      base_linear_velocity_in_world=(0.0, 0.0, 0.0),
+                      base_angular_velocity_in_base=(0.0, 0.0, 0.0))  # fmt: skip
+    truth, pub, rng = Truth(hall), _Pub(), np.random.default_rng(3)
+    for k in range(8):
+        leave_trolley(truth, pub, rng, base, None, (k + 1) * S)
+    assert 1 <= len(pub.sent) <= 7  # half the time, by its own draws
+    assert len(truth.moves) == len(pub.sent)
+    for m in pub.sent:
+        assert m.movable_id == "trolley_1" and m.position is not None
+        assert math.dist(m.position, (start.x, start.y)) >= 1.5
+        assert all(math.dist(m.position, p.position[:2]) >= 1.5 for p in hall.people)
+    small = Truth(generate_world(0, "small"))  # no movable: nothing left anywhere
+    leave_trolley(small, pub2 := _Pub(), np.random.default_rng(0), base, None, S)
+    assert not pub2.sent and not small.moves
 
 
 def test_the_map_accuracy_counts_artifacts_within_10_cm_and_entries_still_true() -> None:
