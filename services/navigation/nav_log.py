@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from common.geometry import FloatArray
 from common.recording import is_recording, stamp
 from services.navigation.body_guard import what_is_near
 from services.navigation.costmap import Costmap, Person
@@ -67,6 +68,8 @@ class NavLogger:
         self.last_costmap = -(10**18)
         self.last_align = -(10**18)
         self.tracks: set[str] = set()
+        #: Whether the last scan held obstacles larger than a person (said on a change).
+        self.scan_obstacles = False
 
     def tick(
         self,
@@ -135,9 +138,21 @@ class NavLogger:
             self.last_costmap = b
             self.rec.log("world/nav/costmap", costmap_mesh(cm))
 
-    def scan(self, b: int, bodies: list[Body], tracks: list[Person]) -> None:
-        """The lidar's bodies (their extent as a ring) and its tracks (id, velocity); a
-        new track is said once."""
+    def scan(self, b: int, bodies: list[Body], tracks: list[Person], obstacles: FloatArray) -> None:
+        """The lidar's bodies (their extent as a ring), its tracks (id, velocity) and the
+        returns of obstacles larger than a person (`obstacles`, (k, 2) map); a new track
+        is said once, and when larger obstacles come into or leave the scan."""
+        if bool(len(obstacles)) != self.scan_obstacles:
+            self.scan_obstacles = bool(len(obstacles))
+            if self.scan_obstacles:
+                lo, hi = obstacles.min(axis=0), obstacles.max(axis=0)
+                self.log.info(
+                    "t=%.2f s lidar: an obstacle the map lacks, larger than a person, %d "
+                    "returns in x %.2f..%.2f, y %.2f..%.2f: marked in the short-lived layer",
+                    b / 1e9, len(obstacles), lo[0], hi[0], lo[1], hi[1],
+                )  # fmt: skip
+            else:
+                self.log.info("t=%.2f s lidar: no obstacle larger than a person now", b / 1e9)
         ids = {q.id for q in tracks}
         for q in tracks:
             if q.id not in self.tracks:
@@ -155,6 +170,12 @@ class NavLogger:
                 [[q.x, q.y, SCAN_Z] for q in bodies],
                 radii=[q.extent_m / 2 for q in bodies],
                 colors=[(250, 200, 40)],
+            ),
+        )
+        self.rec.log(
+            "world/nav/scan_people/obstacles",
+            rr.Points3D(
+                [[x, y, SCAN_Z] for x, y in obstacles.tolist()], radii=0.02, colors=[(200, 60, 200)]
             ),
         )
         self.rec.log(

@@ -156,7 +156,18 @@ class NavMap:
             return False
         self.scan.update(points, self.grid, pose, b)
         self.scanned = self.scan.people(b)
-        return self._layer()
+        marked = self._mark_obstacles(b)
+        return self._layer() or marked
+
+    def _mark_obstacles(self, b: int) -> bool:
+        """The lidar's returns of bodies larger than a person (a trolley the map lacks) into
+        the short-lived layer at b, as the depth camera marks what it sees; whether any."""
+        pts = self.scan.obstacles
+        if self.grid is None or not len(pts):
+            return False
+        iy, ix, inside = self.grid.cells(pts)
+        self.layer.mark(iy[inside], ix[inside], b)
+        return bool(inside.any())
 
     def take(
         self, fresh: tuple[Grid, list[Person], int] | None, seen_changed: bool, b: int

@@ -251,7 +251,7 @@ class NavNode:
         if not worlds:
             return False
         changed = self.map.see_scan(np.vstack(worlds), pose, b, views)
-        self.log.scan(b, self.map.scan.bodies, self.map.scanned)
+        self.log.scan(b, self.map.scan.bodies, self.map.scanned, self.map.scan.obstacles)
         return changed
 
     def _publish(

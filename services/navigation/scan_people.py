@@ -20,8 +20,10 @@ grid, pose, t)` takes one scan's returns in the map frame:
   person's two legs, a wall's return between them);
 - a cluster of at least `min_points` returns, at most `max_extent_m` across, whose
   centroid is outside the footprint (`robot_margin_m` round it: the robot's own arm
-  and what it carries), is a body that could be a person; larger ones (a trolley, a
-  parked load) are obstacles, the depth layer's business. Its floor point is the
+  and what it carries), is a body that could be a person; the returns of larger ones
+  (a trolley left in an aisle, a parked load: `ScanPeople.obstacles`) are obstacles the
+  map lacks, which `NavMap` marks in the short-lived layer as the depth camera's are:
+  the lidar sees them all round, where the camera looks ahead only. Its floor point is the
   centroid of its returns: the near side of the legs, so a little in front of the
   person's centre (distances err on the safe side);
 - each is put on a track (the nearest track's position extrapolated to now within
@@ -135,10 +137,10 @@ def static_clearance(grid: Grid, island_m2: float) -> FloatArray:
     return out
 
 
-def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
-    """The clusters of `points` (n, 2, beam order): split where consecutive points are more
-    than `gap_m` apart, joined where centroids are within `join_m`; those of at least
-    `min_points` and at most `max_extent_m` across."""
+def clusters(points: FloatArray, p: ScanParams) -> list[tuple[FloatArray, float]]:
+    """The clusters of `points` (n, 2, beam order), each with its extent (m): split where
+    consecutive points are more than `gap_m` apart, joined where centroids are within
+    `join_m`; those of at least `min_points`."""
     if len(points) == 0:
         return []
     step = np.hypot(*np.diff(points, axis=0).T)
@@ -155,12 +157,25 @@ def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
             joined.append(g)
     out = []
     for g in joined:
-        if len(g) < p.min_points:
-            continue
-        c = g.mean(axis=0)
-        extent = 2.0 * float(np.max(np.hypot(*(g - c).T)))
+        if len(g) >= p.min_points:
+            out.append((g, 2.0 * float(np.max(np.hypot(*(g - g.mean(axis=0)).T)))))
+    return out
+
+
+def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
+    """The `clusters` of `points` at most `max_extent_m` across, as bodies."""
+    out = []
+    for g, extent in clusters(points, p):
         if extent <= p.max_extent_m:
+            c = g.mean(axis=0)
             out.append(Body(float(c[0]), float(c[1]), extent, len(g)))
+    return out
+
+
+def larger(points: FloatArray, p: ScanParams) -> FloatArray:
+    """The returns (k, 2) of the `clusters` of `points` more than `max_extent_m` across."""
+    big = [g for g, extent in clusters(points, p) if extent > p.max_extent_m]
+    out: FloatArray = np.vstack(big) if big else np.zeros((0, 2))
     return out
 
 
@@ -224,6 +239,8 @@ class ScanPeople:
         self._clearance: FloatArray = np.zeros((0, 0))
         #: The last scan's bodies (for the log).
         self.bodies: list[Body] = []
+        #: The last scan's returns (k, 2, map) of clusters larger than a person: obstacles.
+        self.obstacles: FloatArray = np.zeros((0, 2))
 
     def update(self, points: FloatArray, grid: Grid, pose: Pose, t_ns: int) -> None:
         """One scan's returns (n, 2, map frame, beam order) at `t_ns`, the robot at `pose`."""
@@ -240,6 +257,10 @@ class ScanPeople:
             mine = distance_to_footprint(pose, self.fp, xy) <= p.robot_margin_m
             found = [b for b, m in zip(found, mine.tolist(), strict=True) if not m]
         self.bodies = found
+        big = larger(pts, p)
+        if len(big):
+            big = big[distance_to_footprint(pose, self.fp, big) > p.robot_margin_m]
+        self.obstacles = big
         self._associate(found, t_ns)
 
     def _associate(self, found: list[Body], t_ns: int) -> None:

@@ -261,3 +261,36 @@ def test_the_rear_lidar_says_who_is_gone_behind_the_robot_where_the_front_one_ca
         m.adopt(_room(), [Person("person_4", -2.0, 0.5)], 0, 0)  # walked off behind it
         m.see_scan(_points(pose, []), pose, 0, views)
         assert [q.id for q in m.people] == kept
+
+
+def _trolley(x: float, y: float, length: float = 1.0) -> list[tuple[float, float]]:
+    """A trolley's long side along x at y, in the lidar's plane: circles 0.1 m apart
+    (their returns as close together as a flat face's)."""
+    n = round(length / 0.1) + 1
+    return [(x - 0.5 * length + 0.1 * k, y) for k in range(n)]
+
+
+def test_a_trolley_the_map_lacks_is_no_person_but_an_obstacle_marked_in_the_layer() -> None:
+    """Larger than a person (1 m across): no body, no track; its returns are marked in the
+    short-lived layer at the scan's stamp (the lidar sees it where the head camera does
+    not look: beside the robot here) and the costmap is rebuilt round it."""
+    import logging
+
+    pose = Pose(0.0, 0.0, 0.0)
+    pts = _points(pose, _trolley(0.0, -2.0))
+    field = ScanPeople(FP)
+    field.update(pts, _room(), pose, 0)
+    assert field.bodies == [] and field.people(0) == []
+    assert len(field.obstacles) >= 10
+    assert np.all(np.abs(field.obstacles[:, 1] + 2.0) < 0.1)
+    m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
+    m.adopt(_room(), [], 0, 0)
+    assert m.see_scan(pts, pose, S)  # marked: rebuild
+    m.rebuild(S)
+    cell = m.grid.cell(0.0, -1.93) if m.grid is not None else None  # its near face
+    assert cell is not None and m.layer.active(S)[cell]
+    assert m.costmap is not None and m.costmap.cost[cell] < 0  # lethal where it stands
+    assert not m.layer.active(S + 4 * S)[cell]  # not seen again: it expires
+    # A person's legs are a body, not an obstacle.
+    field.update(_points(pose, _person(0.0, -2.0)), _room(), pose, 2 * S)
+    assert len(field.bodies) == 1 and len(field.obstacles) == 0
