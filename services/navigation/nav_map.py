@@ -2,7 +2,9 @@
 
 Times are ns of sim time; positions m in the world frame. `adopt` takes a grid and the
 map's people as of a sim time (a new grid shape starts an empty short-lived layer); the
-short-lived depth layer (`layer`, marked and cleared by `depth.DepthFeed`) and the people
+short-lived depth layer (`layer`, marked and cleared by `depth.DepthFeed`), the lidar's
+layer of bodies larger than a person (`scan_layer`: a trolley the map lacks, marked at
+each scan, cleared where its beams pass through, else kept `SCAN_TTL_S`) and the people
 layer (`people`: the map's people with those perception sees over them, `SeenPeople`,
 and the lidar's tracks over those, `scan_people`; in the costmap when
 `people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
@@ -29,6 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from common.geometry import FloatArray
+from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
 from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
@@ -40,6 +43,11 @@ from services.navigation.seen_people import SeenPeople
 REBUILD_MOVE_M = 0.1
 #: s: a person the camera saw this recently is there, whatever the map's tracker says.
 CAMERA_FRESH_S = 2.0
+#: s: the lidar's obstacles larger than a person are kept this long unseen (its beams
+#: passing through where one stood clear it sooner): a trolley behind the robot stays on
+#: the plan's map while the robot goes round by another aisle (the depth layer's 3 s
+#: would let the plan lead back to it every few seconds).
+SCAN_TTL_S = 120.0
 
 
 class NavMap:
@@ -58,6 +66,9 @@ class NavMap:
         self.people_in_costmap, self.source_name, self.log = people_in_costmap, source_name, log
         self.grid: Grid | None = None
         self.layer = ObstacleLayer((1, 1), self.ttl_ns)
+        #: The lidar's obstacles larger than a person (`_mark_obstacles`): kept until its
+        #: beams pass through them, or `SCAN_TTL_S` unseen.
+        self.scan_layer = ObstacleLayer((1, 1), round(SCAN_TTL_S * NS_PER_S))
         self.people: list[Person] = []
         self.map_people: list[Person] = []
         self.seen = SeenPeople()
@@ -85,6 +96,7 @@ class NavMap:
                 "map from %s: %s cells of %.2f m", self.source_name, grid.shape, grid.resolution
             )
             self.layer = ObstacleLayer(grid.shape, self.ttl_ns)
+            self.scan_layer = ObstacleLayer(grid.shape, self.scan_layer.ttl_ns)
         self.grid, self.map_people, self.map_at = grid, people, as_of
         self.now = t_ns
         self.known = self.seen.merge(people, t_ns)
@@ -129,7 +141,8 @@ class NavMap:
         assert self.grid is not None  # called once a grid is in
         self.built = list(self.people)
         people = self.people if self.people_in_costmap else []
-        cm = build_costmap(self.grid, self.fp, self.cost_params, self.layer.active(t_ns), people)
+        seen = self.layer.active(t_ns) | self.scan_layer.active(t_ns)
+        cm = build_costmap(self.grid, self.fp, self.cost_params, seen, people)
         # The speed rules always see every person, whether or not the plan avoids them.
         return replace(cm, people=tuple(self.people))
 
@@ -161,13 +174,25 @@ class NavMap:
 
     def _mark_obstacles(self, b: int) -> bool:
         """The lidar's returns of bodies larger than a person (a trolley the map lacks) into
-        the short-lived layer at b, as the depth camera marks what it sees; whether any."""
-        pts = self.scan.obstacles
-        if self.grid is None or not len(pts):
+        its layer at b, and that layer's cells its beams now pass through cleared (the
+        trolley taken away, or a group of people gone); whether it changed."""
+        if self.grid is None:
             return False
+        iy, ix = np.nonzero(self.scan_layer.active(b))
+        cleared = False
+        if len(iy):
+            through = np.zeros(len(iy), dtype=bool)
+            xy = self.grid.centres(np.stack([iy, ix], axis=1))
+            for view in self.views:
+                through |= view.through(xy)
+            self.scan_layer.clear(iy[through], ix[through])
+            cleared = bool(through.any())
+        pts = self.scan.obstacles
+        if not len(pts):
+            return cleared
         iy, ix, inside = self.grid.cells(pts)
-        self.layer.mark(iy[inside], ix[inside], b)
-        return bool(inside.any())
+        self.scan_layer.mark(iy[inside], ix[inside], b)
+        return bool(inside.any()) or cleared
 
     def take(
         self, fresh: tuple[Grid, list[Person], int] | None, seen_changed: bool, b: int
@@ -190,4 +215,5 @@ class NavMap:
     def clear(self, t_ns: int) -> None:
         """The `clear` recovery: forget the short-lived layer and rebuild."""
         self.layer.clear_all()
+        self.scan_layer.clear_all()
         self.costmap = self.build(t_ns)

@@ -56,6 +56,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import ndimage
 
 from common.geometry import FloatArray
@@ -208,6 +209,21 @@ class ScanView:
             return False
         r = self.ranges[k0 : k1 + 1]
         return bool(np.all(r >= dist + beyond_m))
+
+    def through(self, xy: FloatArray, beyond_m: float = 0.15) -> NDArray[np.bool_]:
+        """Which points (n, 2, map) its beam passes: a return from at least `beyond_m`
+        beyond the point (a beam with no return says nothing: lost, or masked by the
+        robot's own legs), the point in the scan's field and range."""
+        if len(xy) == 0:
+            return np.zeros(0, dtype=bool)
+        dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
+        dist = np.hypot(dx, dy)
+        bearing = np.remainder(np.arctan2(dy, dx) - self.heading + np.pi, 2 * np.pi) - np.pi
+        k = np.rint((bearing - self.angle_min) / self.angle_increment).astype(np.int64)
+        inside = (k >= 0) & (k < len(self.ranges)) & (dist + beyond_m < self.range_max)
+        r = self.ranges[np.clip(k, 0, len(self.ranges) - 1)]
+        out: NDArray[np.bool_] = inside & (r >= dist + beyond_m)
+        return out
 
 
 @dataclass

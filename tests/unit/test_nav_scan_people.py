@@ -285,12 +285,19 @@ def test_a_trolley_the_map_lacks_is_no_person_but_an_obstacle_marked_in_the_laye
     assert np.all(np.abs(field.obstacles[:, 1] + 2.0) < 0.1)
     m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
     m.adopt(_room(), [], 0, 0)
-    assert m.see_scan(pts, pose, S)  # marked: rebuild
+    views = [_view(pose, _trolley(0.0, -2.0))]
+    assert m.see_scan(pts, pose, S, views)  # marked: rebuild
     m.rebuild(S)
     cell = m.grid.cell(0.0, -1.93) if m.grid is not None else None  # its near face
-    assert cell is not None and m.layer.active(S)[cell]
+    assert cell is not None and m.scan_layer.active(S)[cell]
     assert m.costmap is not None and m.costmap.cost[cell] < 0  # lethal where it stands
-    assert not m.layer.active(S + 4 * S)[cell]  # not seen again: it expires
+    m.see_scan(pts, pose, 2 * S, views)  # seen again: its beams stop at it, none clears it
+    assert np.array_equal(m.scan_layer.active(2 * S), m.scan_layer.active(S))
+    # Kept while the robot is away (the depth layer's 3 s would have let it go) …
+    assert m.scan_layer.active(60 * S)[cell]
+    # … until the lidar's beams pass where it stood: taken away.
+    assert m.see_scan(_points(pose, []), pose, 61 * S, [_view(pose, [])])
+    assert not m.scan_layer.active(61 * S)[cell]
     # A person's legs are a body, not an obstacle.
     field.update(_points(pose, _person(0.0, -2.0)), _room(), pose, 2 * S)
     assert len(field.bodies) == 1 and len(field.obstacles) == 0
