@@ -212,8 +212,10 @@ class ScanView:
 
     def through(self, xy: FloatArray, beyond_m: float = 0.15) -> NDArray[np.bool_]:
         """Which points (n, 2, map) its beam passes: a return from at least `beyond_m`
-        beyond the point (a beam with no return says nothing: lost, or masked by the
-        robot's own legs), the point in the scan's field and range."""
+        beyond the point, or none at all (nothing within the range: in the middle of a
+        hall most beams return nothing; a beam lost, or masked by the robot's own legs,
+        reads so too, which costs a mark the other lidar or the next scan makes again),
+        the point in the scan's field and range."""
         if len(xy) == 0:
             return np.zeros(0, dtype=bool)
         dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
@@ -222,7 +224,7 @@ class ScanView:
         k = np.rint((bearing - self.angle_min) / self.angle_increment).astype(np.int64)
         inside = (k >= 0) & (k < len(self.ranges)) & (dist + beyond_m < self.range_max)
         r = self.ranges[np.clip(k, 0, len(self.ranges) - 1)]
-        out: NDArray[np.bool_] = inside & (r >= dist + beyond_m)
+        out: NDArray[np.bool_] = inside & ((r >= dist + beyond_m) | (r <= 0.0))
         return out
 
 

@@ -301,3 +301,13 @@ def test_a_trolley_the_map_lacks_is_no_person_but_an_obstacle_marked_in_the_laye
     # A person's legs are a body, not an obstacle.
     field.update(_points(pose, _person(0.0, -2.0)), _room(), pose, 2 * S)
     assert len(field.bodies) == 1 and len(field.obstacles) == 0
+
+
+def test_a_beam_passes_a_point_when_it_returns_beyond_it_or_returns_nothing_in_range() -> None:
+    pose = Pose(0.0, 0.0, 0.0)
+    wall = _view(pose, [])  # the room's walls at 5.95 m
+    pts = np.array([[2.0, 0.5], [5.9, 0.5], [-3.0, 0.5]])  # off the beam at 0 rad (its /0)
+    assert wall.through(pts).tolist() == [True, False, False]  # at the wall; behind: no beam
+    empty = ScanView(wall.origin, 0.0, wall.angle_min, wall.angle_increment,
+                     np.zeros_like(wall.ranges), 10.0)  # fmt: skip
+    assert empty.through(np.array([[2.0, 0.0], [11.0, 0.0]])).tolist() == [True, False]
