@@ -13,6 +13,8 @@ from __future__ import annotations
 import logging
 from collections import defaultdict
 
+import numpy as np
+
 from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
 from services.semantic_map.mapper import IngestReport, SemanticMap
@@ -59,6 +61,19 @@ class FusionLog:
                 entity_id,
                 dets.camera,
             )
+        for entity_id, was, now, seen in report.jumps:
+            log.info(
+                "t=%.2f s: %s moved %.2f m on one %s detection at (%.2f, %.2f): "
+                "(%.2f, %.2f) -> (%.2f, %.2f)",
+                dets.stamp_ns / NS_PER_S, entity_id, float(np.linalg.norm(now - was)),
+                dets.camera, seen[0], seen[1], was[0], was[1], now[0], now[1],
+            )  # fmt: skip
+        for entity_id, seen in report.held:
+            log.info(
+                "t=%.2f s: %s standing: a %s detection of them at (%.2f, %.2f), far from "
+                "where they are, held until a second one there",
+                dets.stamp_ns / NS_PER_S, entity_id, dets.camera, seen[0], seen[1],
+            )  # fmt: skip
         for entity_id, reason in report.dropped:
             t = dets.stamp_ns / NS_PER_S
             log.info("t=%.2f s: %s deleted from %s: %s", t, entity_id, dets.camera, reason)

@@ -103,6 +103,10 @@ class IngestReport:
     learned_cells: int = 0
     #: (id, reason) of the false entries deleted in this frame.
     dropped: list[tuple[str, str]] = field(default_factory=list)
+    #: People moved far by one detection: (id, from xy, to xy, the detection's xy).
+    jumps: list[tuple[str, FloatArray, FloatArray, FloatArray]] = field(default_factory=list)
+    #: Far detections of standing people held for a second one: (id, the detection's xy).
+    held: list[tuple[str, FloatArray]] = field(default_factory=list)
 
 
 def _mat(values: tuple[float, ...]) -> FloatArray:
@@ -381,6 +385,7 @@ class SemanticMap:
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)
         splits = self.people.take_merged()
+        report.jumps, report.held = self.people.take_jumps()
         for keep, gone, _ in splits:
             if keep.id is not None and gone.id is not None:
                 self.aliases[gone.id] = keep.id
