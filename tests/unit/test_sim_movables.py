@@ -75,7 +75,8 @@ def test_a_trolley_left_in_front_of_the_robot_stands_there_and_the_lidar_sees_it
     assert 0.9 < after[front] < 1.7, (before[front], after[front])
     assert before[front] == 0.0 or before[front] > after[front] + 0.1
     # Parked away again: the beam passes where it stood.
-    (cx, cy), _ = core.place_movable("trolley_1", None, 0.0), core.step()
+    cx, _ = core.place_movable("trolley_1", None, 0.0)
+    core.step()
     assert cx < hall.hall.min_xy[0] - 10.0
     assert np.array_equal(core.lidar.scan(core.data), before)
 
