@@ -62,6 +62,7 @@ class PullFeeler(Protocol):
     pull_n: float  # the last sample's pull toward the person, N (logged)
     across_n: float  # its change of force across that direction, N (logged)
     effort_change_nm: float  # its jaw effort change, N·m (logged)
+    rising_since_ns: int | None  # since when the pull has been rising (logged)
 
     def reset(self, status: WbcStatus) -> None: ...
 

@@ -80,13 +80,16 @@ class PullDetector:
         self.across_n = 0.0  # the last sample's change of force across `toward`, N
         self.tripped_at_ns: int | None = None
         self.last_pull_ns: int | None = None  # the last sample pulling ≥ force_n / 2
+        #: Since when the pull has stayed above a quarter of `force_n` (None: below now):
+        #: a person's pull rises within a few tenths of a second, a drift over seconds.
+        self.rising_since_ns: int | None = None
 
     def reset(self, status: WbcStatus) -> None:
         """Start feeling from this status (the arm still in `handover`): a new baseline."""
         self._t0_ns = status.stamp_ns
         self._forces, self._efforts = [], []
         self._since_ns, self.tripped, self.tripped_at_ns = None, False, None
-        self.last_pull_ns = None
+        self.last_pull_ns = self.rising_since_ns = None
         self.pull_n = self.effort_change_nm = 0.0
         self._add_baseline(status)
 
@@ -119,6 +122,10 @@ class PullDetector:
         self.effort_change_nm = abs(effort - self._e0)
         if self.pull_n >= 0.5 * self.force_n:
             self.last_pull_ns = status.stamp_ns
+        if self.pull_n < 0.25 * self.force_n:
+            self.rising_since_ns = None
+        elif self.rising_since_ns is None:
+            self.rising_since_ns = status.stamp_ns
         tugged = self.effort_change_nm >= self.effort_nm and self.across_n <= self.pull_n
         pulling = (
             self.pull_n >= self.force_n

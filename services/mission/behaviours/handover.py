@@ -74,14 +74,23 @@ class FeelPull(MissionBehaviour):
             if self.elapsed_s() >= s.settle_s:
                 detector.reset(status)
                 self.baseline = True
-                self.ctx.decide("handover: holding still, waiting for the pull")
+                f = status.gripper_wrench[:3]
+                self.ctx.decide(
+                    f"handover: holding still, waiting for the pull (the wrench at rest "
+                    f"({f[0]:+.2f}, {f[1]:+.2f}, {f[2]:+.2f}) N, effort "
+                    f"{status.gripper_effort:.2f} N·m)"
+                )
             self.feedback_message = "holding still"
             return Status.RUNNING
         if detector.update(status):
+            since = detector.rising_since_ns
+            rising = f", rising for {(status.stamp_ns - since) / 1e9:.2f} s" if since else ""
+            f = status.gripper_wrench[:3]
             self.ctx.decide(
-                f"handover: pull felt ({detector.pull_n:+.1f} N toward the person, "
+                f"handover: pull felt ({detector.pull_n:+.1f} N toward the person{rising}, "
                 f"{detector.across_n:.1f} N across; effort change "
-                f"{detector.effort_change_nm:.2f} N·m, force {status.gripper_wrench[:3]})"
+                f"{detector.effort_change_nm:.2f} N·m, force ({f[0]:+.2f}, {f[1]:+.2f}, "
+                f"{f[2]:+.2f}) N)"
             )
             return Status.SUCCESS
         self.feedback_message = "waiting for the pull"
