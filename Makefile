@@ -21,7 +21,7 @@ demo: install
 	$(VENV)/bin/dume demo
 
 test: install
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 test-quick: install
 	$(PY) -m pytest -q -m "not slow"

@@ -32,7 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from bench.eval.run import Progress, start_gate_overrides, watch_mission
+from bench.eval.explored import moved, score_entities
+from bench.eval.run import Progress, read_map, start_gate_overrides, watch_mission
 from bench.map_agreement import FREE, UNKNOWN, Alignment, agreement, align_to_truth, truth_on
 from common.bus import Latest
 from common.config import Overrides, merged
@@ -179,11 +180,13 @@ def explore_run(
         record = watch_mission(s.bus, s.keys, request, SIM_TIMEOUT_S, show, start_gate=True)
         job = s.bus.query(s.keys.mission_patrol, PatrolRequest(action="status"), PatrolStatus)
         grid = s.bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 30.0)
+        artifacts, people = read_map(s.bus)
     finally:
         s.stop()
         if tmp is not None:
             tmp.cleanup()
     last = record.changes[-1] if record.changes else None
+    aligned = map_alignment(grid, truth)
     failed = re.search(r"\((\d+) failed\)", last.detail if last else "")
     sim_s = (record.end_ns - record.start_ns) / 1e9
     out |= {
@@ -199,7 +202,13 @@ def explore_run(
         "goals_chosen": job.waypoints,
         "goals_failed": int(failed.group(1)) if failed else None,
         "travelled_m": round(job.travelled_m, 1),
-        **score_map(grid, truth, map_alignment(grid, truth)),
+        **score_map(grid, truth, aligned),
+        # What the map holds, judged from the truth: as the map has it, and as its
+        # alignment to the truth moves it (a map made while localizing is in its own frame).
+        "entities": score_entities(truth, artifacts, people),
+        "entities_aligned": score_entities(
+            truth, moved(artifacts, aligned), moved(people, aligned)
+        ),
     }
     if out["outcome"] != "succeeded":
         out["logs"] = str(s.run_dir)
