@@ -148,7 +148,7 @@ class NavLogger:
                 lo, hi = obstacles.min(axis=0), obstacles.max(axis=0)
                 self.log.info(
                     "t=%.2f s lidar: an obstacle the map lacks, larger than a person, %d "
-                    "returns in x %.2f..%.2f, y %.2f..%.2f: marked in the short-lived layer",
+                    "returns in x %.2f..%.2f, y %.2f..%.2f: kept until the beams pass through",
                     b / 1e9, len(obstacles), lo[0], hi[0], lo[1], hi[1],
                 )  # fmt: skip
             else:
