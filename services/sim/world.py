@@ -355,8 +355,8 @@ def aisle_spot(
     hall): (x, y, yaw) on free floor within `AISLE_NEAR_M` of the static obstacles, its
     footprint `AISLE_MARGIN_M` clear of them, `AISLE_KEEP_M` from the robot and the points
     `keep_clear` (people, artifacts), and every goal of the world (each artifact's standoff
-    and pick pose, each person's handover pose) still reachable from the robot's pose with
-    it there; None when no such spot was drawn in `tries`."""
+    and pick pose, each person's handover pose) that is reachable from the robot's pose
+    without it reachable with it there; None when no such spot was drawn in `tries`."""
     movable = next(m for m in world.movables if m.id == movable_id)
     grid = world.occupancy
     near = fz.clearance(grid)
@@ -366,6 +366,10 @@ def aisle_spot(
     )
     x, y, yaw = robot_pose
     others = [(x, y), *keep_clear]
+    here = msgspec.structs.replace(world, robot_start=RobotStart(x, y, yaw))
+    # What is unreachable already (a walking person's handover pose on a table's corner,
+    # the robot's own spot in a tight corner) is not the trolley's doing.
+    before = set(fz.check_paths(here))
     for _ in range(tries if len(iy) else 0):
         k = int(rng.integers(len(iy)))
         cx, cy, cyaw = float(xs[ix[k]]), float(ys[iy[k]]), float(rng.uniform(-math.pi, math.pi))
@@ -377,12 +381,11 @@ def aisle_spot(
         if np.any(as_numpy(grid.cells)[box] != fz.FREE):
             continue
         with_it = msgspec.structs.replace(
-            world,
+            here,
             obstacles=(*world.obstacles, placed),
             occupancy=fz.rasterize(world.hall, (*world.obstacles, placed), grid.resolution),
-            robot_start=RobotStart(x, y, yaw),
         )
-        if not fz.check_paths(with_it):
+        if not set(fz.check_paths(with_it)) - before:
             return cx, cy, cyaw
     return None
 

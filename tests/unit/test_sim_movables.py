@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -118,3 +119,17 @@ def test_the_hook_leaves_it_at_the_stamp_reports_the_move_and_refuses_a_bad_comm
     assert [(m.movable_id, m.position_in_world, m.away) for m in moved] == [
         ("trolley_1", (x + 2.0, y), False)
     ]
+
+
+def test_a_goal_unreachable_already_does_not_keep_the_trolley_out(hall: WorldDescription) -> None:
+    """A walking person faces a wall from 0.3 m (their handover pose lies in the wall):
+    that is no reason to leave the trolley nowhere (the shift's first trolley was never
+    left: every spot was refused for such a goal)."""
+    p = hall.people[0]
+    at_wall = msgspec.structs.replace(
+        p, position=(hall.hall.min_xy[0] + 0.3, p.position[1]), yaw=math.pi
+    )
+    world = msgspec.structs.replace(hall, people=(at_wall, *hall.people[1:]))
+    assert any(p.id in problem for problem in fz.check_paths(world))
+    spot = aisle_spot(world, "trolley_1", np.random.default_rng(1), _start(world))
+    assert spot is not None
