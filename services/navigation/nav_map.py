@@ -175,24 +175,24 @@ class NavMap:
     def _mark_obstacles(self, b: int) -> bool:
         """The lidar's returns of bodies larger than a person (a trolley the map lacks) into
         its layer at b, and that layer's cells its beams now pass through cleared (the
-        trolley taken away, or a group of people gone); whether it changed."""
+        trolley taken away, or a group of people gone); whether the layer's cells changed
+        (a mark refreshed where one was is no change: no costmap rebuild at the scan's
+        rate while a trolley stands in view)."""
         if self.grid is None:
             return False
-        iy, ix = np.nonzero(self.scan_layer.active(b))
-        cleared = False
+        before = self.scan_layer.active(b)
+        iy, ix = np.nonzero(before)
         if len(iy):
             through = np.zeros(len(iy), dtype=bool)
             xy = self.grid.centres(np.stack([iy, ix], axis=1))
             for view in self.views:
                 through |= view.through(xy)
             self.scan_layer.clear(iy[through], ix[through])
-            cleared = bool(through.any())
         pts = self.scan.obstacles
-        if not len(pts):
-            return cleared
-        iy, ix, inside = self.grid.cells(pts)
-        self.scan_layer.mark(iy[inside], ix[inside], b)
-        return bool(inside.any()) or cleared
+        if len(pts):
+            iy, ix, inside = self.grid.cells(pts)
+            self.scan_layer.mark(iy[inside], ix[inside], b)
+        return not np.array_equal(before, self.scan_layer.active(b))
 
     def take(
         self, fresh: tuple[Grid, list[Person], int] | None, seen_changed: bool, b: int

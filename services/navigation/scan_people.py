@@ -22,8 +22,9 @@ grid, pose, t)` takes one scan's returns in the map frame:
   centroid is outside the footprint (`robot_margin_m` round it: the robot's own arm
   and what it carries), is a body that could be a person; the returns of larger ones
   (a trolley left in an aisle, a parked load: `ScanPeople.obstacles`) are obstacles the
-  map lacks, which `NavMap` marks in the short-lived layer as the depth camera's are:
-  the lidar sees them all round, where the camera looks ahead only. Its floor point is the
+  map lacks, which `NavMap` keeps in a layer of their own until the beams pass through
+  where they stood: the lidar sees them all round, where the camera looks ahead only.
+  Its floor point is the
   centroid of its returns: the near side of the legs, so a little in front of the
   person's centre (distances err on the safe side);
 - each is put on a track (the nearest track's position extrapolated to now within
@@ -163,21 +164,23 @@ def clusters(points: FloatArray, p: ScanParams) -> list[tuple[FloatArray, float]
     return out
 
 
-def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
-    """The `clusters` of `points` at most `max_extent_m` across, as bodies."""
-    out = []
+def bodies_and_larger(points: FloatArray, p: ScanParams) -> tuple[list[Body], FloatArray]:
+    """The `clusters` of `points` at most `max_extent_m` across, as bodies, and the
+    returns (k, 2) of the larger ones."""
+    found, big = [], []
     for g, extent in clusters(points, p):
         if extent <= p.max_extent_m:
             c = g.mean(axis=0)
-            out.append(Body(float(c[0]), float(c[1]), extent, len(g)))
-    return out
+            found.append(Body(float(c[0]), float(c[1]), extent, len(g)))
+        else:
+            big.append(g)
+    larger: FloatArray = np.vstack(big) if big else np.zeros((0, 2))
+    return found, larger
 
 
-def larger(points: FloatArray, p: ScanParams) -> FloatArray:
-    """The returns (k, 2) of the `clusters` of `points` more than `max_extent_m` across."""
-    big = [g for g, extent in clusters(points, p) if extent > p.max_extent_m]
-    out: FloatArray = np.vstack(big) if big else np.zeros((0, 2))
-    return out
+def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
+    """The `clusters` of `points` at most `max_extent_m` across, as bodies."""
+    return bodies_and_larger(points, p)[0]
 
 
 @dataclass(frozen=True)
@@ -269,13 +272,12 @@ class ScanPeople:
         if len(pts):
             d = distance_to_footprint(pose, self.fp, pts)
             pts = pts[d <= p.range_m]
-        found = bodies(pts, p)
+        found, big = bodies_and_larger(pts, p)
         if found:
             xy = np.array([(b.x, b.y) for b in found])
             mine = distance_to_footprint(pose, self.fp, xy) <= p.robot_margin_m
             found = [b for b, m in zip(found, mine.tolist(), strict=True) if not m]
         self.bodies = found
-        big = larger(pts, p)
         if len(big):
             big = big[distance_to_footprint(pose, self.fp, big) > p.robot_margin_m]
         self.obstacles = big

@@ -14,6 +14,7 @@ the sim goes on.
 from __future__ import annotations
 
 import logging
+from abc import ABC, abstractmethod
 from typing import Generic, TypeVar
 
 from common import keys as K
@@ -27,7 +28,7 @@ M = TypeVar("M", ArtifactCommand, MovableCommand)
 E = TypeVar("E", ArtifactMoved, MovableMoved)
 
 
-class _MoveHook(StampedHook[M], Generic[M, E]):
+class _MoveHook(StampedHook[M], ABC, Generic[M, E]):
     """A hook whose commands move one thing each: `apply` takes those due, in stamp order,
     has `_move` apply each (KeyError, ValueError: refused with a warning), and returns the
     events of those applied."""
@@ -49,8 +50,10 @@ class _MoveHook(StampedHook[M], Generic[M, E]):
                           late_note(t_ns, c.stamp_ns))  # fmt: skip
         return moved
 
+    @abstractmethod
     def _move(self, t_ns: int, c: M, core: SimCore) -> tuple[E, str]:
-        raise NotImplementedError
+        """Apply one command: its event and how the log says it (KeyError, ValueError:
+        refused)."""
 
 
 class ArtifactHook(_MoveHook[ArtifactCommand, ArtifactMoved]):

@@ -21,7 +21,7 @@ import time
 from common import keys as K
 from common.lockstep import SimGate
 from common.messages.base import NS_PER_S
-from common.messages.sim import Ack, JointCommand, WorldEvent
+from common.messages.sim import Ack, JointCommand
 from common.messages.world import WorldDescription
 from common.recording import default_blueprint
 from common.service import Service
@@ -116,12 +116,12 @@ class SimNode:
             self.intake.apply_cmd_vel(t_ns)
             self.push_hook.apply(t_ns, self.core)
             self.people_hook.apply(t_ns, self.core.people)
-            moved: list[WorldEvent] = [*self.artifact_hook.apply(t_ns, self.core)]
-            moved += self.movable_hook.apply(t_ns, self.core)
+            moved = self.artifact_hook.apply(t_ns, self.core)
+            left = self.movable_hook.apply(t_ns, self.core)
             t2 = time.perf_counter()
             events = self.core.step()
-            if moved:
-                events = [*moved, *events]
+            if moved or left:
+                events = [*moved, *left, *events]
             now = time.perf_counter()
             publish_s += t1 - t0
             step_s += now - t2
