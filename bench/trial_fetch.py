@@ -2,7 +2,9 @@
 sim's truth measuring what its manipulation algorithms achieved.
 
 Small world, every service (the mission too), lockstep, dynamic locomotion: the run
-`dume demo` makes, with probes. The request goes to the mission as any client's does
+`dume demo` makes, with probes; or a hall world with `dume eval --map truth`'s request
+and map (`--world hall --world-seed N`: the eval's failures looked at closer). The
+request goes to the mission as any client's does
 (`bench.eval.run.watch_mission`, start-gated, so the run is the same at every seed); the
 trial only watches:
 
@@ -14,8 +16,9 @@ trial only watches:
   against the side grasp of the true bottle, where the jaws closed; whether the object
   was held after the pick;
 - the world's events: when the person took the object (`HandoverTaken`) against when
-  the mission felt the pull (its `release` goal after `present`); `samples_path` saves
-  the `wbc/status` samples of the handover (the pull detector's test data).
+  the mission felt the pull (its `release` goal after `present`); `samples_path` (the
+  CLI: `var/trials/fetch-<world>-<seed>.handover.json`) saves the `wbc/status` samples
+  of the handover (the pull detector's test data).
 
 Nothing here decides for the robot: a failure is the mission's, with its reason.
 """
@@ -33,7 +36,8 @@ from typing import Any
 import numpy as np
 
 from bench.eval.judge import MissionRecord, stage_times, static_contacts
-from bench.eval.run import read_world, start_gate_overrides, watch_mission
+from bench.eval.run import read_map, read_world, start_gate_overrides, watch_mission
+from bench.eval.targets import seeded_pair
 from common import robot
 from common.access import services_on
 from common.bus import Bus
@@ -63,16 +67,21 @@ Figures = dict[str, Any]
 OBJECT, PERSON = "bottle_1", "person_1"
 #: Sim seconds the mission has for the whole request.
 TIMEOUT_S = 240.0
+#: The handover's samples go on this long past the release, ns of sim time.
+AFTER_RELEASE_NS = 1_000_000_000
 #: Wall seconds the probe waits for a `wbc/status` before looking at its stop flag.
 POLL_S = 0.5
 
 
-def fetch_settings(seed: int, db_dir: str) -> dict[str, Any]:
-    """The demo's small world, in a throw-away map database, start-gated."""
+def fetch_settings(seed: int, db_dir: str, world: str = "small") -> dict[str, Any]:
+    """The demo's small world (or `world`), in a throw-away map database seeded from the
+    truth with noise (the noise seeded by the world's seed, as `dume eval --map truth`
+    has it, in the hall), start-gated."""
     return merged(
         {
-            "sim.world": "small",
+            "sim.world": world,
             "sim.world_seed": seed,
+            "semantic_map.seed_noise_seed": 0 if world == "small" else seed,
             "sim.locomotion": "dynamic",
             "time.mode": "lockstep",
             "semantic_map.start": "seed-from-world",
@@ -176,7 +185,8 @@ def handover_figures(
     record: MissionRecord, samples: list[WbcStatus]
 ) -> tuple[Figures, list[dict[str, Any]]]:
     """When the pull was felt against when the person took the object, and the
-    handover's `wbc/status` samples (from `release_object` to the release)."""
+    handover's `wbc/status` samples (from `release_object` to `AFTER_RELEASE_NS` past
+    the release)."""
     start = next((c.stamp_ns for c in record.changes if c.behaviour == "release_object"), None)
     taken = next((e for e in record.events if isinstance(e, HandoverTaken)), None)
     if start is None:
@@ -188,7 +198,9 @@ def handover_figures(
          and any(g.kind == "release" and g.goal_id not in before for g in s.goals)),
         None,
     )  # fmt: skip
-    window = [s for s in samples if start <= s.stamp_ns <= (felt or math.inf)]
+    # on past the release for a while: the load leaving the jaws (taken, or fallen)
+    end = math.inf if felt is None else felt + AFTER_RELEASE_NS
+    window = [s for s in samples if start <= s.stamp_ns <= end]
     out = [
         {"stamp_ns": s.stamp_ns, "wrench": list(s.gripper_wrench), "effort": s.gripper_effort,
          "held": s.held, "taken": taken is not None and s.stamp_ns >= taken.stamp_ns}
@@ -219,14 +231,16 @@ def run_fetch(
     overrides: Overrides | None = None,
     samples_path: Path | None = None,
     hosts: Overrides | None = None,
+    world_name: str = "small",
 ) -> Figures:
-    """One fetch on a fresh stack; its figures (JSON-ready). `hosts`: the stack split
-    over two hosts (`zenoh.side`), with these link settings (`zenoh.certs`,
+    """One fetch on a fresh stack; its figures (JSON-ready). The small world's request
+    is `OBJECT` for `PERSON`; another world's `dume eval`'s (`seeded_pair`). `hosts`: the
+    stack split over two hosts (`zenoh.side`), with these link settings (`zenoh.certs`,
     `zenoh.link_port`): two routers, the map behind the link; the trial's own session
     on the robot's router, where the world's truth is."""
-    out: Figures = {"trial": "fetch", "world": "small", "world_seed": seed}
+    out: Figures = {"trial": "fetch", "world": world_name, "world_seed": seed}
     with tempfile.TemporaryDirectory(prefix="dume-fetch-") as db, contextlib.ExitStack() as on:
-        settings = merged(fetch_settings(seed, db), overrides or {})
+        settings = merged(fetch_settings(seed, db, world_name), overrides or {})
         if hosts is None:
             stack = on.enter_context(ProcessStack(list(SERVICES), settings))
         else:
@@ -244,8 +258,13 @@ def run_fetch(
             stack = split[0]
         bus, keys = stack.bus, stack.keys
         world = read_world(bus, timeout_s=30.0)
-        truth = next(a for a in world.artifacts if a.id == OBJECT)
-        request = MissionRequest(request_id=f"fetch-{seed}", object=OBJECT, person=PERSON)
+        obj, person = OBJECT, PERSON
+        if world_name != "small":
+            pair = seeded_pair(*read_map(bus), seed)
+            obj, person = pair.object, pair.person
+        out["request"] = f"{obj} for {person}"
+        truth = next(a for a in world.artifacts if a.id == obj)
+        request = MissionRequest(request_id=f"fetch-{seed}", object=obj, person=person)
         with Probe(bus, keys) as probe:
             record = watch_mission(bus, keys, request, TIMEOUT_S, start_gate=True)
     final = record.changes[-1] if record.changes else None
@@ -265,7 +284,7 @@ def run_fetch(
         "held_after_pick": held_after_pick(record, probe.samples),
         "handover": handover,
         "handed_over": any(
-            isinstance(e, HandoverTaken) and e.object_id == OBJECT for e in record.events
+            isinstance(e, HandoverTaken) and e.object_id == truth.id for e in record.events
         ),
         "contacts_static": len(static_contacts(record.events, world)),
         "wall_s": round(record.wall_s, 1),

@@ -54,7 +54,7 @@ from bench.trial_localize import localize
 from bench.trial_pick import pick
 from bench.trial_random import random_walk
 from common import robot
-from common.config import Overrides, merged
+from common.config import REPO_ROOT, Overrides, merged
 from common.geometry import rpy_of_quat_xyzw, wrap_angle
 from common.messages.wbc import Posture, Reach
 
@@ -300,7 +300,12 @@ def run_trial(
     if name == "fetch":  # the real mission over the full stack, with truth probes
         from bench.trial_fetch import run_fetch
 
-        return run_fetch(seed, overrides)
+        world = (options or {}).get("world") or "small"
+        samples = REPO_ROOT / "var" / "trials" / f"fetch-{world}-{seed}.handover.json"
+        samples.parent.mkdir(parents=True, exist_ok=True)
+        return run_fetch(seed, overrides, samples, world_name=world) | {
+            "handover_samples": str(samples.relative_to(REPO_ROOT))
+        }
     out: Figures = {"trial": name, "world": world, "world_seed": seed}
     out["wbc_period_s"] = wbc_period_s
     if name in OWN_ODOMETRY:

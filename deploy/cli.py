@@ -20,6 +20,7 @@
     dume trial goto X Y [--yaw Θ] [--world hall|small]   walk to a pose over the nav stack (JSON)
     dume trial goals [--count 10] | person | crossing     random goals; people in the path (JSON)
     dume trial fuzz [--count 10000]                      every key a service takes, fuzzed (JSON)
+    dume trial fetch [--world hall --world-seed N]       one fetch, probed; its handover samples
     dume train-segmenter [--seed S]                         render data, train, export ONNX
     dume train-segmenter --confusion MODEL                  its confusion by range, held out
 
@@ -947,7 +948,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("which", choices=TRIALS)
     p.add_argument("xy", nargs="*", type=float, help="goto: the goal's X Y, m in the world")
     p.add_argument("--yaw", type=float, default=0.0, help="goto: the goal's yaw, rad")
-    p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals")
+    p.add_argument("--world", choices=["hall", "small"], default=None, help="goto, goals, fetch")
     p.add_argument(
         "--count", type=int, default=None,
         help="goals: how many (10); fuzz: cases a key (10 000); faults: seeds (5)",
