@@ -20,13 +20,17 @@ or the estimator's noise does not trip it). Tripped stays tripped until `reset`.
 in the `window_s` before t, tripped or not: a person who pulls the object out of the jaws
 faster than the debounce has taken it, where an object that slips out has not been pulled
 toward anyone.
-Recorded in `bench.trial_fetch`: holding still, F · toward stays within ±1.5 N (0.12 N
-noise); a person's pull reaches +13..15 N within 0.4 s of their grip closing; the jaw's
-effort stays at its cap throughout, so the force does the work. The effort clause's
-direction test is from the hall (seed 5): the person's hand, reaching for the can at
-0.8 m/s, knocked it before its grip closed; the jaw's effort changed and the force
-changed as much sideways and up as toward the person (≈ 2 N each): without the test
-that tripped, the jaws opened, and the can fell.
+Recorded in `bench.trial_fetch` (`dume trial fetch [--world hall --world-seed 5]`, the
+samples in `tests/unit/data/`): holding still, F · toward swings by ±1-2.5 N (spikes
+of 10 N across it as the robot shifts its weight); a person's pull reaches +15..17 N
+within 0.4 s of their grip closing (the hand's servo limit, 15 N, and the estimate's
+error); the jaw's effort stays at its cap throughout, so the force does the work. In
+the hall (seed 5) the person's hand, reaching for the can at 0.8 m/s, knocked it before
+its grip closed, twice in two runs: once the jaw's effort changed and the force changed
+as much sideways and up as toward the person (≈ 2 N each: the effort clause's direction
+test), once the force alone rose +4.1 N toward the person for 0.2 s (hence `force_n` 8
+N, twice that; the real pull trips it 0.02-0.04 s later than 4 N did): either time the
+jaws opened and the can fell.
 
 Pure: statuses in (their sim-time stamps are the clock), a bool out.
 """
