@@ -132,13 +132,17 @@ def score_map(
     }
 
 
-def _progress(job: Latest[PatrolStatus]) -> Progress:
-    """The request's changes, and the job's own status every 30 s of sim time, on stderr."""
+def _progress(job: Latest[PatrolStatus], jobs: dict[str, PatrolStatus]) -> Progress:
+    """The request's changes, and the job's own status every 30 s of sim time, on stderr;
+    `jobs` keeps each task's latest status (the exploration's, then its semantic pass's:
+    a patrol's)."""
 
     def show(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
+        now = job.get()
+        if now is not None:
+            jobs[now.task] = now
         if status is None or not (changed or clock.stamp_ns // 1_000_000_000 % 30 == 0):
             return
-        now = job.get()
         said = status.detail if changed or now is None else (
             f"{now.waypoint} of {now.waypoints} goals, {now.travelled_m:.1f} m walked, "
             f"{now.known_m2:.1f} m² known")  # fmt: skip
@@ -176,9 +180,11 @@ def explore_run(
         truth = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, 30.0)
         request = MissionRequest(request_id="explore", task="explore")
         job_now = s.bus.latest(s.keys.mission_patrol_status, PatrolStatus)
-        show = _progress(job_now)
+        jobs: dict[str, PatrolStatus] = {}
+        show = _progress(job_now, jobs)
         record = watch_mission(s.bus, s.keys, request, SIM_TIMEOUT_S, show, start_gate=True)
         job = s.bus.query(s.keys.mission_patrol, PatrolRequest(action="status"), PatrolStatus)
+        jobs[job.task] = job
         grid = s.bus.query(MAP_OCCUPANCY, None, OccupancyGrid, 30.0)
         artifacts, people = read_map(s.bus)
     finally:
@@ -187,7 +193,14 @@ def explore_run(
             tmp.cleanup()
     last = record.changes[-1] if record.changes else None
     aligned = map_alignment(grid, truth)
-    failed = re.search(r"\((\d+) failed\)", last.detail if last else "")
+    # The exploration's own figures: its final sentence's counts ("9 goal(s) walked of 9
+    # chosen (0 failed)"; the last job status may be its semantic pass's), its distance
+    # from its last status seen (a pass that followed took its place).
+    said = last.detail if last else ""
+    failed = re.search(r"\((\d+) failed\)", said)
+    counts = re.search(r"(\d+) goal\(s\) walked of (\d+) chosen", said)
+    explored = jobs.get("explore", job)
+    passed = jobs.get("patrol")
     sim_s = (record.end_ns - record.start_ns) / 1e9
     out |= {
         "outcome": last.state if last else "none",
@@ -198,10 +211,13 @@ def explore_run(
         "sim_s": round(sim_s, 1),
         "wall_s": round(record.wall_s, 1),
         "rtf": round(sim_s / record.wall_s, 3) if record.wall_s > 0 else None,
-        "goals_walked": job.waypoint,
-        "goals_chosen": job.waypoints,
+        "goals_walked": int(counts.group(1)) if counts else explored.waypoint,
+        "goals_chosen": int(counts.group(2)) if counts else explored.waypoints,
         "goals_failed": int(failed.group(1)) if failed else None,
-        "travelled_m": round(job.travelled_m, 1),
+        "travelled_m": round(explored.travelled_m, 1),
+        "semantic_pass": None
+        if passed is None
+        else {"viewpoints": passed.waypoints, "travelled_m": round(passed.travelled_m, 1)},
         **score_map(grid, truth, aligned),
         # What the map holds, judged from the truth: as the map has it, and as its
         # alignment to the truth moves it (a map made while localizing is in its own frame).
