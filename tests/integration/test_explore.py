@@ -40,7 +40,7 @@ def test_on_its_own_odometry_with_the_slam_it_explores_the_small_world_from_noth
     print(json.dumps(out))
     assert (out["outcome"], out["reason"]) == ("succeeded", ""), out
     assert "no reachable frontier left" in out["detail"], out
-    assert out["goals_walked"] >= 1 and out["travelled_m"] > 2.0, out
+    assert out["goals_walked"] >= 1 and out["travelled_m"] > 1.0, out  # 1 goal, 2.4 m
     assert out["semantic_pass"] and out["semantic_pass"]["viewpoints"] >= 1, out
     # The known floor grew from nothing to most of the room.
     assert out["floor_known_share"] >= 0.8, out

@@ -69,7 +69,23 @@ def test_a_frontier_behind_a_wall_is_no_goal() -> None:
     cells[:, 80] = OCCUPIED  # a wall without a door at x = 4 m
     cells[:, 130:] = UNKNOWN  # the far room's end, seen over the wall, is unknown
     out = survey(cells, RES, ORIGIN, (1.0, 2.0))
-    assert out.clusters == 1 and out.reachable == 0 and out.goal is None
+    assert out.clusters == 0 and out.reachable == 0 and out.goal is None
+
+
+def test_free_cells_behind_a_walls_face_are_no_frontier() -> None:
+    """The small world's walls as the explored map had them: the two cells of the face
+    the sensors hit occupied, a cell behind them free (a beam that ended inside the wall),
+    the unknown beyond it; a door in the face makes the strip the robot's own floor."""
+    cells = room(8.0, 4.0)
+    cells[:, 150:] = UNKNOWN  # outside the room, east of x = 7.5 m
+    cells[1:-1, 146:148] = OCCUPIED  # the wall's face
+    cells[1:-1, 148:150] = FREE  # inside the wall, marked free
+    cells[1:-1, 145] = FREE
+    out = survey(cells, RES, ORIGIN, (2.0, 2.0))
+    assert out.robot_on_known and out.clusters == 0 and out.goal is None
+    cells[30:50, 146:148] = FREE  # a door 1 m wide in the face: the strip is this floor
+    out = survey(cells, RES, ORIGIN, (2.0, 2.0))
+    assert out.clusters == 1 and out.goal is not None
 
 
 def test_a_goal_that_failed_is_not_chosen_again_nor_one_near_it() -> None:
