@@ -42,6 +42,7 @@ inside the robot; a person there would give navigation a lethal disc around the 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -73,6 +74,8 @@ from services.semantic_map.looks import looks_at
 from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.people import PeopleTracker, merge_split_people
 from services.semantic_map.supports import surfaces_from_tops, with_kept
+
+log = logging.getLogger("dume.semantic_map")
 
 #: Depth points this close to the base (horizontally) are the robot itself, m.
 SELF_RADIUS_M = 0.7
@@ -245,6 +248,10 @@ class SemanticMap:
         if found and found != self.surfaces:
             self.surfaces = found
             self.surfaces_dirty = True
+            log.info("surfaces now: %s", "; ".join(
+                f"{s.id} at ({s.centre_xy[0]:.2f}, {s.centre_xy[1]:.2f}) "
+                f"{2 * s.half_extents[0]:.2f} × {2 * s.half_extents[1]:.2f} m, "
+                f"top {s.top_height:.2f} m" for s in found))  # fmt: skip
 
     # -- fusion --------------------------------------------------------------------------
 
