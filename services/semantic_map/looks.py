@@ -12,6 +12,7 @@ it missing since that frame's stamp; a detection clears it.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from common.camera import PinholeCamera
 from common.geometry import FloatArray
@@ -42,3 +43,25 @@ def looks_at(
     if valid.size == 0:
         return True  # no return at all: nothing in front, and nothing there either
     return float(np.median(valid)) >= z - occluder_m
+
+
+def sees_over(
+    camera: PinholeCamera, points_world: FloatArray, margin_px: int = 2, beyond_m: float = 0.1
+) -> NDArray[np.bool_]:
+    """Which points (N, 3; world) this frame sees past: in front of the camera, inside the
+    picture (`margin_px` in from its border), and its depth there at least `beyond_m`
+    farther than the point (no return: nothing there). A point just above a table's edge
+    is seen past (the ray goes on to the floor or a wall behind); one just above the
+    highest point a frame saw of a wall is not (out of the picture, or on the wall
+    itself). The tops layer's test (`Occupancy.integrate`)."""
+    depth = camera.depth_image()
+    h, w = depth.shape
+    uv, z = camera.project_world(points_world)
+    u, v = uv[:, 0], uv[:, 1]
+    inside = (z > 0.0) & (u >= margin_px) & (u < w - margin_px) & (v >= margin_px)
+    inside &= v < h - margin_px  # NaN (behind the camera) compares False
+    out = np.zeros(len(z), bool)
+    k = np.flatnonzero(inside)
+    d = depth[np.round(v[k]).astype(np.intp), np.round(u[k]).astype(np.intp)]
+    out[k] = (d <= 0.0) | (d >= z[k] + beyond_m)
+    return out

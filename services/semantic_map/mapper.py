@@ -70,7 +70,7 @@ from services.semantic_map.evidence import (
     person_doubt,
     surface_under,
 )
-from services.semantic_map.looks import looks_at
+from services.semantic_map.looks import looks_at, sees_over
 from services.semantic_map.occupancy import Occupancy
 from services.semantic_map.people import PeopleTracker, merge_split_people
 from services.semantic_map.supports import surfaces_from_tops, with_kept
@@ -512,7 +512,7 @@ class SemanticMap:
         )
         base = _mat(dets.T_world_base)[:2, 3]
         pts = pts[np.linalg.norm(pts[:, :2] - base, axis=1) > SELF_RADIUS_M]
-        learned = self.occupancy.integrate(pts)
+        learned = self.occupancy.integrate(pts, lambda p: sees_over(cam, p))
         self.grid_dirty = True
         return learned
 

@@ -12,9 +12,17 @@ The tops layer (`top_z`, `top_n`): per cell the highest point a frame saw there,
 the running top, and how many frames saw the top within `TOP_TOL_M` of it: what
 `supports.surfaces_from_tops` reads the tables, benches and loaded pallets from (a
 horizontal surface at working height is a patch of cells with one top many frames saw).
+A frame counts a cell's highest point as its top only where it saw over it
+(`integrate`'s `sees_over`, `looks.sees_over`: the ray to `OVER_M` above the point lies
+in the picture and goes on past it): else what stands there may go on above the
+picture, as a wall does. The head camera's picture ends 1.0-1.3 m up on a wall 2.5-4 m
+away: the explored small world's walls were "surfaces" at those heights, which its
+semantic pass walked to (10 viewpoints for 3 "surfaces" where the room has one table).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +34,11 @@ FREE, OCCUPIED, UNKNOWN = 0, 100, 255
 FLOOR_Z_M = 0.05
 #: A frame's highest point in a cell within this of the cell's top confirms it, m.
 TOP_TOL_M = 0.03
+#: A top is seen over when the camera sees past this far above it, m (`integrate`).
+OVER_M = 0.03
+
+#: Which points (N, 3; world) a frame sees past (`looks.sees_over`).
+SeesOver = Callable[[FloatArray], NDArray[np.bool_]]
 #: An obstacle blob of a lidar map at most this across may be a person standing, m.
 PERSON_BLOB_M = 0.8
 #: A sensed static layer's blobs at most this across are a table's or a bench's legs: the
@@ -165,8 +178,10 @@ class Occupancy:
         inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
         return ix, iy, inside
 
-    def integrate(self, points_world: FloatArray) -> int:
-        """Count one depth frame's points (N, 3); the number of cells newly learned."""
+    def integrate(self, points_world: FloatArray, sees_over: SeesOver | None = None) -> int:
+        """Count one depth frame's points (N, 3); the number of cells newly learned.
+        `sees_over`: the frame's test of the points it sees past (module docstring;
+        None: every cell's highest point is its top)."""
         if len(points_world) == 0:
             return 0
         before = self.learned_mask().sum()
@@ -177,7 +192,7 @@ class Occupancy:
         flat = np.unique(iy[hit] * nx + ix[hit])
         counts = self.hits.reshape(-1)
         counts[flat] = np.minimum(counts[flat].astype(np.int64) + 1, 60000).astype(np.uint16)
-        self._tops(iy[hit] * nx + ix[hit], z[hit])
+        self._tops(iy[hit] * nx + ix[hit], points_world[hit], sees_over)
         floor = inside & (np.abs(z) < FLOOR_Z_M)
         free = np.unique(iy[floor] * nx + ix[floor])
         seen = self.seen_free.reshape(-1)
@@ -188,13 +203,18 @@ class Occupancy:
             self.version += 1
         return learned
 
-    def _tops(self, flat: NDArray[np.intp], z: FloatArray) -> None:
-        """One frame's highest point per cell against the cells' running tops."""
+    def _tops(self, flat: NDArray[np.intp], xyz: FloatArray, sees_over: SeesOver | None) -> None:
+        """One frame's highest point per cell against the cells' running tops (of the
+        cells it saw over, with `sees_over`)."""
         if len(flat) == 0:
             return
-        order = np.argsort(flat, kind="stable")
+        order = np.lexsort((-xyz[:, 2], flat))  # by cell, each one's highest point first
         cells, first = np.unique(flat[order], return_index=True)
-        seen = np.maximum.reduceat(z[order], first).astype(np.float32)
+        highest = xyz[order[first]]
+        if sees_over is not None:
+            over = sees_over(highest + np.array([0.0, 0.0, OVER_M]))
+            cells, highest = cells[over], highest[over]
+        seen = highest[:, 2].astype(np.float32)
         tz, tn = self.top_z.reshape(-1), self.top_n.reshape(-1)
         higher = seen > tz[cells] + TOP_TOL_M
         same = ~higher & (seen >= tz[cells] - TOP_TOL_M)

@@ -22,7 +22,7 @@ from common.geometry import FloatArray, inv_T, make_T, rot_x, rot_y, rot_z, tran
 from common.robot_description import R_FORWARD_OPTICAL
 from services.navigation.depth import DepthParams, seen_through
 from services.navigation.grid import Grid
-from services.semantic_map.looks import looks_at
+from services.semantic_map.looks import looks_at, sees_over
 
 H, W = 61, 83  # odd sizes: strides 2, 3, 4 and 5 do not divide them
 FX, FY, CX, CY = 70.5, 68.25, (W - 1) / 2 + 1.5, (H - 1) / 2 - 2.0
@@ -225,6 +225,23 @@ def test_a_world_point_projects_to_its_pixel_and_back() -> None:
     assert z[0] == pytest.approx(2.5)
     np.testing.assert_allclose(uv[0], [FX * 0.3 / 2.5 + CX, FY * -0.2 / 2.5 + CY])
     np.testing.assert_allclose(cam.to_world(cam.unproject(uv, z)), p_world, atol=1e-12)
+
+
+def test_a_frame_sees_past_a_point_in_its_picture_with_the_depth_beyond_it() -> None:
+    depth = np.full((H, W), 3.0, np.float32)  # a wall 3 m ahead along the optical axis
+    depth[:, 20:30] = 0.0  # no return
+    cam = _camera(depth)
+    pts_cam = np.array([
+        [0.0, 0.0, 2.0],  # 1 m before the wall: seen past
+        [0.0, 0.0, 2.95],  # on the wall's face: not (a wall's top seen is no top)
+        [0.0, 0.0, 3.5],  # behind the wall: not
+        [10.0, 0.0, 2.0],  # off the picture's right: not
+        [0.0, -10.0, 2.0],  # above the picture: not
+        [0.0, 0.0, -2.0],  # behind the camera: not
+        [(25 - CX) * 6.0 / FX, 0.0, 6.0],  # column 25, no return: nothing there
+    ])  # fmt: skip
+    got = sees_over(cam, transform_points(T_WORLD_CAMERA, pts_cam))
+    assert got.tolist() == [True, False, False, False, False, False, True]
 
 
 def test_points_behind_the_camera_have_no_pixel() -> None:

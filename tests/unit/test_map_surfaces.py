@@ -61,6 +61,28 @@ def test_a_bench_top_is_one_surface_and_a_wall_a_pallet_and_one_glance_are_none(
     assert abs(math.sin(axis - math.radians(30.0))) < 0.05
 
 
+def test_a_top_counts_only_where_the_frame_saw_over_it() -> None:
+    """Frames that see a wall and a standing person only up to about 1.1 m, where their
+    picture ends: neither has a top, so neither is a surface; the bench in the same
+    frames, seen over, still is one. Without the test, three."""
+    occ = occupancy()
+    bench = top(1.0, 2.0, (0.8, 0.35), 0.0, 0.9)
+    near_wall = wall(-4.0, -3.0, 3.0, 1.1)  # seen to 1.05 m
+    person = top(-1.0, -1.0, (0.15, 0.1), 0.0, 1.08)  # a body's column, seen to 1.08 m
+
+    def in_the_picture(p: np.ndarray) -> np.ndarray:
+        return np.asarray(p[:, 2] < 1.07)  # nothing in front of what it sees
+
+    for _ in range(5):
+        occ.integrate(np.concatenate([bench, near_wall, person]), in_the_picture)
+    found = surfaces_from_tops(occ.top_z, occ.top_n, occ.resolution_m, occ.origin_xy)
+    assert [round(s.top_height, 2) for s in found] == [0.9]
+    blind = occupancy()
+    for _ in range(5):
+        blind.integrate(np.concatenate([bench, near_wall, person]))
+    assert len(surfaces_from_tops(blind.top_z, blind.top_n, RES, blind.origin_xy)) == 3
+
+
 def test_the_front_edge_seen_from_below_is_a_strip_there() -> None:
     occ = occupancy()
     edge = top(0.0, 1.0, (0.8, 0.02), 0.0, 0.9)  # the head camera sees only the edge
