@@ -12,7 +12,10 @@ their message types). For each of those keys, `count` payloads:
   message type, one grown to 1-5 MB, NUL-laden text, a JSON array nested 100 000 deep;
 
 put on a subscribed key, asked (a get) on a queryable. After each key every service's
-process must still run and its liveliness token be there; at the end a valid fetch must
+process must still run and its liveliness token be there (back within `BACK_S` as the
+same run: a flood of 5 MB payloads on a loaded 2-core CI host once made the router cut
+a service's link off, which reconnected; such a lapse is counted, not a crash, as the
+mission doubts it: `common.lifelines`); at the end a valid fetch must
 still be held by the mission (`mission/submit`), so the stack still serves. Figures: per
 key the cases sent and the replies (typed errors vs answers), per service the crashes and
 the logged exceptions, the totals; the rule is 0 crashes.
@@ -46,7 +49,7 @@ import common.messages.semantic_map
 import common.messages.sim
 import common.messages.wbc
 import common.messages.world
-from common.bus import AliveWatch, NoReply, RemoteError
+from common.bus import AliveWatch, NoReply, RemoteError, WaitTimeout
 from common.config import Overrides, merged
 from common.keys import SERVICES
 from common.messages.mission import MissionReceipt, MissionRequest
@@ -66,6 +69,8 @@ TAKES = re.compile(r"ready; takes (\[.*\])$")
 #: Wall seconds a get waits for its reply (every `ASK_EVERY`-th get is waited for).
 REPLY_S = 2.0
 ASK_EVERY = 25
+#: Wall seconds every service's token has to be back after a key's cases.
+BACK_S = 5.0
 
 
 def message_types() -> dict[str, type[msgspec.Struct]]:
@@ -171,10 +176,14 @@ def fuzz_settings(seed: int, db_dir: str) -> dict[str, Any]:
 
 
 def fuzz_key(
-    stack: ProcessStack, target: Input, cases: list[bytes], watch: AliveWatch
+    stack: ProcessStack,
+    target: Input,
+    cases: list[bytes],
+    watch: AliveWatch,
+    runs: dict[str, frozenset[str]],
 ) -> dict[str, Any]:
     """Send the cases to one key; the stack's state after them (`watch`: the services'
-    liveliness tokens, followed since the start)."""
+    liveliness tokens, followed since the start; `runs`: each one's run then)."""
     key, type_name, kind = target
     bus, where = stack.bus, concrete(key)
     t0 = time.monotonic()
@@ -188,13 +197,36 @@ def fuzz_key(
                     errors += r.err is not None
         else:
             bus.session.put(where, payload)
+    losses = _losses(stack, watch)
+    with contextlib.suppress(WaitTimeout):
+        watch.wait_for({stack.keys.alive(n) for n in SERVICES}, BACK_S)
     down = [n for n, p in stack.procs.items() if p.poll() is not None]
     alive = {k.rsplit("/", 1)[-1] for k in watch.alive()}
+    lines = watch.lifelines
     return {
         "key": key, "type": type_name, "kind": kind, "cases": len(cases),
         "answers": answers, "errors": errors, "wall_s": round(time.monotonic() - t0, 1),
         "down": down, "not_alive": sorted(set(SERVICES) - alive),
+        "restarted": sorted(n for n in SERVICES
+                            if lines.runs(stack.keys.alive(n)) - runs[n]),
+        "token_losses": losses,
     }  # fmt: skip
+
+
+def _runs(stack: ProcessStack, watch: AliveWatch) -> dict[str, frozenset[str]]:
+    """Each service's run (its second token, declared just before its first)."""
+    deadline = time.monotonic() + BACK_S
+    while True:
+        runs = {n: watch.lifelines.runs(stack.keys.alive(n)) for n in SERVICES}
+        if all(runs.values()) or time.monotonic() > deadline:
+            return runs
+        time.sleep(0.05)
+
+
+def _losses(stack: ProcessStack, watch: AliveWatch) -> dict[str, int]:
+    """How often each service's token went since the start (a lapse or worse)."""
+    _, losses = watch.lifelines.snapshot()
+    return {n: c for n in SERVICES if (c := losses.get(stack.keys.alive(n), 0))}
 
 
 def still_serves(stack: ProcessStack) -> str:
@@ -223,13 +255,14 @@ def run_fuzz(
         others = [p for n in names for p in derived(types[n], 20, seed)]
         watch = stack.bus.watch_alive(stack.keys.alive_all)
         watch.wait_for({stack.keys.alive(n) for n in SERVICES}, 30.0)
+        runs = _runs(stack, watch)
         started = time.monotonic()
         per_key = []
         for target in targets:
             cls = types.get(target[1])
             valid = derived(cls, count // 2, seed) if cls is not None else []
             cases = [*valid, *malformed(valid, others, count - len(valid), rng)]
-            per_key.append(fuzz_key(stack, target, cases, watch))
+            per_key.append(fuzz_key(stack, target, cases, watch, runs))
         wall_s = round(time.monotonic() - started, 1)
         taken = still_serves(stack)
         crashed = sorted(n for n, p in stack.procs.items() if p.poll() is not None)
@@ -239,7 +272,10 @@ def run_fuzz(
         "cases": sum(k["cases"] for k in per_key),
         "wall_s": wall_s,
         "crashed": crashed,
-        "keys_with_a_service_down": [k["key"] for k in per_key if k["down"] or k["not_alive"]],
+        "keys_with_a_service_down": [
+            k["key"] for k in per_key if k["down"] or k["not_alive"] or k["restarted"]
+        ],
+        "token_losses": per_key[-1]["token_losses"] if per_key else {},
         "logged_exceptions": {n: c for n, c in tracebacks.items() if c},
         "fetch_after": taken,
         "per_key": per_key,

@@ -124,8 +124,8 @@ USER_ALIVE = (f"{ALIVE}/**",)
 
 
 #: What each service does on the network (module docstring). Keys are templates: `{r}` is
-#: the robot's prefix (`dume/<robot>`); `alive`: its own token `dume/alive/<robot>/<name>`;
-#: `watch`: it follows `dume/alive/<robot>/*`.
+#: the robot's prefix (`dume/<robot>`); `alive`: its own token `dume/alive/<robot>/<name>`
+#: and its run's (`…/<name>/<run>`); `watch`: it follows `dume/alive/<robot>/*` (and `/*/*`).
 SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
     "sim": {
         "put": ("{r}/camera/*/rgbd", "{r}/camera/*/segmentation_truth", "{r}/scan",
@@ -260,11 +260,13 @@ def _service_rules(name: str, spec: dict[str, Any], robot: str) -> list[dict[str
         if found := keys(verb):
             for flow, messages in flows:
                 rules.append(_rule(f"{who}-{verb}-{flow}", messages, flow, found))
-    rules.append(_rule(f"{who}-alive", ["liveliness_token"], "ingress", (f"{alive}/{name}",)))
+    own = (f"{alive}/{name}", f"{alive}/{name}/*")  # its token and its run's
+    rules.append(_rule(f"{who}-alive", ["liveliness_token"], "ingress", own))
     if spec.get("watch"):
         asks = ["declare_liveliness_subscriber", "liveliness_query"]
-        rules.append(_rule(f"{who}-watch", asks, "ingress", (f"{alive}/*",)))
-        rules.append(_rule(f"{who}-watched", ["liveliness_token"], "egress", (f"{alive}/*",)))
+        watched = (f"{alive}/*", f"{alive}/*/*")
+        rules.append(_rule(f"{who}-watch", asks, "ingress", watched))
+        rules.append(_rule(f"{who}-watched", ["liveliness_token"], "egress", watched))
     return rules
 
 

@@ -481,6 +481,10 @@ class AliveWatch:
         self.lifelines = Lifelines()
         self._cond = threading.Condition()
         self._sub = session.liveliness().declare_subscriber(key_expr, self._on_sample, history=True)
+        # each service's second token, its run (`common.lifelines`)
+        self._runs = session.liveliness().declare_subscriber(
+            f"{key_expr}/*", self._on_run, history=True
+        )
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -493,6 +497,13 @@ class AliveWatch:
                 self.lifelines.down(key)
             self.version += 1
             self._cond.notify_all()
+
+    def _on_run(self, sample: zenoh.Sample) -> None:
+        key, run = str(sample.key_expr).rsplit("/", 1)
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.lifelines.run_up(key, run)
+        else:
+            self.lifelines.run_down(key, run)
 
     def alive(self) -> set[str]:
         with self._cond:
@@ -527,6 +538,7 @@ class AliveWatch:
 
     def undeclare(self) -> None:
         self._sub.undeclare()
+        self._runs.undeclare()
 
 
 class Bus:

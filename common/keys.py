@@ -224,6 +224,11 @@ class RobotKeys:
     def alive(self, service: str) -> str:
         return f"{ALIVE}/{self.robot}/{_check_chunk(service, 'service')}"
 
+    def alive_run(self, service: str, run: str) -> str:
+        """The second token of a service process: which run of it this is (a random id of
+        the process; `common.lifelines` tells a lapsed link from a restart by it)."""
+        return f"{self.alive(service)}/{_check_chunk(run, 'run')}"
+
     @property
     def alive_all(self) -> str:
         return f"{ALIVE}/{self.robot}/*"

@@ -1,11 +1,23 @@
 """Nobody waits for the dead: which of the services a job depends on went away.
 
 A job (a mission request, a demo's or an eval's watch of one) depends on some services.
-`Lifelines` is what Zenoh's liveliness said about them: who is alive now and how often
+`Lifelines` is what Zenoh's liveliness said about them: who is alive now, how often
 each one's token went away (a service that supervisord restarted within one tick of the
-watcher still counts: its token went, then came back). `Dependencies.lost()` names the
-first one that went away since the job started, as a sentence for the typed reason
-`dependency_lost` ("mission restarted", "navigation is gone").
+watcher still counts: its token went, then came back), and which run of it is alive:
+every service process declares a second token with its run, a random id of that
+process (`RobotKeys.alive_run`). `Dependencies.lost()` names the first one that went
+away since the job started, as a sentence for the typed reason `dependency_lost`
+("mission restarted", "navigation is gone").
+
+A token can go while its process lives: the router closes the link of a client that
+read nothing for 0.5 s (a GIL held by one long call; `deploy/zenoh/router.json5`), and
+the client reconnects by itself within a few tenths of a second, its tokens with it. A
+hall exploration failed `dependency_lost: semantic_map restarted` at t = 540 s on
+such a lapse, with the map's process running throughout. So a dependency whose token
+went is first doubted: back as the same run, it lapsed (the job goes on, the lapse is
+counted); back as another run, it restarted; not back within `LOST_GRACE_S` of wall
+time, it is gone. The grace keeps the policy's 0.5 s to notice a loss (a killed WBC:
+the sim's watchdog holds the robot meanwhile).
 
 `OwnLink` tells a lost token from the watcher's own Zenoh link lapsing (a client the
 router cut off sees every token go and come back), for a client that follows a job
@@ -18,7 +30,12 @@ subscriber; a unit test feeds it by hand.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterable
+
+#: Wall seconds a dependency's lost token is doubted before it counts as gone (a
+#: lapse's reconnect: the client's first retry after 0.05 s, `deploy/zenoh/client.json5`).
+LOST_GRACE_S = 0.4
 
 
 class Lifelines:
@@ -28,10 +45,25 @@ class Lifelines:
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._losses: dict[str, int] = {}
+        self._runs: dict[str, set[str]] = {}
 
     def up(self, key: str) -> None:
         with self._lock:
             self._alive.add(key)
+
+    def run_up(self, key: str, run: str) -> None:
+        """The run `run` of the service whose liveliness key is `key` is alive."""
+        with self._lock:
+            self._runs.setdefault(key, set()).add(run)
+
+    def run_down(self, key: str, run: str) -> None:
+        with self._lock:
+            self._runs.get(key, set()).discard(run)
+
+    def runs(self, key: str) -> frozenset[str]:
+        """The runs of `key`'s service alive now (one, but for a restart's overlap)."""
+        with self._lock:
+            return frozenset(self._runs.get(key, ()))
 
     def down(self, key: str) -> None:
         with self._lock:
@@ -54,19 +86,34 @@ class Dependencies:
     """The services one job depends on, watched from when it started (`arm`).
 
     `key_of(name)` is the service's liveliness key. `lost()` is None while every one of
-    them alive at `arm` is still the same process; else "<name> restarted" (it went away
-    and is back) or "<name> is gone"; or, every one of `ROUTER_LOST_AT` or more gone
-    together, "the router is gone: every service went at once (…)": the link to them
-    all, not each process (a killed router said "sim is gone: the world stopped").
+    them alive at `arm` is still the same process; else "<name> restarted" (another
+    run of it is alive) or "<name> is gone" (none, `grace_s` after its token went); or,
+    every one of `ROUTER_LOST_AT` or more gone together, "the router is gone: every
+    service went at once (…)": the link to them all, not each process (a killed router
+    said "sim is gone: the world stopped"). A token back as the run armed is a lapse
+    (`take_lapses`), not a loss. A service whose run is not known (a token without its run
+    token) counts as restarted when its token comes back.
     """
 
     def __init__(
-        self, lifelines: Lifelines, names: Iterable[str], key_of: Callable[[str], str]
+        self,
+        lifelines: Lifelines,
+        names: Iterable[str],
+        key_of: Callable[[str], str],
+        grace_s: float = LOST_GRACE_S,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._lifelines = lifelines
         self._keys = {name: key_of(name) for name in names}
         self.names = list(self._keys)
-        self._armed: dict[str, int] = {}
+        self.grace_s, self._clock = grace_s, clock
+        #: Per dependency alive at `arm`: its token's losses then, and its run.
+        self._armed: dict[str, tuple[int, str | None]] = {}
+        #: Since when (wall) a dependency's token has been gone, unresolved.
+        self._doubt: dict[str, float] = {}
+        #: The dependencies whose token went and came back as the same run, in order,
+        #: not yet taken (`take_lapses`).
+        self._lapses: list[str] = []
 
     def missing(self) -> list[str]:
         """The dependencies not alive now (a job should not start without them)."""
@@ -76,23 +123,61 @@ class Dependencies:
     def arm(self) -> None:
         """The job starts now: from here on, a dependency that goes away is lost."""
         alive, losses = self._lifelines.snapshot()
-        self._armed = {n: losses.get(k, 0) for n, k in self._keys.items() if k in alive}
+        self._armed = {
+            n: (losses.get(k, 0), _one(self._lifelines.runs(k)))
+            for n, k in self._keys.items()
+            if k in alive
+        }
+        self._doubt = {}
 
     def disarm(self) -> None:
         self._armed = {}
+        self._doubt = {}
+
+    def take_lapses(self) -> list[str]:
+        """The lapses seen since the last call (a watcher logs them)."""
+        out, self._lapses = self._lapses, []
+        return out
+
+    def doubted(self) -> list[str]:
+        """The dependencies whose token is gone, not yet known lapsed or lost."""
+        return list(self._doubt)
 
     def lost(self) -> str | None:
         alive, losses = self._lifelines.snapshot()
-        keys = self._keys
-        gone = [n for n, before in self._armed.items()
-                if losses.get(keys[n], 0) > before and keys[n] not in alive]  # fmt: skip
+        now = self._clock()
+        gone: list[str] = []
+        restarted: str | None = None
+        for name, (before, run) in list(self._armed.items()):
+            key = self._keys[name]
+            if losses.get(key, 0) <= before:
+                continue
+            runs = self._lifelines.runs(key)
+            if run is not None and runs - {run}:
+                restarted = restarted or name
+            elif run is not None and run in runs and key in alive:  # the same process
+                self._armed[name] = (losses.get(key, 0), run)
+                self._doubt.pop(name, None)
+                self._lapses.append(name)
+            elif run is None and key in alive:
+                restarted = restarted or name
+            else:
+                since = self._doubt.setdefault(name, now)
+                if now - since >= self.grace_s:
+                    gone.append(name)
         if len(gone) >= ROUTER_LOST_AT and len(gone) == len(self._armed):
             return f"the router is gone: every service went at once ({', '.join(gone)})"
-        for name, before in self._armed.items():
-            key = self._keys[name]
-            if losses.get(key, 0) > before:
-                return f"{name} restarted" if key in alive else f"{name} is gone"
+        for name in self._armed:
+            if name == restarted:
+                return f"{name} restarted"
+            if name in gone:
+                return f"{name} is gone"
         return None
+
+
+def _one(runs: frozenset[str]) -> str | None:
+    """The run of a service when exactly one is alive; None when unknown."""
+    return next(iter(runs)) if len(runs) == 1 else None
 
 
 #: Wall seconds a lost token is doubted (`OwnLink`): every watched token back and the

@@ -23,6 +23,7 @@ import faulthandler
 import json
 import logging
 import os
+import secrets
 import signal
 import sys
 import threading
@@ -39,6 +40,9 @@ from common.keys import RobotKeys
 from common.recording import RerunHandler, open_recording
 from common.sched import CpuLayout, Role, allowed_cpus, pin
 from common.truth import TruthGuard
+
+#: This process's run: its second liveliness token says it (`Service.ready`).
+RUN = secrets.token_hex(6)
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +75,9 @@ class Service:
         return self.stop.is_set()
 
     def ready(self) -> None:
-        """Declare the liveliness token: the service now serves what it declared."""
+        """Declare the liveliness tokens (its run's first, `common.lifelines`): the
+        service now serves what it declared."""
+        self.bus.declare_alive(self.keys.alive_run(self.name, RUN))
         self.bus.declare_alive(self.keys.alive(self.name))
         self.is_ready = True
         self.log.info("ready; takes %s", json.dumps(self.bus.inputs))

@@ -196,6 +196,11 @@ class MissionNode:
         if not self.inputs.wait(b, first=not self.desk.started):
             self._stalled()  # a dependency went away while its inputs were awaited
         changed = self.desk.step(b)
+        for name in self.desk.deps.take_lapses() + self.patrol.deps.take_lapses():
+            self.svc.log.warning(
+                "t=%.2f s: %s's link lapsed and came back as the same process: the job "
+                "goes on", b / NS_PER_S, name,
+            )  # fmt: skip
         request = self.tree.request
         self.patrol.step(b, f"mission {request.request_id} is running" if request else "")
         changed |= self.desk.job_status(b)

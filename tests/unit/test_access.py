@@ -130,7 +130,7 @@ def test_each_service_puts_only_its_own_outputs() -> None:
     assert [n for n in SERVICES if _reaches(puts[n], WORLD_EVENTS)] == ["sim"]
     for name in SERVICES:  # its own liveliness, no one else's
         tokens = _granted(f"b1.{name}", "liveliness_token", flow="ingress")
-        assert tokens == [keys.alive(name)], (name, tokens)
+        assert tokens == [keys.alive(name), f"{keys.alive(name)}/*"], (name, tokens)
 
 
 def test_a_user_reaches_no_command_no_sensor_and_no_world_key() -> None:

@@ -1,4 +1,5 @@
-"""`common.lifelines`: which of a job's dependencies went away or restarted since it began."""
+"""`common.lifelines`: which of a job's dependencies went away or restarted since it began,
+and which only lapsed (the same run back within the grace)."""
 
 from __future__ import annotations
 
@@ -9,52 +10,111 @@ def key(name: str) -> str:
     return f"dume/alive/b1/{name}"
 
 
-def lifelines(*alive: str) -> Lifelines:
+class Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def lifelines(*alive: str, runs: bool = False) -> Lifelines:
     lines = Lifelines()
     for name in alive:
+        if runs:
+            lines.run_up(key(name), f"{name}-1")
         lines.up(key(name))
     return lines
 
 
+def deps_of(lines: Lifelines, names: list[str], clock: Clock) -> Dependencies:
+    deps = Dependencies(lines, names, key, grace_s=0.4, clock=clock)
+    deps.arm()
+    return deps
+
+
 def test_nothing_is_lost_while_every_dependency_stays_up() -> None:
     lines = lifelines("mission", "sim")
-    deps = Dependencies(lines, ["mission", "sim"], key)
-    deps.arm()
+    deps = deps_of(lines, ["mission", "sim"], Clock())
     lines.up(key("perception"))  # someone else coming and going is no concern
     lines.down(key("perception"))
     assert deps.lost() is None
     assert deps.missing() == []
 
 
-def test_a_dependency_that_goes_is_gone_and_one_that_comes_back_restarted() -> None:
-    lines = lifelines("mission", "sim")
-    deps = Dependencies(lines, ["mission", "sim"], key)
-    deps.arm()
+def test_a_dependency_that_goes_is_doubted_for_the_grace_then_gone() -> None:
+    clock = Clock()
+    lines = lifelines("mission", "sim", runs=True)
+    deps = deps_of(lines, ["mission", "sim"], clock)
     lines.down(key("mission"))
-    assert deps.lost() == "mission is gone"
+    lines.run_down(key("mission"), "mission-1")
+    assert deps.lost() is None and deps.doubted() == ["mission"]
     assert deps.missing() == ["mission"]
+    clock.t += 0.39
+    assert deps.lost() is None
+    clock.t += 0.02
+    assert deps.lost() == "mission is gone"
+
+
+def test_a_dependency_back_as_another_run_restarted_at_once() -> None:
+    lines = lifelines("mission", "sim", runs=True)
+    deps = deps_of(lines, ["mission", "sim"], Clock())
+    lines.down(key("mission"))
+    lines.run_down(key("mission"), "mission-1")
+    lines.run_up(key("mission"), "mission-2")
     lines.up(key("mission"))
     assert deps.lost() == "mission restarted"  # a new process: the request is not in it
 
 
-def test_a_restart_between_two_looks_is_still_seen() -> None:
+def test_a_new_run_is_a_restart_even_before_the_old_ones_token_is_heard_gone() -> None:
+    lines = lifelines("navigation", runs=True)
+    deps = deps_of(lines, ["navigation"], Clock())
+    lines.down(key("navigation"))
+    lines.up(key("navigation"))
+    lines.run_up(key("navigation"), "navigation-2")
+    assert deps.lost() == "navigation restarted"
+
+
+def test_the_same_run_back_is_a_lapse_the_job_goes_on_and_a_later_loss_still_counts() -> None:
+    clock = Clock()
+    lines = lifelines("semantic_map", "sim", runs=True)
+    deps = deps_of(lines, ["semantic_map", "sim"], clock)
+    lines.down(key("semantic_map"))  # the router cut its link off: both tokens go
+    lines.run_down(key("semantic_map"), "semantic_map-1")
+    assert deps.lost() is None
+    clock.t += 0.2
+    lines.up(key("semantic_map"))  # its plain token back before its run's: still doubted
+    assert deps.lost() is None and deps.doubted() == ["semantic_map"]
+    lines.run_up(key("semantic_map"), "semantic_map-1")
+    clock.t += 5.0  # long past the grace: it was resolved as a lapse when it came back
+    assert deps.lost() is None and deps.doubted() == []
+    assert deps.take_lapses() == ["semantic_map"] and deps.take_lapses() == []
+    lines.down(key("semantic_map"))
+    lines.run_down(key("semantic_map"), "semantic_map-1")
+    clock.t += 0.5
+    assert deps.lost() is None  # first doubted: from when it was seen gone
+    clock.t += 0.5
+    assert deps.lost() == "semantic_map is gone"
+
+
+def test_without_a_run_token_a_token_that_comes_back_restarted() -> None:
     lines = lifelines("navigation")
-    deps = Dependencies(lines, ["navigation"], key)
-    deps.arm()
+    deps = deps_of(lines, ["navigation"], Clock())
     lines.down(key("navigation"))
     lines.up(key("navigation"))
     assert deps.lost() == "navigation restarted"
 
 
 def test_losses_before_the_job_began_do_not_count_and_disarm_forgets() -> None:
+    clock = Clock()
     lines = lifelines("wbc")
     lines.down(key("wbc"))
     lines.up(key("wbc"))
-    deps = Dependencies(lines, ["wbc"], key)
-    deps.arm()
+    deps = deps_of(lines, ["wbc"], clock)
     assert deps.lost() is None
     deps.disarm()
     lines.down(key("wbc"))
+    clock.t += 1.0
     assert deps.lost() is None
 
 
@@ -70,16 +130,20 @@ def test_a_dependency_not_running_when_the_job_began_is_missing_not_lost() -> No
 
 
 def test_every_dependency_gone_at_once_is_the_router_not_each_service() -> None:
+    clock = Clock()
     names = ["sim", "wbc", "navigation", "mission"]
-    lines = lifelines(*names)
-    deps = Dependencies(lines, names, key)
-    deps.arm()
+    lines = lifelines(*names, runs=True)
+    deps = deps_of(lines, names, clock)
     for name in names[:3]:
         lines.down(key(name))
+        lines.run_down(key(name), f"{name}-1")
+    deps.lost()
+    clock.t += 0.5
     assert deps.lost() == "sim is gone"  # one still there: services, not the link
     lines.down(key("mission"))
+    lines.run_down(key("mission"), "mission-1")
+    deps.lost()
+    clock.t += 0.5
     assert deps.lost() == (
         "the router is gone: every service went at once (sim, wbc, navigation, mission)"
     )
-    lines.up(key("sim"))  # back after the router: that one restarted, the others not yet
-    assert deps.lost() == "sim restarted"
