@@ -10,6 +10,8 @@ truth, what the failure policy promises (README, "Nobody waits for the dead"):
   mission or the sim itself went (`bench.eval.run.watch_mission`);
 - **reported_s**: until the mission said so on `mission/status` by the request's id (a
   restarted mission reports the request it held: `services/mission/journal.py`);
+- **went_on_s**: until the request was heard running again a sim second past the fault
+  (a killed router: back, every service reconnected, and the request goes on);
 - **hung**: the client did not know the request was over within `HUNG_S`, or the
   mission could speak and did not report it within `HUNG_S`. A SIGSTOPped mission or
   router cannot speak (nobody can reach a frozen mission, nor anything through a frozen
@@ -105,6 +107,9 @@ class Fault:
         self.at = ""  # the stage running when it was injected
         self.final: MissionStatus | None = None  # the request's final status, after it
         self.final_wall = 0.0  # perf_counter when it arrived
+        #: perf_counter when the request was first heard running again after the fault,
+        #: its clock a sim second on (a router back: every service reconnected)
+        self.went_on_wall = 0.0
         self.clock_ns, self.clock_wall, self.clock_stall_s = 0, 0.0, 0.0
         self.consumer: subprocess.Popen[bytes] | None = None
 
@@ -115,6 +120,9 @@ class Fault:
             self.final, self.final_wall = status, time.perf_counter()
         if self.wall:  # the longest wall gap between two clocks since the fault
             now = time.perf_counter()
+            on = status is not None and status.state == "running" and not self.went_on_wall
+            if on and clock.stamp_ns >= self.sim_ns + NS_PER_S:
+                self.went_on_wall = now
             if clock.stamp_ns > self.clock_ns:
                 self.clock_stall_s = max(self.clock_stall_s, now - self.clock_wall)
                 self.clock_ns, self.clock_wall = clock.stamp_ns, now
@@ -193,7 +201,9 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         out |= {"injected": True, "at": fault.at, "at_sim_s": round(fault.sim_ns / NS_PER_S, 2),
                 "ended_s": round(ended - fault.wall, 3)}  # fmt: skip
         out |= _watch_after(stack, keys, fault, request, statuses, truth, events, before)
-        out |= verdict(fault.service, fault.sig, out["ended_s"], out["reported_s"])
+        went_on = round(fault.went_on_wall - fault.wall, 3) if fault.went_on_wall else None
+        out["went_on_s"] = went_on
+        out |= verdict(fault.service, fault.sig, out["ended_s"], out["reported_s"], went_on)
         out["clock_stall_s"] = round(fault.clock_stall_s, 2)
     finally:
         fault.resume()
@@ -257,12 +267,24 @@ def _watch_after(
     }
 
 
-def verdict(service: str, sig: int, ended_s: float, reported_s: float | None) -> Figures:
+def verdict(
+    service: str,
+    sig: int,
+    ended_s: float,
+    reported_s: float | None,
+    went_on_s: float | None = None,
+) -> Figures:
     """Whether the case is mute (the mission cannot speak) and hung (module docstring).
     A fault on no service of the stack (the slow consumer, a client of its own: `sig`
     0, no signal) hurts nothing the request depends on: nothing is to be detected, the
-    request goes on as it would, and a long one is no hang."""
+    request goes on as it would, and a long one is no hang. Nor is a request heard
+    running again after the router was killed (`went_on_s`, reported as its own figure:
+    the world held that long): supervisord restarted it, every service reconnected as
+    the same process, and the mission went on (`common.lifelines`: a lapse of the link
+    to them all)."""
     if service not in STACK or sig == 0:
+        return {"mute": False, "hung": False}
+    if service == "router" and went_on_s is not None:
         return {"mute": False, "hung": False}
     mute = sig == signal.SIGSTOP and service in ("mission", "router")
     unreported = reported_s is None or reported_s > HUNG_S
@@ -291,6 +313,7 @@ def summary(cases: Sequence[Figures]) -> Figures:
     done = [c for c in cases if c.get("injected")]
     detect = [c["ended_s"] for c in done if c.get("ended_s") is not None]
     reported = [c["reported_s"] for c in done if c.get("reported_s") is not None]
+    went_on = [c["went_on_s"] for c in done if c.get("went_on_s") is not None]
     survived = [c for c in done if c["service"] != "wbc" or c["signal"] != "kill"]
     return {
         "cases": len(cases),
@@ -304,6 +327,7 @@ def summary(cases: Sequence[Figures]) -> Figures:
         "world_restarted": sum(bool(c.get("world_restarted")) for c in done),
         "ended_p50_s": _q(detect, 50), "ended_p95_s": _q(detect, 95),
         "reported_p50_s": _q(reported, 50), "reported_p95_s": _q(reported, 95),
+        "went_on": len(went_on), "went_on_max_s": max(went_on) if went_on else None,
     }  # fmt: skip
 
 

@@ -17,7 +17,12 @@ such a lapse, with the map's process running throughout. So a dependency whose t
 went is first doubted: back as the same run, it lapsed (the job goes on, the lapse is
 counted); back as another run, it restarted; not back within `LOST_GRACE_S` of wall
 time, it is gone. The grace keeps the policy's 0.5 s to notice a loss (a killed WBC:
-the sim's watchdog holds the robot meanwhile).
+the sim's watchdog holds the robot meanwhile). Every dependency gone at once is the
+link to them all: the router (restarted by supervisord in about 1.2 s) or the
+watcher's own session (cut off, or starved on a loaded host: a hall exploration's
+mission, with a second stack on its two cores, lost every token for more than 0.4 s).
+That is doubted `LAPSE_GRACE_S`: every one back as the same run, the world only
+paused (a lockstep sim waits for its participants) and the job goes on.
 
 `OwnLink` tells a lost token from the watcher's own Zenoh link lapsing (a client the
 router cut off sees every token go and come back), for a client that follows a job
@@ -36,6 +41,11 @@ from collections.abc import Callable, Iterable
 #: Wall seconds a dependency's lost token is doubted before it counts as gone (a
 #: lapse's reconnect: the client's first retry after 0.05 s, `deploy/zenoh/client.json5`).
 LOST_GRACE_S = 0.4
+#: Wall seconds a lost token is doubted when every one went at once (`Dependencies`),
+#: and by `OwnLink`: every watched token back (and the clock on) within it, the link
+#: lapsed. Well inside the fault trial's `HUNG_S` (a hung mission's loss ends a watch
+#: about 1 + 5 s after the SIGSTOP).
+LAPSE_GRACE_S = 5.0
 
 
 class Lifelines:
@@ -88,11 +98,13 @@ class Dependencies:
     `key_of(name)` is the service's liveliness key. `lost()` is None while every one of
     them alive at `arm` is still the same process; else "<name> restarted" (another
     run of it is alive) or "<name> is gone" (none, `grace_s` after its token went); or,
-    every one of `ROUTER_LOST_AT` or more gone together, "the router is gone: every
-    service went at once (…)": the link to them all, not each process (a killed router
-    said "sim is gone: the world stopped"). A token back as the run armed is a lapse
-    (`take_lapses`), not a loss. A service whose run is not known (a token without its run
-    token) counts as restarted when its token comes back.
+    every one of `ROUTER_LOST_AT` or more gone together and not back in
+    `LAPSE_GRACE_S`, "the router is gone: every service went at once (…)": the link to
+    them all, not each process (a killed router said "sim is gone: the world stopped").
+    A token back as the run armed is a lapse (`take_lapses`), not a loss. A run heard
+    only after `arm` (a watch just made) is taken as the armed one while the token has
+    not gone; a service whose run is not known (a token without its run token) counts
+    as restarted when its token comes back.
     """
 
     def __init__(
@@ -102,15 +114,18 @@ class Dependencies:
         key_of: Callable[[str], str],
         grace_s: float = LOST_GRACE_S,
         clock: Callable[[], float] = time.monotonic,
+        link_grace_s: float = LAPSE_GRACE_S,
     ) -> None:
         self._lifelines = lifelines
         self._keys = {name: key_of(name) for name in names}
         self.names = list(self._keys)
-        self.grace_s, self._clock = grace_s, clock
+        self.grace_s, self.link_grace_s, self._clock = grace_s, link_grace_s, clock
         #: Per dependency alive at `arm`: its token's losses then, and its run.
         self._armed: dict[str, tuple[int, str | None]] = {}
         #: Since when (wall) a dependency's token has been gone, unresolved.
         self._doubt: dict[str, float] = {}
+        #: The doubted ones that went with every other (the link: `link_grace_s`).
+        self._link_doubt: set[str] = set()
         #: The dependencies whose token went and came back as the same run, in order,
         #: not yet taken (`take_lapses`).
         self._lapses: list[str] = []
@@ -128,11 +143,11 @@ class Dependencies:
             for n, k in self._keys.items()
             if k in alive
         }
-        self._doubt = {}
+        self._doubt, self._link_doubt = {}, set()
 
     def disarm(self) -> None:
         self._armed = {}
-        self._doubt = {}
+        self._doubt, self._link_doubt = {}, set()
 
     def take_lapses(self) -> list[str]:
         """The lapses seen since the last call (a watcher logs them)."""
@@ -148,9 +163,18 @@ class Dependencies:
         now = self._clock()
         gone: list[str] = []
         restarted: str | None = None
+        link = len(self._armed) >= ROUTER_LOST_AT and all(
+            losses.get(self._keys[n], 0) > before and self._keys[n] not in alive
+            for n, (before, _) in self._armed.items()
+        )
+        if link:  # they went together: each one is doubted as long, back or not
+            self._link_doubt.update(self._armed)
         for name, (before, run) in list(self._armed.items()):
+            grace = self.link_grace_s if name in self._link_doubt else self.grace_s
             key = self._keys[name]
             if losses.get(key, 0) <= before:
+                if run is None and (run := _one(self._lifelines.runs(key))) is not None:
+                    self._armed[name] = (before, run)  # its run heard after `arm`
                 continue
             runs = self._lifelines.runs(key)
             if run is not None and runs - {run}:
@@ -158,12 +182,13 @@ class Dependencies:
             elif run is not None and run in runs and key in alive:  # the same process
                 self._armed[name] = (losses.get(key, 0), run)
                 self._doubt.pop(name, None)
+                self._link_doubt.discard(name)
                 self._lapses.append(name)
             elif run is None and key in alive:
                 restarted = restarted or name
             else:
                 since = self._doubt.setdefault(name, now)
-                if now - since >= self.grace_s:
+                if now - since >= grace:
                     gone.append(name)
         if len(gone) >= ROUTER_LOST_AT and len(gone) == len(self._armed):
             return f"the router is gone: every service went at once ({', '.join(gone)})"
@@ -178,12 +203,6 @@ class Dependencies:
 def _one(runs: frozenset[str]) -> str | None:
     """The run of a service when exactly one is alive; None when unknown."""
     return next(iter(runs)) if len(runs) == 1 else None
-
-
-#: Wall seconds a lost token is doubted (`OwnLink`): every watched token back and the
-#: clock on within it, the watcher's own link lapsed. Well inside the fault trial's
-#: `HUNG_S` (a hung mission's loss ends a watch about 1 + 5 s after the SIGSTOP).
-LAPSE_GRACE_S = 5.0
 
 
 class OwnLink:

@@ -154,6 +154,13 @@ class Liveliness(Protocol):
 #: Wall seconds the sim blocks on one look for an ack or a command before it looks again
 #: at liveliness, its stall deadline and whether it is stopping.
 POLL_S = 0.05
+#: Wall seconds the sim, its own link back, waits for the services alive before it
+#: lost it to reconnect too (each retries the router on its own backoff, up to 0.5 s).
+LINK_BACK_S = 5.0
+#: Wall seconds the last clock and state are sent again after the link came back, and
+#: how often, while nobody answers.
+RESEND_FOR_S = 3.0
+RESEND_EVERY_S = 0.25
 
 
 class SimGate(Generic[C]):
@@ -171,6 +178,18 @@ class SimGate(Generic[C]):
 
     `alive_key(name)` is a participant's liveliness key; a key's last segment is its
     service's name. `now` is the wall clock (s) the deadlines read.
+
+    The sim's own token (`own`) gone from its own watch is its link to the router gone
+    (the router killed, or this session cut off), not every participant dying: the
+    world holds (`cut_off`: no participant is let go, the waits for acks and commands
+    go on past `stall_timeout_s`) until the link is back and every service alive before
+    it is back too (or `LINK_BACK_S` went by: the late ones are let go), and then
+    `on_back` sends again what the participants wait for (the last clock and state),
+    every `RESEND_EVERY_S` until answered or `RESEND_FOR_S` went by (sent at once, they
+    reached nobody: a publisher hears of its subscribers again a while after). A
+    router killed while navigating let the world run 9 s of sim time without the WBC's
+    commands (every participant "gone"), and the robot fell; held, the world waits for
+    the router's restart.
     """
 
     def __init__(
@@ -184,8 +203,17 @@ class SimGate(Generic[C]):
         stop: threading.Event,
         log: logging.Logger,
         now: Callable[[], float] = time.perf_counter,
+        own: str = "sim",
+        on_back: Callable[[], None] | None = None,
     ) -> None:
         self.settings = settings
+        self.own = own
+        self._on_back = on_back
+        #: The sim's own token is gone from its watch: its link is (class docstring).
+        self.cut_off = False
+        self._back_since: float | None = None
+        #: (next due, until) wall seconds while the last clock and state are sent again.
+        self._resend: tuple[float, float] | None = None
         self.lockstep = settings.mode == "lockstep"
         self.tick_ns = round(NS_PER_S / settings.tick_hz)
         self.acks = AckGate(settings.participants, self.tick_ns)
@@ -239,10 +267,34 @@ class SimGate(Generic[C]):
 
     def refresh(self, t_ns: int) -> None:
         """Take the liveliness changes (if any) as of sim time t: joins and leaves, logged."""
-        if self._alive.version == self._alive_version:
+        if self._alive.version == self._alive_version and not self.cut_off:
             return
         self._alive_version = self._alive.version
         names = {service_of_alive_key(k) for k in self._alive.alive()}
+        if self.own in self.alive_names and self.own not in names and not self.cut_off:
+            self.cut_off, self._back_since = True, None
+            self._log.warning(
+                "t=%.3f s: the sim's own link is down (its token gone from its own watch): "
+                "the world holds until it is back", t_ns / NS_PER_S,
+            )  # fmt: skip
+        if self.cut_off:
+            if self.own not in names:
+                self._back_since = None
+                return  # who is there is not known while cut off: nobody is let go
+            if self._back_since is None:
+                self._back_since = self._now()
+            late = self.alive_names - names
+            if late and self._now() - self._back_since < LINK_BACK_S:
+                return  # the others reconnect in turn: wait for them before going on
+            self.cut_off = False
+            self._log.warning(
+                "t=%.3f s: the sim's link is back%s", t_ns / NS_PER_S,
+                f"; not back in {LINK_BACK_S:g} s: {sorted(late)}" if late else "",
+            )  # fmt: skip
+            # what went out while cut off was lost: sent again until answered (the
+            # publishers hear of their subscribers again some time after the link)
+            self._resend = (self._now(), self._now() + RESEND_FOR_S)
+            self._send_again()
         for name in sorted(names - self.alive_names):
             self._log.info("%s is alive at t=%.3f s", name, t_ns / NS_PER_S)
             self.acks.join(name, t_ns)
@@ -250,6 +302,20 @@ class SimGate(Generic[C]):
             self._log.warning("%s is gone at t=%.3f s: no longer waited for", name, t_ns / NS_PER_S)
             self.acks.leave(name)
         self.alive_names = names
+
+    def _send_again(self) -> None:
+        """`on_back` every `RESEND_EVERY_S` while `RESEND_FOR_S` after the link came back
+        has not passed and the sim is still waiting at the tick it held on (a later clock
+        or state would make the one sent again stale: the waits clear it as they end)."""
+        if self._resend is None or self._on_back is None:
+            return
+        due, until = self._resend
+        now = self._now()
+        if now > until:
+            self._resend = None
+        elif now >= due:
+            self._on_back()
+            self._resend = (now + RESEND_EVERY_S, until)
 
     def drain_acks(self, t_ns: int) -> None:
         """Book the acks that arrived; a stalled participant that acks again rejoins at t."""
@@ -272,8 +338,12 @@ class SimGate(Generic[C]):
             blocking = self.acks.blocking(t_ns)
             if not blocking or self._stop.is_set():
                 self._book(last, start)
+                self._resend = None  # what goes out next is newer than the last sent
                 return
+            self._send_again()
             last = blocking
+            if self.cut_off:  # nobody is heard; the world holds
+                deadline = self._now() + self.settings.stall_timeout_s
             if self._now() > deadline:
                 for name in blocking:
                     self._log.error(
@@ -284,6 +354,7 @@ class SimGate(Generic[C]):
                     )
                     self.acks.leave(name)
                     self.stalls += 1
+                self._resend = None
                 return
             self._ack_inbox.wait(timeout_s=POLL_S)  # wakes on the next ack
             self.refresh(t_ns)
@@ -313,11 +384,16 @@ class SimGate(Generic[C]):
             if cmd is not None:
                 if cmd.stamp_ns == t_ns:
                     self._book([self.commander], start)
+                    self._resend = None  # answered: the link carries again
                     return cmd
                 continue  # an answer to an older state: superseded
+            self._send_again()
+            if self.cut_off:  # nobody is heard; the world holds
+                deadline = self._now() + self.settings.stall_timeout_s
             if self._now() > deadline:
                 self._log.error("%s stalled at t=%.3f s", self.commander, t_ns / NS_PER_S)
                 self.stalls += 1
+                self._resend = None
                 return None
             self.refresh(t_ns)
         return None

@@ -75,6 +75,7 @@ class SimNode:
             alive_key=keys.alive,
             stop=svc.stop,
             log=svc.log,
+            on_back=lambda: self.out.send_again(),
         )
         self.tick_ns = self.gate.tick_ns
         self.description = robot_description(cfg, self.core)

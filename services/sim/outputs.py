@@ -112,6 +112,8 @@ class SimOutputs:
         self.rec = rec
         cameras = config.sim.cameras
         self.clock = bus.publisher(WORLD_CLOCK, Clock, "control")
+        self._last_clock: Clock | None = None
+        self._last_state: RobotState | None = None
         self.state = bus.publisher(keys.state, RobotState, "control")
         #: The free joint on `odom` only when nothing estimates it (the truth ablation,
         #: kinematic locomotion); otherwise the WBC publishes its estimate there.
@@ -170,6 +172,7 @@ class SimOutputs:
                 self.state_truth.put(truth)
             state = self.core.robot_state(tick)
             self.state.put(state)
+            self._last_state = state
         if t_ns % self.odom_period_ns == 0:
             if self.odom is not None:
                 self.odom.put(self.core.odom())
@@ -192,9 +195,18 @@ class SimOutputs:
             self.scene_log.log_poses(self.core.data)
         # The clock goes last: a participant woken by it finds its inputs as of t in.
         if clock_due:
-            self.clock.put(
-                Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf)
+            self._last_clock = Clock(
+                stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf
             )
+            self.clock.put(self._last_clock)
+
+    def send_again(self) -> None:
+        """The last state and clock once more (the link was down when they went: the
+        participants still wait for them; `common.lockstep.SimGate`)."""
+        if self._last_state is not None:
+            self.state.put(self._last_state)
+        if self._last_clock is not None:
+            self.clock.put(self._last_clock)
 
     def _people(self, t_ns: int) -> PeopleTruth:
         people = self.core.people

@@ -33,6 +33,16 @@ def deps_of(lines: Lifelines, names: list[str], clock: Clock) -> Dependencies:
     return deps
 
 
+def gone(names: list[str], clock: Clock, going: list[str]) -> tuple[Lifelines, Dependencies]:
+    """`names` alive with their runs, a job armed on them, then `going` gone."""
+    lines = lifelines(*names, runs=True)
+    deps = deps_of(lines, names, clock)
+    for name in going:
+        lines.down(key(name))
+        lines.run_down(key(name), f"{name}-1")
+    return lines, deps
+
+
 def test_nothing_is_lost_while_every_dependency_stays_up() -> None:
     lines = lifelines("mission", "sim")
     deps = deps_of(lines, ["mission", "sim"], Clock())
@@ -132,18 +142,44 @@ def test_a_dependency_not_running_when_the_job_began_is_missing_not_lost() -> No
 def test_every_dependency_gone_at_once_is_the_router_not_each_service() -> None:
     clock = Clock()
     names = ["sim", "wbc", "navigation", "mission"]
-    lines = lifelines(*names, runs=True)
-    deps = deps_of(lines, names, clock)
-    for name in names[:3]:
-        lines.down(key(name))
-        lines.run_down(key(name), f"{name}-1")
+    _, deps = gone(names, clock, names[:3])
     deps.lost()
     clock.t += 0.5
     assert deps.lost() == "sim is gone"  # one still there: services, not the link
-    lines.down(key("mission"))
-    lines.run_down(key("mission"), "mission-1")
-    deps.lost()
-    clock.t += 0.5
+
+    _, deps = gone(names, clock, names)
+    assert deps.lost() is None
+    clock.t += 4.9  # every one gone at once: the link to them all, doubted longer
+    assert deps.lost() is None
+    clock.t += 0.2
     assert deps.lost() == (
         "the router is gone: every service went at once (sim, wbc, navigation, mission)"
     )
+
+
+def test_every_dependency_back_as_the_same_run_after_the_router_came_back_is_a_lapse() -> None:
+    clock = Clock()
+    names = ["sim", "wbc", "navigation", "mission"]
+    lines, deps = gone(names, clock, names)
+    assert deps.lost() is None
+    clock.t += 1.5  # supervisord restarted the router; the services reconnect one by one
+    for name in names:
+        lines.run_up(key(name), f"{name}-1")
+        lines.up(key(name))
+        assert deps.lost() is None  # the others still doubted as long as the link
+        clock.t += 0.3
+    assert deps.take_lapses() == names
+
+
+def test_a_run_heard_after_the_job_was_armed_is_the_armed_one() -> None:
+    clock = Clock()
+    lines = lifelines("sim")  # the watch has heard the token, not yet its run's
+    deps = deps_of(lines, ["sim"], clock)
+    lines.run_up(key("sim"), "sim-1")
+    assert deps.lost() is None
+    lines.down(key("sim"))
+    lines.run_down(key("sim"), "sim-1")
+    assert deps.lost() is None
+    lines.run_up(key("sim"), "sim-1")
+    lines.up(key("sim"))
+    assert deps.lost() is None and deps.take_lapses() == ["sim"]

@@ -157,7 +157,11 @@ class Sim:
     stop: threading.Event
 
 
-def sim(*alive: str, mode: Literal["lockstep", "realtime"] = "lockstep") -> Sim:
+def sim(
+    *alive: str,
+    mode: Literal["lockstep", "realtime"] = "lockstep",
+    on_back: Callable[[], None] | None = None,
+) -> Sim:
     settings = TimeSettings(
         mode=mode,
         participants={
@@ -181,6 +185,7 @@ def sim(*alive: str, mode: Literal["lockstep", "realtime"] = "lockstep") -> Sim:
         stop=stop,
         log=logging.getLogger("test.sim"),
         now=clock,
+        on_back=on_back,
     )
     gate.refresh(0)  # the sim's first tick
     return Sim(gate, watch, acks, commands, clock, stop)
@@ -242,6 +247,56 @@ def test_a_participant_that_dies_is_not_waited_for(
     s.gate.refresh(22 * MS)
     assert s.gate.wait_command(22 * MS) is None
     assert s.clock.s < 1.0
+
+
+def test_the_sims_own_token_gone_is_its_link_the_world_holds_and_sends_again_once_back(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    sent_again: list[float] = []
+    s = sim("sim", "nav", "wbc", on_back=lambda: sent_again.append(s.clock.s))
+    looks = 0
+
+    def router_down_then_back() -> None:
+        nonlocal looks
+        looks += 1
+        if looks == 1:
+            s.alive.only()  # every token, its own too: the router went
+        elif looks == 60:  # 3 s later (past the 1 s stall timeout): it is back
+            s.alive.only("sim", "nav", "wbc")
+        elif looks == 61:
+            s.acks.items.append(Ack(service="nav", stamp_ns=0))
+
+    s.acks.on_wait = router_down_then_back
+    with caplog.at_level(logging.WARNING):
+        s.gate.wait_acks(20 * MS)
+    assert s.clock.s == pytest.approx(3.05) and s.gate.stalls == 0
+    assert "the sim's own link is down" in caplog.text and "the sim's link is back" in caplog.text
+    assert "no longer waited for" not in caplog.text  # nobody let go
+    assert sent_again == [pytest.approx(3.0)]
+    assert s.gate.acks.blocking(20 * MS) == []
+
+
+def test_back_on_its_link_the_sim_waits_for_the_others_to_reconnect_before_going_on() -> None:
+    sent_again: list[float] = []
+    s = sim("sim", "nav", "wbc", on_back=lambda: sent_again.append(s.clock.s))
+    looks = 0
+
+    def back_in_turn() -> None:
+        nonlocal looks
+        looks += 1
+        if looks == 1:
+            s.alive.only()
+        elif looks == 20:
+            s.alive.only("sim", "wbc")  # its own link first: nav's retry comes later
+        elif looks == 30:
+            s.alive.only("sim", "nav", "wbc")
+        elif looks == 31:
+            s.acks.items.append(Ack(service="nav", stamp_ns=0))
+
+    s.acks.on_wait = back_in_turn
+    s.gate.wait_acks(20 * MS)
+    assert sent_again == [pytest.approx(1.5)]  # once nav was back too, not before
+    assert s.gate.stalls == 0 and "nav" in s.gate.alive_names
 
 
 def test_a_participant_that_stalls_is_logged_and_stepped_without_until_it_acks(

@@ -49,7 +49,7 @@ class Rig:
         self.desk = Desk(
             self.tree,
             self.robot,
-            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0),
+            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0, link_grace_s=0.0),
             StatusBoard(round(every_s * 1e9)),
             self.requests,
             self.cancels,

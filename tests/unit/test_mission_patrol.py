@@ -245,7 +245,7 @@ class Rig:
             PatrolRunner(self.robot, fast_settings(), logger.patrol),
             self.robot,
             fast_settings(),
-            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0),
+            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0, link_grace_s=0.0),
             logger,
             LOG,
             answer_s=5.0,
@@ -255,7 +255,7 @@ class Rig:
         self.desk = Desk(
             self.tree,
             self.robot,
-            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0),
+            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0, link_grace_s=0.0),
             StatusBoard(round(100 * 1e9)),
             self.requests,
             Inbox(),

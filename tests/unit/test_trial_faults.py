@@ -182,3 +182,26 @@ def test_a_map_database_is_checked_and_its_lock_files_named(tmp_path: Path) -> N
     assert (ok, count) == ("ok", 2) and "m.sqlite-wal" in locks
     con.close()
     assert map_state(db) == ("ok", 2, [])  # closed cleanly: no lock files left
+
+
+def test_a_request_that_went_on_after_the_router_came_back_is_not_hung() -> None:
+    kill = signal.SIGKILL
+    # every service reconnected as the same process; the fetch went on 12 s later
+    assert verdict("router", kill, 90.0, 90.0, went_on_s=12.0) == {"mute": False, "hung": False}
+    assert verdict("router", kill, 90.0, 90.0)["hung"]  # it never went on: hung
+    assert verdict("navigation", kill, 90.0, 90.0, went_on_s=12.0)["hung"]  # not the router
+    s = summary(
+        [
+            {
+                "injected": True,
+                "service": "router",
+                "signal": "kill",
+                "ended_s": 90.0,
+                "reported_s": 90.0,
+                "went_on_s": 12.0,
+                "hung": False,
+                "map_ok": True,
+            }
+        ]
+    )
+    assert (s["went_on"], s["went_on_max_s"], s["hung"]) == (1, 12.0, 0)
