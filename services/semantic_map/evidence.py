@@ -12,8 +12,9 @@ so these rules hold for every detection and for every entity the map made itself
   noise; a mask flat on the top is the top) and the tallest artifact's height above it;
   one below the top is the table's apron or legs;
 - an artifact off every support within `PERSON_REACH_M` of a person the map saw lately
-  is the person's hand or clothes (the same frame's person detections already drop
-  them; this catches the frames where the person is cut off or not detected);
+  (and often: one it would keep) is the person's hand or clothes (the same frame's
+  person detections already drop them; this catches the frames where the person is cut
+  off or not detected);
 - a person does not stand inside a support's top, nor where the map knows no floor
   (`KNOWN_FLOOR_M` around the place, on a lidar or file map: beyond the walls the depth
   reads through gaps).

@@ -1,17 +1,20 @@
 """The fetch copes with a hall that changed: whole stacks, the small world, lockstep.
 
 Each test is a fresh stack of every service (the eval's settings: the network segmenter,
-dynamic locomotion, the map seeded from the world, so the map says where the bottle was),
-somebody moves the bottle through the sim's hook (`dume/world/artifact_command`) before
-the mission's first tick, and the request goes in at t = 0 (`start_gate`). What the sim's
-truth sees is judged: the bottle in the person's hand, or the typed failure and where the
-robot looked.
+dynamic locomotion, the map seeded from the world, so the map says where the bottle and
+the person were), somebody moves the bottle through the sim's hook
+(`dume/world/artifact_command`), or the person walks off (`dume/world/people_command`),
+before the mission's first tick, and the request goes in at t = 0 (`start_gate`). What
+the sim's truth sees is judged: the bottle in the requested person's hand, or the typed
+failure and where the robot looked.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,9 +22,19 @@ import pytest
 from bench.eval.evaluate import SERVICES, world_overrides
 from bench.eval.judge import MissionRecord
 from bench.eval.run import watch_mission
-from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_DESCRIPTION
-from common.messages.mission import MissionRequest
-from common.messages.sim import ArtifactCommand, ArtifactMoved, HandoverTaken, ObjectDropped
+from common.keys import (
+    WORLD_ARTIFACT_COMMAND,
+    WORLD_DESCRIPTION,
+    WORLD_PEOPLE_COMMAND,
+)
+from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.sim import (
+    ArtifactCommand,
+    ArtifactMoved,
+    HandoverTaken,
+    ObjectDropped,
+    PersonCommand,
+)
 from common.messages.world import WorldDescription
 from deploy.stack import ProcessStack
 from services.sim.world import new_place
@@ -32,15 +45,20 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 MOVE_NS = 100_000_000
 
 
-def fetch_after_a_move(tmp_path: Path, away: bool) -> tuple[MissionRecord, str]:
-    """The bottle moved along its table (or taken away), then asked for; the record and
-    where it went."""
+def coping_overrides(tmp_path: Path) -> dict[str, object]:
+    """The eval's small-world stack, seed 0, its map seeded from the world (the truth
+    then: what the map says before anyone moves)."""
     args = argparse.Namespace(world="small", walking_people=False, record=False, set=[])
-    overrides = world_overrides(args, 0, "coping") | {
+    return world_overrides(args, 0, "coping") | {
         "semantic_map.dir": str(tmp_path / "map"),
         "recording.enabled": False,
     }
-    with ProcessStack(list(SERVICES), overrides) as s:
+
+
+def fetch_after_a_move(tmp_path: Path, away: bool) -> tuple[MissionRecord, str]:
+    """The bottle moved along its table (or taken away), then asked for; the record and
+    where it went."""
+    with ProcessStack(list(SERVICES), coping_overrides(tmp_path)) as s:
         world = s.bus.query(WORLD_DESCRIPTION, None, WorldDescription, timeout_s=10.0)
         bottle = next(a for a in world.artifacts if a.id == "bottle_1")
         mover = s.bus.publisher(WORLD_ARTIFACT_COMMAND, ArtifactCommand, "control")
@@ -77,3 +95,60 @@ def test_a_bottle_taken_away_fails_as_not_found_naming_where_it_looked(tmp_path:
     assert (last.state, last.reason) == ("failed", "object_not_found"), last
     assert "looked at:" in last.detail or "no viewpoint" in last.detail, last.detail
     assert not [e for e in record.events if isinstance(e, HandoverTaken)]
+
+
+#: Where person_1 walks off to: 2.4 m from their mapped place (-2.58, 0.58), by the
+#: hall's south-west corner.
+WALKED_TO = (-3.1, -1.8)
+#: s after the carry began: the robot has turned from the table and sees them (they
+#: stop to face it once it comes near, as a person asked for would).
+WALK_AFTER_S = 5.0
+
+
+class WhenCarrying:
+    """Once the carry began (the status enters `bring_to_user`), `act(stamp_ns)` puts a
+    hook's command for `after_s` later (sent ahead of its time)."""
+
+    def __init__(self, after_s: float, act: Callable[[int], None]) -> None:
+        self.after_ns, self.act, self.at_ns = round(after_s * 1e9), act, 0
+
+    def on_progress(self, status: MissionStatus | None, _clock: Any, changed: bool) -> None:
+        carrying = changed and status is not None and status.behaviour == "bring_to_user"
+        if carrying and status is not None and not self.at_ns:
+            self.at_ns = status.stamp_ns + self.after_ns
+            self.act(self.at_ns)
+
+
+def fetch_while_carrying(
+    tmp_path: Path, after_s: float, act: Callable[[ProcessStack, int], None]
+) -> tuple[MissionRecord, int]:
+    """bottle_1 to person_1 with `act(stack, stamp_ns)` done `after_s` into the carry;
+    the record and when it was done (0: the carry never began)."""
+    with ProcessStack(list(SERVICES), coping_overrides(tmp_path)) as s:
+        hook = WhenCarrying(after_s, lambda at: act(s, at))
+        request = MissionRequest(request_id="carried", object="bottle_1", person="person_1")
+        record = watch_mission(s.bus, s.keys, request, 900.0, hook.on_progress, start_gate=True)
+    return record, hook.at_ns
+
+
+def assert_brought(record: MissionRecord) -> None:
+    """The request succeeded, the sim's handover event says so: bottle_1 to person_1."""
+    last = record.changes[-1]
+    assert last.state == "succeeded", last
+    taken = [e for e in record.events if isinstance(e, HandoverTaken)]
+    assert [(e.object_id, e.person_id) for e in taken] == [("bottle_1", "person_1")]
+
+
+def walk_off(s: ProcessStack, at_ns: int) -> None:
+    walker = s.bus.publisher(WORLD_PEOPLE_COMMAND, PersonCommand, "control")
+    walker.put(PersonCommand(stamp_ns=at_ns, person_id="person_1", walk_to=(WALKED_TO,),
+                             speed=0.8, ignore_robot=False))  # fmt: skip
+
+
+@pytest.mark.timeout(3600)
+def test_a_person_who_walks_off_as_the_robot_comes_is_followed_and_handed_the_bottle(
+    tmp_path: Path,
+) -> None:
+    record, walked_at = fetch_while_carrying(tmp_path, WALK_AFTER_S, walk_off)
+    assert walked_at > 0, "the carry began and the person walked off"
+    assert_brought(record)  # where they stopped, 2.4 m from where the map had them
