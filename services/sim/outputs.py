@@ -16,11 +16,13 @@ Called from the sim's loop thread only.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import rerun as rr
 
 from common import robot
-from common.bus import Bus
+from common.bus import Bus, Publisher
 from common.config import Config
 from common.keys import WORLD_CLOCK, WORLD_EVENTS, WORLD_PEOPLE, RobotKeys
 from common.messages import to_wire
@@ -112,8 +114,8 @@ class SimOutputs:
         self.rec = rec
         cameras = config.sim.cameras
         self.clock = bus.publisher(WORLD_CLOCK, Clock, "control")
-        self._last_clock: Clock | None = None
-        self._last_state: RobotState | None = None
+        #: Each robot-facing publisher's last sample, by key (`send_again`).
+        self._sent: dict[str, tuple[Publisher[Any], Any]] = {}
         self.state = bus.publisher(keys.state, RobotState, "control")
         #: The free joint on `odom` only when nothing estimates it (the truth ablation,
         #: kinematic locomotion); otherwise the WBC publishes its estimate there.
@@ -171,18 +173,17 @@ class SimOutputs:
                 truth = self.core.state_truth()
                 self.state_truth.put(truth)
             state = self.core.robot_state(tick)
-            self.state.put(state)
-            self._last_state = state
+            self._send(self.state, state)
         if t_ns % self.odom_period_ns == 0:
             if self.odom is not None:
-                self.odom.put(self.core.odom())
+                self._send(self.odom, self.core.odom())
             if truth is None:
                 truth = self.core.state_truth()
                 self.state_truth.put(truth)
         if t_ns % self.lidar_period_ns == 0:
-            self.scan.put(self._scan(t_ns, self.core.lidar))
+            self._send(self.scan, self._scan(t_ns, self.core.lidar))
             if self.core.lidar_rear is not None:
-                self.scan_rear.put(self._scan(t_ns, self.core.lidar_rear))
+                self._send(self.scan_rear, self._scan(t_ns, self.core.lidar_rear))
             if self.people_truth.has_subscribers():
                 self.people_truth.put(self._people(t_ns))
             if self.sim_log.enabled:
@@ -195,18 +196,24 @@ class SimOutputs:
             self.scene_log.log_poses(self.core.data)
         # The clock goes last: a participant woken by it finds its inputs as of t in.
         if clock_due:
-            self._last_clock = Clock(
-                stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf
+            self._send(
+                self.clock,
+                Clock(stamp_ns=t_ns, tick=tick, mode=self.config.time.mode, rtf=wall_rtf),
             )
-            self.clock.put(self._last_clock)
+
+    def _send(self, publisher: Publisher[Any], msg: Any) -> None:
+        """Put `msg`, kept as the publisher's last sample (`send_again`)."""
+        publisher.put(msg)
+        self._sent[publisher.key] = (publisher, msg)
 
     def send_again(self) -> None:
-        """The last state and clock once more (the link was down when they went: the
-        participants still wait for them; `common.lockstep.SimGate`)."""
-        if self._last_state is not None:
-            self.state.put(self._last_state)
-        if self._last_clock is not None:
-            self.clock.put(self._last_clock)
+        """What the participants wait for, once more: the last state, odometry, scans and
+        camera frames, then the last clock (the link was down when they went;
+        `common.lockstep.SimGate`)."""
+        sent = dict(self._sent)  # the render thread adds frames meanwhile
+        clock = sent.pop(self.clock.key, None)
+        for publisher, msg in [*sent.values(), *([clock] if clock else [])]:
+            publisher.put(msg)
 
     def _people(self, t_ns: int) -> PeopleTruth:
         people = self.core.people
@@ -247,7 +254,7 @@ class SimOutputs:
 
     def _put(self, frame: CameraFrame, truth: SegmentationTruth | None) -> None:
         """A rendered frame out (on the render thread)."""
-        self.rgbd[frame.camera].put(frame)
+        self._send(self.rgbd[frame.camera], frame)
         if truth is not None and self.config.sim.segmentation_truth:
             self.truth[frame.camera].put(truth)
         self.sim_log.camera(frame.stamp_ns, frame, truth)

@@ -90,6 +90,8 @@ class WbcNode:
         self.late_inputs = 0
         self.mode_in = bus.fifo(keys.wbc_mode, WbcMode, maxlen=256)
         self.commands = bus.publisher(keys.command, JointCommand, "control")
+        #: The last command sent, answered again to a state sent again.
+        self._answer: JointCommand | None = None
         self.status = bus.publisher(keys.wbc_status, WbcStatus, "data")
         self.odom = bus.publisher(keys.odom, Odom, "control") if cfg.odom_from_estimate() else None
         self.odom_every = round(NS_PER_S / cfg.sim.odom_hz)
@@ -115,15 +117,22 @@ class WbcNode:
         elif prio:
             svc.log.info("the controller runs SCHED_FIFO %d", prio)
         svc.ready()
-        last = -1
+        last, seen = -1, None
 
         def is_new(state: RobotState) -> bool:
-            return state.stamp_ns > last
+            # a later state, or the last one arrived again (another sample: the sim sends
+            # it once more when its link was down, `common.lockstep.SimGate`)
+            return state.stamp_ns > last or (state.stamp_ns == last and state is not seen)
 
         while not svc.stopping:
             try:
                 msg = self.states.wait(is_new, 0.1)
             except WaitTimeout:
+                continue
+            again, seen = msg.stamp_ns == last, msg
+            if again:  # its answer was lost the same way: the same answer once more
+                if self._answer is not None and self._answer.stamp_ns == last:
+                    self.commands.put(self._answer)
                 continue
             last = msg.stamp_ns
             if msg.stamp_ns % self.period_ns:
@@ -160,7 +169,8 @@ class WbcNode:
         self.intake.get()
         core.start_goals(t)
         cmd = core.command(t, state, dt)
-        self.commands.put(joint_command(t, cmd))
+        self._answer = joint_command(t, cmd)
+        self.commands.put(self._answer)
         self.tick_us = (time.perf_counter() - t0 - self._waited_s) * 1e6
         # Off the critical path: the sim is stepping now.
         core.end(t, msg)

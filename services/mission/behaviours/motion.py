@@ -24,7 +24,9 @@
   stepping into view). Seen: SUCCESS, and the walk to them goes to where they were seen;
   never seen: SUCCESS all the same, walking to where the map last had them (the handover
   waits for them there and ends `handover_timeout` when nobody comes).
-- `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission).
+- `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission), or
+  less: only as far as the map's grid leaves room behind the footprint
+  (`room_behind`; none without the map or the pose).
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ from __future__ import annotations
 import math
 from typing import Literal
 
+import numpy as np
 from py_trees.common import Status
 
+from common.messages import as_numpy
 from common.messages.mission import MissionReason
 from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover
 from common.messages.wbc import WbcModeName
@@ -41,6 +45,7 @@ from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import PERSON, SIDE, UNSEEN, Context, MissionBehaviour
 from services.mission.behaviours.handover import side_bearing
 from services.mission.ports import PortError, Refused, Unavailable
+from services.mission.room_behind import room_behind
 
 
 class SetMode(MissionBehaviour):
@@ -261,9 +266,33 @@ class LookForPerson(MissionBehaviour):
 class BackOff(MissionBehaviour):
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("back_off", ctx, stage)
+        self.duration_s = 0.0
+
+    def initialise(self) -> None:
+        super().initialise()
+        s = self.settings
+        want = s.back_off_speed * s.back_off_s
+        room = self._room(want)
+        self.duration_s = s.back_off_s * room / want if want > 0.0 else 0.0
+        if room < want:
+            self.ctx.decide(f"back off {room:.2f} m, not {want:.2f} m: the map has an "
+                            "obstacle behind")  # fmt: skip
+
+    def _room(self, want_m: float) -> float:
+        """How far back the map lets the footprint go (`room_behind`); none when the map
+        or the pose is not at hand (backing up blind is what walked into a wall)."""
+        xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
+        try:
+            grid = self.port.occupancy()
+        except Unavailable:
+            return 0.0
+        if xy is None or yaw is None:
+            return 0.0
+        cells = np.asarray(as_numpy(grid.cells), np.uint8)
+        return room_behind(cells, grid.resolution_m, grid.origin_xy, xy, yaw, want_m)
 
     def update(self) -> Status:
-        if self.elapsed_s() >= self.settings.back_off_s:
+        if self.elapsed_s() >= self.duration_s:
             self.port.command_velocity(0.0, 0.0, 0.0)
             return Status.SUCCESS
         self.port.command_velocity(-self.settings.back_off_speed, 0.0, 0.0)
