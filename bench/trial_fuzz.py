@@ -266,6 +266,7 @@ def run_fuzz(
         wall_s = round(time.monotonic() - started, 1)
         taken = still_serves(stack)
         crashed = sorted(n for n, p in stack.procs.items() if p.poll() is not None)
+        losses = _losses(stack, watch)
         tracebacks = {n: stack.log_text(n).count("Traceback") for n in stack.services}
     return out | {
         "keys": len(targets),
@@ -275,7 +276,7 @@ def run_fuzz(
         "keys_with_a_service_down": [
             k["key"] for k in per_key if k["down"] or k["not_alive"] or k["restarted"]
         ],
-        "token_losses": per_key[-1]["token_losses"] if per_key else {},
+        "token_losses": losses,
         "logged_exceptions": {n: c for n, c in tracebacks.items() if c},
         "fetch_after": taken,
         "per_key": per_key,

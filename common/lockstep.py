@@ -293,7 +293,8 @@ class SimGate(Generic[C]):
             )  # fmt: skip
             # what went out while cut off was lost: sent again until answered (the
             # publishers hear of their subscribers again some time after the link)
-            self._resend = (self._now(), self._now() + RESEND_FOR_S)
+            now = self._now()
+            self._resend = (now, now + RESEND_FOR_S)
             self._send_again()
         for name in sorted(names - self.alive_names):
             self._log.info("%s is alive at t=%.3f s", name, t_ns / NS_PER_S)

@@ -249,24 +249,35 @@ def test_a_participant_that_dies_is_not_waited_for(
     assert s.clock.s < 1.0
 
 
+def cut_off(*steps: tuple[int, tuple[str, ...] | None]) -> tuple[Sim, list[float]]:
+    """A sim (nav, the WBC and its own token alive) whose router goes at its first look
+    for nav's ack: at each (look, names) of `steps` those tokens are alive (None: nav
+    acks instead; each look is 0.05 s of wall time). Its `on_back` calls, in wall s."""
+    sent_again: list[float] = []
+    s = sim("sim", "nav", "wbc", on_back=lambda: sent_again.append(s.clock.s))
+    script = {1: (), **dict(steps)}  # every token, its own too: the router went
+    looks = 0
+
+    def look() -> None:
+        nonlocal looks
+        looks += 1
+        if looks not in script:
+            return
+        names = script[looks]
+        if names is None:
+            s.acks.items.append(Ack(service="nav", stamp_ns=0))
+        else:
+            s.alive.only(*names)
+
+    s.acks.on_wait = look
+    return s, sent_again
+
+
 def test_the_sims_own_token_gone_is_its_link_the_world_holds_and_sends_again_once_back(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    sent_again: list[float] = []
-    s = sim("sim", "nav", "wbc", on_back=lambda: sent_again.append(s.clock.s))
-    looks = 0
-
-    def router_down_then_back() -> None:
-        nonlocal looks
-        looks += 1
-        if looks == 1:
-            s.alive.only()  # every token, its own too: the router went
-        elif looks == 60:  # 3 s later (past the 1 s stall timeout): it is back
-            s.alive.only("sim", "nav", "wbc")
-        elif looks == 61:
-            s.acks.items.append(Ack(service="nav", stamp_ns=0))
-
-    s.acks.on_wait = router_down_then_back
+    # 3 s later (past the 1 s stall timeout) every one is back, then nav acks
+    s, sent_again = cut_off((60, ("sim", "nav", "wbc")), (61, None))
     with caplog.at_level(logging.WARNING):
         s.gate.wait_acks(20 * MS)
     assert s.clock.s == pytest.approx(3.05) and s.gate.stalls == 0
@@ -277,23 +288,8 @@ def test_the_sims_own_token_gone_is_its_link_the_world_holds_and_sends_again_onc
 
 
 def test_back_on_its_link_the_sim_waits_for_the_others_to_reconnect_before_going_on() -> None:
-    sent_again: list[float] = []
-    s = sim("sim", "nav", "wbc", on_back=lambda: sent_again.append(s.clock.s))
-    looks = 0
-
-    def back_in_turn() -> None:
-        nonlocal looks
-        looks += 1
-        if looks == 1:
-            s.alive.only()
-        elif looks == 20:
-            s.alive.only("sim", "wbc")  # its own link first: nav's retry comes later
-        elif looks == 30:
-            s.alive.only("sim", "nav", "wbc")
-        elif looks == 31:
-            s.acks.items.append(Ack(service="nav", stamp_ns=0))
-
-    s.acks.on_wait = back_in_turn
+    # its own link first: nav's retry comes later
+    s, sent_again = cut_off((20, ("sim", "wbc")), (30, ("sim", "nav", "wbc")), (31, None))
     s.gate.wait_acks(20 * MS)
     assert sent_again == [pytest.approx(1.5)]  # once nav was back too, not before
     assert s.gate.stalls == 0 and "nav" in s.gate.alive_names
