@@ -262,6 +262,9 @@ def _service_rules(name: str, spec: dict[str, Any], robot: str) -> list[dict[str
                 rules.append(_rule(f"{who}-{verb}-{flow}", messages, flow, found))
     own = (f"{alive}/{name}", f"{alive}/{name}/*")  # its token and its run's
     rules.append(_rule(f"{who}-alive", ["liveliness_token"], "ingress", own))
+    # it follows its own tokens: its link to the router (`common.bus.LinkBack`)
+    rules.append(_rule(f"{who}-own-link", ["declare_liveliness_subscriber"], "ingress", own))
+    rules.append(_rule(f"{who}-own-link-back", ["liveliness_token"], "egress", own))
     if spec.get("watch"):
         asks = ["declare_liveliness_subscriber", "liveliness_query"]
         watched = (f"{alive}/*", f"{alive}/*/*")

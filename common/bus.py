@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
@@ -203,20 +204,44 @@ def _traced(msg: Any, payload: bytes) -> bytes:
 
 
 class Publisher(Generic[T]):
-    """A declared publisher of one message type."""
+    """A declared publisher of one message type. With `again`, it keeps its last sample,
+    and `send_again()` puts that once more (`LinkBack`: what a lockstep participant put
+    while its link to the router was cut never arrived). Keeping and putting are one step
+    under a lock, so a sample sent again is never put after a newer one."""
 
     def __init__(
-        self, session: zenoh.Session, key: str, traffic: Traffic, trace_every_ns: int = 0
+        self,
+        session: zenoh.Session,
+        key: str,
+        traffic: Traffic,
+        trace_every_ns: int = 0,
+        again: bool = False,
     ) -> None:
         self.key = key
         self._pub = session.declare_publisher(key, **_TRAFFIC[traffic])
         self._trace = OutputTrace(key, trace_every_ns) if trace_every_ns > 0 else None
+        self.again = again
+        self._last: bytes | None = None
+        self._lock = threading.Lock()
 
     def put(self, msg: T) -> None:
         payload = encode(msg)
         if self._trace is not None:
             self._trace.add(_traced(msg, payload), getattr(msg, "stamp_ns", None))
-        self._pub.put(payload)
+        if not self.again:
+            self._pub.put(payload)
+            return
+        with self._lock:
+            self._last = payload
+            self._pub.put(payload)
+
+    def send_again(self) -> bool:
+        """Put the last sample once more (a publisher made with `again`); False: none yet."""
+        with self._lock:
+            if self._last is None:
+                return False
+            self._pub.put(self._last)
+            return True
 
     def put_raw(self, payload: bytes) -> None:
         if self._trace is not None:
@@ -541,6 +566,83 @@ class AliveWatch:
         self._runs.undeclare()
 
 
+#: After a service's link to the router comes back, what it put into the cut is sent
+#: again this often (wall s), for this long: a subscriber's declaration can reach the
+#: router after the first resend, and the sim waits up to `lockstep.LINK_BACK_S` (5 s) for
+#: every service to be back before it sends its own state again.
+AGAIN_EVERY_S = 0.25
+AGAIN_FOR_S = 8.0
+
+
+class LinkBack:
+    """A service's own link to the router, seen through its own liveliness token.
+
+    Zenoh removes a client's token from its own view when the link to the router goes
+    and puts it back once the session has reconnected (a router killed and restarted).
+    Whatever the service put in between never arrived: a lockstep participant's ack for
+    the tick the sim waits on, the output a consumer's `UpstreamGate` waits on. So on
+    the way back `on_back()` is called every `every_s` wall seconds for `for_s`
+    (`Bus.send_again`: each kept publisher's last sample); it stops early if the link
+    goes again. `backs` counts the returns.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        own_key: str,
+        on_back: Callable[[], object],
+        every_s: float = AGAIN_EVERY_S,
+        for_s: float = AGAIN_FOR_S,
+    ) -> None:
+        self.own_key = own_key
+        self._on_back, self._every_s, self._for_s = on_back, every_s, for_s
+        self.backs = 0
+        self._lost = False
+        self._until = 0.0
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._closed = threading.Event()
+        self._sub = session.liveliness().declare_subscriber(own_key, self._on_sample, history=True)
+        self._thread = threading.Thread(target=self._run, name=f"link back {own_key}", daemon=True)
+        self._thread.start()
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            if sample.kind != zenoh.SampleKind.PUT:
+                self._lost = True
+                return
+            if not self._lost:
+                return  # declared, not back
+            self._lost = False
+            self.backs += 1
+            self._until = time.monotonic() + self._for_s
+        log.info("the link to the router is back: sending the last outputs again")
+        self._wake.set()
+
+    def _sending(self) -> bool:
+        with self._lock:
+            return not self._lost and time.monotonic() < self._until
+
+    def _run(self) -> None:
+        while not self._closed.is_set():
+            if not self._wake.wait(1.0):
+                continue
+            self._wake.clear()
+            while self._sending() and not self._closed.is_set():
+                try:
+                    self._on_back()
+                except Exception:  # a failed round must not end the watch
+                    log.exception("sending again after the link came back")
+                self._closed.wait(self._every_s)
+
+    def close(self) -> None:
+        self._closed.set()
+        self._wake.set()
+        self._thread.join(timeout=2.0)
+        with contextlib.suppress(zenoh.ZError):
+            self._sub.undeclare()
+
+
 class Bus:
     """A Zenoh session with typed helpers. Close it (or use `with`) when done."""
 
@@ -564,6 +666,8 @@ class Bus:
         #: Set by `interrupt`: every wait on this bus's subscriptions ends at once.
         self.stopping = threading.Event()
         self._subscriptions: list[_Subscription[Any]] = []
+        self._again: list[Publisher[Any]] = []
+        self._link_back: LinkBack | None = None
 
     @classmethod
     def open(
@@ -583,9 +687,34 @@ class Bus:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def publisher(self, key: str, type_: type[T], traffic: Traffic = "data") -> Publisher[T]:
+    def publisher(
+        self, key: str, type_: type[T], traffic: Traffic = "data", again: bool = False
+    ) -> Publisher[T]:
+        """A publisher; with `again`, its last sample is put once more when this
+        service's link to the router comes back (`watch_own_link`)."""
         self._uses("put", key, type_)
-        return Publisher(self.session, key, traffic, self.trace_every_ns)
+        pub: Publisher[T] = Publisher(self.session, key, traffic, self.trace_every_ns, again)
+        if again:
+            self._again.append(pub)
+        return pub
+
+    def send_again(self) -> int:
+        """Put each `again` publisher's last sample once more; how many were put."""
+        sent = 0
+        for pub in self._again:
+            try:
+                sent += pub.send_again()
+            except zenoh.ZError as exc:  # the link went again: the next round tries
+                log.debug("sending %s again: %s", pub.key, exc)
+        return sent
+
+    def watch_own_link(self, own_key: str) -> LinkBack:
+        """Follow this service's own liveliness token `own_key`: when the link to the
+        router comes back after a cut, every `again` publisher sends its last sample
+        again (`LinkBack`)."""
+        if self._link_back is None:
+            self._link_back = LinkBack(self.session, own_key, self.send_again)
+        return self._link_back
 
     def _reads(self, key: str) -> None:
         if self.guard is not None:
@@ -691,6 +820,9 @@ class Bus:
         return alive_now(self.session, key_expr, timeout_s)
 
     def close(self) -> None:
+        if self._link_back is not None:
+            self._link_back.close()
+            self._link_back = None
         for server in self._servers:
             server.close()
         for token in self._tokens:

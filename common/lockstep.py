@@ -425,7 +425,7 @@ class PeriodicTicker:
     ) -> None:
         self.period_ns = round(period_s * NS_PER_S)
         self.clock = bus.latest(WORLD_CLOCK, Clock)
-        self._ack = bus.publisher(keys.ack(name), Ack, "control")
+        self._ack = bus.publisher(keys.ack(name), Ack, "control", again=True)
         self._name = name
         self._stop = stop
 

@@ -79,6 +79,8 @@ class Service:
         service now serves what it declared."""
         self.bus.declare_alive(self.keys.alive_run(self.name, RUN))
         self.bus.declare_alive(self.keys.alive(self.name))
+        # a router lost and back: what it put into the cut is sent again (`LinkBack`)
+        self.bus.watch_own_link(self.keys.alive_run(self.name, RUN))
         self.is_ready = True
         self.log.info("ready; takes %s", json.dumps(self.bus.inputs))
         if self.config.zenoh.access_control:

@@ -63,11 +63,11 @@ class LocalizationNode:
         bus, keys = svc.bus, svc.keys
         self.scans = bus.latest(keys.scan, LaserScan, history=8)
         self.odom = bus.latest(keys.odom, Odom, history=32)
-        self.pub = bus.publisher(keys.localization, Localization, "control")
+        self.pub = bus.publisher(keys.localization, Localization, "control", again=True)
         self.ticker = PeriodicTicker(bus, keys, NAME, period_s, svc.stop)
         self.logger = LocalizationLogger(svc.rec)
         self.loc: Localizer | Slam | None = None
-        self.grid_pub = bus.publisher(keys.slam_occupancy, OccupancyGrid, "data")
+        self.grid_pub = bus.publisher(keys.slam_occupancy, OccupancyGrid, "data", again=True)
         self._grid_version = -1
         self._grid_stamp = 0
         self._grid_every_ns = round(self.s.slam.publish_every_s * NS_PER_S)

@@ -139,7 +139,9 @@ class MissionNode:
             explorer=ExploreRunner(self.robot, m, self.log.patrol),
         )
         bus.serve(keys.mission_patrol, PatrolRequest, self.patrol.ask)
-        self.patrol_pub = bus.publisher(keys.mission_patrol_status, PatrolStatus, "data")
+        self.patrol_pub = bus.publisher(
+            keys.mission_patrol_status, PatrolStatus, "data", again=True
+        )
         board = StatusBoard(round(m.status_every_s * NS_PER_S))
         self.desk = Desk(
             self.tree,

@@ -126,7 +126,7 @@ class BusRobot:
         self._wrist: deque[Detections] = deque(maxlen=8)
         self._nav = NavClient(bus, keys, query_timeout_s)
         self._arm = ArmClient(bus, keys, query_timeout_s)
-        self._cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
+        self._cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control", again=True)
         self._t = 0
         self._cmd = (0.0, 0.0, 0.0)
         self._held = ""  # who the last command was held back for

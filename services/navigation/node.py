@@ -122,7 +122,7 @@ class NavNode:
         cancels = bus.fifo(keys.nav_cancel, NavCancel, maxlen=64)
         # People seen by perception (the head camera), applied at their stamp + latency.
         self.perception = PerceptionFeed(bus, keys, cfg, self.camera, INPUT_TIMEOUT_S)
-        self.cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control")
+        self.cmd_pub = bus.publisher(keys.cmd_vel, CmdVel, "control", again=True)
         self.status_pub = bus.publisher(keys.nav_status, NavStatus, "data")
         self.path_pub = bus.publisher(keys.nav_path, NavPath, "data")
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_s, svc.stop)

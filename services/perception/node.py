@@ -85,7 +85,7 @@ class PerceptionNode:
             else {}
         )
         odom = bus.latest(keys.odom, Odom, history=16)
-        self.publisher = bus.publisher(keys.detections, Detections, "data")
+        self.publisher = bus.publisher(keys.detections, Detections, "data", again=True)
         self.recent = RecentDetections()
         self.ticker = PeriodicTicker(bus, keys, NAME, self.period_ns / NS_PER_S, svc.stop)
         logger = PerceptionLogger(svc.rec, FrameSelector.of(cfg))

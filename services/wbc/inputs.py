@@ -136,6 +136,8 @@ class ArbiterFeed:
         self.fifo, self.arbiter, self.source, self.modes = fifo, arbiter, source, modes
 
     def _take(self, cmd: CmdVel) -> None:
+        if cmd == self.arbiter.newest(cmd.source):
+            return  # the same sample sent again (a cut link came back): its mode once
         self.arbiter.push(cmd)
         if cmd.mode is not None and self.modes is not None:
             self.modes.push(cmd.mode)

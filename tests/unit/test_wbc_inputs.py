@@ -148,3 +148,24 @@ def test_the_gate_is_met_only_by_samples_the_arbiter_holds() -> None:
     fifo.q.append(cmd(50, 0.3))
     assert feed.wait_stamp(50 * MS, 0.01).vx == 0.3
     assert arb.command(100 * MS)[0] == 0.3  # what met the gate is what the arbiter obeys
+
+
+def test_a_sample_sent_again_after_a_cut_link_carries_its_mode_once() -> None:
+    """A source sends its last cmd_vel again when its link to the router comes back
+    (`common.bus.LinkBack`): the mode it carries is applied once, not twice."""
+    from services.wbc.inputs import ArbiterFeed
+
+    arb = CmdVelArbiter({"mission": 50 * MS}, 500 * MS)
+    arb.select("mission")
+    modes = ModeQueue(50 * MS)
+    walk = WbcMode(stamp_ns=0, mode="walk", cmd_vel_source="mission")
+    with_mode = CmdVel(stamp_ns=0, vx=0.2, vy=0.0, wz=0.0, source="mission", mode=walk)
+    fifo = _Fifo(with_mode, with_mode)
+    feed = ArbiterFeed(fifo, arb, "mission", modes)  # type: ignore[arg-type]
+    assert feed.get() == with_mode
+    fifo.q.append(with_mode)
+    assert feed.get() == with_mode
+    assert modes.due(50 * MS) == [walk]
+    fifo.q.append(CmdVel(stamp_ns=50 * MS, vx=0.2, vy=0.0, wz=0.0, source="mission", mode=walk))
+    feed.get()
+    assert modes.due(100 * MS) == [walk]  # a new sample's mode is still obeyed
