@@ -16,9 +16,11 @@ truth's free floor the map knows as free, and how much it knows at all.
 `align_to_truth(cells, truth, res, origin)`: the rigid motion (a turn about the map's
 obstacles' centre, then a shift) that best lays the map's obstacle cells on the truth's
 (the mean distance to the nearest truth cell, clipped at 0.3 m, least over a grid of
-turns within 2° and shifts within 0.3 m). A map the robot made from nothing is in its
-own frame, anchored at the start pose it was told: a heading off by half a degree there
-turns the whole hall, 8 cm at 10 m, while its walls agree with each other to a cell.
+turns within 2° and shifts within 0.3 m; then, of that motion snapped to whole cells,
+its neighbours and no motion at all, the one whose grid agrees best by the IoU above).
+A map the robot made from nothing is in its own frame, anchored at the start pose it was
+told: a heading off by half a degree there turns the whole hall, 8 cm at 10 m, while its
+walls agree with each other to a cell.
 The report gives the IoU both as the map lies and after this alignment, and the
 alignment itself (how far the map's frame is from the world's), as SLAM maps are judged
 up to a rigid motion.
@@ -157,4 +159,39 @@ def align_to_truth(
                     c = cost(a)
                     if c < best_cost:
                         best, best_cost = a, c
+    return _best_agreeing(cells, truth, resolution_m, origin_xy, best)
+
+
+def _best_agreeing(
+    cells: NDArray[np.uint8],
+    truth: NDArray[np.bool_],
+    resolution_m: float,
+    origin_xy: tuple[float, float],
+    found: Alignment,
+) -> Alignment:
+    """Of the alignment the search found, the same snapped to whole cells and a cell
+    either way, turned 0.05° either way, and no motion at all: the one whose warped grid
+    agrees best (`agreement`'s IoU, the figure reported). The search's cost rounds each
+    point to its cell, where a shift of half a cell lands points either side of a cell's
+    edge; the warp moves the grid by whole cells. Judged by the figure itself, a map
+    "aligned" never agrees less than as it lies (hall seed 2 read 0.754, aligned 0.618)."""
+
+    def iou(a: Alignment) -> float:
+        score = agreement(a.warp(cells, resolution_m, origin_xy), truth, resolution_m)
+        return float(score["iou_within_5cm"] or 0.0)
+
+    best, best_iou = Alignment(centre_xy=found.centre_xy), iou(Alignment())
+    if (score := iou(found)) > best_iou:
+        best, best_iou = found, score
+    sx, sy = (round(v / resolution_m) for v in found.shift_xy)
+    for dyaw in (-0.05, 0.0, 0.05):
+        for i in (sx - 1, sx, sx + 1):
+            for j in (sy - 1, sy, sy + 1):
+                a = Alignment(
+                    found.yaw_rad + float(np.radians(dyaw)),
+                    (i * resolution_m, j * resolution_m),
+                    found.centre_xy,
+                )
+                if (score := iou(a)) > best_iou:
+                    best, best_iou = a, score
     return best
