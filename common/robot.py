@@ -433,6 +433,41 @@ def _footprint(posture: str) -> tuple[float, float, float, float]:
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
+@functools.cache
+def posture_tcp(posture: str) -> tuple[float, float, float]:
+    """The TCP (x, y, z, m) in the base frame with the robot standing in `posture`: where
+    a carried object is (`stow`) and falls from."""
+    import pinocchio as pin
+
+    model = load_pinocchio()[0]
+    data = model.createData()
+    q = standing_q(posture)
+    pin.framesForwardKinematics(model, data, q)
+    T_world_tcp = data.oMf[model.getFrameId(TCP_FRAME)].homogeneous
+    T_world_base = data.oMf[model.getFrameId(BASE_FRAME)].homogeneous
+    x, y, z = (np.linalg.inv(T_world_base) @ T_world_tcp)[:3, 3]
+    return float(x), float(y), float(z)
+
+
+@functools.cache
+def floor_view_m(posture: str = "look", height_m: float = 0.1, margin_deg: float = 5.0) -> float:
+    """How far ahead of the base (m, standing, arm in `posture`) a point `height_m` above
+    the floor first shows in the wrist camera, `margin_deg` inside its lower edge: where
+    the robot stands to look at what fell at its feet (about 1.4 m in `look`)."""
+    import pinocchio as pin
+
+    model = load_pinocchio()[0]
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, standing_q(posture))
+    T = data.oMf[model.getFrameId("camera_wrist")].homogeneous
+    T_base = data.oMf[model.getFrameId(BASE_FRAME)].homogeneous
+    z_optical = T[:3, 2]  # the optical axis (OpenCV: z forward)
+    down = math.atan2(-z_optical[2], math.hypot(z_optical[0], z_optical[1]))
+    lowest = down + math.radians(CAMERA_MOUNTS["camera_wrist"].fovy_deg / 2 - margin_deg)
+    ahead = float(T[0, 3] - T_base[0, 3])
+    return ahead + float(T[2, 3] - height_m) / math.tan(lowest)
+
+
 def _footprint_half_extents() -> tuple[float, float]:
     x_min, x_max, y_min, y_max = _footprint("stow")
     return max(-x_min, x_max), max(-y_min, y_max)

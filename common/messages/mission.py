@@ -90,6 +90,8 @@ MissionReason = Literal[
     "arm_failed",  # an arm goal (posture, reach, release) failed or timed out
     "grasp_failed",  # the reach to the grasp, the jaw or the lift failed (re-picked first)
     "grasp_lost",  # the object was lost while carrying it, and the re-pick budget is spent
+    "object_dropped",  # it fell while carried where the robot cannot pick it up again (on
+    # the floor, out of the arm's reach) or was not seen where it fell: said where
     "handover_timeout",  # nobody took the object in time
     "mode_timeout",  # the whole-body controller did not take the mode asked for
     "dependency_lost",  # a service it depends on went away or restarted while it ran

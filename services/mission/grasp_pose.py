@@ -33,12 +33,14 @@ Pure numpy on msgspec values; no transport.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 
+from common import robot
 from common.geometry import FloatArray, inv_T, make_T, rot_z
 from common.messages.perception import Detection
 from common.messages.wbc import Reach
@@ -243,7 +245,15 @@ def grasp_from_detection(
     if kind == "side":
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
-        R = side_rotation(sight, _side_pitch(centre, T_world_base, p))
+        pitch = _side_pitch(centre, T_world_base, p)
+        gap = tcp_reach_gap(_in_base(centre, T_world_base), pitch)
+        if gap > p.reach_slack_m:  # on the floor: the trunk cannot stoop that far
+            raise GraspPoseError(
+                f"the {det.class_name}'s side grasp is out of the arm's reach "
+                f"({gap * 100:.0f} cm beyond it at the steepest pitch, "
+                f"{p.reach_slack_m * 100:.0f} cm allowed for the trunk's stoop)"
+            )
+        R = side_rotation(sight, pitch)
     else:
         yaw = det.yaw_in_world
         if not world:
@@ -283,6 +293,30 @@ def grasp_from_detection(
         kind=kind,
         stamp_ns=stamp_ns,
     )
+
+
+@functools.cache
+def lowest_reach_z_m(slack_m: float = GraspParams.reach_slack_m) -> float:
+    """The lowest world height (m) a side grasp reaches from the approach's standoff
+    (`D_OPT_M` ahead, standing) at any pitch it may take, within `slack_m` of the arm's
+    reach (the trunk's stoop): about 0.6 m. Nothing with its top below it is picked."""
+    base_z, ahead = robot.STAND_BASE_HEIGHT_M, robot.D_OPT_M  # computed on first access
+    for z in np.arange(0.0, 1.2, 0.01):
+        p_base = np.array([ahead, 0.0, float(z) - base_z])
+        pitches = np.arange(GRASP_PITCH_RAD[0], GRASP_PITCH_RAD[1] + 1e-9, PITCH_STEP_RAD)
+        if min(tcp_reach_gap(p_base, float(p)) for p in pitches) <= slack_m:
+            return float(z)
+    return math.inf
+
+
+def below_reach(det: Detection) -> str:
+    """Why a detected object lies too low for any grasp (its top below `lowest_reach_z_m`:
+    on the floor, fallen from the gripper), or "" when it does not; world heights."""
+    top = float(det.axis_in_world[2]) + 0.5 * float(det.extent[2])
+    lowest = lowest_reach_z_m()
+    if not math.isfinite(top) or top >= lowest:
+        return ""
+    return f"its top at {top:.2f} m lies below the lowest the gripper reaches ({lowest:.2f} m)"
 
 
 def _in_base(centre: FloatArray, T_world_base: FloatArray | None) -> FloatArray:

@@ -14,6 +14,7 @@ import math
 import re
 
 from common.messages.semantic_map import MapEntity
+from common.robot import posture_tcp
 from services.mission.ports import RobotPort
 
 _MAP_ID = re.compile(r"^[a-z][a-z0-9]*_[1-9][0-9]*$")
@@ -47,6 +48,17 @@ def object_candidates(port: RobotPort, name: str) -> list[MapEntity]:
         return [] if entity is None else [entity]
     present = [e for e in port.artifacts_of_class(name) if e.missing_since_ns is None]
     return nearest_first(present, port.robot_xy())
+
+
+def dropped_at(xy: tuple[float, float] | None, yaw: float | None) -> tuple[float, float] | None:
+    """About where an object that fell from the gripper while carried lies (world x, y):
+    below the carry posture's TCP (`stow`), from the robot's place and heading at the
+    loss; None when those are unknown."""
+    if xy is None or yaw is None:
+        return None
+    tx, ty, _ = posture_tcp("stow")
+    c, s = math.cos(yaw), math.sin(yaw)
+    return (xy[0] + c * tx - s * ty, xy[1] + s * tx + c * ty)
 
 
 def person_named(port: RobotPort, name: str) -> MapEntity | None:

@@ -25,6 +25,9 @@
                            reason; then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
                              at_the_person: person_ahead, else PersonHandover once more
+              (a grasp lost: the object fell where the gripper was (`dropped_at`): no
+              walk to its map place, the nearest of its class looked for and picked;
+              not seen there, or out of the arm's reach (the floor): `object_dropped`)
           other_side (Recover: handover_timeout, budget handover_sides - 1, while the
                       person's facing is unknown: the next side round them)
             hand_over (sequence)
@@ -94,6 +97,7 @@ from services.mission.behaviours.request import (
 )
 from services.mission.behaviours.search import LookElsewhere
 from services.mission.recovery import Recover
+from services.mission.targets import dropped_at
 
 REPICK_REASONS = frozenset({"grasp_lost", "grasp_failed"})
 NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed", "blocked_by_person"})
@@ -126,7 +130,10 @@ def build_tree(ctx: Context) -> Sequence:
         bb.set(DETECTION, None)
         target = read(bb, TARGET)
         if failure.reason == "grasp_lost" and isinstance(target, Target):
-            bb.set(TARGET, replace(target, xy=None))  # dropped on the way: not at its place
+            # It fell from the gripper: look where the gripper was, not at its old place.
+            at = dropped_at(ctx.port.robot_xy(), ctx.port.robot_yaw())
+            bb.set(TARGET, replace(target, xy=at, dropped=True))
+            ctx.decide(f"{target.map_id} fell {replace(target, xy=at).where_dropped()}")
         return True
 
     st = STAGES

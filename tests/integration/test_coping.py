@@ -4,7 +4,8 @@ Each test is a fresh stack of every service (the eval's settings: the network se
 dynamic locomotion, the map seeded from the world, so the map says where the bottle and
 the person were), somebody moves the bottle through the sim's hook
 (`dume/world/artifact_command`), or the person walks off (`dume/world/people_command`),
-before the mission's first tick, and the request goes in at t = 0 (`start_gate`). What
+before the mission's first tick, or the carried bottle is knocked out of the jaws
+(`dume/world/push`), and the request goes in at t = 0 (`start_gate`). What
 the sim's truth sees is judged: the bottle in the requested person's hand, or the typed
 failure and where the robot looked.
 """
@@ -16,6 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -26,6 +28,7 @@ from common.keys import (
     WORLD_ARTIFACT_COMMAND,
     WORLD_DESCRIPTION,
     WORLD_PEOPLE_COMMAND,
+    WORLD_PUSH,
 )
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import (
@@ -34,6 +37,7 @@ from common.messages.sim import (
     HandoverTaken,
     ObjectDropped,
     PersonCommand,
+    Push,
 )
 from common.messages.world import WorldDescription
 from deploy.stack import ProcessStack
@@ -152,3 +156,33 @@ def test_a_person_who_walks_off_as_the_robot_comes_is_followed_and_handed_the_bo
     record, walked_at = fetch_while_carrying(tmp_path, WALK_AFTER_S, walk_off)
     assert walked_at > 0, "the carry began and the person walked off"
     assert_brought(record)  # where they stopped, 2.4 m from where the map had them
+
+
+#: A slip: a knock straight down on the carried bottle, 3 s into the carry, that pulls it
+#: out of the jaws (sideways knocks of 20-100 N for 0.1-0.15 s never do).
+KNOCK = Push(stamp_ns=0, force_in_world=(0.0, 0.0, -150.0), duration_s=0.1, target="bottle_1")
+
+
+def knock(s: ProcessStack, at_ns: int) -> None:
+    pusher = s.bus.publisher(WORLD_PUSH, Push, "control")
+    pusher.put(msgspec.structs.replace(KNOCK, stamp_ns=at_ns))
+
+
+@pytest.mark.timeout(3600)
+def test_a_bottle_knocked_from_the_gripper_to_the_floor_is_reported_where_it_lies(
+    tmp_path: Path,
+) -> None:
+    """The bottle falls at the robot's feet, out of every camera's view and below any
+    grasp: the robot steps back to look, sees it on the floor and ends the request
+    `object_dropped` saying where it lies (no walk back to its table, no search)."""
+    record, knocked_at = fetch_while_carrying(tmp_path, 3.0, knock)
+    assert knocked_at > 0, "the carry began and the bottle was knocked"
+    dropped = [e for e in record.events if isinstance(e, ObjectDropped)]
+    assert [e.object_id for e in dropped] == ["bottle_1"]
+    last = record.changes[-1]
+    assert (last.state, last.reason) == ("failed", "object_dropped"), last
+    x, y = (float(v) for v in last.detail.split("lies at (")[1].split(")")[0].split(", "))
+    fell = dropped[0].position_in_world
+    assert np.hypot(x - fell[0], y - fell[1]) < 0.5, (last.detail, fell)  # where it lies
+    assert last.stamp_ns - dropped[0].stamp_ns < 30e9  # told at once, not after a search
+    assert not [e for e in record.events if isinstance(e, HandoverTaken)]

@@ -131,6 +131,8 @@ class FakeRobot:
     #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
     drops: int = 0
     drop_after: int = 1
+    #: A drop takes the object out of the wrist camera's sight (it rolled away).
+    drop_hides: bool = False
     #: Ticks the first goal waits for navigation's map (taken, `active`, not moving); a
     #: goal that waits `NAV_MAP_WAIT_TICKS` fails `timeout`, as navigation's does.
     nav_not_ready: int = 0
@@ -201,6 +203,8 @@ class FakeRobot:
             if self.t - start >= self.drop_after * TICK_NS:
                 self.held = False
                 self.drops -= 1
+                if self.drop_hides:
+                    self.visible = set()
 
     @property
     def now_ns(self) -> int:
@@ -519,13 +523,17 @@ class StubPull:
 
 
 def stub_algorithms(
-    grasp_possible: bool = True, pull: bool = True, pull_on_try: int = 1
+    grasp_possible: bool = True, pull: bool = True, pull_on_try: int = 1, grasp_plans: int = -1
 ) -> Algorithms:
+    """`grasp_plans`: how many grasps are planned before none is possible (−1: all)."""
     tries = itertools.count(1)  # the detectors made: one per offer
+    plans = itertools.count(1)
 
     def grasp(det: Detection, stamp_ns: int, T_world_base: object) -> StubPlan:
         if not grasp_possible:
             raise StubGraspError("the object lies on its side")
+        if 0 <= grasp_plans < next(plans):
+            raise StubGraspError("the bottle's side grasp is out of the arm's reach")
         return StubPlan()
 
     return Algorithms(

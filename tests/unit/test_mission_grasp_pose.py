@@ -264,3 +264,25 @@ def test_a_low_side_grasp_comes_from_a_little_above_at_the_least_pitch_that_reac
         pitches.append(pitch)
     assert pitches[0] == pytest.approx(0.0, abs=1e-9)
     assert pitches == sorted(pitches) and pitches[-1] > 0.1
+
+
+def test_a_bottle_on_the_floor_is_refused_as_out_of_the_arms_reach() -> None:
+    """Knocked from the gripper, a bottle stands on the floor by the robot: its side
+    grasp lies 30 cm and more below what the arm reaches at the steepest pitch, which no
+    stoop of the trunk makes up. Refused, not reached for."""
+    T_wb = base_pose(0.0, 0.0, 0.0)
+    on_floor = detection(T_wb, (0.7, 0.0, 0.1 - BASE_Z))
+    with pytest.raises(GraspPoseError, match="out of the arm's reach"):
+        grasp_from_detection(on_floor, STAMP, T_wb)
+    on_table = detection(T_wb, (0.7, 0.0, 0.8 - BASE_Z))
+    assert grasp_from_detection(on_table, STAMP, T_wb).kind == "side"
+
+
+def test_what_lies_lower_than_any_grasp_is_said_to() -> None:
+    from services.mission.grasp_pose import below_reach, lowest_reach_z_m
+
+    T_wb = base_pose(0.0, 0.0, 0.0)
+    assert 0.4 < lowest_reach_z_m() < 0.75  # tables stand 0.7-0.95 m
+    lying = detection(T_wb, (1.4, 0.0, 0.03 - BASE_Z), extent=(0.06, 0.06, 0.06))
+    assert "below the lowest the gripper reaches" in below_reach(lying)
+    assert below_reach(detection(T_wb, (0.7, 0.0, 0.8 - BASE_Z))) == ""

@@ -5,8 +5,9 @@ from __future__ import annotations
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff
 from common.messages.wbc import Grasp
-from tests.unit.mission_fakes import FakeRobot, entity, small_world
-from tests.unit.test_mission_tree import mission, run
+from services.mission.tree import MissionTree
+from tests.unit.mission_fakes import FakeRobot, context, entity, small_world
+from tests.unit.test_mission_tree import REQUEST, mission, run
 
 
 def grasps(robot: FakeRobot) -> int:
@@ -23,12 +24,36 @@ def test_a_grasp_lost_while_carrying_is_picked_again_and_the_mission_succeeds() 
     outcome = run(tree, robot)
     assert outcome.state == "succeeded", outcome
     assert grasps(robot) == 2
-    assert standoffs(robot) == ["bottle_1", "bottle_1"]  # went back to the object
+    assert standoffs(robot) == ["bottle_1"]  # it fell by the robot: no walk back to its table
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     assert any("regrasp: grasp_lost: try 1 of 2" in d for d in decisions)
-    # The wrist camera looked for it at its mapped place; dropped on the way, anywhere.
+    assert any("bottle_1 fell at (" in d for d in decisions), decisions
+    # The wrist camera looked for it at its mapped place; dropped, the nearest of its class.
     places = list(dict.fromkeys(robot.looked_near))
     assert places == [(3.0, 0.0), None], places
+
+
+def test_an_object_dropped_where_the_arm_cannot_reach_fails_object_dropped_saying_where() -> None:
+    """A knock while carrying drops the bottle on the floor: it is seen there, but no
+    grasp reaches the floor. The request ends at once, saying where it lies (a person
+    picks it up), not after a search of its old table for something that is not there."""
+    robot = small_world(drops=1)
+    tree = MissionTree(context(robot, None, grasp_plans=1))
+    tree.tick()
+    robot.advance()
+    tree.start(REQUEST)
+    outcome = run(tree, robot)
+    assert (outcome.state, outcome.reason) == ("failed", "object_dropped"), outcome
+    assert "bottle_1 fell at (" in outcome.detail and "cannot pick it up" in outcome.detail
+    assert grasps(robot) == 1 and standoffs(robot) == ["bottle_1"]
+
+
+def test_an_object_dropped_out_of_sight_fails_object_dropped() -> None:
+    robot = small_world(drops=1, drop_hides=True)
+    outcome = run(mission(robot), robot)
+    assert (outcome.state, outcome.reason) == ("failed", "object_dropped"), outcome
+    assert "not found where it fell" in outcome.detail
+    assert standoffs(robot) == ["bottle_1"]
 
 
 def test_a_grasp_that_closed_on_nothing_looks_for_the_object_at_its_place_again() -> None:
@@ -104,3 +129,24 @@ def test_a_class_request_skips_instances_the_map_marks_missing() -> None:
     request = MissionRequest(request_id="r", object="bottle", person="person_1")
     assert run(mission(robot, request), robot).state == "succeeded"
     assert standoffs(robot) == ["bottle_2"]
+
+
+def test_where_a_dropped_object_is_looked_for() -> None:
+    """It fell below the carry posture's TCP, half a metre ahead of the base; the robot
+    looks at it from where its wrist camera sees the floor, facing it."""
+    import math
+
+    from common.robot import floor_view_m, posture_tcp
+    from services.mission.behaviours.motion import look_where_it_fell
+    from services.mission.targets import dropped_at
+
+    assert dropped_at(None, 0.0) is None and dropped_at((1.0, 2.0), None) is None
+    ahead = posture_tcp("stow")[0]
+    x, y = dropped_at((1.0, 2.0), math.pi / 2) or (0.0, 0.0)
+    assert math.isclose(y, 2.0 + ahead) and abs(x - 1.0) < 0.05
+    assert 1.2 < floor_view_m() < 1.8
+    goal = look_where_it_fell((1.0, 2.5), (1.0, 2.0), math.pi / 2)
+    assert math.isclose(goal.yaw, math.pi / 2)
+    assert math.isclose(goal.y, 2.5 - floor_view_m()) and math.isclose(goal.x, 1.0, abs_tol=1e-9)
+    on_the_spot = look_where_it_fell((1.0, 2.0), (1.0, 2.0), 0.0)  # its heading, then
+    assert math.isclose(on_the_spot.x, 1.0 - floor_view_m()) and on_the_spot.yaw == 0.0

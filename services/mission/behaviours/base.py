@@ -53,11 +53,24 @@ ALL_KEYS = (
 @dataclass(frozen=True)
 class Target:
     """The object being fetched: its map id, class and mapped place (world x, y; None
-    when the map did not say)."""
+    when the map did not say). `dropped`: it fell from the gripper while carried, and
+    `xy` is where, as the gripper's place at the loss says (None: the robot's own place
+    was unknown); it is looked for there, the nearest of its class, not at the map's."""
 
     map_id: str
     class_name: str
     xy: tuple[float, float] | None = None
+    dropped: bool = False
+
+    @property
+    def look_near(self) -> tuple[float, float] | None:
+        """Where the wrist camera's detection of it is picked (`RobotPort.wrist_detection`):
+        its mapped place, or none (the nearest of its class) once dropped."""
+        return None if self.dropped else self.xy
+
+    def where_dropped(self) -> str:
+        """Where it fell, for a person."""
+        return "near the robot" if self.xy is None else f"at ({self.xy[0]:.2f}, {self.xy[1]:.2f})"
 
 
 @dataclass(frozen=True)

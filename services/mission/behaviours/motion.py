@@ -8,7 +8,10 @@
   or a failed goal fails `navigation_failed` with navigation's reason (the goal is sent
   once: navigation takes one sent before its first map and waits for the map). Carrying
   (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
-  (or failing while the goal is active) it cancels its goal.
+  (or failing while the goal is active) it cancels its goal. An object that fell from
+  the gripper (`Target.dropped`) lies by the robot's feet, out of its cameras' view: it
+  steps back to look at the floor there (`look_where_it_fell`; failing that, or where it
+  fell unknown, it looks from where it stands).
 - `PersonAhead`: at the handover pose, stand `handover_check_s` (the head camera's
   fresh sightings of the person reach the map), then check that the map saw the person
   meanwhile and that their latest mapped place is `HANDOVER_DISTANCE_M` straight ahead
@@ -39,9 +42,9 @@ from py_trees.common import Status
 
 from common.messages import as_numpy
 from common.messages.mission import MissionReason
-from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover
+from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover, PoseGoal
 from common.messages.wbc import WbcModeName
-from common.robot import HANDOVER_DISTANCE_M
+from common.robot import HANDOVER_DISTANCE_M, floor_view_m
 from services.mission.behaviours.base import PERSON, SIDE, UNSEEN, Context, MissionBehaviour
 from services.mission.behaviours.handover import side_bearing
 from services.mission.ports import PortError, Refused, Unavailable
@@ -97,13 +100,25 @@ class NavigateTo(MissionBehaviour):
 
     def _goal(self) -> NavGoal:
         if self.kind == "artifact":
-            return ArtifactStandoff(artifact_id=self.target().map_id)
+            target = self.target()
+            if target.dropped and target.xy is not None:
+                return look_where_it_fell(target.xy, self.port.robot_xy(), self.port.robot_yaw())
+            return ArtifactStandoff(artifact_id=target.map_id)
         side = self.get(SIDE)
         return PersonHandover(person_id=str(self.get(PERSON)), bearing_rad=side_bearing(side))
+
+    def _dropped(self) -> bool:
+        """The object fell from the gripper near the robot: not walked to at its map place."""
+        return self.kind == "artifact" and self.target().dropped
 
     def initialise(self) -> None:
         super().initialise()
         self.goal_id, self.active, self.error = "", False, None
+        if self._dropped():
+            self.ctx.decide(f"{self.name}: {self.target().map_id} fell "
+                            f"{self.target().where_dropped()}: looking for it there")  # fmt: skip
+            if self.target().xy is None:
+                return  # where is unknown: looked for from here
         self._send()
 
     def _send(self) -> None:
@@ -116,6 +131,16 @@ class NavigateTo(MissionBehaviour):
             self.error = exc
 
     def update(self) -> Status:
+        status = self._update()
+        if status == Status.FAILURE and self._dropped():
+            self.ctx.decide(f"{self.name}: no step back to look: looking from here")
+            return Status.SUCCESS
+        return status
+
+    def _update(self) -> Status:
+        if self._dropped() and not self.goal_id and self.error is None:
+            self.feedback_message = "where it fell"
+            return Status.SUCCESS
         if self.error is not None:
             reason: MissionReason = (
                 "navigation_failed" if isinstance(self.error, Refused) else "unavailable"
@@ -150,6 +175,26 @@ class NavigateTo(MissionBehaviour):
             self.port.cancel_nav(self.goal_id, f"{self.name} stopped")
             self.ctx.decide(f"{self.name}: goal {self.goal_id} cancelled")
         self.active = False
+
+
+def look_where_it_fell(
+    at: tuple[float, float], xy: tuple[float, float] | None, yaw: float | None
+) -> PoseGoal:
+    """The pose from which the wrist camera (arm in `look`) sees the floor where an object
+    fell (`common.robot.floor_view_m` short of it, facing it, on the line from the robot;
+    the robot's heading when it stands on the spot or its place is unknown): what fell
+    at its feet is under the gripper, out of every camera's view."""
+    heading = 0.0 if yaw is None else yaw
+    if xy is not None and math.hypot(at[0] - xy[0], at[1] - xy[1]) > 0.05:
+        heading = math.atan2(at[1] - xy[1], at[0] - xy[0])
+    back = floor_view_m()
+    return PoseGoal(
+        x=at[0] - back * math.cos(heading),
+        y=at[1] - back * math.sin(heading),
+        yaw=heading,
+        position_tolerance_m=0.15,
+        yaw_tolerance_rad=0.2,
+    )
 
 
 #: rad/s: the turn on the spot that looks round for a person.

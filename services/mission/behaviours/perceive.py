@@ -1,7 +1,9 @@
 """The leaves that look: the visual approach and the grasp pose.
 
 - `Approach`: each tick the wrist camera's newest detection of the target (by map id,
-  else the one at its mapped place, of its class or, failing that, of any artifact class)
+  else the one at its mapped place, of its class or, failing that, of any artifact class;
+  once it fell from the gripper, the nearest of its class: lying lower than any grasp
+  reaches, `grasp_pose.below_reach`, it fails `object_dropped` saying where it lies)
   becomes a `Sighting` (none when older than `sighting_max_age_s`); the
   approach controller (eq. 3, with its own re-acquire: turn, back off) turns it into
   cmd_vel, sent as source `mission` (the tree set the mode before) within navigation's
@@ -34,6 +36,7 @@ from services.mission.behaviours.base import (
     Context,
     MissionBehaviour,
 )
+from services.mission.grasp_pose import below_reach
 
 
 class Approach(MissionBehaviour):
@@ -54,11 +57,19 @@ class Approach(MissionBehaviour):
         now_ns = self.port.now_ns
         target = self.target()
         # Where it is is all the approach needs, whatever the network calls it there.
-        seen = self.port.wrist_detection(target.map_id, target.class_name, target.xy, True)
+        seen = self.port.wrist_detection(target.map_id, target.class_name, target.look_near, True)
         sighting = None
         max_age_ns = round(self.settings.sighting_max_age_s * NS_PER_S)
         if seen is not None and now_ns - seen.stamp_ns <= max_age_ns:
             det = seen.detection
+            if target.dropped and (low := below_reach(det)):
+                self.port.command_velocity(0.0, 0.0, 0.0)
+                x, y = det.centroid_in_world[:2]
+                return self.fail(
+                    "object_dropped",
+                    f"{target.map_id} fell while carried and lies at ({x:.2f}, {y:.2f}) where "
+                    f"the robot cannot pick it up: {low}",
+                )
             sighting = self.ctx.algorithms.sighting(
                 det.d_obj, det.theta_obj, seen.stamp_ns / NS_PER_S
             )
@@ -72,7 +83,14 @@ class Approach(MissionBehaviour):
             return Status.SUCCESS
         if cmd.state == "failed":
             self.port.command_velocity(0.0, 0.0, 0.0)
-            return self.fail("object_not_found", cmd.reason or f"{target.map_id} not acquired")
+            why = cmd.reason or f"{target.map_id} not acquired"
+            if target.dropped:
+                return self.fail(
+                    "object_dropped",
+                    f"{target.map_id} fell {target.where_dropped()} while carried and was "
+                    f"not found where it fell: {why}",
+                )
+            return self.fail("object_not_found", why)
         held_s = self.controller.held_s
         if self.elapsed_s() - held_s > self.settings.approach_timeout_s:
             self.port.command_velocity(0.0, 0.0, 0.0)
@@ -119,7 +137,7 @@ class EstimateGrasp(MissionBehaviour):
             self.feedback_message = "standing still"
             return Status.RUNNING
         target = self.target()
-        seen = self.port.wrist_detection(target.map_id, target.class_name, target.xy)
+        seen = self.port.wrist_detection(target.map_id, target.class_name, target.look_near)
         settled_ns = self.started_ns + round(s.settle_s * NS_PER_S)
         if seen is None or seen.stamp_ns < settled_ns:
             if self.elapsed_s() > s.settle_s + s.detection_timeout_s:
@@ -134,6 +152,12 @@ class EstimateGrasp(MissionBehaviour):
         try:
             plan = self.ctx.algorithms.grasp_from_detection(det, stamp, T_world_base)
         except self.ctx.algorithms.grasp_error as exc:
+            if target.dropped:  # on the floor, as a rule: a person picks it up
+                return self.fail(
+                    "object_dropped",
+                    f"{target.map_id} fell {target.where_dropped()} while carried and lies "
+                    f"where the robot cannot pick it up: {exc}",
+                )
             return self.fail("grasp_pose_failed", f"no grasp of {target.map_id}: {exc}")
         self.set(DETECTION, seen)
         self.set(GRASP_PLAN, plan)

@@ -87,7 +87,7 @@ class SelectTarget(MissionBehaviour):
         map_id = candidates[index]
         previous = self.get(TARGET)
         if isinstance(previous, Target) and previous.map_id == map_id:
-            target = previous  # a re-pick: the place as it was (None once dropped in transit)
+            target = previous  # a re-pick: the place as it was, or where it fell
         else:
             try:
                 entity = self.port.artifact(map_id)
