@@ -88,7 +88,9 @@ class MapFile(Message, frozen=True):
     place it is a map of (`Config.map_site`: `hall seed 3`; empty in files from before
     sites were kept); a map service of another site refuses it. supports: the surfaces
     artifacts stand on, as the map saw them (`dume/map/supports` of a map with no floor
-    plan), kept for the next run's semantic pass.
+    plan), kept for the next run's semantic pass. appearances: people's colour
+    histograms by id (`services/semantic_map/appearance.py`), so the next run knows
+    somebody who walked off by their clothes (absent in older files).
     """
 
     version: Literal[1] = 1
@@ -98,6 +100,7 @@ class MapFile(Message, frozen=True):
     counters: dict[str, int] = msgspec.field(default_factory=dict)
     occupancy: OccupancyGrid | None = None
     supports: list[SupportSurface] = msgspec.field(default_factory=list)
+    appearances: dict[str, list[float]] = msgspec.field(default_factory=dict)
 
 
 class MapSummary(Message, frozen=True):

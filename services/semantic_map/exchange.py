@@ -94,4 +94,9 @@ def export_map(smap: SemanticMap) -> MapFile:
         counters=dict(smap.ids.counters),
         occupancy=smap.grid(),
         supports=list(smap.surfaces),
+        appearances={
+            t.id: [round(float(v), 5) for v in t.appearance]
+            for t in smap.people.confirmed
+            if t.id is not None and t.appearance is not None
+        },
     )

@@ -68,6 +68,13 @@ class FusionLog:
                 dets.stamp_ns / NS_PER_S, entity_id, float(np.linalg.norm(now - was)),
                 dets.camera, seen[0], seen[1], was[0], was[1], now[0], now[1],
             )  # fmt: skip
+        for entity_id, was, now, app in report.reidentified:
+            log.info(
+                "t=%.2f s: %s known again by their colours (distance %.2f) %.2f m from where "
+                "the map had them: (%.2f, %.2f) -> (%.2f, %.2f)",
+                dets.stamp_ns / NS_PER_S, entity_id, app, float(np.linalg.norm(now - was)),
+                was[0], was[1], now[0], now[1],
+            )  # fmt: skip
         for entity_id, seen in report.held:
             log.info(
                 "t=%.2f s: %s standing: a %s detection of them at (%.2f, %.2f), far from "

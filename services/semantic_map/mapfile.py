@@ -14,10 +14,12 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from common.geometry import FloatArray
 from common.messages import as_numpy, decoder
 from common.messages.semantic_map import MapFile, OccupancyGrid, Source
 from common.messages.world import Cuboid, WorldDescription
 from common.runfiles import write_whole
+from services.semantic_map.appearance import SIZE
 from services.semantic_map.entities import Track
 from services.semantic_map.occupancy import FREE, OCCUPIED, UNKNOWN, Occupancy
 
@@ -42,18 +44,32 @@ def write_map_file(path: Path, mf: MapFile) -> None:
 
 
 def tracks_from_file(mf: MapFile, source: Source) -> list[Track]:
-    """The file's entities as confirmed tracks, renamed to `source` (`prior` or `import`).
-    Their stamps are another run's clock: each is not seen since this run started
-    (`last_seen_ns` 0), and one missing in the file is missing since before it (0). A
-    file's stamp of 500 s read in a run at 200 s was "seen 300 s from now": a person of
-    the file counted as seen lately, and artifacts as seen after a search began."""
-    return [
+    """The file's entities as confirmed tracks, renamed to `source` (`prior` or `import`),
+    people with their colours (`MapFile.appearances`; `ValueError` for a histogram that
+    is not one). Their stamps are another run's clock: each is not seen since this run
+    started (`last_seen_ns` 0), and one missing in the file is missing since before it
+    (0). A file's stamp of 500 s read in a run at 200 s was "seen 300 s from now": a
+    person of the file counted as seen lately, and artifacts as seen after a search began."""
+    tracks = [
         Track.from_message(msgspec.structs.replace(
             e, source=source, last_seen_ns=0,
             missing_since_ns=None if e.missing_since_ns is None else 0,
         ))
         for e in mf.entities
     ]  # fmt: skip
+    for tr in tracks:
+        if tr.id in mf.appearances and tr.kind == "person":
+            tr.appearance = appearance_from_file(tr.id, mf.appearances[tr.id])
+    return tracks
+
+
+def appearance_from_file(entity_id: str, values: list[float]) -> FloatArray:
+    """A person's colour histogram as a file keeps it; `ValueError` unless it is one
+    (`appearance.SIZE` finite non-negative bins summing to 1)."""
+    h = np.asarray(values, dtype=float)
+    if h.shape != (SIZE,) or not np.isfinite(h).all() or (h < 0).any() or abs(h.sum() - 1) > 0.01:
+        raise ValueError(f"{entity_id}'s colours are not a {SIZE}-bin histogram")
+    return h / h.sum()
 
 
 def occupancy_from_grid(grid: OccupancyGrid, **kw: object) -> Occupancy:

@@ -110,6 +110,9 @@ class IngestReport:
     jumps: list[tuple[str, FloatArray, FloatArray, FloatArray]] = field(default_factory=list)
     #: Far detections of standing people held for a second one: (id, the detection's xy).
     held: list[tuple[str, FloatArray]] = field(default_factory=list)
+    #: People known by their colours where the map did not expect them: (id, from xy, to
+    #: xy, colour distance).
+    reidentified: list[tuple[str, FloatArray, FloatArray, float]] = field(default_factory=list)
 
 
 def _mat(values: tuple[float, ...]) -> FloatArray:
@@ -397,8 +400,10 @@ class SemanticMap:
         before = {id(tr) for tr in self.tracks()}
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)
+        self.people.rejoin(t)
         splits = self.people.take_merged()
         report.jumps, report.held = self.people.take_jumps()
+        report.reidentified = self.people.take_reidentified()
         for keep, gone, _ in splits:
             if keep.id is not None and gone.id is not None:
                 self.aliases[gone.id] = keep.id
@@ -454,10 +459,13 @@ class SemanticMap:
                 tr.missing_since_ns = t
                 self._dirty[tr.id] = tr
                 newly.append(tr.id)
-        for tr in self.people.tracks:  # only false entries: people move, nobody is missing
-            if tr.id is None or tr.last_seen_ns == t or not self.is_false_entry(tr):
+        # People move, nobody is missing: a false entry is deleted, and anyone else not
+        # seen where the map has them counts the looks (`PeopleTracker.reidentify`).
+        for tr in self.people.tracks:
+            if tr.id is None or tr.last_seen_ns == t:
                 continue
-            if self._missed(tr, cam, PERSON_LOOK_HEIGHT_M, p.person_look_range_m):
+            missed = self._missed(tr, cam, PERSON_LOOK_HEIGHT_M, p.person_look_range_m)
+            if missed and self.is_false_entry(tr):
                 dropped.append((tr, self._false_entry_reason(tr)))
         return newly, self._delete(dropped)
 

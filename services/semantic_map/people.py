@@ -29,7 +29,15 @@ where they are forgets it. One stray reading does not drag a person across the f
 head-camera detections of nobody while the robot turned from the table; the real
 person_5 became person_6 where they stood, and the handover went to the empty spot).
 A person who walked off unseen is detected there again and again, and moves one frame
-later than before.
+later than before. One who walked off farther than the gate (`MAX_GATE_M`) is somebody
+new to the filter; when the new person is confirmed, their colours are compared with
+the people not seen since they appeared (and not for `REID_UNSEEN_NS`), whose place the
+robot looked at without seeing them (`missing_after_frames` looks, counted by the map):
+within
+`REID_APPEARANCE` of one, and clearly nearer to that one than to any other
+(`REID_MARGIN`), they are that person, come back (`reidentify`): the known id moves to
+the new place instead of a new id being made. People's colours are kept in the map file
+(`MapFile.appearances`), so a map saved after an exploration knows them.
 
 A track still splits now and then: while the robot walks round a standing person their
 visible surface and the depth behind it move, a detection falls outside the gate, and a
@@ -44,6 +52,8 @@ covariance spanning both, so the next detection at either place joins it.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -90,6 +100,14 @@ BODY_M = 0.5
 #: person whose track split, m (the explored hall's farthest split: 1.36 m).
 SPLIT_M = 1.5
 SPLIT_RECENT_NS = 10_000_000_000
+#: Re-identification: a new person whose colours lie within `REID_APPEARANCE` of a
+#: known person's, and nearer by `REID_MARGIN` than anyone else's, who has not been seen
+#: since the new one first was (two bodies seen in turn, not together), not for
+#: `REID_UNSEEN_NS`, and not where the map has them when the robot looked there, is that
+#: person, come back where the map did not expect them.
+REID_APPEARANCE = 0.35
+REID_MARGIN = 0.15
+REID_UNSEEN_NS = 3_000_000_000
 
 
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
@@ -153,6 +171,8 @@ class PeopleTracker:
         #: Far detections held since the last `take_jumps` (id, the detection's xy), for
         #: the log.
         self.held: list[tuple[str, FloatArray]] = []
+        #: People re-identified since the last `take_reidentified` (`reidentify`).
+        self.reidentified: list[tuple[str, FloatArray, FloatArray, float]] = []
 
     @property
     def confirmed(self) -> list[Track]:
@@ -239,6 +259,7 @@ class PeopleTracker:
         """Fuse one frame's person detections; the confirmed people updated."""
         self.predict(stamp_ns)
         changed: list[Track] = []
+        confirmed_now: list[Track] = []
         used: set[int] = set()
         if self.tracks and observations:
             C = np.array([[self.cost(t, o) for o in observations] for t in self.tracks])
@@ -256,9 +277,14 @@ class PeopleTracker:
                     self.jumps.append((tr.id, was, tr.xy.copy(), observations[j].xy.copy()))
                 used.add(int(j))
                 if not tr.confirmed and tr.hits >= self.settings.confirm_hits:
-                    tr.id = self.ids.next_id("person")
-                if tr.confirmed:
+                    confirmed_now.append(tr)
+                elif tr.confirmed:
                     changed.append(tr)
+        for tr in confirmed_now:
+            back = self.reidentify(tr, stamp_ns)
+            if back is None:
+                tr.id = self.ids.next_id("person")
+            changed.append(tr if back is None else back)
         sep = MIN_SEPARATION_M
         for j, obs in enumerate(observations):
             if j in used or any(float(np.linalg.norm(t.xy - obs.xy)) < sep for t in self.tracks):
@@ -289,6 +315,95 @@ class PeopleTracker:
         self.merged.extend(self.merge_splits(seen, stamp_ns))
         gone = {id(g) for _, g, _ in self.merged}
         return [t for t in changed if id(t) not in gone]
+
+    def _gone_from_their_place(self, t: Track, since_ns: int) -> bool:
+        """A person the map looked for where it has them and did not see, unseen since
+        `since_ns`, with colours to know them by."""
+        return (
+            t.appearance is not None
+            and t.last_seen_ns < since_ns
+            and t.misses >= self.settings.missing_after_frames
+        )
+
+    def _same_clothes(self, look: FloatArray, pool: list[Track]) -> tuple[float, Track | None]:
+        """Of `pool`, the one wearing `look` (within `REID_APPEARANCE`, and `REID_MARGIN`
+        nearer than any other), and the colour distance; None when nobody is, or two are."""
+        ranked = sorted(
+            ((bhattacharyya(t.appearance, look), t) for t in pool if t.appearance is not None),
+            key=lambda p: p[0],
+        )
+        if not ranked or ranked[0][0] > REID_APPEARANCE:
+            return math.inf, None
+        if len(ranked) > 1 and ranked[1][0] - ranked[0][0] < REID_MARGIN:
+            return ranked[0][0], None
+        return ranked[0]
+
+    def reidentify(self, new: Track, stamp_ns: int) -> Track | None:
+        """The known person a person about to be confirmed is (module docstring), moved to
+        the new one's place, the new one forgotten; None when they are somebody new."""
+        if new.appearance is None:
+            return None
+        since = min(new.first_seen_ns or stamp_ns, stamp_ns - REID_UNSEEN_NS)
+        pool = [t for t in self.confirmed if self._gone_from_their_place(t, since)]
+        app, old = self._same_clothes(new.appearance, pool)
+        if old is None:
+            return None
+        self._take_place(old, new, app)
+        return old
+
+    def rejoin(self, stamp_ns: int) -> list[tuple[Track, Track, str]]:
+        """People found gone from their place (the map's looks) after somebody in their
+        clothes was confirmed elsewhere: that somebody is them (the same test as
+        `reidentify`, the other way round); (kept, merged away, why), as `take_merged`."""
+        out: list[tuple[Track, Track, str]] = []
+        for old in list(self.confirmed):
+            if not self._gone_from_their_place(old, stamp_ns - REID_UNSEEN_NS):
+                continue
+            assert old.appearance is not None
+            newer = [
+                t
+                for t in self.confirmed
+                if t.source == "perception"
+                and t.first_seen_ns > old.last_seen_ns
+                and old.id not in t.seen_with
+                and t.appearance is not None
+            ]
+            app, new = self._same_clothes(old.appearance, newer)
+            if new is None or new.appearance is None:
+                continue
+            # ...and they are nearer in clothes to `old` than to anybody else
+            others = [t for t in self.confirmed if t is not new]
+            if self._same_clothes(new.appearance, others)[1] is not old:
+                continue
+            self._take_place(old, new, app)
+            out.append((old, new, f"{old.id} in their clothes (colour distance {app:.2f})"))
+        self.merged.extend(out)
+        return out
+
+    def _take_place(self, old: Track, new: Track, app: float) -> None:
+        """`old` is `new`: it takes new's place, velocity and views; new is forgotten."""
+        assert new.P is not None and old.id is not None and new.appearance is not None
+        was = old.xy.copy()
+        self._set(old, np.concatenate([new.xy, new.velocity]), new.P.copy())
+        old.appearance = blend(old.appearance, new.appearance)
+        old.hits += new.hits
+        old.near_hits += new.near_hits
+        old.last_seen_ns, old.stamp_ns, old.moving = new.last_seen_ns, new.stamp_ns, new.moving
+        old.misses, old.missing_since_ns = 0, None
+        old.seen_with |= new.seen_with
+        for tr in self.tracks:  # who was seen with the new one was seen with this one
+            if new.id is not None and new.id in tr.seen_with and tr.id is not None:
+                tr.seen_with.discard(new.id)
+                tr.seen_with.add(old.id)
+        self.leaps.pop(old.id, None)
+        self.drop(new)
+        self.reidentified.append((old.id, was, old.xy.copy(), app))
+
+    def take_reidentified(self) -> list[tuple[str, FloatArray, FloatArray, float]]:
+        """The people re-identified since the last call: (id, from xy, to xy, colour
+        distance)."""
+        out, self.reidentified = self.reidentified, []
+        return out
 
     def merge_splits(self, seen: list[Track], stamp_ns: int) -> list[tuple[Track, Track, str]]:
         """Merge each person seen in this frame with a person that is the same body (module

@@ -198,3 +198,31 @@ def test_a_map_files_stamps_are_another_runs_clock_and_read_as_before_this_one()
         ("bottle_1", 0, None, "prior"),
         ("bottle_2", 0, 0, "prior"),
     ]
+
+
+def test_a_map_file_keeps_peoples_colours_and_refuses_a_histogram_that_is_not_one(
+    saved: tuple[SemanticMap, MapStore, Path], tmp_path: Path
+) -> None:
+    """Saved after an exploration, the map knows its people's clothes: the next run can
+    tell person_2 who walked off from somebody new (`PeopleTracker.reidentify`)."""
+    from services.semantic_map.appearance import SIZE
+    from services.semantic_map.mapfile import read_map_file, write_map_file
+
+    smap, store, _path = saved
+    other = _map()
+    person = _track("person_2", "person", 3.0)
+    look = np.linspace(1.0, 2.0, SIZE)
+    person.appearance = look / look.sum()
+    other.add(person)
+    file = tmp_path / "hall.json"
+    write_map_file(file, export_map(other))
+    mf = read_map_file(file)
+    assert list(mf.appearances) == ["person_2"]
+    import_map(mf, smap, store, ViewHistory(100 * MS, 100 * MS))
+    (back,) = smap.people.confirmed
+    assert back.appearance is not None and np.allclose(
+        back.appearance, person.appearance, atol=1e-4
+    )
+    bad = msgspec.structs.replace(mf, appearances={"person_2": [1.0, 2.0]})
+    with pytest.raises(RequestError, match="person_2's colours"):
+        import_map(bad, smap, store, ViewHistory(100 * MS, 100 * MS))

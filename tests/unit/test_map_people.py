@@ -337,3 +337,74 @@ def test_one_stray_detection_does_not_drag_a_standing_person_but_two_move_them()
     tracker.update(gone, [off])
     tracker.update(gone + S // 10, [off])
     assert np.linalg.norm(seeded.xy - [5.9, 2.8]) < 0.1
+
+
+def _known(
+    tracker: PeopleTracker, looks: list[np.ndarray], places: list[tuple[float, float]]
+) -> int:
+    """People seen standing at `places` for a second, then (the map looked at their places
+    and did not see them) counted missed; the next frame's stamp, 20 s later."""
+    t = _standing(tracker, 0, 10, places, list(looks))
+    for tr in tracker.confirmed:
+        tr.misses = tracker.settings.missing_after_frames  # as the map's looks count them
+    return t + 20 * S
+
+
+def test_a_person_who_walked_off_unseen_is_known_again_by_their_clothes() -> None:
+    """person_1 (red) stood at the origin; 20 s later, not where they were when the robot
+    looked, somebody in red stands 3 m away: person_1, not a new person."""
+    rng = np.random.default_rng(5)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    red = _hist(2, rng)
+    t = _known(tracker, [red], [(0.0, 0.0)])
+    _standing(tracker, t, 5, [(3.0, 1.0)], [red], seed=1)
+    (person,) = tracker.confirmed
+    assert person.id == "person_1" and np.linalg.norm(person.xy - (3.0, 1.0)) < 0.1
+    ((who, was, now, app),) = tracker.take_reidentified()
+    assert np.linalg.norm(now - (3.0, 1.0)) < 0.1
+    assert who == "person_1" and np.linalg.norm(was) < 0.1 and app < 0.35
+
+
+def test_somebody_in_other_clothes_or_like_two_people_is_somebody_new() -> None:
+    rng = np.random.default_rng(5)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _known(tracker, [red], [(0.0, 0.0)])
+    _standing(tracker, t, 5, [(3.0, 1.0)], [blue], seed=1)
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
+    # two people in red, both gone from their places: which one came back is not known
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _known(tracker, [red, red], [(0.0, 0.0), (0.0, 4.0)])  # one uniform
+    _standing(tracker, t, 5, [(3.0, 1.0)], [red], seed=1)
+    assert len(tracker.confirmed) == 3 and not tracker.take_reidentified()
+
+
+def test_a_person_still_where_the_map_has_them_is_not_taken_for_a_newcomer() -> None:
+    """Nobody looked at person_1's place since: a newcomer in like clothes elsewhere is
+    somebody else (two workers in one uniform)."""
+    rng = np.random.default_rng(5)
+    red = _hist(2, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(0.0, 0.0)], [red]) + 20 * S
+    _standing(tracker, t, 5, [(3.0, 1.0)], [red], seed=1)
+    assert len(tracker.confirmed) == 2
+    assert np.linalg.norm(tracker.confirmed[0].xy) < 0.1
+
+
+def test_a_newcomer_in_the_clothes_of_a_person_found_gone_later_is_that_person() -> None:
+    """Seen in red 3 m away before the robot looked at person_1's place: person_2 at
+    first; once the map finds person_1 gone from there, person_2 is person_1."""
+    rng = np.random.default_rng(5)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(0.0, 0.0), (0.0, 5.0)], [red, blue]) + 20 * S
+    t = _standing(tracker, t, 5, [(3.0, 1.0)], [red], seed=1)
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2", "person_3"]
+    assert not tracker.rejoin(t)  # person_1 not looked for yet
+    person_1 = tracker.by_id("person_1")
+    assert person_1 is not None
+    person_1.misses = tracker.settings.missing_after_frames  # the map looked: not there
+    ((kept, gone, why),) = tracker.rejoin(t)
+    assert (kept.id, gone.id) == ("person_1", "person_3") and "clothes" in why
+    assert np.linalg.norm(person_1.xy - (3.0, 1.0)) < 0.1
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
