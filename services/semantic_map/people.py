@@ -391,10 +391,7 @@ class PeopleTracker:
         old.last_seen_ns, old.stamp_ns, old.moving = new.last_seen_ns, new.stamp_ns, new.moving
         old.misses, old.missing_since_ns = 0, None
         old.seen_with |= new.seen_with
-        for tr in self.tracks:  # who was seen with the new one was seen with this one
-            if new.id is not None and new.id in tr.seen_with and tr.id is not None:
-                tr.seen_with.discard(new.id)
-                tr.seen_with.add(old.id)
+        self._seen_with_as(new, old)
         self.leaps.pop(old.id, None)
         self.drop(new)
         self.reidentified.append((old.id, was, old.xy.copy(), app))
@@ -460,12 +457,18 @@ class PeopleTracker:
         if keep.appearance is None and gone.appearance is not None:
             keep.appearance = gone.appearance.copy()
         assert keep.id is not None and gone.id is not None
-        for tr in self.tracks:  # who was seen with the one merged away was seen with this one
+        self._seen_with_as(gone, keep)
+        self.drop(gone)
+
+    def _seen_with_as(self, gone: Track, keep: Track) -> None:
+        """Who was seen with `gone` (merged into `keep`) was seen with `keep`."""
+        if gone.id is None or keep.id is None:
+            return
+        for tr in self.tracks:
             if gone.id in tr.seen_with and tr.id is not None:
                 tr.seen_with.discard(gone.id)
                 tr.seen_with.add(keep.id)
                 keep.seen_with.add(tr.id)
-        self.drop(gone)
 
     def _leap_held(self, tr: Track, obs: Observation, stamp_ns: int) -> bool:
         """Whether the detection matched to `tr` is held back: far from a standing person,
