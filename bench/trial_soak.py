@@ -3,11 +3,18 @@ minutes of wall time (120), and each service's memory and open files over the ru
 
 The stack `dume demo` brings up for the small world (supervisord, every service,
 lockstep, its saved map). Request after request goes on `mission/request` as any
-client's does, each of the map's artifacts to each of its people in turn, with
-`REQUEST_SIM_S` of sim time before the trial cancels it: the robot walks, looks, picks,
-hands over, is cancelled mid-way, fails to find what a person now holds; whatever
-happens is the workload. Every `SAMPLE_S` of wall time, per service (its supervisord
-pid): the resident memory (VmRSS), open file descriptors and threads.
+client's does, each of the map's artifacts to each of its people in turn, by id and,
+every other time, by class ("a bottle"), with `REQUEST_SIM_S` of sim time before the
+trial cancels it. Between two requests the hall is put back as it was (the robot is not
+reset): somebody takes each artifact from whoever holds it and sets it where the world
+had it (`dume/world/artifact_command`, a truth hook: the trial's, never the robot's), and
+the map the stack started from is imported again (`dume/map/import`) with its artifacts
+under new ids (`renumbered`: the mission remembers what it handed over by map id, and
+never fetches that entry again). Without that, the first handover would leave nothing
+to fetch and the soak would measure an idle robot. So every request walks, looks, picks
+and hands over, from wherever the last one ended.
+Every `SAMPLE_S` of wall time, per service (its supervisord pid): the resident memory
+(VmRSS), open file descriptors and threads.
 
 Growth is the median of the last tenth of the samples against the median of the second
 tenth (the first is the warm-up: caches, the segmenter's arena, the map filling), in
@@ -24,11 +31,15 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 
-from bench.eval.run import read_map, start_gate_overrides, watch_mission
+from bench.eval.run import read_world, start_gate_overrides, watch_mission
 from common.config import Overrides, merged
+from common.keys import MAP_EXPORT, MAP_IMPORT, WORLD_ARTIFACT_COMMAND, WORLD_CLOCK
 from common.messages.mission import MissionRequest
+from common.messages.semantic_map import MapFile, MapSummary
+from common.messages.sim import ArtifactCommand, Clock
 from common.recording import new_run_id
 from deploy.demo import SERVICES, demo_overrides
 from deploy.stack import Supervised
@@ -39,6 +50,8 @@ Figures = dict[str, Any]
 REQUEST_SIM_S = 90.0
 #: Wall seconds between two samples of the services' figures.
 SAMPLE_S = 30.0
+#: Sim seconds after a request's end at which the hall is put back.
+RESET_AFTER_S = 0.5
 
 
 def process_figures(pid: int) -> dict[str, int]:
@@ -67,6 +80,19 @@ def growth(samples: list[dict[str, Any]], field: str) -> float | None:
     return round(100.0 * (end - base) / base, 2) if base > 0 else None
 
 
+def renumbered(mf: MapFile) -> MapFile:
+    """`mf` with every artifact under the next free id of its class (`bottle_1` →
+    `bottle_2` for a file whose counter says 1), the counters moved on."""
+    counters = dict(mf.counters)
+    entities = []
+    for e in mf.entities:
+        if e.kind == "artifact":
+            counters[e.class_name] = counters.get(e.class_name, 0) + 1
+            e = msgspec.structs.replace(e, id=f"{e.class_name}_{counters[e.class_name]}")
+        entities.append(e)
+    return msgspec.structs.replace(mf, entities=entities, counters=counters)
+
+
 def run_soak(minutes: float, overrides: Overrides) -> Figures:
     """The soak (see the module docstring)."""
     run_id = new_run_id()
@@ -87,13 +113,30 @@ def run_soak(minutes: float, overrides: Overrides) -> Figures:
         stack.start()
         stack.wait_ready(list(SERVICES), timeout_s=300.0)
         bus, keys = stack.bus, stack.keys
-        arts, people = read_map(bus)
-        pairs = [(a.id, p.id) for a in arts for p in people]
+        the_map = [bus.query(MAP_EXPORT, None, MapFile, 10.0)]
+        people = [e for e in the_map[0].entities if e.kind == "person"]
+        homes = [(a.id, a.position, a.yaw) for a in read_world(bus).artifacts]
+        mover = bus.publisher(WORLD_ARTIFACT_COMMAND, ArtifactCommand, "control")
+        clock = bus.latest(WORLD_CLOCK, Clock)
         last = [0.0]
 
+        def _put_back() -> None:
+            """Every artifact where the world had it, and the map as the stack started
+            (its artifacts renumbered)."""
+            at_ns = clock.wait(lambda _c: True, 30.0).stamp_ns + round(RESET_AFTER_S * 1e9)
+            for art, position, yaw in homes:
+                mover.put(ArtifactCommand(stamp_ns=at_ns, artifact_id=art, position=position,
+                                          yaw=yaw))  # fmt: skip
+            clock.wait(lambda c: c.stamp_ns > at_ns, 30.0)
+            the_map[0] = renumbered(the_map[0])
+            bus.query(MAP_IMPORT, the_map[0], MapSummary, 10.0)
+
         def _one_request(k: int) -> int:
-            obj, person = pairs[k % len(pairs)]
-            request = MissionRequest(request_id=f"soak-{k}", object=obj, person=person)
+            listed = [e for e in the_map[0].entities if e.kind == "artifact"]
+            art = listed[(k // 2) % len(listed)]
+            person = people[(k // 2 // len(listed)) % len(people)].id
+            name = art.id if k % 2 == 0 else art.class_name
+            request = MissionRequest(request_id=f"soak-{k}", object=name, person=person)
             record = watch_mission(bus, keys, request, REQUEST_SIM_S, sample)
             final = record.changes[-1] if record.changes else None
             said = f"{final.state} {final.reason}" if final else record.ended or "no status"
@@ -101,8 +144,10 @@ def run_soak(minutes: float, overrides: Overrides) -> Figures:
             t_min = (time.perf_counter() - wall0) / 60.0
             now = {n: (s[-1]["rss_kb"] // 1024, s[-1]["fds"], s[-1]["threads"])
                    for n, s in samples.items() if s}  # fmt: skip
-            print(f"{t_min:6.1f} min request {k} {obj} → {person}: {said}; "
+            print(f"{t_min:6.1f} min request {k} {name} → {person}: {said} at "
+                  f"{(record.end_ns - record.start_ns) / 1e9:.1f} s; "
                   f"RSS MB, fds, threads {now}", file=sys.stderr, flush=True)  # fmt: skip
+            _put_back()
             return k + 1
 
         def sample(*_: object) -> None:

@@ -195,6 +195,7 @@ class SimCore:
                 f"an artifact's place must be on the hall's floor or a support (z 0-3 m), "
                 f"got {tuple(round(v, 3) for v in position)}"
             )
+        self.handover.let_go(self.model, self.data, artifact_id)  # a person who held it
         adr, dof = self._artifact_q[k], self._artifact_v[k]
         x, y, z = (float(v) for v in position)
         self.data.qpos[adr : adr + 7] = (x, y, z + PLACE_LIFT_M, math.cos(0.5 * yaw), 0.0, 0.0,

@@ -12,7 +12,8 @@ Per person, a small state machine over the hand's three servos (`services.sim.sc
 - holding: the hand's target draws back towards the person, to `RETRACT_TO_M` ahead of
   them, over `RETRACT_S`. The servo's force limit (15 N along the person's x) is the
   pull: a robot that still grips the object feels it in its jaw and arm; once the jaws
-  open, the hand brings the object to the person. The person keeps it.
+  open, the hand brings the object to the person. The person keeps it, until somebody
+  moves it elsewhere (`let_go`: the world's artifact hook puts it back on a bench).
 Nothing here moves the object or the robot directly: only the hand's servo targets.
 """
 
@@ -190,6 +191,17 @@ class Handover:
         back = min(hand.hold_ctrl[0], max(_LOW[0], RETRACT_TO_M - _HAND[0]))  # never push
         hand.ctrl[0] += (back - hand.hold_ctrl[0]) * hand.hold_s / RETRACT_S
         data.ctrl[hand.actuators] = hand.ctrl
+
+    def let_go(self, model: mujoco.MjModel, data: mujoco.MjData, artifact_id: str) -> None:
+        """Whoever holds or reaches for `artifact_id` lets it go (the grip weld opens, the
+        hand back at rest): somebody is about to put it elsewhere."""
+        k = self.artifact_ids.index(artifact_id)
+        for hand in self.hands:
+            if hand.target == k:
+                weld = model.equality(scene.grip_weld_name(hand.person, artifact_id)).id
+                data.eq_active[weld] = 0
+                self._reset(data, hand)
+        self.held[k] = False
 
     def _reset(self, data: mujoco.MjData, hand: _Hand) -> None:
         hand.phase, hand.target = "idle", -1

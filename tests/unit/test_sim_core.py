@@ -363,6 +363,30 @@ def test_a_bottle_held_still_near_a_hand_is_taken_after_half_a_second_and_pulled
     assert not [e for e in events if isinstance(e, ObjectDropped)]
 
 
+def test_a_bottle_a_person_holds_can_be_put_back_on_the_table_and_taken_again(
+    world: WorldDescription,
+) -> None:
+    """Somebody takes it from the person's hand and puts it on the table (the world's
+    artifact hook): the grip lets go, it rests there, and a second handover works."""
+    core, bottle, presented = _handover_setup(world)
+    for _ in range(1000):
+        bottle.step_at(presented)
+    assert core.handover.holder("bottle_1") == world.people[0].id
+    bottle.step_at(None)
+    table = world.artifacts[0].position
+    core.place_artifact("bottle_1", table, 0.0)
+    for _ in range(1000):
+        core.step()
+    assert core.handover.holder("bottle_1") is None
+    x, y, z = core.truth_positions()["bottle_1"]
+    assert math.dist((x, y), table[:2]) < 0.01 and abs(z - table[2]) < 0.005
+    events: list[object] = []
+    for _ in range(1000):
+        events += bottle.step_at(presented)
+    assert [e for e in events if isinstance(e, HandoverTaken)]
+    assert core.handover.holder("bottle_1") == world.people[0].id
+
+
 def test_a_bottle_moved_away_before_half_a_second_is_not_taken(world: WorldDescription) -> None:
     core, bottle, presented = _handover_setup(world)
     away = presented + np.array([0.0, 0.0, ho.RADIUS_M + 0.05])
