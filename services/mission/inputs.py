@@ -39,7 +39,7 @@ from common.lockstep import AckGate
 from common.messages.base import NS_PER_S
 
 #: The slice a wait is taken in between two looks at `lost()`, wall s.
-SLICE_S = 0.05
+SLICE_S = 0.02
 
 
 class Lost(Exception):

@@ -17,7 +17,7 @@ Each tick b (multiples of `time.participants.mission.period_s`):
    `time.participants`) that went away or restarted since the request started fails it
    `dependency_lost` (nobody waits for the dead); else the tree ticks once; its outcome,
    stage and progress become the status. A dead sim stops the clock, so no tick comes:
-   while the clock stands still the loop checks every 0.1 s wall (`Desk.stalled`) and
+   while the clock stands still the loop checks every `IDLE_POLL_S` wall (`Desk.stalled`) and
    fails the request `dependency_lost: sim is gone`, stamped at the last tick; a
    dependency lost while the tick awaits its inputs (a killed WBC sends no odom) ends
    the wait and fails it the same way (`TickInputs`);
@@ -74,6 +74,10 @@ from services.mission.robot import WRIST, BusRobot
 from services.mission.tree import MissionTree
 
 NAME = "mission"
+#: Wall seconds between two looks at the dependencies while the clock stands still: a
+#: loss is decided `LOST_GRACE_S` (0.4 s) after its token went, and said within this of
+#: it (the policy's 0.5 s to notice; it was 0.1 s, and a kill was said 0.45-0.63 s after).
+IDLE_POLL_S = 0.02
 #: The services a running mission depends on (those that are lockstep participants).
 #: The services a job depends on: the sim (the world and its clock) and the lockstep
 #: participants among these.
@@ -161,7 +165,7 @@ class MissionNode:
 
     def run(self) -> None:
         self.svc.ready()
-        for b in self.ticker.ticks(on_idle=self._stalled):
+        for b in self.ticker.ticks(poll_s=IDLE_POLL_S, on_idle=self._stalled):
             self.last_b = b
             try:
                 self.tick(b)
