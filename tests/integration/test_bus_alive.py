@@ -20,17 +20,9 @@ from common.bus import (
     WaitTimeout,
 )
 from common.messages import ErrorReply
+from tests.integration.peers import loopback_peer
 
-
-def _session() -> zenoh.Session:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps("peer"))
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
+_session = loopback_peer
 
 
 def test_a_token_whose_announcement_was_missed_is_found_by_asking() -> None:
