@@ -174,9 +174,10 @@ class SimCore:
     def place_artifact(
         self, artifact_id: str, position: tuple[float, float, float] | None, yaw: float
     ) -> tuple[float, float, float]:
-        """Somebody moves an artifact: its base onto `position` (m, world: the top of what
-        it stands on), upright at `yaw`, at rest; None: away, parked beyond the hall's
-        walls (in a row, out of every camera's sight). Where its base now is.
+        """Somebody moves an artifact (a person who holds it lets go): its base onto
+        `position` (m, world: the top of what it stands on), upright at `yaw`, at rest;
+        None: away, parked beyond the hall's walls (in a row, out of every camera's
+        sight). Where its base now is.
 
         Raises KeyError for an unknown artifact, ValueError for a non-finite position.
         """
