@@ -26,7 +26,6 @@ again at every later standstill as long.
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 
 from common import robot
 from common.config import EstimatorSettings
@@ -65,7 +64,7 @@ class LegOdometry:
         x, y, yaw = self.start_pose
         f = np.array(msg.imu_specific_force, dtype=float)
         R = tilt_from_gravity(f, yaw)
-        q = np.concatenate([np.zeros(3), pin.Quaternion(R).coeffs(), joints])
+        q = np.concatenate([np.zeros(3), robot.quat_xyzw_of(R), joints])
         if self._zero_v is None:
             self._zero_v = np.zeros(model.nv)
         model.update(q, self._zero_v, tcp=False)
@@ -132,6 +131,4 @@ class LegOdometry:
 
     def quaternion(self) -> FloatArray:
         """The estimated orientation, a unit quaternion x y z w."""
-        quat = pin.Quaternion(self.est.R)
-        quat.normalize()
-        return np.asarray(quat.coeffs())
+        return robot.quat_xyzw_of(self.est.R)

@@ -518,3 +518,13 @@ def test_geometry_helpers_round_trip() -> None:
         np.testing.assert_allclose(quat_wxyz_to_xyzw(quat_xyzw_to_wxyz(q)), q)
         np.testing.assert_allclose(pin.Quaternion(R).matrix(), R, atol=1e-12)
     np.testing.assert_allclose(make_T(np.eye(3), [1, 2, 3])[:3, 3], [1, 2, 3])
+
+
+def test_quat_xyzw_of_a_rotation_agrees_with_scipy_up_to_sign() -> None:
+    from scipy.spatial.transform import Rotation
+
+    for R in Rotation.random(50, random_state=3).as_matrix():
+        q = robot.quat_xyzw_of(R)
+        ref = Rotation.from_matrix(R).as_quat()
+        assert abs(np.linalg.norm(q) - 1.0) < 1e-12
+        assert min(np.abs(q - ref).max(), np.abs(q + ref).max()) < 1e-9
