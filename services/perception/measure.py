@@ -29,7 +29,7 @@ import numpy.typing as npt
 
 from common.camera import PinholeCamera, backproject
 from common.geometry import BoolArray, FloatArray, transform_points, wrap_angle, yaw_of, yaw_only
-from services.perception.fits import UprightFit, fit_upright
+from services.perception.fits import UprightFit, body_axis, fit_upright
 from services.perception.geometry import (
     CLASS_SHAPES,
     T_base_yaw_base,
@@ -170,6 +170,8 @@ def measure(
             network_class, class_name = class_name, by_shape
             shape = CLASS_SHAPES[class_name]
             fit = cylinder if shape == "cylinder" else fit_upright(pts_by, eye_by, shape)
+    if class_name == "person":
+        fit = body_axis(fit, eye_by)
     base_yaw_in_world = yaw_of(T_w_by[:3, :3])
     return Measurement(
         centroid_camera=centroid_cam,

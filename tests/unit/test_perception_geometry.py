@@ -15,7 +15,7 @@ import pytest
 from common.camera import PinholeCamera, backproject
 from common.geometry import FloatArray, inv_T, make_T, rot_x, rot_y, rot_z, transform_points
 from common.robot_description import R_FORWARD_OPTICAL
-from services.perception.fits import fit_box, fit_cylinder
+from services.perception.fits import BODY_DEPTH_M, fit_box, fit_cylinder
 from services.perception.geometry import heading, robust_centroid
 from services.perception.measure import FrameGeometry, ShapeCheck, measure
 from tests.unit.perception_raycast import Plane, Shape, UprightBox, UprightCylinder, render
@@ -195,6 +195,26 @@ def test_a_box_showing_two_faces_gives_its_centre_yaw_and_extent() -> None:
     assert min(off, math.pi / 2 - off) < math.radians(1.0)
     fit = fit_box(points[labels == 2])
     assert sorted(fit.extent[:2]) == pytest.approx([0.06, 0.12], abs=8e-3)
+
+
+def test_a_persons_axis_is_put_behind_what_the_camera_sees_of_them() -> None:
+    """A body 24 cm across 1.5 m ahead: the visible centroid lies in front of its axis;
+    the person's axis is `BODY_DEPTH_M` (6 cm) behind it, along the line of sight, and
+    the centroid stays what was seen."""
+    x, y = ahead(1.5)
+    body = UprightCylinder((x, y), 0.12, 0.0, 1.7)
+    depth, labels, points = render([Plane((0, 0, 0), (0, 0, 1)), body], T_WORLD_CAMERA, K, W, H)
+    mask = labels == 2  # the plane is 1
+    m = measure(GEO, depth, mask, (0, 0), "person")
+    assert m is not None
+    seen = points[mask].mean(axis=0)
+    assert np.linalg.norm(m.centroid_world - seen) < 1e-3
+    sight = np.array(ahead(1.0)) - np.array(ahead(0.0))
+    assert np.dot(m.axis_world[:2] - seen[:2], sight) == pytest.approx(BODY_DEPTH_M, abs=2e-3)
+    off_seen = np.hypot(seen[0] - x, seen[1] - y)  # ~10 cm: at 1.5 m less than half shows
+    assert np.hypot(m.axis_world[0] - x, m.axis_world[1] - y) == pytest.approx(
+        off_seen - BODY_DEPTH_M, abs=0.01
+    )
 
 
 def test_too_few_points_is_no_measurement() -> None:
