@@ -305,7 +305,12 @@ GRASP_PITCH_RAD = (0.0, 0.5)  # side grasps from level to ~30 deg nose-down
 COMFORT_MARGIN_RAD = 0.1  # a comfortable grasp stays this far inside every joint limit...
 COMFORT_STRETCH = 0.9  # ...with the wrist at most 90 % of its farthest from the shoulder
 APPROACH_MARGIN_M = 0.3  # navigation stops this far short of D_OPT; visual servoing closes it
-PERSON_REACH_M = 0.45  # a person's centre to the hand that takes the object
+#: A person's centre to the object held out to them, m: 0.15 m before their resting hand
+#: (0.35 m: `services.sim.scene.HAND_IN_PERSON`), which takes what comes within 0.25 m.
+#: It was 0.45 while perception put people 6 cm (to 13 cm) too near the camera, which
+#: made it 0.51 (to 0.58); with that fixed, 0.45 presented the object 1-2 cm from the
+#: hand's grip and the present posture's swing knocked it out (hall seed 3).
+PERSON_REACH_M = 0.50
 THETA_OPT_RAD = 0.0  # the object straight ahead: the arm works in the base's x-z plane
 
 

@@ -50,8 +50,8 @@ ARTIFACT_FRICTION = (1.0, 0.01, 0.0001)
 TABLE_TOP_M = 0.04
 TABLE_LEG_M = 0.05
 #: A person's hand (and grip body) at rest in the person frame, m: ahead, left, up. The
-#: robot presents the object from `HANDOVER_DISTANCE_M`, i.e. `PERSON_REACH_M` (0.45 m)
-#: ahead of the person: 0.1 m beyond the resting hand, well within the handover's reach.
+#: robot presents the object from `HANDOVER_DISTANCE_M`, i.e. `PERSON_REACH_M` (0.50 m)
+#: ahead of the person: 0.15 m before the resting hand, well within the handover's reach.
 HAND_IN_PERSON = (0.35, 0.0, 1.0)
 #: The hand's slide joints, each about the rest position along the person's axis: range
 #: (m), and the servo's stiffness (N/m), damping (N s/m) and force limit (N). The force

@@ -10,6 +10,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from common.config import NavigationSettings, PeopleSettings, PlannerSettings
 from common.messages import world
+from common.robot import HANDOVER_DISTANCE_M
 from services.navigation import native
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.goals import GoalError, handover_pose, standoff_pose
@@ -134,7 +135,9 @@ def test_handover_poses_are_free_and_face_their_person(name: str, seed: int) -> 
         assert pose_ok(cm, pose, FP, 0.03), "the planner takes the pose as it is"
         bearing = math.atan2(person.y - pose.y, person.x - pose.x)
         assert abs(math.remainder(bearing - pose.yaw, math.tau)) < 1e-6
-        assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(1.3, abs=0.01)
+        assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(
+            HANDOVER_DISTANCE_M, abs=0.01
+        )
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -221,4 +224,6 @@ def test_a_handover_pose_takes_the_side_asked_for_before_the_persons_front() -> 
     side = math.atan2(pose.y - person.y, pose.x - person.x)
     assert abs(math.remainder(side - asked, math.tau)) < math.radians(45)  # that side, or near
     assert pose_ok(cm, pose, FP, 0.03)
-    assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(1.3, abs=0.01)
+    assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(
+        HANDOVER_DISTANCE_M, abs=0.01
+    )
