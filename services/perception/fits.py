@@ -18,7 +18,7 @@ Pure numpy, used by `measure`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -302,7 +302,7 @@ def body_axis(fit: UprightFit, eye: npt.ArrayLike) -> UprightFit:
         return fit
     axis = fit.axis.copy()
     axis[:2] += BODY_DEPTH_M * away / norm
-    return UprightFit(axis, fit.extent, fit.yaw, fit.radius, fit.shape, fit.rms_m, fit.fallback)
+    return replace(fit, axis=axis)
 
 
 def fit_upright(points: FloatArray, eye: npt.ArrayLike, shape: Shape) -> UprightFit:
