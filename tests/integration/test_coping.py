@@ -173,15 +173,23 @@ def test_a_bottle_knocked_from_the_gripper_to_the_floor_is_reported_where_it_lie
     tmp_path: Path,
 ) -> None:
     """The bottle falls at the robot's feet, out of every camera's view and below any
-    grasp: the robot steps back to look, sees it on the floor and ends the request
-    `object_dropped` saying where it lies (no walk back to its table, no search)."""
+    grasp: the robot steps back to look at the floor there and ends the request
+    `object_dropped` saying where it lies (no walk back to its table, no search).
+
+    Where: as seen ("lies at") when the network makes the bottle out on the floor, else
+    as the gripper's place at the loss said ("fell at ... not found where it fell"). The
+    network never saw a bottle lying on a floor in training: rendered from the look pose
+    (1.3-2.0 m, three orientations) it found it only at about 1.4 m, as a bottle or a
+    box, and from nearer, looking down, it calls it a person (0.9); which of the two
+    sentences a run ends with turns on the last bits of the lockstep trajectory."""
     record, knocked_at = fetch_while_carrying(tmp_path, 3.0, knock)
     assert knocked_at > 0, "the carry began and the bottle was knocked"
     dropped = [e for e in record.events if isinstance(e, ObjectDropped)]
     assert [e.object_id for e in dropped] == ["bottle_1"]
     last = record.changes[-1]
     assert (last.state, last.reason) == ("failed", "object_dropped"), last
-    x, y = (float(v) for v in last.detail.split("lies at (")[1].split(")")[0].split(", "))
+    said = "lies at (" if "lies at (" in last.detail else "fell at ("
+    x, y = (float(v) for v in last.detail.split(said)[1].split(")")[0].split(", "))
     fell = dropped[0].position_in_world
     assert np.hypot(x - fell[0], y - fell[1]) < 0.5, (last.detail, fell)  # where it lies
     assert last.stamp_ns - dropped[0].stamp_ns < 30e9  # told at once, not after a search
