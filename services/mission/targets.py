@@ -3,8 +3,10 @@
 A map id names one entity (or none: unknown). A class names every mapped, not missing
 artifact of that class, nearest to the robot first: the first is fetched, the rest are
 the candidates a recovery tries when the first is not where the map says. A person may
-be named by id, or as `person` (the nearest mapped person). Which wrist detection is the
-target is `common.sightings.pick_detection`'s rule. Pure apart from the port's map
+be named by id, or as `person` (the nearest mapped person). An object handed over is
+no candidate until somebody puts it down again (`put_back`: the map saw it since, away
+from everyone). Which wrist detection is the target is `common.sightings.pick_detection`'s
+rule. Pure apart from the port's map
 queries, which raise `Unavailable` when the map does not answer.
 """
 
@@ -38,6 +40,25 @@ def nearest_first(entities: list[MapEntity], xy: tuple[float, float] | None) -> 
     return sorted(
         entities,
         key=lambda e: (math.hypot(e.position_in_world[0] - x, e.position_in_world[1] - y), e.id),
+    )
+
+
+#: m: an object handed over and seen since this far from every mapped person was put
+#: down again (a held one is seen within an arm's length of its holder).
+PUT_BACK_M = 1.0
+
+
+def put_back(entity: MapEntity, handed_ns: int, people: list[MapEntity]) -> bool:
+    """Whether an artifact handed over at `handed_ns` (sim ns) was put down again: the
+    map saw it since, `PUT_BACK_M` or more from every person it has. A person the map
+    holds stale, walked off with it, would read as a put-down: the fetch then finds it
+    in a hand, or not at all, and says so."""
+    if entity.last_seen_ns <= handed_ns:
+        return False
+    x, y = entity.position_in_world[:2]
+    return all(
+        math.hypot(p.position_in_world[0] - x, p.position_in_world[1] - y) >= PUT_BACK_M
+        for p in people
     )
 
 

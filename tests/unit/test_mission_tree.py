@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import pytest
 
 from common.config import MissionSettings
@@ -499,6 +500,29 @@ def test_an_object_handed_over_is_no_candidate_again_and_asked_for_by_id_says_wh
     outcome = run(tree, robot)
     assert (outcome.state, outcome.reason) == ("failed", "unknown_object")
     assert "bottle_1 was handed over to person_1" in outcome.detail
+    # Seen since in a hand (within reach of somebody): still handed over.
+    handed_ns = tree.ctx.handed["bottle_1"][1]
+    seen = msgspec.structs.replace(entity("bottle_1", -2.6, 1.0), last_seen_ns=handed_ns + 1)
+    robot.artifacts["bottle_1"] = seen
+    tree.start(MissionRequest(request_id="r4", object="bottle_1", person="person_1"))
+    assert run(tree, robot).reason == "unknown_object"
+    # Seen since on a table, away from everyone: put down again, and fetched again.
+    robot.artifacts["bottle_1"] = msgspec.structs.replace(seen, position_in_world=(2.0, 1.0, 0.8))
+    tree.start(MissionRequest(request_id="r5", object="bottle_1", person="person_1"))
+    assert run(tree, robot).state == "succeeded"
+    assert any("bottle_1, handed over to person_1" in d and "a candidate again" in d
+               for d in tree.ctx.decisions)  # type: ignore[attr-defined]  # fmt: skip
+
+
+def test_a_handed_over_object_counts_as_put_down_only_when_seen_since_away_from_everyone() -> None:
+    from services.mission.targets import PUT_BACK_M, put_back
+
+    person = entity("person_1", 0.0, 0.0, kind="person")
+    later = msgspec.structs.replace(entity("bottle_1", PUT_BACK_M + 0.1, 0.0), last_seen_ns=10)
+    assert put_back(later, 5, [person]) and put_back(later, 5, [])
+    assert not put_back(later, 10, [person])  # not seen since the handover
+    near = msgspec.structs.replace(later, position_in_world=(PUT_BACK_M - 0.1, 0.0, 0.8))
+    assert not put_back(near, 5, [person])
 
 
 def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_and_blocks_others() -> None:

@@ -96,8 +96,9 @@ class Context:
     algorithms: Algorithms
     decide: Decide = field(default=lambda text: logging.getLogger("dume.mission").info(text))
     #: The objects this mission service handed over (map id → to whom, when, sim ns): a
-    #: request by class never fetches one again, and one by id is told where it went
-    #: (the map keeps its entry where it last saw it: in a hand, or on its old support).
+    #: request by class does not fetch one again, and one by id is told where it went
+    #: (the map keeps its entry where it last saw it: in a hand, or on its old support),
+    #: until the map sees it put down again (`targets.put_back`: it leaves this then).
     handed: dict[str, tuple[str, int]] = field(default_factory=dict)
     #: What the robot still held when a request ended unfinished (map id, the request's
     #: id): the next request that asks for it brings it without a fetch, and one that

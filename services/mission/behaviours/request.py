@@ -14,6 +14,7 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from common.messages.mission import MissionRequest
+from common.messages.semantic_map import MapEntity
 from services.mission import targets
 from services.mission.behaviours.base import (
     CANDIDATE,
@@ -56,6 +57,14 @@ class SelectTarget(MissionBehaviour):
             except Unavailable as exc:
                 return self.fail("unavailable", f"the semantic map did not answer: {exc}")
             handed = self.ctx.handed
+            if back := [e for e in found if e.id in handed and self._put_back(e, handed[e.id])]:
+                for e in back:
+                    person, at = handed.pop(e.id)
+                    x, y = e.position_in_world[:2]
+                    self.ctx.decide(
+                        f"{e.id}, handed over to {person} at t={at / 1e9:.1f} s, was put down "
+                        f"at ({x:.2f}, {y:.2f}): a candidate again"
+                    )
             gone = [e.id for e in found if e.id in handed]
             found = [e for e in found if e.id not in handed]
             if not found and gone:
@@ -102,6 +111,14 @@ class SelectTarget(MissionBehaviour):
             self.ctx.decide(f"target {map_id} ({index + 1} of {len(candidates)})")
         self.feedback_message = f"target {map_id}"
         return Status.SUCCESS
+
+    def _put_back(self, entity: MapEntity, handed: tuple[str, int]) -> bool:
+        """`targets.put_back` with the map's people (not, when the map does not answer)."""
+        try:
+            people = self.port.people()
+        except Unavailable:
+            return False
+        return targets.put_back(entity, handed[1], people)
 
 
 def held_from_before(leaf: MissionBehaviour) -> tuple[str, str] | None:
