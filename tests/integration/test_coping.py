@@ -176,12 +176,12 @@ def test_a_bottle_knocked_from_the_gripper_to_the_floor_is_reported_where_it_lie
     grasp: the robot steps back to look at the floor there and ends the request
     `object_dropped` saying where it lies (no walk back to its table, no search).
 
-    Where: as seen ("lies at") when the network makes the bottle out on the floor, else
-    as the gripper's place at the loss said ("fell at ... not found where it fell"). The
-    network never saw a bottle lying on a floor in training: rendered from the look pose
-    (1.3-2.0 m, three orientations) it found it only at about 1.4 m, as a bottle or a
-    box, and from nearer, looking down, it calls it a person (0.9); which of the two
-    sentences a run ends with turns on the last bits of the lockstep trajectory."""
+    Where: as seen ("lies at": whatever class the network gives it there, where the
+    gripper lost it), else as the gripper's place at the loss said ("fell at ... not found
+    where it fell"). The network never saw a bottle lying on a floor in training:
+    rendered from the look pose (1.3-2.0 m, three orientations) it found it only at about
+    1.4 m, as a bottle or a box, and from nearer, looking down, called it a person (0.9:
+    no longer taken for one, `self_filter.is_flat`). This run sees a box there."""
     record, knocked_at = fetch_while_carrying(tmp_path, 3.0, knock)
     assert knocked_at > 0, "the carry began and the bottle was knocked"
     dropped = [e for e in record.events if isinstance(e, ObjectDropped)]

@@ -1,4 +1,5 @@
-"""People seen inside the robot's own footprint are the robot itself and are dropped."""
+"""People seen inside the robot's own footprint are the robot itself, and people lying flat
+on the floor are not people: both are dropped."""
 
 from __future__ import annotations
 
@@ -8,14 +9,20 @@ from common.messages.arrays import to_wire
 from common.messages.perception import Detection
 from common.robot import FOOTPRINT_BOUNDS
 from services.perception.pipeline import Detected
-from services.perception.self_filter import SELF_MARGIN_M, drop_self, is_self
+from services.perception.self_filter import (
+    PERSON_MIN_TOP_M,
+    SELF_MARGIN_M,
+    drop_self,
+    is_flat,
+    is_self,
+)
 
 
-def _det(cls: str, x: float, y: float) -> Detection:
+def _det(cls: str, x: float, y: float, top_row: int = 0) -> Detection:
     return Detection(
         class_name=cls,
         score=0.8,
-        bbox=(0, 0, 2, 2),
+        bbox=(0, top_row, 2, top_row + 2),
         mask=to_wire(np.ones((2, 2), np.uint8)),
         centroid_in_base_yaw=(x, y, 0.6),
         centroid_in_world=(x, y, 0.6),
@@ -48,3 +55,31 @@ def test_people_outside_and_artifacts_anywhere_are_kept() -> None:
     kept, dropped = drop_self(detected)
     assert dropped == 1
     assert [d.detection.class_name for d in kept] == ["person", "bottle"]
+
+
+def _points(top_z: float, n: int = 200) -> np.ndarray:
+    """Points from the floor up to `top_z`, 3 m ahead."""
+    z = np.linspace(0.0, top_z, n)
+    return np.column_stack([np.full(n, 3.0), np.zeros(n), z])
+
+
+def test_a_person_whose_whole_height_shows_below_half_a_metre_lies_flat_and_is_dropped() -> None:
+    """A bottle knocked to the floor, read as a person: its top shows, 7 cm up."""
+    lying = Detected(_det("person", 3.0, 0.0, top_row=180), _points(0.07))
+    assert is_flat(lying)
+    low = PERSON_MIN_TOP_M - 0.05
+    assert is_flat(Detected(_det("person", 3.0, 0.0, top_row=120), _points(low)))
+    stray = _points(0.07)
+    stray[:3, 2] = 1.8  # a few stray points high up do not make it stand
+    assert is_flat(Detected(_det("person", 3.0, 0.0, top_row=180), stray))
+    kept, dropped = drop_self([lying, Detected(_det("person", 3.0, 1.0, 10), _points(1.7))])
+    assert dropped == 1 and len(kept) == 1
+
+
+def test_a_person_cut_by_the_frames_upper_edge_or_standing_and_artifacts_are_kept() -> None:
+    legs = Detected(_det("person", 1.0, 0.0, top_row=0), _points(0.4))  # the rest above
+    assert not is_flat(legs)
+    assert not is_flat(Detected(_det("person", 3.0, 0.0, top_row=40), _points(1.7)))
+    under_a_table = Detected(_det("person", 3.0, 0.0, top_row=90), _points(0.75))
+    assert not is_flat(under_a_table)
+    assert not is_flat(Detected(_det("bottle", 3.0, 0.0, top_row=180), _points(0.07)))

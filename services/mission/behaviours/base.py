@@ -65,8 +65,10 @@ class Target:
     @property
     def look_near(self) -> tuple[float, float] | None:
         """Where the wrist camera's detection of it is picked (`RobotPort.wrist_detection`):
-        its mapped place, or none (the nearest of its class) once dropped."""
-        return None if self.dropped else self.xy
+        its mapped place, or where it fell once dropped (None, where unknown: the nearest
+        of its class). The approach takes any artifact class there: the network never saw
+        an object lying on a floor, and reads a knocked-down bottle as a box."""
+        return self.xy
 
     def where_dropped(self) -> str:
         """Where it fell, for a person."""
