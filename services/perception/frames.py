@@ -140,7 +140,7 @@ class FrameProcessor:
                 detected = (
                     detect(frame, T, instances, min_score, self.shape_check) if not reason else []
                 )
-                detected, selves = drop_self(detected)
+                detected, selves = drop_self(detected, frame.width)
                 if selves:
                     log.debug("%s at t=%.3f s: %d person(s) inside the robot or flat dropped",
                               cam, b / NS_PER_S, selves)  # fmt: skip

@@ -12,9 +12,12 @@ Nor does it see people lying on the floor. The network never saw an object lying
 floor in training, and calls a bottle knocked down from the gripper a person (0.9, seen
 from 1-1.4 m; the map then held a person at the robot's feet and the arm slowed for
 them). A person detection whose top shows in the frame (its mask clear of the frame's
-upper edge) and whose points stay below `PERSON_MIN_TOP_M` (their `TOP_QUANTILE`) is no
-standing person, and is dropped too (`is_flat`). Only its top is judged: a person cut
-off by the frame's edge, or seen only from the knees up behind a table, stays.
+upper and side edges) and whose points stay below `PERSON_MIN_TOP_M` (their
+`TOP_QUANTILE`) is no standing person, and is dropped too (`is_flat`). Only its top is
+judged: a person cut off by the frame's edges, or seen only from the knees down under a
+table, stays. On the dataset's renders of hall seeds 0-3 (both plans, 442 person
+detections: 276 real, 166 false) it drops 6 false ones and no real one (with the top
+edge alone judged, 10 false and 2 real: slivers of a leg at the frame's left edge).
 """
 
 from __future__ import annotations
@@ -45,18 +48,20 @@ PERSON_MIN_TOP_M = 0.5
 TOP_QUANTILE = 0.95
 
 
-def is_flat(found: Detected) -> bool:
-    """Whether `found` is a person whose whole height shows and stays below
-    `PERSON_MIN_TOP_M` (see the module docstring)."""
+def is_flat(found: Detected, frame_width: int) -> bool:
+    """Whether `found` (in a frame `frame_width` pixels wide) is a person whose whole
+    height shows and stays below `PERSON_MIN_TOP_M` (see the module docstring)."""
     det = found.detection
-    if det.class_name != "person" or det.bbox[1] == 0 or len(found.points_world) == 0:
+    u0, v0, u1, _ = det.bbox
+    cut = v0 == 0 or u0 == 0 or u1 >= frame_width
+    if det.class_name != "person" or cut or len(found.points_world) == 0:
         return False
     top = float(np.quantile(found.points_world[:, 2], TOP_QUANTILE))
     return top < PERSON_MIN_TOP_M
 
 
-def drop_self(detected: list[Detected]) -> tuple[list[Detected], int]:
-    """The detections that are neither the robot itself nor a person lying flat
-    (`is_flat`), and how many were."""
-    kept = [d for d in detected if not is_self(d.detection) and not is_flat(d)]
+def drop_self(detected: list[Detected], frame_width: int) -> tuple[list[Detected], int]:
+    """The detections (of a frame `frame_width` pixels wide) that are neither the robot
+    itself nor a person lying flat (`is_flat`), and how many were."""
+    kept = [d for d in detected if not is_self(d.detection) and not is_flat(d, frame_width)]
     return kept, len(detected) - len(kept)

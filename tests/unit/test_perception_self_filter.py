@@ -17,12 +17,15 @@ from services.perception.self_filter import (
     is_self,
 )
 
+#: The frame's width, pixels.
+W = 320
 
-def _det(cls: str, x: float, y: float, top_row: int = 0) -> Detection:
+
+def _det(cls: str, x: float, y: float, top_row: int = 0, left: int = 100) -> Detection:
     return Detection(
         class_name=cls,
         score=0.8,
-        bbox=(0, top_row, 2, top_row + 2),
+        bbox=(left, top_row, left + 2, top_row + 2),
         mask=to_wire(np.ones((2, 2), np.uint8)),
         centroid_in_base_yaw=(x, y, 0.6),
         centroid_in_world=(x, y, 0.6),
@@ -52,7 +55,7 @@ def test_people_outside_and_artifacts_anywhere_are_kept() -> None:
         Detected(_det("person", 3.0, 1.0), np.zeros((0, 3))),
         Detected(_det("bottle", 0.5, 0.0), np.zeros((0, 3))),
     ]
-    kept, dropped = drop_self(detected)
+    kept, dropped = drop_self(detected, W)
     assert dropped == 1
     assert [d.detection.class_name for d in kept] == ["person", "bottle"]
 
@@ -66,20 +69,22 @@ def _points(top_z: float, n: int = 200) -> np.ndarray:
 def test_a_person_whose_whole_height_shows_below_half_a_metre_lies_flat_and_is_dropped() -> None:
     """A bottle knocked to the floor, read as a person: its top shows, 7 cm up."""
     lying = Detected(_det("person", 3.0, 0.0, top_row=180), _points(0.07))
-    assert is_flat(lying)
+    assert is_flat(lying, W)
     low = PERSON_MIN_TOP_M - 0.05
-    assert is_flat(Detected(_det("person", 3.0, 0.0, top_row=120), _points(low)))
+    assert is_flat(Detected(_det("person", 3.0, 0.0, top_row=120), _points(low)), W)
     stray = _points(0.07)
     stray[:3, 2] = 1.8  # a few stray points high up do not make it stand
-    assert is_flat(Detected(_det("person", 3.0, 0.0, top_row=180), stray))
-    kept, dropped = drop_self([lying, Detected(_det("person", 3.0, 1.0, 10), _points(1.7))])
+    assert is_flat(Detected(_det("person", 3.0, 0.0, top_row=180), stray), W)
+    kept, dropped = drop_self([lying, Detected(_det("person", 3.0, 1.0, 10), _points(1.7))], W)
     assert dropped == 1 and len(kept) == 1
 
 
-def test_a_person_cut_by_the_frames_upper_edge_or_standing_and_artifacts_are_kept() -> None:
+def test_a_person_cut_by_the_frames_edges_or_standing_and_artifacts_are_kept() -> None:
     legs = Detected(_det("person", 1.0, 0.0, top_row=0), _points(0.4))  # the rest above
-    assert not is_flat(legs)
-    assert not is_flat(Detected(_det("person", 3.0, 0.0, top_row=40), _points(1.7)))
+    assert not is_flat(legs, W)
+    for left in (0, W - 2):  # a sliver of a leg at a side edge
+        assert not is_flat(Detected(_det("person", 1.0, 0.0, 120, left), _points(0.4)), W)
+    assert not is_flat(Detected(_det("person", 3.0, 0.0, top_row=40), _points(1.7)), W)
     under_a_table = Detected(_det("person", 3.0, 0.0, top_row=90), _points(0.75))
-    assert not is_flat(under_a_table)
-    assert not is_flat(Detected(_det("bottle", 3.0, 0.0, top_row=180), _points(0.07)))
+    assert not is_flat(under_a_table, W)
+    assert not is_flat(Detected(_det("bottle", 3.0, 0.0, top_row=180), _points(0.07)), W)
