@@ -6,8 +6,8 @@ the candidates a recovery tries when the first is not where the map says. A pers
 be named by id, or as `person` (the nearest mapped person). An object handed over is
 no candidate until somebody puts it down again (`put_back`: the map saw it since, away
 from everyone). Which wrist detection is the target is `common.sightings.pick_detection`'s
-rule. Pure apart from the port's map
-queries, which raise `Unavailable` when the map does not answer.
+rule. Pure apart from the port's map queries, which raise `Unavailable` when the map
+does not answer.
 """
 
 from __future__ import annotations

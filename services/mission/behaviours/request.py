@@ -57,7 +57,7 @@ class SelectTarget(MissionBehaviour):
             except Unavailable as exc:
                 return self.fail("unavailable", f"the semantic map did not answer: {exc}")
             handed = self.ctx.handed
-            if back := [e for e in found if e.id in handed and self._put_back(e, handed[e.id])]:
+            if back := self._put_back([e for e in found if e.id in handed]):
                 for e in back:
                     person, at = handed.pop(e.id)
                     x, y = e.position_in_world[:2]
@@ -112,13 +112,17 @@ class SelectTarget(MissionBehaviour):
         self.feedback_message = f"target {map_id}"
         return Status.SUCCESS
 
-    def _put_back(self, entity: MapEntity, handed: tuple[str, int]) -> bool:
-        """`targets.put_back` with the map's people (not, when the map does not answer)."""
+    def _put_back(self, handed: list[MapEntity]) -> list[MapEntity]:
+        """Those of `handed` (entries handed over) put down again (`targets.put_back`,
+        the map's people asked once); none when the map does not answer."""
+        if not handed:
+            return []
         try:
             people = self.port.people()
         except Unavailable:
-            return False
-        return targets.put_back(entity, handed[1], people)
+            return []
+        at = self.ctx.handed
+        return [e for e in handed if targets.put_back(e, at[e.id][1], people)]
 
 
 def held_from_before(leaf: MissionBehaviour) -> tuple[str, str] | None:
