@@ -10,7 +10,8 @@ than the paper's identity rotation:
   reaches it — low grasps come from a little above; y (the jaw pivot) up along the
   cylinder, so z (fixed jaw → moving jaw) is horizontal and the jaws close across it —
   `services.wbc.reach.side_grasp`'s frame. Held low on the body (a bottle's neck is
-  narrow), clear of the surface it stands on.
+  narrow), clear of the surface it stands on, a bottle 1 cm deep in the jaws
+  (`SIDE_GRASP_DEPTH`).
 - top grasp (boxes): x down (tilted `top_tilt_rad` away from the robot, for reach), z
   across the box's shorter side, perpendicular to its long faces (the sign nearer the
   line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
@@ -49,6 +50,14 @@ from common.robot import GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 #: Classes whose upright cylinder fit gets a side grasp, and where along the visible
 #: height (0 bottom, 1 top) the TCP holds it: a bottle's body is its lower 3/4.
 SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
+#: How far (m) past the fitted axis, along the line of sight, a side grasp puts the TCP:
+#: the object deeper in the jaws. The moving jaw's pad is 4.5 cm long and ends about 1 cm
+#: past the TCP, and the jaws' wedge pushes a held cylinder toward their tips; hall seed
+#: 3's bottle (r 2.4 cm), its axis fitted 1.4 cm short, sat 3 mm from that pad's end,
+#: crept 7 mm out over a 45 s carry and fell as the arm presented it. A bottle 1 cm
+#: deeper creeps no faster (`tests/unit/test_robot.py`) and a 3 cm one still clears the
+#: open jaw by 6.7 mm on the way in; cans (short and wide, up to 3.3 cm) stay where fitted.
+SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.0}
 TOP_GRASP_CLASSES = ("box",)
 #: Where a box too high for a top grasp is held from the side (0 bottom, 1 top).
 BOX_SIDE_HEIGHT = 0.5
@@ -245,6 +254,7 @@ def grasp_from_detection(
     if kind == "side":
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
+        centre[:2] += SIDE_GRASP_DEPTH[det.class_name] * sight / np.linalg.norm(sight)
         pitch = _side_pitch(centre, T_world_base, p)
         gap = tcp_reach_gap(_in_base(centre, T_world_base), pitch)
         if gap > p.reach_slack_m:  # on the floor: the trunk cannot stoop that far

@@ -14,6 +14,7 @@ from common.messages.perception import Detection
 from common.messages.wbc import Reach
 from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
+    SIDE_GRASP_DEPTH,
     GraspParams,
     GraspPoseError,
     grasp_from_detection,
@@ -92,8 +93,11 @@ def test_a_side_grasp_approaches_from_the_shoulder_and_closes_across_the_cylinde
         sight[2] = 0.0
         assert approach[2] == pytest.approx(0.0, abs=1e-9)
         assert approach @ sight / np.linalg.norm(sight) == pytest.approx(1.0, abs=1e-9)
-        # The TCP is on the axis (x, y), below its mid-height on a bottle's body.
-        assert np.allclose(H[:2, 3], axis_w[:2], atol=1e-9)
+        # The TCP is on the line of sight 1 cm past the axis (the bottle deeper in the
+        # jaws), below its mid-height on a bottle's body.
+        deeper = SIDE_GRASP_DEPTH["bottle"] * sight[:2] / np.linalg.norm(sight)
+        assert SIDE_GRASP_DEPTH["bottle"] == pytest.approx(0.01)
+        assert np.allclose(H[:2, 3], axis_w[:2] + deeper, atol=1e-9)
         assert axis_w[2] - 0.1 + 0.05 <= H[2, 3] < axis_w[2]
         # Jaw pivot (y) along the cylinder; the jaws close (z) across it, horizontally.
         assert R[:, 1] @ np.array([0.0, 0.0, 1.0]) == pytest.approx(1.0)

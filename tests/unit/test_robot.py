@@ -32,6 +32,7 @@ from common.robot_description import (
     gripper_stl_path,
     read_stl,
 )
+from services.mission.grasp_pose import SIDE_GRASP_DEPTH
 from services.sim import mjcf
 
 PinModels = tuple[pin.Model, pin.GeometryModel]
@@ -278,14 +279,17 @@ def test_postures_are_within_joint_limits() -> None:
     assert pytest.approx(0.5277, abs=1e-3) == robot.STAND_BASE_HEIGHT_M
 
 
-def jaw_distances(model: mujoco.MjModel, data: mujoco.MjData, gripper: float) -> dict[str, float]:
-    """Distance from a 6 cm bottle, centred on gripper_tcp along its y, to each gripper geom."""
+def jaw_distances(
+    model: mujoco.MjModel, data: mujoco.MjData, gripper: float, depth_m: float = 0.0
+) -> dict[str, float]:
+    """Distance from a 6 cm bottle, centred on gripper_tcp along its y (`depth_m` deeper
+    along its x), to each gripper geom."""
     q = robot.standing_q("ready")
     q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = gripper
     data.qpos[mjcf.mj_indices(model, "b1/").qpos] = mjcf.q_pin_to_mj(q)
     mujoco.mj_forward(model, data)
     tcp = data.site("b1/gripper_tcp")
-    data.mocap_pos[0] = tcp.xpos
+    data.mocap_pos[0] = tcp.xpos - depth_m * tcp.xmat.reshape(3, 3)[:, 0]
     data.mocap_quat[0] = quat_xyzw_to_wxyz(
         matrix_to_quat_xyzw(tcp.xmat.reshape(3, 3) @ rot_x(-math.pi / 2))
     )  # z -> tcp y
@@ -305,15 +309,21 @@ def test_a_6cm_bottle_fits_between_the_open_jaws_and_the_closed_jaws_hit_it(
     opened = jaw_distances(model, data, robot.GRIPPER_OPEN)
     assert min(opened.values()) > 0.003, opened
     assert opened["gripper_jaw_fixed"] < 0.01  # it sits right on the fixed pad
+    # held as deep as a side grasp holds a bottle, it still passes the open jaw
+    deeper = jaw_distances(model, data, robot.GRIPPER_OPEN, SIDE_GRASP_DEPTH["bottle"])
+    assert min(deeper.values()) > 0.003, deeper
     closed = jaw_distances(model, data, robot.GRIPPER_CLOSED)
     assert closed["gripper_jaw_moving"] < 0.0, closed
 
 
-def hold_bottle(seconds: float, shake_rad: float = 0.0) -> tuple[float, float]:
+def hold_bottle(
+    seconds: float, shake_rad: float = 0.0, depth_m: float = 0.0
+) -> tuple[float, float]:
     """Base welded in place, arm held in `ready` by PD, 3 N m on the jaw, gravity on: a
-    6 cm, 400 g bottle closed on for 0.5 s, then left to gravity for `seconds` while the
-    arm's first joint swings ±`shake_rad` at 1.5 Hz (a walk's sway, harder). Returns the
-    bottle's slip from the TCP (m) and the jaw angle (rad) at the end."""
+    6 cm, 400 g bottle, its axis `depth_m` deeper in the jaws than the TCP, closed on for
+    0.5 s, then left to gravity for `seconds` while the arm's first joint swings
+    ±`shake_rad` at 1.5 Hz (a walk's sway, harder). Returns the bottle's slip from the
+    TCP (m) and the jaw angle (rad) at the end."""
     spec = mjcf.robot_spec()
     spec.body("base").pos = [0.0, 0.0, robot.STAND_BASE_HEIGHT_M]
     spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1="base", objtype=mujoco.mjtObj.mjOBJ_BODY)
@@ -328,7 +338,8 @@ def hold_bottle(seconds: float, shake_rad: float = 0.0) -> tuple[float, float]:
     tcp = data.site(robot.TCP_FRAME)
     R_tcp = tcp.xmat.reshape(3, 3)
     adr = model.joint("bottle").qposadr[0]
-    data.qpos[adr : adr + 3] = tcp.xpos - 0.004 * R_tcp[:, 2]  # 1 mm off the fixed pad
+    # 1 mm off the fixed pad
+    data.qpos[adr : adr + 3] = tcp.xpos - 0.004 * R_tcp[:, 2] - depth_m * R_tcp[:, 0]
     data.qpos[adr + 3 : adr + 7] = quat_xyzw_to_wxyz(
         matrix_to_quat_xyzw(R_tcp @ rot_x(-math.pi / 2))
     )
@@ -366,6 +377,15 @@ def test_a_swung_bottle_does_not_creep_out_of_the_jaws() -> None:
     softer friction cone (impratio 10) it crept 1.0 mm in these 4 s (0.1 mm at 100) and
     slipped out of carried bottles."""
     slip, jaw = hold_bottle(4.0, shake_rad=0.3)
+    assert slip < 0.0005, slip
+    assert robot.GRIPPER_OPEN < jaw < -0.5
+
+
+def test_a_bottle_held_deeper_in_the_jaws_creeps_no_faster() -> None:
+    """`grasp_pose.SIDE_GRASP_DEPTH`: a bottle 1 cm deeper opens the jaws a few degrees
+    more (a wider wedge) and still holds as well, with 1 cm more of the moving pad
+    before its end."""
+    slip, jaw = hold_bottle(4.0, shake_rad=0.3, depth_m=SIDE_GRASP_DEPTH["bottle"])
     assert slip < 0.0005, slip
     assert robot.GRIPPER_OPEN < jaw < -0.5
 
