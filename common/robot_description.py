@@ -43,6 +43,9 @@ TCP_FRAME = "gripper_tcp"
 # the fixed (lower) jaw, negative angles swing it up, open. Pads meet at stator z = -9 mm.
 GRIPPER_CLOSED = 0.0
 GRIPPER_OPEN = -1.0
+# Opened wider for a top grasp (joint limit -1.5707): open, a 6.3 cm box 3 cm into the jaws
+# has 2.8 mm to the moving jaw's tip; at -1.3 rad, 24 mm.
+GRIPPER_WIDE = -1.3
 # gripper_tcp in the stator frame: x the approach direction (the stator's x), z from the
 # fixed jaw towards the moving one, y along the jaw pivot: an upright bottle held in a side
 # grasp lies along y (joint6 = +pi/2 turns y up). It sits mid-pad, 35 mm above the fixed

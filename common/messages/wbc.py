@@ -50,6 +50,8 @@ class Reach(Message, frozen=True, tag="reach"):
     approach_axis: unit vector in H's frame along which the gripper approaches;
     pregrasp_m: the approach starts this far back along it.
     speed: the share of the arm's speeds it moves at (the mission's, near people).
+    jaw: how far an empty jaw opens for it: `open` (`robot.GRIPPER_OPEN`) or `wide`
+    (`robot.GRIPPER_WIDE`, for a box taken from above).
     """
 
     H: Mat4
@@ -58,6 +60,7 @@ class Reach(Message, frozen=True, tag="reach"):
     approach_axis: Vec3 = (1.0, 0.0, 0.0)
     pregrasp_m: NonNegative = 0.08
     speed: SpeedShare = 1.0
+    jaw: Literal["open", "wide"] = "open"
 
 
 class Grasp(Message, frozen=True, tag="grasp"):

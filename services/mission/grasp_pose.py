@@ -15,7 +15,8 @@ than the paper's identity rotation:
 - top grasp (boxes): x down (tilted `top_tilt_rad` away from the robot, for reach), z
   across the box's shorter side, perpendicular to its long faces (the sign nearer the
   line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
-  just below the top face. A box whose top grasp lies out of the arm's reach
+  just below the top face, the jaws opened wide and the box's middle a little toward the
+  moving jaw (`TOP_GRASP_OFFSET_M`). A box whose top grasp lies out of the arm's reach
   (`common.robot.tcp_reach_gap` over `reach_slack_m`: a tall box on a bench) is held
   from the side instead: x along its long faces (the sign away from the shoulder),
   nose-down, the jaws closing across its shorter side, at half its visible height — if
@@ -59,6 +60,15 @@ SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 #: open jaw by 6.7 mm on the way in; cans (short and wide, up to 3.3 cm) stay where fitted.
 SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.0}
 TOP_GRASP_CLASSES = ("box",)
+#: How far (m) toward the moving jaw a top grasp puts the box's middle, in the jaws opened
+#: wide (`robot.GRIPPER_WIDE`): the TCP sits 3.5 cm from the fixed pad, made for a 6 cm
+#: bottle; a 6.3 cm box centred on it had 3.5 mm to the fixed jaw and 2.8 mm to the open
+#: moving one. Hall seed 0's top grasp stopped 4.5 cm into its descent: the fixed pad's
+#: tip corner on the box's top edge (in the jaws opened wide and 6 mm over, too: the
+#: box's middle 4.4 mm off the plan and 2.4° of twist took the 9.5 mm). At 12 mm: 15.5 mm
+#: to the fixed jaw, 21.6 mm to the moving one; closing, the moving jaw pushes the box
+#: the rest of the way.
+TOP_GRASP_OFFSET_M = 0.012
 #: Where a box too high for a top grasp is held from the side (0 bottom, 1 top).
 BOX_SIDE_HEIGHT = 0.5
 #: The side grasps' pitches tried, from `GraspParams.pitch_rad` up (rad).
@@ -118,7 +128,8 @@ class GraspParams:
 @dataclass(frozen=True)
 class GraspPlan:
     """H: `gripper_tcp`'s goal (4×4) in `frame` as of `stamp_ns`; approach_axis in H's own
-    frame; pregrasp_m back along it; kind: side or top."""
+    frame; pregrasp_m back along it; kind: side or top; jaw: how far the empty jaw opens
+    for it (`Reach.jaw`)."""
 
     H: FloatArray
     frame: Literal["base", "world"]
@@ -126,6 +137,7 @@ class GraspPlan:
     pregrasp_m: float
     kind: Literal["side", "top"]
     stamp_ns: int
+    jaw: Literal["open", "wide"] = "open"
 
     def reach(self) -> Reach:
         """The WBC's arm goal for this plan."""
@@ -135,6 +147,7 @@ class GraspPlan:
             stamp_ns=self.stamp_ns,
             approach_axis=self.approach_axis,
             pregrasp_m=self.pregrasp_m,
+            jaw=self.jaw,
         )
 
     def lifted(self, dz_m: float) -> GraspPlan:
@@ -251,6 +264,7 @@ def grasp_from_detection(
         raise GraspPoseError(f"the {det.class_name} is at the shoulder: no line of sight")
     bottom, top = axis[2] - 0.5 * extent[2], axis[2] + 0.5 * extent[2]
     centre = axis.copy()
+    jaw: Literal["open", "wide"] = "open"
     if kind == "side":
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
@@ -278,6 +292,7 @@ def grasp_from_detection(
         centre[2] = max(top - p.top_depth_m, axis[2])
         R = top_rotation(sight, across, p.top_tilt_rad)
         gap = _top_gap(R, centre, T_world_base)
+        jaw = "wide"
         if gap > p.reach_slack_m:
             # Too high for a top grasp: from the side, along the long faces, from above.
             along = np.array([-across[1], across[0]])
@@ -290,11 +305,13 @@ def grasp_from_detection(
                     f"(at most {math.degrees(p.box_side_max_off_rad):.0f}° for a side grasp): "
                     "it needs a stance along its long side"
                 )
-            kind = "side"
+            kind, jaw = "side", "open"
             z = bottom + BOX_SIDE_HEIGHT * extent[2]
             centre = axis.copy()
             centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
             R = side_rotation(along, GRASP_PITCH_RAD[1])
+    if kind == "top":  # the box's middle TOP_GRASP_OFFSET_M toward the moving jaw
+        centre -= TOP_GRASP_OFFSET_M * R[:, 2]
     return GraspPlan(
         H=make_T(R, centre),
         frame="world" if world else "base",
@@ -302,6 +319,7 @@ def grasp_from_detection(
         pregrasp_m=p.pregrasp_m,
         kind=kind,
         stamp_ns=stamp_ns,
+        jaw=jaw,
     )
 
 

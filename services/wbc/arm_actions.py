@@ -12,7 +12,7 @@ reached (a frozen pose or joint target), so Grasp after Reach keeps the gripper 
   `reach_tol_m` and `reach_tol_rad` after the motion (`held_tol_*` while gripping: the
   controller's model does not know the payload; its integral action takes the sag out
   within about a second, not at once), fails after `settle_s` more. Reach opens the jaw
-  unless it is gripping.
+  (as wide as its `jaw` says) unless it is gripping.
 - Grasp: close under min(max_effort, `wbc.grip_effort_max_nm`) until `GraspDetector` says held
   (succeeded) or the jaw closes on nothing or `grasp_timeout_s` passes (failed).
 - Release: open the jaw; succeeded once open (or after `release_s`).
@@ -216,7 +216,8 @@ class ArmActions:
             T_prev = T
         self.T_goal, self._T_hold = H, None
         if self.jaw != "grip":
-            self.jaw, self._jaw_angle = "open", robot.GRIPPER_OPEN
+            wide = goal.jaw == "wide"
+            self.jaw, self._jaw_angle = "open", robot.GRIPPER_WIDE if wide else robot.GRIPPER_OPEN
 
     def _start_joints(
         self, q_goal: FloatArray, now_ns: int, q_now: FloatArray, speed: float = 1.0

@@ -15,6 +15,7 @@ from common.messages.wbc import Reach
 from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
     SIDE_GRASP_DEPTH,
+    TOP_GRASP_OFFSET_M,
     GraspParams,
     GraspPoseError,
     grasp_from_detection,
@@ -160,7 +161,11 @@ def test_a_top_grasp_comes_down_with_the_jaws_across_the_shorter_side(
         assert abs(closing @ short_side) > 0.9  # the jaws close across the short side
         top = det.axis_in_world[2] + extent[2] / 2
         assert top - 0.05 < H[2, 3] < top
-        assert np.allclose(H[:2, 3], np.array(det.axis_in_world)[:2], atol=1e-9)
+        # Opened wide, the box's middle TOP_GRASP_OFFSET_M from the TCP toward the moving
+        # jaw (the TCP's z), on the box's axis.
+        assert plan.jaw == "wide" and plan.reach().jaw == "wide"
+        middle = H[:3, 3] + TOP_GRASP_OFFSET_M * closing
+        assert np.allclose(middle[:2], np.array(det.axis_in_world)[:2], atol=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -247,6 +252,7 @@ def test_a_box_too_high_for_a_top_grasp_is_held_from_the_side_across_its_short_s
     assert abs(abs(R[:, 2] @ short_side) - 1.0) < 1e-9  # the jaws close across 6.2 cm
     assert np.isclose(H[2, 3], high.axis_in_world[2])  # half way up
     assert np.allclose(H[:2, 3], np.array(high.axis_in_world)[:2], atol=1e-9)
+    assert plan.jaw == "open"
 
 
 def test_a_low_side_grasp_comes_from_a_little_above_at_the_least_pitch_that_reaches() -> None:

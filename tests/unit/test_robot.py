@@ -32,7 +32,7 @@ from common.robot_description import (
     gripper_stl_path,
     read_stl,
 )
-from services.mission.grasp_pose import SIDE_GRASP_DEPTH
+from services.mission.grasp_pose import SIDE_GRASP_DEPTH, TOP_GRASP_OFFSET_M, GraspParams
 from services.sim import mjcf
 
 PinModels = tuple[pin.Model, pin.GeometryModel]
@@ -314,6 +314,41 @@ def test_a_6cm_bottle_fits_between_the_open_jaws_and_the_closed_jaws_hit_it(
     assert min(deeper.values()) > 0.003, deeper
     closed = jaw_distances(model, data, robot.GRIPPER_CLOSED)
     assert closed["gripper_jaw_moving"] < 0.0, closed
+
+
+def test_a_box_taken_from_above_clears_both_wide_open_jaws() -> None:
+    """`grasp_pose.TOP_GRASP_OFFSET_M`: hall seed 0's 6.3 cm box, 3 cm into the jaws (the
+    TCP `top_depth_m` below its top), had 3.5 mm to the fixed jaw and 2.8 mm to the open
+    moving one; opened wide, its middle moved toward the moving jaw, it clears both by
+    more than the grasp's centimetre of error."""
+    spec = mjcf.robot_spec()
+    spec.body("base").pos = [0.0, 0.0, robot.STAND_BASE_HEIGHT_M]
+    box = spec.worldbody.add_body(name="box", mocap=True)
+    box.add_geom(name="box", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.0665, 0.0455, 0.0315])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+
+    def clearance(jaw: float, offset_m: float) -> dict[str, float]:
+        q = robot.standing_q("ready")
+        q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = jaw
+        data.qpos[mjcf.mj_indices(model).qpos] = mjcf.q_pin_to_mj(q)
+        mujoco.mj_forward(model, data)
+        tcp = data.site(robot.TCP_FRAME)
+        R = tcp.xmat.reshape(3, 3)  # the box's height along x, its 6.3 cm across z
+        top_depth = GraspParams().top_depth_m
+        data.mocap_pos[0] = tcp.xpos + (0.0665 - top_depth) * R[:, 0] + offset_m * R[:, 2]
+        data.mocap_quat[0] = quat_xyzw_to_wxyz(matrix_to_quat_xyzw(R))
+        mujoco.mj_forward(model, data)
+        g = model.geom("box").id
+        return {
+            b.name: mujoco.mj_geomDistance(model, data, g, model.geom(b.name).id, 0.2, None)
+            for b in GRIPPER_BOXES
+        }
+
+    before = clearance(robot.GRIPPER_OPEN, 0.0)
+    assert before["gripper_jaw_fixed"] < 0.004 and before["gripper_jaw_moving"] < 0.004
+    after = clearance(robot.GRIPPER_WIDE, TOP_GRASP_OFFSET_M)
+    assert min(after.values()) > 0.015, after
 
 
 def hold_bottle(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -52,6 +53,19 @@ def test_a_reach_succeeds_once_the_tcp_is_at_the_goal_after_the_motion() -> None
     assert end.T_world_tcp is not None
     np.testing.assert_allclose(end.T_world_tcp, goal_T, atol=1e-9)
     assert state_of(a, "g1") == "succeeded"
+
+
+def test_a_reach_for_a_top_grasp_opens_the_jaw_wide_and_a_gripping_jaw_stays_closed() -> None:
+    a = ArmActions(WbcSettings())
+    goal = msgspec.structs.replace(reach_goal(make_T(np.eye(3), [0.6, 0.0, 0.9])), jaw="wide")
+    a.start("g1", goal, 0, obs(), no_pose)
+    assert a.update(10 * MS, obs()).gripper_angle == robot.GRIPPER_WIDE < robot.GRIPPER_OPEN
+    a.start("g2", Grasp(), 20 * MS, obs(), no_pose)
+    for k in range(3, 200):
+        a.update(k * 10 * MS, obs(angle=-0.4, effort=4.0))
+    assert a.held
+    a.start("g3", goal, 2_000 * MS, obs(angle=-0.4), no_pose)  # a lift: the jaw grips on
+    assert a.update(2_010 * MS, obs(angle=-0.4)).gripper_effort is not None
 
 
 def test_a_reach_goes_through_the_pregrasp_pose_on_the_approach_axis() -> None:
