@@ -15,8 +15,9 @@ than the paper's identity rotation:
 - top grasp (boxes): x down (tilted `top_tilt_rad` away from the robot, for reach), z
   across the box's shorter side, perpendicular to its long faces (the sign nearer the
   line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
-  just below the top face, the jaws opened wide and the box's middle a little toward the
-  moving jaw (`TOP_GRASP_OFFSET_M`). A box whose top grasp lies out of the arm's reach
+  just below the top face, coming down in the jaws opened wide with the box's middle a
+  little toward the moving jaw, then moving over to bring the fixed jaw to the box
+  (`TOP_GRASP_OFFSET_M`, `TOP_CLOSE_IN_M`). A box whose top grasp lies out of the arm's reach
   (`common.robot.tcp_reach_gap` over `reach_slack_m`: a tall box on a bench) is held
   from the side instead: x along its long faces (the sign away from the shoulder),
   nose-down, the jaws closing across its shorter side, at half its visible height — if
@@ -60,15 +61,19 @@ SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 #: open jaw by 6.7 mm on the way in; cans (short and wide, up to 3.3 cm) stay where fitted.
 SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.0}
 TOP_GRASP_CLASSES = ("box",)
-#: How far (m) toward the moving jaw a top grasp puts the box's middle, in the jaws opened
-#: wide (`robot.GRIPPER_WIDE`): the TCP sits 3.5 cm from the fixed pad, made for a 6 cm
-#: bottle; a 6.3 cm box centred on it had 3.5 mm to the fixed jaw and 2.8 mm to the open
-#: moving one. Hall seed 0's top grasp stopped 4.5 cm into its descent: the fixed pad's
-#: tip corner on the box's top edge (in the jaws opened wide and 6 mm over, too: the
-#: box's middle 4.4 mm off the plan and 2.4° of twist took the 9.5 mm). At 12 mm: 15.5 mm
-#: to the fixed jaw, 21.6 mm to the moving one; closing, the moving jaw pushes the box
-#: the rest of the way.
+#: How far (m) toward the moving jaw a top grasp comes down with the box's middle, in the
+#: jaws opened wide (`robot.GRIPPER_WIDE`), and how far it then moves over (`closed_in`)
+#: before the jaw closes: the fixed pad 1.5 mm from a 6.3 cm box's face. The TCP sits
+#: 3.5 cm from the fixed pad, made for a 6 cm bottle; a 6.3 cm box centred on it had 3.5 mm
+#: to the fixed jaw and 2.8 mm to the open moving one, and hall seed 0's top grasp stopped
+#: 4.5 cm into its descent, the fixed pad's tip corner on the box's top edge (with 9.5 mm
+#: of room, too: the box's middle 4.4 mm off the plan and 2.4° of twist took it). Coming
+#: down 12 mm over: 15.5 mm to the fixed jaw, 21.6 mm to the moving one. Closed from
+#: there, the moving jaw pressed a 6.9 cm box down onto its table and did not push it
+#: across (hall seed 17): held 15 mm off the fixed pad, in a 56° wedge, it crept out and
+#: fell during the carry; hence the fixed pad is brought to the box first.
 TOP_GRASP_OFFSET_M = 0.012
+TOP_CLOSE_IN_M = 0.014
 #: Where a box too high for a top grasp is held from the side (0 bottom, 1 top).
 BOX_SIDE_HEIGHT = 0.5
 #: The side grasps' pitches tried, from `GraspParams.pitch_rad` up (rad).
@@ -93,8 +98,10 @@ class GraspParams:
     tcp_reach_gap`: the whole-body controller stoops the trunk for the rest);
     top_tilt_rad: top grasps' tilt from vertical toward the robot; clearance_m: the TCP
     at least this far above the visible bottom (the gripper reaches 4 cm below its TCP);
-    top_depth_m: top grasps' TCP below the top face; pregrasp_m: the approach starts this
-    far back; max_width_m: the widest the jaws hold;
+    top_depth_m: top grasps' TCP below the top face (4.5 cm: a box held only by its upper
+    part creeps out of the jaws' wedge as the robot walks, 0.2-0.3 mm/s for a 6.8 cm box
+    in a 54° wedge, and fell from 3 cm after 40 s of carrying, hall seed 16);
+    pregrasp_m: the approach starts this far back; max_width_m: the widest the jaws hold;
     width_slack_m: a measured width up to this much wider is still tried (one view's fit
     overestimates: hall seed 15's box measured 8.1 cm across its 6.2 cm side, its yaw
     10° off, and the closing jaws turn a box square); reach_slack_m: a box whose top
@@ -110,7 +117,7 @@ class GraspParams:
     comfort_gap_m: float = 0.02
     top_tilt_rad: float = 0.3
     clearance_m: float = 0.05
-    top_depth_m: float = 0.03
+    top_depth_m: float = 0.045
     pregrasp_m: float = 0.12
     max_width_m: float = 0.075
     width_slack_m: float = 0.015
@@ -129,7 +136,8 @@ class GraspParams:
 class GraspPlan:
     """H: `gripper_tcp`'s goal (4×4) in `frame` as of `stamp_ns`; approach_axis in H's own
     frame; pregrasp_m back along it; kind: side or top; jaw: how far the empty jaw opens
-    for it (`Reach.jaw`)."""
+    for it (`Reach.jaw`); close_in_m: how far the TCP then moves along its z (the fixed
+    pad to the object) before the jaw closes."""
 
     H: FloatArray
     frame: Literal["base", "world"]
@@ -138,6 +146,7 @@ class GraspPlan:
     kind: Literal["side", "top"]
     stamp_ns: int
     jaw: Literal["open", "wide"] = "open"
+    close_in_m: float = 0.0
 
     def reach(self) -> Reach:
         """The WBC's arm goal for this plan."""
@@ -150,14 +159,21 @@ class GraspPlan:
             jaw=self.jaw,
         )
 
+    def closed_in(self) -> GraspPlan:
+        """The grasp pose moved `close_in_m` along the TCP's z, reached straight: where
+        the jaw closes."""
+        H = np.array(self.H, dtype=float)
+        H[:3, 3] += self.close_in_m * H[:3, 2]
+        return replace(self, H=H, pregrasp_m=0.0, close_in_m=0.0)
+
     def lifted(self, dz_m: float) -> GraspPlan:
-        """The grasp pose raised `dz_m` in the world, reached straight (no pre-grasp):
-        the lift that takes the object off its surface before stowing."""
+        """The closed-in grasp pose raised `dz_m` in the world, reached straight (no
+        pre-grasp): the lift that takes the object off its surface before stowing."""
         if self.frame != "world":
             raise GraspPoseError("a lift needs a world-frame plan (give T_world_base)")
-        H = np.array(self.H, dtype=float)
+        H = np.array(self.closed_in().H, dtype=float)
         H[2, 3] += dz_m
-        return replace(self, H=H, pregrasp_m=0.0)
+        return replace(self, H=H, pregrasp_m=0.0, close_in_m=0.0)
 
     def backed_out(self) -> GraspPlan:
         """The pre-grasp pose (H moved `pregrasp_m` back along the approach), reached
@@ -320,6 +336,7 @@ def grasp_from_detection(
         kind=kind,
         stamp_ns=stamp_ns,
         jaw=jaw,
+        close_in_m=TOP_CLOSE_IN_M if kind == "top" else 0.0,
     )
 
 

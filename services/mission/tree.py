@@ -57,7 +57,7 @@ from common.messages.base import NS_PER_S
 from common.messages.mission import STAGES, MissionReason, MissionRequest
 from common.messages.wbc import Grasp, Posture, Release
 from services.mission.behaviours.abort import Abort, halt
-from services.mission.behaviours.arm import ArmAction, CheckHeld, GraspReach
+from services.mission.behaviours.arm import ArmAction, CheckHeld, GraspReach, NoCloseIn
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
@@ -164,6 +164,13 @@ def build_tree(ctx: Context) -> Sequence:
                 _seq(
                     "grasp_it",
                     GraspReach(ctx, lambda b: b.get(GRASP_PLAN).reach(), st[3]),
+                    # a top grasp comes down with room, then brings the fixed jaw to the
+                    # box (stopped short by it: close anyway)
+                    Selector("closed_in", memory=True, children=[
+                        NoCloseIn(ctx, st[3]),
+                        ArmAction(ctx, "close_in", lambda b: b.get(GRASP_PLAN).closed_in().reach(),
+                                  "grasp_failed", s.reach_timeout_s, st[3], must_succeed=False),
+                    ]),
                     ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed",
                               s.grasp_timeout_s, st[3]),
                     CheckHeld(ctx, st[3]),

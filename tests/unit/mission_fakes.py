@@ -490,10 +490,17 @@ class StubPlan:
     frame: Literal["base", "world"] = "world"
     possible: bool = True
     pregrasp_m: float = 0.08
+    close_in_m: float = 0.0
 
     def reach(self) -> Reach:
-        H = tuple(np.eye(4).ravel().tolist())
-        return Reach(H=H, frame=self.frame, stamp_ns=0, pregrasp_m=self.pregrasp_m)
+        H = np.eye(4)
+        H[:3, 3] = (0.0, 0.0, -self.close_in_m)  # the close-in moves it back to 0
+        return Reach(
+            H=tuple(H.ravel().tolist()), frame=self.frame, stamp_ns=0, pregrasp_m=self.pregrasp_m
+        )
+
+    def closed_in(self) -> StubPlan:
+        return StubPlan(self.kind, self.frame, self.possible, 0.0)
 
     def lifted(self, dz_m: float) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, 0.0)
@@ -523,9 +530,14 @@ class StubPull:
 
 
 def stub_algorithms(
-    grasp_possible: bool = True, pull: bool = True, pull_on_try: int = 1, grasp_plans: int = -1
+    grasp_possible: bool = True,
+    pull: bool = True,
+    pull_on_try: int = 1,
+    grasp_plans: int = -1,
+    close_in_mm: int = 0,
 ) -> Algorithms:
-    """`grasp_plans`: how many grasps are planned before none is possible (−1: all)."""
+    """`grasp_plans`: how many grasps are planned before none is possible (−1: all);
+    `close_in_mm`: the plans' close-in move (a top grasp's)."""
     tries = itertools.count(1)  # the detectors made: one per offer
     plans = itertools.count(1)
 
@@ -534,7 +546,7 @@ def stub_algorithms(
             raise StubGraspError("the object lies on its side")
         if 0 <= grasp_plans < next(plans):
             raise StubGraspError("the bottle's side grasp is out of the arm's reach")
-        return StubPlan()
+        return StubPlan(close_in_m=close_in_mm / 1000)
 
     return Algorithms(
         approacher=StubApproach,

@@ -15,6 +15,7 @@ from common.messages.wbc import Reach
 from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
     SIDE_GRASP_DEPTH,
+    TOP_CLOSE_IN_M,
     TOP_GRASP_OFFSET_M,
     GraspParams,
     GraspPoseError,
@@ -166,6 +167,15 @@ def test_a_top_grasp_comes_down_with_the_jaws_across_the_shorter_side(
         assert plan.jaw == "wide" and plan.reach().jaw == "wide"
         middle = H[:3, 3] + TOP_GRASP_OFFSET_M * closing
         assert np.allclose(middle[:2], np.array(det.axis_in_world)[:2], atol=1e-9)
+        # Then it moves over, the fixed pad to the box, and lifts from there.
+        assert plan.close_in_m == TOP_CLOSE_IN_M > TOP_GRASP_OFFSET_M
+        closed = plan.closed_in()
+        assert closed.pregrasp_m == 0.0 and closed.close_in_m == 0.0
+        H_in = closed.in_world(T_wb)
+        assert np.allclose(H_in[:3, 3], H[:3, 3] + TOP_CLOSE_IN_M * closing, atol=1e-9)
+        if with_base:
+            lifted = plan.lifted(0.1).H
+            assert np.allclose(lifted[:3, 3], H_in[:3, 3] + [0.0, 0.0, 0.1], atol=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -252,7 +262,7 @@ def test_a_box_too_high_for_a_top_grasp_is_held_from_the_side_across_its_short_s
     assert abs(abs(R[:, 2] @ short_side) - 1.0) < 1e-9  # the jaws close across 6.2 cm
     assert np.isclose(H[2, 3], high.axis_in_world[2])  # half way up
     assert np.allclose(H[:2, 3], np.array(high.axis_in_world)[:2], atol=1e-9)
-    assert plan.jaw == "open"
+    assert plan.jaw == "open" and plan.close_in_m == 0.0
 
 
 def test_a_low_side_grasp_comes_from_a_little_above_at_the_least_pitch_that_reaches() -> None:

@@ -234,6 +234,21 @@ def test_a_reach_is_only_sent_once_the_controller_is_in_manipulate() -> None:
     assert robot.arm_goals[reach + 3][1] == Posture(name="stow")
 
 
+def test_a_top_grasp_closes_in_on_the_box_before_the_jaw_closes_and_lifts_from_there() -> None:
+    robot = small_world()
+    tree = mission(robot, close_in_mm=14)
+    assert run(tree, robot).state == "succeeded"
+    reach = next(i for i, (_, g) in enumerate(robot.arm_goals) if isinstance(g, Reach))
+    approach, close_in = robot.arm_goals[reach][1], robot.arm_goals[reach + 1][1]
+    assert isinstance(approach, Reach) and approach.pregrasp_m > 0.0
+    assert approach.H[11] == pytest.approx(-0.014)  # the stub comes down 14 mm off
+    assert isinstance(close_in, Reach) and close_in.pregrasp_m == 0.0 and close_in.H[11] == 0.0
+    assert isinstance(robot.arm_goals[reach + 2][1], Grasp)
+    lift = robot.arm_goals[reach + 3][1]
+    assert isinstance(lift, Reach) and lift.pregrasp_m == 0.0
+    assert any("close_in: Reach sent" in d for d in tree.ctx.decisions)  # type: ignore[attr-defined]
+
+
 def test_settings_change_the_handover_patience() -> None:
     robot = small_world()
     tree = mission(robot, pull=False, settings=fast_settings(handover_timeout_s=1.0))

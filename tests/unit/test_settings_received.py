@@ -390,7 +390,7 @@ def test_the_mission_receives_what_its_params_held() -> None:
         comfort_gap_m=0.02,
         top_tilt_rad=0.3,
         clearance_m=0.05,
-        top_depth_m=0.03,
+        top_depth_m=0.045,  # 0.03 until a box held by its upper part crept out (seed 16)
         pregrasp_m=0.12,
         max_width_m=0.075,
         width_slack_m=0.015,

@@ -11,6 +11,8 @@
   re-picked (hall seed 15: the gripper hit the bench under a tall box 11.7 cm short, and
   the second try tipped the robot over).
 - `CheckHeld`: the grasp detector on `wbc/status` says an object is held.
+- `NoCloseIn`: SUCCESS when the grasp plan has no close-in move (a side grasp), so the
+  tree skips it; FAILURE when it has one (a top grasp: `GraspPlan.closed_in`).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from py_trees.common import Status
 
 from common.messages.mission import MissionReason
 from common.messages.wbc import ArmGoal
-from services.mission.behaviours.base import Context, MissionBehaviour
+from services.mission.behaviours.base import GRASP_PLAN, Context, MissionBehaviour
 from services.mission.ports import PortError, Refused
 
 GoalOf = Callable[[MissionBehaviour], ArmGoal]
@@ -113,3 +115,12 @@ class CheckHeld(MissionBehaviour):
             return Status.SUCCESS
         effort = "no wbc/status" if status is None else f"effort {status.gripper_effort:.2f}"
         return self.fail("grasp_failed", f"the grasp detector does not say held ({effort})")
+
+
+class NoCloseIn(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("no_close_in", ctx, stage)
+
+    def update(self) -> Status:
+        plan = self.get(GRASP_PLAN)
+        return Status.SUCCESS if plan is None or plan.close_in_m <= 0.0 else Status.FAILURE
