@@ -280,7 +280,6 @@ def grasp_from_detection(
         raise GraspPoseError(f"the {det.class_name} is at the shoulder: no line of sight")
     bottom, top = axis[2] - 0.5 * extent[2], axis[2] + 0.5 * extent[2]
     centre = axis.copy()
-    jaw: Literal["open", "wide"] = "open"
     if kind == "side":
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
@@ -308,7 +307,6 @@ def grasp_from_detection(
         centre[2] = max(top - p.top_depth_m, axis[2])
         R = top_rotation(sight, across, p.top_tilt_rad)
         gap = _top_gap(R, centre, T_world_base)
-        jaw = "wide"
         if gap > p.reach_slack_m:
             # Too high for a top grasp: from the side, along the long faces, from above.
             along = np.array([-across[1], across[0]])
@@ -321,12 +319,13 @@ def grasp_from_detection(
                     f"(at most {math.degrees(p.box_side_max_off_rad):.0f}° for a side grasp): "
                     "it needs a stance along its long side"
                 )
-            kind, jaw = "side", "open"
+            kind = "side"
             z = bottom + BOX_SIDE_HEIGHT * extent[2]
             centre = axis.copy()
             centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
             R = side_rotation(along, GRASP_PITCH_RAD[1])
-    if kind == "top":  # the box's middle TOP_GRASP_OFFSET_M toward the moving jaw
+    from_above = kind == "top"
+    if from_above:  # down in the wide-open jaws, the box's middle toward the moving jaw
         centre -= TOP_GRASP_OFFSET_M * R[:, 2]
     return GraspPlan(
         H=make_T(R, centre),
@@ -335,8 +334,8 @@ def grasp_from_detection(
         pregrasp_m=p.pregrasp_m,
         kind=kind,
         stamp_ns=stamp_ns,
-        jaw=jaw,
-        close_in_m=TOP_CLOSE_IN_M if kind == "top" else 0.0,
+        jaw="wide" if from_above else "open",
+        close_in_m=TOP_CLOSE_IN_M if from_above else 0.0,
     )
 
 
