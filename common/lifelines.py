@@ -2,27 +2,27 @@
 
 A job (a mission request, a demo's or an eval's watch of one) depends on some services.
 `Lifelines` is what Zenoh's liveliness said about them: who is alive now, how often
-each one's token went away (a service that supervisord restarted within one tick of the
-watcher still counts: its token went, then came back), and which run of it is alive:
-every service process declares a second token with its run, a random id of that
-process (`RobotKeys.alive_run`). `Dependencies.lost()` names the first one that went
-away since the job started, as a sentence for the typed reason `dependency_lost`
+each one's token went away and when (a service that supervisord restarted within one
+tick of the watcher still counts: its token went, then came back), and which run of it
+is alive: every service process declares a second token with its run, a random id of
+that process (`RobotKeys.alive_run`). `Dependencies.lost()` names the first one that
+went away since the job started, as a sentence for the typed reason `dependency_lost`
 ("mission restarted", "navigation is gone").
 
 A token can go while its process lives: the router closes the link of a client that
 read nothing for 0.5 s (a GIL held by one long call; `deploy/zenoh/router.json5`), and
-the client reconnects by itself within a few tenths of a second, its tokens with it. A
-hall exploration failed `dependency_lost: semantic_map restarted` at t = 540 s on
+the client reconnects by itself once it reads again, 0.07-0.09 s later, its tokens with
+it. A hall exploration failed `dependency_lost: semantic_map restarted` at t = 540 s on
 such a lapse, with the map's process running throughout. So a dependency whose token
 went is first doubted: back as the same run, it lapsed (the job goes on, the lapse is
 counted); back as another run, it restarted; not back within `LOST_GRACE_S` of wall
-time, it is gone. The grace keeps the policy's 0.5 s to notice a loss (a killed WBC:
-the sim's watchdog holds the robot meanwhile). Every dependency gone at once is the
-link to them all: the router (restarted by supervisord in about 1.2 s) or the
-watcher's own session (cut off, or starved on a loaded host: a hall exploration's
-mission, with a second stack on its two cores, lost every token for more than 0.4 s).
-That is doubted `LAPSE_GRACE_S`: every one back as the same run, the world only
-paused (a lockstep sim waits for its participants) and the job goes on.
+time from when its token went, it is gone. The grace keeps the policy's 0.5 s to notice
+a loss (a killed WBC: the sim's watchdog holds the robot meanwhile). Every dependency
+gone at once is the link to them all: the router (restarted by supervisord in about
+1.2 s) or the watcher's own session (cut off, or starved on a loaded host: a hall
+exploration's mission, with a second stack on its two cores, lost every token for more
+than 0.4 s). That is doubted `LAPSE_GRACE_S`: every one back as the same run, the world
+only paused (a lockstep sim waits for its participants) and the job goes on.
 
 `OwnLink` tells a lost token from the watcher's own Zenoh link lapsing (a client the
 router cut off sees every token go and come back), for a client that follows a job
@@ -38,9 +38,13 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-#: Wall seconds a dependency's lost token is doubted before it counts as gone (a
-#: lapse's reconnect: the client's first retry after 0.05 s, `deploy/zenoh/client.json5`).
-LOST_GRACE_S = 0.4
+#: Wall seconds a dependency's lost token is doubted before it counts as gone, from when
+#: its token went. A lapse is back in what was left of the stall that caused it plus
+#: 0.07-0.09 s to reconnect (the client's first retry after 0.05 s,
+#: `deploy/zenoh/client.json5`; measured with a subscriber stalled 1.5 s under 100 MB/s).
+#: It was 0.4 s, counted from the watcher's next look: a kill was said 0.42-0.51 s
+#: after (the policy's 0.5 s to notice).
+LOST_GRACE_S = 0.3
 #: Wall seconds a lost token is doubted when every one went at once (`Dependencies`),
 #: and by `OwnLink`: every watched token back (and the clock on) within it, the link
 #: lapsed. Well inside the fault trial's `HUNG_S` (a hung mission's loss ends a watch
@@ -51,10 +55,12 @@ LAPSE_GRACE_S = 5.0
 class Lifelines:
     """Who is alive (liveliness keys) and how often each one's token went away."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._lock = threading.Lock()
+        self._clock = clock
         self._alive: set[str] = set()
         self._losses: dict[str, int] = {}
+        self._lost_at: dict[str, float] = {}
         self._runs: dict[str, set[str]] = {}
 
     def up(self, key: str) -> None:
@@ -80,6 +86,12 @@ class Lifelines:
             if key in self._alive:
                 self._alive.discard(key)
                 self._losses[key] = self._losses.get(key, 0) + 1
+                self._lost_at[key] = self._clock()
+
+    def lost_at(self, key: str) -> float | None:
+        """When (this one's clock) `key`'s token last went away; None if it never did."""
+        with self._lock:
+            return self._lost_at.get(key)
 
     def snapshot(self) -> tuple[frozenset[str], dict[str, int]]:
         """(who is alive, how often each key went away) now."""
@@ -186,8 +198,9 @@ class Dependencies:
                 self._lapses.append(name)
             elif run is None and key in alive:
                 restarted = restarted or name
-            else:
-                since = self._doubt.setdefault(name, now)
+            else:  # doubted from when its token went, not from when a tick saw it
+                went = self._lifelines.lost_at(key)
+                since = self._doubt.setdefault(name, now if went is None else min(went, now))
                 if now - since >= grace:
                     gone.append(name)
         if len(gone) >= ROUTER_LOST_AT and len(gone) == len(self._armed):

@@ -75,7 +75,7 @@ from services.mission.tree import MissionTree
 
 NAME = "mission"
 #: Wall seconds between two looks at the dependencies while the clock stands still: a
-#: loss is decided `LOST_GRACE_S` (0.4 s) after its token went, and said within this of
+#: loss is decided `LOST_GRACE_S` (0.3 s) after its token went, and said within this of
 #: it (the policy's 0.5 s to notice; it was 0.1 s, and a kill was said 0.45-0.63 s after).
 IDLE_POLL_S = 0.02
 #: The services a running mission depends on (those that are lockstep participants).

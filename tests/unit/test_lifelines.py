@@ -18,8 +18,8 @@ class Clock:
         return self.t
 
 
-def lifelines(*alive: str, runs: bool = False) -> Lifelines:
-    lines = Lifelines()
+def lifelines(*alive: str, runs: bool = False, clock: Clock | None = None) -> Lifelines:
+    lines = Lifelines() if clock is None else Lifelines(clock)
     for name in alive:
         if runs:
             lines.run_up(key(name), f"{name}-1")
@@ -35,7 +35,7 @@ def deps_of(lines: Lifelines, names: list[str], clock: Clock) -> Dependencies:
 
 def gone(names: list[str], clock: Clock, going: list[str]) -> tuple[Lifelines, Dependencies]:
     """`names` alive with their runs, a job armed on them, then `going` gone."""
-    lines = lifelines(*names, runs=True)
+    lines = lifelines(*names, runs=True, clock=clock)
     deps = deps_of(lines, names, clock)
     for name in going:
         lines.down(key(name))
@@ -54,7 +54,7 @@ def test_nothing_is_lost_while_every_dependency_stays_up() -> None:
 
 def test_a_dependency_that_goes_is_doubted_for_the_grace_then_gone() -> None:
     clock = Clock()
-    lines = lifelines("mission", "sim", runs=True)
+    lines = lifelines("mission", "sim", runs=True, clock=clock)
     deps = deps_of(lines, ["mission", "sim"], clock)
     lines.down(key("mission"))
     lines.run_down(key("mission"), "mission-1")
@@ -87,7 +87,7 @@ def test_a_new_run_is_a_restart_even_before_the_old_ones_token_is_heard_gone() -
 
 def test_the_same_run_back_is_a_lapse_the_job_goes_on_and_a_later_loss_still_counts() -> None:
     clock = Clock()
-    lines = lifelines("semantic_map", "sim", runs=True)
+    lines = lifelines("semantic_map", "sim", runs=True, clock=clock)
     deps = deps_of(lines, ["semantic_map", "sim"], clock)
     lines.down(key("semantic_map"))  # the router cut its link off: both tokens go
     lines.run_down(key("semantic_map"), "semantic_map-1")
@@ -101,10 +101,21 @@ def test_the_same_run_back_is_a_lapse_the_job_goes_on_and_a_later_loss_still_cou
     assert deps.take_lapses() == ["semantic_map"] and deps.take_lapses() == []
     lines.down(key("semantic_map"))
     lines.run_down(key("semantic_map"), "semantic_map-1")
-    clock.t += 0.5
-    assert deps.lost() is None  # first doubted: from when it was seen gone
-    clock.t += 0.5
+    clock.t += 0.2
+    assert deps.lost() is None  # doubted from when its token went
+    clock.t += 0.21
     assert deps.lost() == "semantic_map is gone"
+
+
+def test_a_loss_is_doubted_from_when_its_token_went_not_from_when_a_tick_saw_it() -> None:
+    clock = Clock()
+    lines = lifelines("wbc", "sim", runs=True, clock=clock)
+    deps = deps_of(lines, ["wbc", "sim"], clock)
+    lines.down(key("wbc"))  # Zenoh's thread, while the watcher's tick was busy
+    lines.run_down(key("wbc"), "wbc-1")
+    assert lines.lost_at(key("wbc")) == clock.t and lines.lost_at(key("sim")) is None
+    clock.t += 0.41  # the watcher's first look at it, late: past the grace already
+    assert deps.lost() == "wbc is gone"
 
 
 def test_without_a_run_token_a_token_that_comes_back_restarted() -> None:
