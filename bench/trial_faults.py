@@ -312,6 +312,7 @@ def summary(cases: Sequence[Figures]) -> Figures:
     """The battery's figures over its injected cases."""
     done = [c for c in cases if c.get("injected")]
     detect = [c["ended_s"] for c in done if c.get("ended_s") is not None]
+    noticed = [c["reported_s"] for c in done if _noticed_by_dependents(c)]
     reported = [c["reported_s"] for c in done if c.get("reported_s") is not None]
     went_on = [c["went_on_s"] for c in done if c.get("went_on_s") is not None]
     survived = [c for c in done if c["service"] != "wbc" or c["signal"] != "kill"]
@@ -327,8 +328,21 @@ def summary(cases: Sequence[Figures]) -> Figures:
         "world_restarted": sum(bool(c.get("world_restarted")) for c in done),
         "ended_p50_s": _q(detect, 50), "ended_p95_s": _q(detect, 95),
         "reported_p50_s": _q(reported, 50), "reported_p95_s": _q(reported, 95),
+        "detected": len(noticed), "detected_p50_s": _q(noticed, 50),
+        "detected_p95_s": _q(noticed, 95), "detected_max_s": max(noticed) if noticed else None,
         "went_on": len(went_on), "went_on_max_s": max(went_on) if went_on else None,
     }  # fmt: skip
+
+
+def _noticed_by_dependents(case: Figures) -> bool:
+    """A case the policy's 0.5 s to notice a loss is about: a service the mission depends
+    on (not the mission itself, whose restart reports what it held; not the router,
+    whose world goes on; not a client of our own), gone and said gone by the mission."""
+    return (
+        case.get("service") in STACK - {"mission", "router"}
+        and case.get("reported_s") is not None
+        and "dependency_lost" in str(case.get("final"))
+    )
 
 
 def _q(xs: Sequence[float], q: float) -> float | None:

@@ -131,18 +131,26 @@ def test_the_battery_pairs_the_slow_consumer_with_slow_only(monkeypatch: Any) ->
 def test_the_summary_counts_hung_cases_silent_drops_and_falls_the_wbc_survived() -> None:
     cases: list[dict[str, Any]] = [
         {"injected": True, "service": "wbc", "signal": "kill", "ended_s": 0.1,
-         "reported_s": 0.1, "hung": False, "fell": True, "map_ok": True},
+         "reported_s": 0.1, "hung": False, "fell": True, "map_ok": True,
+         "final": "failed dependency_lost: wbc is gone"},
         {"injected": True, "service": "navigation", "signal": "kill", "ended_s": 0.2,
          "reported_s": 12.0, "hung": True, "fell": False, "dropped": True,
-         "drop_reported": False, "map_ok": True},
+         "drop_reported": False, "map_ok": True,
+         "final": "failed dependency_lost: navigation is gone"},
         {"injected": True, "service": "perception", "signal": "stop", "ended_s": 0.3,
-         "reported_s": 0.3, "hung": False, "fell": True, "map_ok": False},
+         "reported_s": 0.3, "hung": False, "fell": True, "map_ok": False,
+         "final": "failed dependency_lost: perception is gone"},
+        {"injected": True, "service": "mission", "signal": "kill", "ended_s": 4.0,
+         "reported_s": 4.0, "hung": False, "map_ok": True,
+         "final": "failed dependency_lost: mission restarted"},
         {"injected": False, "service": "sim", "signal": "kill", "map_ok": True},
     ]  # fmt: skip
     s = summary(cases)
-    assert (s["cases"], s["injected"], s["hung"], s["silent_drops"]) == (4, 3, 1, 1)
-    assert (s["falls"], s["falls_wbc_alive"], s["map_ok"]) == (2, 1, "3/4")
-    assert s["ended_p50_s"] == 0.2 and s["reported_p95_s"] is not None
+    assert (s["cases"], s["injected"], s["hung"], s["silent_drops"]) == (5, 4, 1, 1)
+    assert (s["falls"], s["falls_wbc_alive"], s["map_ok"]) == (2, 1, "4/5")
+    assert s["ended_p50_s"] == 0.25 and s["reported_p95_s"] is not None
+    # what the policy's 0.5 s is about: the dependents' notice, not the mission's restart
+    assert (s["detected"], s["detected_p50_s"], s["detected_max_s"]) == (3, 0.3, 12.0)
 
 
 def test_a_frozen_mission_or_router_is_mute_not_hung_and_a_late_end_is_hung() -> None:
