@@ -45,6 +45,10 @@ from collections.abc import Callable, Iterable
 #: It was 0.4 s, counted from the watcher's next look: a kill was said 0.42-0.51 s
 #: after (the policy's 0.5 s to notice).
 LOST_GRACE_S = 0.3
+#: Wall seconds a watcher looks at a lost token at least, however long ago it went: one
+#: starved of the CPU for seconds (a shift's mission, a second stack on its two cores)
+#: first sees the loss with the token's return still queued behind it.
+LOOK_AGAIN_S = 0.1
 #: Wall seconds a lost token is doubted when every one went at once (`Dependencies`),
 #: and by `OwnLink`: every watched token back (and the clock on) within it, the link
 #: lapsed. Well inside the fault trial's `HUNG_S` (a hung mission's loss ends a watch
@@ -134,8 +138,9 @@ class Dependencies:
         self.grace_s, self.link_grace_s, self._clock = grace_s, link_grace_s, clock
         #: Per dependency alive at `arm`: its token's losses then, and its run.
         self._armed: dict[str, tuple[int, str | None]] = {}
-        #: Since when (wall) a dependency's token has been gone, unresolved.
-        self._doubt: dict[str, float] = {}
+        #: Since when (wall) a dependency's token has been gone, unresolved, and when this
+        #: watcher first looked at it gone.
+        self._doubt: dict[str, tuple[float, float]] = {}
         #: The doubted ones that went with every other (the link: `link_grace_s`).
         self._link_doubt: set[str] = set()
         #: The dependencies whose token went and came back as the same run, in order,
@@ -200,8 +205,10 @@ class Dependencies:
                 restarted = restarted or name
             else:  # doubted from when its token went, not from when a tick saw it
                 went = self._lifelines.lost_at(key)
-                since = self._doubt.setdefault(name, now if went is None else min(went, now))
-                if now - since >= grace:
+                since, looked = self._doubt.setdefault(
+                    name, (now if went is None else min(went, now), now)
+                )
+                if now - since >= grace and now - looked >= min(grace, LOOK_AGAIN_S):
                     gone.append(name)
         if len(gone) >= ROUTER_LOST_AT and len(gone) == len(self._armed):
             return f"the router is gone: every service went at once ({', '.join(gone)})"

@@ -3,7 +3,7 @@ and which only lapsed (the same run back within the grace)."""
 
 from __future__ import annotations
 
-from common.lifelines import Dependencies, Lifelines
+from common.lifelines import LOOK_AGAIN_S, Dependencies, Lifelines
 
 
 def key(name: str) -> str:
@@ -115,7 +115,25 @@ def test_a_loss_is_doubted_from_when_its_token_went_not_from_when_a_tick_saw_it(
     lines.run_down(key("wbc"), "wbc-1")
     assert lines.lost_at(key("wbc")) == clock.t and lines.lost_at(key("sim")) is None
     clock.t += 0.41  # the watcher's first look at it, late: past the grace already
+    assert deps.lost() is None  # but it looks again first (`LOOK_AGAIN_S`)
+    clock.t += LOOK_AGAIN_S + 0.01
     assert deps.lost() == "wbc is gone"
+
+
+def test_a_starved_watcher_that_first_sees_a_loss_late_hears_its_return_before_it_judges() -> None:
+    """A shift's mission, starved for 3 s by a second stack on two cores, saw the sim's
+    token gone 3 s after it went, its return still queued behind it."""
+    clock = Clock()
+    lines = lifelines("sim", "wbc", runs=True, clock=clock)
+    deps = deps_of(lines, ["sim", "wbc"], clock)
+    lines.down(key("sim"))
+    lines.run_down(key("sim"), "sim-1")
+    clock.t += 3.0
+    assert deps.lost() is None
+    clock.t += 0.05
+    lines.run_up(key("sim"), "sim-1")  # the backlog: it came back as the same process
+    lines.up(key("sim"))
+    assert deps.lost() is None and deps.take_lapses() == ["sim"]
 
 
 def test_without_a_run_token_a_token_that_comes_back_restarted() -> None:
