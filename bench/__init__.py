@@ -41,7 +41,8 @@ def _nav(overrides: Overrides) -> dict[str, Any]:
 @dataclass(frozen=True)
 class BenchOptions:
     """The command line's bench options: `rounds` (startup, decoders, deadwatch: how
-    many stacks or processes); `sim_s` and `full` (stack: how long it measures)."""
+    many stacks or processes; lapse: rounds a stall length); `sim_s` and `full` (stack:
+    how long it measures)."""
 
     rounds: int = 10
     sim_s: float = 60.0
@@ -70,6 +71,12 @@ def _deadwatch(_overrides: Overrides) -> dict[str, Any]:
     return bench_deadwatch(OPTIONS["now"].rounds)
 
 
+def _lapse(_overrides: Overrides) -> dict[str, Any]:
+    from bench.lapse import bench_lapse
+
+    return bench_lapse(OPTIONS["now"].rounds)
+
+
 def _stack(overrides: Overrides) -> dict[str, Any]:
     from bench.stack import bench_stack
 
@@ -91,6 +98,7 @@ BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "startup": _startup,
     "decoders": _decoders,
     "deadwatch": _deadwatch,
+    "lapse": _lapse,
     "stack": _stack,
     "slam": _slam,
 }

@@ -939,7 +939,9 @@ def build_parser() -> argparse.ArgumentParser:
     from bench import BENCHES, TRIALS
 
     p.add_argument("which", choices=[*BENCHES, "all"])
-    p.add_argument("--rounds", type=int, default=10, help="startup, decoders: rounds")
+    p.add_argument(
+        "--rounds", type=int, default=10, help="startup, decoders: rounds; lapse: a stall length"
+    )
     p.add_argument("--sim-s", type=float, default=60.0, help="stack: sim seconds measured")
     p.add_argument("--full", action="store_true", help="stack: the whole demo request")
     p.set_defaults(func=cmd_bench)
