@@ -7,8 +7,8 @@ with the localization's correction in effect at b: it places what the frame show
 map) and, with the `truth` segmenter, for its
 `segmentation_truth` stamped b;
 segments it (the ONNX network, or the sim's labels), measures each instance
-(`pipeline.detect`), drops the people inside the robot or lying flat on the floor
-(`self_filter.drop_self`) and
+(`pipeline.detect`), drops the people inside the robot, lying flat on the floor or that
+are a table's edge (`self_filter.drop_self`) and
 publishes `Detections` stamped b whatever happens: an empty list with a `reason` when
 nothing could be processed (no frame, no odom, no segmenter, a bad frame, a segmenter
 that raised). `process_ms` is the wall time from the frame's arrival to the message,
@@ -142,7 +142,7 @@ class FrameProcessor:
                 )
                 detected, selves = drop_self(detected, frame.width)
                 if selves:
-                    log.debug("%s at t=%.3f s: %d person(s) inside the robot or flat dropped",
+                    log.debug("%s at t=%.3f s: %d person(s) in the robot, flat or a slab dropped",
                               cam, b / NS_PER_S, selves)  # fmt: skip
             except (ArrayError, ValueError) as exc:
                 reason = f"bad frame: {exc}"

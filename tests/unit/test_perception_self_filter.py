@@ -1,5 +1,5 @@
 """People seen inside the robot's own footprint are the robot itself, and people lying flat
-on the floor are not people: both are dropped."""
+on the floor or in a thin horizontal slab are not people: all are dropped."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from services.perception.self_filter import (
     drop_self,
     is_flat,
     is_self,
+    is_slab,
 )
 
 #: The frame's width, pixels.
@@ -88,3 +89,28 @@ def test_a_person_cut_by_the_frames_edges_or_standing_and_artifacts_are_kept() -
     under_a_table = Detected(_det("person", 3.0, 0.0, top_row=90), _points(0.75))
     assert not is_flat(under_a_table, W)
     assert not is_flat(Detected(_det("bottle", 3.0, 0.0, top_row=180), _points(0.07)), W)
+
+
+def _slab(width_m: float, height_m: float, z: float = 0.8, n: int = 200) -> np.ndarray:
+    """Points `width_m` across (along y, 2 m ahead) and `height_m` tall about z."""
+    rng = np.random.default_rng(0)
+    y = rng.uniform(-width_m / 2, width_m / 2, n)
+    return np.column_stack([np.full(n, 2.0), y, z + rng.uniform(-height_m / 2, height_m / 2, n)])
+
+
+def test_a_person_in_a_thin_horizontal_slab_is_a_tables_edge_and_is_dropped() -> None:
+    """The small world's table underside at the head camera's top edge: 0.7 m across, level."""
+    underside = Detected(_det("person", 2.0, 0.0, top_row=0), _slab(0.7, 0.0))
+    assert is_slab(underside)
+    assert is_slab(Detected(_det("person", 2.0, 0.0), _slab(0.5, 0.1)))  # 5 × wider than tall
+    kept, dropped = drop_self([underside, Detected(_det("person", 3.0, 1.0), _points(1.7))], W)
+    assert dropped == 1 and [d.detection.centroid_in_world[1] for d in kept] == [1.0]
+
+
+def test_a_heads_sliver_a_standing_person_and_a_flat_artifact_are_no_slab() -> None:
+    """A head at the frame's top edge is about as wide as it is tall; a bottle is no person."""
+    assert not is_slab(Detected(_det("person", 2.0, 0.0, top_row=0), _slab(0.18, 0.05, 1.6)))
+    assert not is_slab(Detected(_det("person", 2.0, 0.0), _slab(0.5, 0.3)))  # too tall
+    assert not is_slab(Detected(_det("person", 3.0, 0.0), _points(1.7)))
+    assert not is_slab(Detected(_det("person", 3.0, 0.0), np.zeros((0, 3))))
+    assert not is_slab(Detected(_det("box", 2.0, 0.0), _slab(0.7, 0.0)))
