@@ -11,13 +11,18 @@ so these rules hold for every detection and for every entity the map made itself
   `ABOVE_TOP_M` above the top (the smallest object's half height, less the depth's
   noise; a mask flat on the top is the top) and the tallest artifact's height above it;
   one below the top is the table's apron or legs;
-- an artifact off every support within `PERSON_REACH_M` of a person the map saw lately
-  (and often: one it would keep) is the person's hand or clothes (the same frame's
-  person detections already drop them; this catches the frames where the person is cut
-  off or not detected);
-- a person does not stand inside a support's top, nor where the map knows no floor
-  (`KNOWN_FLOOR_M` around the place, on a lidar or file map: beyond the walls the depth
-  reads through gaps).
+- an artifact off every support, not over an obstacle the map knows, within
+  `PERSON_REACH_M` of a person the map saw lately (and often: one it would keep) is the
+  person's hand or clothes (the same frame's person detections already drop them; this
+  catches the frames where the person is cut off or not detected). Over an obstacle
+  (`on_obstacle`: a table's footprint the depth learned, whose top the head camera,
+  below it, never saw) it stands on that obstacle: the explored small world's bottle,
+  0.7 m behind the only edge of its table the tops layer had, was deleted beside a
+  "person" the network made of the table's underside;
+- a person does not stand inside a support's top, nor inside an obstacle the map knows
+  (every cell within `INSIDE_M` occupied: the people's own points are never learned as
+  obstacles), nor where the map knows no floor (`KNOWN_FLOOR_M` around the place, on a
+  lidar or file map: beyond the walls the depth reads through gaps).
 
 The rules read the map's surfaces, so they apply on a map with no floor plan (the floor
 plan's ablation keeps the static-obstacle checks of `mapper`). Pure functions; the
@@ -32,7 +37,7 @@ from numpy.typing import NDArray
 
 from common.geometry import FloatArray, on_surface
 from common.messages.world import SupportSurface
-from services.semantic_map.occupancy import FREE, Occupancy
+from services.semantic_map.occupancy import FREE, OCCUPIED, Occupancy
 from services.semantic_map.supports import SURFACE_Z_M
 
 #: An artifact's visible centroid above the support's top, m: the flattest artifact (a
@@ -60,6 +65,8 @@ PERSON_MERGE_M = 0.4
 #: person's axis point), m.
 PERSON_REACH_M = 0.6
 PERSON_RECENT_NS = 10_000_000_000
+#: A person whose every cell within this is an obstacle stands inside it, m.
+INSIDE_M = 0.1
 
 
 def surface_under(
@@ -97,9 +104,27 @@ def person_doubt(
     s = surface_under(xy, surfaces, 0.0)
     if s is not None:
         return f"inside the top of {s.id}"
-    if occupancy is not None and not known_floor_near(occupancy, xy, KNOWN_FLOOR_M):
+    if occupancy is None:
+        return ""
+    if inside_obstacle(occupancy, xy, INSIDE_M):
+        return f"inside an obstacle the map knows (every cell within {INSIDE_M:g} m)"
+    if not known_floor_near(occupancy, xy, KNOWN_FLOOR_M):
         return f"no floor the map knows within {KNOWN_FLOOR_M:g} m (beyond a wall?)"
     return ""
+
+
+def on_obstacle(occupancy: Occupancy, xy: FloatArray) -> bool:
+    """Whether xy's cell of the merged grid is an obstacle (static or learned)."""
+    return inside_obstacle(occupancy, xy, 0.0)
+
+
+def inside_obstacle(occupancy: Occupancy, xy: FloatArray, radius_m: float) -> bool:
+    """Whether every cell of the merged grid within `radius_m` of xy is an obstacle."""
+    window = _disc(occupancy, xy, radius_m)
+    if window is None:
+        return False
+    (y0, y1, x0, x1), disc = window
+    return bool(np.all(occupancy.cells((slice(y0, y1), slice(x0, x1)))[disc] == OCCUPIED))
 
 
 def floats(occupancy: Occupancy, xy: FloatArray, z: float) -> bool:

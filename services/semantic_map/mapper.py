@@ -67,6 +67,7 @@ from services.semantic_map.evidence import (
     PERSON_REACH_M,
     PERSON_RECENT_NS,
     artifact_doubt,
+    on_obstacle,
     person_doubt,
     surface_under,
 )
@@ -305,14 +306,17 @@ class SemanticMap:
 
     def _doubt_artifact(self, xy: FloatArray, z: float, t: int) -> str:
         """`evidence.artifact_doubt` (off every surface, over the floor only once the map
-        knows surfaces), and off every surface beside a person seen lately, one the map
-        would keep (`drop_below_observations` detections or more): hall seed 1 explored,
-        a "person" of 4 wrist-camera detections at a table's edge deleted box_2 (off the
-        table's explored top, which lay 0.4 m short of that edge) and was itself deleted
-        as a false entry 14 s later; the box stayed lost."""
+        knows surfaces), and off every surface and every obstacle beside a person seen
+        lately, one the map would keep (`drop_below_observations` detections or more):
+        hall seed 1 explored, a "person" of 4 wrist-camera detections at a table's edge
+        deleted box_2 (off the table's explored top, which lay 0.4 m short of that edge)
+        and was itself deleted as a false entry 14 s later; the box stayed lost. On the
+        table's cells the box stands on the table whoever is beside it."""
         why = artifact_doubt(xy, z, self.surfaces, self.occupancy if self.surfaces else None)
         if why or not self.surfaces or surface_under(xy, self.surfaces) is not None:
             return why
+        if on_obstacle(self.occupancy, xy):
+            return ""  # on a table whose top the map has not seen (`evidence`)
         for tr in self.people.confirmed:
             if tr.hits < self.settings.drop_below_observations:
                 continue  # a person of a few detections is no evidence against anything

@@ -16,6 +16,7 @@ from services.semantic_map.entities import Track
 from services.semantic_map.evidence import (
     artifact_doubt,
     known_floor_near,
+    on_obstacle,
     person_doubt,
     surface_under,
 )
@@ -73,6 +74,19 @@ def test_a_person_stands_on_floor_and_not_in_a_table() -> None:
     assert person_doubt(np.array([1.95, 0.0]), [], occ).startswith("no floor the map knows")
     assert person_doubt(np.array([1.95, 0.0]), [], None) == ""  # a floor plan's map: no say
     assert person_doubt(np.array([2.1, 0.2]), [TABLE], None) == "inside the top of surface_1"
+
+
+def test_a_person_inside_an_obstacle_the_depth_learned_is_none() -> None:
+    """The small world explored: a "person" made of a table's underside, 0.3 m inside the
+    table's footprint the depth had learned, whose top the tops layer never saw."""
+    occ = _floor_map()
+    occ.hits[36:50, 36:50] = occ.hits_needed  # a table's footprint, 0.7 m square at 0-0.7
+    inside = person_doubt(np.array([0.17, 0.17]), [], occ)
+    assert inside == "inside an obstacle the map knows (every cell within 0.1 m)"
+    assert person_doubt(np.array([-0.18, 0.17]), [], occ) == ""  # at its edge: beside it
+    assert person_doubt(np.array([0.17, 0.17]), [], None) == ""  # a floor plan's map: no say
+    assert on_obstacle(occ, np.array([0.17, 0.17]))
+    assert not on_obstacle(occ, np.array([-1.0, -1.0]))
 
 
 # -- through the mapper ---------------------------------------------------------------------
@@ -173,7 +187,8 @@ def test_only_a_person_the_map_would_keep_makes_an_artifact_off_every_top_their_
     """Hall seed 1 explored: box_2 stood 0.1 m inside table_2's edge, off the explored
     top (short of that edge), on the table's occupied cells; a "person" of 4 wrist-camera
     detections 4 cm from it deleted it, and was itself deleted as a false entry 14 s
-    later. A person of so few detections is no evidence; one seen often is."""
+    later. A person of so few detections is no evidence; one seen often is, for an
+    artifact over free floor; on the table's cells the box stands on the table."""
     smap = _explored_map()
     smap.occupancy.static[40:44, 64:68] = OCCUPIED  # under the box: the table's edge
     box = Track("box", "artifact", np.array([1.3, 0.0]), np.eye(2) * 0.01, 0.8, "perception",
@@ -185,6 +200,6 @@ def test_only_a_person_the_map_would_keep_makes_an_artifact_off_every_top_their_
     smap.add(person)
     assert smap._doubt_artifact(box.xy, box.z, smap.stamp_ns) == ""
     person.hits = 10
-    assert smap._doubt_artifact(box.xy, box.z, smap.stamp_ns) == (
-        "on no surface, 0.04 m from person_1"
-    )
+    assert smap._doubt_artifact(box.xy, box.z, smap.stamp_ns) == "", "on the table's cells"
+    held = np.array([1.3, 0.3])  # over free floor beside them: in their hand
+    assert smap._doubt_artifact(held, 0.8, smap.stamp_ns) == "on no surface, 0.26 m from person_1"
