@@ -631,6 +631,9 @@ class MissionSettings(_Section):
     arm_slow_speed: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 0.5
     #: After the grasp, the object is lifted this far straight up before stowing, m.
     lift_m: NonNegative = 0.10
+    #: Put back where it was picked, the object is let go this far above its old place
+    #: (the grasp pose raised this much), m.
+    put_down_clear_m: NonNegative = 0.015
     #: The whole visual approach (the controller re-acquires and fails by itself sooner),
     #: not counting the time its commands were held back for people (the speed and
     #: separation monitor's caps), which is bounded on its own: a person who stays in the

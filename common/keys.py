@@ -33,6 +33,8 @@ WORLD_ARTIFACT_COMMAND = f"{ROOT}/world/artifact_command"
 #: Leave a movable in the hall (`sim.MovableCommand`): tests and evaluation publish, the sim
 #: applies.
 WORLD_MOVABLE_COMMAND = f"{ROOT}/world/movable_command"
+#: Queryable: where every artifact is now (`sim.ArtifactsTruth`, truth): tests and evaluation.
+WORLD_ARTIFACTS = f"{ROOT}/world/artifacts"
 MAP_ARTIFACTS = f"{ROOT}/map/artifacts"
 MAP_PEOPLE = f"{ROOT}/map/people"
 MAP_OCCUPANCY = f"{ROOT}/map/occupancy"

@@ -10,6 +10,7 @@
     dume down [--run RUN]                                   stop a `dume up` run
     dume world --world-seed N [--world small] [--grid]      a generated world as JSON (truth)
     dume request OBJECT --to PERSON [--wait --timeout S]    ask for an object
+    dume request --put-back [--wait]                        put back what the gripper still holds
     dume cancel REQUEST_ID [--reason TEXT]                  cancel a request
     dume map [--explore | --patrol | --export FILE | --import FILE]   the semantic map (JSON)
     dume demo [--world-seed N] [--object ID --person ID]    bring an object, print a JSON line
@@ -349,9 +350,17 @@ def cmd_world(args: argparse.Namespace) -> int:
 
 def cmd_request(args: argparse.Namespace) -> int:
     config = _client_config(args)
-    request = MissionRequest(
-        request_id=args.request_id or uuid.uuid4().hex[:12], object=args.object, person=args.to
-    )
+    rid = args.request_id or uuid.uuid4().hex[:12]
+    if args.put_back:
+        if args.object or args.to:
+            raise CliError("--put-back takes no OBJECT or --to", "dume request --put-back")
+        request = MissionRequest(request_id=rid, task="put_back")
+    elif not args.object or not args.to:
+        raise CliError(
+            "a fetch needs OBJECT and --to PERSON", "dume request bottle_1 --to person_1"
+        )
+    else:
+        request = MissionRequest(request_id=rid, object=args.object, person=args.to)
     return _submit(config, request, args.wait, args.timeout)
 
 
@@ -802,9 +811,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pretty", action="store_true")
     p.set_defaults(func=cmd_world)
 
-    p = add("request", "ask the robot to bring OBJECT to PERSON")
-    p.add_argument("object", help="a map id (bottle_1) or a class (bottle)")
-    p.add_argument("--to", required=True, help="a person's map id (person_1)")
+    p = add("request", "ask the robot to bring OBJECT to PERSON (or --put-back what it holds)")
+    p.add_argument("object", nargs="?", default="", help="a map id (bottle_1) or a class (bottle)")
+    p.add_argument("--to", default="", help="a person's map id (person_1)")
+    p.add_argument(
+        "--put-back",
+        action="store_true",
+        help="put what the gripper still holds from an unfinished request back where it was picked",
+    )
     p.add_argument("--request-id", default=None)
     p.add_argument("--wait", action="store_true", help="follow the status until it ends")
     p.add_argument("--timeout", type=float, default=600.0)

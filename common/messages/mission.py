@@ -17,20 +17,21 @@ RequestId = Annotated[
 ]
 #: A map id (`bottle_1`) or a class (`bottle`: the nearest mapped one); "" for none.
 Target = Annotated[str, msgspec.Meta(pattern=r"^([a-z][a-z0-9]*(_[1-9][0-9]*)?)?$", max_length=64)]
-#: What a request asks the robot to do: bring an object to a person (`fetch`), map the
-#: place from nothing by frontier exploration (`explore`), or walk the mapping patrol's
-#: coverage route over the map it has (`patrol`).
-Task = Literal["fetch", "explore", "patrol"]
-#: The mapping jobs (`Task` less the fetch).
+#: What a request asks the robot to do: bring an object to a person (`fetch`), put what
+#: the gripper still holds from an unfinished fetch back where it was picked
+#: (`put_back`), map the place from nothing by frontier exploration (`explore`), or walk
+#: the mapping patrol's coverage route over the map it has (`patrol`).
+Task = Literal["fetch", "put_back", "explore", "patrol"]
+#: The mapping jobs (`Task` less the fetch and the put-back, which the bring-me tree runs).
 JobTask = Literal["patrol", "explore"]
 
 
 class MissionRequest(Message, frozen=True, omit_defaults=True):
     """`dume/<r>/mission/request`: `{"request_id", "object", "person"}` (a fetch), or
-    `{"request_id", "task": "explore"}` / `"patrol"`.
+    `{"request_id", "task": "put_back"}` / `"explore"` / `"patrol"`.
 
     task: `fetch` (the default: a request without it is a fetch) needs `object` and
-    `person`; `explore` and `patrol` take neither. A request that breaks this does not
+    `person`; `put_back`, `explore` and `patrol` take neither. A request that breaks this does not
     decode (the mission rejects it `malformed`, saying which field).
     at_ns: sim time before which the mission does not take it (held until its tick
     reaches it; a user leaves it out): an evaluation's shift sends each request ahead of

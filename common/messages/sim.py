@@ -250,6 +250,24 @@ class RobotContact(Message, frozen=True, tag="robot_contact"):
     force: NonNegative
 
 
+class ArtifactPose(Message, frozen=True):
+    """An artifact as the simulator has it: its body's origin in the world (m) and how
+    upright it stands (the cosine of its tilt: 1 upright, 0 lying)."""
+
+    id: EntityId
+    position_in_world: Vec3
+    upright: Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)]
+
+
+class ArtifactsTruth(Message, frozen=True):
+    """The answer of `dume/world/artifacts` (truth: tests and evaluation only): every
+    artifact of the world where it is at `stamp_ns` (the sim's snapshot, every 0.1 s of
+    sim time)."""
+
+    stamp_ns: StampNs
+    artifacts: list[ArtifactPose]
+
+
 class ArtifactMoved(Message, frozen=True, tag="artifact_moved"):
     """Somebody moved an artifact (the changing hall's hook, `ArtifactCommand`): where its
     base now is (truth, for evaluation); `away`: out of the hall."""

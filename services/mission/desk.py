@@ -9,8 +9,9 @@
 2. requests drained from the inbox: parsed, refused at once (a `rejected` status
    published stamped b) when malformed, when a mission or a mapping job runs (`busy`;
    `busy_with` names the job), when a dependency is not running (`unavailable`) or when
-   the map does not know the object or the person (`check_request`); else the tree
-   starts, the dependencies are armed and `accepted` is published. A request of task
+   the map does not know the object or the person (`check_request`, a fetch's only);
+   else the tree starts (a fetch, or a `put_back` of what the gripper still holds), the
+   dependencies are armed and `accepted` is published. A request of task
    `explore` or `patrol` goes to the mapping jobs' desk (`jobs.start_request`: refused
    `busy`, `unavailable`, `no_route`), `accepted` with its stage;
 3. cancels drained from the inbox: one of the running request stops the tree
@@ -195,10 +196,11 @@ class Desk:
             if isinstance(parsed, Rejection):
                 self._reject(b, parsed)
                 continue
-            if parsed.task != "fetch":
+            if parsed.task not in ("fetch", "put_back"):
                 self._job(b, parsed)
                 continue
-            self.log.request(f"request {parsed.request_id}: {parsed.object} to {parsed.person}")
+            said = f"{parsed.object} to {parsed.person}" if parsed.task == "fetch" else "put back"
+            self.log.request(f"request {parsed.request_id}: {said}")
             if self.tree.busy:
                 running = self.tree.request.request_id if self.tree.request else ""
                 self._reject(
@@ -214,6 +216,8 @@ class Desk:
                 Rejection(parsed.request_id, "unavailable", f"not running: {', '.join(down)}")
                 if down
                 else check_request(parsed, self.robot)
+                if parsed.task == "fetch"
+                else None
             )
             if refused is not None:
                 self._reject(b, refused)
@@ -252,7 +256,8 @@ class Desk:
     def _start(self, b: int, request: MissionRequest) -> None:
         self.tree.start(request)
         self.deps.arm()
-        self.board.update(b, request.request_id, "accepted", detail="checked against the map")
+        said = "checked against the map" if request.task == "fetch" else "put back what it holds"
+        self.board.update(b, request.request_id, "accepted", detail=said)
         self._publish(self.board.sent(b))
 
     def _cancels(self) -> Outcome | None:

@@ -175,6 +175,11 @@ class GraspPlan:
         H[2, 3] += dz_m
         return replace(self, H=H, pregrasp_m=0.0, close_in_m=0.0)
 
+    def over_the_spot(self, dz_m: float) -> GraspPlan:
+        """The lift's pose (`lifted`), reached via the pre-grasp pose as the grasp was: how
+        a held object is carried back over the place it was picked from."""
+        return replace(self.lifted(dz_m), pregrasp_m=self.pregrasp_m)
+
     def backed_out(self) -> GraspPlan:
         """The pre-grasp pose (H moved `pregrasp_m` back along the approach), reached
         straight: how the gripper leaves an object it did not pick, before the base walks."""

@@ -3,9 +3,15 @@
     bring_me (sequence)
       wait_for_request
       mission_or_abort (selector)
-        mission (sequence)
+        the_task (selector): fetch_task (below), else put_back_task: is_put_back, then
+                             nothing_held, else put_back_asked (`put_back_tree`)
+        fetch_task (sequence): is_fetch, then
           regrasp (Recover: grasp_lost | grasp_failed, budget repick_budget)
             fetch_and_carry (sequence)
+              have_it: still_holding (the object asked for, held since an unfinished
+                       request: no fetch), else find_and_pick: hands_free, else put_back
+                       (the object held since an unfinished request, not asked for: put
+                       back where it was picked, `behaviours.put_back`), then:
               next_instance (Recover: object_not_found | navigation_failed |
                              blocked_by_person,
                              budget max_candidates - 1, while candidates remain; then,
@@ -72,6 +78,7 @@ from services.mission.behaviours.base import (
     TARGET,
     Context,
     Failure,
+    Held,
     MissionBehaviour,
     Target,
     blackboard,
@@ -88,8 +95,10 @@ from services.mission.behaviours.motion import (
     SetMode,
 )
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
+from services.mission.behaviours.put_back import PutBackFirst, PutDown, held_reach
 from services.mission.behaviours.request import (
     HandsFree,
+    IsTask,
     ResolvePerson,
     SelectTarget,
     StillHolding,
@@ -105,6 +114,35 @@ NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed", "blo
 
 def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
     return Sequence(name, memory=True, children=list(children))
+
+
+def put_back_tree(ctx: Context, name: str) -> Sequence:
+    """Put what the gripper still holds from an unfinished request back where it was
+    picked (`behaviours.put_back`): walk to the grasp's stance, carry it in over its
+    place, set it down, let go, leave, stow."""
+    s, st = ctx.settings, STAGES
+    return _seq(
+        name,
+        PutBackFirst(ctx, st[0]),
+        SetMode(ctx, "walk", "navigation", st[0], name="mode_walk_put_back"),
+        NavigateTo(ctx, "put_back", st[0], watch_held=True),
+        SetMode(ctx, "manipulate", "navigation", st[0], name="mode_manipulate_put_back"),
+        ArmAction(ctx, "ready_held", lambda _b: Posture(name="ready"), "arm_failed",
+                  s.posture_timeout_s, st[0]),  # out of the stow as the grasp's reach began
+        ArmAction(ctx, "over_the_spot", held_reach(lambda p: p.over_the_spot(s.lift_m)),
+                  "arm_failed", s.reach_timeout_s, st[0]),
+        # stopped short by the surface: it is down all the same
+        ArmAction(ctx, "set_down", held_reach(lambda p: p.lifted(s.put_down_clear_m)),
+                  "arm_failed", s.reach_timeout_s, st[0], must_succeed=False),
+        ArmAction(ctx, "let_go_held", lambda _b: Release(), "arm_failed",
+                  s.release_timeout_s, st[0]),
+        ArmAction(ctx, "leave_it", held_reach(lambda p: p.backed_out()), "arm_failed",
+                  s.reach_timeout_s, st[0], must_succeed=False),  # stuck short: stow anyway
+        ArmAction(ctx, "stow_put_back", lambda _b: Posture(name="stow"), "arm_failed",
+                  s.posture_timeout_s, st[0]),
+        PutDown(ctx, st[0]),
+        SetMode(ctx, "walk", "navigation", st[0], name="mode_walk_put_down"),
+    )  # fmt: skip
 
 
 def build_tree(ctx: Context) -> Sequence:
@@ -254,7 +292,16 @@ def build_tree(ctx: Context) -> Sequence:
                 memory=True,
                 children=[
                     StillHolding(ctx),
-                    _seq("find_and_pick", HandsFree(ctx), find, pick),
+                    _seq(
+                        "find_and_pick",
+                        Selector(
+                            "hands_free_or_put_back",
+                            memory=True,
+                            children=[HandsFree(ctx), put_back_tree(ctx, "put_back")],
+                        ),
+                        find,
+                        pick,
+                    ),
                 ],
             ),
             bring,
@@ -280,7 +327,22 @@ def build_tree(ctx: Context) -> Sequence:
         ctx.decide,
         next_side(ctx, blackboard("other_side", (SIDE,))),
     )  # fmt: skip
-    mission = _seq("mission", fetch, offer)
+    mission = Selector(
+        "the_task",
+        memory=True,
+        children=[
+            _seq("fetch_task", IsTask(ctx, "fetch"), fetch, offer),
+            _seq(
+                "put_back_task",
+                IsTask(ctx, "put_back"),
+                Selector(
+                    "nothing_held_or_put_back",
+                    memory=True,
+                    children=[HandsFree(ctx, "nothing_held"), put_back_tree(ctx, "put_back_asked")],
+                ),
+            ),
+        ],
+    )
     return _seq(
         "bring_me",
         WaitForRequest(ctx),
@@ -324,14 +386,22 @@ class MissionTree:
         reset_blackboard()
         self.request = request
         self.bb.set(REQUEST, request)
-        self.ctx.decide(f"mission {request.request_id}: bring {request.object} to {request.person}")
+        self.ctx.put_back = ""
+        said = (
+            "put back what it holds"
+            if request.task == "put_back"
+            else (f"bring {request.object} to {request.person}")
+        )
+        self.ctx.decide(f"mission {request.request_id}: {said}")
 
     def tick(self) -> Outcome | None:
         """Tick once; the outcome when the mission ended this tick."""
         self.root.tick_once()
         if self.request is None or self.root.status == Status.RUNNING:
             return None
-        if self.root.status == Status.SUCCESS:
+        if self.root.status == Status.SUCCESS and self.request.task == "put_back":
+            outcome = Outcome("succeeded", "", self.ctx.put_back or "nothing held to put back")
+        elif self.root.status == Status.SUCCESS:
             outcome = Outcome("succeeded", "", f"{self.request.object} handed over")
             target, person = read(self.bb, TARGET), read(self.bb, PERSON)
             if isinstance(target, Target):
@@ -356,7 +426,10 @@ class MissionTree:
             return outcome
         target = read(self.bb, TARGET)
         if isinstance(target, Target) and self.request is not None:
-            self.ctx.holding = (target.map_id, self.request.request_id)
+            plan, stance, before = read(self.bb, GRASP_PLAN), self.ctx.picked_from, self.ctx.holding
+            if plan is None and before is not None and before.map_id == target.map_id:
+                plan, stance = before.plan, before.stance  # brought on, not picked again
+            self.ctx.holding = Held(target.map_id, self.request.request_id, plan, stance)
         what = (
             target.map_id if isinstance(target, Target)
             else self.request.object if self.request is not None else "the object"

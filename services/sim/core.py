@@ -37,7 +37,14 @@ from common import robot
 from common.config import SensorSettings
 from common.geometry import FloatArray, make_T, quat_wxyz_to_xyzw, quat_xyzw_to_matrix
 from common.messages import Array
-from common.messages.sim import Locomotion, Odom, RobotState, StateTruth, WorldEvent
+from common.messages.sim import (
+    ArtifactPose,
+    Locomotion,
+    Odom,
+    RobotState,
+    StateTruth,
+    WorldEvent,
+)
 from common.messages.world import WorldDescription
 from services.sim import mjcf, scene
 from services.sim.drive import JAW, N_JOINTS, CommandError, JointDrive, joint_addresses, validate
@@ -205,6 +212,17 @@ class SimCore:
         self.drops.forget(k)  # settling onto its new support is no drop
         mujoco.mj_forward(self.model, self.data)
         return x, y, z
+
+    def artifact_poses(self) -> list[ArtifactPose]:
+        """Every artifact's body origin (world, m) and uprightness (the cosine of its tilt)
+        now (truth)."""
+        out = []
+        for k, artifact_id in enumerate(self.drops.ids):
+            adr = self._artifact_q[k]
+            x, y, z, _w, qx, qy, _qz = (float(v) for v in self.data.qpos[adr : adr + 7])
+            upright = min(1.0, max(-1.0, 1.0 - 2.0 * (qx * qx + qy * qy)))
+            out.append(ArtifactPose(id=artifact_id, position_in_world=(x, y, z), upright=upright))
+        return out
 
     def place_movable(
         self, movable_id: str, position: tuple[float, float] | None, yaw: float

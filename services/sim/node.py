@@ -7,7 +7,8 @@ everything stamped t (`SimOutputs`: the state, odom at 50 Hz, the cameras at 10 
 the clock when due); take the command to step with (in lockstep the command participant's
 answer to the state at t, in realtime the newest); apply it, the kinematic base's
 cmd_vel, and the pushes, people and artifact commands due at t; step the physics to
-t + 1 ms and publish the step's world events (an artifact moved by its hook among them).
+t + 1 ms and publish the step's world events (an artifact moved by its hook among them);
+every `ARTIFACTS_EVERY_TICKS` take the artifacts' poses for `dume/world/artifacts` (truth).
 The protocol's waits (the start gate, acks, commands, stalls, liveliness) are
 `common.lockstep.SimGate`'s; the physics, people, handover and events `SimCore`'s; the
 cameras are rendered beside the loop, from a snapshot of tick t (`RenderWorker`); this
@@ -21,7 +22,7 @@ import time
 from common import keys as K
 from common.lockstep import SimGate
 from common.messages.base import NS_PER_S
-from common.messages.sim import Ack, JointCommand
+from common.messages.sim import Ack, ArtifactsTruth, JointCommand
 from common.messages.world import WorldDescription
 from common.recording import default_blueprint
 from common.service import Service
@@ -32,6 +33,9 @@ from services.sim.outputs import SimOutputs, robot_description
 from services.sim.people_hook import PeopleHook
 from services.sim.push_hook import PushHook
 from services.sim.world import generate_world
+
+#: The artifacts' truth snapshot (`dume/world/artifacts`) is taken every this many ticks.
+ARTIFACTS_EVERY_TICKS = 100
 
 
 class SimNode:
@@ -81,6 +85,10 @@ class SimNode:
         self.description = robot_description(cfg, self.core)
         bus.serve(keys.description, None, lambda _req, _sel: self.description)
         bus.serve(K.WORLD_DESCRIPTION, None, lambda _req, _sel: self.world)
+        #: The artifacts where they are (truth), snapshot on the loop's thread: a query
+        #: answers from Zenoh's while the physics steps.
+        self.artifacts = ArtifactsTruth(stamp_ns=0, artifacts=self.core.artifact_poses())
+        bus.serve(K.WORLD_ARTIFACTS, None, lambda _req, _sel: self.artifacts)
 
     def run(self) -> None:
         svc, cfg, gate = self.svc, self.svc.config, self.gate
@@ -128,6 +136,10 @@ class SimNode:
             step_s += now - t2
             tick += 1
             self.out.events(tick * self.tick_ns, events)
+            if tick % ARTIFACTS_EVERY_TICKS == 0:
+                self.artifacts = ArtifactsTruth(
+                    stamp_ns=tick * self.tick_ns, artifacts=self.core.artifact_poses()
+                )
             if tick % 1000 == 0:
                 sim_s = (tick - rtf_mark[1]) * self.tick_ns / NS_PER_S
                 rtf = sim_s / max(now - rtf_mark[0], 1e-9)

@@ -5,9 +5,10 @@ dynamic locomotion, the map seeded from the world, so the map says where the bot
 the person were), somebody moves the bottle through the sim's hook
 (`dume/world/artifact_command`), or the person walks off (`dume/world/people_command`),
 before the mission's first tick, or the carried bottle is knocked out of the jaws
-(`dume/world/push`), and the request goes in at t = 0 (`start_gate`). What
-the sim's truth sees is judged: the bottle in the requested person's hand, or the typed
-failure and where the robot looked.
+(`dume/world/push`), and the request goes in at t = 0 (`start_gate`); or the request is
+cancelled while carrying and the bottle put back. What the sim's truth sees is judged:
+the bottle in the requested person's hand (or back on its table), or the typed failure
+and where the robot looked.
 """
 
 from __future__ import annotations
@@ -26,14 +27,17 @@ from bench.eval.judge import MissionRecord
 from bench.eval.run import watch_mission
 from common.keys import (
     WORLD_ARTIFACT_COMMAND,
+    WORLD_ARTIFACTS,
     WORLD_DESCRIPTION,
     WORLD_PEOPLE_COMMAND,
     WORLD_PUSH,
 )
-from common.messages.mission import MissionRequest, MissionStatus
+from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from common.messages.sim import (
     ArtifactCommand,
     ArtifactMoved,
+    ArtifactPose,
+    ArtifactsTruth,
     HandoverTaken,
     ObjectDropped,
     PersonCommand,
@@ -194,3 +198,43 @@ def test_a_bottle_knocked_from_the_gripper_to_the_floor_is_reported_where_it_lie
     assert np.hypot(x - fell[0], y - fell[1]) < 0.5, (last.detail, fell)  # where it lies
     assert last.stamp_ns - dropped[0].stamp_ns < 30e9  # told at once, not after a search
     assert not [e for e in record.events if isinstance(e, HandoverTaken)]
+
+
+@pytest.mark.timeout(3600)
+def test_a_bottle_still_held_after_a_cancel_is_put_back_on_its_table_when_asked(
+    tmp_path: Path,
+) -> None:
+    """The request is cancelled as the carry begins: the robot holds the bottle (and says
+    so). A `put_back` request then walks it back to where it stood for the grasp, sets it
+    down where it was picked and lets go: the sim's truth has it upright within 5 cm of
+    where it stood before the fetch, and nothing fell."""
+    with ProcessStack(list(SERVICES), coping_overrides(tmp_path)) as s:
+        before = _bottle(s)
+        canceller = s.bus.publisher(s.keys.mission_cancel, MissionCancel, "control")
+        hook = WhenCarrying(
+            0.0,
+            lambda _at: canceller.put(
+                MissionCancel(request_id="carried", reason="changed my mind")
+            ),
+        )
+        request = MissionRequest(request_id="carried", object="bottle_1", person="person_1")
+        carried = watch_mission(s.bus, s.keys, request, 900.0, hook.on_progress, start_gate=True)
+        back = watch_mission(
+            s.bus, s.keys, MissionRequest(request_id="back", task="put_back"), 600.0
+        )
+        after = _bottle(s)
+    cancelled = carried.changes[-1]
+    assert cancelled.state == "cancelled", cancelled
+    assert "the robot was holding bottle_1" in cancelled.detail, cancelled.detail
+    last = back.changes[-1]
+    assert (last.state, last.detail) == ("succeeded", "bottle_1 put back where it was picked")
+    moved = np.subtract(after.position_in_world, before.position_in_world)
+    assert float(np.hypot(moved[0], moved[1])) < 0.05 and abs(moved[2]) < 0.02, (before, after)
+    assert after.upright > 0.95, after
+    assert not [e for e in (*carried.events, *back.events) if isinstance(e, ObjectDropped)]
+
+
+def _bottle(s: ProcessStack) -> ArtifactPose:
+    """bottle_1 as the sim has it now (truth)."""
+    truth = s.bus.query(WORLD_ARTIFACTS, None, ArtifactsTruth, timeout_s=10.0)
+    return next(a for a in truth.artifacts if a.id == "bottle_1")

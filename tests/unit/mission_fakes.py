@@ -508,6 +508,9 @@ class StubPlan:
     def backed_out(self) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, 0.0)
 
+    def over_the_spot(self, dz_m: float) -> StubPlan:
+        return StubPlan(self.kind, self.frame, self.possible, self.pregrasp_m)
+
 
 class StubPull:
     """A pull begins on the first status after the baseline and is felt on the third

@@ -215,6 +215,21 @@ def test_an_unknown_object_is_refused_before_the_robot_moves() -> None:
     assert rig.robot.nav_goals == []
 
 
+def test_a_put_back_with_nothing_held_is_accepted_unchecked_and_succeeds_saying_so() -> None:
+    rig = Rig()
+    rig.tick()
+    rig.requests.submit(MissionRequest(request_id="p1", task="put_back"), "")
+    statuses = rig.tick(5)
+    assert (statuses[0].state, statuses[0].detail) == ("accepted", "put back what it holds")
+    done = statuses[-1]
+    assert (done.request_id, done.state, done.detail) == (
+        "p1",
+        "succeeded",
+        "nothing held to put back",
+    )
+    assert rig.robot.nav_goals == [] and rig.robot.arm_goals == []
+
+
 def test_only_a_cancel_of_the_running_request_stops_it() -> None:
     rig = Rig()
     rig.running()

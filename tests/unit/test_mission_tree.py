@@ -9,9 +9,10 @@ import pytest
 
 from common.config import MissionSettings
 from common.messages.mission import MissionRequest
-from common.messages.navigation import ArtifactStandoff, PersonHandover
+from common.messages.navigation import ArtifactStandoff, PersonHandover, PoseGoal
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
+from services.mission.behaviours.base import Held
 from services.mission.behaviours.handover import FeelPull
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import FakeRobot, context, entity, fast_settings, small_world
@@ -540,23 +541,76 @@ def test_a_handed_over_object_counts_as_put_down_only_when_seen_since_away_from_
     assert not put_back(near, 5, [person])
 
 
-def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_and_blocks_others() -> None:
+def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_without_a_fetch() -> None:
     robot = small_world()
-    robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
-    robot.visible.add("can_1")
     tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
     first = run(tree, robot)
     assert (first.state, first.reason) == ("failed", "unknown_person")
-    assert robot.held and tree.ctx.holding == ("bottle_1", "r1")
-    tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
-    busy = run(tree, robot)
-    assert (busy.state, busy.reason) == ("failed", "busy")
-    assert "still holds bottle_1 from request r1" in busy.detail
+    held = tree.ctx.holding
+    assert robot.held and held is not None and (held.map_id, held.request_id) == ("bottle_1", "r1")
+    assert held.can_put_back and held.stance == (robot.xy[0], robot.xy[1], robot.yaw)
     standoffs = len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)])
     tree.start(MissionRequest(request_id="r3", object="bottle", person="person_1"))
     assert run(tree, robot).state == "succeeded"
     assert len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]) == standoffs
     assert tree.ctx.holding is None and "bottle_1" in tree.ctx.handed
+
+
+def test_an_object_still_held_is_put_back_where_it_was_picked_before_another_is_fetched() -> None:
+    robot = small_world()
+    robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
+    robot.visible.add("can_1")
+    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
+    assert run(tree, robot).reason == "unknown_person"
+    held = tree.ctx.holding
+    assert held is not None and held.stance is not None
+    robot.xy, robot.yaw = (-1.0, 1.0), 2.0  # it walked off meanwhile
+    goals_before, arm_before = len(robot.nav_goals), len(robot.arm_goals)
+    tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
+    outcome = run(tree, robot)
+    assert outcome.state == "succeeded", outcome
+    assert tree.ctx.holding is None
+    nav = [g for _, g in robot.nav_goals[goals_before:]]
+    assert isinstance(nav[0], PoseGoal) and (nav[0].x, nav[0].y, nav[0].yaw) == held.stance
+    assert isinstance(nav[1], ArtifactStandoff) and nav[1].artifact_id == "can_1"
+    arm = [type(g).__name__ for _, g in robot.arm_goals[arm_before:]]
+    # ready, over the spot, set down, let go, leave, stow; then the can's pick
+    assert arm[:6] == ["Posture", "Reach", "Reach", "Release", "Reach", "Posture"], arm
+    first = robot.arm_goals[arm_before + 1][1]
+    assert isinstance(first, Reach) and first.pregrasp_m > 0.0  # in as the gripper came
+    decided = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("putting bottle_1 (held since request r1) back" in d for d in decided)
+    assert any("bottle_1 put back where it was picked" in d for d in decided)
+
+
+def test_a_put_back_request_puts_the_held_object_back_and_fetches_nothing() -> None:
+    robot = small_world()
+    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
+    assert run(tree, robot).reason == "unknown_person"
+    held = tree.ctx.holding
+    assert held is not None and robot.held
+    standoffs = len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)])
+    tree.start(MissionRequest(request_id="p1", task="put_back"))
+    outcome = run(tree, robot)
+    assert (outcome.state, outcome.detail) == ("succeeded", "bottle_1 put back where it was picked")
+    assert not robot.held and tree.ctx.holding is None and "bottle_1" not in tree.ctx.handed
+    assert isinstance(robot.nav_goals[-1][1], PoseGoal)
+    assert len([g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]) == standoffs
+    tree.start(MissionRequest(request_id="p2", task="put_back"))  # again: nothing held
+    assert run(tree, robot).detail == "nothing held to put back"
+
+
+def test_an_object_held_that_cannot_be_put_back_blocks_other_requests_busy() -> None:
+    robot = small_world()
+    robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
+    robot.visible.add("can_1")
+    robot.held = True
+    tree = mission(robot, MissionRequest(request_id="r2", object="can_1", person="person_1"))
+    tree.ctx.holding = Held("bottle_1", "r1")  # where it was picked is not known
+    busy = run(tree, robot)
+    assert (busy.state, busy.reason) == ("failed", "busy")
+    assert "still holds bottle_1 from request r1" in busy.detail
+    assert not [g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
 
 
 def _approach_held(

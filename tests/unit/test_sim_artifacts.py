@@ -47,6 +47,21 @@ def test_an_artifact_moved_to_another_place_rests_there_and_is_no_drop(
     assert math.dist((x, y), (-2.0, 1.5)) < 0.01 and abs(z) < 0.005
 
 
+def test_the_artifacts_truth_has_each_one_where_it_is_and_how_upright(
+    world: WorldDescription,
+) -> None:
+    core = SimCore(world, locomotion="kinematic", sensors=ideal_sensors())
+    _run(core, 0.2)
+    (pose,) = core.artifact_poses()
+    assert pose.id == "bottle_1" and pose.upright > 0.999
+    assert pose.position_in_world == pytest.approx(core.truth_positions()["bottle_1"])
+    core.place_artifact("bottle_1", (-2.0, 1.5, 0.0), 0.0)
+    adr = core._artifact_q[0]
+    core.data.qpos[adr + 3 : adr + 7] = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)
+    (lying,) = core.artifact_poses()  # turned 90° about x: on its side
+    assert lying.upright == pytest.approx(0.0, abs=1e-9)
+
+
 def test_an_artifact_taken_away_is_parked_beyond_the_walls(world: WorldDescription) -> None:
     core = SimCore(world, locomotion="kinematic", sensors=ideal_sensors())
     x = core.place_artifact("bottle_1", None, 0.0)[0]

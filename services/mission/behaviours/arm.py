@@ -10,7 +10,8 @@
   from the grasp pose met something solid or is out of reach: `grasp_pose_failed`, not
   re-picked (hall seed 15: the gripper hit the bench under a tall box 11.7 cm short, and
   the second try tipped the robot over).
-- `CheckHeld`: the grasp detector on `wbc/status` says an object is held.
+- `CheckHeld`: the grasp detector on `wbc/status` says an object is held; where the base
+  stands then is kept (`Context.picked_from`: where a put-back walks to).
 - `NoCloseIn`: SUCCESS when the grasp plan has no close-in move (a side grasp), so the
   tree skips it; FAILURE when it has one (a top grasp: `GraspPlan.closed_in`).
 """
@@ -112,6 +113,8 @@ class CheckHeld(MissionBehaviour):
     def update(self) -> Status:
         status = self.port.wbc_status()
         if status is not None and status.held:
+            xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
+            self.ctx.picked_from = None if xy is None or yaw is None else (*xy, yaw)
             return Status.SUCCESS
         effort = "no wbc/status" if status is None else f"effort {status.gripper_effort:.2f}"
         return self.fail("grasp_failed", f"the grasp detector does not say held ({effort})")

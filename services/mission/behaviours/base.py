@@ -76,6 +76,23 @@ class Target:
 
 
 @dataclass(frozen=True)
+class Held:
+    """An object the gripper still holds from a request that ended unfinished: its map
+    id, the request's id, the grasp's plan (world frame: the map's) and where the base
+    stood for it (map x, y, yaw; None: unknown, and it cannot be put back)."""
+
+    map_id: str
+    request_id: str
+    plan: Any = None
+    stance: tuple[float, float, float] | None = None
+
+    @property
+    def can_put_back(self) -> bool:
+        """Whether the robot knows where it picked it: a world plan and a stance."""
+        return self.stance is not None and getattr(self.plan, "frame", "") == "world"
+
+
+@dataclass(frozen=True)
 class Failure:
     """Why a leaf failed: the typed reason, a sentence, which leaf, when (sim ns)."""
 
@@ -102,10 +119,14 @@ class Context:
     #: (the map keeps its entry where it last saw it: in a hand, or on its old support),
     #: until the map sees it put down again (`targets.put_back`: it leaves this then).
     handed: dict[str, tuple[str, int]] = field(default_factory=dict)
-    #: What the robot still held when a request ended unfinished (map id, the request's
-    #: id): the next request that asks for it brings it without a fetch, and one that
-    #: asks for something else fails `busy` saying what the gripper holds.
-    holding: tuple[str, str] | None = None
+    #: What the robot still holds from a request that ended unfinished (`Held`): the next
+    #: request that asks for it brings it without a fetch; one that asks for something
+    #: else puts it back where it was picked first.
+    holding: Held | None = None
+    #: Where the base stood (map x, y, yaw) when the grasp detector last said held.
+    picked_from: tuple[float, float, float] | None = None
+    #: What this request put back (a sentence; "" when nothing): a `put_back`'s outcome.
+    put_back: str = ""
 
 
 def blackboard(name: str, writes: Sequence[str] = ()) -> py_trees.blackboard.Client:

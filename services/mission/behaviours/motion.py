@@ -3,8 +3,10 @@
 - `SetMode(mode, source)`: asks the whole-body controller for a mode and the cmd_vel
   source it obeys; succeeds once `wbc/status` reports both (modes take effect one
   mission latency after their stamp), fails `mode_timeout` after `mode_timeout_s`.
-- `NavigateTo("artifact" | "person")`: sends `ArtifactStandoff(target)` or
-  `PersonHandover(person)` on start and watches `nav/status` for that goal id; a refusal
+- `NavigateTo("artifact" | "person" | "put_back")`: sends `ArtifactStandoff(target)`,
+  `PersonHandover(person)` or a `PoseGoal` to where the base stood to pick the object it
+  still holds (`Held.stance`, within `PUT_BACK_TOL_M`/`_RAD`: the arm puts it down at
+  the grasp's own pose) on start and watches `nav/status` for that goal id; a refusal
   or a failed goal fails `navigation_failed` with navigation's reason (the goal is sent
   once: navigation takes one sent before its first map and waits for the map). Carrying
   (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
@@ -50,6 +52,10 @@ from services.mission.behaviours.handover import side_bearing
 from services.mission.ports import PortError, Refused, Unavailable
 from services.mission.room_behind import room_behind
 
+#: A put-back's stance: within this of where the base stood for the grasp (m, rad).
+PUT_BACK_TOL_M = 0.05
+PUT_BACK_TOL_RAD = 0.08
+
 
 class SetMode(MissionBehaviour):
     def __init__(
@@ -86,7 +92,7 @@ class NavigateTo(MissionBehaviour):
     def __init__(
         self,
         ctx: Context,
-        kind: Literal["artifact", "person"],
+        kind: Literal["artifact", "person", "put_back"],
         stage: str,
         watch_held: bool = False,
         name: str = "",
@@ -99,6 +105,13 @@ class NavigateTo(MissionBehaviour):
         self.error: PortError | None = None
 
     def _goal(self) -> NavGoal:
+        if self.kind == "put_back":
+            held = self.ctx.holding
+            if held is None or held.stance is None:
+                raise RuntimeError(f"{self.name}: nothing held to put back (tree misbuilt)")
+            x, y, yaw = held.stance
+            return PoseGoal(x=x, y=y, yaw=yaw, position_tolerance_m=PUT_BACK_TOL_M,
+                            yaw_tolerance_rad=PUT_BACK_TOL_RAD)  # fmt: skip
         if self.kind == "artifact":
             target = self.target()
             if target.dropped and target.xy is not None:

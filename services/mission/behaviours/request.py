@@ -25,6 +25,7 @@ from services.mission.behaviours.base import (
     REQUEST,
     TARGET,
     Context,
+    Held,
     MissionBehaviour,
     Target,
 )
@@ -40,6 +41,19 @@ class WaitForRequest(MissionBehaviour):
             return Status.SUCCESS
         self.feedback_message = "waiting for a request"
         return Status.RUNNING
+
+
+class IsTask(MissionBehaviour):
+    """SUCCESS when the request is of `task` (`fetch`, `put_back`); FAILURE otherwise (a
+    condition: the tree's branch for the other task runs)."""
+
+    def __init__(self, ctx: Context, task: str) -> None:
+        super().__init__(f"is_{task}", ctx, stage="")
+        self.task = task
+
+    def update(self) -> Status:
+        request = self.get(REQUEST)
+        return Status.SUCCESS if request.task == self.task else Status.FAILURE
 
 
 class SelectTarget(MissionBehaviour):
@@ -125,10 +139,10 @@ class SelectTarget(MissionBehaviour):
         return [e for e in handed if targets.put_back(e, at[e.id][1], people)]
 
 
-def held_from_before(leaf: MissionBehaviour) -> tuple[str, str] | None:
-    """(map id, request id) of the object the gripper still holds from a request that
-    ended unfinished (`Context.holding`), None when none; forgotten once the controller
-    says the gripper holds nothing (somebody took it meanwhile)."""
+def held_from_before(leaf: MissionBehaviour) -> Held | None:
+    """The object the gripper still holds from a request that ended unfinished
+    (`Context.holding`), None when none; forgotten once the controller says the gripper
+    holds nothing (somebody took it meanwhile)."""
     wbc = leaf.port.wbc_status()
     if leaf.ctx.holding is not None and wbc is not None and not wbc.held:
         leaf.ctx.holding = None
@@ -149,35 +163,28 @@ class StillHolding(MissionBehaviour):
         held = held_from_before(self)
         if held is None:
             return Status.FAILURE
-        map_id, rid = held
         request: MissionRequest = self.get(REQUEST)
-        name = request.object
+        name, map_id = request.object, held.map_id
         if name != map_id and (targets.is_map_id(name) or targets.class_of(map_id) != name):
             return Status.FAILURE
         self.set(TARGET, Target(map_id, targets.class_of(map_id), None))
         self.set(CANDIDATES, [map_id])
-        self.ctx.decide(f"still holding {map_id} from request {rid}: bringing it, no fetch")
+        self.ctx.decide(
+            f"still holding {map_id} from request {held.request_id}: bringing it, no fetch"
+        )
         return Status.SUCCESS
 
 
 class HandsFree(MissionBehaviour):
-    """Fails `busy` while the robot still holds an object from a request that ended
-    unfinished that this request does not ask for (`StillHolding` did not take it): the
-    gripper cannot pick another, and a person must know where the first one is."""
+    """SUCCESS when the gripper holds nothing from an earlier request; FAILURE (a
+    condition, no mission failure) when it still holds one this request does not ask for
+    (`StillHolding` did not take it): the tree puts that one back first."""
 
-    def __init__(self, ctx: Context) -> None:
-        super().__init__("hands_free", ctx, stage="navigate_to_object")
+    def __init__(self, ctx: Context, name: str = "hands_free") -> None:
+        super().__init__(name, ctx, stage="navigate_to_object")
 
     def update(self) -> Status:
-        held = held_from_before(self)
-        if held is None:
-            return Status.SUCCESS
-        map_id, rid = held
-        return self.fail(
-            "busy",
-            f"the robot still holds {map_id} from request {rid}: ask for "
-            f"{map_id} (or a {targets.class_of(map_id)}) to be brought first",
-        )
+        return Status.SUCCESS if held_from_before(self) is None else Status.FAILURE
 
 
 class ResolvePerson(MissionBehaviour):
