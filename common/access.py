@@ -134,7 +134,7 @@ SERVICE_KEYS: dict[str, dict[str, tuple[str, ...] | bool]] = {
         "subscribe": ("{r}/ack/*", "{r}/command", "{r}/wbc/cmd_vel",
                       f"{ROOT}/world/people_command", f"{ROOT}/world/push",
                       f"{ROOT}/world/artifact_command", f"{ROOT}/world/movable_command"),
-        "serve": ("{r}/description", f"{ROOT}/world/description"),
+        "serve": ("{r}/description", f"{ROOT}/world/description", f"{ROOT}/world/artifacts"),
         "watch": True,
     },
     "wbc": {

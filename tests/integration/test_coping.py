@@ -229,6 +229,8 @@ def test_a_bottle_still_held_after_a_cancel_is_put_back_on_its_table_when_asked(
     last = back.changes[-1]
     assert (last.state, last.detail) == ("succeeded", "bottle_1 put back where it was picked")
     moved = np.subtract(after.position_in_world, before.position_in_world)
+    print(f"bottle_1 moved {np.hypot(moved[0], moved[1]) * 100:.1f} cm across, "
+          f"{moved[2] * 100:+.1f} cm up; upright {after.upright:.4f}")  # fmt: skip
     assert float(np.hypot(moved[0], moved[1])) < 0.05 and abs(moved[2]) < 0.02, (before, after)
     assert after.upright > 0.95, after
     assert not [e for e in (*carried.events, *back.events) if isinstance(e, ObjectDropped)]
