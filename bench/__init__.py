@@ -84,6 +84,12 @@ def _stack(overrides: Overrides) -> dict[str, Any]:
     return bench_stack(overrides, opts.sim_s, opts.full)
 
 
+def _person_filter(_overrides: Overrides) -> dict[str, Any]:
+    from bench.person_filter import bench_person_filter
+
+    return bench_person_filter()
+
+
 def _slam(settings: Overrides) -> dict[str, Any]:
     from bench.slam import bench_slam
 
@@ -101,6 +107,7 @@ BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "lapse": _lapse,
     "stack": _stack,
     "slam": _slam,
+    "person-filter": _person_filter,
 }
 #: What `dume bench all` runs (the others start stacks or processes in a loop: alone).
 ALL = ("sim", "wbc", "perception", "nav")
