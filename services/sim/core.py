@@ -395,11 +395,7 @@ class SimCore:
 
     def truth_positions(self) -> dict[str, tuple[float, float, float]]:
         """Artifact body origins and people's floor points in the world, m (sim truth)."""
-        data = self.data
-        out: dict[str, tuple[float, float, float]] = {}
-        for a, adr in zip(self.drops.ids, self._artifact_q, strict=True):
-            x, y, z = data.qpos[adr : adr + 3].tolist()
-            out[a] = (x, y, z)
+        out = {a.id: a.position_in_world for a in self.artifact_poses()}
         for pid in self.people.ids:
             x, y, _ = self.people.pose(pid)
             out[pid] = (x, y, 0.0)
