@@ -48,7 +48,8 @@ class SeparationWatch:
     closest_m: float = math.inf
     speed_at_closest_mps: float = math.nan
     closest_person: str = ""
-    #: The first `KEEP` violations, each as it was: when, who, d, S_p, the two speeds.
+    #: The first `KEEP` violations, each as it was: when, who, d, S_p, the two speeds,
+    #: where the robot (x, y, yaw) and the person stood and the person's velocity.
     kept: list[dict[str, Any]] = field(default_factory=list)
     #: Every moment's tightest person (least d − S_p): (t s, d m, S_p m, base speed m/s),
     #: S_p of the robot's speed towards them (0 moving away) and theirs (the plots).
@@ -83,6 +84,10 @@ class SeparationWatch:
                             "t_s": round(base.stamp_ns / 1e9, 2), "person": p.id,
                             "d_m": round(d, 3), "s_p_m": round(s_p, 3),
                             "v_robot_mps": round(v_r, 3), "v_person_mps": round(v_h, 3),
+                            "robot_xy_yaw": [round(pose.x, 2), round(pose.y, 2),
+                                             round(pose.yaw, 2)],
+                            "person_xy": [round(xy[0], 2), round(xy[1], 2)],
+                            "person_velocity": [round(c, 2) for c in p.velocity],
                         })  # fmt: skip
         if tightest is not None:
             self.series.append((base.stamp_ns / 1e9, tightest[1], tightest[2], math.hypot(*v)))

@@ -112,6 +112,11 @@ def test_moving_towards_a_person_inside_the_protective_separation_is_a_violation
     assert f["violations"] == 1 and f["least_margin_m"] < 0 and f["samples"] == 4
     (v,) = f["violations_kept"]
     assert (v["person"], v["d_m"], v["v_robot_mps"]) == ("person_1", 0.678, 0.6)
+    assert (v["robot_xy_yaw"], v["person_xy"], v["person_velocity"]) == (
+        [0.8, 0.0, 0.0],
+        [2.0, 0.0],
+        [0.0, 0.0],
+    )  # where: the report's reader finds the moment
     assert f["closest_m"] == pytest.approx(0.678, abs=1e-3) and f["closest_person"] == "person_1"
 
 
