@@ -167,7 +167,7 @@ class NavMap:
         self.pose, self.now = pose, b
         if self.grid is None:
             return False
-        self.scan.update(points, self.grid, pose, b)
+        self.scan.update(points, self.grid, pose, b, self.views)
         self.scanned = self.scan.people(b)
         marked = self._mark_obstacles(b)
         return self._layer() or marked

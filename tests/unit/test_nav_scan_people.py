@@ -311,3 +311,70 @@ def test_a_beam_passes_a_point_when_it_returns_beyond_it_or_returns_nothing_in_r
     empty = ScanView(wall.origin, 0.0, wall.angle_min, wall.angle_increment,
                      np.zeros_like(wall.ranges), 10.0)  # fmt: skip
     assert empty.through(np.array([[2.0, 0.0], [11.0, 0.0]])).tolist() == [True, False]
+
+
+def _masked(pose: Pose, legs: list[tuple[float, float]]) -> tuple[np.ndarray, ScanView]:
+    """The front lidar's scan as the trunk masks it (no return beyond ±97°: the sim's
+    B1), as points and rays."""
+    view = _view(pose, legs)
+    ranges = np.where(np.abs(ANGLES) > math.radians(97.0), 0.0, view.ranges)
+    view = ScanView(view.origin, view.heading, view.angle_min, view.angle_increment,
+                    ranges, view.range_max)  # fmt: skip
+    base = scan_points(ranges, float(ANGLES[0]), view.angle_increment, T_BASE_LIDAR)
+    return base + np.array([pose.x, pose.y]), view  # the robot at yaw 0
+
+
+def test_a_person_walking_into_the_blind_wedge_beside_the_trunk_coasts_along_their_velocity() -> (
+    None
+):
+    """Walking at 1 m/s along −x, 1.2 m to the robot's right: seen ahead, then beside the
+    trunk where the masked beams say nothing. The track lives on past `ttl_s` where its
+    velocity takes them, for the monitor."""
+    tracker = ScanPeople(FP)
+    pose, grid = Pose(0.0, 0.0, 0.0), _room()
+    seen_to = 0
+    for k in range(31):  # 3 s at 10 Hz, from x = 2.0 to x = −1.0
+        t, x = k * S // 10, 2.0 - 0.1 * k
+        pts, view = _masked(pose, _person(x, -1.2))
+        tracker.update(pts, grid, pose, t, [view])
+        if tracker.bodies:
+            seen_to = k
+        if k == 22:  # x = -0.2: beside the trunk, unseen for a second
+            (p,) = tracker.people(t)
+            assert p.id == "scan_1" and p.velocity is not None
+            assert p.velocity[0] == pytest.approx(-1.0, abs=0.15)
+            assert p.x == pytest.approx(x, abs=0.2) and p.y == pytest.approx(-1.2, abs=0.2)
+    assert 10 < seen_to < 22  # lost in the wedge (the front lidar sees down to ±97°)
+    # Without the rays (no beam can say), a track ends at its time to live as before.
+    bare = ScanPeople(FP)
+    for k in range(seen_to + 7):
+        pts, _ = _masked(pose, _person(2.0 - 0.1 * k, -1.2))
+        bare.update(pts, grid, pose, k * S // 10)
+    assert bare.people((seen_to + 6) * S // 10) == []
+
+
+def test_a_coasting_track_ends_once_a_beam_passes_where_it_would_be() -> None:
+    """A person standing ahead who is gone (the beams reach the wall behind them) ends at
+    the time to live; one the trunk masks coasts (at rest, where they were) up to
+    `coast_s`."""
+    pose, grid = Pose(0.0, 0.0, 0.0), _room()
+    tracker = ScanPeople(FP)
+    pts, view = _masked(pose, _person(2.0, 0.5))
+    tracker.update(pts, grid, pose, 0, [view])
+    for k in range(1, 8):
+        pts, view = _masked(pose, [])
+        tracker.update(pts, grid, pose, k * S // 10, [view])
+    assert tracker.people(7 * S // 10) == []  # the beams go through: gone
+    beside = ScanPeople(FP)
+    pts, view = _masked(pose, _person(0.4, -1.2))  # just inside the front lidar's field
+    beside.update(pts, grid, pose, 0, [view])
+    assert beside.bodies
+    for k in range(1, 35):
+        pts, view = _masked(pose, [])
+        # The masked beams towards (0.4, −1.2) read nothing: it cannot be said gone.
+        view = ScanView(view.origin, view.heading, view.angle_min, view.angle_increment,
+                        np.where(np.abs(ANGLES + math.radians(95.0)) < 0.1, 0.0, view.ranges),
+                        view.range_max)  # fmt: skip
+        beside.update(pts, grid, pose, k * S // 10, [view])
+        alive = beside.people(k * S // 10)
+        assert bool(alive) == (k <= 30), k  # coast_s = 3 s
