@@ -1,7 +1,8 @@
 """One goal's life: plan, follow, replan, recover, succeed or fail — pure, on sim time.
 
-`Navigator.tick(t, pose, world)` runs once per period with the costmap and people of the
-tick and returns the cmd_vel and the status. Its settings are `NavigationSettings` (the
+`Navigator.tick(t, pose, world, velocity)` runs once per period with the costmap and
+people of the tick (and the base's measured velocity in the map) and returns the cmd_vel
+and the status. Its settings are `NavigationSettings` (the
 follower's `controller`, the planner's `planner`, the people rules' `people`). Per goal:
 - (re)plan at start, every `replan_s`, and when the path ahead (`BLOCKED_LOOKAHEAD_M`) crosses
   a lethal cell; a plan that fails while a path is held keeps the old one until
@@ -58,6 +59,11 @@ BACKOFF_S = 1.5
 BACKOFF_SPEED = 0.15
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
+#: m/s: the base's measured velocity, when at least this, is one more direction of travel
+#: for the people rules (below it, the trot's sway gives it no meaning). The trot does not
+#: go quite where it is sent: turning onto a bend it stepped sideways at 0.23 m/s towards
+#: a person its path ran past (the changing hall's shift, t = 19 s).
+MEASURED_MIN_MPS = 0.1
 
 
 @dataclass(frozen=True)
@@ -196,7 +202,13 @@ class Navigator:
         iy, ix, inside = cm.grid.cells(ahead)
         return bool(np.any(cm.cost[iy, ix] < 0) | np.any(~inside))
 
-    def tick(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
+    def tick(
+        self,
+        t_ns: int,
+        pose: Pose,
+        cm: Costmap,
+        velocity: tuple[float, float] = (0.0, 0.0),
+    ) -> TickOutput:
         was_guarded, self.guarded = self.guarded, ""
         if self.state != "active" or self.goal is None:
             self.cmd = np.zeros(3)
@@ -231,6 +243,9 @@ class Navigator:
                 ways.append((float(ahead[0] / norm), float(ahead[1] / norm)))
         direction = ways[0] if ways else None
         also = (*ways[1:], (math.cos(pose.yaw), math.sin(pose.yaw))) if ways else ()
+        speed = math.hypot(*velocity)
+        if ways and speed >= MEASURED_MIN_MPS:
+            also = (*also, (velocity[0] / speed, velocity[1] / speed))
         limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
                              g.handover_id, self.limit_rule == "stop", also)  # fmt: skip
         self.limit_rule = limit.rule

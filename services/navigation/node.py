@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 from common.bus import WaitTimeout
-from common.geometry import yaw_of
+from common.geometry import yaw_of, yaw_of_quat_xyzw
 from common.lockstep import PeriodicTicker
 from common.map_frame import MapFrame
 from common.messages import as_numpy, to_wire
@@ -179,7 +179,7 @@ class NavNode:
             self.intake.follow_person(b, m.costmap, pose, m.map_people)
         if changed:
             m.rebuild(b)
-        out = self.nav.tick(b, pose, m.costmap)
+        out = self.nav.tick(b, pose, m.costmap, map_velocity(odom, T_map_base))
         self._caps(b, pose)
         if out.recovery == "clear" and self.nav.recovery == "clear":
             m.clear(b)
@@ -297,6 +297,16 @@ class NavNode:
                 cap_person=person,
             )
         )
+
+
+def map_velocity(odom: Odom, T_map_base: np.ndarray) -> tuple[float, float]:
+    """The base's measured floor velocity (the odometry's, in its own world frame) in the
+    map frame: the odometry's drift is a rotation about the vertical, which the map's
+    correction undoes."""
+    turn = yaw_of(T_map_base[:3, :3]) - yaw_of_quat_xyzw(odom.base_orientation_xyzw)
+    c, s = math.cos(turn), math.sin(turn)
+    vx, vy = odom.base_linear_velocity_in_world[:2]
+    return c * vx - s * vy, s * vx + c * vy
 
 
 def main(svc: Service) -> None:

@@ -12,7 +12,11 @@ rules per person:
   even a robot at rest is too close (S_p(0) ≥ the separation, or the allowed speed
   below `CREEP_MPS`) and it is not moving away: `stop`. A stop holds until the person is
   `RESUME_MARGIN_M` further than that (their position jitters from frame to frame: no
-  creeping on and off), then the robot goes on by itself;
+  creeping on and off), then the robot goes on by itself. Within S_p at rest of anyone
+  but the person handed over to, the robot is at rest unless its path leads clearly
+  away from them (`AWAY_COS`): moving along or beside a person that close, the trot's
+  sway and drift step towards them (a bystander passing 0.3 m behind the robot, the
+  shift: 0.06-0.1 m/s towards them while the path ran along them);
 - **the slow zone**: `handover_speed` within `slow_radius_m` of the person being handed
   over to, `slow_speed` within it of anyone else, entered on a braking ramp
   `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (the command goes through acceleration limits
@@ -48,6 +52,9 @@ Rule = Literal["", "slow", "handover", "stop"]
 BRAKE_LEAD_M = 0.1
 RESUME_MARGIN_M = 0.15
 CREEP_MPS = 0.03
+#: Within S_p at rest of a bystander, the path's direction must point at least this
+#: much away from them (the cosine with the line to them) for the robot to move.
+AWAY_COS = -0.5
 #: The caps are commanded this fraction below the limits: the trot overshoots a commanded
 #: speed by up to 13 % over 0.5 s (0.306 m/s for 0.27, `dume trial person`).
 TRACKING_MARGIN = 0.2
@@ -113,6 +120,10 @@ def people_limit(
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
         ways = (direction_world, *also) if direction_world else ()
         cos = max((n[0] * u[0] + n[1] * u[1] for u in ways), default=0.0)
+        if direction_world and not handing and d < at_rest:
+            away = n[0] * direction_world[0] + n[1] * direction_world[1] <= AWAY_COS
+            if not away:  # too close to move but away from them: the protective stop
+                return SpeedLimit(0.0, "stop", person.id, d, at_rest)
         if cos > 1e-6:  # moving towards them (not along or away): the protective separation
             room = d - (RESUME_MARGIN_M if stopped else 0.0)
             v_a = allowed_speed(room, v_h, sep)

@@ -217,6 +217,21 @@ def test_a_person_abeam_caps_only_the_speed_towards_them() -> None:
     assert people_limit(pose, (1.0, 0.0), [person], FP, p, top).rule == "slow"
 
 
+def test_inside_the_protective_separation_at_rest_only_a_path_away_moves() -> None:
+    """A bystander 0.3 m off the footprint's left side (S_p at rest 0.445 m): a path along
+    them stops the robot (the trot drifts as it steps), one leading away from them does
+    not; the person handed over to is no bystander (the robot comes to them)."""
+    p, top = PeopleSettings(), 0.6
+    pose = Pose(0.0, 0.0, 0.0)
+    person = Person("person_1", 0.0, FP.half_width + 0.3, None, (0.0, 0.0))
+    along = people_limit(pose, (1.0, 0.0), [person], FP, p, top)
+    assert (along.rule, along.speed, along.person_id) == ("stop", 0.0, "person_1")
+    away = people_limit(pose, (0.0, -1.0), [person], FP, p, top)
+    assert away.rule == "slow" and away.speed > 0.0
+    handing = people_limit(pose, (1.0, 0.0), [person], FP, p, top, "person_1")
+    assert handing.rule == "handover" and handing.speed > 0.0
+
+
 def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid() -> None:
     free = build_costmap(_open_floor(), FP, CostParams())
     blob = np.zeros_like(_open_floor().occupied)
@@ -289,6 +304,27 @@ def test_a_person_towards_any_way_the_base_may_move_caps_it() -> None:
     turning = people_limit(pose, (1.0, 0.0), [person], FP, p, 1.0,
                            also=((math.cos(pose.yaw), math.sin(pose.yaw)),))  # fmt: skip
     assert turning.speed < along.speed
+
+
+def test_the_base_stepping_sideways_towards_a_person_beside_the_path_is_stopped() -> None:
+    """The path runs along +x past a person 0.45 m off the footprint's right side, walking
+    alongside at 0.3 m/s: nothing the path or the heading does goes towards them, but the
+    trot, turning, steps sideways at 0.2 m/s (the changing hall's shift): the measured
+    velocity counts as a way the base moves."""
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    person = Person("person_1", 0.0, -(FP.half_width + 0.45), None, (0.3, 0.0))
+    cm = dataclasses.replace(floor, people=(person,))
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(5.0, 0.0, 0.0), 0.1, 0.1), 0)
+    planned = nav.tick(0, Pose(0.0, 0.0, 0.0), cm)
+    assert planned.limit.rule != "stop"
+    drifting = nav.tick(round(DT * 1e9), Pose(0.0, 0.0, 0.0), cm, velocity=(0.1, -0.2))
+    assert drifting.limit.rule == "stop" and drifting.limit.person_id == "person_1"
+    assert float(np.hypot(*drifting.cmd[:2])) == 0.0
+    # Sway at rest (below MEASURED_MIN_MPS) is no direction.
+    nav.start(GoalSpec("h", Pose(5.0, 0.0, 0.0), 0.1, 0.1), 0)
+    swaying = nav.tick(0, Pose(0.0, 0.0, 0.0), cm, velocity=(0.0, -0.05))
+    assert swaying.limit.rule != "stop"
 
 
 def test_a_person_standing_in_the_way_is_waited_for_before_any_recovery() -> None:
