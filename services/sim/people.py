@@ -5,8 +5,12 @@ pose (`RobotNear`): when the base is within `FACE_RADIUS_M` the person stops and
 towards it (a worker waiting for the robot); otherwise a walking person follows the route
 `position -> waypoints[0] -> ... -> waypoints[-1] -> ... -> position -> ...` at their
 speed (at most `MAX_SPEED_MPS`), pausing `PAUSE_S` at each end of a leg and turning in
-place towards the next one before walking on. Turns run at `TURN_RATE_RADPS`. With
-walking off, or no waypoints, a person only turns.
+place towards the next one before walking on. A walker speeds up from rest and slows
+into the point they walk to at `ACCEL_MPS2`, as people do (they reach their pace in one
+or two steps), and stops at once (a step). Stepping from rest straight to 1.1 m/s, a
+bystander who had paused beside the robot walked past it inside the protective
+separation of a speed nobody could have measured in time (the shift, t = 118 s). Turns
+run at `TURN_RATE_RADPS`. With walking off, or no waypoints, a person only turns.
 
 Bystanders (`bystanders`, with walking on: the changing hall) do not stop for the robot:
 a walking person keeps to their route past it and across its path, and stops to face it
@@ -43,6 +47,9 @@ YIELD_M = 1.1
 YIELD_HALF_ANGLE_RAD = math.radians(50.0)
 MAX_SPEED_MPS = 1.2
 TURN_RATE_RADPS = 2.0
+#: m/s²: how fast a walker speeds up from rest and slows into a point (gait initiation
+#: reaches a walking pace of 1-1.4 m/s in about a second).
+ACCEL_MPS2 = 1.0
 PAUSE_S = 1.0
 GIVE_WAY_S = 4.0
 #: Closer than this to the next point counts as there (the last step lands on it).
@@ -68,6 +75,7 @@ class _Walker:
     yielding_s: float = 0.0  # how long a bystander has paused for the robot in the way
     vx: float = 0.0  # the last step's velocity, m/s (world)
     vy: float = 0.0
+    pace: float = 0.0  # the speed walked at, m/s: up from rest at ACCEL_MPS2
 
 
 class RobotNear(NamedTuple):
@@ -168,6 +176,8 @@ class People:
             elif w.route:
                 self._walk(w, dt)
             w.vx, w.vy = (w.x - x0) / dt, (w.y - y0) / dt
+            if w.x == x0 and w.y == y0:
+                w.pace = 0.0  # stood, turned or paused: from rest again
             if w.dirty:
                 data.mocap_pos[w.mocap, 0] = w.x
                 data.mocap_pos[w.mocap, 1] = w.y
@@ -202,7 +212,8 @@ class People:
             return
         if not self._turn_towards(w, math.atan2(dy, dx), dt):
             return
-        step = min(distance, w.speed * dt)
+        w.pace = min(w.speed, w.pace + ACCEL_MPS2 * dt, math.sqrt(2.0 * ACCEL_MPS2 * distance))
+        step = min(distance, max(w.pace, ACCEL_MPS2 * dt) * dt)
         w.x += step * dx / distance
         w.y += step * dy / distance
         w.dirty = True

@@ -8,7 +8,7 @@ import mujoco
 import pytest
 
 from common.messages.world import Person
-from services.sim.people import COME_M, FACE_RADIUS_M, People, RobotNear
+from services.sim.people import ACCEL_MPS2, COME_M, FACE_RADIUS_M, People, RobotNear
 
 XML = """<mujoco><worldbody>
 <body name="person_1" mocap="true"><geom type="box" size=".2 .2 .9"/></body>
@@ -43,7 +43,8 @@ def test_a_bystander_walks_on_past_a_robot_beside_their_route() -> None:
     assert max(_run(ordinary, data, robot, 5.0)) < 3.0 - math.sqrt(FACE_RADIUS_M**2 - 1.5**2) + 0.01
     bystander, data = _walker(True)
     xs = _run(bystander, data, robot, 5.0)
-    assert xs[-1] == pytest.approx(5.0, abs=0.05)  # 5 s at 1 m/s, no stop
+    # 5 s at 1 m/s, no stop: from rest at ACCEL_MPS2, the first second gains half a metre.
+    assert xs[-1] == pytest.approx(5.0 - 0.5 / ACCEL_MPS2, abs=0.05)
     assert bystander.velocity("person_1") == pytest.approx((1.0, 0.0))  # the truth's velocity
 
 
@@ -75,15 +76,16 @@ def test_a_bystander_pauses_rather_than_walk_into_the_robot_and_goes_on_once_it_
     in_the_way = RobotNear(3.0, 0.0, math.pi / 2)  # standing across the route
     xs = _run(people, data, in_the_way, 5.0)  # less than GIVE_WAY_S after the stop
     assert max(xs) <= 3.0 - 1.1 + 0.002 and xs[-1] > 1.5  # stopped 1.1 m short of its base
-    assert _run(people, data, RobotNear(3.0, 2.0, math.pi / 2), 1.5)[-1] > 3.0  # gone: on
+    assert _run(people, data, RobotNear(3.0, 2.0, math.pi / 2), 2.0)[-1] > 3.0  # gone: on
 
 
 def test_a_bystander_kept_waiting_by_the_robot_turns_back_along_their_route() -> None:
     people, data = _walker(True)
     in_the_way = RobotNear(3.0, 0.0, math.pi / 2)
-    xs = _run(people, data, in_the_way, 8.0)
+    xs = _run(people, data, in_the_way, 9.0)
     stop = max(xs)
     assert stop <= 3.0 - 1.1 + 0.002
-    # Stopped 1.9 s in, waited GIVE_WAY_S, turned (π at 2 rad/s), then walked back.
+    # Stopped 2.4 s in (1.9 m from rest), waited GIVE_WAY_S, turned (π at 2 rad/s), then
+    # walked back for 1.03 s, the first second speeding up.
     assert xs[-1] == pytest.approx(stop - 0.53, abs=0.05)
     assert people.velocity("person_1") == pytest.approx((-1.0, 0.0), abs=1e-6)
