@@ -11,7 +11,8 @@
               have_it: still_holding (the object asked for, held since an unfinished
                        request: no fetch), else find_and_pick: hands_free, else put_back
                        (the object held since an unfinished request, not asked for: put
-                       back where it was picked, `behaviours.put_back`), then:
+                       back where it was picked, `behaviours.put_back`; fallen from the
+                       gripper on the way: where it lies said, and on), then:
               next_instance (Recover: object_not_found | navigation_failed |
                              blocked_by_person,
                              budget max_candidates - 1, while candidates remain; then,
@@ -95,7 +96,7 @@ from services.mission.behaviours.motion import (
     SetMode,
 )
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
-from services.mission.behaviours.put_back import PutBackFirst, PutDown, held_reach
+from services.mission.behaviours.put_back import FellOnTheWay, PutBackFirst, PutDown, held_reach
 from services.mission.behaviours.request import (
     HandsFree,
     IsTask,
@@ -116,13 +117,14 @@ def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
     return Sequence(name, memory=True, children=list(children))
 
 
-def put_back_tree(ctx: Context, name: str) -> Sequence:
+def put_back_tree(ctx: Context, name: str, goes_on: bool) -> Selector:
     """Put what the gripper still holds from an unfinished request back where it was
     picked (`behaviours.put_back`): walk to the grasp's stance, carry it in over its
-    place, set it down, let go, leave, stow."""
+    place, set it down, let go, leave, stow; the object fallen on the way, say where it
+    lies (`goes_on`: and go on with the request)."""
     s, st = ctx.settings, STAGES
-    return _seq(
-        name,
+    steps = _seq(
+        f"{name}_steps",
         PutBackFirst(ctx, st[0]),
         SetMode(ctx, "walk", "navigation", st[0], name="mode_walk_put_back"),
         NavigateTo(ctx, "put_back", st[0], watch_held=True),
@@ -143,6 +145,7 @@ def put_back_tree(ctx: Context, name: str) -> Sequence:
         PutDown(ctx, st[0]),
         SetMode(ctx, "walk", "navigation", st[0], name="mode_walk_put_down"),
     )  # fmt: skip
+    return Selector(name, memory=True, children=[steps, FellOnTheWay(ctx, st[0], goes_on)])
 
 
 def build_tree(ctx: Context) -> Sequence:
@@ -297,7 +300,7 @@ def build_tree(ctx: Context) -> Sequence:
                         Selector(
                             "hands_free_or_put_back",
                             memory=True,
-                            children=[HandsFree(ctx), put_back_tree(ctx, "put_back")],
+                            children=[HandsFree(ctx), put_back_tree(ctx, "put_back", True)],
                         ),
                         find,
                         pick,
@@ -338,7 +341,10 @@ def build_tree(ctx: Context) -> Sequence:
                 Selector(
                     "nothing_held_or_put_back",
                     memory=True,
-                    children=[HandsFree(ctx, "nothing_held"), put_back_tree(ctx, "put_back_asked")],
+                    children=[
+                        HandsFree(ctx, "nothing_held"),
+                        put_back_tree(ctx, "put_back_asked", False),
+                    ],
                 ),
             ),
         ],

@@ -130,6 +130,8 @@ class FakeRobot:
     reach_miss_m: float = 0.02
     #: Times the grasp lets go while carrying (after `drop_after` ticks of the handover goal).
     drops: int = 0
+    #: The goal kind during which a drop happens (`drops`, after `drop_after` ticks).
+    drop_on: str = "person_handover"
     drop_after: int = 1
     #: A drop takes the object out of the wrist camera's sight (it rolled away).
     drop_hides: bool = False
@@ -194,9 +196,7 @@ class FakeRobot:
             ):
                 self._finish_arm(goal_id, goal)
         handover = [
-            g
-            for g, (_, k, state) in self._nav.items()
-            if k == "person_handover" and state == "active"
+            g for g, (_, k, state) in self._nav.items() if k == self.drop_on and state == "active"
         ]
         if self.drops > 0 and self.held and handover:
             start = self._nav[handover[-1]][0]

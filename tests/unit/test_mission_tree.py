@@ -583,6 +583,35 @@ def test_an_object_still_held_is_put_back_where_it_was_picked_before_another_is_
     assert any("bottle_1 put back where it was picked" in d for d in decided)
 
 
+def test_an_object_that_falls_on_the_way_to_be_put_back_is_said_and_the_fetch_goes_on() -> None:
+    """The held bottle falls from the gripper on the walk back to its place (minutes in
+    the jaws: a box creeps out of them): where it lies is said, the holding forgotten,
+    and the request's can fetched with the regrasp budget untouched; asked to put it
+    back, the request fails `object_dropped` saying where it lies."""
+    for task in ("fetch", "put_back"):
+        robot = small_world()
+        robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
+        robot.visible.add("can_1")
+        tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
+        assert run(tree, robot).reason == "unknown_person"
+        robot.drops, robot.drop_on, robot.drop_after = 1, "pose", 2
+        if task == "fetch":
+            tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
+        else:
+            tree.start(MissionRequest(request_id="p1", task="put_back"))
+        outcome = run(tree, robot)
+        assert not robot.held and tree.ctx.holding is None
+        fell = "bottle_1 (held since request r1) fell from the gripper on the way to be put back"
+        if task == "fetch":
+            assert outcome.state == "succeeded", outcome
+            decided = tree.ctx.decisions  # type: ignore[attr-defined]
+            assert any(d.startswith(fell) and "it lies about (" in d for d in decided), decided
+            assert not any("regrasp" in d for d in decided), decided
+        else:
+            assert (outcome.state, outcome.reason) == ("failed", "object_dropped"), outcome
+            assert outcome.detail.startswith(fell)
+
+
 def test_a_put_back_request_puts_the_held_object_back_and_fetches_nothing() -> None:
     robot = small_world()
     tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))

@@ -17,7 +17,12 @@ succeeds saying so, or that nothing was held (`put_back_tree` in `tree`):
   it is down all the same); `let_go_held`: open; `leave_it`: back to the pre-grasp pose
   (stuck: stow anyway); `stow_put_back`: stow;
 - `PutDown`: the gripper says empty: the holding is forgotten, and the map sees the
-  object in its place again through the cameras.
+  object in its place again through the cameras;
+- `FellOnTheWay`, when any of those failed: a failure `grasp_lost` (the object fell from
+  the gripper on the walk back: minutes in the jaws, a box creeps out of them) is said
+  with where it lies (`dropped_at`) and the holding forgotten; a fetch then goes on, its
+  gripper free (the fetch's own regrasp budget is not spent on it), and a `put_back`
+  request fails `object_dropped` saying where it lies. Any other failure stands.
 
 The Reaches (`held_reach`) are stamped now, not at the grasp's capture: the place is a
 pose in the map, which the robot port takes to the controller's odometry with the
@@ -34,7 +39,8 @@ import msgspec
 from py_trees.common import Status
 
 from common.messages.wbc import ArmGoal
-from services.mission.behaviours.base import Context, Held, MissionBehaviour
+from services.mission.behaviours.base import FAILURE, Context, Failure, Held, MissionBehaviour
+from services.mission.targets import dropped_at
 
 
 def _held(leaf: MissionBehaviour) -> Held:
@@ -100,4 +106,31 @@ class PutDown(MissionBehaviour):
         self.ctx.holding = None
         self.ctx.put_back = f"{held.map_id} put back where it was picked"
         self.ctx.decide(self.ctx.put_back)
+        return Status.SUCCESS
+
+
+class FellOnTheWay(MissionBehaviour):
+    """After the put-back failed: the held object fell on the way (the module docstring).
+    `goes_on`: SUCCESS then (a fetch goes on); else FAILURE `object_dropped`."""
+
+    def __init__(self, ctx: Context, stage: str, goes_on: bool) -> None:
+        super().__init__("fell_on_the_way", ctx, stage)
+        self.goes_on = goes_on
+
+    def update(self) -> Status:
+        failure, held, status = self.get(FAILURE), self.ctx.holding, self.port.wbc_status()
+        fell = isinstance(failure, Failure) and failure.reason == "grasp_lost"
+        if not fell or held is None or status is None or status.held:
+            return Status.FAILURE  # the failure as it was
+        at = dropped_at(self.port.robot_xy(), self.port.robot_yaw())
+        where = f"about ({at[0]:.2f}, {at[1]:.2f})" if at else "where the robot walked"
+        said = (
+            f"{held.map_id} (held since request {held.request_id}) fell from the gripper on "
+            f"the way to be put back: it lies {where}"
+        )
+        self.ctx.holding = None
+        if not self.goes_on:
+            return self.fail("object_dropped", said)
+        self.ctx.decide(said)
+        self.set(FAILURE, None)  # dealt with: the fetch goes on with its gripper free
         return Status.SUCCESS
