@@ -179,7 +179,7 @@ class NavNode:
             self.intake.follow_person(b, m.costmap, pose, m.map_people)
         if changed:
             m.rebuild(b)
-        out = self.nav.tick(b, pose, m.costmap, map_velocity(odom, T_map_base))
+        out = self.nav.tick(b, pose, m.costmap, map_velocity(odom, pose.yaw))
         self._caps(b, pose)
         if out.recovery == "clear" and self.nav.recovery == "clear":
             m.clear(b)
@@ -299,11 +299,11 @@ class NavNode:
         )
 
 
-def map_velocity(odom: Odom, T_map_base: np.ndarray) -> tuple[float, float]:
+def map_velocity(odom: Odom, map_yaw: float) -> tuple[float, float]:
     """The base's measured floor velocity (the odometry's, in its own world frame) in the
-    map frame: the odometry's drift is a rotation about the vertical, which the map's
-    correction undoes."""
-    turn = yaw_of(T_map_base[:3, :3]) - yaw_of_quat_xyzw(odom.base_orientation_xyzw)
+    map frame, the base's heading there being `map_yaw`: the map's correction of the
+    odometry is a rotation about the vertical."""
+    turn = map_yaw - yaw_of_quat_xyzw(odom.base_orientation_xyzw)
     c, s = math.cos(turn), math.sin(turn)
     vx, vy = odom.base_linear_velocity_in_world[:2]
     return c * vx - s * vy, s * vx + c * vy

@@ -33,12 +33,13 @@ grid, pose, t)` takes one scan's returns in the map frame:
   `velocity_min_span_s`: the monitor then takes a walking pace). A track not seen for
   `ttl_s` ends (a body that left the field went out of range) unless no beam can say
   it is gone: then it coasts along its velocity for up to `coast_s`, and ends as soon
-  as a beam returns from beyond where it would be (`ScanView.clears`). The two lidars
-  see ±97° about their own axes (the trunk masks the rest): a wedge on each side of the
-  trunk, 0.6 m long at 1.2 m out and closing at 3.3 m, is blind to both, and a person
-  walking beside the robot crosses it in seconds (the changing hall's shift: person_1,
-  overtaking the robot 1.1 m to its right, unseen for 2.2 s, was found again 0.74 m from
-  the footprint with no velocity, after the robot had stepped towards them).
+  as a beam returns from `CLEARS_BEYOND_M` beyond where it would be (`ScanView.through`,
+  a beam with no return saying nothing). The two lidars see ±97° about their own axes
+  (the trunk masks the rest): a wedge on each side of the trunk, 0.6 m long at 1.2 m
+  out and closing at 3.3 m, is blind to both, and a person walking beside the robot
+  crosses it in seconds (the changing hall's shift: person_1, overtaking the robot 1.1 m
+  to its right, unseen for 2.2 s, was found again 0.74 m from the footprint with no
+  velocity, after the robot had stepped towards them).
 
 Every track is a person to the speed rules, as ISO 13855's protective field treats
 anything that enters it: something the map lacks that is the size of a person. A
@@ -73,6 +74,9 @@ from common.messages.base import NS_PER_S
 from services.navigation.costmap import Person
 from services.navigation.grid import BoolGrid, Footprint, Grid, Pose, distance_to_footprint
 from services.navigation.seen_people import fitted_velocity
+
+#: m: a beam returning from this far beyond a coasting track's place says it is gone.
+CLEARS_BEYOND_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -223,24 +227,15 @@ class ScanView:
         r = self.ranges[k0 : k1 + 1]
         return bool(np.all(r >= dist + beyond_m))
 
-    def clears(self, xy: tuple[float, float], beyond_m: float = 0.3) -> bool:
-        """Whether the beam at the point (map) returns from at least `beyond_m` beyond it:
-        nothing stands there. A beam with no return says nothing (the trunk masks it, it
-        was lost, or nothing is within range), nor does one out of the field."""
-        dx, dy = xy[0] - self.origin[0], xy[1] - self.origin[1]
-        dist = math.hypot(dx, dy)
-        bearing = math.remainder(math.atan2(dy, dx) - self.heading, math.tau)
-        k = round((bearing - self.angle_min) / self.angle_increment)
-        if not 0 <= k < len(self.ranges):
-            return False
-        return bool(self.ranges[k] >= dist + beyond_m)
-
-    def through(self, xy: FloatArray, beyond_m: float = 0.15) -> NDArray[np.bool_]:
+    def through(
+        self, xy: FloatArray, beyond_m: float = 0.15, none_passes: bool = True
+    ) -> NDArray[np.bool_]:
         """Which points (n, 2, map) its beam passes: a return from at least `beyond_m`
         beyond the point, or none at all (nothing within the range: in the middle of a
         hall most beams return nothing; a beam lost, or masked by the robot's own legs,
         reads so too, which costs a mark the other lidar or the next scan makes again),
-        the point in the scan's field and range."""
+        the point in the scan's field and range. `none_passes` False: a beam with no
+        return says nothing (where a person may be hidden: the trunk masks it)."""
         if len(xy) == 0:
             return np.zeros(0, dtype=bool)
         dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
@@ -249,7 +244,7 @@ class ScanView:
         k = np.rint((bearing - self.angle_min) / self.angle_increment).astype(np.int64)
         inside = (k >= 0) & (k < len(self.ranges)) & (dist + beyond_m < self.range_max)
         r = self.ranges[np.clip(k, 0, len(self.ranges) - 1)]
-        out: NDArray[np.bool_] = inside & ((r >= dist + beyond_m) | (r <= 0.0))
+        out: NDArray[np.bool_] = inside & ((r >= dist + beyond_m) | (none_passes & (r <= 0.0)))
         return out
 
 
@@ -326,10 +321,15 @@ class ScanPeople:
     def _associate(self, found: list[Body], t_ns: int, views: Sequence[ScanView] = ()) -> None:
         p = self.p
         ttl = round(p.ttl_s * NS_PER_S)
-        for tr in self.tracks:  # unseen past its time to live: does a beam see it gone?
-            if t_ns - tr.last[0] > ttl and not tr.cleared:
-                where = tr.predicted(t_ns)
-                tr.cleared = not views or any(v.clears(where) for v in views)
+        # Unseen past its time to live: does a beam return from beyond where it would be?
+        unseen = [tr for tr in self.tracks if t_ns - tr.last[0] > ttl and not tr.cleared]
+        if unseen:
+            where = np.array([tr.predicted(t_ns) for tr in unseen])
+            gone = np.full(len(unseen), not views)
+            for v in views:
+                gone |= v.through(where, CLEARS_BEYOND_M, none_passes=False)
+            for tr, g in zip(unseen, gone.tolist(), strict=True):
+                tr.cleared = g
         live = [tr for tr in self.tracks if self._alive(tr, t_ns)]
         pairs = sorted(
             (math.hypot(b.x - px, b.y - py), i, k)

@@ -195,11 +195,11 @@ class FakeRobot:
                 and self.t - start >= self.arm_ticks * TICK_NS
             ):
                 self._finish_arm(goal_id, goal)
-        handover = [
+        carrying = [
             g for g, (_, k, state) in self._nav.items() if k == self.drop_on and state == "active"
         ]
-        if self.drops > 0 and self.held and handover:
-            start = self._nav[handover[-1]][0]
+        if self.drops > 0 and self.held and carrying:
+            start = self._nav[carrying[-1]][0]
             if self.t - start >= self.drop_after * TICK_NS:
                 self.held = False
                 self.drops -= 1
