@@ -9,7 +9,7 @@ by this map), `import` (a map file imported while running).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -19,6 +19,20 @@ from common.messages.world import SupportSurface
 
 Source = Literal["prior", "seed-from-world", "perception", "import"]
 EntityKind = Literal["artifact", "person"]
+
+
+class SeenPlace(Message, frozen=True):
+    """One of a person's usual places: where the map saw them, one `PLACE_CELL_M` cell of
+    the floor (`services.semantic_map.whereabouts`).
+
+    xy: the sightings' mean place there, m, world. sightings: how many (at most one a
+    second: about the seconds they were seen there). last_seen_ns: the latest one's sim
+    time, ns.
+    """
+
+    xy: tuple[Finite, Finite]
+    sightings: Annotated[int, msgspec.Meta(ge=1)]
+    last_seen_ns: StampNs
 
 
 class MapEntity(Message, frozen=True):
@@ -34,6 +48,9 @@ class MapEntity(Message, frozen=True):
     nearest_view_m: an artifact's nearest view fused, its range from the camera's base, m
         (None: not known, as for one seeded or imported); the mapping patrol looks again
         at one seen only from afar.
+    places: a person's usual places, most seen first (empty for artifacts, and for a
+        person seeded from truth and not seen since): where to look for someone who is
+        not where they were last seen.
     """
 
     id: EntityId
@@ -48,6 +65,7 @@ class MapEntity(Message, frozen=True):
     velocity_in_world: tuple[Finite, Finite] = (0.0, 0.0)
     observations: int = 0
     nearest_view_m: NonNegative | None = None
+    places: Annotated[tuple[SeenPlace, ...], msgspec.Meta(max_length=64)] = ()
 
 
 class MapListing(Message, frozen=True):

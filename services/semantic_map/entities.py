@@ -17,6 +17,7 @@ import numpy as np
 
 from common.geometry import FloatArray
 from common.messages.semantic_map import EntityKind, MapEntity, Source
+from services.semantic_map.whereabouts import Whereabouts
 
 _ID = re.compile(r"^([a-z][a-z0-9]*)_([1-9][0-9]*)$")
 
@@ -88,6 +89,8 @@ class Track:
     moving: bool = False
     seen_with: set[str] = field(default_factory=set)
     best_range_m: float | None = None
+    #: People: where they were seen (`whereabouts`), their usual places.
+    whereabouts: Whereabouts = field(default_factory=Whereabouts)
 
     @property
     def confirmed(self) -> bool:
@@ -114,6 +117,7 @@ class Track:
             velocity_in_world=(float(self.velocity[0]), float(self.velocity[1])),
             observations=self.hits,
             nearest_view_m=self.best_range_m,
+            places=self.whereabouts.places() if self.kind == "person" else (),
         )
 
     @classmethod
@@ -134,6 +138,7 @@ class Track:
             appearance=appearance,
             hits=e.observations,
             best_range_m=e.nearest_view_m,
+            whereabouts=Whereabouts.of(e.places),
         )
 
 

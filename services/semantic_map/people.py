@@ -302,6 +302,7 @@ class PeopleTracker:
                 hits=1,
             )
             tr.vel_cov = np.eye(2) * V_MAX**2
+            tr.whereabouts.see(tr.xy, stamp_ns)
             self.add(tr, stamp_ns)
             if self.settings.confirm_hits <= 1:
                 tr.id = self.ids.next_id("person")
@@ -391,6 +392,7 @@ class PeopleTracker:
         old.last_seen_ns, old.stamp_ns, old.moving = new.last_seen_ns, new.stamp_ns, new.moving
         old.misses, old.missing_since_ns = 0, None
         old.seen_with |= new.seen_with
+        old.whereabouts.absorb(new.whereabouts)
         self._seen_with_as(new, old)
         self.leaps.pop(old.id, None)
         self.drop(new)
@@ -456,6 +458,7 @@ class PeopleTracker:
         keep.last_seen_ns = max(keep.last_seen_ns, gone.last_seen_ns)
         if keep.appearance is None and gone.appearance is not None:
             keep.appearance = gone.appearance.copy()
+        keep.whereabouts.absorb(gone.whereabouts)
         assert keep.id is not None and gone.id is not None
         self._seen_with_as(gone, keep)
         self.drop(gone)
@@ -520,3 +523,4 @@ class PeopleTracker:
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None
+        tr.whereabouts.see(tr.xy, stamp_ns)
