@@ -663,8 +663,12 @@ class MissionSettings(_Section):
     handover_check_s: NonNegative = 1.0
     handover_tol_m: Positive = 0.12
     #: A person not seen at the handover pose: after a turn round on the spot, stand this
-    #: long saying "looking for <person>" before walking to where the map last had them.
+    #: long saying "looking for <person>" before walking to one of their usual places, or
+    #: to where the map last had them.
     person_ask_s: NonNegative = 10.0
+    #: A person not at the handover pose: the rounds of looking for them (at their usual
+    #: places) and walking to them again before the request fails `person_not_found`.
+    person_rounds: PositiveInt = 6
     #: After the release: walk backwards at this speed (m/s) for this long.
     back_off_speed: Positive = 0.15
     back_off_s: NonNegative = 1.0

@@ -94,6 +94,8 @@ MissionReason = Literal[
     "object_dropped",  # it fell while carried where the robot cannot pick it up again (on
     # the floor, out of the arm's reach) or was not seen where it fell: said where
     "handover_timeout",  # nobody took the object in time
+    "person_not_found",  # the person was not reached: not seen where the robot looked for
+    # them, or walking on: said where it looked and where the map last saw them
     "mode_timeout",  # the whole-body controller did not take the mode asked for
     "dependency_lost",  # a service it depends on went away or restarted while it ran
     "no_route",  # explore, patrol: no free floor the robot can reach in the map's grid

@@ -31,7 +31,12 @@
                            Reach back to the pre-grasp pose, Posture(stow), fail with its
                            reason; then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
-                             at_the_person: person_ahead, else PersonHandover once more
+                             find_person (Recover: person_not_found | navigation_failed,
+                                          budget person_rounds - 1)
+                               at_the_person: person_ahead, else: when unseen, look round
+                                 and ask (then the next of their usual places, or their
+                                 last), PersonHandover (or a walk to that place) once
+                                 more, stands_there (seen, not walking: present)
               (a grasp lost: the object fell where the gripper was (`dropped_at`): no
               walk to its map place, the nearest of its class looked for and picked;
               not seen there, or out of the arm's reach (the floor): `object_dropped`)
@@ -94,6 +99,7 @@ from services.mission.behaviours.motion import (
     PersonAhead,
     SeenThere,
     SetMode,
+    StandsThere,
 )
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
 from services.mission.behaviours.put_back import FellOnTheWay, PutBackFirst, PutDown, held_reach
@@ -111,6 +117,9 @@ from services.mission.targets import dropped_at
 
 REPICK_REASONS = frozenset({"grasp_lost", "grasp_failed"})
 NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed", "blocked_by_person"})
+#: One more round of looking for the person and walking to them (they walk on, were not
+#: seen, or their place could not be walked to).
+FIND_PERSON_REASONS = frozenset({"person_not_found", "navigation_failed"})
 
 
 def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
@@ -246,23 +255,30 @@ def build_tree(ctx: Context) -> Sequence:
         ResolvePerson(ctx),
         SetMode(ctx, "walk", "navigation", st[4]),
         NavigateTo(ctx, "person", st[4], watch_held=True),
-        Selector(
-            "at_the_person",
-            memory=True,
-            children=[
-                PersonAhead(ctx, st[4]),
-                _seq(
-                    "to_them_again",
-                    Selector("look_if_unseen", memory=True, children=[
-                        SeenThere(ctx, st[4]),
-                        _seq("look_round",
-                             SetMode(ctx, "walk", "mission", st[4], name="mode_walk_look"),
-                             LookForPerson(ctx, st[4]),
-                             SetMode(ctx, "walk", "navigation", st[4], name="mode_walk_on")),
-                    ]),
-                    NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
-                ),
-            ],
+        Recover(
+            "find_person",
+            Selector(
+                "at_the_person",
+                memory=True,
+                children=[
+                    PersonAhead(ctx, st[4]),
+                    _seq(
+                        "to_them_again",
+                        Selector("look_if_unseen", memory=True, children=[
+                            SeenThere(ctx, st[4]),
+                            _seq("look_round",
+                                 SetMode(ctx, "walk", "mission", st[4], name="mode_walk_look"),
+                                 LookForPerson(ctx, st[4]),
+                                 SetMode(ctx, "walk", "navigation", st[4], name="mode_walk_on")),
+                        ]),
+                        NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
+                        StandsThere(ctx, st[4]),
+                    ),
+                ],
+            ),
+            FIND_PERSON_REASONS,
+            max(0, s.person_rounds - 1),
+            ctx.decide,
         ),
     )  # fmt: skip
     release = _seq(

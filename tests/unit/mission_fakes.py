@@ -104,6 +104,8 @@ class FakeRobot:
     #: sees them there. None: seen where they are whenever the robot stands facing them.
     person_walked_to: tuple[float, float] | None = None
     seen_after_turn_rad: float = math.pi / 2
+    #: ...or once the robot stands within this of where they walked (None: never so).
+    sees_within_m: float | None = None
     _turned: float = 0.0
     _facing: str = ""
     #: Where each wrist_detection call looked for the target (its mapped place or None).
@@ -177,13 +179,8 @@ class FakeRobot:
             self.xy = (self.xy[0] + (c * vx - s * vy) * dt, self.xy[1] + (s * vx + c * vy) * dt)
             self.yaw = math.remainder(self.yaw + wz * dt, math.tau)
             self._turned += abs(wz) * dt
-            if self.person_walked_to is not None and self._turned >= self.seen_after_turn_rad:
-                for pid, p in self.people_.items():
-                    x, y = self.person_walked_to
-                    self.people_[pid] = msgspec.structs.replace(
-                        p, position_in_world=(x, y, 0.0), last_seen_ns=self.t
-                    )
-                self.person_walked_to = None
+            if self._turned >= self.seen_after_turn_rad:
+                self._see_walked_off()
         self._cmd = (0.0, 0.0, 0.0)
         self.t += TICK_NS
         if self._pending_mode is not None and self.modes_work:
@@ -309,6 +306,9 @@ class FakeRobot:
                 pose = next(g for i, g in self.nav_goals if i == goal_id)
                 assert isinstance(pose, PoseGoal)
                 self.xy, self.yaw = (pose.x, pose.y), pose.yaw
+                there, within = self.person_walked_to, self.sees_within_m
+                if there is not None and within is not None and math.dist(self.xy, there) <= within:
+                    self._see_walked_off()
         reason = self.nav_fail.get(kind, "") if state == "failed" else ""
         progress = min(1.0, (self.t - start) / (self.nav_ticks * TICK_NS))
         return NavStatus(
@@ -318,6 +318,17 @@ class FakeRobot:
             reason=cast(NavFailure, reason),
             progress=progress,
         )
+
+    def _see_walked_off(self) -> None:
+        """The person who walked off is seen where they went: the map has them there."""
+        if self.person_walked_to is None:
+            return
+        for pid, p in self.people_.items():
+            x, y = self.person_walked_to
+            self.people_[pid] = msgspec.structs.replace(
+                p, position_in_world=(x, y, 0.0), last_seen_ns=self.t
+            )
+        self.person_walked_to = None
 
     def _arrive_at_person(self, goal_id: str) -> None:
         """Stand facing +x at the handover distance from the person's mapped place, as

@@ -10,6 +10,7 @@ import pytest
 from common.config import MissionSettings
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PersonHandover, PoseGoal
+from common.messages.semantic_map import SeenPlace
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
@@ -469,7 +470,9 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
 ) -> None:
     """At the handover pose the map does not see the person: the robot turns round on
     the spot saying it is looking for them. Seen a quarter turn in, it walks to where they
-    were seen; never seen, it asks, then walks to where the map last had them."""
+    were seen; never seen (and with no usual places), it asks, walks to where the map
+    last had them, waits and asks there `person_rounds` times in all (looked round there
+    already: no second turn), then fails `person_not_found` saying where it looked."""
     robot = small_world(moves=True)
     robot.person_walked_to = (1.0, 3.0)
     robot.seen_after_turn_rad = seen_after if seen_after is not None else 100.0
@@ -482,20 +485,49 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         robot.advance()
         if outcome is not None:
             break
-    assert outcome is not None and outcome.state == "succeeded"
+    assert outcome is not None
     assert "looking for person_1" in said
     turned = sum(abs(c[2]) for c in robot.cmds) * 0.05
     sent = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
-    assert len(sent) == 2  # there, then to them again
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     if seen_after is not None:
+        assert outcome.state == "succeeded"
+        assert len(sent) == 2  # there, then to them again
         assert turned == pytest.approx(math.pi / 2, abs=0.1)
         assert any("person_1 seen at (1.00, 3.00)" in d for d in decisions)
         assert "looking for person_1: not seen round here" not in said
     else:
+        rounds = MissionSettings().person_rounds
+        assert (outcome.state, outcome.reason) == ("failed", "person_not_found")
+        assert "person_1 not reached; looked round at (" in outcome.detail
+        assert len(sent) == 1 + rounds  # there, then once a round
         assert turned == pytest.approx(math.tau, abs=0.1)
         assert "looking for person_1: not seen round here" in said
         assert any("walking to where the map last had them" in d for d in decisions)
+
+
+def test_a_person_not_at_their_place_is_looked_for_at_their_usual_place_and_handed_to() -> None:
+    """Not seen round their last place, the person is looked for at the place the map
+    saw them most (walked to with a pose goal), seen there and walked to."""
+    robot = small_world(moves=True)
+    bench = SeenPlace(xy=(3.0, 3.0), sightings=40, last_seen_ns=1)
+    last = robot.people_["person_1"].position_in_world
+    passed = SeenPlace(xy=(last[0], last[1]), sightings=12, last_seen_ns=2)
+    robot.people_["person_1"] = msgspec.structs.replace(
+        robot.people_["person_1"], places=(passed, bench)
+    )
+    robot.person_walked_to = (3.2, 2.9)
+    robot.seen_after_turn_rad = 100.0  # not seen from their last place
+    robot.sees_within_m = 1.0
+    tree = mission(robot)
+    outcome = run(tree, robot)
+    assert outcome.state == "succeeded", outcome.detail
+    poses = [g for _, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert [(g.x, g.y) for g in poses] == [(3.0, 3.0)]
+    handovers = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert len(handovers) >= 2  # their last place, then to them where they were seen
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("looking at a usual place of theirs, (3.00, 3.00)" in d for d in decisions)
 
 
 def test_an_object_handed_over_is_no_candidate_again_and_asked_for_by_id_says_where_it_went() -> (

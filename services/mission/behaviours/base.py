@@ -44,9 +44,11 @@ SEARCH = "search"  # bool: look elsewhere before the next try (every candidate m
 SEARCHED = "searched"  # bool: this request looked elsewhere already
 UNSEEN = "unseen"  # bool: the person was not seen at their mapped place: look round
 KNOWN = "known"  # list[str]: the map's artifacts of the class when the request began
+LOOK_AT = "look_at"  # SeenPlace | None: the person's usual place walked to next, to look
+LOOKED = "looked"  # list[tuple[float, float]]: where the robot looked round for the person
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
-    SEARCH, SEARCHED, UNSEEN, KNOWN,
+    SEARCH, SEARCHED, UNSEEN, KNOWN, LOOK_AT, LOOKED,
 )  # fmt: skip
 
 

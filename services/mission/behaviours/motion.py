@@ -4,7 +4,8 @@
   source it obeys; succeeds once `wbc/status` reports both (modes take effect one
   mission latency after their stamp), fails `mode_timeout` after `mode_timeout_s`.
 - `NavigateTo("artifact" | "person" | "put_back")`: sends `ArtifactStandoff(target)`,
-  `PersonHandover(person)` or a `PoseGoal` to where the base stood to pick the object it
+  `PersonHandover(person)` (or, while looking for them, a `PoseGoal` to one of their
+  usual places) or a `PoseGoal` to where the base stood to pick the object it
   still holds (`Held.stance`, within `PUT_BACK_TOL_M`/`_RAD`: the arm puts it down at
   the grasp's own pose) on start and watches `nav/status` for that goal id; a refusal
   or a failed goal fails `navigation_failed` with navigation's reason (the goal is sent
@@ -23,12 +24,20 @@
   from close by, and the person's hand takes only what is held out within 0.25 m of it.
 - `SeenThere`: SUCCESS unless the person was not seen at their place (`UNSEEN`).
 - `LookForPerson`: the person was not where the map had them. Turn on the spot once
-  round (`LOOK_RATE_RAD_S`, cmd_vel from the mission) while the head camera sweeps the
-  floor round it, asking the map each tick whether it saw them since the look began;
-  then stand `person_ask_s` saying "looking for <person>" (a person near may answer by
-  stepping into view). Seen: SUCCESS, and the walk to them goes to where they were seen;
-  never seen: SUCCESS all the same, walking to where the map last had them (the handover
-  waits for them there and ends `handover_timeout` when nobody comes).
+  round (`LOOK_RATE_RAD_S`, cmd_vel from the mission; not where it looked round already
+  in this request) while the head camera sweeps the floor round it, asking the map each
+  tick whether it saw them since the look began; then stand `person_ask_s` saying
+  "looking for <person>" (a person near may answer by stepping into view). Seen: SUCCESS,
+  and the walk to them goes to where they were seen; never seen: SUCCESS all the same,
+  and the next walk goes to the next of their usual places (`LOOK_AT`,
+  `person_search.next_place`: where the map saw them most), or, none left, to where the
+  map last had them. A walk to a usual place (`NavigateTo`, a `PoseGoal` within
+  `LOOK_AT_TOL_M`, any heading) ends as soon as the map sees the person.
+- `StandsThere`: after one more walk to the person, SUCCESS (present) only when the map
+  sees them standing in front of the robot (`in_front`); else FAILURE
+  `person_not_found`, which the tree takes as one more round of looking (`find_person`,
+  `person_rounds` in all): the last one's detail says where it looked round and where
+  the map last saw them, walking or not.
 - `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission), or
   less: only as far as the map's grid leaves room behind the footprint
   (`room_behind`; none without the map or the pose).
@@ -43,18 +52,51 @@ import numpy as np
 from py_trees.common import Status
 
 from common.messages import as_numpy
+from common.messages.base import NS_PER_S
 from common.messages.mission import MissionReason
 from common.messages.navigation import ArtifactStandoff, NavGoal, PersonHandover, PoseGoal
+from common.messages.semantic_map import MapEntity
 from common.messages.wbc import WbcModeName
 from common.robot import HANDOVER_DISTANCE_M, floor_view_m
-from services.mission.behaviours.base import PERSON, SIDE, UNSEEN, Context, MissionBehaviour
+from services.mission.behaviours.base import (
+    LOOK_AT,
+    LOOKED,
+    PERSON,
+    SIDE,
+    UNSEEN,
+    Context,
+    MissionBehaviour,
+)
 from services.mission.behaviours.handover import side_bearing
+from services.mission.person_search import LOOKED_M, next_place
 from services.mission.ports import PortError, Refused, Unavailable
 from services.mission.room_behind import room_behind
 
 #: A put-back's stance: within this of where the base stood for the grasp (m, rad).
 PUT_BACK_TOL_M = 0.05
 PUT_BACK_TOL_RAD = 0.08
+#: m: a person's usual place is reached within this (any heading: the robot looks round).
+LOOK_AT_TOL_M = 0.5
+#: A person seen within this (s) and slower than this (m/s) stands where the map has them.
+PERSON_FRESH_S = 3.0
+WALKING_MPS = 0.3
+#: m: a person this far ahead of the robot's front (about `HANDOVER_DISTANCE_M`) and this
+#: far to a side is near enough to present to; elsewhere the walk went to one of their
+#: usual places, or navigation stopped short.
+PRESENT_AHEAD_M = (HANDOVER_DISTANCE_M - 0.3, HANDOVER_DISTANCE_M + 0.5)
+PRESENT_SIDE_M = 0.5
+
+
+def in_front(
+    xy: tuple[float, float] | None, yaw: float | None, person_xy: tuple[float, float]
+) -> bool:
+    """Whether a person at person_xy is near enough in front of the robot to present to."""
+    if xy is None or yaw is None:
+        return False
+    dx, dy = person_xy[0] - xy[0], person_xy[1] - xy[1]
+    ahead = math.cos(yaw) * dx + math.sin(yaw) * dy
+    left = -math.sin(yaw) * dx + math.cos(yaw) * dy
+    return PRESENT_AHEAD_M[0] <= ahead <= PRESENT_AHEAD_M[1] and abs(left) <= PRESENT_SIDE_M
 
 
 class SetMode(MissionBehaviour):
@@ -89,6 +131,8 @@ class SetMode(MissionBehaviour):
 
 
 class NavigateTo(MissionBehaviour):
+    WRITES = (LOOK_AT,)
+
     def __init__(
         self,
         ctx: Context,
@@ -103,6 +147,8 @@ class NavigateTo(MissionBehaviour):
         self.goal_id = ""
         self.active = False
         self.error: PortError | None = None
+        #: Walking to a person's usual place (`LOOK_AT`), not to the person.
+        self.to_place = False
 
     def _goal(self) -> NavGoal:
         if self.kind == "put_back":
@@ -117,6 +163,18 @@ class NavigateTo(MissionBehaviour):
             if target.dropped and target.xy is not None:
                 return look_where_it_fell(target.xy, self.port.robot_xy(), self.port.robot_yaw())
             return ArtifactStandoff(artifact_id=target.map_id)
+        place = self.get(LOOK_AT)
+        if place is not None:
+            self.to_place = True
+            xy = self.port.robot_xy()
+            yaw = 0.0 if xy is None else math.atan2(place.xy[1] - xy[1], place.xy[0] - xy[0])
+            return PoseGoal(
+                x=place.xy[0],
+                y=place.xy[1],
+                yaw=yaw,
+                position_tolerance_m=LOOK_AT_TOL_M,
+                yaw_tolerance_rad=math.pi,
+            )
         side = self.get(SIDE)
         return PersonHandover(person_id=str(self.get(PERSON)), bearing_rad=side_bearing(side))
 
@@ -126,7 +184,7 @@ class NavigateTo(MissionBehaviour):
 
     def initialise(self) -> None:
         super().initialise()
-        self.goal_id, self.active, self.error = "", False, None
+        self.goal_id, self.active, self.error, self.to_place = "", False, None, False
         if self._dropped():
             self.ctx.decide(f"{self.name}: {self.target().map_id} fell "
                             f"{self.target().where_dropped()}: looking for it there")  # fmt: skip
@@ -144,11 +202,30 @@ class NavigateTo(MissionBehaviour):
             self.error = exc
 
     def update(self) -> Status:
+        if self.to_place and self._seen_on_the_way():
+            return Status.SUCCESS
         status = self._update()
         if status == Status.FAILURE and self._dropped():
             self.ctx.decide(f"{self.name}: no step back to look: looking from here")
             return Status.SUCCESS
+        if status != Status.RUNNING and self.to_place:
+            self.set(LOOK_AT, None)  # looked at (or not reachable): not walked to again
         return status
+
+    def _seen_on_the_way(self) -> bool:
+        """On the way to a person's usual place, the map saw them: the walk ends, and the
+        next goes to them."""
+        pid, person = the_person(self)
+        if person is None or person.last_seen_ns < self.started_ns:
+            return False
+        if self.active:
+            self.port.cancel_nav(self.goal_id, f"{pid} seen")
+            self.active = False
+        self.set(LOOK_AT, None)
+        x, y = person.position_in_world[:2]
+        self.ctx.decide(f"{pid} seen at ({x:.2f}, {y:.2f}) on the way to their usual place: "
+                        "walking to them")  # fmt: skip
+        return True
 
     def _update(self) -> Status:
         if self._dropped() and not self.goal_id and self.error is None:
@@ -210,6 +287,16 @@ def look_where_it_fell(
     )
 
 
+def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
+    """The requested person's map id and the map's entry for them (None: not in the map,
+    or the map did not answer)."""
+    pid = str(b.get(PERSON))
+    try:
+        return pid, b.port.person(pid)
+    except Unavailable:
+        return pid, None
+
+
 #: rad/s: the turn on the spot that looks round for a person.
 LOOK_RATE_RAD_S = 0.4
 
@@ -225,12 +312,8 @@ class PersonAhead(MissionBehaviour):
         if self.elapsed_s() < s.handover_check_s:
             self.feedback_message = "looking at the person"
             return Status.RUNNING
-        person_id = str(self.get(PERSON))
+        person_id, person = the_person(self)
         xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
-        try:
-            person = self.port.person(person_id)
-        except Unavailable:
-            person = None
         if person is None or xy is None or yaw is None:
             self.feedback_message = "cannot check: presenting where navigation stopped"
             return Status.SUCCESS
@@ -266,10 +349,43 @@ class SeenThere(MissionBehaviour):
         return Status.FAILURE if self.get(UNSEEN) else Status.SUCCESS
 
 
+class StandsThere(MissionBehaviour):
+    """After one more walk to the person: SUCCESS when the map sees them standing (seen
+    within `PERSON_FRESH_S`, slower than `WALKING_MPS`) in front of it (`in_front`): the
+    robot presents there. Else FAILURE `person_not_found` (they walk on, were not seen,
+    or the walk went to one of their usual places), which the tree's find_person takes as
+    one more round; its detail, the last, says where the robot looked and where the map
+    last saw them."""
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("stands_there", ctx, stage)
+
+    def update(self) -> Status:
+        pid, person = the_person(self)
+        looked = ", ".join(f"({x:.1f}, {y:.1f})" for x, y in self.get(LOOKED) or [])
+        where = f"looked round at {looked}" if looked else "not looked round for"
+        if person is None:
+            return self.fail("person_not_found", f"{pid} is not in the map; {where}")
+        age = (self.port.now_ns - person.last_seen_ns) / NS_PER_S
+        speed = math.hypot(*person.velocity_in_world)
+        x, y = person.position_in_world[:2]
+        xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
+        away = math.inf if xy is None else math.hypot(x - xy[0], y - xy[1])
+        if age <= PERSON_FRESH_S and speed < WALKING_MPS and in_front(xy, yaw, (x, y)):
+            self.feedback_message = f"{pid} stands there"
+            return Status.SUCCESS
+        walking = f", walking at {speed:.1f} m/s" if speed >= WALKING_MPS else ""
+        return self.fail(
+            "person_not_found",
+            f"{pid} not reached; {where}; the map last saw them {age:.0f} s ago, "
+            f"now at ({x:.1f}, {y:.1f}), {away:.1f} m away{walking}",
+        )
+
+
 class LookForPerson(MissionBehaviour):
     """Turn once round, then ask, until the map sees the person (the module docstring)."""
 
-    WRITES = (UNSEEN,)
+    WRITES = (UNSEEN, LOOK_AT, LOOKED)
 
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("look_for_person", ctx, stage)
@@ -280,13 +396,12 @@ class LookForPerson(MissionBehaviour):
     def initialise(self) -> None:
         super().initialise()
         self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
+        xy = self.port.robot_xy()
+        if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
+            self.turned = math.tau  # looked round here already: only waits and asks
 
     def update(self) -> Status:
-        pid = str(self.get(PERSON))
-        try:
-            person = self.port.person(pid)
-        except Unavailable:
-            person = None
+        pid, person = the_person(self)
         if person is not None and person.last_seen_ns >= self.started_ns:
             x, y = person.position_in_world[:2]
             self.ctx.decide(f"{pid} seen at ({x:.2f}, {y:.2f}) after {self.elapsed_s():.1f} s")
@@ -309,12 +424,33 @@ class LookForPerson(MissionBehaviour):
         if waited < self.settings.person_ask_s:
             self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
             return Status.RUNNING
-        self.ctx.decide(f"{pid} not seen: walking to where the map last had them")
-        return self._done()
+        return self._not_seen(pid, person)
 
     def _done(self) -> Status:
         self.port.command_velocity(0.0, 0.0, 0.0)
         self.set(UNSEEN, False)
+        self.set(LOOK_AT, None)
+        return Status.SUCCESS
+
+    def _not_seen(self, pid: str, person: MapEntity | None) -> Status:
+        """Not seen: the next of their usual places to look at (`LOOK_AT`,
+        `person_search.next_place`), or, none left, where the map last had them."""
+        self._done()
+        xy = self.port.robot_xy()
+        looked = [*(self.get(LOOKED) or []), *([xy] if xy is not None else [])]
+        place = None if person is None else next_place(person.places, looked, xy)
+        if place is None:
+            self.ctx.decide(f"{pid} not seen: walking to where the map last had them")
+        else:
+            looked.append(place.xy)
+            self.set(LOOK_AT, place)
+            ago = (self.port.now_ns - place.last_seen_ns) / 1e9
+            self.ctx.decide(
+                f"{pid} not seen: looking at a usual place of theirs, "
+                f"({place.xy[0]:.2f}, {place.xy[1]:.2f}): seen there {place.sightings} times, "
+                f"last {ago:.0f} s ago"
+            )
+        self.set(LOOKED, looked)
         return Status.SUCCESS
 
     def terminate(self, new_status: Status) -> None:
