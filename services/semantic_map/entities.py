@@ -87,6 +87,8 @@ class Track:
     P: FloatArray | None = None
     #: People: the velocity at the last sighting was sure (extrapolated while unseen).
     moving: bool = False
+    #: People: seen walking (a sure velocity) at some sighting: a body, not furniture.
+    walked: bool = False
     seen_with: set[str] = field(default_factory=set)
     best_range_m: float | None = None
     #: People: where they were seen (`whereabouts`), their usual places.

@@ -36,7 +36,11 @@ robot looked at without seeing them (`missing_after_frames` looks, counted by th
 within
 `REID_APPEARANCE` of one, and clearly nearer to that one than to any other
 (`REID_MARGIN`), they are that person, come back (`reidentify`): the known id moves to
-the new place instead of a new id being made. People's colours are kept in the map file
+the new place instead of a new id being made. A person unseen for `REID_STALE_NS` may be
+anywhere in the hall, looked for there or not (a walker on their round, a person of a
+saved map not seen yet this run): a newcomer seen walking (`Track.walked`: a body, not
+furniture the network read as a person) whose clothes are theirs, and nearer to theirs
+than to anybody else's the map has, is them. People's colours are kept in the map file
 (`MapFile.appearances`), so a map saved after an exploration knows them.
 
 A track still splits now and then: while the robot walks round a standing person their
@@ -108,6 +112,9 @@ SPLIT_RECENT_NS = 10_000_000_000
 REID_APPEARANCE = 0.35
 REID_MARGIN = 0.15
 REID_UNSEEN_NS = 3_000_000_000
+#: A person unseen this long may be anywhere in the hall (1.5 m/s for a minute): one
+#: known again by their clothes alone, without the map having looked at their place, ns.
+REID_STALE_NS = 60_000_000_000
 
 
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
@@ -326,6 +333,17 @@ class PeopleTracker:
             and t.misses >= self.settings.missing_after_frames
         )
 
+    @staticmethod
+    def _long_unseen(t: Track, stamp_ns: int) -> bool:
+        """A person with colours to know them by, unseen for `REID_STALE_NS`."""
+        return t.appearance is not None and stamp_ns - t.last_seen_ns >= REID_STALE_NS
+
+    def _only_them(self, new: Track, old: Track) -> bool:
+        """`new` is nearer in clothes to `old` than to anybody else the map has."""
+        assert new.appearance is not None
+        others = [t for t in self.confirmed if t is not new]
+        return self._same_clothes(new.appearance, others)[1] is old
+
     def _same_clothes(self, look: FloatArray, pool: list[Track]) -> tuple[float, Track | None]:
         """Of `pool`, the one wearing `look` (within `REID_APPEARANCE`, and `REID_MARGIN`
         nearer than any other), and the colour distance; None when nobody is, or two are."""
@@ -345,9 +363,10 @@ class PeopleTracker:
         if new.appearance is None:
             return None
         since = min(new.first_seen_ns or stamp_ns, stamp_ns - REID_UNSEEN_NS)
-        pool = [t for t in self.confirmed if self._gone_from_their_place(t, since)]
-        app, old = self._same_clothes(new.appearance, pool)
-        if old is None:
+        gone = [t for t in self.confirmed if self._gone_from_their_place(t, since)]
+        stale = [t for t in self.confirmed if new.walked and self._long_unseen(t, stamp_ns)]
+        app, old = self._same_clothes(new.appearance, [*gone, *(t for t in stale if t not in gone)])
+        if old is None or (old not in gone and not self._only_them(new, old)):
             return None
         self._take_place(old, new, app)
         return old
@@ -358,7 +377,8 @@ class PeopleTracker:
         `reidentify`, the other way round); (kept, merged away, why), as `take_merged`."""
         out: list[tuple[Track, Track, str]] = []
         for old in list(self.confirmed):
-            if not self._gone_from_their_place(old, stamp_ns - REID_UNSEEN_NS):
+            gone = self._gone_from_their_place(old, stamp_ns - REID_UNSEEN_NS)
+            if not gone and not self._long_unseen(old, stamp_ns):
                 continue
             assert old.appearance is not None
             newer = [
@@ -368,13 +388,13 @@ class PeopleTracker:
                 and t.first_seen_ns > old.last_seen_ns
                 and old.id not in t.seen_with
                 and t.appearance is not None
+                and (gone or t.walked)
             ]
             app, new = self._same_clothes(old.appearance, newer)
             if new is None or new.appearance is None:
                 continue
             # ...and they are nearer in clothes to `old` than to anybody else
-            others = [t for t in self.confirmed if t is not new]
-            if self._same_clothes(new.appearance, others)[1] is not old:
+            if not self._only_them(new, old):
                 continue
             self._take_place(old, new, app)
             out.append((old, new, f"{old.id} in their clothes (colour distance {app:.2f})"))
@@ -390,6 +410,7 @@ class PeopleTracker:
         old.hits += new.hits
         old.near_hits += new.near_hits
         old.last_seen_ns, old.stamp_ns, old.moving = new.last_seen_ns, new.stamp_ns, new.moving
+        old.walked |= new.walked
         old.misses, old.missing_since_ns = 0, None
         old.seen_with |= new.seen_with
         old.whereabouts.absorb(new.whereabouts)
@@ -459,6 +480,7 @@ class PeopleTracker:
         if keep.appearance is None and gone.appearance is not None:
             keep.appearance = gone.appearance.copy()
         keep.whereabouts.absorb(gone.whereabouts)
+        keep.walked |= gone.walked
         assert keep.id is not None and gone.id is not None
         self._seen_with_as(gone, keep)
         self.drop(gone)
@@ -520,6 +542,7 @@ class PeopleTracker:
         tr.hits += 1
         tr.near_hits += int(obs.near(self.settings.class_near_m))
         tr.moving = sure_velocity(tr)
+        tr.walked |= tr.moving
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None

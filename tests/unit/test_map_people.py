@@ -408,3 +408,58 @@ def test_a_newcomer_in_the_clothes_of_a_person_found_gone_later_is_that_person()
     assert (kept.id, gone.id) == ("person_1", "person_3") and "clothes" in why
     assert np.linalg.norm(person_1.xy - (3.0, 1.0)) < 0.1
     assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
+
+
+def _walking(
+    tracker: PeopleTracker,
+    t0: int,
+    frames: int,
+    start: tuple[float, float],
+    velocity: tuple[float, float],
+    look: np.ndarray,
+    seed: int = 0,
+) -> int:
+    """`frames` frames of one person walking from `start`; the next frame's stamp."""
+    rng = np.random.default_rng(seed)
+    for k in range(frames):
+        xy = np.array(start) + np.array(velocity) * k * 0.1 + rng.normal(0.0, 0.02, 2)
+        tracker.update(t0 + k * DT_NS, [Observation("person", xy, 0.0, 0.05, 0.9, look, 2.0)])
+    return t0 + frames * DT_NS
+
+
+def test_a_person_unseen_for_a_minute_is_known_again_walking_elsewhere_by_their_clothes() -> None:
+    """person_1 (red) was seen a minute ago 8 m away; nobody looked at their place since.
+    Somebody in red walks by here: person_1 on their round, not a new person."""
+    rng = np.random.default_rng(5)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(8.0, 0.0), (0.0, 9.0)], [red, blue]) + 61 * S
+    t = _walking(tracker, t, 30, (0.0, 0.0), (1.0, 0.0), red, seed=1)
+    ((kept, gone, why),) = tracker.rejoin(t)  # as the map does after every frame
+    assert (kept.id, gone.id) == ("person_1", "person_3") and "clothes" in why
+    ids = sorted(tr.id or "" for tr in tracker.confirmed)
+    assert ids == ["person_1", "person_2"], ids
+    person_1 = tracker.by_id("person_1")
+    assert person_1 is not None and np.linalg.norm(person_1.xy - (2.9, 0.0)) < 0.2
+    assert person_1.walked
+
+
+def test_within_the_minute_or_standing_or_like_two_people_a_newcomer_stays_new() -> None:
+    rng = np.random.default_rng(5)
+    red = _hist(2, rng)
+    # unseen for 30 s only: may still stand where the map has them (one uniform, two workers)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(8.0, 0.0)], [red]) + 30 * S
+    t = _walking(tracker, t, 30, (0.0, 0.0), (1.0, 0.0), red, seed=1)
+    assert not tracker.rejoin(t) and len(tracker.confirmed) == 2
+    # a minute unseen, but the newcomer stands: a pallet's edge read as a person stands too
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(8.0, 0.0)], [red]) + 61 * S
+    t = _standing(tracker, t, 30, [(0.0, 0.0)], [red], seed=1)
+    assert not tracker.rejoin(t) and len(tracker.confirmed) == 2
+    # two people in red, both unseen for a minute: which one walks by is not known
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(8.0, 0.0), (0.0, 9.0)], [red, red]) + 61 * S
+    t = _walking(tracker, t, 30, (0.0, 0.0), (1.0, 0.0), red, seed=1)
+    assert not tracker.rejoin(t) and len(tracker.confirmed) == 3
+    assert not tracker.take_reidentified()
