@@ -16,7 +16,14 @@ from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
 from services.mission.behaviours.handover import FeelPull
 from services.mission.tree import MissionTree, Outcome
-from tests.unit.mission_fakes import FakeRobot, context, entity, fast_settings, small_world
+from tests.unit.mission_fakes import (
+    TICK_NS,
+    FakeRobot,
+    context,
+    entity,
+    fast_settings,
+    small_world,
+)
 
 REQUEST = MissionRequest(request_id="r1", object="bottle_1", person="person_1")
 
@@ -725,3 +732,31 @@ def test_a_person_who_stays_in_the_way_fails_the_approach_after_the_held_bound()
     assert outcome is not None and (outcome.state, outcome.reason) == (
         "failed", "blocked_by_person"), outcome  # fmt: skip
     assert "bottle_1 not reached: held back for person_2 3 s in all" in outcome.detail
+
+
+def test_a_walk_to_a_usual_place_ends_when_the_map_sees_the_person_on_the_way() -> None:
+    """On the way to the person's usual place the map sees them elsewhere: the walk there
+    is cancelled and the next goes to them."""
+    robot = small_world(moves=True)
+    robot.nav_ticks = 40
+    bench = SeenPlace(xy=(3.0, 3.0), sightings=40, last_seen_ns=1)
+    robot.people_["person_1"] = msgspec.structs.replace(robot.people_["person_1"], places=(bench,))
+    robot.person_walked_to = (0.5, -2.0)
+    robot.seen_after_turn_rad = 100.0
+    tree = mission(robot)
+    outcome = None
+    for _ in range(6000):
+        outcome = tree.tick()
+        robot.advance()
+        walks = [i for i, g in robot.nav_goals if isinstance(g, PoseGoal)]
+        if walks and robot.t - robot._nav_sent[walks[0]] > 10 * TICK_NS:  # 10 ticks on
+            robot._see_walked_off()  # once: then nobody walked off any more
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    (pose_id,) = [i for i, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert pose_id in robot.nav_cancels
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("seen at (0.50, -2.00) on the way to their usual place" in d for d in decisions)
+    last = robot.nav_goals[-1][1]
+    assert isinstance(last, PersonHandover)
