@@ -1,5 +1,6 @@
 """What the map shows in rerun: entities as labelled points sized by their uncertainty,
-missing artifacts in red, the occupancy grid's occupied cells (static grey, learned
+missing artifacts in red, people's usual places (flat discs on the floor, sized by how
+often they were seen there), the occupancy grid's occupied cells (static grey, learned
 orange). The patrol's route is the mission's (`mission_log`)."""
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from services.semantic_map.mapper import SemanticMap
 ARTIFACT = (40, 160, 255)
 PERSON = (60, 200, 90)
 MISSING = (230, 40, 40)
+#: A usual place's disc: its radius grows with the square root of its sightings (m).
+PLACE_RADIUS_M = 0.05
 
 
 class MapLogger:
@@ -41,6 +44,7 @@ class MapLogger:
                         show_labels=True,
                     ),
                 )
+            self._places(smap)
         if t_ns % self.grid_every_ns == 0:
             occ = smap.occupancy
             learned = occ.learned_mask()
@@ -61,3 +65,17 @@ class MapLogger:
                     f"world/map/occupancy/{name}",
                     rr.Points3D(xyz, radii=occ.resolution_m / 2, colors=colour),
                 )
+
+    def _places(self, smap: SemanticMap) -> None:
+        """Every person's usual places, under their id."""
+        for e in smap.entities("person"):
+            if not e.places:
+                continue
+            self.rec.log(
+                f"world/map/places/{e.id}",
+                rr.Points3D(
+                    [(p.xy[0], p.xy[1], 0.02) for p in e.places],
+                    radii=[PLACE_RADIUS_M * float(np.sqrt(p.sightings)) for p in e.places],
+                    colors=PERSON,
+                ),
+            )
