@@ -18,7 +18,10 @@ not in view of its old place, and the search ended there); the mission walks vie
 facing them all (`coverage.facing_route`, as the second look does) with the arm up.
 `found` says, after each look, whether the map now has the object: an artifact of the
 class, not missing, seen since the search began over a support or at a place looked at,
-not one the fetch already tried; for a
+fused from at least `FIRM_OBSERVATIONS` detections (the map deletes an entry of a few
+stray detections as soon as a look misses it: hall seed 0's shift stopped its search for
+a "bottle" made from two head-camera detections, deleted 1.2 s later, and the fetch
+walked to nothing), not one the fetch already tried; for a
 request by id, also not one the map already knew when the search began (the object
 moved makes a new entry where it now stands; an old one is another object of its
 class). Pure: no transport.
@@ -38,6 +41,8 @@ from common.messages.world import SupportSurface
 ON_MARGIN_M = 0.2
 #: m: a support's top is looked at every this far along it.
 STRETCH_M = 0.6
+#: An entry fused from fewer detections than this is not found yet (0.5 s of a camera).
+FIRM_OBSERVATIONS = 5
 
 
 class Place(NamedTuple):
@@ -150,6 +155,7 @@ def found(
     fresh = [
         a for a in artifacts
         if a.class_name == class_name and a.missing_since_ns is None and a.id not in skip
+        and a.observations >= FIRM_OBSERVATIONS
         and since_ns <= a.last_seen_ns and (now_ns is None or a.last_seen_ns <= now_ns)
         and (where is None or _near(a, *where))
     ]  # fmt: skip

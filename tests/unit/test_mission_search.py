@@ -10,7 +10,7 @@ from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PoseGoal
 from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
-from services.mission.search import Place, along, found, places_to_look
+from services.mission.search import FIRM_OBSERVATIONS, Place, along, found, places_to_look
 from tests.unit.mission_fakes import FakeRobot, entity, small_world
 from tests.unit.test_mission_tree import mission
 
@@ -22,8 +22,12 @@ def _surface(sid: str, x: float, y: float) -> SupportSurface:
                           top_height=0.8)  # fmt: skip
 
 
-def _seen(e: MapEntity, t_ns: int, missing: bool = False) -> MapEntity:
-    return msgspec.structs.replace(e, last_seen_ns=t_ns, missing_since_ns=t_ns if missing else None)
+def _seen(
+    e: MapEntity, t_ns: int, missing: bool = False, observations: int = FIRM_OBSERVATIONS
+) -> MapEntity:
+    """Seen at t_ns (fused from `observations` detections), or looked for and missed."""
+    return msgspec.structs.replace(e, last_seen_ns=t_ns, observations=observations,
+                                   missing_since_ns=t_ns if missing else None)  # fmt: skip
 
 
 def test_the_places_go_from_its_last_place_to_its_likes_to_the_supports_nearest_first() -> None:
@@ -147,3 +151,12 @@ def test_a_place_on_a_support_is_looked_at_along_its_whole_top() -> None:
     # A sighting at the far end counts as at a place looked at, support or not.
     far = _seen(entity("bottle_2", 2.0, -0.7), 5 * S)
     assert found([far], "bottle", 1 * S, [], None, 10 * S, (places, [])) == far
+
+
+def test_an_entry_of_a_few_stray_detections_is_not_found_yet() -> None:
+    """Two head-camera detections make an entry the map deletes at the next look that
+    misses it: the search walks on until it is firm."""
+    stray = _seen(entity("bottle_6", 2.0, -0.7), 5 * S, observations=2)
+    assert found([stray], "bottle", 1 * S, [], None, 10 * S) is None
+    firm = _seen(stray, 6 * S, observations=FIRM_OBSERVATIONS)
+    assert found([firm], "bottle", 1 * S, [], None, 10 * S) == firm
