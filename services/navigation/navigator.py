@@ -10,7 +10,11 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   later, what covers it is the short-lived layers (depth, people), so it counts as
   blocked (the `clear` recovery may free it);
 - follow with `Follower`, capped by `people_limit` (a stop for a person counts as blocked
-  time, so a person who stays leads to a replan around them, then to recovery);
+  time, so a person who stays leads to a replan around them, then to recovery); under a
+  stop the base stands, not turning on the spot either: a trot turning on the spot
+  steps and sways the trunk, and the body's ends sweep at the turn rate (the changing
+  hall's shift: its separation violations at 0.05-0.12 m/s came with the robot turning
+  on the spot at 0.1-0.8 rad/s beside a person walking past);
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
   follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad (a turn the
   body guard sends the other way round counts from where it began);
@@ -20,8 +24,8 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   clear the short-lived layer, rotate in place (`ROTATE_S`), back off (`BACKOFF_S`), each
   followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
   ever found);
-- every command, the follower's, a turn under a people stop and the recoveries', goes
-  through the body guard (`body_guard`): it may not sweep the footprint onto obstacles;
+- every command, the follower's and the recoveries', goes through the body guard
+  (`body_guard`): it may not sweep the footprint onto obstacles;
 - `goal_timeout_s` of sim time on one goal: `failed: timeout`;
 - `retarget` moves the goal's pose (a handover whose person's estimate moved): replan.
 `cancel` brings the command to zero at once (the WBC's own acceleration limits shape it).
@@ -254,11 +258,8 @@ class Navigator:
                      g.tol_xy, g.tol_yaw, guard)  # fmt: skip
         self.cmd = out.cmd
         self.guarded = out.guarded
-        if limit.rule == "stop":
-            turn = np.array([0.0, 0.0, out.cmd[2]])
-            self.cmd = turn if guard.ok(turn) else np.zeros(3)
-            if not self.cmd.any() and turn.any():
-                self.guarded = "stand"
+        if limit.rule == "stop":  # the protective stop: at rest, no turn on the spot either
+            self.cmd = np.zeros(3)
             f.cmd = self.cmd.copy()
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")

@@ -346,3 +346,19 @@ def test_a_person_standing_in_the_way_is_waited_for_before_any_recovery() -> Non
             break
     assert first == pytest.approx(2 * n.blocked_timeout_s + n.people.wait_s, abs=2 * DT)
     assert "waiting for person_1 to pass" in said
+
+
+def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot() -> None:
+    """The goal lies behind the robot (a turn on the spot first) and a person walks at it
+    from the side, inside the protective separation: the protective stop is the base at
+    rest, the turn included (a trot turning on the spot steps and sways the trunk)."""
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(1.0, 0.0, math.pi), 0.1, 0.1), 0)
+    clear = nav.tick(0, Pose(3.5, 0.0, 0.0), floor)
+    assert clear.limit.rule != "stop" and clear.cmd[2] != 0.0  # turning towards the goal
+    person = Person("person_1", 3.5, FP.half_width + 0.5, None, (0.0, -1.0))
+    near = dataclasses.replace(floor, people=(person,))
+    stopped = nav.tick(round(DT * 1e9), Pose(3.5, 0.0, 0.0), near)
+    assert stopped.limit.rule == "stop" and stopped.limit.person_id == "person_1"
+    assert not stopped.cmd.any()
