@@ -74,14 +74,17 @@ def within_caps(cmd: Vel, caps: tuple[float, ...] | None) -> tuple[Vel, bool]:
     """(vx, vy, ωz) with vx within (−behind, ahead) and vy within (−right, left) of
     navigation's caps (`NavStatus.caps_mps`; None: none known), and whether it was cut.
     The mission drives along one axis at a time (the approach, the back-off, the look
-    round), so each axis's cap is its directed speed's."""
+    round), so each axis's cap is its directed speed's. A cap of 0 is a protective stop
+    for a person: no turn on the spot then either (the body's ends sweep, the trot sways
+    the trunk), as navigation's own goals stand."""
     if caps is None:
         return cmd, False
     ahead, behind, left, right = caps
     vx, vy, wz = cmd
     cx = min(vx, ahead) if vx > 0.0 else max(vx, -behind)
     cy = min(vy, left) if vy > 0.0 else max(vy, -right)
-    return (cx, cy, wz), (cx, cy) != (vx, vy)
+    cw = 0.0 if min(caps) <= 0.0 else wz
+    return (cx, cy, cw), (cx, cy, cw) != (vx, vy, wz)
 
 
 NAME = "mission"

@@ -62,7 +62,9 @@ def test_a_stop_holds_until_the_person_is_clear_by_the_resume_margin() -> None:
 
 def test_the_mission_command_goes_out_within_the_caps() -> None:
     caps = (0.0, 0.1, math.inf, 0.05)
-    assert within_caps((0.2, 0.0, 0.3), caps) == ((0.0, 0.0, 0.3), True)  # held, turns
+    assert within_caps((0.2, 0.0, 0.3), caps) == ((0.0, 0.0, 0.0), True)  # held, no turn
+    assert within_caps((0.0, 0.0, 0.3), caps) == ((0.0, 0.0, 0.0), True)  # a stop: at rest
+    assert within_caps((0.0, 0.0, 0.3), (0.2, 0.1, 0.1, 0.05)) == ((0.0, 0.0, 0.3), False)
     assert within_caps((-0.2, 0.0, 0.0), caps) == ((-0.1, 0.0, 0.0), True)
     assert within_caps((-0.05, 0.3, 0.0), caps) == ((-0.05, 0.3, 0.0), False)
     assert within_caps((0.0, -0.2, 0.0), caps) == ((0.0, -0.05, 0.0), True)
