@@ -506,7 +506,8 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
     else:
         rounds = MissionSettings().person_rounds
         assert (outcome.state, outcome.reason) == ("failed", "person_not_found")
-        assert "person_1 not reached; looked round at (" in outcome.detail
+        assert "person_1 not reached; looked round at (-4.4, 1.0); the map" in outcome.detail
+        assert "the map has not seen them since it started" in outcome.detail
         assert len(sent) == 1 + rounds  # there, then once a round
         assert turned == pytest.approx(math.tau, abs=0.1)
         assert "looking for person_1: not seen round here" in said

@@ -375,10 +375,15 @@ class StandsThere(MissionBehaviour):
             self.feedback_message = f"{pid} stands there"
             return Status.SUCCESS
         walking = f", walking at {speed:.1f} m/s" if speed >= WALKING_MPS else ""
+        seen = (
+            f"the map last saw them {age:.0f} s ago"
+            if person.last_seen_ns > 0
+            else "the map has not seen them since it started (a place from its file)"
+        )
         return self.fail(
             "person_not_found",
-            f"{pid} not reached; {where}; the map last saw them {age:.0f} s ago, "
-            f"now at ({x:.1f}, {y:.1f}), {away:.1f} m away{walking}",
+            f"{pid} not reached; {where}; {seen}, now at ({x:.1f}, {y:.1f}), "
+            f"{away:.1f} m away{walking}",
         )
 
 
@@ -437,7 +442,9 @@ class LookForPerson(MissionBehaviour):
         `person_search.next_place`), or, none left, where the map last had them."""
         self._done()
         xy = self.port.robot_xy()
-        looked = [*(self.get(LOOKED) or []), *([xy] if xy is not None else [])]
+        looked = list(self.get(LOOKED) or [])
+        if xy is not None and all(math.dist(xy, q) > LOOKED_M for q in looked):
+            looked.append(xy)  # a place once, however many rounds waited there
         place = None if person is None else next_place(person.places, looked, xy)
         if place is None:
             self.ctx.decide(f"{pid} not seen: walking to where the map last had them")
