@@ -13,6 +13,7 @@ from common.messages.semantic_map import MapEntity
 from services.semantic_map.entities import IdBook, Observation, Track
 from services.semantic_map.people import PeopleTracker
 from services.semantic_map.whereabouts import CELL_M, EVERY_NS, MAX_PLACES, Whereabouts
+from tests.unit.test_map_people import _hist, _standing, _walking
 
 S = 1_000_000_000
 
@@ -103,3 +104,16 @@ def test_two_tracks_merged_into_one_person_pool_their_places() -> None:
     got = {(math.floor(p.xy[0]), p.sightings) for p in a.places()}
     assert got == {(0, 1), (3, 2), (7, 1)}
     assert a.last_ns == 3 * S
+
+
+def test_a_person_known_again_by_their_clothes_keeps_the_places_of_both_tracks() -> None:
+    """person_1 stood at (8, 0) and is seen a minute later walking elsewhere under a new
+    track; once the map knows them again, their usual places hold both."""
+    rng = np.random.default_rng(5)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(8.0, 0.5), (0.5, 9.0)], [red, blue]) + 61 * S
+    t = _walking(tracker, t, 30, (0.5, 0.5), (1.0, 0.0), red, seed=1)
+    ((kept, _gone, _why),) = tracker.rejoin(t)
+    cells = {math.floor(p.xy[0]) for p in kept.to_message().places}
+    assert 8 in cells and {0, 1, 2} <= cells
