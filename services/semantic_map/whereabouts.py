@@ -41,9 +41,9 @@ class Whereabouts:
     last_ns: int = -1
 
     def see(self, xy: FloatArray | tuple[float, float], stamp_ns: int) -> bool:
-        """Count a sighting at xy (m, world) unless one was counted within `EVERY_NS`;
-        whether it was."""
-        if self.last_ns >= 0 and stamp_ns - self.last_ns < EVERY_NS:
+        """Count a sighting at xy (m, world) unless one was counted within `EVERY_NS`
+        before it (a clock that went back counts afresh); whether it was."""
+        if self.last_ns >= 0 and 0 <= stamp_ns - self.last_ns < EVERY_NS:
             return False
         x, y = float(xy[0]), float(xy[1])
         if not (math.isfinite(x) and math.isfinite(y)):

@@ -61,6 +61,13 @@ def test_non_finite_places_are_not_counted() -> None:
     assert w.places() == ()
 
 
+def test_a_clock_that_went_back_counts_afresh() -> None:
+    w = Whereabouts()
+    assert w.see((1.0, 1.0), 500 * S)
+    assert w.see((1.0, 1.0), 2 * S)  # a new run's sim time: not "within a second"
+    assert not w.see((1.0, 1.0), 2 * S + EVERY_NS // 2)
+
+
 def test_places_survive_the_entity_message_and_its_wire() -> None:
     w = Whereabouts()
     for k in range(6):
