@@ -364,9 +364,14 @@ class PeopleTracker:
             return None
         since = min(new.first_seen_ns or stamp_ns, stamp_ns - REID_UNSEEN_NS)
         gone = [t for t in self.confirmed if self._gone_from_their_place(t, since)]
-        stale = [t for t in self.confirmed if new.walked and self._long_unseen(t, stamp_ns)]
-        app, old = self._same_clothes(new.appearance, [*gone, *(t for t in stale if t not in gone)])
-        if old is None or (old not in gone and not self._only_them(new, old)):
+        by_looks = {id(t) for t in gone}  # tracks by identity: their `==` compares arrays
+        stale = [
+            t
+            for t in self.confirmed
+            if new.walked and id(t) not in by_looks and self._long_unseen(t, stamp_ns)
+        ]
+        app, old = self._same_clothes(new.appearance, [*gone, *stale])
+        if old is None or (id(old) not in by_looks and not self._only_them(new, old)):
             return None
         self._take_place(old, new, app)
         return old

@@ -463,3 +463,24 @@ def test_within_the_minute_or_standing_or_like_two_people_a_newcomer_stays_new()
     t = _walking(tracker, t, 30, (0.0, 0.0), (1.0, 0.0), red, seed=1)
     assert not tracker.rejoin(t) and len(tracker.confirmed) == 3
     assert not tracker.take_reidentified()
+
+
+def test_a_walker_confirmed_in_the_clothes_of_a_long_unseen_person_beside_one_gone_is_them() -> (
+    None
+):
+    """Re-identification at confirmation with both pools at once: person_1 (blue) gone
+    from their place, person_2 (red) unseen for a minute; a newcomer walking in red is
+    person_2."""
+    rng = np.random.default_rng(5)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(0.0, 9.0), (8.0, 0.0)], [blue, red]) + 61 * S
+    person_1 = tracker.by_id("person_1")
+    assert person_1 is not None
+    person_1.misses = tracker.settings.missing_after_frames  # the map looked: not there
+    new = Track("person", "person", np.array([0.0, 0.0]), np.eye(2) * 0.01, 0.0, "perception",
+                first_seen_ns=t, last_seen_ns=t, appearance=red, walked=True)  # fmt: skip
+    tracker.add(new, t)
+    back = tracker.reidentify(new, t)
+    assert back is not None and back.id == "person_2"
+    assert np.linalg.norm(back.xy) < 0.05
