@@ -9,6 +9,7 @@ import numpy as np
 import rerun as rr
 
 from common.messages.base import NS_PER_S
+from common.messages.semantic_map import MapEntity
 from common.recording import is_recording
 from services.semantic_map.mapper import SemanticMap
 
@@ -44,7 +45,8 @@ class MapLogger:
                         show_labels=True,
                     ),
                 )
-            self._places(smap)
+                if kind == "person":
+                    self._places(es)
         if t_ns % self.grid_every_ns == 0:
             occ = smap.occupancy
             learned = occ.learned_mask()
@@ -66,9 +68,9 @@ class MapLogger:
                     rr.Points3D(xyz, radii=occ.resolution_m / 2, colors=colour),
                 )
 
-    def _places(self, smap: SemanticMap) -> None:
+    def _places(self, people: list[MapEntity]) -> None:
         """Every person's usual places, under their id."""
-        for e in smap.entities("person"):
+        for e in people:
             if not e.places:
                 continue
             self.rec.log(

@@ -39,6 +39,9 @@ class Whereabouts:
 
     cells: dict[tuple[int, int], _Cell] = field(default_factory=dict)
     last_ns: int = -1
+    #: `places()` as last ranked (the entity's message is made every frame it is seen;
+    #: the cells change once a second at most), None when a change came since.
+    _ranked: tuple[SeenPlace, ...] | None = field(default=None, repr=False, compare=False)
 
     def see(self, xy: FloatArray | tuple[float, float], stamp_ns: int) -> bool:
         """Count a sighting at xy (m, world) unless one was counted within `EVERY_NS`
@@ -48,7 +51,7 @@ class Whereabouts:
         x, y = float(xy[0]), float(xy[1])
         if not (math.isfinite(x) and math.isfinite(y)):
             return False
-        self.last_ns = stamp_ns
+        self.last_ns, self._ranked = stamp_ns, None
         key = (math.floor(x / CELL_M), math.floor(y / CELL_M))
         cell = self.cells.get(key)
         if cell is None:
@@ -68,6 +71,7 @@ class Whereabouts:
 
     def absorb(self, other: Whereabouts) -> None:
         """Pool another track's places into these (the two are one person)."""
+        self._ranked = None
         for key, c in other.cells.items():
             mine = self.cells.get(key)
             if mine is None:
@@ -82,15 +86,17 @@ class Whereabouts:
 
     def places(self) -> tuple[SeenPlace, ...]:
         """Most seen first (then the latest first)."""
-        ranked = sorted(self.cells.values(), key=lambda c: (-c.sightings, -c.last_ns))
-        return tuple(
-            SeenPlace(
-                xy=(c.sum_x / c.sightings, c.sum_y / c.sightings),
-                sightings=c.sightings,
-                last_seen_ns=c.last_ns,
+        if self._ranked is None:
+            ranked = sorted(self.cells.values(), key=lambda c: (-c.sightings, -c.last_ns))
+            self._ranked = tuple(
+                SeenPlace(
+                    xy=(c.sum_x / c.sightings, c.sum_y / c.sightings),
+                    sightings=c.sightings,
+                    last_seen_ns=c.last_ns,
+                )
+                for c in ranked
             )
-            for c in ranked
-        )
+        return self._ranked
 
     @classmethod
     def of(cls, places: tuple[SeenPlace, ...]) -> Whereabouts:

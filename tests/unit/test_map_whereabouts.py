@@ -124,3 +124,14 @@ def test_a_person_known_again_by_their_clothes_keeps_the_places_of_both_tracks()
     ((kept, _gone, _why),) = tracker.rejoin(t)
     cells = {math.floor(p.xy[0]) for p in kept.to_message().places}
     assert 8 in cells and {0, 1, 2} <= cells
+
+
+def test_the_places_follow_every_sighting_and_pooling_after_they_were_ranked() -> None:
+    w, other = Whereabouts(), Whereabouts()
+    w.see((0.5, 0.5), 0)
+    assert [p.sightings for p in w.places()] == [1]
+    w.see((0.5, 0.5), S)
+    assert [p.sightings for p in w.places()] == [2]
+    other.see((4.5, 0.5), 0)
+    w.absorb(other)
+    assert [p.sightings for p in w.places()] == [2, 1]
