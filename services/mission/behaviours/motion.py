@@ -87,15 +87,21 @@ PRESENT_AHEAD_M = (HANDOVER_DISTANCE_M - 0.3, HANDOVER_DISTANCE_M + 0.5)
 PRESENT_SIDE_M = 0.5
 
 
+def ahead_left(
+    xy: tuple[float, float], yaw: float, point: tuple[float, float]
+) -> tuple[float, float]:
+    """A floor point (world) as the robot at (xy, yaw) sees it: metres ahead, to the left."""
+    dx, dy = point[0] - xy[0], point[1] - xy[1]
+    return math.cos(yaw) * dx + math.sin(yaw) * dy, -math.sin(yaw) * dx + math.cos(yaw) * dy
+
+
 def in_front(
     xy: tuple[float, float] | None, yaw: float | None, person_xy: tuple[float, float]
 ) -> bool:
     """Whether a person at person_xy is near enough in front of the robot to present to."""
     if xy is None or yaw is None:
         return False
-    dx, dy = person_xy[0] - xy[0], person_xy[1] - xy[1]
-    ahead = math.cos(yaw) * dx + math.sin(yaw) * dy
-    left = -math.sin(yaw) * dx + math.cos(yaw) * dy
+    ahead, left = ahead_left(xy, yaw, person_xy)
     return PRESENT_AHEAD_M[0] <= ahead <= PRESENT_AHEAD_M[1] and abs(left) <= PRESENT_SIDE_M
 
 
@@ -324,10 +330,7 @@ class PersonAhead(MissionBehaviour):
             )
             self.set(UNSEEN, True)
             return Status.FAILURE
-        dx = person.position_in_world[0] - xy[0]
-        dy = person.position_in_world[1] - xy[1]
-        ahead = math.cos(yaw) * dx + math.sin(yaw) * dy
-        left = -math.sin(yaw) * dx + math.cos(yaw) * dy
+        ahead, left = ahead_left(xy, yaw, person.position_in_world[:2])
         off = math.hypot(ahead - HANDOVER_DISTANCE_M, left)
         if off <= s.handover_tol_m:
             self.feedback_message = f"{person_id} {off:.2f} m from the handover place"
