@@ -42,11 +42,12 @@ def _nav(overrides: Overrides) -> dict[str, Any]:
 class BenchOptions:
     """The command line's bench options: `rounds` (startup, decoders, deadwatch: how
     many stacks or processes; lapse: rounds a stall length); `sim_s` and `full` (stack:
-    how long it measures)."""
+    how long it measures); `run` (people-ids: a shift's output folder)."""
 
     rounds: int = 10
     sim_s: float = 60.0
     full: bool = False
+    run: str = ""
 
 
 #: The options of the bench being run (set by `run_bench`).
@@ -90,6 +91,12 @@ def _person_filter(_overrides: Overrides) -> dict[str, Any]:
     return bench_person_filter()
 
 
+def _people_ids(overrides: Overrides) -> dict[str, Any]:
+    from bench.people_ids import bench_people_ids
+
+    return bench_people_ids(OPTIONS["now"].run or "var/eval/latest", overrides)
+
+
 def _slam(settings: Overrides) -> dict[str, Any]:
     from bench.slam import bench_slam
 
@@ -108,6 +115,7 @@ BENCHES: dict[str, Callable[[Overrides], dict[str, Any]]] = {
     "stack": _stack,
     "slam": _slam,
     "person-filter": _person_filter,
+    "people-ids": _people_ids,
 }
 #: What `dume bench all` runs (the others start stacks or processes in a loop: alone).
 ALL = ("sim", "wbc", "perception", "nav")

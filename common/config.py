@@ -449,6 +449,10 @@ class SemanticMapSettings(_Section):
     #: Sim seconds between rerun logs of the entities and of the grid.
     log_every_s: Positive = 1.0
     grid_log_every_s: Positive = 5.0
+    #: A file (relative to the repository root) the people tracker's input is written to,
+    #: frame by frame, for replay (`services/semantic_map/people_trace.py`, `dume bench
+    #: people-ids`); empty: none.
+    people_trace: str = ""
 
 
 class ControllerSettings(_Section):

@@ -655,7 +655,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from bench.eval.run import sigterm_interrupts
 
     with sigterm_interrupts():  # a killed bench still stops its stack
-        return run_bench(args.which, args.set, BenchOptions(args.rounds, args.sim_s, args.full))
+        options = BenchOptions(args.rounds, args.sim_s, args.full, args.run)
+        return run_bench(args.which, args.set, options)
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -938,6 +939,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--slips", type=float, default=0.2, metavar="F",
         help="--shift: the fraction of carries knocked (seeded)",
     )  # fmt: skip
+    p.add_argument(
+        "--trace-people", action="store_true",
+        help="--shift: keep the map's people input and the truth people in DIR, for `dume "
+        "bench people-ids --run DIR`",
+    )  # fmt: skip
     p.add_argument("--record", action="store_true", help="write each world's recording")
     p.add_argument(
         "--map", default="saved", metavar="saved|DIR|explored|truth",
@@ -958,6 +964,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--sim-s", type=float, default=60.0, help="stack: sim seconds measured")
     p.add_argument("--full", action="store_true", help="stack: the whole demo request")
+    p.add_argument(
+        "--run", default="", metavar="DIR",
+        help="people-ids: a shift's output folder (default var/eval/latest)",
+    )  # fmt: skip
     p.set_defaults(func=cmd_bench)
 
     p = add("trial", "a whole-body controller trial over a real stack; JSON on the last line")

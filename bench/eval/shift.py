@@ -278,6 +278,9 @@ def run_shift_world(
     scenario = scenario_of(args)
     map_name = f"shift-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{seed}"
     overrides = world_overrides(args, seed, map_name)
+    traced = resolve(args.out) / f"people-seed-{seed}.trace"
+    if getattr(args, "trace_people", False):  # the map's people input, for the replay bench
+        overrides["semantic_map.people_trace"] = str(traced)
     stack = ProcessStack(list(SERVICES), overrides)
     watch = SeparationWatch(truth_separation(overrides))
     plots = ShiftPlots(load_config(overrides).navigation.people.slow_radius_m)
@@ -383,6 +386,11 @@ def run_shift_world(
         plots.write(plots_path, watch.series)
         figures["plots"] = str(plots_path)
         figures["logs"] = shown(stack.run_dir)
+        if getattr(args, "trace_people", False) and truth is not None:
+            follow.drain()
+            path = traced.with_name(f"people-truth-seed-{seed}.msgpack")
+            path.write_bytes(msgspec.msgpack.encode(follow.history))
+            figures["people_trace"] = [shown(traced), shown(path)]
     return figures
 
 

@@ -45,7 +45,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -93,6 +93,15 @@ MAX_RANGE_M = 8.0
 #: A person observed within this of the robot's own footprint at capture is the robot
 #: (its arm, or a leg, read as a person): nobody stands inside it, m (a person's radius).
 SELF_MARGIN_M = 0.2
+
+
+class PeopleTraceSink(Protocol):
+    """Where each fused frame's person observations and camera go for replay
+    (`people_trace.PeopleTrace`)."""
+
+    def frame(
+        self, stamp_ns: int, people: list[Observation], cam: PinholeCamera | None
+    ) -> None: ...
 
 
 @dataclass
@@ -169,6 +178,8 @@ class SemanticMap:
         #: A person's id merged away → the id kept (one person whose track split): a
         #: request for the old id still finds them (`entity`). This run's only.
         self.aliases: dict[str, str] = {}
+        #: Where the people tracker's input is written for replay (`people_trace`), or None.
+        self.people_trace: PeopleTraceSink | None = None
 
     # -- contents ------------------------------------------------------------------------
 
@@ -400,7 +411,35 @@ class SemanticMap:
             arts = [o for o in arts if all(o is not q for q in on_person)]
         kept = [o for o in arts if not self._doubt_artifact(o.xy, o.z, t)]
         report.ignored += len(arts) - len(kept)
-        arts = kept
+        cam = None
+        if frame is not None and not dets.reason:  # a frame perception did process
+            cam = PinholeCamera(
+                frame.fx,
+                frame.fy,
+                frame.cx,
+                frame.cy,
+                _mat(dets.T_world_base) @ _mat(frame.T_base_camera),
+                np.asarray(as_numpy(frame.depth), np.float32),
+            )
+        self.fuse(t, kept, people, cam, report)
+        if self.people_trace is not None:
+            self.people_trace.frame(t, people, cam)
+        if cam is not None:
+            report.learned_cells = self._learn(dets, cam)
+        return report
+
+    def fuse(
+        self,
+        t: int,
+        arts: list[Observation],
+        people: list[Observation],
+        cam: PinholeCamera | None,
+        report: IngestReport | None = None,
+    ) -> IngestReport:
+        """Fuse one frame's observations (already filtered) stamped `t`, and count the
+        looks of its camera (None: the frame had no image); what it did, into `report`.
+        `ingest` calls it; a people trace's replay calls it with the traced people."""
+        report = IngestReport() if report is None else report
         before = {id(tr) for tr in self.tracks()}
         changed_a, seen = self.artifacts.update(t, arts)
         changed_p = self.people.update(t, people)
@@ -429,18 +468,9 @@ class SemanticMap:
         if merged:
             report.dropped += self._delete(merged)
             seen = {i for i, tr in enumerate(self.artifacts.tracks) if tr.last_seen_ns == t}
-        if frame is not None and not dets.reason:  # a frame perception did process
-            cam = PinholeCamera(
-                frame.fx,
-                frame.fy,
-                frame.cx,
-                frame.cy,
-                _mat(dets.T_world_base) @ _mat(frame.T_base_camera),
-                np.asarray(as_numpy(frame.depth), np.float32),
-            )
+        if cam is not None:
             report.missing, dropped = self._look(t, cam, seen)
             report.dropped += dropped
-            report.learned_cells = self._learn(dets, cam)
         return report
 
     def _look(

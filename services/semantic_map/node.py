@@ -27,6 +27,7 @@ from functools import partial
 import numpy as np
 
 from common.bus import RequestError, WaitTimeout
+from common.config import resolve
 from common.keys import (
     MAP_ARTIFACTS,
     MAP_ARTIFACTS_ONE,
@@ -58,6 +59,7 @@ from services.semantic_map.intake import (
     perception_due,
 )
 from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.people_trace import PeopleTrace
 from services.semantic_map.rerun_log import MapLogger
 from services.semantic_map.startup import MapSiteError, open_map, world_description
 from services.semantic_map.store import MapStore, database_path, remove_database
@@ -83,6 +85,11 @@ class MapNode:
         world = partial(world_description, svc.bus, svc.stop)
         self.smap, how = open_map(self.cfg, self.store, world, self.site)
         log.info("%s", how)
+        self.trace: PeopleTrace | None = None
+        if self.cfg.people_trace:
+            self.trace = PeopleTrace(resolve(self.cfg.people_trace))
+            self.trace.start(self.smap)
+            self.smap.people_trace = self.trace
         latency_ns = svc.config.time.latency_ns_of(NAME, self.period_ns / NS_PER_S)
         lockstep = svc.config.time.mode == "lockstep"
         self.views = ViewHistory(self.period_ns, latency_ns, wait=lockstep)
@@ -239,6 +246,8 @@ class MapNode:
     def close(self) -> None:
         with self.lock:
             self.committer.close(self.smap)
+            if self.trace is not None:
+                self.trace.close()
 
 
 def main(svc: Service) -> None:
