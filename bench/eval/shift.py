@@ -66,7 +66,7 @@ from bench.eval.evaluate import (
     scenario_of,
     world_overrides,
 )
-from bench.eval.judge import MissionRecord, WorldResult, evaluate
+from bench.eval.judge import MissionRecord, TruthMatch, WorldResult, evaluate
 from bench.eval.judge import truth_person as match_person
 from bench.eval.report import json_safe, write_report
 from bench.eval.run import read_map, read_world, request_result, sigterm_interrupts, watch_mission
@@ -99,6 +99,8 @@ from services.sim.world import aisle_spot, new_place
 
 #: m: a mapped artifact stands for the truth artifact nearest to it within this.
 MATCH_M = 0.3
+#: m: a mapped person stands for the truth person nearest to them within this.
+PERSON_MATCH_M = 1.0
 #: ns between the people samples kept for the whole shift (who a mapped person is).
 HISTORY_EVERY_NS = 250_000_000
 #: Every this many requests, one asks by class.
@@ -231,18 +233,41 @@ class Truth:
         return msgspec.structs.replace(self.world, artifacts=arts, people=folks)
 
 
-def whom(
-    result: WorldResult, person: str, people: list[MapEntity], follow: Follow, truth: Truth
-) -> None:
+def stands_for(who: MapEntity, follow: Follow, truth: Truth) -> TruthMatch | None:
     """The truth person a mapped person stands for: the one nearest to the map's estimate
     where the people were when the map last saw them (`last_seen_ns`), not at the
     request (a walking person is metres from their last sighting: 4.5 m on hall seed 0's
-    shift, and the request was judged for whoever stood nearest the stale estimate)."""
+    shift, and the request was judged for whoever stood nearest the stale estimate). A
+    saved map's person not seen yet this run is judged where the people stood when the
+    run began: where the exploration that made the map left them. None: no sample then."""
+    if not who.last_seen_ns:
+        return match_person(truth.now(None), who.position_in_world[:2])
+    then = follow.people_at(who.last_seen_ns)
+    return None if then is None else match_person(truth.now(then), who.position_in_world[:2])
+
+
+def real_people(
+    people: Sequence[MapEntity], follow: Follow, truth: Truth
+) -> tuple[list[MapEntity], list[str]]:
+    """The mapped people who stand for somebody (`stands_for` within `PERSON_MATCH_M`),
+    and the ids of those who stand for nobody (ghosts: a request for them asks for
+    nobody, and is not drawn)."""
+    real, ghosts = [], []
+    for who in people:
+        match = stands_for(who, follow, truth)
+        if match is not None and match.distance_m <= PERSON_MATCH_M:
+            real.append(who)
+        else:
+            ghosts.append(who.id)
+    return real, ghosts
+
+
+def whom(
+    result: WorldResult, person: str, people: list[MapEntity], follow: Follow, truth: Truth
+) -> None:
+    """The request's truth person: the one the mapped person stands for (`stands_for`)."""
     who = next((p for p in people if p.id == person), None)
-    then = follow.people_at(who.last_seen_ns) if who is not None and who.last_seen_ns else None
-    if who is None or then is None:
-        return
-    match = match_person(truth.now(then), who.position_in_world[:2])
+    match = None if who is None else stands_for(who, follow, truth)
     if match is not None:
         result.truth_person = match.id
         result.truth_match_m = (result.truth_match_m[0], round(match.distance_m, 3))
@@ -322,7 +347,10 @@ def run_shift_world(
                                             "within_10cm": round(within, 3),
                                             "current": round(current, 3)})  # fmt: skip
             present = present_artifacts(arts, truth.where, truth.gone)
-            pair, asked = shift_request(present, people, seed, k, last_person)
+            real, ghosts = real_people(people, follow, truth)
+            if ghosts:
+                figures.setdefault("people_ghosts", []).append({"request": k + 1, "ids": ghosts})
+            pair, asked = shift_request(present, real, seed, k, last_person)
             at_ns = None
             if not gated:
                 at_ns = end_ns + round(REQUEST_AFTER_S * 1e9)
@@ -580,6 +608,18 @@ def write_shift_section(out: Path, shifts: Sequence[dict[str, Any]]) -> None:
     ]  # fmt: skip
     if knocks:
         lines += _part("Slips (a knock on what the robot carried):", knocks)
+    ghosts = [
+        f"- seed {s['world_seed']} request {g['request']}: {', '.join(g['ids'])}"
+        for s in shifts for g in s.get("people_ghosts", [])
+    ]  # fmt: skip
+    if ghosts:
+        said = (f"The map's people who stood for nobody (truth: no person within "
+                f"{PERSON_MATCH_M:g} m when last seen; never asked for):")  # fmt: skip
+        lines += _part(said, ghosts)
+    traces = [f"- seed {s['world_seed']}: {', '.join(s['people_trace'])}" for s in shifts
+              if s.get("people_trace")]  # fmt: skip
+    if traces:
+        lines += _part("People traces (`dume bench people-ids --run DIR`):", traces)
     with (out / "report.md").open("a") as f:
         f.write("\n".join(lines) + "\n")
     (out / "shift.json").write_text(json.dumps(json_safe(list(shifts)), indent=2) + "\n")

@@ -20,6 +20,7 @@ from bench.eval.shift import (
     class_verdict,
     leave_trolley,
     present_artifacts,
+    real_people,
     shift_request,
     whom,
 )
@@ -191,6 +192,28 @@ def test_the_person_asked_for_is_who_stood_at_the_maps_estimate_when_it_last_saw
     whom(result, "person_7", [mapped], follow, truth)
     assert result.truth_person == "person_1"
     assert result.truth_match_m[1] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_saved_maps_person_unseen_this_run_is_who_stood_there_as_the_run_began() -> None:
+    """The hall's person_2 starts at (-6.79, 0.93) and has walked 5 m off by the request; a
+    saved map's person the run never saw stands 0.2 m from that start: it is person_2,
+    not whoever is nearest to it at the request. A mapped person 3 m from anybody at the
+    start stands for nobody, and is not drawn."""
+    truth = Truth(generate_world(0, "hall"))
+    people, base = _Fifo(), _Fifo()
+    follow = Follow(people, base, SeparationWatch(SeparationParams()))  # type: ignore[arg-type]
+    start = {p.id: p.position for p in truth.world.people}
+    moved = [PersonTruth(id=i, position=(x + (5.0 if i == "person_2" else 0.0), y), yaw=0.0,
+                         velocity=(0.0, 0.0)) for i, (x, y) in start.items()]  # fmt: skip
+    people.items.append(PeopleTruth(stamp_ns=60 * S, people=moved))
+    follow.drain()
+    prior = _entity("person_5", -6.63, 0.78, "person")  # never seen this run
+    ghost = _entity("person_9", 0.0, 8.0, "person")
+    result = WorldResult(world="hall", world_seed=0, scenario="bystanders")
+    whom(result, "person_5", [prior], follow, truth)
+    assert result.truth_person == "person_2"
+    real, ghosts = real_people([prior, ghost], follow, truth)
+    assert [p.id for p in real] == ["person_5"] and ghosts == ["person_9"]
 
 
 class _Pub:
