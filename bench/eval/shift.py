@@ -91,6 +91,7 @@ from common.messages.sim import (
     StateTruth,
 )
 from common.messages.world import WorldDescription
+from common.runfiles import write_whole
 from deploy.demo import SERVICES
 from deploy.runs import shown
 from deploy.stack import ProcessStack
@@ -387,6 +388,9 @@ def run_shift_world(
             end_ns = max(record.end_ns, (record.changes[-1].stamp_ns if record.changes else 0))
             last_person = pair.person
             out.append(result)
+            if getattr(args, "trace_people", False):  # replayable while the shift goes on
+                follow.drain()
+                keep_people_truth(follow, traced)
             ok = sum(r.succeeded for r in out)
             _say(
                 f"  [{seed} #{k + 1}] {pair.object} → {pair.person}: {result.outcome} "
@@ -416,10 +420,17 @@ def run_shift_world(
         figures["logs"] = shown(stack.run_dir)
         if getattr(args, "trace_people", False) and truth is not None:
             follow.drain()
-            path = traced.with_name(f"people-truth-seed-{seed}.msgpack")
-            path.write_bytes(msgspec.msgpack.encode(follow.history))
-            figures["people_trace"] = [shown(traced), shown(path)]
+            figures["people_trace"] = [shown(traced), shown(keep_people_truth(follow, traced))]
     return figures
+
+
+def keep_people_truth(follow: Follow, trace: Path) -> Path:
+    """The shift's truth people so far, beside the map's people trace (for `dume bench
+    people-ids`); the file written."""
+    path = trace.with_name(trace.name.replace("people-seed-", "people-truth-seed-"))
+    path = path.with_suffix(".msgpack")
+    write_whole(path, msgspec.msgpack.encode(follow.history))
+    return path
 
 
 class Knock:
