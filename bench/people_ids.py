@@ -48,8 +48,8 @@ RECENT_NS = 2_000_000_000
 
 #: Id → floor point (m, world).
 Places = dict[str, tuple[float, float]]
-#: One scoring sample: the truth people in view, the map's people current.
-Sample = tuple[Places, Places]
+#: One scoring sample: its sim time (ns), the truth people in view, the map's people current.
+Sample = tuple[int, Places, Places]
 
 
 @dataclass
@@ -65,6 +65,8 @@ class IdScore:
     ids_per_person: dict[str, list[str]] = field(default_factory=dict)
     shared: dict[str, list[str]] = field(default_factory=dict)
     ghosts: list[str] = field(default_factory=list)
+    #: Per truth person, the map ids they were matched to in turn: [id, from s, to s].
+    timeline: dict[str, list[list[Any]]] = field(default_factory=dict)
 
     def figures(self) -> dict[str, Any]:
         return {
@@ -77,6 +79,7 @@ class IdScore:
             "ids_per_person": {k: len(v) for k, v in sorted(self.ids_per_person.items())},
             "shared_ids": self.shared,
             "ghosts": self.ghosts,
+            "timeline": self.timeline,
         }
 
 
@@ -93,7 +96,8 @@ def match(
 
 
 def score(samples: list[Sample]) -> IdScore:
-    """The figures over samples of (truth people in view, map people current): id → xy."""
+    """The figures over samples of (stamp, truth people in view, map people current:
+    id → xy)."""
     out = IdScore(samples=len(samples))
     together: dict[tuple[str, str], int] = defaultdict(int)
     last: dict[str, str] = {}
@@ -101,7 +105,7 @@ def score(samples: list[Sample]) -> IdScore:
     per_id: dict[str, set[str]] = defaultdict(set)
     seen_ids: set[str] = set()
     n_truth = n_map = 0
-    for truth, mapped in samples:
+    for stamp, truth, mapped in samples:
         n_truth += len(truth)
         n_map += len(mapped)
         seen_ids |= set(mapped)
@@ -111,6 +115,11 @@ def score(samples: list[Sample]) -> IdScore:
             per_id[m].add(t)
             if t in last and last[t] != m:
                 out.switches += 1
+            runs = out.timeline.setdefault(t, [])
+            if runs and runs[-1][0] == m:
+                runs[-1][2] = round(stamp * 1e-9, 1)
+            else:
+                runs.append([m, round(stamp * 1e-9, 1), round(stamp * 1e-9, 1)])
             last[t] = m
     if together:
         t_ids = sorted({t for t, _ in together})
@@ -167,7 +176,7 @@ def replay_samples(
                 for t in smap.people.confirmed
                 if t.id is not None and stamp - t.last_seen_ns <= RECENT_NS
             }
-            samples.append((inside, mapped))
+            samples.append((stamp, inside, mapped))
     return samples
 
 

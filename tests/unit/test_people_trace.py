@@ -80,24 +80,25 @@ def test_a_cut_short_last_record_ends_the_trace(tmp_path: Path) -> None:
 
 
 def test_one_id_throughout_scores_one_and_a_change_of_id_is_a_switch() -> None:
-    steady = score([({"a": (0.0, 0.0), "b": (5.0, 0.0)},
+    steady = score([(0, {"a": (0.0, 0.0), "b": (5.0, 0.0)},
                      {"person_1": (0.2, 0.0), "person_2": (5.1, 0.1)})] * 10)  # fmt: skip
     assert steady.idf1 == 1.0 and steady.switches == 0 and not steady.shared
     split = score(
-        [({"a": (0.0, 0.0)}, {"person_1": (0.1, 0.0)})] * 6
-        + [({"a": (0.0, 0.0)}, {"person_7": (0.1, 0.0)})] * 4
+        [(k * S, {"a": (0.0, 0.0)}, {"person_1": (0.1, 0.0)}) for k in range(6)]
+        + [(k * S, {"a": (0.0, 0.0)}, {"person_7": (0.1, 0.0)}) for k in range(6, 10)]
     )
     assert split.switches == 1 and split.ids_per_person == {"a": ["person_1", "person_7"]}
     assert split.idtp == 6 and split.idfn == 4 and split.idfp == 4
     assert abs(split.idf1 - 0.6) < 1e-9
+    assert split.timeline == {"a": [["person_1", 0.0, 5.0], ["person_7", 6.0, 9.0]]}
 
 
 def test_one_id_on_two_people_is_shared_and_an_id_on_nobody_a_ghost() -> None:
     s = score(
-        [({"a": (0.0, 0.0)}, {"person_1": (0.1, 0.0), "person_9": (4.0, 4.0)})] * 3
-        + [({"b": (2.0, 0.0)}, {"person_1": (2.1, 0.0)})] * 3
+        [(0, {"a": (0.0, 0.0)}, {"person_1": (0.1, 0.0), "person_9": (4.0, 4.0)})] * 3
+        + [(0, {"b": (2.0, 0.0)}, {"person_1": (2.1, 0.0)})] * 3
     )
     assert s.shared == {"person_1": ["a", "b"]}
     assert s.ghosts == ["person_9"]
-    far = score([({"a": (0.0, 0.0)}, {"person_1": (1.5, 0.0)})])
+    far = score([(0, {"a": (0.0, 0.0)}, {"person_1": (1.5, 0.0)})])
     assert far.idtp == 0 and far.ghosts == ["person_1"]
