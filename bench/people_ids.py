@@ -39,7 +39,7 @@ from scipy.optimize import linear_sum_assignment
 
 from common.config import Overrides, SemanticMapSettings, load_config, resolve
 from common.messages.sim import PeopleTruth
-from services.semantic_map.people_trace import TraceFrame, read_trace, replay
+from services.semantic_map.people_trace import TraceFrame, replay
 
 #: A map person within this of a truth person stands for them, m.
 MATCH_M = 1.0
@@ -156,11 +156,10 @@ def replay_samples(
     """The trace replayed through the map as the code now is, sampled at each truth stamp
     by the first frame at or after it: the truth people that frame's camera could see, the
     map's people current then."""
-    frames = {r.stamp_ns: r for r in read_trace(trace) if isinstance(r, TraceFrame)}
     samples: list[Sample] = []
     k = 0
-    for stamp, smap in replay(trace, settings):
-        frame = frames[stamp]
+    for frame, smap in replay(trace, settings):
+        stamp = frame.stamp_ns
         while k < len(truth) and truth[k].stamp_ns <= stamp:
             sample = truth[k]
             k += 1

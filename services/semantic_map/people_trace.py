@@ -179,4 +179,4 @@ def replay(path: Path, settings: SemanticMapSettings) -> Iterator[tuple[int, Sem
         people = [observation(p) for p in record.people]
         cam = None if record.camera is None else camera(record.camera)
         smap.fuse(record.stamp_ns, [], people, cam)
-        yield record.stamp_ns, smap
+        yield record, smap
