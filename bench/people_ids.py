@@ -43,8 +43,8 @@ from services.semantic_map.people_trace import TraceFrame, replay
 
 #: A map person within this of a truth person stands for them, m.
 MATCH_M = 1.0
-#: A map person is current when seen within this of the sample, ns.
-RECENT_NS = 2_000_000_000
+#: A map person is current when seen within this of the sample (a detection then), ns.
+RECENT_NS = 500_000_000
 
 #: Id → floor point (m, world).
 Places = dict[str, tuple[float, float]]
