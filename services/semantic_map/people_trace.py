@@ -164,8 +164,8 @@ def read_trace(path: Path) -> Iterator[Record]:
             yield _DECODER.decode(data)
 
 
-def replay(path: Path, settings: SemanticMapSettings) -> Iterator[tuple[int, SemanticMap]]:
-    """A fresh map of `settings` through the trace: (stamp, the map) after each frame."""
+def replay(path: Path, settings: SemanticMapSettings) -> Iterator[tuple[TraceFrame, SemanticMap]]:
+    """A fresh map of `settings` through the trace: (the frame, the map) after each frame."""
     smap: SemanticMap | None = None
     for record in read_trace(path):
         if isinstance(record, TraceStart):
