@@ -11,12 +11,19 @@ covariance kept, so nobody drifts along a velocity that is noise. A person unsee
 covariance of (V_MAX)², so the position's uncertainty then grows like a walker's reach
 instead of drifting along an old heading. Detections are assigned to people by the
 Hungarian method on a cost that adds the Mahalanobis distance of the innovation (gated
-at χ²₂ 99.9 %, or within `GATE_MIN_M`; never beyond `MAX_GATE_M`) and the Bhattacharyya
-distance of the colour histograms: two people crossing are told apart by their clothes
-where their positions are ambiguous. The colours veto a match (beyond `MAX_APPEARANCE`)
-only when the detection is not where the person is expected (outside χ²₂ 95 %): a person
-standing where they were, seen from behind or under another light, is still them (the
-small-world patrol gave one standing person four ids when the colours vetoed). A detection left over
+at χ²₂ 99.9 %, or within `GATE_MIN_M`; never beyond `MAX_GATE_M`), the likelihood's
+spread (½ ln |S| over the detection's own: a person the map is unsure of, long unseen,
+takes a detection only where nobody better placed is expected; the Mahalanobis distance
+alone let a stale wide track take a walker's detections from the walker's own track)
+and the Bhattacharyya distance of the colour histograms: two people crossing are told
+apart by their clothes where their positions are ambiguous. The colours veto a match
+(beyond `MAX_APPEARANCE`) when the detection is not where the person is expected
+(outside χ²₂ 95 %), or when the person is unseen for `VETO_STALE_NS` and the detection
+lies beyond `GATE_MIN_M` of where they were (a stale place says little: the σ of a
+long-unseen person spans the gate, and in the hall's shift walkers passing within a metre
+of it took the id of whoever had stood there): a person standing where they were, seen
+from behind or under another light, is still them (the small-world patrol gave one
+standing person four ids when the colours vetoed). A detection left over
 starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
 unless it lies within `MIN_SEPARATION_M` of a person (then it is a piece of that body,
 e.g. legs whose colours did not match the shirt).
@@ -47,12 +54,18 @@ A track still splits now and then: while the robot walks round a standing person
 visible surface and the depth behind it move, a detection falls outside the gate, and a
 second id grows beside the first (the explored hall: three people with two ids each, 8 cm
 to 1.4 m apart). Two people never in one frame together (`Track.seen_with`) are merged
-back into one (`merge_splits`) when they are closer than `BODY_M` (two bodies do not
-overlap), or closer than `SPLIT_M` with like colours, both seen within `SPLIT_RECENT_NS`
-(the detections alternate between them). The id kept is the one seen more often from
-near (`SemanticMapSettings.class_near_m`), a person the map was given (a prior, a seed)
-before one it made; the other's id is deleted. The place is the two moment-matched, its
-covariance spanning both, so the next detection at either place joins it.
+back into one (`merge_splits`) when they are closer than `BODY_M` and both seen within
+`BODY_RECENT_NS` (two bodies do not overlap), or closer than `BODY_M` to where the other
+was last seen in their clothes (within `REID_APPEARANCE`: nobody stands at a stale place
+now, so the place alone proves nothing), or, neither of them ever seen walking, closer
+than `SPLIT_M` with like colours, both seen within `SPLIT_RECENT_NS` (the detections
+alternate between them). Walkers on their routes pass each other's places all the time:
+in the hall's shift (`dume bench people-ids`) all three split merges of walkers joined
+two people, and one body merge with a place 22 s stale did. The id kept is the one seen
+more often from near (`SemanticMapSettings.class_near_m`), a person the map was given (a
+prior, a seed) before one it made; the other's id is deleted. The place is the two
+moment-matched, its covariance spanning both, so the next detection at either place
+joins it.
 """
 
 from __future__ import annotations
@@ -104,6 +117,8 @@ BODY_M = 0.5
 #: person whose track split, m (the explored hall's farthest split: 1.36 m).
 SPLIT_M = 1.5
 SPLIT_RECENT_NS = 10_000_000_000
+#: Two tracks overlapping are one body when both were seen this lately, ns.
+BODY_RECENT_NS = 2_000_000_000
 #: Re-identification: a new person whose colours lie within `REID_APPEARANCE` of a
 #: known person's, and nearer by `REID_MARGIN` than anyone else's, who has not been seen
 #: since the new one first was (two bodies seen in turn, not together), not for
@@ -115,6 +130,8 @@ REID_UNSEEN_NS = 3_000_000_000
 #: A person unseen this long may be anywhere in the hall (1.5 m/s for a minute): one
 #: known again by their clothes alone, without the map having looked at their place, ns.
 REID_STALE_NS = 60_000_000_000
+#: A person unseen this long is matched away from their place only in their clothes, ns.
+VETO_STALE_NS = 2_000_000_000
 
 
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
@@ -258,9 +275,13 @@ class PeopleTracker:
         app = 0.0
         if tr.appearance is not None and obs.appearance is not None:
             app = bhattacharyya(tr.appearance, obs.appearance)
-            if app > MAX_APPEARANCE and d2 > CHI2_2D_95:
+            stale = not tr.last_seen_ns or tr.stamp_ns - tr.last_seen_ns > VETO_STALE_NS
+            if app > MAX_APPEARANCE and (d2 > CHI2_2D_95 or (stale and dist > GATE_MIN_M)):
                 return _BIG  # unlike, and not where they are expected: somebody else
-        return min(d2, CHI2_2D_999) / CHI2_2D_999 + s.appearance_weight * app
+        # The likelihood's spread (ln |S| over the detection's own): a person the map is
+        # unsure of takes a detection only where nobody better placed is expected.
+        spread = 0.5 * math.log(max(float(np.linalg.det(S)), 1e-12) / max(obs.sigma_m, 1e-3) ** 4)
+        return (min(d2, CHI2_2D_999) + max(spread, 0.0)) / CHI2_2D_999 + s.appearance_weight * app
 
     def update(self, stamp_ns: int, observations: list[Observation]) -> list[Track]:
         """Fuse one frame's person detections; the confirmed people updated."""
@@ -452,13 +473,17 @@ class PeopleTracker:
         if a is b or b.id in a.seen_with or a.id in b.seen_with:
             return ""
         d = float(np.linalg.norm(a.xy - b.xy))
-        if d < BODY_M:
+        app = (
+            math.inf
+            if a.appearance is None or b.appearance is None
+            else bhattacharyya(a.appearance, b.appearance)
+        )
+        if d < BODY_M and stamp_ns - b.last_seen_ns <= BODY_RECENT_NS:
             return f"{d:.2f} m apart and never seen together: one body"
-        if d >= SPLIT_M or stamp_ns - b.last_seen_ns > SPLIT_RECENT_NS:
+        if d < BODY_M and app <= REID_APPEARANCE:
+            return f"{d:.2f} m from where they were last seen, in their clothes ({app:.2f})"
+        if d >= SPLIT_M or stamp_ns - b.last_seen_ns > SPLIT_RECENT_NS or a.walked or b.walked:
             return ""
-        if a.appearance is None or b.appearance is None:
-            return ""
-        app = bhattacharyya(a.appearance, b.appearance)
         if app > MAX_APPEARANCE:
             return ""
         return (

@@ -484,3 +484,34 @@ def test_a_walker_confirmed_in_the_clothes_of_a_long_unseen_person_beside_one_go
     back = tracker.reidentify(new, t)
     assert back is not None and back.id == "person_2"
     assert np.linalg.norm(back.xy) < 0.05
+
+
+def test_two_walkers_alike_in_clothes_on_one_route_seconds_apart_stay_two() -> None:
+    """Two workers in like clothes walk the same aisle 4 s apart and are never in one
+    frame: the second passes within a metre of where the first was last seen. Walkers on a
+    route pass each other's places all the time: a split track is a standing person's
+    (the hall's shift: all three split merges of walkers joined two people)."""
+    rng = np.random.default_rng(9)
+    red = _hist(2, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _walking(tracker, 0, 30, (0.0, 0.0), (1.0, 0.0), red, seed=1)  # to (3, 0), then gone
+    t = _walking(tracker, t + 4 * S, 30, (0.0, 0.6), (1.0, 0.0), red / red.sum(), seed=2)
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
+    assert not tracker.take_merged()
+
+
+def test_a_long_unseen_persons_place_is_not_taken_by_somebody_in_other_clothes() -> None:
+    """person_1 (red) stood at the origin 30 s ago. Somebody in blue is first seen 0.7 m
+    from there and walks past: neither within the gate (a stale place says little, the
+    colours must agree) nor as one body (nobody stands there now) are they person_1.
+    person_1 in red seen again where they stood is still person_1."""
+    rng = np.random.default_rng(10)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _standing(tracker, 0, 10, [(0.0, 0.0)], [red]) + 30 * S
+    t = _walking(tracker, t, 20, (-0.6, 0.4), (1.0, -0.2), blue, seed=3)
+    assert sorted(tr.id for tr in tracker.confirmed) == ["person_1", "person_2"]
+    person_1 = tracker.by_id("person_1")
+    assert person_1 is not None and np.linalg.norm(person_1.xy) < 0.1
+    _standing(tracker, t + 20 * S, 5, [(0.1, 0.0)], [red], seed=4)
+    assert person_1.last_seen_ns > t
