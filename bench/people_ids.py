@@ -20,7 +20,9 @@ within `MATCH_M`:
 - **ids per person**: how many map ids each truth person was matched to;
 - **shared ids**: map ids matched to two truth people or more (one id for two bodies:
   the handover goes to the wrong one);
-- **ghosts**: map ids seen lately at some sample that never matched anybody.
+- **ghosts**: map ids seen lately at some sample that never matched anybody;
+- **decisions**: each re-identification and merge the tracker made, judged right or wrong
+  by who the ids stood for (`Decisions`), the wrong ones listed.
 
 Truth appears only here, in the scoring (evaluation); the replayed map sees the trace.
 """
@@ -150,16 +152,61 @@ def in_view(frame: TraceFrame, xy: tuple[float, float], range_m: float) -> bool:
     return abs(math.atan2(p[0], p[2])) <= half
 
 
+@dataclass
+class Decisions:
+    """The tracker's identity decisions judged against the truth: per kind (`reid`: a
+    person known again by their clothes; `body`, `place`, `split`: two ids merged as one
+    body, at a stale place in their clothes, as a standing person's split track), how
+    many were right, wrong, or could not be judged (an id not yet matched to anybody)."""
+
+    tally: dict[str, dict[str, int]] = field(default_factory=dict)
+    wrong: list[str] = field(default_factory=list)
+
+    def add(self, kind: str, verdict: str, said: str) -> None:
+        row = self.tally.setdefault(kind, {"right": 0, "wrong": 0, "unjudged": 0})
+        row[verdict] += 1
+        if verdict == "wrong":
+            self.wrong.append(said)
+
+
+def merge_kind(reason: str) -> str:
+    """Which rule merged two people, from the map's reason."""
+    if "one body" in reason:
+        return "body"
+    return "split" if "track split" in reason else "place"
+
+
 def replay_samples(
     trace: Path, truth: list[PeopleTruth], settings: SemanticMapSettings
-) -> list[Sample]:
+) -> tuple[list[Sample], Decisions]:
     """The trace replayed through the map as the code now is, sampled at each truth stamp
     by the first frame at or after it: the truth people that frame's camera could see, the
-    map's people current then."""
+    map's people current then. And each identity decision judged: a re-identification is
+    right when the id went to the truth person it stood for (its last match), a merge when
+    both ids stood for one truth person."""
     samples: list[Sample] = []
+    decisions = Decisions()
+    owner: dict[str, str] = {}  # map id → the truth person it was last matched to
     k = 0
-    for frame, smap in replay(trace, settings):
+    for frame, smap, report in replay(trace, settings):
         stamp = frame.stamp_ns
+        now = truth[min(k, len(truth) - 1)] if truth else None
+        for pid, _, to, app in report.reidentified:
+            there = {p.id: p.position for p in now.people} if now is not None else {}
+            who = match(there, {"x": (float(to[0]), float(to[1]))})
+            was, found = owner.get(pid), next(iter(who), None)
+            verdict = "unjudged" if was is None or found is None else (
+                "right" if was == found else "wrong")  # fmt: skip
+            decisions.add("reid", verdict, f"{stamp * 1e-9:.1f} s: {pid} ({was}) re-identified "
+                          f"on {found} (colour distance {app:.2f})")  # fmt: skip
+        for gone, reason in report.dropped:
+            keep = smap.aliases.get(gone)
+            if keep is None or "in their clothes (colour distance" in reason:
+                continue  # a false entry deleted; a re-identification, judged above
+            a, b = owner.get(gone), owner.get(keep)
+            verdict = "unjudged" if a is None or b is None else ("right" if a == b else "wrong")
+            said = f"{stamp * 1e-9:.1f} s: {gone} ({a}) merged into {keep} ({b})"
+            decisions.add(merge_kind(reason), verdict, said)
         while k < len(truth) and truth[k].stamp_ns <= stamp:
             sample = truth[k]
             k += 1
@@ -176,7 +223,8 @@ def replay_samples(
                 if t.id is not None and stamp - t.last_seen_ns <= RECENT_NS
             }
             samples.append((stamp, inside, mapped))
-    return samples
+            owner |= {m: t for t, m in match(inside, mapped).items()}
+    return samples, decisions
 
 
 def bench_people_ids(run: str, overrides: Overrides) -> dict[str, Any]:
@@ -194,5 +242,9 @@ def bench_people_ids(run: str, overrides: Overrides) -> dict[str, Any]:
         seed = trace.stem.removeprefix("people-seed-")
         truth_path = folder / f"people-truth-seed-{seed}.msgpack"
         truth = msgspec.msgpack.decode(truth_path.read_bytes(), type=list[PeopleTruth])
-        out[f"seed {seed}"] = score(replay_samples(trace, truth, settings)).figures()
+        samples, decisions = replay_samples(trace, truth, settings)
+        out[f"seed {seed}"] = score(samples).figures() | {
+            "decisions": decisions.tally,
+            "wrong_decisions": decisions.wrong,
+        }
     return out

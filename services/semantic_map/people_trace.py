@@ -13,7 +13,7 @@ each prefixed by its length (a killed service loses at most the last record):
   the map's looks (`looks_at`) count misses with.
 
 `replay` runs a fresh `SemanticMap` of the same settings through the trace (people only:
-no artifacts, no occupancy learned) and yields its confirmed people after every frame;
+no artifacts, no occupancy learned) and yields the map and what each frame did to it;
 `dume bench people-ids` scores that against the sim's truth. The trace is the map's own
 input: no truth is in it.
 """
@@ -33,7 +33,7 @@ from common.config import SemanticMapSettings
 from common.geometry import FloatArray
 from common.messages.semantic_map import MapEntity
 from services.semantic_map.entities import Observation, Track
-from services.semantic_map.mapper import SemanticMap
+from services.semantic_map.mapper import IngestReport, SemanticMap
 from services.semantic_map.occupancy import Occupancy
 
 #: The depth image is kept at every `DEPTH_STRIDE`-th pixel of each axis (the looks read a
@@ -164,8 +164,11 @@ def read_trace(path: Path) -> Iterator[Record]:
             yield _DECODER.decode(data)
 
 
-def replay(path: Path, settings: SemanticMapSettings) -> Iterator[tuple[TraceFrame, SemanticMap]]:
-    """A fresh map of `settings` through the trace: (the frame, the map) after each frame."""
+def replay(
+    path: Path, settings: SemanticMapSettings
+) -> Iterator[tuple[TraceFrame, SemanticMap, IngestReport]]:
+    """A fresh map of `settings` through the trace: (the frame, the map, what fusing the
+    frame did) after each frame."""
     smap: SemanticMap | None = None
     for record in read_trace(path):
         if isinstance(record, TraceStart):
@@ -178,5 +181,5 @@ def replay(path: Path, settings: SemanticMapSettings) -> Iterator[tuple[TraceFra
             raise ValueError(f"{path}: a frame before the trace's start")
         people = [observation(p) for p in record.people]
         cam = None if record.camera is None else camera(record.camera)
-        smap.fuse(record.stamp_ns, [], people, cam)
-        yield record, smap
+        report = smap.fuse(record.stamp_ns, [], people, cam)
+        yield record, smap, report

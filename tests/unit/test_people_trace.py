@@ -60,7 +60,7 @@ def test_a_replayed_trace_gives_the_ids_and_places_the_live_map_gave(tmp_path: P
     trace.close()
     records = list(read_trace(path))
     assert len(records) == 61
-    *_, (frame, replayed) = replay(path, settings)
+    *_, (frame, replayed, _) = replay(path, settings)
     assert frame.stamp_ns == 59 * S // 10
     want = {t.id: (t.xy.round(6).tolist(), t.hits, t.misses) for t in live.people.confirmed}
     got = {t.id: (t.xy.round(6).tolist(), t.hits, t.misses) for t in replayed.people.confirmed}
