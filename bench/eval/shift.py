@@ -304,8 +304,10 @@ def run_shift_world(
     scenario = scenario_of(args)
     map_name = f"shift-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{seed}"
     overrides = world_overrides(args, seed, map_name)
-    traced = resolve(args.out) / f"people-seed-{seed}.trace"
-    if getattr(args, "trace_people", False):  # the map's people input, for the replay bench
+    tracing = bool(getattr(args, "trace_people", False))  # for `dume bench people-ids`
+    traced = resolve(args.out) / f"people-seed-{seed}.trace"  # the map's people input
+    truth_path = traced.with_name(f"people-truth-seed-{seed}.msgpack")  # and the truth's
+    if tracing:
         overrides["semantic_map.people_trace"] = str(traced)
     stack = ProcessStack(list(SERVICES), overrides)
     watch = SeparationWatch(truth_separation(overrides))
@@ -388,9 +390,9 @@ def run_shift_world(
             end_ns = max(record.end_ns, (record.changes[-1].stamp_ns if record.changes else 0))
             last_person = pair.person
             out.append(result)
-            if getattr(args, "trace_people", False):  # replayable while the shift goes on
+            if tracing:  # replayable while the shift goes on
                 follow.drain()
-                keep_people_truth(follow, traced)
+                keep_people_truth(follow, truth_path)
             ok = sum(r.succeeded for r in out)
             _say(
                 f"  [{seed} #{k + 1}] {pair.object} → {pair.person}: {result.outcome} "
@@ -418,19 +420,17 @@ def run_shift_world(
         plots.write(plots_path, watch.series)
         figures["plots"] = str(plots_path)
         figures["logs"] = shown(stack.run_dir)
-        if getattr(args, "trace_people", False) and truth is not None:
+        if tracing and truth is not None:
             follow.drain()
-            figures["people_trace"] = [shown(traced), shown(keep_people_truth(follow, traced))]
+            keep_people_truth(follow, truth_path)
+            figures["people_trace"] = [shown(traced), shown(truth_path)]
     return figures
 
 
-def keep_people_truth(follow: Follow, trace: Path) -> Path:
-    """The shift's truth people so far, beside the map's people trace (for `dume bench
-    people-ids`); the file written."""
-    path = trace.with_name(trace.name.replace("people-seed-", "people-truth-seed-"))
-    path = path.with_suffix(".msgpack")
+def keep_people_truth(follow: Follow, path: Path) -> None:
+    """The shift's truth people so far into `path`, beside the map's people trace (for
+    `dume bench people-ids`)."""
     write_whole(path, msgspec.msgpack.encode(follow.history))
-    return path
 
 
 class Knock:

@@ -473,18 +473,15 @@ class PeopleTracker:
         if a is b or b.id in a.seen_with or a.id in b.seen_with:
             return ""
         d = float(np.linalg.norm(a.xy - b.xy))
-        app = (
-            math.inf
-            if a.appearance is None or b.appearance is None
-            else bhattacharyya(a.appearance, b.appearance)
-        )
         if d < BODY_M and stamp_ns - b.last_seen_ns <= BODY_RECENT_NS:
             return f"{d:.2f} m apart and never seen together: one body"
+        if d >= SPLIT_M or a.appearance is None or b.appearance is None:
+            return ""  # the colours are compared only for the few near enough
+        app = bhattacharyya(a.appearance, b.appearance)
         if d < BODY_M and app <= REID_APPEARANCE:
             return f"{d:.2f} m from where they were last seen, in their clothes ({app:.2f})"
-        if d >= SPLIT_M or stamp_ns - b.last_seen_ns > SPLIT_RECENT_NS or a.walked or b.walked:
-            return ""
-        if app > MAX_APPEARANCE:
+        recent = stamp_ns - b.last_seen_ns <= SPLIT_RECENT_NS
+        if not recent or a.walked or b.walked or app > MAX_APPEARANCE:
             return ""
         return (
             f"{d:.2f} m apart, alike (colour distance {app:.2f}), seen in turn within "

@@ -134,7 +134,7 @@ class PeopleTrace:
         self._file.flush()
 
     def start(self, smap: SemanticMap) -> None:
-        people = [t for t in smap.people.confirmed]
+        people = smap.people.confirmed
         apps = {
             t.id: [float(v) for v in t.appearance]
             for t in people
