@@ -66,6 +66,8 @@ PERSON_RADIUS_M = 0.25
 #: People keep this far (m) from the robot's start, its goal poses and each other.
 PERSON_SPACING_M = 1.5
 MAX_WALKING_SPEED_MPS = 1.2
+#: The random stream people's routes are drawn from, apart from the world's own.
+WALK_STREAM = 0x5A1C
 
 
 class WorldGenerationError(RuntimeError):
@@ -205,12 +207,12 @@ class _Sampler:
             surface_id=surface.id,
         )
 
-    def people(self, count: int, walking: bool, tries: int = 100) -> list[Person] | None:
+    def people(self, count: int, tries: int = 100) -> list[Person] | None:
         placed: list[Person] = []
         distance = fz.handover_distance()
         for n in range(1, count + 1):
             for _ in range(tries):
-                person = self._person(n, walking, placed, distance)
+                person = self._person(n, placed, distance)
                 if person is not None:
                     placed.append(person)
                     self.goals.append(fz.handover_pose_for(person.position, person.yaw, distance))
@@ -219,9 +221,7 @@ class _Sampler:
                 return None
         return placed
 
-    def _person(
-        self, n: int, walking: bool, placed: list[Person], distance: float
-    ) -> Person | None:
+    def _person(self, n: int, placed: list[Person], distance: float) -> Person | None:
         point = self.random_free_point(PERSON_CLEARANCE_M + PERSON_RADIUS_M)
         if point is None:
             return None
@@ -238,7 +238,6 @@ class _Sampler:
                 break
         else:
             return None
-        waypoints = self._waypoints(point) if walking else ()
         return Person(
             id=f"person_{n}",
             position=point,
@@ -247,9 +246,13 @@ class _Sampler:
             shirt_rgba=colour(self.rng, SHIRT_COLOURS),
             trousers_rgba=colour(self.rng, TROUSERS_COLOURS),
             skin_rgba=colour(self.rng, SKIN_COLOURS, jitter=0.02),
-            waypoints=waypoints,
-            speed=uniform(self.rng, 0.5, MAX_WALKING_SPEED_MPS) if waypoints else 0.0,
         )
+
+    def route(self, person: Person) -> Person:
+        """`person` with a route (waypoints) and a walking speed; none when no leg fits."""
+        waypoints = self._waypoints(person.position)
+        speed = uniform(self.rng, 0.5, MAX_WALKING_SPEED_MPS) if waypoints else 0.0
+        return msgspec.structs.replace(person, waypoints=waypoints, speed=speed)
 
     def _waypoints(self, start: tuple[float, float]) -> tuple[tuple[float, float], ...]:
         """One to three points, each reached from the last along a line clear of obstacles."""
@@ -277,9 +280,7 @@ class _Sampler:
         return True
 
 
-def _sample(
-    rng: np.random.Generator, seed: int, name: str, walking: bool
-) -> WorldDescription | None:
+def _sample(rng: np.random.Generator, seed: int, name: str) -> WorldDescription | None:
     layouts: dict[str, Callable[[np.random.Generator], Layout]] = {
         "hall": hall_layout,
         "small": small_layout,
@@ -301,7 +302,7 @@ def _sample(
     else:
         classes, n_people = ["bottle"], 1
     artifacts = sampler.artifacts(classes)
-    people = sampler.people(n_people, walking) if artifacts is not None else None
+    people = sampler.people(n_people) if artifacts is not None else None
     if artifacts is None or people is None:
         return None
     return WorldDescription(
@@ -408,15 +409,26 @@ def generate_world(seed: int, name: str = "hall", walking_people: bool = False) 
     rng = np.random.default_rng(seed)
     problems: list[str] = ["no sample placed everything"]
     for attempt in range(MAX_ATTEMPTS):
-        world = _sample(rng, seed, name, walking_people)
+        world = _sample(rng, seed, name)
         if world is None:
             continue
         problems = fz.check_paths(world)
         if not problems:
             log.debug("world %s seed %d: feasible after %d samples", name, seed, attempt + 1)
-            return world
+            return with_routes(world) if walking_people else world
         log.debug("world %s seed %d sample %d dropped: %s", name, seed, attempt + 1, problems)
     raise WorldGenerationError(name, seed, problems)
+
+
+def with_routes(world: WorldDescription) -> WorldDescription:
+    """`world` with its people walking: each gets one to three waypoints and a speed,
+    drawn from a stream of their own (`WALK_STREAM`), so that people start where they
+    stand, and wear what they wear, with walking on or off; a map explored in the standing
+    world is the walking world's map too."""
+    rng = np.random.default_rng([world.seed, WALK_STREAM])
+    sampler = _Sampler(rng, Layout(world.hall, world.obstacles, world.surfaces))
+    sampler.start_label = sampler.label_at(world.robot_start.x, world.robot_start.y)
+    return msgspec.structs.replace(world, people=tuple(sampler.route(p) for p in world.people))
 
 
 def new_place(

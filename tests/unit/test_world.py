@@ -48,6 +48,18 @@ def test_the_same_seed_gives_the_same_bytes_and_another_seed_another_world() -> 
     assert _encode(walking) == _encode(generate_world(7, walking_people=True))
 
 
+def test_walking_people_start_where_and_as_they_stand() -> None:
+    """Routes come from a stream of their own: a map explored with people standing is the
+    walking world's map too (it once drew them from the world's stream, so walking
+    people started elsewhere, in other clothes, and the saved map's people were ghosts)."""
+    for seed in range(5):
+        standing, walking = generate_world(seed), generate_world(seed, walking_people=True)
+        assert walking.artifacts == standing.artifacts
+        still = [msgspec.structs.replace(p, waypoints=(), speed=0.0) for p in walking.people]
+        assert still == list(standing.people)
+        assert any(p.waypoints for p in walking.people)
+
+
 def test_msgpack_and_json_round_trips_give_the_same_world(
     halls: dict[int, WorldDescription],
 ) -> None:
