@@ -30,7 +30,8 @@
                            still_held; any of these failing, back_out: open on the spot,
                            Reach back to the pre-grasp pose, Posture(stow), fail with its
                            reason; then Posture(stow), mode walk/navigation
-              bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go),
+              bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go;
+                             navigation_failed: walked_short, find_person takes over),
                              find_person (Recover: person_not_found | navigation_failed,
                                           budget person_rounds - 1)
                                at_the_person: person_ahead, else: when unseen, look round
@@ -100,6 +101,7 @@ from services.mission.behaviours.motion import (
     SeenThere,
     SetMode,
     StandsThere,
+    WalkedShort,
 )
 from services.mission.behaviours.perceive import Approach, EstimateGrasp
 from services.mission.behaviours.put_back import FellOnTheWay, PutBackFirst, PutDown, held_reach
@@ -254,7 +256,10 @@ def build_tree(ctx: Context) -> Sequence:
         st[4],
         ResolvePerson(ctx),
         SetMode(ctx, "walk", "navigation", st[4]),
-        NavigateTo(ctx, "person", st[4], watch_held=True),
+        Selector("walk_to_them", memory=True, children=[
+            NavigateTo(ctx, "person", st[4], watch_held=True),
+            WalkedShort(ctx, st[4]),
+        ]),
         Recover(
             "find_person",
             Selector(

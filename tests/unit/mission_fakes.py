@@ -114,6 +114,9 @@ class FakeRobot:
     arm_ticks: int = 2
     #: Goal kind (`artifact_standoff`, `person_handover`, `pose`) → "refuse" or a NavFailure.
     nav_fail: dict[str, str] = field(default_factory=dict)
+    #: ...for only the first this many goals of each kind (None: every one).
+    nav_fail_times: int | None = None
+    _nav_failed: dict[str, int] = field(default_factory=dict)
     #: Goals navigation refuses (no typed code: this goal only), when given.
     nav_refuse: Callable[[NavGoal], bool] | None = None
     #: The map's occupancy grid (None: 8 × 8 m of free floor about the origin) and the
@@ -298,6 +301,10 @@ class FakeRobot:
             return NavStatus(stamp_ns=self.t, goal_id=goal_id, state="failed", reason="timeout")
         if state == "active" and self.t - start >= self.nav_ticks * TICK_NS:
             failure = self.nav_fail.get(kind, "")
+            if failure and self.nav_fail_times is not None:
+                if self._nav_failed.get(kind, 0) >= self.nav_fail_times:
+                    failure = ""
+                self._nav_failed[kind] = self._nav_failed.get(kind, 0) + 1
             state = "failed" if failure else "succeeded"
             self._nav[goal_id] = (start, kind, state)
             if state == "succeeded" and kind == "person_handover":

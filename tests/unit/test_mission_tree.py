@@ -142,7 +142,7 @@ def test_every_failure_ends_in_abort_with_its_typed_reason(
         fixed["people_"] = {"person_9": entity("person_9", 1.0, 1.0, "person")}
     robot = small_world(**fixed)
     tree = mission(robot, REQUEST, None, **algorithms)
-    outcome = run(tree, robot)
+    outcome = run(tree, robot, 20_000)  # nobody reached: looked for, round after round
     assert outcome.state == "failed", why
     assert outcome.reason == reason, outcome
     assert outcome.detail
@@ -512,6 +512,22 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         assert turned == pytest.approx(math.tau, abs=0.1)
         assert "looking for person_1: not seen round here" in said
         assert any("walking to where the map last had them" in d for d in decisions)
+
+
+def test_a_walk_to_the_person_that_falls_short_looks_for_them_and_hands_over() -> None:
+    """The handover pose cannot be reached (blocked: a bystander stood by it in the
+    shift) and the person walked off meanwhile: the failure does not end the request; the
+    robot looks round where it stopped, sees them, walks to them and hands over."""
+    robot = small_world(moves=True, nav_fail={"person_handover": "blocked"}, nav_fail_times=1)
+    robot.person_walked_to = (1.0, 3.0)
+    tree = mission(robot)
+    outcome = run(tree, robot, 6000)
+    assert outcome.state == "succeeded", outcome
+    sent = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert len(sent) == 2  # blocked, then to where they were seen
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("navigate_to_person fell short (goal nav_2 blocked" in d for d in decisions)
+    assert any("person_1 seen at (1.00, 3.00)" in d for d in decisions)
 
 
 def test_a_person_not_at_their_place_is_looked_for_at_their_usual_place_and_handed_to() -> None:

@@ -59,12 +59,14 @@ from common.messages.semantic_map import MapEntity
 from common.messages.wbc import WbcModeName
 from common.robot import HANDOVER_DISTANCE_M, floor_view_m
 from services.mission.behaviours.base import (
+    FAILURE,
     LOOK_AT,
     LOOKED,
     PERSON,
     SIDE,
     UNSEEN,
     Context,
+    Failure,
     MissionBehaviour,
 )
 from services.mission.behaviours.handover import side_bearing
@@ -303,8 +305,10 @@ def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
         return pid, None
 
 
-#: rad/s: the turn on the spot that looks round for a person.
+#: rad/s: the turn on the spot that looks round for a person; it asks after one turn or
+#: after twice a turn's time (a base that does not turn: held for a person beside it).
 LOOK_RATE_RAD_S = 0.4
+LOOK_TURN_MAX_S = 2 * math.tau / LOOK_RATE_RAD_S
 
 
 class PersonAhead(MissionBehaviour):
@@ -340,6 +344,28 @@ class PersonAhead(MissionBehaviour):
             f"({ahead:.2f} m ahead, {left:+.2f} m left): walking to them again"
         )
         return Status.FAILURE
+
+
+class WalkedShort(MissionBehaviour):
+    """After the walk to the person failed with `navigation_failed` (their handover pose
+    could not be reached: a bystander stood by it, the map had them where nobody stands):
+    SUCCESS, the failure forgotten, so that find_person checks whether they are ahead and
+    else looks for them, as after a walk that ended (the changing hall's shift: the robot
+    stood 0.09 m from the pose of a person who had walked off, a bystander 0.45 m from its
+    footprint, for 120 s of navigation's recoveries, and the request failed there with
+    the person never looked for). Any other failure (the grasp let go) stays a FAILURE."""
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("walked_short", ctx, stage)
+
+    def update(self) -> Status:
+        failure = self.get(FAILURE)
+        if not isinstance(failure, Failure) or failure.reason != "navigation_failed":
+            return Status.FAILURE
+        self.set(FAILURE, None)
+        self.ctx.decide(f"{failure.behaviour} fell short ({failure.detail}): "
+                        "checking whether the person is here, else looking for them")  # fmt: skip
+        return Status.SUCCESS
 
 
 class SeenThere(MissionBehaviour):
@@ -418,7 +444,8 @@ class LookForPerson(MissionBehaviour):
         if yaw is not None and self.last_yaw is not None:
             self.turned += abs(math.remainder(yaw - self.last_yaw, math.tau))
         self.last_yaw = yaw
-        if self.turned < math.tau and self.asked_ns is None:
+        turning = self.elapsed_s() < LOOK_TURN_MAX_S  # a base held still does not turn
+        if self.turned < math.tau and self.asked_ns is None and turning:
             self.port.command_velocity(0.0, 0.0, LOOK_RATE_RAD_S)
             self.say = f"looking for {pid}"
             self.fraction = 0.5 * self.turned / math.tau
@@ -426,7 +453,8 @@ class LookForPerson(MissionBehaviour):
         self.port.command_velocity(0.0, 0.0, 0.0)
         if self.asked_ns is None:
             self.asked_ns = self.port.now_ns
-            self.ctx.decide(f"{pid} not seen in a turn round their place: asking for them")
+            turn = "a turn" if self.turned >= math.tau else f"{math.degrees(self.turned):.0f}°"
+            self.ctx.decide(f"{pid} not seen in {turn} round their place: asking for them")
         self.say = f"looking for {pid}: not seen round here"
         waited = (self.port.now_ns - self.asked_ns) / 1e9
         if waited < self.settings.person_ask_s:
