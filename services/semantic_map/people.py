@@ -16,14 +16,19 @@ spread (½ ln |S| over the detection's own: a person the map is unsure of, long 
 takes a detection only where nobody better placed is expected; the Mahalanobis distance
 alone let a stale wide track take a walker's detections from the walker's own track)
 and the Bhattacharyya distance of the colour histograms: two people crossing are told
-apart by their clothes where their positions are ambiguous. The colours veto a match
-(beyond `MAX_APPEARANCE`) when the detection is not where the person is expected
-(outside χ²₂ 95 %), or when the person is unseen for `VETO_STALE_NS` and the detection
-lies beyond `GATE_MIN_M` of where they were (a stale place says little: the σ of a
-long-unseen person spans the gate, and in the hall's shift walkers passing within a metre
-of it took the id of whoever had stood there): a person standing where they were, seen
-from behind or under another light, is still them (the small-world patrol gave one
-standing person four ids when the colours vetoed). A detection left over
+apart by their clothes where their positions are ambiguous. A detection in clothes that
+are clearly another known person's (`clothes_owner`: within `REID_APPEARANCE` of theirs
+and `REID_MARGIN` nearer than anybody else's) is never matched to a confirmed person
+with other colours, however near: two people crossing where the camera sees only the
+nearer (the hall's shift: the requested person's id went over to a passer-by in the
+frame the two met, followed them for 50 s, and the robot handed the box to the passer).
+The colours veto a match (beyond `MAX_APPEARANCE`) when the detection is not where the
+person is expected (outside χ²₂ 95 %), or when the person is unseen for `VETO_STALE_NS`
+and the detection lies beyond `GATE_MIN_M` of where they were (a stale place says
+little: the σ of a long-unseen person spans the gate, and in the hall's shift walkers
+passing within a metre of it took the id of whoever had stood there): a person standing
+where they were, seen from behind or under another light, is still them (the small-world
+patrol gave one standing person four ids when the colours vetoed). A detection left over
 starts a tentative person, who gets the next `person_<n>` at `confirm_hits` detections,
 unless it lies within `MIN_SEPARATION_M` of a person (then it is a piece of that body,
 e.g. legs whose colours did not match the shirt).
@@ -262,8 +267,9 @@ class PeopleTracker:
         tr.cov = tr.P[:2, :2].copy()
         tr.vel_cov = tr.P[2:, 2:].copy()
 
-    def cost(self, tr: Track, obs: Observation) -> float:
-        """Association cost, or `_BIG` outside the gates."""
+    def cost(self, tr: Track, obs: Observation, owner: Track | None = None) -> float:
+        """Association cost, or `_BIG` outside the gates; `owner`: the person whose
+        clothes the detection's are, clearly (`clothes_owner`), if anybody's."""
         s = self.settings
         assert tr.P is not None
         S = tr.P[:2, :2] + np.eye(2) * obs.sigma_m**2
@@ -272,6 +278,8 @@ class PeopleTracker:
         dist = float(np.linalg.norm(nu))
         if dist > MAX_GATE_M or (d2 > CHI2_2D_999 and dist > GATE_MIN_M):
             return _BIG
+        if owner is not None and owner is not tr and tr.confirmed and tr.appearance is not None:
+            return _BIG  # in somebody else's clothes, clearly: not this person
         app = 0.0
         if tr.appearance is not None and obs.appearance is not None:
             app = bhattacharyya(tr.appearance, obs.appearance)
@@ -290,7 +298,11 @@ class PeopleTracker:
         confirmed_now: list[Track] = []
         used: set[int] = set()
         if self.tracks and observations:
-            C = np.array([[self.cost(t, o) for o in observations] for t in self.tracks])
+            owners = [self.clothes_owner(o) for o in observations]
+            C = np.array(
+                [[self.cost(t, o, w) for o, w in zip(observations, owners, strict=True)]
+                 for t in self.tracks]
+            )  # fmt: skip
             rows, cols = linear_sum_assignment(C)
             for i, j in zip(rows, cols, strict=True):
                 if C[i, j] >= _BIG:
@@ -364,6 +376,13 @@ class PeopleTracker:
         assert new.appearance is not None
         others = [t for t in self.confirmed if t is not new]
         return self._same_clothes(new.appearance, others)[1] is old
+
+    def clothes_owner(self, obs: Observation) -> Track | None:
+        """The person the detection's colours are, clearly (`_same_clothes` over everyone
+        the map has), or None: no colours, nobody's, or two people's alike."""
+        if obs.appearance is None:
+            return None
+        return self._same_clothes(obs.appearance, self.confirmed)[1]
 
     def _same_clothes(self, look: FloatArray, pool: list[Track]) -> tuple[float, Track | None]:
         """Of `pool`, the one wearing `look` (within `REID_APPEARANCE`, and `REID_MARGIN`
