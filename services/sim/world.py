@@ -99,6 +99,13 @@ class _Sampler:
         self.start_label = 0
         self.goals: list[fz.Pose2D] = []
 
+    @classmethod
+    def of(cls, world: WorldDescription, rng: np.random.Generator) -> _Sampler:
+        """A sampler on a world already made (its layout, the robot's start region)."""
+        sampler = cls(rng, Layout(world.hall, world.obstacles, world.surfaces))
+        sampler.start_label = sampler.label_at(world.robot_start.x, world.robot_start.y)
+        return sampler
+
     def label_at(self, x: float, y: float) -> int:
         cell = fz.cell_of(self.grid, x, y)
         return int(self.labels[cell]) if cell is not None else 0
@@ -426,8 +433,7 @@ def with_routes(world: WorldDescription) -> WorldDescription:
     stand, and wear what they wear, with walking on or off; a map explored in the standing
     world is the walking world's map too."""
     rng = np.random.default_rng([world.seed, WALK_STREAM])
-    sampler = _Sampler(rng, Layout(world.hall, world.obstacles, world.surfaces))
-    sampler.start_label = sampler.label_at(world.robot_start.x, world.robot_start.y)
+    sampler = _Sampler.of(world, rng)
     return msgspec.structs.replace(world, people=tuple(sampler.route(p) for p in world.people))
 
 
@@ -444,8 +450,7 @@ def new_place(
     the points `taken`, from which the robot could pick it, as the generator places
     artifacts: (its base's point, yaw, the surface's id), or None when none fits."""
     art = next(a for a in world.artifacts if a.id == artifact_id)
-    sampler = _Sampler(rng, Layout(world.hall, world.obstacles, world.surfaces))
-    sampler.start_label = sampler.label_at(world.robot_start.x, world.robot_start.y)
+    sampler = _Sampler.of(world, rng)
     surfaces = [s for s in world.surfaces if s.id != avoid_surface]
     depth_max = sampler.depth_max()
     for _ in range(tries if surfaces else 0):
