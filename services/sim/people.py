@@ -16,12 +16,15 @@ Bystanders (`bystanders`, with walking on: the changing hall) do not stop for th
 a walking person keeps to their route past it and across its path, and stops to face it
 only when it comes to them holding something (within `COME_M`, its heading within
 `COME_HALF_ANGLE_RAD` of them: the person asked for it, or one who sees it is for them),
-then waits while it stays within `FACE_RADIUS_M`. Nobody walks into a machine: a
-bystander who has come within `YIELD_M` of the robot's base ahead of them (within
-`YIELD_HALF_ANGLE_RAD` of where they walk) pauses until it is clear, and after
-`GIVE_WAY_S` of that turns back along their route (a person does not wait for ever on
-a robot that waits for them: the two stood facing each other for good in the changing
-hall's shift, the robot's goal inside their safety zone).
+then waits while it stays within `FACE_RADIUS_M`, for `WAIT_S` at most once it stops
+coming nearer: a robot that stands near them with something that is not for them does
+not keep them for good (it held the robot, whose goal was beside them, for two minutes
+in the shift), and they wait for it again only once it has gone and comes again.
+Nobody walks into a machine: a bystander who has come within `YIELD_M` of the robot's
+base ahead of them (within `YIELD_HALF_ANGLE_RAD` of where they walk) pauses until it is
+clear, and after `GIVE_WAY_S` of that turns back along their route (a person does not
+wait for ever on a robot that waits for them: the two stood facing each other for good
+in the changing hall's shift, the robot's goal inside their safety zone).
 
 `command` (a test hook) teleports a person and/or sends them along given points once,
 optionally ignoring the robot. The hand and the handover are `services.sim.handover`'s;
@@ -52,6 +55,10 @@ TURN_RATE_RADPS = 2.0
 ACCEL_MPS2 = 1.0
 PAUSE_S = 1.0
 GIVE_WAY_S = 4.0
+#: s a bystander waits for a robot that came to them carrying, once it comes no nearer
+#: (by `NEARER_M`): the handover it came for reaches them well within that.
+WAIT_S = 30.0
+NEARER_M = 0.05
 #: Closer than this to the next point counts as there (the last step lands on it).
 ARRIVE_M = 1e-9
 
@@ -72,6 +79,9 @@ class _Walker:
     once: bool = False  # a commanded walk: the route once, no pauses, then stand
     ignore_robot: bool = False  # walk on even with the robot within FACE_RADIUS_M
     waiting: bool = False  # a bystander stopped for the robot that came to them
+    waited_s: float = 0.0  # since the robot last came nearer (`WAIT_S`)
+    closest_m: float = math.inf  # the nearest the robot came while they waited
+    waited_out: bool = False  # gave up on the robot near them: not again till it went
     yielding_s: float = 0.0  # how long a bystander has paused for the robot in the way
     vx: float = 0.0  # the last step's velocity, m/s (world)
     vy: float = 0.0
@@ -161,7 +171,7 @@ class People:
             dx, dy = robot.x - w.x, robot.y - w.y
             near = dx * dx + dy * dy <= FACE_RADIUS_M * FACE_RADIUS_M
             if self.bystanders and w.route and not w.once:
-                w.waiting = near and (w.waiting or _coming_to(robot, w))
+                w.waiting = self._waits(w, near, robot, dt)
                 if w.waiting:
                     self._turn_towards(w, math.atan2(dy, dx), dt)
                 elif _in_the_way(robot, w):
@@ -183,6 +193,23 @@ class People:
                 data.mocap_pos[w.mocap, 1] = w.y
                 data.mocap_quat[w.mocap] = (math.cos(0.5 * w.yaw), 0.0, 0.0, math.sin(0.5 * w.yaw))
                 w.dirty = False
+
+    @staticmethod
+    def _waits(w: _Walker, near: bool, robot: RobotNear, dt: float) -> bool:
+        """Whether a bystander waits for the robot this step (module docstring)."""
+        if not near:
+            w.waited_out, w.closest_m = False, math.inf
+            return False
+        if w.waited_out or not (w.waiting or _coming_to(robot, w)):
+            return False
+        distance = math.hypot(robot.x - w.x, robot.y - w.y)
+        if distance < w.closest_m - NEARER_M or not w.waiting:
+            w.closest_m, w.waited_s = distance, 0.0
+        w.waited_s += dt
+        if w.waited_s >= WAIT_S:
+            w.waited_out, w.closest_m = True, math.inf
+            return False
+        return True
 
     @staticmethod
     def _turn_towards(w: _Walker, heading: float, dt: float) -> bool:

@@ -8,7 +8,7 @@ import mujoco
 import pytest
 
 from common.messages.world import Person
-from services.sim.people import ACCEL_MPS2, COME_M, FACE_RADIUS_M, People, RobotNear
+from services.sim.people import ACCEL_MPS2, COME_M, FACE_RADIUS_M, WAIT_S, People, RobotNear
 
 XML = """<mujoco><worldbody>
 <body name="person_1" mocap="true"><geom type="box" size=".2 .2 .9"/></body>
@@ -69,6 +69,32 @@ def test_a_bystander_stops_for_a_robot_that_comes_to_them_carrying_something() -
     after = RobotNear(x3 + COME_M - 0.2, 0.0, math.pi, carrying=False)
     assert _run(people, data, after, 1.0)[-1] == pytest.approx(xs[-1], abs=1e-3)
     assert _run(people, data, RobotNear(20.0, 20.0), 1.0)[-1] > xs[-1] + 0.5
+
+
+def test_a_bystander_waits_out_a_robot_that_stands_near_them_and_again_once_it_came_again() -> None:
+    """A robot that came to them carrying, then stood there (its goal beside them, the
+    object not for them): they wait WAIT_S, walk on, and stop for it again only after
+    it went and came again. One that keeps coming nearer keeps them waiting."""
+    people, data = _walker(True)
+    _run(people, data, RobotNear(10.0, 10.0), 1.0)
+    x1 = people.pose("person_1")[0]
+    standing = RobotNear(x1 + COME_M - 0.2, 0.0, math.pi, carrying=True)
+    xs = _run(people, data, standing, WAIT_S - 0.5)
+    assert xs[-1] == pytest.approx(x1, abs=1e-3)  # waiting
+    xs = _run(people, data, standing, 1.5)
+    assert xs[-1] > x1 + 0.3  # waited out: walking on along their route
+    away = RobotNear(x1 + 10.0, 5.0, math.pi, carrying=True)
+    _run(people, data, away, 0.5)  # gone from their sight ...
+    x2 = people.pose("person_1")[0]
+    again = RobotNear(x2 - COME_M + 0.2, 0.0, 0.0, carrying=True)  # ... and come again
+    xs = _run(people, data, again, 3.0)
+    assert xs[-1] == pytest.approx(xs[0], abs=2e-3)  # waiting again
+    people, data = _walker(True)
+    _run(people, data, RobotNear(10.0, 10.0), 1.0)
+    x1 = people.pose("person_1")[0]
+    for k in range(8):  # 10 cm nearer every 5 s: 40 s in all, past WAIT_S
+        nearer = RobotNear(x1 + COME_M - 0.2 - 0.1 * k, 0.0, math.pi, carrying=True)
+        assert _run(people, data, nearer, 5.0)[-1] == pytest.approx(x1, abs=1e-3), k
 
 
 def test_a_bystander_pauses_rather_than_walk_into_the_robot_and_goes_on_once_it_moved() -> None:
