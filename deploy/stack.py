@@ -53,6 +53,9 @@ from deploy.runs import (
 log = logging.getLogger(__name__)
 
 SUPERVISORD_CONF = REPO_ROOT / "deploy" / "supervisord.conf"
+#: s to reap a process after its SIGKILL before the stop goes on without it (a loaded
+#: machine once took longer, and the eval died with the rest of its stack left running).
+KILL_WAIT_S = 10.0
 #: Python modules of the processes a stack can run.
 MODULES = {
     "router": "services.router",
@@ -334,7 +337,8 @@ class ProcessStack(_Stack):
         return out
 
     def stop(self, timeout_s: float = 5.0) -> dict[str, int | None]:
-        """SIGINT everything (services first, the router last); SIGKILL what lingers."""
+        """SIGINT everything (services first, the router last); SIGKILL what lingers; each
+        one's exit code (None: not reaped even after its SIGKILL)."""
         self.close_bus()
         order = [n for n in self.procs if n != "router"] + (
             ["router"] if "router" in self.procs else []
@@ -349,8 +353,14 @@ class ProcessStack(_Stack):
                 codes[name] = proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
                 log.warning("%s did not stop within %.1f s: killed", name, timeout_s)
-                os.killpg(proc.pid, signal.SIGKILL)
-                codes[name] = proc.wait(timeout=5)
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                try:
+                    codes[name] = proc.wait(timeout=KILL_WAIT_S)
+                except subprocess.TimeoutExpired:  # not reaped yet: the rest still stop
+                    log.error("%s (pid %d) still there %.0f s after SIGKILL", name, proc.pid,
+                              KILL_WAIT_S)  # fmt: skip
+                    codes[name] = None
         self.ended()
         return codes
 

@@ -1,8 +1,17 @@
-"""`troubles_in`: what a failed run's report keeps of a service's log (CI keeps no logs)."""
+"""`troubles_in`: what a failed run's report keeps of a service's log (CI keeps no logs);
+and a stack's stop that goes on past a process it cannot reap."""
 
 from __future__ import annotations
 
-from deploy.stack import troubles_in
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import deploy.stack as stack_module
+from deploy.stack import ProcessStack, troubles_in
 
 LOG = """\
 2026-11-27 12:51:32,727 navigation INFO common.service: navigation runs on CPUs [1] (rest)
@@ -35,3 +44,48 @@ def test_a_log_gives_its_warnings_errors_and_whole_tracebacks_and_nothing_else()
 
 def test_a_quiet_log_gives_nothing() -> None:
     assert troubles_in("2026-11-27 12:51:32,727 sim INFO common.service: ready\n") == []
+
+
+class _Unreaped:
+    """A child that dies by its SIGKILL but, as on a loaded machine, is not reaped in time:
+    every `wait` times out."""
+
+    def __init__(self) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", "import signal, time; "
+             "signal.signal(signal.SIGINT, signal.SIG_IGN); print('deaf', flush=True); "
+             "time.sleep(60)"],
+            start_new_session=True, stdout=subprocess.PIPE,
+        )  # fmt: skip
+        assert self.proc.stdout is not None and self.proc.stdout.readline() == b"deaf\n"
+        self.pid = self.proc.pid
+
+    def poll(self) -> int | None:
+        return self.proc.poll()
+
+    def wait(self, timeout: float | None = None) -> int:
+        raise subprocess.TimeoutExpired("unreaped", timeout or 0.0)
+
+
+def test_a_process_not_reaped_after_its_sigkill_does_not_keep_the_rest_of_the_stack_up(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The eval's stack stop raised when the sim was not reaped within 5 s of its SIGKILL,
+    and left every other service of that stack running."""
+    monkeypatch.setattr(stack_module, "KILL_WAIT_S", 0.1)
+    stack = object.__new__(ProcessStack)
+    stuck = _Unreaped()
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"],
+                             start_new_session=True)  # fmt: skip
+    router = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"],
+                              start_new_session=True)  # fmt: skip
+    stack.procs = {"sim": stuck, "navigation": other, "router": router}  # type: ignore[dict-item]
+    stack._alive, stack._bus, stack.run_dir = None, None, tmp_path
+    try:
+        codes = stack.stop(timeout_s=0.5)
+    finally:
+        stuck.proc.kill()
+        stuck.proc.communicate()
+    assert codes["sim"] is None  # said, and passed over
+    assert codes["navigation"] == -signal.SIGINT and codes["router"] == -signal.SIGINT
+    assert stuck.proc.returncode == -signal.SIGKILL  # it was killed all the same
