@@ -90,6 +90,9 @@ class Track:
     #: People: seen walking (a sure velocity) at some sighting: a body, not furniture.
     walked: bool = False
     seen_with: set[str] = field(default_factory=set)
+    #: People: detections near them in somebody else's clothes standing still: (first
+    #: stamp ns, first xy, last stamp ns), or None (`people.PeopleTracker._colours_lie`).
+    doubt: tuple[int, FloatArray, int] | None = None
     best_range_m: float | None = None
     #: People: where they were seen (`whereabouts`), their usual places.
     whereabouts: Whereabouts = field(default_factory=Whereabouts)

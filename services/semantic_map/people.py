@@ -21,7 +21,13 @@ are clearly another known person's (`clothes_owner`: within `REID_APPEARANCE` of
 and `REID_MARGIN` nearer than anybody else's) is never matched to a confirmed person
 with other colours, however near: two people crossing where the camera sees only the
 nearer (the hall's shift: the requested person's id went over to a passer-by in the
-frame the two met, followed them for 50 s, and the robot handed the box to the passer).
+frame the two met, followed them for 50 s, and the robot handed the box to the passer),
+unless such detections stand still within `GATE_MIN_M` of that person for
+`DOUBT_NS` (`_colours_lie`): a passer-by walks on, and one who stands where the person
+stands is the person, the colours seen from here misleading (hall seed 1: two people in
+one red shirt; the near view of one showed the shirt and little else, the other's
+colours from afar, and the person handed over to went unseen for 15 s in front of the
+robot's camera while it looked round for them).
 The colours veto a match (beyond `MAX_APPEARANCE`) when the detection is not where the
 person is expected (outside χ²₂ 95 %), or when the person is unseen for `VETO_STALE_NS`
 and the detection lies beyond `GATE_MIN_M` of where they were (a stale place says
@@ -137,6 +143,12 @@ REID_UNSEEN_NS = 3_000_000_000
 REID_STALE_NS = 60_000_000_000
 #: A person unseen this long is matched away from their place only in their clothes, ns.
 VETO_STALE_NS = 2_000_000_000
+#: Detections in clearly another's clothes that stand within `STILL_M` of where they
+#: were for this long, within `GATE_MIN_M` of a person, are that person after all, ns.
+DOUBT_NS = 1_000_000_000
+STILL_M = 0.15
+#: A gap this long between such detections starts the count again, ns.
+DOUBT_GAP_NS = 500_000_000
 
 
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
@@ -299,9 +311,11 @@ class PeopleTracker:
         used: set[int] = set()
         if self.tracks and observations:
             owners = [self.clothes_owner(o) for o in observations]
+            lie = [self._colours_lie(t, observations, owners, stamp_ns) for t in self.tracks]
             C = np.array(
-                [[self.cost(t, o, w) for o, w in zip(observations, owners, strict=True)]
-                 for t in self.tracks]
+                [[self.cost(t, o, None if liar else w)
+                  for o, w in zip(observations, owners, strict=True)]
+                 for t, liar in zip(self.tracks, lie, strict=True)]
             )  # fmt: skip
             rows, cols = linear_sum_assignment(C)
             for i, j in zip(rows, cols, strict=True):
@@ -376,6 +390,33 @@ class PeopleTracker:
         assert new.appearance is not None
         others = [t for t in self.confirmed if t is not new]
         return self._same_clothes(new.appearance, others)[1] is old
+
+    def _colours_lie(
+        self,
+        tr: Track,
+        observations: list[Observation],
+        owners: list[Track | None],
+        stamp_ns: int,
+    ) -> bool:
+        """Whether detections in somebody else's clothes have stood still within
+        `GATE_MIN_M` of confirmed person `tr` for `DOUBT_NS` (module docstring): the
+        person there is `tr`, whatever the colours say. Keeps `tr.doubt`."""
+        if not tr.confirmed or tr.appearance is None:
+            return False
+        near = [
+            o.xy
+            for o, w in zip(observations, owners, strict=True)
+            if w is not None and w is not tr and np.linalg.norm(o.xy - tr.xy) <= GATE_MIN_M
+        ]
+        if not near:
+            return False
+        xy = min(near, key=lambda p: float(np.linalg.norm(p - tr.xy)))
+        d = tr.doubt
+        if d is None or stamp_ns - d[2] > DOUBT_GAP_NS or np.linalg.norm(xy - d[1]) > STILL_M:
+            tr.doubt = (stamp_ns, xy.copy(), stamp_ns)  # from here (a passer-by walks on)
+            return False
+        tr.doubt = (d[0], d[1], stamp_ns)
+        return stamp_ns - d[0] >= DOUBT_NS
 
     def clothes_owner(self, obs: Observation) -> Track | None:
         """The person the detection's colours are, clearly (`_same_clothes` over everyone
