@@ -71,7 +71,8 @@ class LookElsewhere(MissionBehaviour):
                 hit = None
             if hit is not None:
                 self.hit = hit.id
-                self.ctx.decide(f"search: {hit.id} seen at {hit.position_in_world[:2]}")
+                x, y = hit.position_in_world[:2]
+                self.ctx.decide(f"search: {hit.id} seen at ({x:.2f}, {y:.2f})")
                 runner.stop(f"found {hit.id}")
         if runner.running:
             st = runner.status(self.port.now_ns)
