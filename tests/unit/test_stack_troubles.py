@@ -46,18 +46,23 @@ def test_a_quiet_log_gives_nothing() -> None:
     assert troubles_in("2026-11-27 12:51:32,727 sim INFO common.service: ready\n") == []
 
 
+def _child(code: str) -> subprocess.Popen[bytes]:
+    """A Python child in a session of its own, returned once it runs `code` (it printed
+    "up": its signal handlers are in place)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", f"{code}; print('up', flush=True); import time; time.sleep(60)"],
+        start_new_session=True, stdout=subprocess.PIPE,
+    )  # fmt: skip
+    assert proc.stdout is not None and proc.stdout.readline() == b"up\n"
+    return proc
+
+
 class _Unreaped:
-    """A child that dies by its SIGKILL but, as on a loaded machine, is not reaped in time:
-    every `wait` times out."""
+    """A child deaf to SIGINT that dies by its SIGKILL but, as on a loaded machine, is not
+    reaped in time: every `wait` times out."""
 
     def __init__(self) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", "import signal, time; "
-             "signal.signal(signal.SIGINT, signal.SIG_IGN); print('deaf', flush=True); "
-             "time.sleep(60)"],
-            start_new_session=True, stdout=subprocess.PIPE,
-        )  # fmt: skip
-        assert self.proc.stdout is not None and self.proc.stdout.readline() == b"deaf\n"
+        self.proc = _child("import signal; signal.signal(signal.SIGINT, signal.SIG_IGN)")
         self.pid = self.proc.pid
 
     def poll(self) -> int | None:
@@ -74,18 +79,16 @@ def test_a_process_not_reaped_after_its_sigkill_does_not_keep_the_rest_of_the_st
     and left every other service of that stack running."""
     monkeypatch.setattr(stack_module, "KILL_WAIT_S", 0.1)
     stack = object.__new__(ProcessStack)
-    stuck = _Unreaped()
-    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"],
-                             start_new_session=True)  # fmt: skip
-    router = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"],
-                              start_new_session=True)  # fmt: skip
+    stuck, other, router = _Unreaped(), _child("pass"), _child("pass")
     stack.procs = {"sim": stuck, "navigation": other, "router": router}  # type: ignore[dict-item]
     stack._alive, stack._bus, stack.run_dir = None, None, tmp_path
     try:
-        codes = stack.stop(timeout_s=0.5)
+        codes = stack.stop(timeout_s=30.0)  # the unreaped one's wait fails at once
     finally:
         stuck.proc.kill()
         stuck.proc.communicate()
+        for p in (other, router):
+            p.communicate()
     assert codes["sim"] is None  # said, and passed over
     assert codes["navigation"] == -signal.SIGINT and codes["router"] == -signal.SIGINT
     assert stuck.proc.returncode == -signal.SIGKILL  # it was killed all the same
