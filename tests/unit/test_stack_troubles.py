@@ -48,7 +48,8 @@ def test_a_quiet_log_gives_nothing() -> None:
 
 def _child(code: str) -> subprocess.Popen[bytes]:
     """A Python child in a session of its own, returned once it runs `code` (it printed
-    "up": its signal handlers are in place)."""
+    "up": its signal handlers are in place; a child of a background job inherits SIGINT
+    ignored, and Python then leaves it so)."""
     proc = subprocess.Popen(
         [sys.executable, "-c", f"{code}; print('up', flush=True); import time; time.sleep(60)"],
         start_new_session=True, stdout=subprocess.PIPE,
@@ -79,7 +80,8 @@ def test_a_process_not_reaped_after_its_sigkill_does_not_keep_the_rest_of_the_st
     and left every other service of that stack running."""
     monkeypatch.setattr(stack_module, "KILL_WAIT_S", 0.1)
     stack = object.__new__(ProcessStack)
-    stuck, other, router = _Unreaped(), _child("pass"), _child("pass")
+    hears = "import signal; signal.signal(signal.SIGINT, signal.default_int_handler)"
+    stuck, other, router = _Unreaped(), _child(hears), _child(hears)  # as a service does
     stack.procs = {"sim": stuck, "navigation": other, "router": router}  # type: ignore[dict-item]
     stack._alive, stack._bus, stack.run_dir = None, None, tmp_path
     try:
