@@ -79,6 +79,7 @@ def _pose(odom: Odom) -> tuple[float, float, float]:
     return p[0], p[1], yaw_of_quat_xyzw(odom.base_orientation_xyzw)
 
 
+@pytest.mark.slow  # about 2 min of walking: out of the quick loop
 def test_three_goals_in_the_small_world_are_reached_without_touching_obstacles(
     stack: StartStack, tmp_path: Path
 ) -> None:
