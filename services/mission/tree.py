@@ -271,10 +271,7 @@ def build_tree(ctx: Context) -> Sequence:
                         "to_them_again",
                         Selector("look_if_unseen", memory=True, children=[
                             SeenThere(ctx, st[4]),
-                            _seq("look_round",
-                                 SetMode(ctx, "walk", "mission", st[4], name="mode_walk_look"),
-                                 LookForPerson(ctx, st[4]),
-                                 SetMode(ctx, "walk", "navigation", st[4], name="mode_walk_on")),
+                            LookForPerson(ctx, st[4]),
                         ]),
                         NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
                         StandsThere(ctx, st[4]),

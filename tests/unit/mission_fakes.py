@@ -100,8 +100,9 @@ class FakeRobot:
     #: the handover pose.
     person_shift_m: float = 0.0
     #: The person walked here (x, y) before the robot came: at the handover pose the map
-    #: does not see them; once the robot has turned `seen_after_turn_rad` on the spot it
-    #: sees them there. None: seen where they are whenever the robot stands facing them.
+    #: does not see them; once the robot has turned `seen_after_turn_rad` on the spot (by
+    #: its own cmd_vel or by navigation's pose goals) it sees them there. None: seen where
+    #: they are whenever the robot stands facing them.
     person_walked_to: tuple[float, float] | None = None
     seen_after_turn_rad: float = math.pi / 2
     #: ...or once the robot stands within this of where they walked (None: never so).
@@ -312,7 +313,11 @@ class FakeRobot:
             if state == "succeeded" and kind == "pose":
                 pose = next(g for i, g in self.nav_goals if i == goal_id)
                 assert isinstance(pose, PoseGoal)
+                if math.dist(self.xy, (pose.x, pose.y)) < 0.05:  # a turn on the spot
+                    self._turned += abs(math.remainder(pose.yaw - self.yaw, math.tau))
                 self.xy, self.yaw = (pose.x, pose.y), pose.yaw
+                if self._turned >= self.seen_after_turn_rad:
+                    self._see_walked_off()
                 there, within = self.person_walked_to, self.sees_within_m
                 if there is not None and within is not None and math.dist(self.xy, there) <= within:
                     self._see_walked_off()

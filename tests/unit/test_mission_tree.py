@@ -476,7 +476,8 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
     seen_after: float | None,
 ) -> None:
     """At the handover pose the map does not see the person: the robot turns round on
-    the spot saying it is looking for them. Seen a quarter turn in, it walks to where they
+    the spot (navigation's pose goals, a third of a turn each) saying it is looking for
+    them. Seen a quarter turn in, it walks to where they
     were seen; never seen (and with no usual places), it asks, walks to where the map
     last had them, waits and asks there `person_rounds` times in all (looked round there
     already: no second turn), then fails `person_not_found` saying where it looked."""
@@ -494,13 +495,16 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
             break
     assert outcome is not None
     assert "looking for person_1" in said
-    turned = sum(abs(c[2]) for c in robot.cmds) * 0.05
+    assert not any(c[2] for c in robot.cmds)  # the mission turns nothing itself
+    turns = [(i, g) for i, g in robot.nav_goals if isinstance(g, PoseGoal)]  # navigation's
+    assert all(g.position_tolerance_m == pytest.approx(0.5) for _, g in turns)
+    turned = len([i for i, _ in turns if i not in robot.nav_cancels]) * math.tau / 3
     sent = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     if seen_after is not None:
         assert outcome.state == "succeeded"
         assert len(sent) == 2  # there, then to them again
-        assert turned == pytest.approx(math.pi / 2, abs=0.1)
+        assert turned == pytest.approx(math.tau / 3)  # seen in the first of three turns
         assert any("person_1 seen at (1.00, 3.00)" in d for d in decisions)
         assert "looking for person_1: not seen round here" not in said
     else:
@@ -509,7 +513,7 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         assert "person_1 not reached; looked round at (-4.4, 1.0); the map" in outcome.detail
         assert "the map has not seen them since it started" in outcome.detail
         assert len(sent) == 1 + rounds  # there, then once a round
-        assert turned == pytest.approx(math.tau, abs=0.1)
+        assert turned == pytest.approx(math.tau)  # once round, not again at the same place
         assert "looking for person_1: not seen round here" in said
         assert any("walking to where the map last had them" in d for d in decisions)
 
@@ -547,7 +551,9 @@ def test_a_person_not_at_their_place_is_looked_for_at_their_usual_place_and_hand
     outcome = run(tree, robot)
     assert outcome.state == "succeeded", outcome.detail
     poses = [g for _, g in robot.nav_goals if isinstance(g, PoseGoal)]
-    assert [(g.x, g.y) for g in poses] == [(3.0, 3.0)]
+    walks = [(g.x, g.y) for g in poses if _to_a_place(g)]
+    assert walks == [(3.0, 3.0)]
+    assert len(poses) == 1 + 3  # the look round (three turns) at their last place
     handovers = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
     assert len(handovers) >= 2  # their last place, then to them where they were seen
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
@@ -751,6 +757,11 @@ def test_a_person_who_stays_in_the_way_fails_the_approach_after_the_held_bound()
     assert "bottle_1 not reached: held back for person_2 3 s in all" in outcome.detail
 
 
+def _to_a_place(goal: object) -> bool:
+    """A walk to a person's usual place (any heading), not one of the look round's turns."""
+    return isinstance(goal, PoseGoal) and goal.yaw_tolerance_rad == pytest.approx(math.pi)
+
+
 def test_a_walk_to_a_usual_place_ends_when_the_map_sees_the_person_on_the_way() -> None:
     """On the way to the person's usual place the map sees them elsewhere: the walk there
     is cancelled and the next goes to them."""
@@ -765,13 +776,13 @@ def test_a_walk_to_a_usual_place_ends_when_the_map_sees_the_person_on_the_way() 
     for _ in range(6000):
         outcome = tree.tick()
         robot.advance()
-        walks = [i for i, g in robot.nav_goals if isinstance(g, PoseGoal)]
+        walks = [i for i, g in robot.nav_goals if _to_a_place(g)]
         if walks and robot.t - robot._nav_sent[walks[0]] > 10 * TICK_NS:  # 10 ticks on
             robot._see_walked_off()  # once: then nobody walked off any more
         if outcome is not None:
             break
     assert outcome is not None and outcome.state == "succeeded", outcome
-    (pose_id,) = [i for i, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    (pose_id,) = [i for i, g in robot.nav_goals if _to_a_place(g)]
     assert pose_id in robot.nav_cancels
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     assert any("seen at (0.50, -2.00) on the way to their usual place" in d for d in decisions)

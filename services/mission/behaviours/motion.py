@@ -24,9 +24,12 @@
   from close by, and the person's hand takes only what is held out within 0.25 m of it.
 - `SeenThere`: SUCCESS unless the person was not seen at their place (`UNSEEN`).
 - `LookForPerson`: the person was not where the map had them. Turn on the spot once
-  round (`LOOK_RATE_RAD_S`, cmd_vel from the mission; not where it looked round already
-  in this request) while the head camera sweeps the floor round it, asking the map each
-  tick whether it saw them since the look began; then stand `person_ask_s` saying
+  round (`LOOK_TURNS` pose goals to navigation, as the patrol's look-around: its body
+  guard keeps the body's ends off what stands round, its people rules hold the turn for
+  a person near; before, the mission turned the base with its own cmd_vel and swept the
+  hips into a pallet, 9 contacts in one shift; not where it looked round already in this
+  request) while the head camera sweeps the floor round it, asking the map each tick
+  whether it saw them since the look began; then stand `person_ask_s` saying
   "looking for <person>" (a person near may answer by stepping into view). Seen: SUCCESS,
   and the walk to them goes to where they were seen; never seen: SUCCESS all the same,
   and the next walk goes to the next of their usual places (`LOOK_AT`,
@@ -51,6 +54,7 @@ from typing import Literal
 import numpy as np
 from py_trees.common import Status
 
+from common.geometry import wrap_angle
 from common.messages import as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionReason
@@ -305,10 +309,14 @@ def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
         return pid, None
 
 
-#: rad/s: the turn on the spot that looks round for a person; it asks after one turn or
-#: after twice a turn's time (a base that does not turn: held for a person beside it).
-LOOK_RATE_RAD_S = 0.4
-LOOK_TURN_MAX_S = 2 * math.tau / LOOK_RATE_RAD_S
+#: The look round for a person: `LOOK_TURNS` turns on the spot, each a navigation pose
+#: goal (as the patrol's look-around: navigation may move the pose `LOOK_POSITION_TOL_M`
+#: to where the footprint turns clear), within `LOOK_TOL_RAD` each; it asks after the
+#: turns or after `LOOK_TURN_MAX_S` (a base held still for a person beside it).
+LOOK_TURNS = 3
+LOOK_POSITION_TOL_M = 0.5
+LOOK_TOL_RAD = 0.2
+LOOK_TURN_MAX_S = 40.0
 
 
 class PersonAhead(MissionBehaviour):
@@ -417,7 +425,8 @@ class StandsThere(MissionBehaviour):
 
 
 class LookForPerson(MissionBehaviour):
-    """Turn once round, then ask, until the map sees the person (the module docstring)."""
+    """Turn once round through navigation, then ask, until the map sees the person (the
+    module docstring)."""
 
     WRITES = (UNSEEN, LOOK_AT, LOOKED)
 
@@ -426,13 +435,20 @@ class LookForPerson(MissionBehaviour):
         self.turned = 0.0
         self.last_yaw: float | None = None
         self.asked_ns: int | None = None
+        #: The turns still to send (poses, m and rad) and the one navigation walks now.
+        self.turns: list[tuple[float, float, float]] = []
+        self.goal_id = ""
 
     def initialise(self) -> None:
         super().initialise()
         self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
-        xy = self.port.robot_xy()
+        self.turns, self.goal_id = [], ""
+        xy, yaw = self.port.robot_xy(), self.last_yaw
         if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
             self.turned = math.tau  # looked round here already: only waits and asks
+        elif xy is not None and yaw is not None:
+            self.turns = [(xy[0], xy[1], wrap_angle(yaw + k * math.tau / LOOK_TURNS))
+                          for k in range(1, LOOK_TURNS + 1)]  # fmt: skip
 
     def update(self) -> Status:
         pid, person = the_person(self)
@@ -444,16 +460,14 @@ class LookForPerson(MissionBehaviour):
         if yaw is not None and self.last_yaw is not None:
             self.turned += abs(math.remainder(yaw - self.last_yaw, math.tau))
         self.last_yaw = yaw
-        turning = self.elapsed_s() < LOOK_TURN_MAX_S  # a base held still does not turn
-        if self.turned < math.tau and self.asked_ns is None and turning:
-            self.port.command_velocity(0.0, 0.0, LOOK_RATE_RAD_S)
+        if self.asked_ns is None and self._turning(pid):
             self.say = f"looking for {pid}"
-            self.fraction = 0.5 * self.turned / math.tau
+            self.fraction = 0.5 * min(self.turned / math.tau, 1.0)
             return Status.RUNNING
-        self.port.command_velocity(0.0, 0.0, 0.0)
         if self.asked_ns is None:
             self.asked_ns = self.port.now_ns
-            turn = "a turn" if self.turned >= math.tau else f"{math.degrees(self.turned):.0f}°"
+            whole = self.turned >= math.tau - LOOK_TOL_RAD
+            turn = "a turn" if whole else f"{math.degrees(self.turned):.0f}°"
             self.ctx.decide(f"{pid} not seen in {turn} round their place: asking for them")
         self.say = f"looking for {pid}: not seen round here"
         waited = (self.port.now_ns - self.asked_ns) / 1e9
@@ -462,8 +476,44 @@ class LookForPerson(MissionBehaviour):
             return Status.RUNNING
         return self._not_seen(pid, person)
 
+    def _turning(self, pid: str) -> bool:
+        """Whether a turn is under way: the next turn sent once the last ended (a failed
+        one passed over, as the patrol's); False once none is left, navigation refused,
+        or `LOOK_TURN_MAX_S` went by (a base held still for a person beside it)."""
+        if self.elapsed_s() >= LOOK_TURN_MAX_S:
+            self._cancel(f"the look round for {pid} took {LOOK_TURN_MAX_S:.0f} s")
+            return False
+        if self.goal_id:
+            status = self.port.nav_status(self.goal_id)
+            if status is None or status.state in ("idle", "active"):
+                return True
+            if status.state != "succeeded":
+                why = status.reason or status.state
+                self.ctx.decide(f"look_for_person: turn {self.goal_id} {why} ({status.detail}): "
+                                "passed over")  # fmt: skip
+            self.goal_id = ""
+        if not self.turns:
+            return False
+        x, y, yaw = self.turns.pop(0)
+        goal = PoseGoal(x=x, y=y, yaw=yaw, position_tolerance_m=LOOK_POSITION_TOL_M,
+                        yaw_tolerance_rad=LOOK_TOL_RAD)  # fmt: skip
+        try:
+            self.goal_id = self.port.send_nav_goal(goal)
+        except PortError as exc:
+            self.ctx.decide(f"look_for_person: navigation did not take the turn ({exc}): "
+                            "looking from here")  # fmt: skip
+            self.turns = []
+            return False
+        return True
+
+    def _cancel(self, why: str) -> None:
+        if self.goal_id:
+            self.port.cancel_nav(self.goal_id, why)
+            self.goal_id = ""
+        self.turns = []
+
     def _done(self) -> Status:
-        self.port.command_velocity(0.0, 0.0, 0.0)
+        self._cancel("the person was seen")
         self.set(UNSEEN, False)
         self.set(LOOK_AT, None)
         return Status.SUCCESS
@@ -492,7 +542,7 @@ class LookForPerson(MissionBehaviour):
         return Status.SUCCESS
 
     def terminate(self, new_status: Status) -> None:
-        self.port.command_velocity(0.0, 0.0, 0.0)
+        self._cancel("look_for_person stopped")
 
 
 class BackOff(MissionBehaviour):
