@@ -504,6 +504,9 @@ class LookForPerson(MissionBehaviour):
                             "looking from here")  # fmt: skip
             self.turns = []
             return False
+        k = LOOK_TURNS - len(self.turns)
+        self.ctx.decide(f"look_for_person: turn {k}/{LOOK_TURNS} to {math.degrees(yaw):.0f}° "
+                        f"sent as {self.goal_id}")  # fmt: skip
         return True
 
     def _cancel(self, why: str) -> None:
