@@ -153,6 +153,25 @@ def test_a_place_on_a_support_is_looked_at_along_its_whole_top() -> None:
     assert found([far], "bottle", 1 * S, [], None, 10 * S, (places, [])) == far
 
 
+def test_a_new_entry_where_a_known_one_of_its_class_stands_unseen_is_that_one_again() -> None:
+    """By id: a new bottle 0.24 m from where the map has bottle_2, which was not seen
+    itself since the search began, is bottle_2 seen again (the map's estimate lay beyond
+    its gate), not the moved bottle_1; seen beside bottle_2, bottle_2 seen too, or far
+    from it, it is the moved one; by class, any bottle will do."""
+    start = 50 * S
+    two = _seen(entity("bottle_2", 6.33, 2.86), 10 * S)  # seeded, not seen since
+    again = _seen(entity("bottle_8", 6.10, 2.80), 70 * S)
+    known = {"bottle_1", "bottle_2"}
+    assert found([two, again], "bottle", start, ["bottle_1"], known) is None
+    assert found([two, again], "bottle", start, ["bottle_1"], None) == again  # by class
+    both = _seen(two, 70 * S)  # two bottles in view at once: two objects
+    assert found([both, again], "bottle", start, ["bottle_1"], known) == again
+    far = _seen(entity("bottle_8", 6.33, 3.5), 70 * S)  # 0.64 m off: another one
+    assert found([two, far], "bottle", start, ["bottle_1"], known) == far
+    gone = _seen(two, 60 * S, missing=True)  # looked at and missed: not there to see
+    assert found([gone, again], "bottle", start, ["bottle_1"], known) == again
+
+
 def test_an_entry_of_a_few_stray_detections_is_not_found_yet() -> None:
     """Two head-camera detections make an entry the map deletes at the next look that
     misses it: the search walks on until it is firm."""
