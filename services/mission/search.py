@@ -120,8 +120,8 @@ def places_to_look(
     ]  # fmt: skip
     for a in sorted(seen, key=lambda a: math.dist(a.position_in_world[:2], robot_xy)):
         ago = (now_ns - a.last_seen_ns) / 1e9
-        add((a.position_in_world[0], a.position_in_world[1]),
-            f"a {class_name} seen there {ago:.0f} s ago ({a.id})")  # fmt: skip
+        x, y = a.position_in_world[:2]
+        add((x, y), f"a {class_name} seen there {ago:.0f} s ago ({a.id} at ({x:.2f}, {y:.2f}))")
     for s in sorted(supports, key=lambda s: math.dist(s.centre_xy, robot_xy)):
         if s.id not in covered:
             add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, not looked at yet")

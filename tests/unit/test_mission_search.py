@@ -43,12 +43,14 @@ def test_the_places_go_from_its_last_place_to_its_likes_to_the_supports_nearest_
                             recent_s=150.0, max_places=5, skip=["bottle_1"])  # fmt: skip
     assert [p.why for p in places] == [
         "where the map had it (on table_1)",
-        "a bottle seen there 100 s ago (bottle_2) (on bench_1)",
+        "a bottle seen there 100 s ago (bottle_2 at (6.20, 0.10)) (on bench_1)",
         "table_2, not looked at yet",
     ]
     assert places[0].xy == (2.1, 0.2)
     few = places_to_look(None, "bottle", listing, supports, (0.0, 0.0), 200 * S, 150.0, 1)
-    assert [p.why for p in few] == ["a bottle seen there 100 s ago (bottle_2) (on bench_1)"]
+    assert [p.why for p in few] == [
+        "a bottle seen there 100 s ago (bottle_2 at (6.20, 0.10)) (on bench_1)"
+    ]
 
 
 def test_found_is_a_new_sighting_of_the_class_for_an_id_and_any_untried_for_a_class() -> None:
@@ -124,6 +126,32 @@ def test_a_moved_object_the_map_saw_on_the_way_is_still_the_one_fetched() -> Non
     assert outcome is not None and outcome.state == "succeeded", outcome
     standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
     assert standoffs == ["bottle_1", "bottle_9"]
+
+
+def test_a_look_alike_seen_again_off_its_place_is_not_fetched_for_the_object_asked_for() -> None:
+    """The search's look at table_2 makes bottle_8 0.22 m from where the map has
+    bottle_2 (not seen since): it says bottle_8 is bottle_2 seen again, does not fetch
+    it for bottle_1, and fails naming where it looked (bottle_1 was taken away)."""
+    robot = small_world(artifacts={"bottle_1": entity("bottle_1", 3.0, 0.0),
+                                   "bottle_2": entity("bottle_2", -1.0, 3.2)},
+                        visible={"bottle_8"})  # fmt: skip
+    robot.supports = [_surface("table_1", 3.3, 0.0), _surface("table_2", -1.0, 3.0)]
+    tree = mission(robot)
+    outcome = None
+    for _ in range(3000):
+        outcome = tree.tick()
+        robot.advance()
+        if tree.arm_look:
+            robot.artifacts["bottle_8"] = _seen(entity("bottle_8", -1.2, 3.1), robot.now_ns)
+        if outcome is not None:
+            break
+    assert outcome is not None and (outcome.state, outcome.reason) == (
+        "failed", "object_not_found"), outcome  # fmt: skip
+    standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert standoffs == ["bottle_1"]
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    said = [d for d in decisions if "bottle_8 is bottle_2 seen again 0.22 m" in d]
+    assert len(said) == 1, decisions  # said once, however many looks
 
 
 def test_an_object_taken_away_fails_object_not_found_naming_the_places_looked_at() -> None:

@@ -16,10 +16,13 @@ candidate (SUCCESS: the fetch goes on to it); the route walked without it,
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from py_trees.common import Status
 
 from common.messages import as_numpy
+from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
 from services.mission.behaviours.base import (
     CANDIDATE,
@@ -33,7 +36,7 @@ from services.mission.behaviours.base import (
 from services.mission.coverage import facing_route
 from services.mission.patrol import VIEW_HALF_ANGLE, PatrolRunner
 from services.mission.ports import PortError
-from services.mission.search import Place, found, places_to_look
+from services.mission.search import Place, found, places_to_look, re_seen
 from services.mission.targets import class_of, is_map_id
 
 
@@ -49,6 +52,8 @@ class LookElsewhere(MissionBehaviour):
         self.tried: list[str] = []
         self.class_name = ""
         self.hit = ""
+        #: New entries said to be a known one seen again (`_say_re_seen`).
+        self.said_re_seen: set[str] = set()
 
     @property
     def arm_look(self) -> bool:
@@ -64,21 +69,40 @@ class LookElsewhere(MissionBehaviour):
         runner.step()
         if runner.running and not self.hit:
             try:
-                hit = found(self.port.artifacts_of_class(self.class_name), self.class_name,
-                            self.started_ns, self.tried, self.known, self.port.now_ns,
-                            (self.places, self.supports))  # fmt: skip
+                listing = self.port.artifacts_of_class(self.class_name)
+                hit = found(listing, self.class_name, self.started_ns, self.tried, self.known,
+                            self.port.now_ns, (self.places, self.supports))  # fmt: skip
+                self._say_re_seen(listing)
             except PortError:
                 hit = None
             if hit is not None:
                 self.hit = hit.id
                 x, y = hit.position_in_world[:2]
-                self.ctx.decide(f"search: {hit.id} seen at ({x:.2f}, {y:.2f})")
+                self.ctx.decide(f"search: {hit.id} seen at ({x:.2f}, {y:.2f}), made of "
+                                f"{hit.observations} detections")  # fmt: skip
                 runner.stop(f"found {hit.id}")
         if runner.running:
             st = runner.status(self.port.now_ns)
             self.fraction = min(0.99, st.waypoint / max(1, st.waypoints))
             return Status.RUNNING
         return self._end()
+
+    def _say_re_seen(self, listing: list[MapEntity]) -> None:
+        """Say, once per entry, a new one the search does not take for the object asked
+        for by id: a known one of its class seen again off its place (`search.re_seen`)."""
+        if self.known is None:
+            return
+        known = self.known - set(self.tried)
+        for a in listing:
+            if a.id in self.known or a.id in self.said_re_seen or a.last_seen_ns < self.started_ns:
+                continue
+            old = re_seen(a, listing, known, self.started_ns)
+            if old is not None:
+                self.said_re_seen.add(a.id)
+                off = math.dist(a.position_in_world[:2], old.position_in_world[:2])
+                self.ctx.decide(f"search: {a.id} is {old.id} seen again {off:.2f} m from its "
+                                "place (not seen itself since the search began), not the one "
+                                "asked for")  # fmt: skip
 
     def _start(self) -> Status:
         request = self.get(REQUEST)
@@ -141,3 +165,4 @@ class LookElsewhere(MissionBehaviour):
             runner.step()
         if new_status != Status.RUNNING:
             self.runner, self.hit, self.places = None, "", []
+            self.said_re_seen = set()
