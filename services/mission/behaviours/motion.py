@@ -54,7 +54,6 @@ from typing import Literal
 import numpy as np
 from py_trees.common import Status
 
-from common.geometry import wrap_angle
 from common.messages import as_numpy
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionReason
@@ -74,6 +73,8 @@ from services.mission.behaviours.base import (
     MissionBehaviour,
 )
 from services.mission.behaviours.handover import side_bearing
+from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
+from services.mission.patrol_goals import PatrolGoal, look_around
 from services.mission.person_search import LOOKED_M, next_place
 from services.mission.ports import PortError, Refused, Unavailable
 from services.mission.room_behind import room_behind
@@ -309,13 +310,10 @@ def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
         return pid, None
 
 
-#: The look round for a person: `LOOK_TURNS` turns on the spot, each a navigation pose
-#: goal (as the patrol's look-around: navigation may move the pose `LOOK_POSITION_TOL_M`
-#: to where the footprint turns clear), within `LOOK_TOL_RAD` each; it asks after the
-#: turns or after `LOOK_TURN_MAX_S` (a base held still for a person beside it).
-LOOK_TURNS = 3
-LOOK_POSITION_TOL_M = 0.5
-LOOK_TOL_RAD = 0.2
+#: The look round for a person is the patrol's look-around (`patrol_goals.look_around`:
+#: `LOOK_TURNS` pose goals at the robot's place, within `goal_job`'s tolerances: navigation
+#: may move the pose to where the footprint turns clear); it asks after the turns or after
+#: `LOOK_TURN_MAX_S` (a base held still for a person beside it).
 LOOK_TURN_MAX_S = 40.0
 
 
@@ -435,8 +433,8 @@ class LookForPerson(MissionBehaviour):
         self.turned = 0.0
         self.last_yaw: float | None = None
         self.asked_ns: int | None = None
-        #: The turns still to send (poses, m and rad) and the one navigation walks now.
-        self.turns: list[tuple[float, float, float]] = []
+        #: The turns still to send and the goal id of the one navigation walks now.
+        self.turns: list[PatrolGoal] = []
         self.goal_id = ""
 
     def initialise(self) -> None:
@@ -447,8 +445,7 @@ class LookForPerson(MissionBehaviour):
         if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
             self.turned = math.tau  # looked round here already: only waits and asks
         elif xy is not None and yaw is not None:
-            self.turns = [(xy[0], xy[1], wrap_angle(yaw + k * math.tau / LOOK_TURNS))
-                          for k in range(1, LOOK_TURNS + 1)]  # fmt: skip
+            self.turns = look_around(0, xy[0], xy[1], yaw, LOOK_TURNS)[1:]
 
     def update(self) -> Status:
         pid, person = the_person(self)
@@ -466,7 +463,7 @@ class LookForPerson(MissionBehaviour):
             return Status.RUNNING
         if self.asked_ns is None:
             self.asked_ns = self.port.now_ns
-            whole = self.turned >= math.tau - LOOK_TOL_RAD
+            whole = self.turned >= math.tau - TURN_TOLERANCE_RAD
             turn = "a turn" if whole else f"{math.degrees(self.turned):.0f}°"
             self.ctx.decide(f"{pid} not seen in {turn} round their place: asking for them")
         self.say = f"looking for {pid}: not seen round here"
@@ -494,9 +491,10 @@ class LookForPerson(MissionBehaviour):
             self.goal_id = ""
         if not self.turns:
             return False
-        x, y, yaw = self.turns.pop(0)
-        goal = PoseGoal(x=x, y=y, yaw=yaw, position_tolerance_m=LOOK_POSITION_TOL_M,
-                        yaw_tolerance_rad=LOOK_TOL_RAD)  # fmt: skip
+        turn = self.turns.pop(0)
+        goal = PoseGoal(x=turn.x, y=turn.y, yaw=turn.yaw,
+                        position_tolerance_m=POSITION_TOLERANCE_M,
+                        yaw_tolerance_rad=TURN_TOLERANCE_RAD)  # fmt: skip
         try:
             self.goal_id = self.port.send_nav_goal(goal)
         except PortError as exc:
@@ -505,7 +503,7 @@ class LookForPerson(MissionBehaviour):
             self.turns = []
             return False
         k = LOOK_TURNS - len(self.turns)
-        self.ctx.decide(f"look_for_person: turn {k}/{LOOK_TURNS} to {math.degrees(yaw):.0f}° "
+        self.ctx.decide(f"look_for_person: turn {k}/{LOOK_TURNS} to {math.degrees(turn.yaw):.0f}° "
                         f"sent as {self.goal_id}")  # fmt: skip
         return True
 
