@@ -25,9 +25,16 @@ class PoseGoal(Message, frozen=True, tag="pose"):
 
 
 class ArtifactStandoff(Message, frozen=True, tag="artifact_standoff"):
-    """Walk to an obstacle-free pose in front of a mapped artifact, facing it."""
+    """Walk to an obstacle-free pose in front of a mapped artifact, facing it.
+
+    bearings_rad: the sides to stand on, as world bearings from the artifact to the
+    robot, each within `bearing_tolerance_rad` (the one nearest a bearing that is free);
+    empty: in front of it, off the nearest edge of its support (a box whose grasp needs
+    the line of sight along its long faces sends both ends of that line)."""
 
     artifact_id: EntityId
+    bearings_rad: Annotated[tuple[Finite, ...], msgspec.Meta(max_length=8)] = ()
+    bearing_tolerance_rad: Annotated[float, msgspec.Meta(ge=0.0, le=math.pi)] = math.pi
 
 
 class PersonHandover(Message, frozen=True, tag="person_handover"):

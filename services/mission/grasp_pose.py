@@ -22,7 +22,8 @@ than the paper's identity rotation:
   from the side instead: x along its long faces (the sign away from the shoulder),
   nose-down, the jaws closing across its shorter side, at half its visible height — if
   those faces are within `box_side_max_off_rad` of the line of sight; otherwise it is
-  refused with the reason (the robot would need another stance).
+  refused with the reason and the yaw of those faces (`GraspPoseError.stance_yaw_rad`):
+  the mission walks to a stance along them and tries again.
 
 Frames, as the WBC's Reach reads them (`services.wbc.arm_actions`): with the base pose at
 capture (`Detections.T_world_base`) the plan is in `world` — fixed, exact, whenever it is
@@ -81,11 +82,15 @@ PITCH_STEP_RAD = 0.05
 
 
 class GraspPoseError(Exception):
-    """No grasp can be planned for this detection; `reason` says why, for a person."""
+    """No grasp can be planned for this detection; `reason` says why, for a person.
 
-    def __init__(self, reason: str) -> None:
+    `stance_yaw_rad`: the grasp is possible from another stance: the line of sight along
+    this yaw (in the plan's frame, either sign: a box's long faces), else None."""
+
+    def __init__(self, reason: str, stance_yaw_rad: float | None = None) -> None:
         super().__init__(reason)
         self.reason = reason
+        self.stance_yaw_rad = stance_yaw_rad
 
 
 @dataclass(frozen=True)
@@ -322,7 +327,8 @@ def grasp_from_detection(
                     f"the {det.class_name}'s top is out of the arm's reach ({gap * 100:.0f} cm) "
                     f"and its long faces are {math.degrees(off):.0f}° off the line of sight "
                     f"(at most {math.degrees(p.box_side_max_off_rad):.0f}° for a side grasp): "
-                    "it needs a stance along its long side"
+                    "it needs a stance along its long side",
+                    stance_yaw_rad=math.atan2(float(along[1]), float(along[0])),
                 )
             kind = "side"
             z = bottom + BOX_SIDE_HEIGHT * extent[2]

@@ -22,8 +22,14 @@
                                       places the object may be now, walked with the
                                       arm up until the map sees it: the only candidate),
                                       select_target, mode walk/navigation, ArtifactStandoff
-                  approach_object: mode walk/mission, Posture(look), approach (eq. 3)
-                  pose_estimation: mode manipulate, estimate_grasp
+                  restance (Recover: grasp_pose_failed, budget 1, when a stance was
+                            asked for: a box too tall for a top grasp, its long faces
+                            off the line of sight)
+                    at_the_object (sequence)
+                      stance: no_stance_asked, else Posture(stow), mode walk/navigation,
+                              ArtifactStandoff at an end of the line along its long faces
+                      approach_object: mode walk/mission, Posture(look), approach (eq. 3)
+                      pose_estimation: mode manipulate, estimate_grasp
               pick_object: Release (open), Posture(ready), then grasp_it: Reach(plan)
                            (stopped more than reach_miss_max_m short: grasp_pose_failed),
                            Grasp, check_held, lift (Reach up lift_m; short is enough),
@@ -82,6 +88,7 @@ from services.mission.behaviours.base import (
     SEARCH,
     SEARCHED,
     SIDE,
+    STANCE,
     TARGET,
     Context,
     Failure,
@@ -103,7 +110,7 @@ from services.mission.behaviours.motion import (
     StandsThere,
     WalkedShort,
 )
-from services.mission.behaviours.perceive import Approach, EstimateGrasp
+from services.mission.behaviours.perceive import Approach, EstimateGrasp, NoStance
 from services.mission.behaviours.put_back import FellOnTheWay, PutBackFirst, PutDown, held_reach
 from services.mission.behaviours.request import (
     HandsFree,
@@ -162,9 +169,12 @@ def put_back_tree(ctx: Context, name: str, goes_on: bool) -> Selector:
 def build_tree(ctx: Context) -> Sequence:
     """The tree of the module docstring, its leaves bound to `ctx`."""
     s = ctx.settings
-    bb = blackboard("recovery", (CANDIDATE, GRASP_PLAN, DETECTION, TARGET, SEARCH, SEARCHED))
+    bb = blackboard(
+        "recovery", (CANDIDATE, GRASP_PLAN, DETECTION, TARGET, SEARCH, SEARCHED, STANCE)
+    )
 
     def next_candidate(failure: Failure) -> bool:
+        bb.set(STANCE, None)  # a stance is one object's
         candidates = read(bb, CANDIDATES) or []
         index = int(read(bb, CANDIDATE, 0)) + 1
         if index < len(candidates):
@@ -180,6 +190,7 @@ def build_tree(ctx: Context) -> Sequence:
     def forget_grasp(failure: Failure) -> bool:
         bb.set(GRASP_PLAN, None)
         bb.set(DETECTION, None)
+        bb.set(STANCE, None)
         target = read(bb, TARGET)
         if failure.reason == "grasp_lost" and isinstance(target, Target):
             # It fell from the gripper: look where the gripper was, not at its old place.
@@ -296,9 +307,36 @@ def build_tree(ctx: Context) -> Sequence:
         ArmAction(ctx, "stow_empty", lambda _b: Posture(name="stow"), "arm_failed",
                   s.posture_timeout_s, st[5]),
     )  # fmt: skip
+
+    def to_stance(failure: Failure) -> bool:
+        return read(bb, STANCE) is not None
+
+    # A grasp that needs another stance (`STANCE`): stow, walk to it, approach again.
+    at_the_object = Recover(
+        "restance",
+        _seq(
+            "at_the_object",
+            Selector("stance", memory=True, children=[
+                NoStance(ctx, st[1]),
+                _seq(
+                    "to_a_stance",
+                    ArmAction(ctx, "stow_for_stance", lambda _b: Posture(name="stow"),
+                              "arm_failed", s.posture_timeout_s, st[0]),
+                    SetMode(ctx, "walk", "navigation", st[0], name="mode_walk_stance"),
+                    NavigateTo(ctx, "artifact", st[0], name="navigate_to_stance"),
+                ),
+            ]),
+            approach,
+            pose,
+        ),
+        frozenset({"grasp_pose_failed"}),
+        1,
+        ctx.decide,
+        to_stance,
+    )  # fmt: skip
     find = Recover(
         "next_instance",
-        _seq("find_object", navigate, approach, pose),
+        _seq("find_object", navigate, at_the_object),
         NEXT_INSTANCE_REASONS,
         max(0, s.max_candidates - 1) + (1 if s.search_places else 0),
         ctx.decide,

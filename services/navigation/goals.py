@@ -8,7 +8,8 @@ edge's outward normal, so their mean direction is that normal — the direction 
 generator uses (`services.sim.feasibility.standoff_pose_for`, computed there from the
 surface's rectangle). The pose lies `STANDOFF_DISTANCE_M` out along it, facing the
 artifact; when its footprint is not free, directions further from the normal are tried
-in turn, so a crowded edge still gives a free pose.
+in turn, so a crowded edge still gives a free pose. A goal may ask for the sides to
+stand on instead (`ArtifactStandoff.bearings_rad`: a box held along its long faces).
 
 Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; on the
 side the goal asks for (`PersonHandover.bearing_rad`), else in front of them when their
@@ -82,21 +83,42 @@ def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> 
 
 
 def standoff_pose(
-    costmap: Costmap, x: float, y: float, fp: Footprint, margin: float = GOAL_MARGIN_M
+    costmap: Costmap,
+    x: float,
+    y: float,
+    fp: Footprint,
+    margin: float = GOAL_MARGIN_M,
+    bearings: tuple[float, ...] = (),
+    tolerance: float = math.pi,
 ) -> Pose:
-    """A free pose facing the artifact at (x, y), `STANDOFF_DISTANCE_M` away."""
+    """A free pose facing the artifact at (x, y), `STANDOFF_DISTANCE_M` away: off the
+    nearest edge (the directions nearest its normal first) or, given `bearings` (world
+    bearings from the artifact), the direction nearest any of them, within `tolerance`."""
     angles = np.arange(0.0, 2 * math.pi, RAY_STEP_RAD)
-    exits = exit_distances(costmap, x, y, angles)
-    near = exits <= exits.min() + NORMAL_BAND_M
-    best = float(np.angle(np.exp(1j * angles[near]).sum()))
-    order = np.argsort(np.abs(np.angle(np.exp(1j * (angles - best)))), kind="stable")
+    if bearings:
+        off = np.abs(np.angle(np.exp(1j * (angles[:, None] - np.asarray(bearings)[None, :]))))
+        away = off.min(axis=1)
+        order = np.argsort(away, kind="stable")
+        order = order[away[order] <= tolerance + 1e-9]
+    else:
+        exits = exit_distances(costmap, x, y, angles)
+        near = exits <= exits.min() + NORMAL_BAND_M
+        best = float(np.angle(np.exp(1j * angles[near]).sum()))
+        order = np.argsort(np.abs(np.angle(np.exp(1j * (angles - best)))), kind="stable")
     d = robot.STANDOFF_DISTANCE_M
     for k in order:
         a = float(angles[k])
         pose = Pose(x + d * math.cos(a), y + d * math.sin(a), math.remainder(a + math.pi, math.tau))
         if pose_ok(costmap, pose, fp, margin):
             return pose
-    raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) in any direction")
+    sides = (
+        "in any direction"
+        if not bearings
+        else "within {:.0f}° of {}".format(
+            math.degrees(tolerance), ", ".join(f"{math.degrees(b):.0f}°" for b in bearings)
+        )
+    )
+    raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) {sides}")
 
 
 def handover_pose(

@@ -176,7 +176,9 @@ class GoalIntake:
                 tol, tol_yaw, handover = g.position_tolerance_m, g.yaw_tolerance_rad, ""
             elif isinstance(g, ArtifactStandoff):
                 x, y = self.source.artifact_xy(g.artifact_id, at_ns=at)
-                target = goals.standoff_pose(cm, x, y, self.fp)
+                target = goals.standoff_pose(
+                    cm, x, y, self.fp, bearings=g.bearings_rad, tolerance=g.bearing_tolerance_rad
+                )
                 tol, tol_yaw, handover = *self.tolerance, ""
             else:
                 assert isinstance(g, PersonHandover)

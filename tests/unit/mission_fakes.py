@@ -504,7 +504,9 @@ class StubApproach:
 
 
 class StubGraspError(Exception):
-    pass
+    def __init__(self, reason: str, stance_yaw_rad: float | None = None) -> None:
+        super().__init__(reason)
+        self.stance_yaw_rad = stance_yaw_rad
 
 
 @dataclass
@@ -561,15 +563,21 @@ def stub_algorithms(
     pull_on_try: int = 1,
     grasp_plans: int = -1,
     close_in_mm: int = 0,
+    stance_plans: int = 0,
 ) -> Algorithms:
     """`grasp_plans`: how many grasps are planned before none is possible (−1: all);
-    `close_in_mm`: the plans' close-in move (a top grasp's)."""
+    `close_in_mm`: the plans' close-in move (a top grasp's); `stance_plans`: how many
+    grasps first ask for another stance (a tall box's long faces off the line of
+    sight, along 90°)."""
+    stances = itertools.count(1)
     tries = itertools.count(1)  # the detectors made: one per offer
     plans = itertools.count(1)
 
     def grasp(det: Detection, stamp_ns: int, T_world_base: object) -> StubPlan:
         if not grasp_possible:
             raise StubGraspError("the object lies on its side")
+        if next(stances) <= stance_plans:
+            raise StubGraspError("the box's long faces are 60° off", math.pi / 2)
         if 0 <= grasp_plans < next(plans):
             raise StubGraspError("the bottle's side grasp is out of the arm's reach")
         return StubPlan(close_in_m=close_in_mm / 1000)

@@ -245,8 +245,18 @@ def test_a_box_too_high_for_a_top_grasp_is_held_from_the_side_across_its_short_s
     long_side = np.array([math.cos(box_yaw), math.sin(box_yaw), 0.0])
     off = math.acos(abs(long_side @ sight) / np.linalg.norm(sight))
     if off > GraspParams().box_side_max_off_rad:
-        with pytest.raises(GraspPoseError, match=r"out of the arm's reach .* off the line"):
+        with pytest.raises(GraspPoseError, match=r"out of the arm's reach .* off the line") as e:
             grasp_from_detection(high, STAMP, T_wb)
+        # the stance it needs: the line of sight along the long faces (either way)
+        stance = e.value.stance_yaw_rad
+        assert stance is not None
+        assert abs(math.sin(stance - box_yaw)) < 1e-9
+        # and from a base on that line, facing the box, the grasp is a side grasp
+        box = np.array(high.axis_in_world)
+        T_on = base_pose(*(box[:2] - D_OPT_M * np.array([math.cos(stance), math.sin(stance)])),
+                         stance)  # fmt: skip
+        there = detection(T_on, (D_OPT_M, 0.0, 0.49), "box", "box", extent, yaw_in_world=box_yaw)
+        assert grasp_from_detection(there, STAMP, T_on).kind == "side"
         return
     plan = grasp_from_detection(high, STAMP, T_wb)
     assert plan.kind == "side"

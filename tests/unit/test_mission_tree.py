@@ -15,6 +15,7 @@ from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
 from services.mission.behaviours.handover import FeelPull
+from services.mission.behaviours.motion import STANCE_TOL_RAD
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
     TICK_NS,
@@ -105,6 +106,51 @@ def test_the_approach_commands_cmd_vel_as_source_mission_and_hands_back_the_base
     assert robot.modes[i - 1] == ("walk", "navigation")  # navigation drove before
     assert ("manipulate", "navigation") in robot.modes[i:]
     assert any(c == (0.2, 0.0, 0.0) for c in robot.cmds)
+
+
+def _postures(robot: FakeRobot) -> list[str]:
+    return [g.name for _, g in robot.arm_goals if isinstance(g, Posture)]
+
+
+def test_a_grasp_that_needs_another_stance_walks_there_stowed_and_tries_again() -> None:
+    """A box too tall for a top grasp, its long faces off the line of sight: the grasp
+    says along which line it needs to look; the robot stows, walks to a standoff at
+    either end of that line, approaches and estimates again."""
+    robot = small_world()
+    outcome = run(mission(robot, REQUEST, None, stance_plans=1), robot, 4000)
+    assert outcome.state == "succeeded", outcome
+    standoffs = [g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert len(standoffs) == 2
+    assert standoffs[0].bearings_rad == ()
+    stance = standoffs[1]
+    assert stance.artifact_id == standoffs[0].artifact_id
+    assert sorted(stance.bearings_rad) == pytest.approx([-math.pi / 2, math.pi / 2])
+    assert stance.bearing_tolerance_rad == pytest.approx(STANCE_TOL_RAD)
+    postures = _postures(robot)
+    # looked, stowed for the walk, looked again on the second approach
+    assert postures[:3] == ["look", "stow", "look"], postures
+    manipulate = robot.modes.index(("manipulate", "navigation"))
+    walk = robot.modes.index(("walk", "navigation"), manipulate)
+    assert ("walk", "mission") in robot.modes[walk:]  # the approach again, after the walk
+
+
+def test_a_grasp_still_impossible_from_the_new_stance_fails_with_its_reason() -> None:
+    robot = small_world()
+    outcome = run(mission(robot, REQUEST, None, stance_plans=2), robot, 4000)
+    assert outcome.state == "failed" and outcome.reason == "grasp_pose_failed", outcome
+    assert "long faces" in outcome.detail
+    standoffs = [g for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert [bool(g.bearings_rad) for g in standoffs] == [False, True]  # one stance walk
+    assert_halted(robot)
+
+
+def test_a_stance_navigation_cannot_reach_fails_navigation_failed_saying_so() -> None:
+    robot = small_world(
+        nav_refuse=lambda g: isinstance(g, ArtifactStandoff) and bool(g.bearings_rad)
+    )
+    outcome = run(mission(robot, REQUEST, None, stance_plans=1), robot, 4000)
+    assert outcome.state == "failed" and outcome.reason == "navigation_failed", outcome
+    assert_halted(robot)
 
 
 FAILURES = [

@@ -126,6 +126,29 @@ def test_an_explored_bench_standoff_faces_its_front_not_the_strip_behind_its_lid
     assert math.remainder(pose.yaw + math.pi / 2, math.tau) == pytest.approx(0.0, abs=0.02)
 
 
+def test_a_standoff_asked_for_on_given_sides_stands_near_one_or_says_where_it_tried() -> None:
+    """Hall seed 1's box_2, 19 cm tall near table_2's edge, its long faces 27° off the
+    table's long side: held from the side only with the line of sight along them. Of
+    that line's two ends one lies on the table; the stance is near the other."""
+    world, cm = _world_costmap("hall", 1)
+    box = next(a for a in world.artifacts if a.id == "box_2")
+    x, y = box.position[:2]
+    along = box.yaw  # the box's x (its long side: half sizes 6.9 × 3.0 cm)
+    tol = math.radians(30.0)
+    pose = standoff_pose(cm, x, y, FP, bearings=(along, along + math.pi), tolerance=tol)
+    assert footprint_free(cm.occupied, cm.grid, pose, FP, 0.03)
+    bearing = math.atan2(pose.y - y, pose.x - x)  # from the box to the robot
+    assert abs(math.remainder(bearing - (along + math.pi), math.tau)) <= tol + 1e-6
+    assert abs(math.remainder(math.atan2(y - pose.y, x - pose.x) - pose.yaw, math.tau)) < 1e-6
+    # the default stands off the table's nearest edge, further from that line
+    default = standoff_pose(cm, x, y, FP)
+    off = abs(math.remainder(math.atan2(default.y - y, default.x - x) - along, math.pi))
+    assert off > tol
+    # asked only for the end on the table: refused, saying what it tried
+    with pytest.raises(GoalError, match=r"within 5° of -27°"):
+        standoff_pose(cm, x, y, FP, bearings=(along,), tolerance=math.radians(5.0))
+
+
 @pytest.mark.parametrize(("name", "seed"), [("small", 1), ("hall", 1), ("hall", 3)])
 def test_handover_poses_are_free_and_face_their_person(name: str, seed: int) -> None:
     _, cm = _world_costmap(name, seed)

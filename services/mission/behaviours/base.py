@@ -46,9 +46,10 @@ UNSEEN = "unseen"  # bool: the person was not seen at their mapped place: look r
 KNOWN = "known"  # list[str]: the map's artifacts of the class when the request began
 LOOK_AT = "look_at"  # SeenPlace | None: the person's usual place walked to next, to look
 LOOKED = "looked"  # list[tuple[float, float]]: where the robot looked round for the person
+STANCE = "stance"  # float | None: the world yaw of the line of sight the grasp needs (±)
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
-    SEARCH, SEARCHED, UNSEEN, KNOWN, LOOK_AT, LOOKED,
+    SEARCH, SEARCHED, UNSEEN, KNOWN, LOOK_AT, LOOKED, STANCE,
 )  # fmt: skip
 
 

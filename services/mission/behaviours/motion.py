@@ -3,7 +3,8 @@
 - `SetMode(mode, source)`: asks the whole-body controller for a mode and the cmd_vel
   source it obeys; succeeds once `wbc/status` reports both (modes take effect one
   mission latency after their stamp), fails `mode_timeout` after `mode_timeout_s`.
-- `NavigateTo("artifact" | "person" | "put_back")`: sends `ArtifactStandoff(target)`,
+- `NavigateTo("artifact" | "person" | "put_back")`: sends `ArtifactStandoff(target)`
+  (at an end of the line of sight a grasp asked for, `STANCE`, when it did),
   `PersonHandover(person)` (or, while looking for them, a `PoseGoal` to one of their
   usual places) or a `PoseGoal` to where the base stood to pick the object it
   still holds (`Held.stance`, within `PUT_BACK_TOL_M`/`_RAD`: the arm puts it down at
@@ -67,6 +68,7 @@ from services.mission.behaviours.base import (
     LOOKED,
     PERSON,
     SIDE,
+    STANCE,
     UNSEEN,
     Context,
     Failure,
@@ -82,6 +84,9 @@ from services.mission.room_behind import room_behind
 #: A put-back's stance: within this of where the base stood for the grasp (m, rad).
 PUT_BACK_TOL_M = 0.05
 PUT_BACK_TOL_RAD = 0.08
+#: A stance for a grasp along a box's long faces (`STANCE`): the standoff's bearing
+#: from the box within this of that line (rad); the grasp takes them 45° off at most.
+STANCE_TOL_RAD = math.radians(30.0)
 #: m: a person's usual place is reached within this (any heading: the robot looks round).
 LOOK_AT_TOL_M = 0.5
 #: A person seen within this (s) and slower than this (m/s) stands where the map has them.
@@ -175,7 +180,13 @@ class NavigateTo(MissionBehaviour):
             target = self.target()
             if target.dropped and target.xy is not None:
                 return look_where_it_fell(target.xy, self.port.robot_xy(), self.port.robot_yaw())
-            return ArtifactStandoff(artifact_id=target.map_id)
+            stance = self.get(STANCE)
+            if stance is None:
+                return ArtifactStandoff(artifact_id=target.map_id)
+            ends = (math.remainder(stance + math.pi, math.tau), math.remainder(stance, math.tau))
+            return ArtifactStandoff(
+                artifact_id=target.map_id, bearings_rad=ends, bearing_tolerance_rad=STANCE_TOL_RAD
+            )
         place = self.get(LOOK_AT)
         if place is not None:
             self.to_place = True

@@ -19,11 +19,16 @@
   world-fixed goal (so the Reach stays valid while the arm gets ready, and a box's
   world yaw is usable) → the plan and the detection on the blackboard; no
   detection within `detection_timeout_s` → `object_not_found`; no grasp possible →
-  `grasp_pose_failed`.
+  `grasp_pose_failed`. A grasp possible from another stance (a box too tall for a top
+  grasp, its long faces off the line of sight: `GraspPoseError.stance_yaw_rad`) puts
+  that line's world yaw on the blackboard (`STANCE`) first, once per object: the tree
+  walks to a standoff at one of its ends (`NoStance` fails), approaches and tries again.
+- `NoStance`: SUCCESS unless a grasp asked for a stance (`STANCE`).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -33,6 +38,7 @@ from services.mission.behaviours.base import (
     DETECTION,
     GRASP_PLAN,
     NS_PER_S,
+    STANCE,
     Context,
     MissionBehaviour,
 )
@@ -126,7 +132,7 @@ class Approach(MissionBehaviour):
 
 
 class EstimateGrasp(MissionBehaviour):
-    WRITES = (DETECTION, GRASP_PLAN)
+    WRITES = (DETECTION, GRASP_PLAN, STANCE)
 
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("estimate_grasp", ctx, stage)
@@ -158,6 +164,14 @@ class EstimateGrasp(MissionBehaviour):
                     f"{target.map_id} fell {target.where_dropped()} while carried and lies "
                     f"where the robot cannot pick it up: {exc}",
                 )
+            stance = getattr(exc, "stance_yaw_rad", None)
+            if stance is not None and self.get(STANCE) is None:
+                self.set(STANCE, float(stance))
+                return self.fail(
+                    "grasp_pose_failed",
+                    f"no grasp of {target.map_id} from here: {exc}; walking to a stance "
+                    f"with the line of sight along {math.degrees(stance):.0f}°",
+                )
             return self.fail("grasp_pose_failed", f"no grasp of {target.map_id}: {exc}")
         self.set(DETECTION, seen)
         self.set(GRASP_PLAN, plan)
@@ -165,3 +179,11 @@ class EstimateGrasp(MissionBehaviour):
             f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp / NS_PER_S:.2f} s"
         )
         return Status.SUCCESS
+
+
+class NoStance(MissionBehaviour):
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("no_stance_asked", ctx, stage)
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.get(STANCE) is None else Status.FAILURE
