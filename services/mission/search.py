@@ -25,8 +25,8 @@ walked to nothing), not one the fetch already tried; for a
 request by id, also not one the map already knew when the search began (the object
 moved makes a new entry where it now stands; an old one is another object of its
 class), nor a new one standing where the map has a known one of its class that was
-not seen itself since the search began (`re_seen`: that one, seen again a little off
-its mapped place). Pure: no transport.
+not seen itself since the search began, or that stands there seen only from afar
+(`re_seen`: that one, seen again a little off its mapped place). Pure: no transport.
 """
 
 from __future__ import annotations
@@ -48,6 +48,10 @@ FIRM_OBSERVATIONS = 5
 #: m: a new entry this near a known one of its class not seen since the search began is
 #: that one seen again (`re_seen`): twice the map's least association gate.
 RE_SEEN_M = 0.5
+#: m: a new entry seen from no nearer than this beside a known one of its class may be
+#: that one, even when it was seen too (`re_seen`): the map's `class_near_m`, the range
+#: within which the network and the depth are trusted.
+NEAR_VIEW_M = 2.0
 
 
 class Place(NamedTuple):
@@ -173,18 +177,22 @@ def re_seen(
     new: MapEntity, artifacts: Iterable[MapEntity], known: set[str], since_ns: int
 ) -> MapEntity | None:
     """The known entry of `new`'s class that `new` is most likely that one seen again off
-    its mapped place: within `RE_SEEN_M` of it, not missing, not seen itself since the
-    search began (its detections went to the new entry). None: `new` is another object.
+    its mapped place: within `RE_SEEN_M` of it, not missing, and either not seen itself
+    since the search began (its detections went to the new entry) or `new` seen only
+    from afar (never within `NEAR_VIEW_M`). None: `new` is another object.
     The map's estimate of an artifact seen from afar, or seeded, can lie a little beyond
-    its association gate: hall seed 1's shift looked for a moved bottle_1 on table_2,
-    where the map had bottle_2 0.24 m from the bottle standing there; the map made
-    bottle_8 of it, and the fetch brought bottle_2 for bottle_1. An object put down
-    beside its like is seen beside it, the like seen too: that one is still found."""
+    its association gate, and one far view can come apart in two: hall seed 1's shift
+    looked for a moved bottle_1 from table_1, 5 m from table_2, where the map had
+    bottle_2; the head camera's views of it went to bottle_2, the raised wrist camera's,
+    0.26 m nearer, made bottle_8, and the fetch brought bottle_2 for bottle_1. An
+    object put down beside its like and seen from near, the like seen too, is still
+    found; from afar the two cannot be told apart, and a near look decides."""
     x, y = new.position_in_world[:2]
+    far = new.nearest_view_m is None or new.nearest_view_m > NEAR_VIEW_M
     near = [
         a for a in artifacts
         if a.id in known and a.id != new.id and a.class_name == new.class_name
-        and a.missing_since_ns is None and a.last_seen_ns < since_ns
+        and a.missing_since_ns is None and (far or a.last_seen_ns < since_ns)
         and math.hypot(a.position_in_world[0] - x, a.position_in_world[1] - y) <= RE_SEEN_M
     ]  # fmt: skip
     return min(near, key=lambda a: math.dist(a.position_in_world[:2], (x, y)), default=None)

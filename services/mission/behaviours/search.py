@@ -100,9 +100,13 @@ class LookElsewhere(MissionBehaviour):
             if old is not None:
                 self.said_re_seen.add(a.id)
                 off = math.dist(a.position_in_world[:2], old.position_in_world[:2])
+                why = (
+                    "not seen itself since the search began"
+                    if old.last_seen_ns < self.started_ns
+                    else f"{a.id} seen only from afar"
+                )
                 self.ctx.decide(f"search: {a.id} is {old.id} seen again {off:.2f} m from its "
-                                "place (not seen itself since the search began), not the one "
-                                "asked for")  # fmt: skip
+                                f"place ({why}), not the one asked for")  # fmt: skip
 
     def _start(self) -> Status:
         request = self.get(REQUEST)
