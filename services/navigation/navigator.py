@@ -14,7 +14,9 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   stop the base stands, not turning on the spot either: a trot turning on the spot
   steps and sways the trunk, and the body's ends sweep at the turn rate (the changing
   hall's shift: its separation violations at 0.05-0.12 m/s came with the robot turning
-  on the spot at 0.1-0.8 rad/s beside a person walking past);
+  on the spot at 0.1-0.8 rad/s beside a person walking past); the goal's final turn on
+  the spot (no path left to follow) is a stop within a bystander's protective
+  separation at rest too;
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
   follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad (a turn the
   body guard sends the other way round counts from where it began);
@@ -22,8 +24,10 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   while a person is within `people.slow_radius_m` of the footprint or of the goal,
   "waiting for <person>": people move), recoveries in order:
   clear the short-lived layer, rotate in place (`ROTATE_S`), back off (`BACKOFF_S`), each
-  followed by a replan; after them, `failed: blocked` (or `no_path` when no plan was
-  ever found);
+  followed by a replan, the people rules holding them as they hold a path (a rotation
+  or a step back inside a bystander's protective separation is a stop: before, the
+  recoveries moved whoever stood there); after them, `failed: blocked` (or `no_path`
+  when no plan was ever found);
 - every command, the follower's and the recoveries', goes through the body guard
   (`body_guard`): it may not sweep the footprint onto obstacles;
 - `goal_timeout_s` of sim time on one goal: `failed: timeout`;
@@ -251,7 +255,8 @@ class Navigator:
         if ways and speed >= MEASURED_MIN_MPS:
             also = (*also, (velocity[0] / speed, velocity[1] / speed))
         limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
-                             g.handover_id, self.limit_rule == "stop", also)  # fmt: skip
+                             g.handover_id, self.limit_rule == "stop", also,
+                             turning=direction is None)  # fmt: skip
         self.limit_rule = limit.rule
         guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,
@@ -327,17 +332,26 @@ class Navigator:
             self.best_yaw_error = math.inf
             return self._out()
         guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
-        if rec == "rotate":  # either way round, whichever the body has room for
+        # The people rules hold a recovery as they hold a path: a turn on the spot or a
+        # step back within a bystander's protective separation is a stop.
+        behind = (-math.cos(pose.yaw), -math.sin(pose.yaw))
+        limit = people_limit(
+            pose, behind if rec == "backoff" else None, cm.people, self.fp, self.n.people,
+            self.top_mps, self.goal.handover_id if self.goal else "",
+            self.limit_rule == "stop", turning=rec == "rotate",
+        )  # fmt: skip
+        self.limit_rule = limit.rule
+        if limit.rule == "stop":
+            self.cmd = np.zeros(3)
+        elif rec == "rotate":  # either way round, whichever the body has room for
             turns = (np.array([0.0, 0.0, w]) for w in (ROTATE_RATE, -ROTATE_RATE))
             self.cmd = next((c for c in turns if guard.ok(c)), np.zeros(3))
             self.guarded = "" if self.cmd.any() else "stand"
         elif rec == "backoff":
-            back = Pose(
-                pose.x - 0.3 * math.cos(pose.yaw), pose.y - 0.3 * math.sin(pose.yaw), pose.yaw
-            )
-            step = np.array([-BACKOFF_SPEED, 0.0, 0.0])
+            back = Pose(pose.x + 0.3 * behind[0], pose.y + 0.3 * behind[1], pose.yaw)
+            step = np.array([-min(BACKOFF_SPEED, limit.speed), 0.0, 0.0])
             free = cm.cost_at(back.x, back.y) >= 0 and guard.ok(step)
             self.cmd = step if free else np.zeros(3)
             self.guarded = "" if free else "stand"
-        out = self._out()
+        out = self._out(limit)
         return out._replace(recovery=rec)

@@ -16,7 +16,9 @@ rules per person:
   but the person handed over to, the robot is at rest unless its path leads clearly
   away from them (`AWAY_COS`): moving along or beside a person that close, the trot's
   sway and drift step towards them (a bystander passing 0.3 m behind the robot, the
-  shift: 0.06-0.1 m/s towards them while the path ran along them);
+  shift: 0.06-0.1 m/s towards them while the path ran along them); nor does it turn on
+  the spot (hall seed 1's shift: the handover's final turn went on with a bystander
+  0.45 m off the footprint, the base swaying 0.06 m/s towards them);
 - **the slow zone**: `handover_speed` within `slow_radius_m` of the person being handed
   over to, `slow_speed` within it of anyone else, entered on a braking ramp
   `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (the command goes through acceleration limits
@@ -98,13 +100,16 @@ def people_limit(
     handover_id: str = "",
     stopped: bool = False,
     also: tuple[tuple[float, float], ...] = (),
+    turning: bool = False,
 ) -> SpeedLimit:
     """The tightest cap that people impose now; `direction_world` the intended travel
     direction (unit, world; None when not translating), `also` other directions the base
     may move in over the next moment (unit: the path's next poses, the heading), the one
     most towards each person counting. `top_mps`: the base's top speed
     (a cap at or above it is no cap). `stopped`: the last cap was a stop (it holds until
-    the person is `RESUME_MARGIN_M` further than S_p at rest)."""
+    the person is `RESUME_MARGIN_M` further than S_p at rest). `turning`: not
+    translating but turning on the spot (the goal's final turn): the footprint's ends
+    sweep and the trot sways, so within S_p at rest of a bystander it is a stop too."""
     if not people:
         return NO_LIMIT
     sep = separation_params(p)
@@ -120,8 +125,10 @@ def people_limit(
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
         ways = (direction_world, *also) if direction_world else ()
         cos = max((n[0] * u[0] + n[1] * u[1] for u in ways), default=0.0)
-        if direction_world and not handing and d < at_rest:
-            away = n[0] * direction_world[0] + n[1] * direction_world[1] <= AWAY_COS
+        if (direction_world or turning) and not handing and d < at_rest:
+            away = direction_world is not None and (
+                n[0] * direction_world[0] + n[1] * direction_world[1] <= AWAY_COS
+            )
             if not away:  # too close to move but away from them: the protective stop
                 return SpeedLimit(0.0, "stop", person.id, d, at_rest)
         if cos > 1e-6:  # moving towards them (not along or away): the protective separation

@@ -230,6 +230,12 @@ def test_inside_the_protective_separation_at_rest_only_a_path_away_moves() -> No
     assert away.rule == "slow" and away.speed > 0.0
     handing = people_limit(pose, (1.0, 0.0), [person], FP, p, top, "person_1")
     assert handing.rule == "handover" and handing.speed > 0.0
+    # a turn on the spot sweeps the footprint's ends: a stop too, but for the person
+    # handed over to; standing still (no turn) is no stop
+    turn = people_limit(pose, None, [person], FP, p, top, turning=True)
+    assert (turn.rule, turn.speed, turn.person_id) == ("stop", 0.0, "person_1")
+    assert people_limit(pose, None, [person], FP, p, top, "person_1", turning=True).rule != "stop"
+    assert people_limit(pose, None, [person], FP, p, top).rule != "stop"
 
 
 def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid() -> None:
@@ -346,6 +352,51 @@ def test_a_person_standing_in_the_way_is_waited_for_before_any_recovery() -> Non
             break
     assert first == pytest.approx(2 * n.blocked_timeout_s + n.people.wait_s, abs=2 * DT)
     assert "waiting for person_1 to pass" in said
+
+
+def test_the_recoveries_do_not_turn_or_step_back_inside_a_bystanders_separation() -> None:
+    """A person stays 0.3 m off the footprint's left side while the base (held here)
+    makes no progress: the rotate and back-off recoveries run their time standing
+    still; with the person clear they move."""
+
+    def recoveries(person: Person) -> dict[str, list[np.ndarray]]:
+        floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+        cm = dataclasses.replace(floor, people=(person,))
+        nav = Navigator(FP, NavigationSettings(), DT)
+        nav.start(GoalSpec("g", Pose(5.0, 0.0, 0.0), 0.1, 0.1), 0)
+        nav.recoveries = ["rotate", "backoff"]
+        seen: dict[str, list[np.ndarray]] = {}
+        for k in range(round(60 / DT)):
+            out = nav.tick(round(k * DT * 1e9), Pose(0.0, 0.0, 0.0), cm)
+            if out.recovery:
+                seen.setdefault(out.recovery, []).append(out.cmd)
+            if out.state != "active":
+                break
+        return seen
+
+    near = recoveries(Person("person_1", 0.0, FP.half_width + 0.3, None, (0.0, 0.0)))
+    assert set(near) == {"rotate", "backoff"}
+    assert not any(c.any() for cmds in near.values() for c in cmds)
+    far = recoveries(Person("person_1", 0.0, FP.half_width + 3.0, None, (0.0, 0.0)))
+    assert any(c[2] != 0.0 for c in far["rotate"]) and any(c[0] < 0.0 for c in far["backoff"])
+
+
+def test_the_final_turn_at_the_goal_waits_for_a_bystander_inside_the_separation() -> None:
+    """Hall seed 1's shift: at the handover pose the base turned on the spot to the goal's
+    yaw with a walker 0.45 m off the footprint (S_p at rest 0.66 m), swaying 0.06 m/s
+    towards them. At its goal's place, the turn waits for the person to step clear."""
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(3.5, 0.0, math.pi / 2), 0.1, 0.1), 0)
+    person = Person("person_1", 3.5, -(FP.half_width + 0.3), None, (0.0, 0.0))
+    near = dataclasses.replace(floor, people=(person,))
+    held = nav.tick(0, Pose(3.5, 0.0, 0.0), near)
+    assert held.limit.rule == "stop" and not held.cmd.any()
+    gone = dataclasses.replace(person, y=-(FP.half_width + 1.5))
+    clear = nav.tick(
+        round(DT * 1e9), Pose(3.5, 0.0, 0.0), dataclasses.replace(floor, people=(gone,))
+    )
+    assert clear.limit.rule != "stop" and clear.cmd[2] > 0.0  # turning to the goal's yaw
 
 
 def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot() -> None:
