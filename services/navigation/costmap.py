@@ -42,13 +42,15 @@ class CostParams:
 @dataclass(frozen=True)
 class Person:
     """A person on the floor: id, position (m, world), yaw (rad; None when unknown), floor
-    velocity (m/s, world; None while not known: a person just seen)."""
+    velocity (m/s, world; None while not known: a person just seen), and when they were
+    last seen there (sim ns; None: now, or not known: a seen or scanned person's)."""
 
     id: str
     x: float
     y: float
     yaw: float | None = None
     velocity: tuple[float, float] | None = (0.0, 0.0)
+    seen_ns: int | None = None
 
 
 def clearance(occupied: BoolGrid, resolution: float) -> FloatGrid:

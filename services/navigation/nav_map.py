@@ -9,8 +9,10 @@ layer (`people`: the map's people with those perception sees over them, `SeenPeo
 and the lidar's tracks over those, `scan_people`; in the costmap when
 `people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
 `build` (`costmap.build_costmap`); a person the map alone has (the camera has not seen
-them for `CAMERA_FRESH_S`) whose place the lidar sees free (`ScanView.clear_at`), or who
-is inside the robot's footprint, is left out of the layer and said once. The lidar's
+them for `CAMERA_FRESH_S`) whose place the lidar sees free (`ScanView.clear_at`), or saw
+free since the map last saw them there (`cleared`: out of the lidar's field now, in the
+blind wedge beside the trunk), or who is inside the robot's footprint, is left out of
+the layer and said once. The lidar's
 tracks move a little at every scan: the costmap is rebuilt when a person came or went
 or moved `REBUILD_MOVE_M` since the last build, and otherwise only its people (what the
 speed rules read) are the newest.
@@ -48,6 +50,11 @@ CAMERA_FRESH_S = 2.0
 #: the plan's map while the robot goes round by another aisle (the depth layer's 3 s
 #: would let the plan lead back to it every few seconds).
 SCAN_TTL_S = 120.0
+#: m: a map person still this near where the lidar saw their place free, and not seen
+#: by the map since, is not there (the robot turned that place into the blind wedge
+#: beside its trunk, or behind it: hall seed 0's shift held a goal 20 s for a ghost
+#: 0.76 m off the flank, and failed it blocked).
+CLEARED_SAME_M = 0.3
 
 
 class NavMap:
@@ -85,6 +92,8 @@ class NavMap:
         self.views: tuple[ScanView, ...] = ()
         self.pose: Pose | None = None
         self.left_out: dict[str, str] = {}
+        #: Where and when (ns, x, y) the lidar last saw each map person's place free.
+        self.cleared: dict[str, tuple[int, float, float]] = {}
         self.costmap: Costmap | None = None
         #: The sim time the map in use is as of (goals queued before it resolve against it).
         self.map_at = 0
@@ -123,14 +132,21 @@ class NavMap:
         return material
 
     def _absent(self, q: Person) -> bool:
-        """Whether the newest scan or the robot's own body says `q` is not there (said
-        once per person and reason)."""
+        """Whether the newest scan, an earlier one since the map last saw `q`, or the
+        robot's own body says `q` is not there (said once per person and reason)."""
         why = ""
         at = np.array([[q.x, q.y]])
+        cleared = self.cleared.get(q.id)
         if self.pose is not None and distance_to_footprint(self.pose, self.fp, at)[0] <= 0.0:
             why = "inside the robot's footprint"
         elif any(v.clear_at(q.x, q.y) for v in self.views):
             why = "the lidar sees free floor there"
+            self.cleared[q.id] = (self.now, q.x, q.y)
+        elif (
+            cleared is not None and q.seen_ns is not None and q.seen_ns < cleared[0]
+            and math.hypot(q.x - cleared[1], q.y - cleared[2]) <= CLEARED_SAME_M
+        ):  # fmt: skip
+            why = "the lidar saw free floor there after the map last saw them"
         if why and self.left_out.get(q.id) != why:  # said once per person and reason
             self.log.info("%s at (%.2f, %.2f) left out of the people layer: %s", q.id, q.x, q.y,
                           why)  # fmt: skip

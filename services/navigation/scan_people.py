@@ -389,7 +389,7 @@ def merge_scan(people: list[Person], scanned: list[Person], same_m: float) -> li
             continue
         s = scanned[k]
         velocity = s.velocity if s.velocity is not None else people[i].velocity
-        out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity)
+        out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity, seen_ns=None)
         claimed.add(i)
         free.remove(k)
     return out + [scanned[k] for k in free]

@@ -125,4 +125,6 @@ def _person(e: MapEntity) -> Person:
     # default of an entity without one, so it is only trusted when non-zero.
     yaw = e.yaw if e.yaw != 0.0 else None
     vx, vy = e.velocity_in_world
-    return Person(e.id, e.position_in_world[0], e.position_in_world[1], yaw, (vx, vy))
+    return Person(
+        e.id, e.position_in_world[0], e.position_in_world[1], yaw, (vx, vy), e.last_seen_ns
+    )

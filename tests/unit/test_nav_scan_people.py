@@ -6,6 +6,7 @@ radius, 0.2 m apart) and the map's own walls, from the lidar's mount on the base
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -234,6 +235,33 @@ def test_the_nav_map_leaves_out_people_the_lidar_sees_gone_or_inside_the_robot()
         "person_1": "the lidar sees free floor there",
         "person_3": "inside the robot's footprint",
     }
+
+
+def test_a_map_person_whose_place_the_lidar_saw_free_stays_out_once_it_cannot_see_there() -> None:
+    """Hall seed 0's shift: a ghost the map kept 0.76 m off the robot's flank, in the blind
+    wedge beside the trunk, held its goal under the stop rule. The lidar saw that place
+    free before the robot turned: until the map sees them again (or has them elsewhere),
+    they stay out of the layer."""
+    import logging
+
+    m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
+    ghost = Person("person_1", 2.0, -1.5, seen_ns=0)  # last seen there at 0 s
+    m.adopt(_room(), [ghost], 0, 0)
+    front = Pose(0.0, 0.0, 0.0)
+    m.see_scan(_points(front, []), front, S, [_view(front, [])])
+    assert m.people == []  # seen free at 1 s
+    turned = Pose(0.0, 0.0, math.pi)  # the place behind the front lidar now
+    assert not _view(turned, []).clear_at(2.0, -1.5)
+    m.see_scan(_points(turned, []), turned, 2 * S, [_view(turned, [])])
+    assert m.people == []
+    assert m.left_out["person_1"] == "the lidar saw free floor there after the map last saw them"
+    for back in (
+        dataclasses.replace(ghost, seen_ns=3 * S),  # the map saw them there again
+        dataclasses.replace(ghost, x=2.0, y=-2.2),  # the map has them elsewhere now
+        dataclasses.replace(ghost, seen_ns=None),  # seen now (a camera's, a scan track's)
+    ):
+        m.adopt(_room(), [back], 3 * S, 3 * S)
+        assert [q.id for q in m.people] == ["person_1"], back
 
 
 def test_beams_without_a_return_say_nothing_of_who_stands_there() -> None:
