@@ -27,7 +27,7 @@ import numpy as np
 from common import robot
 from common.messages.navigation import NavGoalRequest
 from services.navigation.costmap import Costmap, Person
-from services.navigation.grid import Footprint, Pose
+from services.navigation.grid import Footprint, Pose, footprint_hits, footprint_points
 from services.navigation.planner import GOAL_MARGIN_M, pose_ok
 
 RAY_STEP_RAD = math.radians(1.0)
@@ -111,14 +111,42 @@ def standoff_pose(
         pose = Pose(x + d * math.cos(a), y + d * math.sin(a), math.remainder(a + math.pi, math.tau))
         if pose_ok(costmap, pose, fp, margin):
             return pose
-    sides = (
-        "in any direction"
-        if not bearings
-        else "within {:.0f}° of {}".format(
-            math.degrees(tolerance), ", ".join(f"{math.degrees(b):.0f}°" for b in bearings)
-        )
+    if not bearings:
+        raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) in any direction")
+    wanted = ", ".join(f"{math.degrees(b):.0f}°" for b in bearings)
+    a = bearings[0] + math.pi
+    nearest = Pose(x + d * math.cos(bearings[0]), y + d * math.sin(bearings[0]), a)
+    raise GoalError(
+        f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) within "
+        f"{math.degrees(tolerance):.0f}° of {wanted}: at {wanted.split(',')[0]}, "
+        f"{blocked_by(costmap, nearest, fp, margin)}"
     )
-    raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) {sides}")
+
+
+def blocked_by(costmap: Costmap, pose: Pose, fp: Footprint, margin: float) -> str:
+    """Why `pose_ok` refuses `pose`, for a person: off the map, a lethal cell, or where
+    its footprint meets occupied cells (their centroid) and which layer holds them."""
+    cell = costmap.grid.cell(pose.x, pose.y)
+    if cell is None:
+        return f"({pose.x:.2f}, {pose.y:.2f}) is off the map"
+    local = footprint_points(fp, margin, 0.5 * costmap.grid.resolution)
+    hits = footprint_hits(costmap.occupied, costmap.grid, pose, local)
+    if not hits.any():
+        return (
+            f"({pose.x:.2f}, {pose.y:.2f}) is too near an obstacle (cost {costmap.cost[cell]:.0f})"
+        )
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    pts = local[hits]
+    xy = np.column_stack([pose.x + c * pts[:, 0] - s * pts[:, 1],
+                          pose.y + s * pts[:, 0] + c * pts[:, 1]])  # fmt: skip
+    iy, ix, _ = costmap.grid.cells(xy)
+    static = costmap.grid.occupied[iy, ix]
+    what = "the map's obstacles" if static.all() else "the short-lived layers or people"
+    mx, my = xy.mean(axis=0)
+    return (
+        f"the footprint at ({pose.x:.2f}, {pose.y:.2f}) meets {len(pts)} occupied cells "
+        f"about ({mx:.2f}, {my:.2f}): {what}"
+    )
 
 
 def handover_pose(

@@ -149,6 +149,7 @@ class GoalIntake:
         try:
             resolved = self.resolve(req, cm, pose, req.stamp_ns)
         except GoalInvalid as exc:
+            self.log.info("goal %s refused: %s", type(req.goal).__name__, exc)
             return NavGoalReply(accepted=False, reason=f"invalid_goal: {exc}")
         with self._ticked:
             self._count += 1
