@@ -144,12 +144,14 @@ def test_a_grasp_still_impossible_from_the_new_stance_fails_with_its_reason() ->
     assert_halted(robot)
 
 
-def test_a_stance_navigation_cannot_reach_fails_navigation_failed_saying_so() -> None:
+def test_a_stance_navigation_cannot_reach_fails_the_grasp_saying_why() -> None:
     robot = small_world(
         nav_refuse=lambda g: isinstance(g, ArtifactStandoff) and bool(g.bearings_rad)
     )
     outcome = run(mission(robot, REQUEST, None, stance_plans=1), robot, 4000)
-    assert outcome.state == "failed" and outcome.reason == "navigation_failed", outcome
+    assert outcome.state == "failed" and outcome.reason == "grasp_pose_failed", outcome
+    assert outcome.detail.startswith("no stance along its long faces: "), outcome.detail
+    assert "scripted refusal" in outcome.detail
     assert_halted(robot)
 
 

@@ -158,10 +158,14 @@ class NavigateTo(MissionBehaviour):
         stage: str,
         watch_held: bool = False,
         name: str = "",
+        fails_as: tuple[MissionReason, str] | None = None,
     ) -> None:
         super().__init__(name or f"navigate_to_{kind}", ctx, stage)
         self.kind = kind
         self.watch_held = watch_held
+        #: What its failure is for the request, and what it says first (a walk that is a
+        #: means to another end: to a stance for a grasp, `grasp_pose_failed`).
+        self.fails_as = fails_as
         self.goal_id = ""
         self.active = False
         self.error: PortError | None = None
@@ -201,6 +205,11 @@ class NavigateTo(MissionBehaviour):
             )
         side = self.get(SIDE)
         return PersonHandover(person_id=str(self.get(PERSON)), bearing_rad=side_bearing(side))
+
+    def fail(self, reason: MissionReason, detail: str) -> Status:
+        if self.fails_as is None or reason == "grasp_lost":
+            return super().fail(reason, detail)
+        return super().fail(self.fails_as[0], f"{self.fails_as[1]}{detail}")
 
     def _dropped(self) -> bool:
         """The object fell from the gripper near the robot: not walked to at its map place."""
