@@ -20,8 +20,9 @@ than the paper's identity rotation:
   (`TOP_GRASP_OFFSET_M`, `TOP_CLOSE_IN_M`). A box whose top grasp lies out of the arm's reach
   (`common.robot.tcp_reach_gap` over `reach_slack_m`: a tall box on a bench) is held
   from the side instead: x along its long faces (the sign away from the shoulder),
-  nose-down, the jaws closing across its shorter side, at half its visible height — if
-  those faces are within `box_side_max_off_rad` of the line of sight; otherwise it is
+  nose-down, the jaws closing across its shorter side, at half its visible height, its
+  near end `BOX_SIDE_DEPTH_M` in, wide open and closed in as a top grasp — if those
+  faces are within `box_side_max_off_rad` of the line of sight; otherwise it is
   refused with the reason and the yaw of those faces (`GraspPoseError.stance_yaw_rad`):
   the mission walks to a stance along them and tries again.
 
@@ -77,6 +78,13 @@ TOP_GRASP_OFFSET_M = 0.012
 TOP_CLOSE_IN_M = 0.014
 #: Where a box too high for a top grasp is held from the side (0 bottom, 1 top).
 BOX_SIDE_HEIGHT = 0.5
+#: How far (m) a box held from the side, along its long faces, goes in behind the TCP:
+#: its near end that far in, not its middle. The jaws open take a 5.9 cm box only 3.45 cm
+#: behind the TCP; held at its middle, hall seed 1's 13.7 cm box met the fixed jaw with
+#: the TCP 11 cm out and the reach stopped 10.2 cm short (the whole-body controller in
+#: MuJoCo: from 2.5 cm in, wide open and closed in as a top grasp, it reached within
+#: 4-6 mm, held it and lifted it, from along its long faces to 23° off them).
+BOX_SIDE_DEPTH_M = 0.025
 #: The side grasps' pitches tried, from `GraspParams.pitch_rad` up (rad).
 PITCH_STEP_RAD = 0.05
 
@@ -116,7 +124,9 @@ class GraspParams:
     faces lie within box_side_max_off_rad of the line of sight; else it is refused (hall
     seed 15: a 19 cm box on a 0.94 m bench, short side to the robot: the top grasp stopped
     11.7 cm short with the gripper on the bench; a side grasp 69° off, level, met the
-    bench with the forearm, nose-down, ended 1.3-3 cm / 4-15° off in three tries)."""
+    bench with the forearm, nose-down, ended 1.3-3 cm / 4-15° off in three tries; held
+    `BOX_SIDE_DEPTH_M` in, hall seed 1's box was held from along its faces to 23° off
+    them, not from 30°: 25°, and the mission walks to a stance along them for more)."""
 
     pitch_rad: float = 0.0
     comfort_gap_m: float = 0.02
@@ -127,7 +137,7 @@ class GraspParams:
     max_width_m: float = 0.075
     width_slack_m: float = 0.015
     reach_slack_m: float = 0.06
-    box_side_max_off_rad: float = math.radians(45.0)
+    box_side_max_off_rad: float = math.radians(25.0)
 
     def __post_init__(self) -> None:
         lo, hi = GRASP_PITCH_RAD
@@ -334,9 +344,11 @@ def grasp_from_detection(
             z = bottom + BOX_SIDE_HEIGHT * extent[2]
             centre = axis.copy()
             centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
+            half_long = 0.5 * float(max(extent[0], extent[1]))
+            centre[:2] -= max(0.0, half_long - BOX_SIDE_DEPTH_M) * along
             R = side_rotation(along, GRASP_PITCH_RAD[1])
-    from_above = kind == "top"
-    if from_above:  # down in the wide-open jaws, the box's middle toward the moving jaw
+    wide = det.class_name in TOP_GRASP_CLASSES  # a box, from above or from the side
+    if wide:  # in the wide-open jaws, the box's middle toward the moving jaw
         centre -= TOP_GRASP_OFFSET_M * R[:, 2]
     return GraspPlan(
         H=make_T(R, centre),
@@ -345,8 +357,8 @@ def grasp_from_detection(
         pregrasp_m=p.pregrasp_m,
         kind=kind,
         stamp_ns=stamp_ns,
-        jaw="wide" if from_above else "open",
-        close_in_m=TOP_CLOSE_IN_M if from_above else 0.0,
+        jaw="wide" if wide else "open",
+        close_in_m=TOP_CLOSE_IN_M if wide else 0.0,
     )
 
 

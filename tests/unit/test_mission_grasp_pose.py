@@ -14,6 +14,7 @@ from common.messages.perception import Detection
 from common.messages.wbc import Reach
 from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
+    BOX_SIDE_DEPTH_M,
     SIDE_GRASP_DEPTH,
     TOP_CLOSE_IN_M,
     TOP_GRASP_OFFSET_M,
@@ -271,8 +272,13 @@ def test_a_box_too_high_for_a_top_grasp_is_held_from_the_side_across_its_short_s
     assert approach[:2] @ sight[:2] > 0.0  # away from the robot
     assert abs(abs(R[:, 2] @ short_side) - 1.0) < 1e-9  # the jaws close across 6.2 cm
     assert np.isclose(H[2, 3], high.axis_in_world[2])  # half way up
-    assert np.allclose(H[:2, 3], np.array(high.axis_in_world)[:2], atol=1e-9)
-    assert plan.jaw == "open" and plan.close_in_m == 0.0
+    # its near end BOX_SIDE_DEPTH_M in (not its middle: the jaws have no room), its
+    # middle toward the moving jaw, wide open, then closed in: as a top grasp
+    back = np.array(high.axis_in_world)[:2] - H[:2, 3]
+    in_along = 0.5 * extent[0] - BOX_SIDE_DEPTH_M
+    assert back @ level == pytest.approx(in_along, abs=1e-9)
+    assert back @ R[:2, 2] == pytest.approx(TOP_GRASP_OFFSET_M, abs=1e-9)
+    assert plan.jaw == "wide" and plan.close_in_m == TOP_CLOSE_IN_M
 
 
 def test_a_low_side_grasp_comes_from_a_little_above_at_the_least_pitch_that_reaches() -> None:

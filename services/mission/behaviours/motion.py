@@ -85,8 +85,10 @@ from services.mission.room_behind import room_behind
 PUT_BACK_TOL_M = 0.05
 PUT_BACK_TOL_RAD = 0.08
 #: A stance for a grasp along a box's long faces (`STANCE`): the standoff's bearing
-#: from the box within this of that line (rad); the grasp takes them 45° off at most.
-STANCE_TOL_RAD = math.radians(30.0)
+#: from the box within this of that line (rad); the grasp takes them 25° off at most
+#: (`GraspParams.box_side_max_off_rad`: the approach's own drift and the fit's error
+#: take the rest).
+STANCE_TOL_RAD = math.radians(20.0)
 #: m: a person's usual place is reached within this (any heading: the robot looks round).
 LOOK_AT_TOL_M = 0.5
 #: A person seen within this (s) and slower than this (m/s) stands where the map has them.
