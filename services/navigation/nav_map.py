@@ -147,7 +147,10 @@ class NavMap:
             and math.hypot(q.x - cleared[1], q.y - cleared[2]) <= CLEARED_SAME_M
         ):  # fmt: skip
             why = "the lidar saw free floor there after the map last saw them"
-        if why and self.left_out.get(q.id) != why:  # said once per person and reason
+        said = self.left_out.get(q.id, "")
+        # said once per person and reason (the lidar's now and since are one: the trot's
+        # sway takes a place in and out of the field from scan to scan)
+        if why and said != why and not ("lidar" in said and "lidar" in why):
             self.log.info("%s at (%.2f, %.2f) left out of the people layer: %s", q.id, q.x, q.y,
                           why)  # fmt: skip
             self.left_out[q.id] = why

@@ -254,7 +254,7 @@ def test_a_map_person_whose_place_the_lidar_saw_free_stays_out_once_it_cannot_se
     assert not _view(turned, []).clear_at(2.0, -1.5)
     m.see_scan(_points(turned, []), turned, 2 * S, [_view(turned, [])])
     assert m.people == []
-    assert m.left_out["person_1"] == "the lidar saw free floor there after the map last saw them"
+    assert m.left_out["person_1"] == "the lidar sees free floor there"  # said once
     for back in (
         dataclasses.replace(ghost, seen_ns=3 * S),  # the map saw them there again
         dataclasses.replace(ghost, x=2.0, y=-2.2),  # the map has them elsewhere now
