@@ -395,5 +395,7 @@ def test_the_mission_receives_what_its_params_held() -> None:
         max_width_m=0.075,
         width_slack_m=0.015,
         reach_slack_m=0.06,
-        box_side_max_off_rad=math.radians(45.0),
+        # 45° until a box held from the side by its near end (hall seed 1's shift) was
+        # held from 23° off its long faces and not from 30°
+        box_side_max_off_rad=math.radians(25.0),
     )
