@@ -16,9 +16,7 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   hall's shift: its separation violations at 0.05-0.12 m/s came with the robot turning
   on the spot at 0.1-0.8 rad/s beside a person walking past); the goal's final turn on
   the spot (no path left to follow) is a stop within a bystander's protective
-  separation at rest too; a stop held `STEP_AWAY_AFTER_S` for one person steps the base
-  straight away from them, slowly, where the people rules and the body guard let it
-  (a path along a person standing beside the robot never leads away from them);
+  separation at rest too;
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
   follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad (a turn the
   body guard sends the other way round counts from where it began);
@@ -53,7 +51,7 @@ from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
-from services.navigation.people import NO_LIMIT, SpeedLimit, bearing, people_limit
+from services.navigation.people import NO_LIMIT, SpeedLimit, people_limit
 from services.navigation.planner import Plan, PlanError, plan
 
 Recovery = Literal["", "clear", "rotate", "backoff"]
@@ -67,13 +65,6 @@ ROTATE_S = 3.0
 ROTATE_RATE = 0.5
 BACKOFF_S = 1.5
 BACKOFF_SPEED = 0.15
-#: Held by the protective stop this long (s) for one person, the base steps straight
-#: away from them at this speed (m/s) while the people rules and the body guard let it:
-#: the rule lets a path leading away move, but a path along a person standing beside the
-#: robot never does (hall seed 0's shift: person_17 stood 0.43 m off the flank, S_p at
-#: rest 0.44 m, and the goal waited out its recoveries, 96 s, and failed blocked).
-STEP_AWAY_AFTER_S = 2.0
-STEP_AWAY_MPS = 0.1
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
@@ -132,8 +123,6 @@ class Navigator:
         self.total_m = 0.0
         self.limit_rule = ""
         self.guarded = ""
-        #: Since when (ns) the protective stop has held, and for whom.
-        self.stop_since: tuple[int, str] | None = None
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
@@ -152,7 +141,6 @@ class Navigator:
         self.progress_ns = t_ns
         self.total_m = 0.0
         self.limit_rule = ""
-        self.stop_since = None
 
     def retarget(self, pose: Pose, person_xy: tuple[float, float], t_ns: int) -> None:
         """The active goal's pose moves (a handover: the person's estimate moved); the
@@ -276,10 +264,8 @@ class Navigator:
         self.cmd = out.cmd
         self.guarded = out.guarded
         if limit.rule == "stop":  # the protective stop: at rest, no turn on the spot either
-            self.cmd = self._step_away(t_ns, pose, cm, limit, guard)
+            self.cmd = np.zeros(3)
             f.cmd = self.cmd.copy()
-        else:
-            self.stop_since = None
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
             return self._out(limit, new_plan)
@@ -295,32 +281,6 @@ class Navigator:
         self.blocked_since = None
         return self._out(limit, new_plan)
 
-    def _step_away(
-        self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit, guard: BodyGuard
-    ) -> np.ndarray:
-        """Under the protective stop: at rest, or, once it has held `STEP_AWAY_AFTER_S` for
-        the same person, a slow step straight away from them (the rule's own exception: a
-        robot moving away from a person has no speed towards them) when the people rules
-        allow that direction (nobody else there) and the body guard the step."""
-        if self.stop_since is None or self.stop_since[1] != limit.person_id:
-            self.stop_since = (t_ns, limit.person_id)
-        person = next((q for q in cm.people if q.id == limit.person_id), None)
-        if person is None or t_ns - self.stop_since[0] < STEP_AWAY_AFTER_S * NS_PER_S:
-            return np.zeros(3)
-        n = bearing(pose, self.fp, (person.x, person.y))
-        away = (-n[0], -n[1])
-        handover = self.goal.handover_id if self.goal else ""
-        allowed = people_limit(pose, away, cm.people, self.fp, self.n.people, self.top_mps,
-                               handover, True)  # fmt: skip
-        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-        speed = min(STEP_AWAY_MPS, allowed.speed)
-        step = np.array([c * away[0] + s * away[1], -s * away[0] + c * away[1], 0.0]) * speed
-        clear = cm.cost_at(pose.x + 0.3 * away[0], pose.y + 0.3 * away[1]) >= 0
-        if allowed.rule == "stop" or speed <= 0.0 or not clear or not guard.ok(step):
-            return np.zeros(3)
-        self.detail = f"stepping away from {limit.person_id}"
-        return step
-
     def _blocked(
         self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit, new_plan: Plan | None
     ) -> TickOutput:
@@ -330,8 +290,7 @@ class Navigator:
         wait_s = self.n.blocked_timeout_s + (self.n.people.wait_s if who else 0.0)
         if t_ns - self.blocked_since < wait_s * NS_PER_S:
             if who and t_ns - self.blocked_since >= self.n.blocked_timeout_s * NS_PER_S:
-                doing = "stepping away from" if self.cmd.any() else "waiting for"
-                self.detail = f"{doing} {who}" + ("" if self.cmd.any() else " to pass")
+                self.detail = f"waiting for {who} to pass"
             return self._out(limit, new_plan)
         if not self.recoveries:
             reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
