@@ -114,11 +114,11 @@ def standoff_pose(
     if not bearings:
         raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) in any direction")
     wanted = ", ".join(f"{math.degrees(b):.0f}°" for b in bearings)
-    a = bearings[0] + math.pi
-    nearest = Pose(x + d * math.cos(bearings[0]), y + d * math.sin(bearings[0]), a)
+    b = bearings[0]
+    nearest = Pose(x + d * math.cos(b), y + d * math.sin(b), b + math.pi)
     raise GoalError(
         f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) within "
-        f"{math.degrees(tolerance):.0f}° of {wanted}: at {wanted.split(',')[0]}, "
+        f"{math.degrees(tolerance):.0f}° of {wanted}: at {math.degrees(b):.0f}°, "
         f"{blocked_by(costmap, nearest, fp, margin)}"
     )
 
@@ -132,9 +132,7 @@ def blocked_by(costmap: Costmap, pose: Pose, fp: Footprint, margin: float) -> st
     local = footprint_points(fp, margin, 0.5 * costmap.grid.resolution)
     hits = footprint_hits(costmap.occupied, costmap.grid, pose, local)
     if not hits.any():
-        return (
-            f"({pose.x:.2f}, {pose.y:.2f}) is too near an obstacle (cost {costmap.cost[cell]:.0f})"
-        )
+        return f"({pose.x:.2f}, {pose.y:.2f}) lies on a lethal cell (too near an obstacle)"
     c, s = math.cos(pose.yaw), math.sin(pose.yaw)
     pts = local[hits]
     xy = np.column_stack([pose.x + c * pts[:, 0] - s * pts[:, 1],

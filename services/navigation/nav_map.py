@@ -55,6 +55,10 @@ SCAN_TTL_S = 120.0
 #: beside its trunk, or behind it: hall seed 0's shift held a goal 20 s for a ghost
 #: 0.76 m off the flank, and failed it blocked).
 CLEARED_SAME_M = 0.3
+#: Why a map person is left out for the lidar: it sees their place free now, or it saw
+#: it free since the map last saw them.
+LIDAR_FREE = "the lidar sees free floor there"
+LIDAR_FREED = "the lidar saw free floor there after the map last saw them"
 
 
 class NavMap:
@@ -140,17 +144,17 @@ class NavMap:
         if self.pose is not None and distance_to_footprint(self.pose, self.fp, at)[0] <= 0.0:
             why = "inside the robot's footprint"
         elif any(v.clear_at(q.x, q.y) for v in self.views):
-            why = "the lidar sees free floor there"
+            why = LIDAR_FREE
             self.cleared[q.id] = (self.now, q.x, q.y)
         elif (
             cleared is not None and q.seen_ns is not None and q.seen_ns < cleared[0]
             and math.hypot(q.x - cleared[1], q.y - cleared[2]) <= CLEARED_SAME_M
         ):  # fmt: skip
-            why = "the lidar saw free floor there after the map last saw them"
+            why = LIDAR_FREED
         said = self.left_out.get(q.id, "")
         # said once per person and reason (the lidar's now and since are one: the trot's
         # sway takes a place in and out of the field from scan to scan)
-        if why and said != why and not ("lidar" in said and "lidar" in why):
+        if why and said != why and {said, why} != {LIDAR_FREE, LIDAR_FREED}:
             self.log.info("%s at (%.2f, %.2f) left out of the people layer: %s", q.id, q.x, q.y,
                           why)  # fmt: skip
             self.left_out[q.id] = why
