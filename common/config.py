@@ -551,9 +551,11 @@ class ApproachSettings(_Section):
     tol_theta_rad: Positive = 0.05
     #: Both errors within tolerance this long: arrived.
     settle_s: Positive = 0.6
-    #: Blocked short of d_opt (a hip against the support): arrived when the distance error
-    #: is at most `blocked_slack_m` and no sighting came `progress_m` nearer for `stall_s`.
-    blocked_slack_m: Positive = 0.12
+    #: Blocked short of d_opt (the legs stopped short of the support's front): arrived when
+    #: the distance error is at most `blocked_slack_m` and no sighting came `progress_m`
+    #: nearer for `stall_s`. 0.17 m: what a hip pressed against the front reached before
+    #: the base stopped 5 cm short of it (an object 0.4 m deep on a bench).
+    blocked_slack_m: Positive = 0.17
     progress_m: Positive = 0.01
     stall_s: Positive = 4.0
     #: A sighting older than this no longer drives the base; none this long: re-acquire.

@@ -116,6 +116,7 @@ __all__ = [  # the description's names, re-exported, and this module's
     "joint_damping",
     "joint_frictionloss",
     "load_pinocchio",
+    "posture_front_m",
     "standing_q",
     "tcp_reach_gap",
 ]
@@ -481,6 +482,12 @@ def floor_view_m(posture: str = "look", height_m: float = 0.1, margin_deg: float
     lowest = down + math.radians(CAMERA_MOUNTS["camera_wrist"].fovy_deg / 2 - margin_deg)
     ahead = float(T[0, 3] - T_base[0, 3])
     return ahead + float(T[2, 3] - height_m) / math.tan(lowest)
+
+
+def posture_front_m(posture: str) -> float:
+    """How far ahead of the base (m) the robot standing with its arm in `posture` reaches:
+    its legs' front (0.435 m) or the arm's, whichever is farther."""
+    return _footprint(posture)[1]
 
 
 def _footprint_half_extents() -> tuple[float, float]:

@@ -114,6 +114,14 @@ class NavStatus(Message, frozen=True):
         math.inf, math.inf, math.inf, math.inf,
     )  # fmt: skip
     cap_person: str = ""
+    #: How far from the base origin (m; inf: none within `body_guard.ROOM_REACH_M` of
+    #: the footprint) the static world navigation knows (the map's obstacles and the
+    #: depth layer's) lies ahead, behind, left, right, in the band the body sweeps along
+    #: that axis (`body_guard.clearance`), for the same drivers: less the body's extent
+    #: that way, the room they have. Negative: an obstacle under the body.
+    clear_m: tuple[float, float, float, float] = (
+        math.inf, math.inf, math.inf, math.inf,
+    )  # fmt: skip
 
 
 class NavPath(Message, frozen=True):

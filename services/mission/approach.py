@@ -12,8 +12,10 @@ acceleration limits. The gains, limits and times are settings (`ApproachSettings
 - arrived: both errors within tolerance on every sighting for `settle_s`; latched (zero
   command) until `reset`. Or blocked short of d_opt: the heading within tolerance, the
   distance within `blocked_slack_m` beyond d_opt, and no sighting `progress_m` nearer
-  than the nearest one for `stall_s` while tracking (a hip against the support's front:
-  a can 11 cm deep on a bench, seen at 0.77 m for 36 s, failed on the 40 s timeout).
+  than the nearest one for `stall_s` while tracking (the legs stopped short of the
+  support's front: the mission's commands keep the body off the static world, see
+  `robot.within_room`; before, a hip pressed against it: a can 11 cm deep on a bench,
+  seen at 0.77 m for 36 s, failed on the 40 s timeout).
   The arm's comfortable side grasps span d_opt ± 0.28 m (`common.robot`), so a base a
   few cm short still grasps comfortably; the reason says how far short it stopped.
 - reacquiring: no sighting for `lost_after_s`: turn toward the last seen bearing (as

@@ -18,7 +18,12 @@ Nav cancels go out at once. A Reach or a Posture sent while a mapped person stan
 The mission's own cmd_vel (the approach, the back-off, the look round) is held within
 the speed and separation monitor's caps that navigation publishes on `nav/status` for
 each of the base's axes (`within_caps`): navigation's people, lidar tracks included,
-guard every base motion, not only its goals.
+guard every base motion, not only its goals. It also stops short of the static world
+(`within_room`): navigation's clearance along each axis less the body's extent, the front
+that of the arm's last named posture (the legs' in `look`, the approach's: 0.09 m less
+far forward than the stowed gripper). Stopped short of a support, the approach makes no
+progress and ends as blocked, as it did with a hip against the support's front, without
+the touch.
 """
 
 from __future__ import annotations
@@ -55,6 +60,7 @@ from common.messages.wbc import (
     ArmGoal,
     CmdVel,
     GoalStatus,
+    Grasp,
     Posture,
     Reach,
     WbcMode,
@@ -62,6 +68,7 @@ from common.messages.wbc import (
     WbcStatus,
 )
 from common.messages.world import SupportSurface
+from common.robot import Footprint, posture_front_m
 from common.sightings import pick_detection
 from services.mission.ports import Unavailable, WristSighting
 
@@ -87,12 +94,41 @@ def within_caps(cmd: Vel, caps: tuple[float, ...] | None) -> tuple[Vel, bool]:
     return (cx, cy, cw), (cx, cy, cw) != (vx, vy, wz)
 
 
+def within_room(
+    cmd: Vel, clear: tuple[float, ...] | None, body: tuple[float, float, float, float]
+) -> tuple[Vel, bool]:
+    """(vx, vy, ωz) with the translation slowed to stop `ROOM_KEEP_M` short of the static
+    world, and whether it was cut: along the axis it moves on, at most the room left
+    (navigation's clearance, `NavStatus.clear_m`, less the body's extent `body` that way:
+    ahead, behind, left, right; None: none known) less the keep, over `ROOM_TIME_S`.
+    Turns are not cut: the mission turns at a support only to face what stands on it."""
+    if clear is None:
+        return cmd, False
+    ahead, behind, left, right = (c - e for c, e in zip(clear, body, strict=True))
+    vx, vy, wz = cmd
+
+    def most(room_m: float) -> float:
+        return max(0.0, room_m - ROOM_KEEP_M) / ROOM_TIME_S
+
+    cx = min(vx, most(ahead)) if vx > 0.0 else max(vx, -most(behind))
+    cy = min(vy, most(left)) if vy > 0.0 else max(vy, -most(right))
+    return (cx, cy, wz), (cx, cy) != (vx, vy)
+
+
+def _metres(values: tuple[float, ...] | None) -> str:
+    return "none" if values is None else "(" + ", ".join(f"{v:.2f}" for v in values) + ")"
+
+
 NAME = "mission"
 WRIST = "camera_wrist"
 #: Refusals that mean "no such thing" rather than "cannot answer now".
 _NOT_FOUND = ("unknown_id", "invalid")
 #: Wall seconds the floor plan's supports may take (the map's first answer asks the sim).
 SUPPORTS_TIMEOUT_S = 10.0
+#: m the body stops short of the static world, and s to close the rest at most (the
+#: speed cap is the room left over this time): 0.1 m/s at 0.12 m of room.
+ROOM_KEEP_M = 0.02
+ROOM_TIME_S = 1.0
 
 
 class BusRobot:
@@ -134,6 +170,13 @@ class BusRobot:
         self._cmd = (0.0, 0.0, 0.0)
         self._held = ""  # who the last command was held back for
         self._mode: tuple[WbcModeName, str] | None = None
+        #: The arm's last named posture (None: a reach since, or none yet) and the body's
+        #: extent in it (ahead, behind, left, right: the stowed footprint's, the front
+        #: the posture's): what `within_room` keeps off the static world.
+        self._posture: str | None = None
+        fp = Footprint.stowed()
+        self._body = (fp.front, fp.back, fp.half_width, fp.half_width)
+        self._roomed = False  # whether the last command was cut short of the world
 
     # -- the tick -------------------------------------------------------------------------
 
@@ -260,7 +303,15 @@ class BusRobot:
     def command_velocity(self, vx: float, vy: float, wz: float) -> str:
         status = self.nav.at(self._t - self.nav_latency_ns)
         caps = status.caps_mps if status is not None else None
-        self._cmd, held = within_caps((float(vx), float(vy), float(wz)), caps)
+        capped, held = within_caps((float(vx), float(vy), float(wz)), caps)
+        clear = status.clear_m if status is not None else None
+        self._cmd, roomed = within_room(capped, clear, self._body)
+        if roomed != self._roomed:
+            log.info("t=%.2f s the base %s: (%.2f, %.2f) m/s asked, clearance %s m, body %s m "
+                     "(arm in %s)", self._t / 1e9,
+                     "stops short of the world" if roomed else "has room again", vx, vy,
+                     _metres(clear), _metres(self._body), self._posture or "a reach")  # fmt: skip
+            self._roomed = roomed
         if not held:
             self._held = ""
             return ""
@@ -290,6 +341,11 @@ class BusRobot:
             H_map = np.asarray(goal.H, dtype=float).reshape(4, 4)
             H = self.map_frame.to_odom(H_map, goal.stamp_ns, self._t)
             goal = msgspec.structs.replace(goal, H=tuple(H.ravel().tolist()))
+        if isinstance(goal, (Posture, Reach, Grasp)):
+            fp = Footprint.stowed()  # after a reach: the stowed front (the next is stow)
+            self._posture = goal.name if isinstance(goal, Posture) else None
+            front = posture_front_m(goal.name) if isinstance(goal, Posture) else fp.front
+            self._body = (front, fp.back, fp.half_width, fp.half_width)
         if isinstance(goal, (Reach, Posture)) and self.arm_slow_speed < goal.speed:
             near = self.person_near(self.arm_slow_m)
             if near:

@@ -30,6 +30,14 @@ step straight away from where the body touches, or from the nearest obstacle wit
 `ROOM_M` (hall seed 5: walked 2-3 cm along a bench, every turn and the walk on refused,
 it stood until the goal failed); else it stands. A robot that can do none is blocked,
 and the navigator's recoveries (themselves guarded) and replans take over.
+
+What drives the base without a goal (the mission's visual approach, its back-off) is not
+rolled out here; it gets `clearance`: how far from the base the nearest obstacle lies
+along each of the base's axes, in the band the body sweeps (up to `ROOM_REACH_M` beyond
+the footprint), published on `nav/status` with the people caps, so the mission slows and
+stops its body short of the world
+(hall seed 0's shift: the approach to a bottle deep on a bench pressed the front hip into
+the bench for 2 s until its stall gave up, five contacts).
 """
 
 from __future__ import annotations
@@ -60,6 +68,8 @@ SWEEP_STEP_RAD = 0.1
 #: the base, the side is 0.24 m off it): an obstacle this near is stepped away from when
 #: nothing else is let through (`away`).
 ROOM_M = 0.45
+#: m: how far beyond the footprint `clearance` looks along each axis; farther is free (inf).
+ROOM_REACH_M = 0.5
 
 
 class BodyGuard:
@@ -124,6 +134,35 @@ class BodyGuard:
             yaws = self.pose.yaw + np.linspace(turn_rad / n, turn_rad, n)
             poses += [Pose(self.pose.x, self.pose.y, float(y)) for y in yaws]
         return all(self._touching(p.x, p.y, p.yaw) <= self.now for p in poses)
+
+
+def clearance(
+    solid: BoolGrid, grid: Grid, fp: Footprint, pose: Pose, reach_m: float = ROOM_REACH_M
+) -> tuple[float, float, float, float]:
+    """How far (m) from the base origin the nearest cell of `solid` lies ahead, behind,
+    left and right within the band the footprint sweeps moving that way (its width, or
+    its length, grown by `MARGIN_M` and half a cell: a cell is its centre here), less
+    that growth; inf where none lies within `reach_m` of the footprint. What drives the
+    base subtracts the body's own extent along the axis (the arm's posture changes the
+    front): the room it has. A cell under the body counts where it lies, so the body
+    may move only off it."""
+    grow = MARGIN_M + 0.5 * grid.resolution
+    near = _near_cells(solid, grid, fp, pose, reach_m + grow)
+    if near is None:
+        return (math.inf,) * 4
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    dx, dy = near[0][:, 0] - pose.x, near[0][:, 1] - pose.y
+    u, v = c * dx + s * dy, -s * dx + c * dy
+    along = np.abs(v) < fp.half_width + grow
+    across = (u > -fp.back - grow) & (u < fp.front + grow)
+    gaps = (
+        u[along & (u > 0.0)],
+        -u[along & (u < 0.0)],
+        v[across & (v > 0.0)],
+        -v[across & (v < 0.0)],
+    )
+    out = [float(g.min()) - grow if g.size else math.inf for g in gaps]
+    return out[0], out[1], out[2], out[3]
 
 
 def _near_cells(

@@ -46,6 +46,7 @@ from common.messages.sim import CameraFrame, LaserScan, Odom
 from common.messages.wbc import CmdVel
 from common.scan import scan_points
 from common.service import Service
+from services.navigation.body_guard import clearance
 from services.navigation.costmap import CostParams
 from services.navigation.depth import DepthFeed
 from services.navigation.grid import Footprint, Pose
@@ -101,6 +102,8 @@ class NavNode:
         self.nav = Navigator(self.fp, n, self.period_s)
         #: The caps on the base's axes for other drivers (`people.base_caps`), as published.
         self.caps: Caps = (math.inf,) * 4
+        #: The static world's clearance along the base's axes (`body_guard.clearance`).
+        self.clear: Caps = (math.inf,) * 4
         self.cap_person = ""
         self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
         self.odom = bus.latest(keys.odom, Odom, history=16)
@@ -212,6 +215,7 @@ class NavNode:
                               f"{said} m/s ({person}, {tight.distance_m:.2f} m)" if person
                               else "none")  # fmt: skip
         self.caps, self.cap_person = caps, person
+        self.clear = clearance(cm.solid, cm.grid, self.fp, pose)
 
     def _scan(self, b: int, pose: Pose, T_map_base: np.ndarray) -> bool:
         """The lidars' scans stamped b (at their rate) into the people layer, the front's
@@ -272,7 +276,7 @@ class NavNode:
             state = "active" if queued else self.nav.state
             status = NavStatus(
                 stamp_ns=b, goal_id=goal_id, state=state, detail=detail,
-                caps_mps=caps, cap_person=person,
+                caps_mps=caps, cap_person=person, clear_m=self.clear,
             )  # fmt: skip
             self.status_pub.put(status)
             return
@@ -295,6 +299,7 @@ class NavNode:
                 remaining_m=out.remaining_m,
                 caps_mps=caps,
                 cap_person=person,
+                clear_m=self.clear,
             )
         )
 
