@@ -128,7 +128,7 @@ def places_to_look(
         add((x, y), f"a {class_name} seen there {ago:.0f} s ago ({a.id} at ({x:.2f}, {y:.2f}))")
     for s in sorted(supports, key=lambda s: math.dist(s.centre_xy, robot_xy)):
         if s.id not in covered:
-            add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, not looked at yet")
+            add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, a support")
     return out
 
 

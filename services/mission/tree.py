@@ -16,7 +16,8 @@
               next_instance (Recover: object_not_found | navigation_failed |
                              blocked_by_person,
                              budget max_candidates - 1, while candidates remain; then,
-                             once, object_not_found: a search, when search_places)
+                             once, object_not_found: a search, when search_places; what
+                             it found missed, the search goes on, up to twice)
                 find_object (sequence)
                   navigate_to_object: look_elsewhere (only when a search is asked: the
                                       places the object may be now, walked with the
@@ -86,6 +87,7 @@ from services.mission.behaviours.base import (
     PERSON,
     REQUEST,
     SEARCH,
+    SEARCH_LEFT,
     SEARCHED,
     SIDE,
     STANCE,
@@ -120,7 +122,7 @@ from services.mission.behaviours.request import (
     StillHolding,
     WaitForRequest,
 )
-from services.mission.behaviours.search import LookElsewhere
+from services.mission.behaviours.search import MAX_RESUMES, LookElsewhere
 from services.mission.recovery import Recover
 from services.mission.targets import dropped_at
 
@@ -170,7 +172,8 @@ def build_tree(ctx: Context) -> Sequence:
     """The tree of the module docstring, its leaves bound to `ctx`."""
     s = ctx.settings
     bb = blackboard(
-        "recovery", (CANDIDATE, GRASP_PLAN, DETECTION, TARGET, SEARCH, SEARCHED, STANCE)
+        "recovery",
+        (CANDIDATE, GRASP_PLAN, DETECTION, TARGET, SEARCH, SEARCHED, SEARCH_LEFT, STANCE),
     )
 
     def next_candidate(failure: Failure) -> bool:
@@ -180,8 +183,12 @@ def build_tree(ctx: Context) -> Sequence:
         if index < len(candidates):
             bb.set(CANDIDATE, index)
             return True
-        # Every candidate missed at its place: look elsewhere, once per request.
-        if failure.reason != "object_not_found" or read(bb, SEARCHED) or not s.search_places:
+        # Every candidate missed at its place: look elsewhere, once per request; what
+        # the search found missed too, the search goes on where it stopped (at most
+        # `MAX_RESUMES` times: `behaviours.search`).
+        if failure.reason != "object_not_found" or not s.search_places:
+            return False
+        if read(bb, SEARCHED) and read(bb, SEARCH_LEFT) is None:
             return False
         bb.set(SEARCH, True)
         bb.set(SEARCHED, True)
@@ -340,7 +347,7 @@ def build_tree(ctx: Context) -> Sequence:
         "next_instance",
         _seq("find_object", navigate, at_the_object),
         NEXT_INSTANCE_REASONS,
-        max(0, s.max_candidates - 1) + (1 if s.search_places else 0),
+        max(0, s.max_candidates - 1) + (1 + MAX_RESUMES if s.search_places else 0),
         ctx.decide,
         next_candidate,
     )

@@ -42,6 +42,7 @@ GRASP_PLAN = "grasp_plan"  # a GraspPlan
 FAILURE = "failure"  # Failure | None
 SEARCH = "search"  # bool: look elsewhere before the next try (every candidate missed)
 SEARCHED = "searched"  # bool: this request looked elsewhere already
+SEARCH_LEFT = "search_left"  # SearchLeft | None: a search that stopped at a find, the rest
 UNSEEN = "unseen"  # bool: the person was not seen at their mapped place: look round
 KNOWN = "known"  # list[str]: the map's artifacts of the class when the request began
 LOOK_AT = "look_at"  # SeenPlace | None: the person's usual place walked to next, to look
@@ -49,7 +50,7 @@ LOOKED = "looked"  # list[tuple[float, float]]: where the robot looked round for
 STANCE = "stance"  # float | None: the world yaw of the line of sight the grasp needs (±)
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
-    SEARCH, SEARCHED, UNSEEN, KNOWN, LOOK_AT, LOOKED, STANCE,
+    SEARCH, SEARCHED, SEARCH_LEFT, UNSEEN, KNOWN, LOOK_AT, LOOKED, STANCE,
 )  # fmt: skip
 
 

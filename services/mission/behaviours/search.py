@@ -12,11 +12,20 @@ saying `arm_look`). After every tick it asks the map whether the object is there
 `KNOWN`): found, the walk stops and the found artifact becomes the only
 candidate (SUCCESS: the fetch goes on to it); the route walked without it,
 `object_not_found` naming the places looked at. Halted, it stops the walk.
+
+What the search found may not be there when the fetch comes to it: a network's phantom
+on a table's corner made from the head camera's views (hall seed 1's shift: the search
+stopped at a "bottle_7" no wrist view ever showed, and the request failed with three
+supports not looked at). So a find keeps the rest of the route (`SEARCH_LEFT`: the
+viewpoints from the one being walked to on, at most `MAX_RESUMES` times a request), and
+when the found one is missed at its place the tree asks for the search again: it goes on
+from there, the missed one among the tried.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from py_trees.common import Status
@@ -30,18 +39,33 @@ from services.mission.behaviours.base import (
     KNOWN,
     REQUEST,
     SEARCH,
+    SEARCH_LEFT,
     Context,
     MissionBehaviour,
 )
-from services.mission.coverage import facing_route
+from services.mission.coverage import Route, facing_route
 from services.mission.patrol import VIEW_HALF_ANGLE, PatrolRunner
 from services.mission.ports import PortError
 from services.mission.search import Place, found, places_to_look, re_seen
 from services.mission.targets import class_of, is_map_id
 
+#: How many times a request's search goes on after what it found was not there.
+MAX_RESUMES = 2
+
+
+@dataclass(frozen=True)
+class SearchLeft:
+    """What a search that stopped at a find had left: the route from the viewpoint it was
+    at, the places it planned (for the failure's text), and the times it went on."""
+
+    route: Route
+    places: tuple[Place, ...]
+    tried: tuple[str, ...]
+    resumes: int = 0
+
 
 class LookElsewhere(MissionBehaviour):
-    WRITES = (CANDIDATES, CANDIDATE, SEARCH)
+    WRITES = (CANDIDATES, CANDIDATE, SEARCH, SEARCH_LEFT)
 
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("look_elsewhere", ctx, stage)
@@ -52,6 +76,8 @@ class LookElsewhere(MissionBehaviour):
         self.tried: list[str] = []
         self.class_name = ""
         self.hit = ""
+        self.hit_at = 0  # the viewpoint (from 1) the route was at when the hit came
+        self.resumes = 0  # the times this request's search went on after a miss
         #: New entries said to be a known one seen again (`_say_re_seen`).
         self.said_re_seen: set[str] = set()
 
@@ -76,7 +102,7 @@ class LookElsewhere(MissionBehaviour):
             except PortError:
                 hit = None
             if hit is not None:
-                self.hit = hit.id
+                self.hit, self.hit_at = hit.id, runner.status(self.port.now_ns).waypoint
                 x, y = hit.position_in_world[:2]
                 self.ctx.decide(f"search: {hit.id} seen at ({x:.2f}, {y:.2f}), made of "
                                 f"{hit.observations} detections")  # fmt: skip
@@ -111,6 +137,10 @@ class LookElsewhere(MissionBehaviour):
     def _start(self) -> Status:
         request = self.get(REQUEST)
         self.tried = list(self.get(CANDIDATES) or []) + list(self.ctx.handed)
+        left = self.get(SEARCH_LEFT)
+        if isinstance(left, SearchLeft):
+            return self._resume(left)
+        self.resumes = 0
         name = request.object
         self.class_name = class_of(name) if is_map_id(name) else name
         s = self.settings
@@ -151,11 +181,46 @@ class LookElsewhere(MissionBehaviour):
         self.runner.start(route)
         return Status.RUNNING
 
+    def _resume(self, left: SearchLeft) -> Status:
+        """Go on with the route a find stopped (the module docstring)."""
+        self.set(SEARCH_LEFT, None)
+        self.places, self.resumes = list(left.places), left.resumes + 1
+        self.tried = [*left.tried, *(t for t in self.tried if t not in left.tried)]
+        request = self.get(REQUEST)
+        name = request.object
+        self.class_name = class_of(name) if is_map_id(name) else name
+        known = self.get(KNOWN)
+        self.known = set(known) if known is not None and is_map_id(name) else None
+        try:
+            self.supports = list(self.port.floor_supports())
+        except PortError as exc:
+            return self.fail("unavailable", f"the semantic map did not answer: {exc}")
+        missed = ", ".join(t for t in self.tried if t not in left.tried) or "what it found"
+        self.ctx.decide(f"search for {name} goes on: {missed} was not there; "
+                        f"{len(left.route.viewpoints)} viewpoint(s) left")  # fmt: skip
+        self.runner = PatrolRunner(self.port, self.settings, self.ctx.decide)
+        self.runner.start(left.route)
+        return Status.RUNNING
+
+    def _left(self) -> SearchLeft | None:
+        """The route from the viewpoint the find came at (None: nothing left, or the
+        request went on too often)."""
+        route = None if self.runner is None else self.runner.route
+        if route is None or self.resumes >= MAX_RESUMES:
+            return None
+        k = max(0, self.hit_at - 1)
+        if k >= len(route.viewpoints):
+            return None
+        facings = None if route.facings is None else route.facings[k:]
+        rest = Route(route.viewpoints[k:], route.paths[k:], facings, route.unseen)
+        return SearchLeft(rest, tuple(self.places), tuple(self.tried), self.resumes)
+
     def _end(self) -> Status:
         request = self.get(REQUEST)
         hit, said = self.hit, "; ".join(p.why for p in self.places)
         self.set(SEARCH, False)
         if hit:
+            self.set(SEARCH_LEFT, self._left())
             self.set(CANDIDATES, [hit])
             self.set(CANDIDATE, 0)
             self.ctx.decide(f"search: fetching {hit} for {request.object}")
@@ -168,5 +233,5 @@ class LookElsewhere(MissionBehaviour):
             runner.stop("the fetch stopped")
             runner.step()
         if new_status != Status.RUNNING:
-            self.runner, self.hit, self.places = None, "", []
+            self.runner, self.hit, self.hit_at, self.places = None, "", 0, []
             self.said_re_seen = set()
