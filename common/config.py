@@ -669,9 +669,10 @@ class MissionSettings(_Section):
     handover_check_s: NonNegative = 1.0
     handover_tol_m: Positive = 0.12
     #: A person not seen at the handover pose: after a turn round on the spot, stand this
-    #: long saying "looking for <person>" before walking to one of their usual places, or
-    #: to where the map last had them.
-    person_ask_s: NonNegative = 10.0
+    #: long asking for them ("asking for <person>: please come to the robot") before
+    #: walking to one of their usual places, or to where the map last had them: a person
+    #: 8 m off who hears it walks over in 10 s and stands (`ANSWER_STAND_S`) in 15.
+    person_ask_s: NonNegative = 20.0
     #: A person not at the handover pose: the rounds of looking for them (at their usual
     #: places) and walking to them again before the request fails `person_not_found`.
     person_rounds: PositiveInt = 6

@@ -18,6 +18,11 @@ serves M requests one after another:
   the robot, the people and the artifacts, every goal still reachable round it;
   `dume/world/movable_command`), where the robot's map has floor; with `--bystanders`
   the people walk their routes past the robot all shift long;
+- **the worker asked for answers** (`bench.eval.answer`): when the mission asks for the
+  person it cannot find ("asking for person_5: please come to the robot"), the request's
+  truth person, within earshot and with a straight way to the robot, walks over and
+  stands in front of it (people commands stamped after the ask); what the mission makes
+  of who came is its own (`LookForPerson`);
 - **slips** (`--slips F`, the fraction of requests): a knock on the object the robot
   carries, 3 s into the carry (`Knock`, the sim's push hook on the artifact): recovered
   when the request still succeeded, else the mission's reason says why;
@@ -54,6 +59,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from bench.eval.answer import Answer
 from bench.eval.evaluate import (
     START_TIMEOUT_S,
     STOP_TIMEOUT_S,
@@ -69,14 +75,27 @@ from bench.eval.evaluate import (
 from bench.eval.judge import MissionRecord, TruthMatch, WorldResult, evaluate
 from bench.eval.judge import truth_person as match_person
 from bench.eval.report import json_safe, write_report
-from bench.eval.run import read_map, read_world, request_result, sigterm_interrupts, watch_mission
+from bench.eval.run import (
+    Progress,
+    read_map,
+    read_world,
+    request_result,
+    sigterm_interrupts,
+    watch_mission,
+)
 from bench.eval.shift_plots import ShiftPlots, map_accuracy
 from bench.eval.targets import Pair, TargetError
 from bench.separation import SeparationWatch, truth_separation
 from common.bus import BusError, Fifo
 from common.config import ConfigError, load_config, resolve
 from common.geometry import yaw_of_quat_xyzw
-from common.keys import WORLD_ARTIFACT_COMMAND, WORLD_MOVABLE_COMMAND, WORLD_PEOPLE, WORLD_PUSH
+from common.keys import (
+    WORLD_ARTIFACT_COMMAND,
+    WORLD_MOVABLE_COMMAND,
+    WORLD_PEOPLE,
+    WORLD_PEOPLE_COMMAND,
+    WORLD_PUSH,
+)
 from common.messages import PayloadError
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.semantic_map import MapEntity
@@ -86,6 +105,7 @@ from common.messages.sim import (
     HandoverTaken,
     MovableCommand,
     PeopleTruth,
+    PersonCommand,
     Push,
     SimStats,
     StateTruth,
@@ -173,6 +193,7 @@ class Follow:
         self._people: list[PeopleTruth] = []
         self._base: dict[int, StateTruth] = {}
         self.history: list[PeopleTruth] = []
+        self.bases: list[StateTruth] = []  # the base's, kept as the people's are
 
     def people_at(self, t_ns: int) -> PeopleTruth | None:
         """The kept people sample nearest to sim time `t_ns` (None before any)."""
@@ -182,6 +203,14 @@ class Follow:
         near = self.history[max(0, k - 1) : k + 1]
         return min(near, key=lambda h: abs(h.stamp_ns - t_ns))
 
+    def base_at(self, t_ns: int) -> StateTruth | None:
+        """The kept base sample nearest to sim time `t_ns` (None before any)."""
+        if not self.bases:
+            return None
+        k = bisect.bisect_left([b.stamp_ns for b in self.bases], t_ns)
+        near = self.bases[max(0, k - 1) : k + 1]
+        return min(near, key=lambda b: abs(b.stamp_ns - t_ns))
+
     def drain(self) -> None:
         fresh = list(self.people.drain())
         for sample in fresh:
@@ -190,6 +219,8 @@ class Follow:
         self._people.extend(fresh)
         for b in self.base.drain():
             self._base[b.stamp_ns] = b
+            if not self.bases or b.stamp_ns - self.bases[-1].stamp_ns >= HISTORY_EVERY_NS:
+                self.bases.append(b)
         left: list[PeopleTruth] = []
         for sample in self._people:
             base = self._base.get(sample.stamp_ns)
@@ -328,6 +359,7 @@ def run_shift_world(
         base_now = bus.latest(keys.state_truth, StateTruth)
         trolley_rng = np.random.default_rng([seed, TROLLEY_STREAM])  # the moves' draws unchanged
         pusher = bus.publisher(WORLD_PUSH, Push, "control")
+        walkers = bus.publisher(WORLD_PEOPLE_COMMAND, PersonCommand, "control")
         how, path = map_source(args.map, args.world, seed)
         gated = True
         if how == "explore":
@@ -372,8 +404,19 @@ def run_shift_world(
                                      person=pair.person, at_ns=at_ns)  # fmt: skip
             step = f"run request {k + 1}"
             knock = Knock(pusher, asked, rng.random() < args.slips, _stage_line(seed))
-            record = watch_mission(bus, keys, request, args.timeout, knock.on_progress,
+            statuses = bus.fifo(keys.mission_status, MissionStatus, maxlen=1 << 14)
+            answer = Answer(statuses, follow, walkers, truth.world.occupancy, request.request_id,
+                            pair.person, result.truth_person)  # fmt: skip
+
+            record = watch_mission(bus, keys, request, args.timeout,
+                                   both(knock.on_progress, answer.on_progress),
                                    start_gate=gated)  # fmt: skip
+            statuses.undeclare()
+            for line in answer.said:
+                _say(f"    {line}")
+            if answer.said:
+                figures.setdefault("answers", []).append({"request": k + 1,
+                                                          "said": answer.said})  # fmt: skip
 
             gated = False
             plots.changes.extend(record.changes)
@@ -425,6 +468,16 @@ def run_shift_world(
             keep_people_truth(follow, truth_path)
             figures["people_trace"] = [shown(traced), shown(truth_path)]
     return figures
+
+
+def both(first: Progress, second: Progress) -> Progress:
+    """One progress callback that calls `first`, then `second`."""
+
+    def progress(status: MissionStatus | None, clock: Clock, changed: bool) -> None:
+        first(status, clock, changed)
+        second(status, clock, changed)
+
+    return progress
 
 
 def keep_people_truth(follow: Follow, path: Path) -> None:

@@ -554,7 +554,7 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         assert len(sent) == 2  # there, then to them again
         assert turned == pytest.approx(math.tau / 3)  # seen in the first of three turns
         assert any("person_1 seen at (1.00, 3.00)" in d for d in decisions)
-        assert "looking for person_1: not seen round here" not in said
+        assert "asking for person_1: please come to the robot" not in said
     else:
         rounds = MissionSettings().person_rounds
         assert (outcome.state, outcome.reason) == ("failed", "person_not_found")
@@ -562,8 +562,70 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         assert "the map has not seen them since it started" in outcome.detail
         assert len(sent) == 1 + rounds  # there, then once a round
         assert turned == pytest.approx(math.tau)  # once round, not again at the same place
-        assert "looking for person_1: not seen round here" in said
+        assert "asking for person_1: please come to the robot" in said
         assert any("walking to where the map last had them" in d for d in decisions)
+
+
+def _ask_scene(
+    appear: dict[str, tuple[float, float, float, float]],
+) -> tuple[MissionTree, FakeRobot, Outcome | None, list[str]]:
+    """The person asked for walked off where the robot never sees them; while it asks,
+    `appear`: person id → (ahead m, left m, from s into the ask, for s) map people seen
+    standing there relative to the robot (from -1: there when the ask began)."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (1.0, 3.0)
+    robot.seen_after_turn_rad = 100.0
+    tree = mission(robot)
+    said: list[str] = []
+    outcome, asked_at = None, None
+    for _ in range(8000):
+        outcome = tree.tick()
+        said.append(tree.where()[1])
+        asking = said[-1].startswith("asking for person_1")
+        if asking and asked_at is None:
+            asked_at = robot.now_ns
+        looking = any(d.startswith("look_for_person") for d in tree.ctx.decisions)  # type: ignore[attr-defined]
+        since = -1.0 if asked_at is None else (robot.now_ns - asked_at) / 1e9
+        for pid, (ahead, left, t0, dur) in appear.items():
+            shown = looking if t0 < 0 else asked_at is not None and t0 <= since < t0 + dur
+            if shown and pid not in robot.people_ and robot.xy is not None:
+                c, s_ = math.cos(robot.yaw), math.sin(robot.yaw)
+                x = robot.xy[0] + c * ahead - s_ * left
+                y = robot.xy[1] + s_ * ahead + c * left
+                robot.people_[pid] = entity(pid, x, y, kind="person")
+            if shown:
+                robot.people_[pid] = msgspec.structs.replace(
+                    robot.people_[pid], last_seen_ns=robot.now_ns
+                )
+            elif pid in robot.people_ and t0 >= 0 and since >= t0 + dur:
+                robot.people_.pop(pid)
+        robot.advance()
+        if outcome is not None:
+            break
+    return tree, robot, outcome, said
+
+
+def test_a_person_who_comes_while_the_robot_asks_is_the_one_asked_for() -> None:
+    """The map lost who the person is while they walked (a new id for them); they hear
+    the robot ask, come and stand in front of it: the handover goes to them."""
+    tree, robot, outcome, said = _ask_scene({"person_9": (1.3, 0.2, 2.0, 1e9)})
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    assert "asking for person_1: please come to the robot" in said
+    handovers = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert handovers[0] == "person_1" and handovers[-1] == "person_9", handovers
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any(d.startswith("person_9 came while the robot asked for person_1") for d in decisions)
+
+
+def test_nobody_who_stood_near_already_or_only_paused_answers_the_ask() -> None:
+    """person_8 stood 1.5 m off before the robot asked, person_7 stood in its way 3 s
+    (a walker pausing) and walked on: neither is taken for the person asked for."""
+    _, robot, outcome, _ = _ask_scene({"person_8": (1.0, 1.1, -1.0, 1e9),
+                                       "person_7": (1.2, 0.0, 1.0, 3.0)})  # fmt: skip
+    assert outcome is not None and (outcome.state, outcome.reason) == (
+        "failed", "person_not_found"), outcome  # fmt: skip
+    handovers = {g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)}
+    assert handovers == {"person_1"}
 
 
 def test_a_walk_to_the_person_that_falls_short_looks_for_them_and_hands_over() -> None:

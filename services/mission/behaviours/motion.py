@@ -30,8 +30,14 @@
   a person near; before, the mission turned the base with its own cmd_vel and swept the
   hips into a pallet, 9 contacts in one shift; not where it looked round already in this
   request) while the head camera sweeps the floor round it, asking the map each tick
-  whether it saw them since the look began; then stand `person_ask_s` saying
-  "looking for <person>" (a person near may answer by stepping into view). Seen: SUCCESS,
+  whether it saw them since the look began; then stand `person_ask_s` asking for them
+  ("asking for <person>: please come to the robot"). A person who comes while it asks
+  and stands within `ANSWER_M` of the base for `ANSWER_STAND_S` (not one who stood that
+  near already when it began to ask, nor a walker pausing in its way: they walk on
+  within 4 s) answered: the map's id for them may be another one (the map lost who is
+  who while they walked: hall seed 1's shift saw the requested person as three new ids
+  while the robot looked for the old one, and the request timed out), and the fetch goes
+  on to them under that id (`PERSON`), said. Seen: SUCCESS,
   and the walk to them goes to where they were seen; never seen: SUCCESS all the same,
   and the next walk goes to the next of their usual places (`LOOK_AT`,
   `person_search.next_place`: where the map saw them most), or, none left, to where the
@@ -99,6 +105,11 @@ WALKING_MPS = 0.3
 #: usual places, or navigation stopped short.
 PRESENT_AHEAD_M = (HANDOVER_DISTANCE_M - 0.3, HANDOVER_DISTANCE_M + 0.5)
 PRESENT_SIDE_M = 0.5
+#: m: a person who comes this near the base while it asks for someone answered the ask,
+#: once they have stood there `ANSWER_STAND_S` (s): longer than a walker pauses in the
+#: robot's way before turning back (`services.sim.people.GIVE_WAY_S`, 4 s).
+ANSWER_M = 2.0
+ANSWER_STAND_S = 5.0
 
 
 def ahead_left(
@@ -448,13 +459,17 @@ class LookForPerson(MissionBehaviour):
     """Turn once round through navigation, then ask, until the map sees the person (the
     module docstring)."""
 
-    WRITES = (UNSEEN, LOOK_AT, LOOKED)
+    WRITES = (UNSEEN, LOOK_AT, LOOKED, PERSON)
 
     def __init__(self, ctx: Context, stage: str) -> None:
         super().__init__("look_for_person", ctx, stage)
         self.turned = 0.0
         self.last_yaw: float | None = None
         self.asked_ns: int | None = None
+        #: The people near when the ask began (no answer), and since when each person
+        #: who came has stood near (sim ns).
+        self.near_at_ask: set[str] = set()
+        self.standing: dict[str, int] = {}
         #: The turns still to send and the goal id of the one navigation walks now.
         self.turns: list[PatrolGoal] = []
         self.goal_id = ""
@@ -463,6 +478,7 @@ class LookForPerson(MissionBehaviour):
         super().initialise()
         self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
         self.turns, self.goal_id = [], ""
+        self.near_at_ask, self.standing = set(), {}
         xy, yaw = self.port.robot_xy(), self.last_yaw
         if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
             self.turned = math.tau  # looked round here already: only waits and asks
@@ -485,15 +501,57 @@ class LookForPerson(MissionBehaviour):
             return Status.RUNNING
         if self.asked_ns is None:
             self.asked_ns = self.port.now_ns
+            self.near_at_ask = {q.id for q, _ in self._near_people()}
             whole = self.turned >= math.tau - TURN_TOLERANCE_RAD
             turn = "a turn" if whole else f"{math.degrees(self.turned):.0f}°"
             self.ctx.decide(f"{pid} not seen in {turn} round their place: asking for them")
-        self.say = f"looking for {pid}: not seen round here"
+        self.say = f"asking for {pid}: please come to the robot"
+        came = self._answer(pid)
+        if came is not None:
+            return self._done()
         waited = (self.port.now_ns - self.asked_ns) / 1e9
         if waited < self.settings.person_ask_s:
             self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
             return Status.RUNNING
         return self._not_seen(pid, person)
+
+    def _near_people(self) -> list[tuple[MapEntity, float]]:
+        """The map's people seen lately (`PERSON_FRESH_S`), standing (slower than
+        `WALKING_MPS`), within `ANSWER_M` of the base, with their distance."""
+        xy = self.port.robot_xy()
+        try:
+            people = self.port.people()
+        except PortError:
+            return []
+        if xy is None:
+            return []
+        now = self.port.now_ns
+        out = []
+        for q in people:
+            d = math.dist(xy, q.position_in_world[:2])
+            fresh = (now - q.last_seen_ns) / NS_PER_S <= PERSON_FRESH_S
+            if fresh and d <= ANSWER_M and math.hypot(*q.velocity_in_world) < WALKING_MPS:
+                out.append((q, d))
+        return out
+
+    def _answer(self, pid: str) -> str | None:
+        """The id of the person who answered the ask (the module docstring), taken as
+        `pid` from now on (`PERSON`); None while nobody has."""
+        now = self.port.now_ns
+        near = {q.id: (q, d) for q, d in self._near_people() if q.id not in self.near_at_ask}
+        self.standing = {i: self.standing.get(i, now) for i in near}
+        stood = [i for i, t in self.standing.items()
+                 if (now - t) / NS_PER_S >= ANSWER_STAND_S]  # fmt: skip
+        if not stood:
+            return None
+        who, (q, d) = min(((i, near[i]) for i in stood), key=lambda item: item[1][1])
+        if who != pid:
+            self.set(PERSON, who)
+        x, y = q.position_in_world[:2]
+        self.ctx.decide(f"{who} came while the robot asked for {pid} and stands {d:.1f} m "
+                        f"from it at ({x:.2f}, {y:.2f}): taken as {pid}, the handover goes "
+                        f"to {who}")  # fmt: skip
+        return who
 
     def _turning(self, pid: str) -> bool:
         """Whether a turn is under way: the next turn sent once the last ended (a failed
