@@ -58,8 +58,18 @@ the new place instead of a new id being made. A person unseen for `REID_STALE_NS
 anywhere in the hall, looked for there or not (a walker on their round, a person of a
 saved map not seen yet this run): a newcomer seen walking (`Track.walked`: a body, not
 furniture the network read as a person) whose clothes are theirs, and nearer to theirs
-than to anybody else's the map has, is them. People's colours are kept in the map file
-(`MapFile.appearances`), so a map saved after an exploration knows them.
+than to anybody else's the map has, is them. A person who was walking when last seen
+(`Track.moving`: a walker on their round has left the place, looked at or not) and is
+unseen for `WALKED_OFF_NS` may be anywhere within walking reach of it (`V_MAX` of the
+time unseen, plus `MAX_GATE_M`): a newcomer there in their clothes, nearer to theirs
+than to anybody else's, is them (`_walked_off`; hall seed 0's shift: each walker's id
+was renewed at each return, 5-12 ids a person, IDF1 0.27-0.38 on three traces, 0.35-0.42
+with the rule; under 5 s a second walker in like clothes on the same route may follow
+the first). Nobody is known by their clothes while a person the map was given without
+colours (a seed not seen yet) could be them: nothing says the newcomer is not that one
+(`_only_them`; hall seed 1's shift, four seeded people, three alike: a walker's id went
+to another 49 s in). People's colours are kept in the map file (`MapFile.appearances`),
+so a map saved after an exploration knows them.
 
 A track still splits now and then: while the robot walks round a standing person their
 visible surface and the depth behind it move, a detection falls outside the gate, and a
@@ -144,6 +154,9 @@ REID_UNSEEN_NS = 3_000_000_000
 #: A person unseen this long may be anywhere in the hall (1.5 m/s for a minute): one
 #: known again by their clothes alone, without the map having looked at their place, ns.
 REID_STALE_NS = 60_000_000_000
+#: A walker unseen this long may be anywhere within walking reach (`_walked_off`); before
+#: it, a second walker in like clothes on the same route may be following the first, ns.
+WALKED_OFF_NS = 5_000_000_000
 #: A person unseen this long is matched away from their place only in their clothes, ns.
 VETO_STALE_NS = 2_000_000_000
 #: Detections in clearly another's clothes that stand within `STILL_M` of where they
@@ -389,9 +402,13 @@ class PeopleTracker:
         return t.appearance is not None and stamp_ns - t.last_seen_ns >= REID_STALE_NS
 
     def _only_them(self, new: Track, old: Track) -> bool:
-        """`new` is nearer in clothes to `old` than to anybody else the map has."""
+        """`new` is nearer in clothes to `old` than to anybody else the map has, and
+        nobody else who may be them goes without colours (a seeded person not seen yet:
+        their clothes are not known, so nothing says the newcomer is not them)."""
         assert new.appearance is not None
         others = [t for t in self.confirmed if t is not new]
+        if any(t.appearance is None and t.source != "perception" and t is not old for t in others):
+            return False
         return self._same_clothes(new.appearance, others)[1] is old
 
     def _colours_lie(
@@ -441,6 +458,18 @@ class PeopleTracker:
             return ranked[0][0], None
         return ranked[0]
 
+    def _walked_off(self, old: Track, new: Track) -> bool:
+        """`old`, seen walking and unseen since before `new` was first seen (for
+        `REID_UNSEEN_NS`), could have walked to where `new` is: within `V_MAX` of the
+        time unseen (plus `MAX_GATE_M`, the places' own error) of where they were."""
+        if old.appearance is None or not old.moving or not old.last_seen_ns:
+            return False
+        unseen_ns = (new.first_seen_ns or new.last_seen_ns) - old.last_seen_ns
+        if unseen_ns < WALKED_OFF_NS:
+            return False
+        reach = V_MAX * unseen_ns * 1e-9 + MAX_GATE_M
+        return float(np.linalg.norm(new.xy - old.xy)) <= reach
+
     def reidentify(self, new: Track, stamp_ns: int) -> Track | None:
         """The known person a person about to be confirmed is (module docstring), moved to
         the new one's place, the new one forgotten; None when they are somebody new."""
@@ -452,7 +481,13 @@ class PeopleTracker:
         stale = [
             t
             for t in self.confirmed
-            if new.walked and id(t) not in by_looks and self._long_unseen(t, stamp_ns)
+            if id(t) not in by_looks
+            and t is not new
+            and t.id not in new.seen_with
+            and (
+                (new.walked and self._long_unseen(t, stamp_ns))
+                or (t.last_seen_ns < since and self._walked_off(t, new))
+            )
         ]
         app, old = self._same_clothes(new.appearance, [*gone, *stale])
         if old is None or (id(old) not in by_looks and not self._only_them(new, old)):
@@ -466,10 +501,14 @@ class PeopleTracker:
         `reidentify`, the other way round); (kept, merged away, why), as `take_merged`."""
         out: list[tuple[Track, Track, str]] = []
         for old in list(self.confirmed):
+            if all(old is not t for t in self.tracks):
+                continue  # merged away already
             gone = self._gone_from_their_place(old, stamp_ns - REID_UNSEEN_NS)
-            if not gone and not self._long_unseen(old, stamp_ns):
+            long_unseen = self._long_unseen(old, stamp_ns)
+            if not gone and not long_unseen and not old.moving:
                 continue
-            assert old.appearance is not None
+            if old.appearance is None:
+                continue
             newer = [
                 t
                 for t in self.confirmed
@@ -477,7 +516,7 @@ class PeopleTracker:
                 and t.first_seen_ns > old.last_seen_ns
                 and old.id not in t.seen_with
                 and t.appearance is not None
-                and (gone or t.walked)
+                and (gone or (long_unseen and t.walked) or self._walked_off(old, t))
             ]
             app, new = self._same_clothes(old.appearance, newer)
             if new is None or new.appearance is None:

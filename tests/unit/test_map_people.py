@@ -572,3 +572,45 @@ def test_a_passer_by_in_a_known_persons_clothes_does_not_take_the_id_of_the_one_
     last = np.array([0.2, 0.5 - 0.1 * 19])
     passer = min(tracker.confirmed, key=lambda tr: float(np.linalg.norm(tr.xy - last)))
     assert passer.id != red_id and np.linalg.norm(passer.xy - last) < 0.3
+
+
+def test_a_walker_unseen_is_known_again_within_walking_reach_by_their_clothes() -> None:
+    """person_1 (red) walked out of view 20 s ago (nobody looked at their place since; a
+    walker on a round has left it): somebody in red walking 5 m away is person_1, come
+    back (hall seed 0's shift: a walker's id renewed at each return, 5-12 ids a person).
+    Out of their walking reach (unseen 4 s, 14 m away) they are somebody new."""
+    rng = np.random.default_rng(5)
+    red, blue = _hist(2, rng), _hist(30, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _walking(tracker, 0, 30, (0.0, 0.0), (1.0, 0.0), red)  # to (3, 0), then gone
+    t = _standing(tracker, t, 10, [(0.0, 9.0)], [blue]) + 20 * S  # person_2, elsewhere
+    person_1 = tracker.by_id("person_1")
+    assert person_1 is not None and person_1.moving
+    t = _walking(tracker, t, 10, (6.0, 4.0), (0.0, -1.0), red, seed=1)
+    assert sorted(tr.id or "" for tr in tracker.confirmed) == ["person_1", "person_2"]
+    assert np.linalg.norm(person_1.xy - (6.0, 3.1)) < 0.3
+    ((who, _, _, _),) = tracker.take_reidentified()
+    assert who == "person_1"
+    # out of reach: 4 s unseen, 14 m away
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    t = _walking(tracker, 0, 30, (0.0, 0.0), (1.0, 0.0), red)
+    t = _standing(tracker, t, 10, [(0.0, 9.0)], [blue]) + 3 * S
+    t = _walking(tracker, t, 10, (17.0, 0.0), (0.0, 1.0), red, seed=1)
+    tracker.rejoin(t)
+    assert len(tracker.confirmed) == 3 and not tracker.take_reidentified()
+
+
+def test_a_seeded_person_not_seen_yet_may_be_a_newcomer_whatever_the_clothes() -> None:
+    """A person the map was given without colours (a seed) may be anybody: a newcomer in
+    the clothes of a walker unseen since is not known again by them (hall seed 1's shift:
+    four seeded people, three alike, and a walker's id went to another at 49 s)."""
+    rng = np.random.default_rng(5)
+    red = _hist(2, rng)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    seed = Track("person", "person", np.array([0.0, 8.0]), np.eye(2) * 0.01, 0.0,
+                 "seed-from-world", id="person_7")  # fmt: skip
+    tracker.add(seed)
+    t = _walking(tracker, 0, 30, (0.0, 0.0), (1.0, 0.0), red) + 20 * S
+    t = _walking(tracker, t, 10, (6.0, 4.0), (0.0, -1.0), red, seed=1)
+    tracker.rejoin(t)
+    assert len(tracker.confirmed) == 3 and not tracker.take_reidentified()
