@@ -43,10 +43,13 @@ class PersonHandover(Message, frozen=True, tag="person_handover"):
     bearing_rad: the side to stand on, as the world bearing from the person to the
     robot (rad); None: in front of them when the map knows which way they face, else on
     the robot's side (the mission's search round a person whose facing is unknown sends
-    the sides it tries)."""
+    the sides it tries). extra_m: how much farther than `common.robot.HANDOVER_DISTANCE_M`
+    to stand (an object held out that reaches farther past the gripper than a bottle:
+    a box held by its near end would press into the person's arm)."""
 
     person_id: EntityId
     bearing_rad: Finite | None = None
+    extra_m: Annotated[float, msgspec.Meta(ge=0.0, le=0.5)] = 0.0
 
 
 NavGoal = PoseGoal | ArtifactStandoff | PersonHandover

@@ -152,7 +152,9 @@ class GraspPlan:
     """H: `gripper_tcp`'s goal (4×4) in `frame` as of `stamp_ns`; approach_axis in H's own
     frame; pregrasp_m back along it; kind: side or top; jaw: how far the empty jaw opens
     for it (`Reach.jaw`); close_in_m: how far the TCP then moves along its z (the fixed
-    pad to the object) before the jaw closes."""
+    pad to the object) before the jaw closes; beyond_m: how far the object held reaches
+    past the TCP along its x (the arm's `handover` posture points x at the person: a box
+    held by its near end reaches 11 cm out, a bottle 2-3 cm)."""
 
     H: FloatArray
     frame: Literal["base", "world"]
@@ -162,6 +164,7 @@ class GraspPlan:
     stamp_ns: int
     jaw: Literal["open", "wide"] = "open"
     close_in_m: float = 0.0
+    beyond_m: float = 0.0
 
     def reach(self) -> Reach:
         """The WBC's arm goal for this plan."""
@@ -304,6 +307,7 @@ def grasp_from_detection(
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
         centre[:2] += SIDE_GRASP_DEPTH[det.class_name] * sight / np.linalg.norm(sight)
+        beyond = 0.5 * width - SIDE_GRASP_DEPTH[det.class_name]
         pitch = _side_pitch(centre, T_world_base, p)
         gap = tcp_reach_gap(_in_base(centre, T_world_base), pitch)
         if gap > p.reach_slack_m:  # on the floor: the trunk cannot stoop that far
@@ -325,6 +329,7 @@ def grasp_from_detection(
         fit_x = np.array([math.cos(yaw), math.sin(yaw)])
         across = fit_x if extent[0] <= extent[1] else np.array([-fit_x[1], fit_x[0]])
         centre[2] = max(top - p.top_depth_m, axis[2])
+        beyond = float(centre[2] - bottom)  # x is down: the box hangs below the TCP
         R = top_rotation(sight, across, p.top_tilt_rad)
         gap = _top_gap(R, centre, T_world_base)
         if gap > p.reach_slack_m:
@@ -346,6 +351,7 @@ def grasp_from_detection(
             centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
             half_long = 0.5 * float(max(extent[0], extent[1]))
             centre[:2] -= max(0.0, half_long - BOX_SIDE_DEPTH_M) * along
+            beyond = 2.0 * half_long - min(BOX_SIDE_DEPTH_M, half_long)
             R = side_rotation(along, GRASP_PITCH_RAD[1])
     wide = det.class_name in TOP_GRASP_CLASSES  # a box, from above or from the side
     if wide:  # in the wide-open jaws, the box's middle toward the moving jaw
@@ -359,6 +365,7 @@ def grasp_from_detection(
         stamp_ns=stamp_ns,
         jaw="wide" if wide else "open",
         close_in_m=TOP_CLOSE_IN_M if wide else 0.0,
+        beyond_m=max(0.0, beyond),
     )
 
 

@@ -154,16 +154,17 @@ def handover_pose(
     fp: Footprint,
     margin: float = GOAL_MARGIN_M,
     bearing: float | None = None,
+    distance: float | None = None,
 ) -> Pose:
-    """A free pose facing the person at `HANDOVER_DISTANCE_M` (see the module docstring);
-    `bearing`: the side asked for (the bearing from the person), first."""
+    """A free pose facing the person at `distance` (None: `HANDOVER_DISTANCE_M`; see the
+    module docstring); `bearing`: the side asked for (the bearing from the person), first."""
     if bearing is not None:
         preferred = bearing
     elif person.yaw is not None:
         preferred = person.yaw
     else:
         preferred = math.atan2(robot_xy[1] - person.y, robot_xy[0] - person.x)
-    d = robot.HANDOVER_DISTANCE_M
+    d = robot.HANDOVER_DISTANCE_M if distance is None else distance
     # The planner's own test (`pose_ok`), so a pose chosen here is one it plans to: the
     # footprint on free cells, the base not in lethal cost (the person's lethal disc ends
     # short of the handover distance).

@@ -170,7 +170,7 @@ class GoalIntake:
         """The goal's pose, tolerances and handover person against `cm` and the map's
         data as of `at`; `GoalInvalid` with the reason."""
         g = req.goal
-        person_xy, bearing = None, None
+        person_xy, bearing, distance = None, None, 0.0
         try:
             if isinstance(g, PoseGoal):
                 target = Pose(g.x, g.y, g.yaw)
@@ -186,7 +186,9 @@ class GoalIntake:
                 person = self.source.person(g.person_id, at_ns=at)
                 here = (pose.x, pose.y) if pose else (person.x + 1.0, person.y)
                 bearing = g.bearing_rad
-                target = goals.handover_pose(cm, person, here, self.fp, bearing=bearing)
+                distance = robot.HANDOVER_DISTANCE_M + g.extra_m
+                target = goals.handover_pose(cm, person, here, self.fp, bearing=bearing,
+                                             distance=distance)  # fmt: skip
                 tol, handover = self.tolerance[0], g.person_id
                 tol_yaw = handover_yaw_tolerance(self.tolerance[1])
                 person_xy = (person.x, person.y)
@@ -194,7 +196,7 @@ class GoalIntake:
             raise GoalInvalid(str(exc)) from None
         if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
             raise GoalInvalid(f"{target} is off the map")
-        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing)
+        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing, distance)
 
     def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
         """A handover goal follows its person: once the map has them `RETARGET_M` from
@@ -208,7 +210,10 @@ class GoalIntake:
                                         person.y - g.person_xy[1]) < RETARGET_M:  # fmt: skip
             return
         try:
-            target = goals.handover_pose(cm, person, (pose.x, pose.y), self.fp, bearing=g.bearing)
+            here = (pose.x, pose.y)
+            target = goals.handover_pose(
+                cm, person, here, self.fp, bearing=g.bearing, distance=g.distance or None
+            )
         except goals.GoalError as exc:
             self.log.info("goal %s keeps its pose: %s", g.goal_id, exc)
             return

@@ -87,6 +87,8 @@ class GoalSpec:
     person_xy: tuple[float, float] | None = None
     #: The side of the person the goal asked for (`PersonHandover.bearing_rad`).
     bearing: float | None = None
+    #: How far from the person the handover stands (m; `PersonHandover.extra_m` added).
+    distance: float = 0.0
 
 
 class TickOutput(NamedTuple):

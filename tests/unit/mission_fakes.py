@@ -343,13 +343,14 @@ class FakeRobot:
         self.person_walked_to = None
 
     def _arrive_at_person(self, goal_id: str) -> None:
-        """Stand facing +x at the handover distance from the person's mapped place, as
-        navigation would; then, once, the map moves the person by `person_shift_m` (seen
-        from close by, they were not quite where the map had them)."""
+        """Stand facing +x at the handover distance (and the goal's `extra_m`) from the
+        person's mapped place, as navigation would; then, once, the map moves the person
+        by `person_shift_m` (seen from close by, they were not quite where the map had
+        them)."""
         goal = next(g for i, g in self.nav_goals if i == goal_id)
         assert isinstance(goal, PersonHandover)
         p = self.people_[goal.person_id].position_in_world
-        self.xy, self.yaw = (p[0] - HANDOVER_DISTANCE_M, p[1]), 0.0
+        self.xy, self.yaw = (p[0] - HANDOVER_DISTANCE_M - goal.extra_m, p[1]), 0.0
         self._facing = goal.person_id  # the head camera sees them from close by, if there
         if self.person_shift_m:
             moved = (p[0], p[1] + self.person_shift_m, p[2])
@@ -516,6 +517,7 @@ class StubPlan:
     possible: bool = True
     pregrasp_m: float = 0.08
     close_in_m: float = 0.0
+    beyond_m: float = 0.0
 
     def reach(self) -> Reach:
         H = np.eye(4)
@@ -564,11 +566,12 @@ def stub_algorithms(
     grasp_plans: int = -1,
     close_in_mm: int = 0,
     stance_plans: int = 0,
+    beyond_mm: int = 0,
 ) -> Algorithms:
     """`grasp_plans`: how many grasps are planned before none is possible (−1: all);
     `close_in_mm`: the plans' close-in move (a top grasp's); `stance_plans`: how many
     grasps first ask for another stance (a tall box's long faces off the line of
-    sight, along 90°)."""
+    sight, along 90°); `beyond_mm`: how far the object reaches past the gripper."""
     stances = itertools.count(1)
     tries = itertools.count(1)  # the detectors made: one per offer
     plans = itertools.count(1)
@@ -580,7 +583,7 @@ def stub_algorithms(
             raise StubGraspError("the box's long faces are 60° off", math.pi / 2)
         if 0 <= grasp_plans < next(plans):
             raise StubGraspError("the bottle's side grasp is out of the arm's reach")
-        return StubPlan(close_in_m=close_in_mm / 1000)
+        return StubPlan(close_in_m=close_in_mm / 1000, beyond_m=beyond_mm / 1000)
 
     return Algorithms(
         approacher=StubApproach,

@@ -322,3 +322,21 @@ def test_what_lies_lower_than_any_grasp_is_said_to() -> None:
     lying = detection(T_wb, (1.4, 0.0, 0.03 - BASE_Z), extent=(0.06, 0.06, 0.06))
     assert "below the lowest the gripper reaches" in below_reach(lying)
     assert below_reach(detection(T_wb, (0.7, 0.0, 0.8 - BASE_Z))) == ""
+
+
+def test_the_plan_says_how_far_the_object_reaches_past_the_gripper() -> None:
+    """What the handover holds out toward the person (the TCP's x in the `handover`
+    posture): a bottle's far side, a box's height below the top grasp, a tall box's
+    length past the near end a side grasp takes (hall seed 1's box_2: 11 cm)."""
+    T_wb = base_pose(1.0, -2.0, 0.0)
+    bottle = detection(T_wb, (D_OPT_M, 0.0, 0.15), extent=(0.07, 0.07, 0.22))
+    assert grasp_from_detection(bottle, STAMP, T_wb).beyond_m == pytest.approx(0.035 - 0.01)
+    extent = (0.137, 0.059, 0.194)
+    low = detection(T_wb, (D_OPT_M, 0.0, 0.15), "box", "box", extent)
+    top = grasp_from_detection(low, STAMP, T_wb)
+    assert top.kind == "top"
+    assert top.beyond_m == pytest.approx(0.194 - GraspParams().top_depth_m, abs=1e-9)
+    high = detection(T_wb, (D_OPT_M, 0.0, 0.49), "box", "box", extent)
+    side = grasp_from_detection(high, STAMP, T_wb)
+    assert side.kind == "side"
+    assert side.beyond_m == pytest.approx(0.137 - BOX_SIDE_DEPTH_M, abs=1e-9)

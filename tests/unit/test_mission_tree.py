@@ -15,7 +15,7 @@ from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
 from services.mission.behaviours.handover import FeelPull
-from services.mission.behaviours.motion import STANCE_TOL_RAD
+from services.mission.behaviours.motion import HANDOVER_BEYOND_M, STANCE_TOL_RAD
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
     TICK_NS,
@@ -898,3 +898,20 @@ def test_a_walk_to_a_usual_place_ends_when_the_map_sees_the_person_on_the_way() 
     assert any("seen at (0.50, -2.00) on the way to their usual place" in d for d in decisions)
     last = robot.nav_goals[-1][1]
     assert isinstance(last, PersonHandover)
+
+
+def test_an_object_that_reaches_far_past_the_gripper_is_held_out_from_farther() -> None:
+    """A tall box held by its near end reaches 11 cm past the gripper (a bottle 2-3 cm):
+    the handover stands 8 cm farther from the person, and the check at the handover
+    pose expects them there (hall seed 1: the box pressed into the person's forearm)."""
+    robot = small_world()
+    tree = mission(robot, beyond_mm=112)
+    outcome = run(tree, robot)
+    assert outcome.state == "succeeded", outcome
+    handovers = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert handovers and all(g.extra_m == pytest.approx(0.112 - HANDOVER_BEYOND_M)
+                             for g in handovers)  # fmt: skip
+    assert len(handovers) == 1  # there at once: the check expected the extra distance
+    plain = small_world()
+    assert run(mission(plain), plain).state == "succeeded"
+    assert [g.extra_m for _, g in plain.nav_goals if isinstance(g, PersonHandover)] == [0.0]

@@ -161,6 +161,12 @@ def test_handover_poses_are_free_and_face_their_person(name: str, seed: int) -> 
         assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(
             HANDOVER_DISTANCE_M, abs=0.01
         )
+        # held out from farther (`PersonHandover.extra_m`: a long object in the gripper)
+        far = handover_pose(cm, person, (0.0, 0.0), FP, distance=HANDOVER_DISTANCE_M + 0.08)
+        assert pose_ok(cm, far, FP, 0.03)
+        assert math.hypot(person.x - far.x, person.y - far.y) == pytest.approx(
+            HANDOVER_DISTANCE_M + 0.08, abs=0.01
+        )
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -70,6 +70,7 @@ from common.messages.wbc import WbcModeName
 from common.robot import HANDOVER_DISTANCE_M, floor_view_m
 from services.mission.behaviours.base import (
     FAILURE,
+    GRASP_PLAN,
     LOOK_AT,
     LOOKED,
     PERSON,
@@ -105,6 +106,13 @@ WALKING_MPS = 0.3
 #: usual places, or navigation stopped short.
 PRESENT_AHEAD_M = (HANDOVER_DISTANCE_M - 0.3, HANDOVER_DISTANCE_M + 0.5)
 PRESENT_SIDE_M = 0.5
+#: m: how far past the gripper's TCP the handover distance lets an object reach (a
+#: bottle's far side, 2-3 cm); one that reaches farther is held out from farther away,
+#: by the difference, at most `HANDOVER_EXTRA_MAX_M`: hall seed 1's tall box, held by
+#: its near end, reached 11 cm out and pressed into the person's forearm (12 N at rest)
+#: with the robot 5 cm inside its goal's tolerance, and the person never took it.
+HANDOVER_BEYOND_M = 0.03
+HANDOVER_EXTRA_MAX_M = 0.3
 #: m: a person who comes this near the base while it asks for someone answered the ask,
 #: once they have stood there `ANSWER_STAND_S` (s): longer than a walker pauses in the
 #: robot's way before turning back (`services.sim.people.GIVE_WAY_S`, 4 s).
@@ -217,7 +225,8 @@ class NavigateTo(MissionBehaviour):
                 yaw_tolerance_rad=math.pi,
             )
         side = self.get(SIDE)
-        return PersonHandover(person_id=str(self.get(PERSON)), bearing_rad=side_bearing(side))
+        return PersonHandover(person_id=str(self.get(PERSON)), bearing_rad=side_bearing(side),
+                              extra_m=handover_extra_m(self))  # fmt: skip
 
     def fail(self, reason: MissionReason, detail: str) -> Status:
         if self.fails_as is None or reason == "grasp_lost":
@@ -333,6 +342,17 @@ def look_where_it_fell(
     )
 
 
+def handover_extra_m(b: MissionBehaviour) -> float:
+    """How much farther than `HANDOVER_DISTANCE_M` the robot stands to hold out what it
+    carries: as far as the object reaches past the gripper beyond what a bottle does
+    (`HANDOVER_BEYOND_M`), from the grasp's plan (`GraspPlan.beyond_m`; none known: 0)."""
+    plan = b.get(GRASP_PLAN)
+    if plan is None and b.ctx.holding is not None:
+        plan = b.ctx.holding.plan
+    beyond = float(getattr(plan, "beyond_m", 0.0))
+    return min(max(0.0, beyond - HANDOVER_BEYOND_M), HANDOVER_EXTRA_MAX_M)
+
+
 def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
     """The requested person's map id and the map's entry for them (None: not in the map,
     or the map did not answer)."""
@@ -374,7 +394,7 @@ class PersonAhead(MissionBehaviour):
             self.set(UNSEEN, True)
             return Status.FAILURE
         ahead, left = ahead_left(xy, yaw, person.position_in_world[:2])
-        off = math.hypot(ahead - HANDOVER_DISTANCE_M, left)
+        off = math.hypot(ahead - HANDOVER_DISTANCE_M - handover_extra_m(self), left)
         if off <= s.handover_tol_m:
             self.feedback_message = f"{person_id} {off:.2f} m from the handover place"
             return Status.SUCCESS
