@@ -28,6 +28,17 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   or a step back inside a bystander's protective separation is a stop: before, the
   recoveries moved whoever stood there); after them, `failed: blocked` (or `no_path`
   when no plan was ever found);
+- a stop held, at the recoveries' turn, for a person only the map has beside the body's
+  flank (not seen for `STALE_S`: a stale estimate, in the wedge neither lidar sees, so
+  the lidar cannot clear it), the first recovery is a slide instead (once a goal): a
+  straight walk ahead or back along the flank (`SLIDE_M` at `SLIDE_SPEED`), held by the
+  people rules of everybody else, and by that person's only when it heads towards them
+  (inside S_p at rest the rules let only a way 60° away from a person move: along the
+  flank is not). It sweeps only floor the lidars see, never the flank's side; from
+  there the lidar sees the place (and navigation drops a person it sees free). Hall seed
+  0's shift: a walker's last place beside the flank held the robot 300 s (two
+  requests), nobody there; turning and stepping back were stops for it, and stepping
+  away from a person's estimate walked into a real person once (reverted);
 - every command, the follower's and the recoveries', goes through the body guard
   (`body_guard`): it may not sweep the footprint onto obstacles;
 - `goal_timeout_s` of sim time on one goal: `failed: timeout`;
@@ -51,10 +62,10 @@ from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
-from services.navigation.people import NO_LIMIT, SpeedLimit, people_limit
+from services.navigation.people import NO_LIMIT, SpeedLimit, bearing, people_limit
 from services.navigation.planner import Plan, PlanError, plan
 
-Recovery = Literal["", "clear", "rotate", "backoff"]
+Recovery = Literal["", "clear", "rotate", "backoff", "slide"]
 
 
 #: Not settings (the navigator's are in `NavigationSettings`): how far ahead a lethal cell
@@ -65,6 +76,12 @@ ROTATE_S = 3.0
 ROTATE_RATE = 0.5
 BACKOFF_S = 1.5
 BACKOFF_SPEED = 0.15
+#: The slide (module docstring): a map person unseen this long (s) beside the flank may
+#: be slid past, this far (m: their place then lies beyond the body's end, in a lidar's
+#: view) at this speed (m/s).
+STALE_S = 10.0
+SLIDE_M = 1.2
+SLIDE_SPEED = 0.2
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
@@ -138,6 +155,9 @@ class Navigator:
         self.recoveries: list[Recovery] = ["clear", "rotate", "backoff"]
         self.recovery = ""
         self.recovery_until = 0
+        self.slid = False  # the slide is once a goal
+        self.slide_sign = 0.0  # +1 ahead, -1 back
+        self.slide_person = ""  # the stale person slid past
         self.best_remaining = math.inf
         self.best_yaw_error = math.inf
         self.progress_ns = t_ns
@@ -298,12 +318,51 @@ class Navigator:
             reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
             self._finish("failed", reason, f"{reason}: {self.detail}; recoveries exhausted")
             return self._out(limit, new_plan)
-        self.recovery = self.recoveries.pop(0)
+        sign = 0.0 if self.slid or limit.rule != "stop" else self._slide_way(t_ns, pose, cm, limit)
+        if sign:
+            self.recovery, self.slide_sign, self.slid = "slide", sign, True
+        else:
+            self.recovery = self.recoveries.pop(0)
         self.blocked_since = None
-        span = {"clear": 0.0, "rotate": ROTATE_S, "backoff": BACKOFF_S}
+        span = {"clear": 0.0, "rotate": ROTATE_S, "backoff": BACKOFF_S,
+                "slide": SLIDE_M / SLIDE_SPEED}  # fmt: skip
         self.recovery_until = t_ns + round(span[self.recovery] * NS_PER_S)
         self.detail = f"recovery: {self.recovery}"
         return self._out(limit, new_plan)
+
+    def _slide_way(self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit) -> float:
+        """+1 (ahead) or -1 (back): the way to slide past the person who holds the stop,
+        when they qualify (module docstring) and the way neither heads towards them nor
+        is held by anybody else's rules; 0 otherwise."""
+        who = next((q for q in cm.people if q.id == limit.person_id), None)
+        if who is None or who.seen_ns is None or t_ns - who.seen_ns < STALE_S * NS_PER_S:
+            return 0.0
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        dx, dy = who.x - pose.x, who.y - pose.y
+        u, v = c * dx + s * dy, -s * dx + c * dy
+        if not (-self.fp.back <= u <= self.fp.front and abs(v) >= self.fp.half_width):
+            return 0.0  # not beside the flank: ahead or behind, where a lidar sees
+        self.slide_person = who.id
+        for sign in (-1.0, 1.0) if u > 0.0 else (1.0, -1.0):  # away from them first
+            self.slide_sign = sign
+            if self._slide_limit(pose, cm).rule != "stop":
+                return sign
+        self.slide_person, self.slide_sign = "", 0.0
+        return 0.0
+
+    def _slide_limit(self, pose: Pose, cm: Costmap) -> SpeedLimit:
+        """The people rules for a slide: everybody's but the stale person's, for whom a
+        stop only when the slide heads towards them (it goes along the flank)."""
+        way = (self.slide_sign * math.cos(pose.yaw), self.slide_sign * math.sin(pose.yaw))
+        others = [q for q in cm.people if q.id != self.slide_person]
+        stale = [q for q in cm.people if q.id == self.slide_person]
+        for q in stale:
+            n = bearing(pose, self.fp, (q.x, q.y))
+            if n[0] * way[0] + n[1] * way[1] > 1e-6:
+                return SpeedLimit(0.0, "stop", q.id)
+        handing = self.goal.handover_id if self.goal else ""
+        return people_limit(pose, way, others, self.fp, self.n.people, self.top_mps,
+                            handing, self.limit_rule == "stop")  # fmt: skip
 
     def _person_near(self, pose: Pose, cm: Costmap) -> str:
         """The nearest person within the slow radius of the footprint or of the goal
@@ -337,10 +396,15 @@ class Navigator:
         # The people rules hold a recovery as they hold a path: a turn on the spot or a
         # step back within a bystander's protective separation is a stop.
         behind = (-math.cos(pose.yaw), -math.sin(pose.yaw))
-        limit = people_limit(
-            pose, behind if rec == "backoff" else None, cm.people, self.fp, self.n.people,
-            self.top_mps, self.goal.handover_id if self.goal else "",
-            self.limit_rule == "stop", turning=rec == "rotate",
+        slide = (self.slide_sign * math.cos(pose.yaw), self.slide_sign * math.sin(pose.yaw))
+        limit = (
+            self._slide_limit(pose, cm)
+            if rec == "slide"
+            else people_limit(
+                pose, behind if rec == "backoff" else None, cm.people, self.fp, self.n.people,
+                self.top_mps, self.goal.handover_id if self.goal else "",
+                self.limit_rule == "stop", turning=rec == "rotate",
+            )
         )  # fmt: skip
         self.limit_rule = limit.rule
         if limit.rule == "stop":
@@ -353,6 +417,12 @@ class Navigator:
             back = Pose(pose.x + 0.3 * behind[0], pose.y + 0.3 * behind[1], pose.yaw)
             step = np.array([-min(BACKOFF_SPEED, limit.speed), 0.0, 0.0])
             free = cm.cost_at(back.x, back.y) >= 0 and guard.ok(step)
+            self.cmd = step if free else np.zeros(3)
+            self.guarded = "" if free else "stand"
+        elif rec == "slide":
+            step = np.array([self.slide_sign * min(SLIDE_SPEED, limit.speed), 0.0, 0.0])
+            to = Pose(pose.x + 0.3 * slide[0], pose.y + 0.3 * slide[1], pose.yaw)
+            free = cm.cost_at(to.x, to.y) >= 0 and guard.ok(step)
             self.cmd = step if free else np.zeros(3)
             self.guarded = "" if free else "stand"
         out = self._out(limit)

@@ -413,3 +413,36 @@ def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot
     stopped = nav.tick(round(DT * 1e9), Pose(3.5, 0.0, 0.0), near)
     assert stopped.limit.rule == "stop" and stopped.limit.person_id == "person_1"
     assert not stopped.cmd.any()
+
+
+def _flank_scene(seen_ns: int | None) -> list:  # type: ignore[type-arg]
+    """A person the map last had beside the robot's right flank, 5 cm off (`seen_ns`: when
+    the map last saw them; None: a sensor sees them now), and a goal to the right: the
+    turn is a stop for them."""
+    ghost = Person("person_17", 1.9, -(FP.half_width + 0.05), None, (0.0, 0.0), seen_ns)
+    cm = dataclasses.replace(build_costmap(_open_floor(), FP, CostParams()), people=(ghost,))
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(5.0, -2.0, 0.0), 0.1, 0.1), 0)
+    return _run(nav, Pose(2.0, 0.0, 0.0), lambda _t, _p: cm, 3000)
+
+
+def test_a_stale_person_beside_the_flank_is_slid_past_along_it() -> None:
+    """Hall seed 0's shift: a walker's last place, beside the flank where neither lidar
+    sees, held the robot 300 s with nobody there. Unseen 10 s, it is slid past: straight
+    ahead along the flank, never nearer to them, and the goal is reached."""
+    outs = _flank_scene(seen_ns=0)
+    assert outs[-1][2].state == "succeeded", outs[-1][2]
+    slide = [(t, p) for t, p, o in outs if o.recovery == "slide"]
+    assert slide, "a slide"
+    assert slide[0][0] >= 10 * 1e9  # not before the map's sighting is stale
+    ghost = np.array([[1.9, -(FP.half_width + 0.05)]])
+    start = float(distance_to_footprint(slide[0][1], FP, ghost)[0])
+    assert all(float(distance_to_footprint(p, FP, ghost)[0]) >= start - 0.01 for _, p in slide)
+    assert all(abs(p.y) < 0.02 and abs(p.yaw) < 0.02 for _, p in slide)  # along the flank
+    assert slide[-1][1].x - slide[0][1].x > 1.0
+
+
+def test_a_person_a_sensor_sees_beside_the_flank_is_not_slid_past() -> None:
+    outs = _flank_scene(seen_ns=None)
+    assert all(o.recovery != "slide" for _, _, o in outs)
+    assert outs[-1][2].state == "failed", outs[-1][2]
