@@ -343,12 +343,21 @@ class Navigator:
         if not (-self.fp.back <= u <= self.fp.front and abs(v) >= self.fp.half_width):
             return 0.0  # not beside the flank: ahead or behind, where a lidar sees
         self.slide_person = who.id
+        guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         for sign in (-1.0, 1.0) if u > 0.0 else (1.0, -1.0):  # away from them first
             self.slide_sign = sign
-            if self._slide_limit(pose, cm).rule != "stop":
+            if self._slide_limit(pose, cm).rule != "stop" and self._slide_free(pose, cm, guard):
                 return sign
         self.slide_person, self.slide_sign = "", 0.0
         return 0.0
+
+    def _slide_free(self, pose: Pose, cm: Costmap, guard: BodyGuard) -> bool:
+        """Whether the slide's way is free of obstacles: 0.3 m on, not in lethal cost, and
+        the body guard lets the step through (as the back-off's)."""
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        to = (pose.x + 0.3 * self.slide_sign * c, pose.y + 0.3 * self.slide_sign * s)
+        step = np.array([self.slide_sign * SLIDE_SPEED, 0.0, 0.0])
+        return cm.cost_at(*to) >= 0 and guard.ok(step)
 
     def _slide_limit(self, pose: Pose, cm: Costmap) -> SpeedLimit:
         """The people rules for a slide: everybody's but the stale person's, for whom a
@@ -396,7 +405,6 @@ class Navigator:
         # The people rules hold a recovery as they hold a path: a turn on the spot or a
         # step back within a bystander's protective separation is a stop.
         behind = (-math.cos(pose.yaw), -math.sin(pose.yaw))
-        slide = (self.slide_sign * math.cos(pose.yaw), self.slide_sign * math.sin(pose.yaw))
         limit = (
             self._slide_limit(pose, cm)
             if rec == "slide"
@@ -421,8 +429,7 @@ class Navigator:
             self.guarded = "" if free else "stand"
         elif rec == "slide":
             step = np.array([self.slide_sign * min(SLIDE_SPEED, limit.speed), 0.0, 0.0])
-            to = Pose(pose.x + 0.3 * slide[0], pose.y + 0.3 * slide[1], pose.yaw)
-            free = cm.cost_at(to.x, to.y) >= 0 and guard.ok(step)
+            free = self._slide_free(pose, cm, guard)
             self.cmd = step if free else np.zeros(3)
             self.guarded = "" if free else "stand"
         out = self._out(limit)

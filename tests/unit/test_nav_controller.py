@@ -415,14 +415,21 @@ def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot
     assert not stopped.cmd.any()
 
 
-def _flank_scene(seen_ns: int | None) -> list:  # type: ignore[type-arg]
+def _flank_scene(seen_ns: int | None, wall_ahead: bool = False) -> list:  # type: ignore[type-arg]
     """A person the map last had beside the robot's right flank, 5 cm off (`seen_ns`: when
     the map last saw them; None: a sensor sees them now), and a goal to the right: the
-    turn is a stop for them."""
+    turn is a stop for them. `wall_ahead`: a wall 8 cm beyond the body's front (and the
+    goal behind, to the right)."""
     ghost = Person("person_17", 1.9, -(FP.half_width + 0.05), None, (0.0, 0.0), seen_ns)
-    cm = dataclasses.replace(build_costmap(_open_floor(), FP, CostParams()), people=(ghost,))
+    grid = _open_floor()
+    if wall_ahead:
+        occ = grid.occupied.copy()
+        occ[:, round((2.0 + FP.front + 0.08 + 1.0) / 0.05) :] = True
+        grid = Grid(occ, 0.05, (-1.0, -3.0))
+    cm = dataclasses.replace(build_costmap(grid, FP, CostParams()), people=(ghost,))
     nav = Navigator(FP, NavigationSettings(), DT)
-    nav.start(GoalSpec("g", Pose(5.0, -2.0, 0.0), 0.1, 0.1), 0)
+    goal = Pose(0.0, -2.0, math.pi) if wall_ahead else Pose(5.0, -2.0, 0.0)
+    nav.start(GoalSpec("g", goal, 0.1, 0.1), 0)
     return _run(nav, Pose(2.0, 0.0, 0.0), lambda _t, _p: cm, 3000)
 
 
@@ -440,6 +447,13 @@ def test_a_stale_person_beside_the_flank_is_slid_past_along_it() -> None:
     assert all(float(distance_to_footprint(p, FP, ghost)[0]) >= start - 0.01 for _, p in slide)
     assert all(abs(p.y) < 0.02 and abs(p.yaw) < 0.02 for _, p in slide)  # along the flank
     assert slide[-1][1].x - slide[0][1].x > 1.0
+
+
+def test_the_slide_goes_the_other_way_when_its_way_is_walled() -> None:
+    outs = _flank_scene(seen_ns=0, wall_ahead=True)
+    slide = [p for _, p, o in outs if o.recovery == "slide"]
+    assert slide and slide[-1].x < slide[0].x - 1.0  # back along the flank
+    assert all(abs(p.y) < 0.02 for p in slide)
 
 
 def test_a_person_a_sensor_sees_beside_the_flank_is_not_slid_past() -> None:
