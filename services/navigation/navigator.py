@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 from common.config import NavigationSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
-from services.navigation.body_guard import BodyGuard
+from services.navigation.body_guard import HORIZON_S, BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
@@ -82,6 +82,8 @@ BACKOFF_SPEED = 0.15
 STALE_S = 10.0
 SLIDE_M = 1.2
 SLIDE_SPEED = 0.2
+#: m the body guard looks along the slide's way before each step.
+SLIDE_LOOK_M = 0.3
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
@@ -352,12 +354,10 @@ class Navigator:
         return 0.0
 
     def _slide_free(self, pose: Pose, cm: Costmap, guard: BodyGuard) -> bool:
-        """Whether the slide's way is free of obstacles: 0.3 m on, not in lethal cost, and
-        the body guard lets the step through (as the back-off's)."""
-        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-        to = (pose.x + 0.3 * self.slide_sign * c, pose.y + 0.3 * self.slide_sign * s)
-        step = np.array([self.slide_sign * SLIDE_SPEED, 0.0, 0.0])
-        return cm.cost_at(*to) >= 0 and guard.ok(step)
+        """Whether the body guard lets the footprint slide `SLIDE_LOOK_M` on (the costmap's
+        lethal cost is no test here: it holds the stale person's own disc)."""
+        look = np.array([self.slide_sign * SLIDE_LOOK_M / HORIZON_S, 0.0, 0.0])
+        return guard.ok(look)
 
     def _slide_limit(self, pose: Pose, cm: Costmap) -> SpeedLimit:
         """The people rules for a slide: everybody's but the stale person's, for whom a

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from common.config import ControllerSettings, NavigationSettings, PeopleSettings
+from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
@@ -454,6 +455,19 @@ def test_the_slide_goes_the_other_way_when_its_way_is_walled() -> None:
     slide = [p for _, p, o in outs if o.recovery == "slide"]
     assert slide and slide[-1].x < slide[0].x - 1.0  # back along the flank
     assert all(abs(p.y) < 0.02 for p in slide)
+
+
+def test_the_slide_looks_for_obstacles_not_for_the_stale_persons_own_disc() -> None:
+    """The costmap's lethal disc round the person beside the flank covers the base's way
+    (hall seed 0's shift: the slide took that for an obstacle and never moved); the
+    body guard's obstacles alone hold it."""
+    ghost = Person("person_17", 1.9, -(FP.half_width + 0.05), None, (0.0, 0.0), 0)
+    cm = build_costmap(_open_floor(), FP, CostParams(), people=[ghost])
+    pose = Pose(2.0, 0.0, 0.0)
+    assert cm.cost_at(2.3, 0.0) < 0  # lethal: the person's disc
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.slide_sign = 1.0
+    assert nav._slide_free(pose, cm, BodyGuard(cm.solid, cm.grid, FP, pose))
 
 
 def test_a_person_a_sensor_sees_beside_the_flank_is_not_slid_past() -> None:
