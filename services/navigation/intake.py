@@ -170,7 +170,7 @@ class GoalIntake:
         """The goal's pose, tolerances and handover person against `cm` and the map's
         data as of `at`; `GoalInvalid` with the reason."""
         g = req.goal
-        person_xy, bearing, distance = None, None, 0.0
+        person_xy, bearing, distance = None, None, None
         try:
             if isinstance(g, PoseGoal):
                 target = Pose(g.x, g.y, g.yaw)
@@ -212,7 +212,7 @@ class GoalIntake:
         try:
             here = (pose.x, pose.y)
             target = goals.handover_pose(
-                cm, person, here, self.fp, bearing=g.bearing, distance=g.distance or None
+                cm, person, here, self.fp, bearing=g.bearing, distance=g.distance
             )
         except goals.GoalError as exc:
             self.log.info("goal %s keeps its pose: %s", g.goal_id, exc)

@@ -107,8 +107,9 @@ class GoalSpec:
     person_xy: tuple[float, float] | None = None
     #: The side of the person the goal asked for (`PersonHandover.bearing_rad`).
     bearing: float | None = None
-    #: How far from the person the handover stands (m; `PersonHandover.extra_m` added).
-    distance: float = 0.0
+    #: How far from the person the handover stands (m; `PersonHandover.extra_m` added;
+    #: None: not a handover).
+    distance: float | None = None
 
 
 class TickOutput(NamedTuple):
@@ -336,7 +337,8 @@ class Navigator:
     def _slide_way(self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit) -> float:
         """+1 (ahead) or -1 (back): the way to slide past the person who holds the stop,
         when they qualify (module docstring) and the way neither heads towards them nor
-        is held by anybody else's rules; 0 otherwise."""
+        is held by anybody else's rules, nor by the body guard; 0 otherwise. Sets
+        `slide_person` when it is not 0."""
         who = next((q for q in cm.people if q.id == limit.person_id), None)
         if who is None or who.seen_ns is None or t_ns - who.seen_ns < STALE_S * NS_PER_S:
             return 0.0
@@ -345,31 +347,26 @@ class Navigator:
         u, v = c * dx + s * dy, -s * dx + c * dy
         if not (-self.fp.back <= u <= self.fp.front and abs(v) >= self.fp.half_width):
             return 0.0  # not beside the flank: ahead or behind, where a lidar sees
-        self.slide_person = who.id
         guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         for sign in (-1.0, 1.0) if u > 0.0 else (1.0, -1.0):  # away from them first
-            self.slide_sign = sign
-            if self._slide_limit(pose, cm).rule != "stop" and self._slide_free(pose, cm, guard):
+            if self._slide_limit(pose, cm, sign, who.id).rule != "stop" and _slide_free(
+                guard, sign
+            ):
+                self.slide_person = who.id
                 return sign
-        self.slide_person, self.slide_sign = "", 0.0
         return 0.0
 
-    def _slide_free(self, pose: Pose, cm: Costmap, guard: BodyGuard) -> bool:
-        """Whether the body guard lets the footprint slide `SLIDE_LOOK_M` on (the costmap's
-        lethal cost is no test here: it holds the stale person's own disc)."""
-        look = np.array([self.slide_sign * SLIDE_LOOK_M / HORIZON_S, 0.0, 0.0])
-        return guard.ok(look)
-
-    def _slide_limit(self, pose: Pose, cm: Costmap) -> SpeedLimit:
-        """The people rules for a slide: everybody's but the stale person's, for whom a
-        stop only when the slide heads towards them (it goes along the flank)."""
-        way = (self.slide_sign * math.cos(pose.yaw), self.slide_sign * math.sin(pose.yaw))
-        others = [q for q in cm.people if q.id != self.slide_person]
-        stale = [q for q in cm.people if q.id == self.slide_person]
-        for q in stale:
-            n = bearing(pose, self.fp, (q.x, q.y))
-            if n[0] * way[0] + n[1] * way[1] > 1e-6:
-                return SpeedLimit(0.0, "stop", q.id)
+    def _slide_limit(self, pose: Pose, cm: Costmap, sign: float, stale_id: str) -> SpeedLimit:
+        """The people rules for a slide `sign` (+1 ahead, -1 back): everybody's but the
+        stale person's, for whom a stop only when the slide heads towards them (it goes
+        along the flank)."""
+        way = (sign * math.cos(pose.yaw), sign * math.sin(pose.yaw))
+        for q in cm.people:
+            if q.id == stale_id:
+                n = bearing(pose, self.fp, (q.x, q.y))
+                if n[0] * way[0] + n[1] * way[1] > 1e-6:
+                    return SpeedLimit(0.0, "stop", q.id)
+        others = [q for q in cm.people if q.id != stale_id]
         handing = self.goal.handover_id if self.goal else ""
         return people_limit(pose, way, others, self.fp, self.n.people, self.top_mps,
                             handing, self.limit_rule == "stop")  # fmt: skip
@@ -407,7 +404,7 @@ class Navigator:
         # step back within a bystander's protective separation is a stop.
         behind = (-math.cos(pose.yaw), -math.sin(pose.yaw))
         limit = (
-            self._slide_limit(pose, cm)
+            self._slide_limit(pose, cm, self.slide_sign, self.slide_person)
             if rec == "slide"
             else people_limit(
                 pose, behind if rec == "backoff" else None, cm.people, self.fp, self.n.people,
@@ -430,8 +427,15 @@ class Navigator:
             self.guarded = "" if free else "stand"
         elif rec == "slide":
             step = np.array([self.slide_sign * min(SLIDE_SPEED, limit.speed), 0.0, 0.0])
-            free = self._slide_free(pose, cm, guard)
+            free = _slide_free(guard, self.slide_sign)
             self.cmd = step if free else np.zeros(3)
             self.guarded = "" if free else "stand"
         out = self._out(limit)
         return out._replace(recovery=rec)
+
+
+def _slide_free(guard: BodyGuard, sign: float) -> bool:
+    """Whether the body guard lets the footprint slide `SLIDE_LOOK_M` ahead (`sign` +1) or
+    back (-1) (the costmap's lethal cost is no test here: it holds the stale person's own
+    disc)."""
+    return guard.ok(np.array([sign * SLIDE_LOOK_M / HORIZON_S, 0.0, 0.0]))

@@ -17,7 +17,7 @@ from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
-from services.navigation.navigator import GoalSpec, Navigator
+from services.navigation.navigator import GoalSpec, Navigator, _slide_free
 from services.navigation.people import (
     BRAKE_LEAD_M,
     RESUME_MARGIN_M,
@@ -465,9 +465,7 @@ def test_the_slide_looks_for_obstacles_not_for_the_stale_persons_own_disc() -> N
     cm = build_costmap(_open_floor(), FP, CostParams(), people=[ghost])
     pose = Pose(2.0, 0.0, 0.0)
     assert cm.cost_at(2.3, 0.0) < 0  # lethal: the person's disc
-    nav = Navigator(FP, NavigationSettings(), DT)
-    nav.slide_sign = 1.0
-    assert nav._slide_free(pose, cm, BodyGuard(cm.solid, cm.grid, FP, pose))
+    assert _slide_free(BodyGuard(cm.solid, cm.grid, FP, pose), 1.0)
 
 
 def test_a_person_a_sensor_sees_beside_the_flank_is_not_slid_past() -> None:
