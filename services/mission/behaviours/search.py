@@ -56,10 +56,14 @@ MAX_RESUMES = 2
 @dataclass(frozen=True)
 class SearchLeft:
     """What a search that stopped at a find had left: the route from the viewpoint it was
-    at, the places it planned (for the failure's text), and the times it went on."""
+    at, the places it planned (for the failure's text), what it looked for (the class,
+    the ids known when it began: None for a request by class), the ids tried, and the
+    times it went on."""
 
     route: Route
     places: tuple[Place, ...]
+    class_name: str
+    known: frozenset[str] | None
     tried: tuple[str, ...]
     resumes: int = 0
 
@@ -186,11 +190,9 @@ class LookElsewhere(MissionBehaviour):
         self.set(SEARCH_LEFT, None)
         self.places, self.resumes = list(left.places), left.resumes + 1
         self.tried = [*left.tried, *(t for t in self.tried if t not in left.tried)]
-        request = self.get(REQUEST)
-        name = request.object
-        self.class_name = class_of(name) if is_map_id(name) else name
-        known = self.get(KNOWN)
-        self.known = set(known) if known is not None and is_map_id(name) else None
+        self.class_name = left.class_name
+        self.known = None if left.known is None else set(left.known)
+        name = self.get(REQUEST).object
         try:
             self.supports = list(self.port.floor_supports())
         except PortError as exc:
@@ -213,7 +215,9 @@ class LookElsewhere(MissionBehaviour):
             return None
         facings = None if route.facings is None else route.facings[k:]
         rest = Route(route.viewpoints[k:], route.paths[k:], facings, route.unseen)
-        return SearchLeft(rest, tuple(self.places), tuple(self.tried), self.resumes)
+        known = None if self.known is None else frozenset(self.known)
+        return SearchLeft(rest, tuple(self.places), self.class_name, known, tuple(self.tried),
+                          self.resumes)  # fmt: skip
 
     def _end(self) -> Status:
         request = self.get(REQUEST)
