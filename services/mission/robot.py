@@ -174,7 +174,8 @@ class BusRobot:
         #: extent in it (ahead, behind, left, right: the stowed footprint's, the front
         #: the posture's): what `within_room` keeps off the static world.
         self._posture: str | None = None
-        fp = Footprint.stowed()
+        self._stowed = Footprint.stowed()
+        fp = self._stowed
         self._body = (fp.front, fp.back, fp.half_width, fp.half_width)
         self._roomed = False  # whether the last command was cut short of the world
 
@@ -342,7 +343,7 @@ class BusRobot:
             H = self.map_frame.to_odom(H_map, goal.stamp_ns, self._t)
             goal = msgspec.structs.replace(goal, H=tuple(H.ravel().tolist()))
         if isinstance(goal, (Posture, Reach, Grasp)):
-            fp = Footprint.stowed()  # after a reach: the stowed front (the next is stow)
+            fp = self._stowed  # after a reach: the stowed front (the next is stow)
             self._posture = goal.name if isinstance(goal, Posture) else None
             front = posture_front_m(goal.name) if isinstance(goal, Posture) else fp.front
             self._body = (front, fp.back, fp.half_width, fp.half_width)
