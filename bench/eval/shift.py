@@ -54,7 +54,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import msgspec
 import numpy as np
@@ -197,30 +197,20 @@ class Follow:
 
     def people_at(self, t_ns: int) -> PeopleTruth | None:
         """The kept people sample nearest to sim time `t_ns` (None before any)."""
-        if not self.history:
-            return None
-        k = bisect.bisect_left([h.stamp_ns for h in self.history], t_ns)
-        near = self.history[max(0, k - 1) : k + 1]
-        return min(near, key=lambda h: abs(h.stamp_ns - t_ns))
+        return _nearest(self.history, t_ns)
 
     def base_at(self, t_ns: int) -> StateTruth | None:
         """The kept base sample nearest to sim time `t_ns` (None before any)."""
-        if not self.bases:
-            return None
-        k = bisect.bisect_left([b.stamp_ns for b in self.bases], t_ns)
-        near = self.bases[max(0, k - 1) : k + 1]
-        return min(near, key=lambda b: abs(b.stamp_ns - t_ns))
+        return _nearest(self.bases, t_ns)
 
     def drain(self) -> None:
         fresh = list(self.people.drain())
         for sample in fresh:
-            if not self.history or sample.stamp_ns - self.history[-1].stamp_ns >= HISTORY_EVERY_NS:
-                self.history.append(sample)
+            _keep(self.history, sample)
         self._people.extend(fresh)
         for b in self.base.drain():
             self._base[b.stamp_ns] = b
-            if not self.bases or b.stamp_ns - self.bases[-1].stamp_ns >= HISTORY_EVERY_NS:
-                self.bases.append(b)
+            _keep(self.bases, b)
         left: list[PeopleTruth] = []
         for sample in self._people:
             base = self._base.get(sample.stamp_ns)
@@ -235,6 +225,23 @@ class Follow:
 
 
 # -- the shift ------------------------------------------------------------------------------
+
+
+Stamped = TypeVar("Stamped", PeopleTruth, StateTruth)
+
+
+def _keep(kept: list[Stamped], sample: Stamped) -> None:
+    """Keep `sample` when it is `HISTORY_EVERY_NS` or more after the last one kept."""
+    if not kept or sample.stamp_ns - kept[-1].stamp_ns >= HISTORY_EVERY_NS:
+        kept.append(sample)
+
+
+def _nearest(kept: list[Stamped], t_ns: int) -> Stamped | None:
+    """The kept sample nearest to sim time `t_ns` (None before any)."""
+    if not kept:
+        return None
+    k = bisect.bisect_left([h.stamp_ns for h in kept], t_ns)
+    return min(kept[max(0, k - 1) : k + 1], key=lambda h: abs(h.stamp_ns - t_ns))
 
 
 @dataclass
