@@ -35,6 +35,21 @@ class SeenPlace(Message, frozen=True):
     last_seen_ns: StampNs
 
 
+Histogram = Annotated[tuple[NonNegative, ...], msgspec.Meta(max_length=64)]
+
+
+class PersonColours(Message, frozen=True):
+    """A person's clothes as the map saw them, by range band (`common.appearance.Banded`):
+    colour histograms (empty: no view in that band yet) and how many views each averages.
+    far: whole views from 3 m on (shirt and trousers); near: views within 2 m (the legs).
+    """
+
+    far: Histogram = ()
+    far_views: Annotated[int, msgspec.Meta(ge=0)] = 0
+    near: Histogram = ()
+    near_views: Annotated[int, msgspec.Meta(ge=0)] = 0
+
+
 class MapEntity(Message, frozen=True):
     """`dume/map/artifacts/<id>` or `dume/map/people/<id>`: one mapped thing.
 
@@ -51,6 +66,8 @@ class MapEntity(Message, frozen=True):
     places: a person's usual places, most seen first (empty for artifacts, and for a
         person seeded from truth and not seen since): where to look for someone who is
         not where they were last seen.
+    colours: a person's colours by range band (`PersonColours`; None for artifacts):
+        the mission checks whom it hands over to against them.
     """
 
     id: EntityId
@@ -66,6 +83,7 @@ class MapEntity(Message, frozen=True):
     observations: int = 0
     nearest_view_m: NonNegative | None = None
     places: Annotated[tuple[SeenPlace, ...], msgspec.Meta(max_length=64)] = ()
+    colours: PersonColours | None = None
 
 
 class MapListing(Message, frozen=True):
@@ -107,7 +125,7 @@ class MapFile(Message, frozen=True):
     sites were kept); a map service of another site refuses it. supports: the surfaces
     artifacts stand on, as the map saw them (`dume/map/supports` of a map with no floor
     plan), kept for the next run's semantic pass. appearances: people's colour
-    histograms by id (`services/semantic_map/appearance.py`), so the next run knows
+    histograms by id (`common/appearance.py`), so the next run knows
     somebody who walked off by their clothes (absent in older files).
     """
 

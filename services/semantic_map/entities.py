@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common.appearance import Banded
 from common.geometry import FloatArray
 from common.messages.semantic_map import EntityKind, MapEntity, Source
 from services.semantic_map.whereabouts import Whereabouts
@@ -96,6 +97,9 @@ class Track:
     best_range_m: float | None = None
     #: People: where they were seen (`whereabouts`), their usual places.
     whereabouts: Whereabouts = field(default_factory=Whereabouts)
+    #: People: their colours by range band (`common.appearance.Banded`), which the mission
+    #: checks whom it hands over to by (stored with the entry, `MapEntity.colours`).
+    colours: Banded = field(default_factory=Banded)
 
     @property
     def confirmed(self) -> bool:
@@ -123,6 +127,7 @@ class Track:
             observations=self.hits,
             nearest_view_m=self.best_range_m,
             places=self.whereabouts.places() if self.kind == "person" else (),
+            colours=self.colours.to_message() if self.kind == "person" else None,
         )
 
     @classmethod
@@ -144,6 +149,7 @@ class Track:
             hits=e.observations,
             best_range_m=e.nearest_view_m,
             whereabouts=Whereabouts.of(e.places),
+            colours=Banded.from_message(e.colours),
         )
 
 

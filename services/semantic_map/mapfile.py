@@ -14,12 +14,12 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from common.appearance import SIZE
 from common.geometry import FloatArray
 from common.messages import as_numpy, decoder
 from common.messages.semantic_map import MapFile, OccupancyGrid, Source
 from common.messages.world import Cuboid, WorldDescription
 from common.runfiles import write_whole
-from services.semantic_map.appearance import SIZE
 from services.semantic_map.entities import Track
 from services.semantic_map.occupancy import FREE, OCCUPIED, UNKNOWN, Occupancy
 

@@ -50,6 +50,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from common import robot
+from common.appearance import colour_histogram
 from common.camera import PinholeCamera
 from common.config import SemanticMapSettings
 from common.geometry import FloatArray
@@ -59,7 +60,6 @@ from common.messages.perception import Detection, Detections
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
 from common.messages.sim import CameraFrame
 from common.messages.world import SupportSurface
-from services.semantic_map.appearance import colour_histogram
 from services.semantic_map.artifacts import ArtifactTracker
 from services.semantic_map.entities import IdBook, Observation, Track, measurement_sigma
 from services.semantic_map.evidence import (

@@ -96,9 +96,9 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from common.appearance import bhattacharyya, blend
 from common.config import SemanticMapSettings
 from common.geometry import FloatArray
-from services.semantic_map.appearance import bhattacharyya, blend
 from services.semantic_map.entities import IdBook, Observation, Track
 
 CHI2_2D_999 = 13.82
@@ -373,6 +373,8 @@ class PeopleTracker:
             )
             tr.vel_cov = np.eye(2) * V_MAX**2
             tr.whereabouts.see(tr.xy, stamp_ns)
+            if obs.appearance is not None:
+                tr.colours.see(obs.appearance, obs.range_m, obs.whole)
             self.add(tr, stamp_ns)
             if self.settings.confirm_hits <= 1:
                 tr.id = self.ids.next_id("person")
@@ -535,6 +537,7 @@ class PeopleTracker:
         was = old.xy.copy()
         self._set(old, np.concatenate([new.xy, new.velocity]), new.P.copy())
         old.appearance = blend(old.appearance, new.appearance)
+        old.colours.absorb(new.colours)
         old.hits += new.hits
         old.near_hits += new.near_hits
         old.last_seen_ns, old.stamp_ns, old.moving = new.last_seen_ns, new.stamp_ns, new.moving
@@ -608,6 +611,7 @@ class PeopleTracker:
         keep.last_seen_ns = max(keep.last_seen_ns, gone.last_seen_ns)
         if keep.appearance is None and gone.appearance is not None:
             keep.appearance = gone.appearance.copy()
+        keep.colours.absorb(gone.colours)
         keep.whereabouts.absorb(gone.whereabouts)
         keep.walked |= gone.walked
         assert keep.id is not None and gone.id is not None
@@ -668,6 +672,7 @@ class PeopleTracker:
         self._set(tr, x, P)
         if obs.appearance is not None:
             tr.appearance = blend(tr.appearance, obs.appearance)
+            tr.colours.see(obs.appearance, obs.range_m, obs.whole)
         tr.hits += 1
         tr.near_hits += int(obs.near(self.settings.class_near_m))
         tr.moving = sure_velocity(tr)

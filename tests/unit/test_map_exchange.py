@@ -205,7 +205,7 @@ def test_a_map_file_keeps_peoples_colours_and_refuses_a_histogram_that_is_not_on
 ) -> None:
     """Saved after an exploration, the map knows its people's clothes: the next run can
     tell person_2 who walked off from somebody new (`PeopleTracker.reidentify`)."""
-    from services.semantic_map.appearance import SIZE
+    from common.appearance import SIZE
     from services.semantic_map.mapfile import read_map_file, write_map_file
 
     smap, store, _path = saved

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.appearance import SIZE, bhattacharyya, colour_histogram
 from common.config import SemanticMapSettings
-from services.semantic_map.appearance import SIZE, bhattacharyya, colour_histogram
 from services.semantic_map.entities import IdBook, Observation, Track
 from services.semantic_map.people import PeopleTracker
 

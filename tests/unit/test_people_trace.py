@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from bench.people_ids import score
+from common.appearance import SIZE
 from common.camera import PinholeCamera
 from common.config import SemanticMapSettings
-from services.semantic_map.appearance import SIZE
 from services.semantic_map.entities import Observation, Track
 from services.semantic_map.mapper import SemanticMap
 from services.semantic_map.occupancy import Occupancy
