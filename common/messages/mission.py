@@ -96,6 +96,8 @@ MissionReason = Literal[
     "handover_timeout",  # nobody took the object in time
     "person_not_found",  # the person was not reached: not seen where the robot looked for
     # them, or walking on: said where it looked and where the map last saw them
+    "wrong_person",  # the person at the handover wears other clothes than the one asked for,
+    # and nobody in the map wears theirs: not handed over (said with the colour distances)
     "mode_timeout",  # the whole-body controller did not take the mode asked for
     "dependency_lost",  # a service it depends on went away or restarted while it ran
     "no_route",  # explore, patrol: no free floor the robot can reach in the map's grid

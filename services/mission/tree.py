@@ -5,7 +5,7 @@
       mission_or_abort (selector)
         the_task (selector): fetch_task (below), else put_back_task: is_put_back, then
                              nothing_held, else put_back_asked (`put_back_tree`)
-        fetch_task (sequence): is_fetch, then
+        fetch_task (sequence): is_fetch, note_look (the requested person's colours), then
           regrasp (Recover: grasp_lost | grasp_failed, budget repick_budget)
             fetch_and_carry (sequence)
               have_it: still_holding (the object asked for, held since an unfinished
@@ -39,12 +39,15 @@
                            reason; then Posture(stow), mode walk/navigation
               bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go;
                              navigation_failed: walked_short, find_person takes over),
-                             find_person (Recover: person_not_found | navigation_failed,
-                                          budget person_rounds - 1)
+                             find_person (Recover: person_not_found | navigation_failed
+                                          | wrong_person while another wears their
+                                          colours, budget person_rounds - 1)
                                at_the_person: person_ahead, else: when unseen, look round
                                  and ask (then the next of their usual places, or their
                                  last), PersonHandover (or a walk to that place) once
                                  more, stands_there (seen, not walking: present)
+                               right_person: wears the colours noted at the start
+                                 (note_look, `identity`), else wrong_person
               (a grasp lost: the object fell where the gripper was (`dropped_at`): no
               walk to its map place, the nearest of its class looked for and picked;
               not seen there, or out of the arm's reach (the floor): `object_dropped`)
@@ -102,6 +105,7 @@ from services.mission.behaviours.base import (
     reset_blackboard,
 )
 from services.mission.behaviours.handover import FeelPull, FirstSide, next_side
+from services.mission.behaviours.identity import NoteLook, RightPerson, another_to_try
 from services.mission.behaviours.motion import (
     BackOff,
     LookForPerson,
@@ -130,7 +134,7 @@ REPICK_REASONS = frozenset({"grasp_lost", "grasp_failed"})
 NEXT_INSTANCE_REASONS = frozenset({"object_not_found", "navigation_failed", "blocked_by_person"})
 #: One more round of looking for the person and walking to them (they walk on, were not
 #: seen, or their place could not be walked to).
-FIND_PERSON_REASONS = frozenset({"person_not_found", "navigation_failed"})
+FIND_PERSON_REASONS = frozenset({"person_not_found", "navigation_failed", "wrong_person"})
 
 
 def _seq(name: str, *children: py_trees.behaviour.Behaviour) -> Sequence:
@@ -280,25 +284,31 @@ def build_tree(ctx: Context) -> Sequence:
         ]),
         Recover(
             "find_person",
-            Selector(
-                "at_the_person",
-                memory=True,
-                children=[
-                    PersonAhead(ctx, st[4]),
-                    _seq(
-                        "to_them_again",
-                        Selector("look_if_unseen", memory=True, children=[
-                            SeenThere(ctx, st[4]),
-                            LookForPerson(ctx, st[4]),
-                        ]),
-                        NavigateTo(ctx, "person", st[4], watch_held=True, name="navigate_again"),
-                        StandsThere(ctx, st[4]),
-                    ),
-                ],
+            _seq(
+                "at_the_right_person",
+                Selector(
+                    "at_the_person",
+                    memory=True,
+                    children=[
+                        PersonAhead(ctx, st[4]),
+                        _seq(
+                            "to_them_again",
+                            Selector("look_if_unseen", memory=True, children=[
+                                SeenThere(ctx, st[4]),
+                                LookForPerson(ctx, st[4]),
+                            ]),
+                            NavigateTo(ctx, "person", st[4], watch_held=True,
+                                       name="navigate_again"),
+                            StandsThere(ctx, st[4]),
+                        ),
+                    ],
+                ),
+                RightPerson(ctx, st[4]),
             ),
             FIND_PERSON_REASONS,
             max(0, s.person_rounds - 1),
             ctx.decide,
+            another_to_try(blackboard("find_person")),
         ),
     )  # fmt: skip
     release = _seq(
@@ -399,7 +409,7 @@ def build_tree(ctx: Context) -> Sequence:
         "the_task",
         memory=True,
         children=[
-            _seq("fetch_task", IsTask(ctx, "fetch"), fetch, offer),
+            _seq("fetch_task", IsTask(ctx, "fetch"), NoteLook(ctx), fetch, offer),
             _seq(
                 "put_back_task",
                 IsTask(ctx, "put_back"),

@@ -10,7 +10,7 @@ import pytest
 from common.config import MissionSettings
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PersonHandover, PoseGoal
-from common.messages.semantic_map import SeenPlace
+from common.messages.semantic_map import PersonColours, SeenPlace
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
@@ -568,11 +568,18 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
 
 def _ask_scene(
     appear: dict[str, tuple[float, float, float, float]],
+    colours: dict[str, PersonColours] | None = None,
 ) -> tuple[MissionTree, FakeRobot, Outcome | None, list[str]]:
     """The person asked for walked off where the robot never sees them; while it asks,
     `appear`: person id → (ahead m, left m, from s into the ask, for s) map people seen
-    standing there relative to the robot (from -1: there when the ask began)."""
+    standing there relative to the robot (from -1: there when the ask began); `colours`:
+    the map's colours of people by id (person_1's as the request begins)."""
+    colours = colours or {}
     robot = small_world(moves=True)
+    if "person_1" in colours:
+        robot.people_["person_1"] = msgspec.structs.replace(
+            robot.people_["person_1"], colours=colours["person_1"]
+        )
     robot.person_walked_to = (1.0, 3.0)
     robot.seen_after_turn_rad = 100.0
     tree = mission(robot)
@@ -592,7 +599,9 @@ def _ask_scene(
                 c, s_ = math.cos(robot.yaw), math.sin(robot.yaw)
                 x = robot.xy[0] + c * ahead - s_ * left
                 y = robot.xy[1] + s_ * ahead + c * left
-                robot.people_[pid] = entity(pid, x, y, kind="person")
+                robot.people_[pid] = msgspec.structs.replace(
+                    entity(pid, x, y, kind="person"), colours=colours.get(pid)
+                )
             if shown:
                 robot.people_[pid] = msgspec.structs.replace(
                     robot.people_[pid], last_seen_ns=robot.now_ns

@@ -48,9 +48,11 @@ KNOWN = "known"  # list[str]: the map's artifacts of the class when the request 
 LOOK_AT = "look_at"  # SeenPlace | None: the person's usual place walked to next, to look
 LOOKED = "looked"  # list[tuple[float, float]]: where the robot looked round for the person
 STANCE = "stance"  # float | None: the world yaw of the line of sight the grasp needs (±)
+PERSON_LOOK = "person_look"  # identity.Look | None: the requested person's colours, noted
+OTHERS = "others"  # list[str]: map people found at the handover in other clothes
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
-    SEARCH, SEARCHED, SEARCH_LEFT, UNSEEN, KNOWN, LOOK_AT, LOOKED, STANCE,
+    SEARCH, SEARCHED, SEARCH_LEFT, UNSEEN, KNOWN, LOOK_AT, LOOKED, STANCE, PERSON_LOOK, OTHERS,
 )  # fmt: skip
 
 

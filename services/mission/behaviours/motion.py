@@ -21,8 +21,10 @@
   meanwhile and that their latest mapped place is `HANDOVER_DISTANCE_M` straight ahead
   within `handover_tol_m`; when not, FAILURE, a condition (no mission failure): the tree
   walks to the person again, after looking round for them when they were not seen
-  (`UNSEEN`). The map can hold a person some tenths of a metre off until it sees them
-  from close by, and the person's hand takes only what is held out within 0.25 m of it.
+  (`UNSEEN`; once somebody else stood at the handover, `identity.RightPerson`, only when
+  the map has the person within `PERSON_HERE_M`: else the tree walks to them). The map
+  can hold a person some tenths of a metre off until it sees them from close by, and the
+  person's hand takes only what is held out within 0.25 m of it.
 - `SeenThere`: SUCCESS unless the person was not seen at their place (`UNSEEN`).
 - `LookForPerson`: the person was not where the map had them. Turn on the spot once
   round (`LOOK_TURNS` pose goals to navigation, as the patrol's look-around: its body
@@ -73,7 +75,9 @@ from services.mission.behaviours.base import (
     GRASP_PLAN,
     LOOK_AT,
     LOOKED,
+    OTHERS,
     PERSON,
+    PERSON_LOOK,
     SIDE,
     STANCE,
     UNSEEN,
@@ -82,6 +86,7 @@ from services.mission.behaviours.base import (
     MissionBehaviour,
 )
 from services.mission.behaviours.handover import side_bearing
+from services.mission.behaviours.identity import other_clothes
 from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
 from services.mission.patrol_goals import PatrolGoal, look_around
 from services.mission.person_search import LOOKED_M, next_place
@@ -363,6 +368,12 @@ def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
         return pid, None
 
 
+#: Once somebody else stood at the handover (`identity.RightPerson`), a person mapped
+#: farther than this from the base is not looked round for here: the tree walks to where
+#: the map has them, m.
+PERSON_HERE_M = 2.5
+
+
 #: The look round for a person is the patrol's look-around (`patrol_goals.look_around`:
 #: `LOOK_TURNS` pose goals at the robot's place, within `goal_job`'s tolerances: navigation
 #: may move the pose to where the footprint turns clear); it asks after the turns or after
@@ -386,7 +397,10 @@ class PersonAhead(MissionBehaviour):
         if person is None or xy is None or yaw is None:
             self.feedback_message = "cannot check: presenting where navigation stopped"
             return Status.SUCCESS
-        if person.last_seen_ns < self.started_ns and not self.get(UNSEEN):
+        # after somebody else stood here (`OTHERS`), the person walked to next may be
+        # mapped anywhere: looked round for only where the map has them
+        here = not self.get(OTHERS) or math.dist(xy, person.position_in_world[:2]) <= PERSON_HERE_M
+        if person.last_seen_ns < self.started_ns and not self.get(UNSEEN) and here:
             self.ctx.decide(
                 f"{person_id} not seen at their place in {self.elapsed_s():.1f} s here: "
                 "looking round for them"
@@ -537,7 +551,9 @@ class LookForPerson(MissionBehaviour):
 
     def _near_people(self) -> list[tuple[MapEntity, float]]:
         """The map's people seen lately (`PERSON_FRESH_S`), standing (slower than
-        `WALKING_MPS`), within `ANSWER_M` of the base, with their distance."""
+        `WALKING_MPS`), within `ANSWER_M` of the base, with their distance; not one
+        clearly in other clothes than the person asked for (`identity.other_clothes`), nor one
+        found at the handover in them already (`OTHERS`)."""
         xy = self.port.robot_xy()
         try:
             people = self.port.people()
@@ -546,11 +562,14 @@ class LookForPerson(MissionBehaviour):
         if xy is None:
             return []
         now = self.port.now_ns
+        look, others = self.get(PERSON_LOOK), self.get(OTHERS) or []
         out = []
         for q in people:
             d = math.dist(xy, q.position_in_world[:2])
             fresh = (now - q.last_seen_ns) / NS_PER_S <= PERSON_FRESH_S
-            if fresh and d <= ANSWER_M and math.hypot(*q.velocity_in_world) < WALKING_MPS:
+            standing = math.hypot(*q.velocity_in_world) < WALKING_MPS
+            asked = q.id not in others and not other_clothes(look, q)
+            if fresh and d <= ANSWER_M and standing and asked:
                 out.append((q, d))
         return out
 

@@ -6,7 +6,8 @@
   the blackboard's `candidate` index becomes the `target`. The `next_instance` recovery
   moves the index on; past the last one the object was not found.
 - `ResolvePerson`: the person's map id, checked against the map now (the request was
-  checked when it came; the map may have changed since).
+  checked when it came; the map may have changed since); their colours noted if the
+  fetch's start had none (`identity.note_look`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from services.mission.behaviours.base import (
     FACING,
     KNOWN,
     PERSON,
+    PERSON_LOOK,
     REQUEST,
     TARGET,
     Context,
@@ -29,6 +31,7 @@ from services.mission.behaviours.base import (
     MissionBehaviour,
     Target,
 )
+from services.mission.behaviours.identity import note_look
 from services.mission.ports import Unavailable
 
 
@@ -188,7 +191,7 @@ class HandsFree(MissionBehaviour):
 
 
 class ResolvePerson(MissionBehaviour):
-    WRITES = (PERSON, FACING)
+    WRITES = (PERSON, FACING, PERSON_LOOK)
 
     def __init__(self, ctx: Context) -> None:
         super().__init__("resolve_person", ctx, stage="bring_to_user")
@@ -202,6 +205,7 @@ class ResolvePerson(MissionBehaviour):
         if person is None:
             return self.fail("unknown_person", f"no mapped person is {request.person!r}")
         self.set(PERSON, person.id)
+        note_look(self, person)
         if person.id != request.person and targets.is_map_id(request.person):
             self.ctx.decide(f"{request.person} is {person.id} now: the map found them one person")
         # 0.0 is also the yaw of an entity without one (`navigation.sources._person`)

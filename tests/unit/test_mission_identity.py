@@ -1,0 +1,124 @@
+"""Whom the robot hands over to: the person asked for, by their clothes (`identity`)."""
+
+from __future__ import annotations
+
+import math
+
+import msgspec
+import numpy as np
+
+from common.appearance import MIN_VIEWS, SIZE
+from common.messages.navigation import PersonHandover
+from common.messages.semantic_map import MapEntity, PersonColours
+from common.messages.wbc import Posture
+from services.mission.behaviours.identity import Look, compared, other_clothes
+from services.mission.tree import Outcome
+from tests.unit.mission_fakes import FakeRobot, entity, small_world
+from tests.unit.test_mission_tree import _ask_scene, mission
+
+
+def clothes(*bins: int) -> tuple[float, ...]:
+    """A colour histogram with most of its mass in `bins` (a little everywhere)."""
+    h = np.full(SIZE, 0.2 / SIZE)
+    h[list(bins)] += 0.8 / len(bins)
+    return tuple(float(v) for v in h / h.sum())
+
+
+def afar(hist: tuple[float, ...], views: int = 10) -> PersonColours:
+    """Colours seen `views` times from afar only."""
+    return PersonColours(far=hist, far_views=views)
+
+
+RED, BLUE = afar(clothes(0, 1, 48)), afar(clothes(28, 29, 50))
+
+
+def dressed(p: MapEntity, colours: PersonColours) -> MapEntity:
+    return msgspec.structs.replace(p, colours=colours)
+
+
+def _swap_on_the_way(
+    robot: FakeRobot, others: dict[str, MapEntity]
+) -> tuple[Outcome, list[str], list[str]]:
+    """Run the fetch; as the robot sets off to the person, the map's person_1 becomes
+    somebody in blue (the map lost who is who) and `others` appear. The outcome, the
+    person ids of the handover goals sent, in order, and the decisions said."""
+    tree = mission(robot)
+    swapped = False
+    for _ in range(6000):
+        outcome = tree.tick()
+        sent = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+        if sent and not swapped:
+            swapped = True
+            robot.people_["person_1"] = dressed(robot.people_["person_1"], BLUE)
+            robot.people_.update(others)
+        robot.advance()
+        if outcome is not None:
+            return outcome, sent, tree.ctx.decisions  # type: ignore[attr-defined]
+    raise AssertionError(tree.where())
+
+
+def _world() -> FakeRobot:
+    person = entity("person_1", -3.0, 1.0, kind="person", yaw=math.pi)
+    return small_world(people_={"person_1": dressed(person, RED)})
+
+
+def test_the_colours_tell_the_person_asked_for_from_somebody_else_like_with_like() -> None:
+    person = entity("p", 0, 0, "person")
+    asked = Look("person_1", RED, 0)
+    assert compared(asked, dressed(person, RED)) == [("far", 0.0, False)]
+    assert other_clothes(asked, dressed(person, BLUE))
+    # nothing to compare: no colours, too few views, or only near views against far ones
+    assert not other_clothes(asked, person)
+    assert not other_clothes(asked, dressed(person, afar(BLUE.far, MIN_VIEWS - 1)))
+    legs = PersonColours(near=BLUE.far, near_views=20)
+    assert compared(asked, dressed(person, legs)) == []
+
+
+def test_somebody_else_at_the_handover_is_not_handed_to_the_one_in_their_clothes_is() -> None:
+    """The map's person_1 is somebody in blue by the time the robot is there; person_4,
+    elsewhere, wears person_1's red: the robot walks on to person_4 and hands over."""
+    robot = _world()
+    wearer = dressed(entity("person_4", -3.0, -3.0, kind="person", yaw=math.pi), RED)
+    outcome, sent, decisions = _swap_on_the_way(robot, {"person_4": wearer})
+    assert outcome.state == "succeeded", outcome
+    assert sent == ["person_1", "person_4"]
+    assert any("person_1 stands there in other clothes than person_1 wore" in d
+               and "person_4 wears them" in d for d in decisions)  # fmt: skip
+    # presented once, to person_4 (not to the somebody else at the first stop)
+    assert [g.name for _, g in robot.arm_goals if isinstance(g, Posture)].count("handover") == 1
+
+
+def test_nobody_in_the_clothes_asked_for_fails_the_request_without_presenting() -> None:
+    robot = _world()
+    stranger = dressed(entity("person_4", -3.0, -3.0, kind="person", yaw=math.pi), BLUE)
+    outcome, sent, _ = _swap_on_the_way(robot, {"person_4": stranger})
+    assert (outcome.state, outcome.reason) == ("failed", "wrong_person"), outcome
+    assert "nobody else in the map wears their colours" in outcome.detail
+    assert sent == ["person_1"]
+    assert "handover" not in [g.name for _, g in robot.arm_goals if isinstance(g, Posture)]
+
+
+def test_a_person_whose_colours_the_map_does_not_know_is_handed_to_as_before() -> None:
+    """No colours when asked, none at the handover: nothing to tell people apart by."""
+    robot = small_world()
+    tree = mission(robot)
+    for _ in range(6000):
+        outcome = tree.tick()
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded", outcome
+
+
+def test_the_ask_is_answered_only_by_someone_the_colours_do_not_tell_apart() -> None:
+    """person_1 (red) walked off unseen; while the robot asks, person_9 in blue comes and
+    stands in front of it: not taken for person_1. person_8 in red, who comes later, is."""
+    scene = {"person_9": (1.3, 0.2, 2.0, 1e9), "person_8": (1.2, -0.6, 9.0, 1e9)}
+    tree, robot, outcome, _ = _ask_scene(
+        scene, {"person_1": RED, "person_9": BLUE, "person_8": RED}
+    )
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    handovers = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert handovers[-1] == "person_8" and "person_9" not in handovers, handovers
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any(d.startswith("person_8 came while the robot asked for person_1") for d in decisions)
