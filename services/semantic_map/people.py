@@ -170,7 +170,8 @@ DOUBT_GAP_NS = 500_000_000
 def merge_split_people(observations: list[Observation], radius_m: float) -> list[Observation]:
     """One observation per person: detections of one frame closer than `radius_m` are
     pieces of one body the segmenter split (a person is about 0.5 m across), merged into
-    the best-scored one at their mean position."""
+    the best-scored one at their mean position, its range kept and counted cut (its
+    colours are of a piece of them)."""
     out: list[Observation] = []
     left = sorted(observations, key=lambda o: -o.score)
     while left:
@@ -179,9 +180,8 @@ def merge_split_people(observations: list[Observation], radius_m: float) -> list
         left = [o for o in rest if float(np.linalg.norm(o.xy - best.xy)) >= radius_m]
         if near:
             xy = np.mean([best.xy, *(o.xy for o in near)], axis=0)
-            best = Observation(
-                best.class_name, xy, best.z, best.sigma_m, best.score, best.appearance
-            )
+            best = Observation(best.class_name, xy, best.z, best.sigma_m, best.score,
+                               best.appearance, best.range_m, whole=False)  # fmt: skip
         out.append(best)
     return out
 

@@ -8,7 +8,7 @@ from common.appearance import MIN_VIEWS, OTHER, SIZE, Banded, band_of, bhattacha
 from common.config import SemanticMapSettings
 from common.messages.semantic_map import PersonColours
 from services.semantic_map.entities import IdBook, Observation
-from services.semantic_map.people import PeopleTracker
+from services.semantic_map.people import PeopleTracker, merge_split_people
 
 S = 1_000_000_000
 
@@ -82,3 +82,13 @@ def test_colours_read_back_from_a_map_entry_are_the_ones_written() -> None:
     assert back.far is not None and bhattacharyya(back.far, SHIRT) < 1e-3
     bad = PersonColours(far=(0.5, 0.5), far_views=4)  # not a histogram of this size
     assert Banded.from_message(bad).far is None and Banded.from_message(None).far_views == 0
+
+
+def test_pieces_of_one_body_merged_keep_their_range_and_count_as_cut() -> None:
+    """The segmenter split a person 4 m away in two: the merged observation is 4 m away
+    and a piece of them, so its colours feed no far band (a whole view's would)."""
+    top = Observation("person", np.array([4.0, 0.1]), 0.0, 0.1, 0.9, SHIRT, 4.0, whole=True)
+    legs = Observation("person", np.array([4.0, -0.1]), 0.0, 0.1, 0.6, LEGS, 4.1, whole=True)
+    [one] = merge_split_people([legs, top], radius_m=0.5)
+    assert one.range_m == 4.0 and not one.whole
+    assert band_of(one.range_m, one.whole) is None
