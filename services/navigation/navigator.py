@@ -16,7 +16,9 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   hall's shift: its separation violations at 0.05-0.12 m/s came with the robot turning
   on the spot at 0.1-0.8 rad/s beside a person walking past); the goal's final turn on
   the spot (no path left to follow) is a stop within a bystander's protective
-  separation at rest too;
+  separation at rest too; the body guard's answers that walk another way than the path
+  (unturned, a step clear of a table) are held to the rules for their own way
+  (`people.within_people`);
 - progress is the remaining distance shrinking by 5 cm, or the heading error (to the
   follower's reference: the goal's yaw when aligning) shrinking by 0.05 rad (a turn the
   body guard sends the other way round counts from where it began);
@@ -62,7 +64,13 @@ from services.navigation.body_guard import HORIZON_S, BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
-from services.navigation.people import NO_LIMIT, SpeedLimit, bearing, people_limit
+from services.navigation.people import (
+    NO_LIMIT,
+    SpeedLimit,
+    bearing,
+    people_limit,
+    within_people,
+)
 from services.navigation.planner import Plan, PlanError, plan
 
 Recovery = Literal["", "clear", "rotate", "backoff", "slide"]
@@ -80,6 +88,9 @@ BACKOFF_SPEED = 0.15
 #: be slid past, this far (m: their place then lies beyond the body's end, in a lidar's
 #: view) at this speed (m/s).
 STALE_S = 10.0
+#: The body guard's answers that translate another way than the path (`Follower._guarded`):
+#: held to the people rules for their own way (`people.within_people`).
+GUARD_WAYS = ("unturned", "step clear")
 SLIDE_M = 1.2
 SLIDE_SPEED = 0.2
 #: m the body guard looks along the slide's way before each step (its own 0.5 s at 0.2 m/s:
@@ -289,6 +300,14 @@ class Navigator:
                      g.tol_xy, g.tol_yaw, guard)  # fmt: skip
         self.cmd = out.cmd
         self.guarded = out.guarded
+        if out.guarded in GUARD_WAYS and limit.rule != "stop":
+            # the guard's way is not the path's the cap was taken along: its own rules
+            self.cmd, held = within_people(self.cmd, pose, cm.people, self.fp, self.n.people,
+                                           self.top_mps, g.handover_id)  # fmt: skip
+            if held.speed < limit.speed:
+                limit = held
+                self.limit_rule = limit.rule
+            f.cmd = self.cmd.copy()
         if limit.rule == "stop":  # the protective stop: at rest, no turn on the spot either
             self.cmd = np.zeros(3)
             f.cmd = self.cmd.copy()

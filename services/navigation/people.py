@@ -36,6 +36,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from common.config import PeopleSettings
+from common.geometry import FloatArray
 from services.navigation.costmap import Person
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
 from services.navigation.separation import (
@@ -144,6 +145,34 @@ def people_limit(
         if limit.speed < best.speed or (limit.speed == best.speed and d < best.distance_m):
             best = limit
     return best
+
+
+def within_people(
+    cmd: FloatArray,
+    pose: Pose,
+    people: tuple[Person, ...] | list[Person],
+    fp: Footprint,
+    p: PeopleSettings,
+    top_mps: float,
+    handover_id: str = "",
+) -> tuple[FloatArray, SpeedLimit]:
+    """A command's translation (`cmd` = vx, vy in the base's frame, wz) held to the people
+    rules for the way it goes itself, with the rule that acted: for the body guard's
+    answers (a walk on unturned, a step clear of a table), which go another way than the
+    path the tick's cap was taken along (the changing hall's shift: a step clear of a
+    table took the base 0.15 m/s towards a bystander 0.36 m from the footprint, their
+    S_p at rest 0.44 m, while the path led away from them). A stop keeps the turn."""
+    vx, vy = float(cmd[0]), float(cmd[1])
+    speed = math.hypot(vx, vy)
+    if speed < 1e-6:
+        return cmd, NO_LIMIT
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    way = ((c * vx - s * vy) / speed, (s * vx + c * vy) / speed)
+    limit = people_limit(pose, way, people, fp, p, top_mps, handover_id)
+    if limit.speed >= speed:
+        return cmd, limit
+    k = limit.speed / speed
+    return np.array([vx * k, vy * k, float(cmd[2])]), limit
 
 
 #: The base's axes in its own frame, as `base_caps` orders them: ahead, behind, left, right.

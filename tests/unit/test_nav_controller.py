@@ -14,7 +14,7 @@ import pytest
 
 from common.config import ControllerSettings, NavigationSettings, PeopleSettings
 from services.navigation.body_guard import BodyGuard
-from services.navigation.controller import Follower
+from services.navigation.controller import Follower, FollowOutput
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
 from services.navigation.navigator import GoalSpec, Navigator, _slide_free
@@ -26,6 +26,7 @@ from services.navigation.people import (
     bearing,
     people_limit,
     separation_params,
+    within_people,
 )
 from services.navigation.separation import (
     SeparationParams,
@@ -472,3 +473,46 @@ def test_a_person_a_sensor_sees_beside_the_flank_is_not_slid_past() -> None:
     outs = _flank_scene(seen_ns=None)
     assert all(o.recovery != "slide" for _, _, o in outs)
     assert outs[-1][2].state == "failed", outs[-1][2]
+
+
+def _behind_left() -> Person:
+    """A bystander 0.27 m off the footprint's rear left corner (S_p at rest 0.445 m)."""
+    return Person("person_1", -(FP.back + 0.25), FP.half_width + 0.1, None, (0.0, 0.0))
+
+
+def test_a_command_another_way_than_the_path_is_held_to_the_rules_for_its_own_way() -> None:
+    """The path ahead leads away from the bystander behind-left; a step left goes towards
+    them inside their S_p at rest (a stop, the turn kept), a step ahead-right, away from
+    them, does not."""
+    p, top, pose, person = PeopleSettings(), 0.6, Pose(0.0, 0.0, 0.0), _behind_left()
+    assert people_limit(pose, (1.0, 0.0), [person], FP, p, top).rule != "stop"
+    left, rule = within_people(np.array([0.0, 0.1, 0.2]), pose, [person], FP, p, top)
+    assert rule.rule == "stop" and list(left) == [0.0, 0.0, 0.2]
+    away, rule = within_people(np.array([0.1, -0.05, 0.0]), pose, [person], FP, p, top)
+    assert rule.rule != "stop" and list(away) == [0.1, -0.05, 0.0]
+
+
+def test_the_body_guards_step_clear_towards_a_bystander_is_stopped(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The changing hall's shift: the path led away from a bystander 0.36 m off the
+    footprint, the guard stepped clear of a table towards them at 0.15 m/s. The step is
+    held to the people rules for its own way: a stop."""
+    step = Follower.step
+
+    def stepping_left(self: Follower, *args: object, **kwargs: object) -> FollowOutput:
+        out = step(self, *args, **kwargs)  # type: ignore[arg-type]
+        return out._replace(cmd=np.array([0.0, 0.1, 0.0]), guarded="step clear")
+
+    monkeypatch.setattr(Follower, "step", stepping_left)
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    cm = dataclasses.replace(floor, people=(_behind_left(),))
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(3.0, 0.0, 0.0), 0.1, 0.1), 0)
+    out = nav.tick(0, Pose(0.0, 0.0, 0.0), cm)
+    assert out.limit.rule == "stop" and out.limit.person_id == "person_1"
+    assert not out.cmd.any()
+    monkeypatch.setattr(Follower, "step", step)
+    nav.start(GoalSpec("h", Pose(3.0, 0.0, 0.0), 0.1, 0.1), 0)
+    ahead = nav.tick(0, Pose(0.0, 0.0, 0.0), cm)  # the path's own way: away from them
+    assert ahead.limit.rule != "stop"
