@@ -493,7 +493,8 @@ class SemanticMap:
                 tr.missing_since_ns = t
                 self._dirty[tr.id] = tr
                 newly.append(tr.id)
-        # People move, nobody is missing: a false entry is deleted, and anyone else not
+        # People move: nobody looked for and not seen is missing (a walker out of view
+        # is, `PeopleTracker.walked_off`); a false entry is deleted, and anyone else not
         # seen where the map has them counts the looks (`PeopleTracker.reidentify`).
         for tr in self.people.tracks:
             if tr.id is None or tr.last_seen_ns == t:

@@ -155,7 +155,8 @@ REID_UNSEEN_NS = 3_000_000_000
 #: known again by their clothes alone, without the map having looked at their place, ns.
 REID_STALE_NS = 60_000_000_000
 #: A walker unseen this long may be anywhere within walking reach (`_walked_off`); before
-#: it, a second walker in like clothes on the same route may be following the first, ns.
+#: it, a second walker in like clothes on the same route may be following the first; and
+#: they are missing from their last place (`walked_off`), ns.
 WALKED_OFF_NS = 5_000_000_000
 #: A person unseen this long is matched away from their place only in their clothes, ns.
 VETO_STALE_NS = 2_000_000_000
@@ -288,6 +289,21 @@ class PeopleTracker:
             self._set(tr, x, P)
             tr.stamp_ns = stamp_ns
 
+    def walked_off(self, stamp_ns: int) -> list[Track]:
+        """Mark missing (`missing_since_ns`, now) each confirmed person who was walking
+        when last seen (`Track.moving`) and is unseen for `WALKED_OFF_NS`: where they
+        are is not known, and their last place is not where they stand (navigation
+        leaves missing people out of its rules). Seen again, they are not missing."""
+        out = []
+        for tr in self.confirmed:
+            unseen = stamp_ns - tr.last_seen_ns
+            if tr.missing_since_ns is None and tr.moving and tr.last_seen_ns and (
+                unseen >= WALKED_OFF_NS
+            ):
+                tr.missing_since_ns = stamp_ns
+                out.append(tr)
+        return out
+
     @staticmethod
     def _set(tr: Track, x: FloatArray, P: FloatArray) -> None:
         tr.xy, tr.velocity = x[:2].copy(), x[2:].copy()
@@ -320,9 +336,10 @@ class PeopleTracker:
         return (min(d2, CHI2_2D_999) + max(spread, 0.0)) / CHI2_2D_999 + s.appearance_weight * app
 
     def update(self, stamp_ns: int, observations: list[Observation]) -> list[Track]:
-        """Fuse one frame's person detections; the confirmed people updated."""
+        """Fuse one frame's person detections; the confirmed people updated (and those
+        who walked off out of view, `walked_off`)."""
         self.predict(stamp_ns)
-        changed: list[Track] = []
+        changed: list[Track] = self.walked_off(stamp_ns)
         confirmed_now: list[Track] = []
         used: set[int] = set()
         if self.tracks and observations:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from common.appearance import SIZE, bhattacharyya, colour_histogram
 from common.config import SemanticMapSettings
 from services.semantic_map.entities import IdBook, Observation, Track
-from services.semantic_map.people import PeopleTracker
+from services.semantic_map.people import WALKED_OFF_NS, PeopleTracker
 
 DT_NS = 100_000_000  # 10 Hz frames
 S = 1_000_000_000
@@ -83,6 +84,34 @@ def test_a_person_walking_out_of_view_and_back_keeps_the_id() -> None:
         tracker.update(k * DT_NS, [Observation("person", xy, 0.0, 0.05, appearance=look)])
     assert [t.id for t in tracker.confirmed] == ["person_1"]
     assert abs(tracker.confirmed[0].velocity[0] - 0.8) < 0.2
+
+
+def test_a_walker_out_of_view_is_missing_from_their_last_place_until_seen_again() -> None:
+    """Walking at 0.8 m/s, then out of view: after `WALKED_OFF_NS` they are missing (said
+    once, in the frame's changes); somebody standing still and unseen as long is not;
+    the walker seen again is not missing any more."""
+    rng = np.random.default_rng(3)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    walker, stander = _hist(10, rng), _hist(30, rng)
+    changes: list[list[str]] = []
+    for k in range(120):
+        seen = []
+        if k < 20 or k >= 110:  # walking in view, then unseen for 9 s
+            xy = np.array([0.8 * k * 0.1, 0.0]) + rng.normal(0.0, 0.02, 2)
+            seen.append(Observation("person", xy, 0.0, 0.05, appearance=walker))
+        if k < 20:
+            xy = np.array([0.0, 3.0]) + rng.normal(0.0, 0.02, 2)
+            seen.append(Observation("person", xy, 0.0, 0.05, appearance=stander))
+        changed = tracker.update(k * DT_NS, seen)
+        changes.append([t.id for t in changed if t.missing_since_ns is not None])
+        if k == 108:
+            by_place = sorted(tracker.confirmed, key=lambda t: float(t.xy[1]))
+            assert by_place[0].missing_since_ns is not None  # the walker
+            assert by_place[1].missing_since_ns is None  # the one who stood
+    first = next(k for k, c in enumerate(changes) if c)
+    assert (first - 19) * DT_NS == pytest.approx(WALKED_OFF_NS, abs=DT_NS)
+    assert sum(map(len, changes)) == 1  # said once
+    assert all(t.missing_since_ns is None for t in tracker.confirmed)  # seen again
 
 
 def test_a_one_frame_false_positive_never_gets_an_id() -> None:
