@@ -924,3 +924,30 @@ def test_an_object_that_reaches_far_past_the_gripper_is_held_out_from_farther() 
     plain = small_world()
     assert run(mission(plain), plain).state == "succeeded"
     assert [g.extra_m for _, g in plain.nav_goals if isinstance(g, PersonHandover)] == [0.0]
+
+
+def test_a_person_seen_walking_on_as_the_robot_came_is_walked_to_not_looked_round_for() -> None:
+    """Hall seed 1's shift: the person asked for was seen walking at 1 m/s a second
+    before the robot stopped where it had gone to them; it turned round, asked 20 s and
+    walked to an old usual place of theirs. A walker seen lately is walked to again."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (9.0, 9.0)  # the map does not see them from the handover pose
+    tree = mission(robot)
+    moved = False
+    for _ in range(3000):
+        tree.tick()
+        if tree.where()[1] == "person_ahead" and not moved:  # seen walking on a tick ago
+            moved = True
+            p = robot.people_["person_1"]
+            robot.people_["person_1"] = msgspec.structs.replace(
+                p, position_in_world=(-1.0, 1.0, 0.0), velocity_in_world=(1.0, 0.0),
+                last_seen_ns=robot.now_ns - TICK_NS,
+            )  # fmt: skip
+        robot.advance()
+        if len([g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]) >= 2:
+            break
+    goals = [g for _, g in robot.nav_goals]
+    handovers = [k for k, g in enumerate(goals) if isinstance(g, PersonHandover)]
+    assert moved and len(handovers) >= 2, tree.ctx.decisions  # type: ignore[attr-defined]
+    between = goals[handovers[0] + 1 : handovers[1]]
+    assert not any(isinstance(g, PoseGoal) for g in between)  # no turn round, no place

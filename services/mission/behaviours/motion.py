@@ -21,8 +21,9 @@
   meanwhile and that their latest mapped place is `HANDOVER_DISTANCE_M` straight ahead
   within `handover_tol_m`; when not, FAILURE, a condition (no mission failure): the tree
   walks to the person again, after looking round for them when they were not seen
-  (`UNSEEN`; once somebody else stood at the handover, `identity.RightPerson`, only when
-  the map has the person within `PERSON_HERE_M`: else the tree walks to them). The map
+  (`UNSEEN`; not a person the map saw walking on within `PERSON_FRESH_S`, nor, once
+  somebody else stood at the handover, `identity.RightPerson`, one the map has farther
+  than `PERSON_HERE_M`: the tree walks to where the map has them). The map
   can hold a person some tenths of a metre off until it sees them from close by, and the
   person's hand takes only what is held out within 0.25 m of it.
 - `SeenThere`: SUCCESS unless the person was not seen at their place (`UNSEEN`).
@@ -400,7 +401,13 @@ class PersonAhead(MissionBehaviour):
         # after somebody else stood here (`OTHERS`), the person walked to next may be
         # mapped anywhere: looked round for only where the map has them
         here = not self.get(OTHERS) or math.dist(xy, person.position_in_world[:2]) <= PERSON_HERE_M
-        if person.last_seen_ns < self.started_ns and not self.get(UNSEEN) and here:
+        # a walker seen walking within PERSON_FRESH_S is walked to, not looked round for
+        # where they are not (hall seed 1's shift: seen walking at 1 m/s 1 s before, the
+        # robot turned round, asked 20 s and walked to an old usual place of theirs)
+        age_s = (self.port.now_ns - person.last_seen_ns) / NS_PER_S
+        walking = age_s <= PERSON_FRESH_S and math.hypot(*person.velocity_in_world) >= WALKING_MPS
+        unseen = person.last_seen_ns < self.started_ns and not walking
+        if unseen and not self.get(UNSEEN) and here:
             self.ctx.decide(
                 f"{person_id} not seen at their place in {self.elapsed_s():.1f} s here: "
                 "looking round for them"
