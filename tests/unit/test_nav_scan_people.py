@@ -181,6 +181,11 @@ def test_merge_puts_a_track_on_the_person_it_is_and_adds_the_rest() -> None:
         ("person_1", -4.0, 0.0, (0.0, 0.0)),
         ("scan_5", 0.0, 2.0, None),
     ]
+    # a track with no velocity yet: the person's own if it is a motion, else unknown
+    fresh = [Person("scan_6", 3.1, 1.0, velocity=None), Person("scan_7", -4.1, 0.0, velocity=None)]
+    walking = [Person("person_2", 3.0, 1.0, velocity=(0.0, 0.0)),
+               Person("person_1", -4.0, 0.0, velocity=(1.0, 0.0))]  # fmt: skip
+    assert [p.velocity for p in merge_scan(walking, fresh, same_m=0.6)] == [None, (1.0, 0.0)]
 
 
 def test_the_nav_map_rebuilds_for_a_person_come_or_moved_not_for_jitter() -> None:
