@@ -16,7 +16,7 @@ from common import robot
 from common.scan import scan_points
 from services.navigation.costmap import CostParams, Person
 from services.navigation.grid import Footprint, Grid, Pose
-from services.navigation.nav_map import NavMap
+from services.navigation.nav_map import AHEAD_MAX_S, NavMap, ahead
 from services.navigation.scan_people import (
     ScanParams,
     ScanPeople,
@@ -411,3 +411,21 @@ def test_a_coasting_track_ends_once_a_beam_passes_where_it_would_be() -> None:
         beside.update(pts, grid, pose, k * S // 10, [view])
         alive = beside.people(k * S // 10)
         assert bool(alive) == (k <= 30), k  # coast_s = 3 s
+
+
+def test_a_walker_the_map_saw_lately_is_carried_along_their_velocity_to_the_tick() -> None:
+    """The map's place of a walker is its newest frame's, late: the speed rules take them
+    where their velocity has carried them since (for at most `AHEAD_MAX_S`); a standing
+    person, or one seen by a sensor now (no `seen_ns`), is where they are."""
+    import logging
+
+    m = NavMap(FP, CostParams(), S, True, "test", logging.getLogger("test"))
+    walker = Person("person_1", 2.0, 2.0, velocity=(1.0, 0.0), seen_ns=S)
+    stander = Person("person_2", -2.0, 2.0, velocity=(0.0, 0.0), seen_ns=0)
+    m.adopt(_room(), [walker, stander], S, S + S // 2)
+    assert m.costmap is not None
+    where = {p.id: (round(p.x, 3), round(p.y, 3)) for p in m.costmap.people}
+    assert where == {"person_1": (2.5, 2.0), "person_2": (-2.0, 2.0)}
+    assert ahead(walker, 5 * S).x == 2.0 + AHEAD_MAX_S  # no further than that
+    now = dataclasses.replace(walker, seen_ns=None)
+    assert ahead(now, 5 * S) == now
