@@ -296,10 +296,8 @@ class PeopleTracker:
         leaves missing people out of its rules). Seen again, they are not missing."""
         out = []
         for tr in self.confirmed:
-            unseen = stamp_ns - tr.last_seen_ns
-            if tr.missing_since_ns is None and tr.moving and tr.last_seen_ns and (
-                unseen >= WALKED_OFF_NS
-            ):
+            gone = tr.moving and tr.last_seen_ns and stamp_ns - tr.last_seen_ns >= WALKED_OFF_NS
+            if tr.missing_since_ns is None and gone:
                 tr.missing_since_ns = stamp_ns
                 out.append(tr)
         return out
