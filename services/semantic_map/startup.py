@@ -116,6 +116,9 @@ def open_map(
                 tracks = seed_from_world(w, s.seed_noise_m, s.seed_noise_seed)
             if s.floor_plan == "world":
                 occ, source = occupancy_from_world(w, **occ_kw), "world"
+                # the floor plan's tables and benches too: what may stand on them is
+                # judged against their tops (`evidence`), as on an explored map's
+                surfaces = surfaces or list(w.surfaces)
         else:
             log.warning("no world description: the static occupancy layer is unknown")
     if occ is None:

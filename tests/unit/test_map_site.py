@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import msgspec
+import numpy as np
 import pytest
 
 from common.bus import RequestError
@@ -89,3 +90,31 @@ def test_a_prior_file_or_an_import_of_another_site_is_refused(tmp_path: Path) ->
     check_import(MapFile(site=HALL_3), HALL_3)
     with pytest.raises(RequestError, match="names no site"):
         check_import(MapFile(), HALL_3)  # a file that does not say which world it maps
+
+
+def test_a_map_on_the_floor_plan_judges_artifacts_against_its_tables_tops(
+    tmp_path: Path,
+) -> None:
+    """With the floor plan (the truth ablation's static layer), the plan's tables and
+    benches are the map's surfaces, as an explored map's are: a detection at table_1's
+    edge at its top's height is the table itself (hall seed 1's shift: nine false
+    bottles and boxes along that table's edges, each walked to), one above it stands on
+    it; the surfaces stay with the database."""
+    from common.messages.world import WorldDescription
+    from services.semantic_map.evidence import artifact_doubt
+    from services.sim.world import generate_world
+
+    world: WorldDescription = generate_world(1)
+    s = _settings(tmp_path, start="empty", floor_plan="world", name="plan")
+    store = MapStore(database_path(s))
+    smap, _ = open_map(s, store, lambda: world, "hall seed 1")
+    assert smap.surfaces == list(world.surfaces)
+    table = next(t for t in smap.surfaces if t.id == "table_1")
+    edge = np.array([1.85, -2.07])  # bottle_8 of the shift, at the table's front edge
+    assert "the surface itself" in artifact_doubt(edge, table.top_height - 0.01, smap.surfaces)
+    assert artifact_doubt(edge, table.top_height + 0.1, smap.surfaces) == ""
+    store.close()
+    store = MapStore(database_path(s))
+    again, how = open_map(s, store, lambda: world, "hall seed 1")
+    assert how.startswith("resumed") and again.surfaces == smap.surfaces
+    store.close()
