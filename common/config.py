@@ -662,6 +662,11 @@ class MissionSettings(_Section):
     #: the pull on each, s.
     handover_sides: PositiveInt = 6
     handover_side_timeout_s: Positive = 10.0
+    #: Nobody pulling this long at an offer, the robot holds the object out this much
+    #: nearer (once an offer: `handover.LeanIn`; the person's hand takes what is held out
+    #: within 0.25 m of it, and the base stands a few centimetres off its pose), s and m.
+    handover_lean_after_s: Positive = 8.0
+    handover_lean_m: NonNegative = 0.08
     #: The object leaving the jaws this soon after a pull was felt was taken, not lost (s).
     handover_taken_window_s: NonNegative = 0.5
     #: At the handover pose: look this long, then walk again if the person's mapped place

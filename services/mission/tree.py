@@ -56,7 +56,9 @@
             hand_over (sequence)
               at_a_side: first_side, else go_round: Posture(stow), mode walk/navigation,
                          PersonHandover at the side
-              release_object: mode stand, Posture(handover), feel_pull, Release,
+              release_object: mode stand, Posture(handover), feel_pull (its first
+                              handover_lean_after_s; nobody pulling: mode walk/mission,
+                              lean_in, mode stand, feel_pull_again), Release,
                               mode walk/mission, back_off, mode stand, Posture(stow)
         abort: halt everything, FAILURE with the blackboard's reason
 
@@ -104,7 +106,13 @@ from services.mission.behaviours.base import (
     read,
     reset_blackboard,
 )
-from services.mission.behaviours.handover import FeelPull, FirstSide, next_side
+from services.mission.behaviours.handover import (
+    FeelPull,
+    FirstSide,
+    LeanIn,
+    NotTakenYet,
+    next_side,
+)
 from services.mission.behaviours.identity import NoteLook, RightPerson, another_to_try
 from services.mission.behaviours.motion import (
     BackOff,
@@ -316,7 +324,17 @@ def build_tree(ctx: Context) -> Sequence:
         SetMode(ctx, "stand", "navigation", st[5]),
         ArmAction(ctx, "present", lambda _b: Posture(name="handover"), "arm_failed",
                   s.posture_timeout_s, st[5]),
-        FeelPull(ctx, st[5]),
+        Selector("feel_or_lean", memory=True, children=[
+            FeelPull(ctx, st[5], "before_lean"),
+            _seq(
+                "lean_in_and_feel",
+                NotTakenYet(ctx, st[5]),
+                SetMode(ctx, "walk", "mission", st[5], name="mode_walk_lean"),
+                LeanIn(ctx, st[5]),
+                SetMode(ctx, "stand", "navigation", st[5], name="mode_stand_lean"),
+                FeelPull(ctx, st[5], "after_lean"),
+            ),
+        ]),
         ArmAction(ctx, "release", lambda _b: Release(), "arm_failed", s.release_timeout_s, st[5]),
         SetMode(ctx, "walk", "mission", st[5]),
         BackOff(ctx, st[5]),

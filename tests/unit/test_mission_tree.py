@@ -14,7 +14,7 @@ from common.messages.semantic_map import PersonColours, SeenPlace
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
-from services.mission.behaviours.handover import FeelPull
+from services.mission.behaviours.handover import LEAN_MPS, FeelPull
 from services.mission.behaviours.motion import HANDOVER_BEYOND_M, STANCE_TOL_RAD
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
@@ -951,3 +951,23 @@ def test_a_person_seen_walking_on_as_the_robot_came_is_walked_to_not_looked_roun
     assert moved and len(handovers) >= 2, tree.ctx.decisions  # type: ignore[attr-defined]
     between = goals[handovers[0] + 1 : handovers[1]]
     assert not any(isinstance(g, PoseGoal) for g in between)  # no turn round, no place
+
+
+def test_nobody_pulling_the_robot_holds_the_object_out_nearer_once_and_it_is_taken() -> None:
+    """Hall seed 1: the base stood 3 cm farther than a run whose handover was taken, and
+    nobody took it in 60 s. Nobody pulling in `handover_lean_after_s`, the base walks
+    `handover_lean_m` ahead on the mission's cmd_vel and the person takes it; nobody
+    taking it then, the offer ends when its whole wait is spent."""
+    settings = fast_settings(handover_timeout_s=6.0, handover_lean_after_s=2.0)
+    robot = small_world(moves=True)
+    tree = mission(robot, pull_on_try=2, settings=settings)
+    outcome = run(tree, robot, 4000)
+    assert outcome.state == "succeeded", outcome
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert "handover: leaned in 8 cm of 8 cm" in decisions
+    leaned = [c for c in robot.cmds if c == (LEAN_MPS, 0.0, 0.0)]
+    assert len(leaned) * TICK_NS / 1e9 * LEAN_MPS == pytest.approx(0.08, abs=0.011)
+    robot = small_world(moves=True)
+    outcome = run(mission(robot, pull=False, settings=settings), robot, 4000)
+    assert (outcome.state, outcome.reason) == ("failed", "handover_timeout")
+    assert outcome.detail.startswith("nobody took the object in 6 s, held out nearer after 2 s")
