@@ -9,8 +9,9 @@ layer (`people`: the map's people with those perception sees over them, `SeenPeo
 and the lidar's tracks over those, `scan_people`; in the costmap when
 `people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
 `build` (`costmap.build_costmap`); the map's walkers are carried along their velocity
-from when it last saw them to the tick (`ahead`); a person the map alone has (the camera has not seen
-them for `CAMERA_FRESH_S`) whose place the lidar sees free (`ScanView.clear_at`), or saw
+from when it last saw them to the tick (`ahead`); a person the map alone has (the
+camera has not seen them for `CAMERA_FRESH_S`) whose place the lidar sees free
+(`ScanView.clear_at`), or saw
 free since the map last saw them there (`cleared`: out of the lidar's field now, in the
 blind wedge beside the trunk), or who is inside the robot's footprint, is left out of
 the layer and said once. The lidar's
