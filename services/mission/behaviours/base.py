@@ -195,6 +195,15 @@ class MissionBehaviour(py_trees.behaviour.Behaviour):
             raise RuntimeError(f"{self.name}: no target on the blackboard (tree misbuilt)")
         return target
 
+    def forget_failure(self, reason: MissionReason) -> Failure | None:
+        """The blackboard's failure, forgotten, when it is of `reason` (a recovery leaf
+        that takes it over); None, and it stays, otherwise."""
+        failure = self.get(FAILURE)
+        if not isinstance(failure, Failure) or failure.reason != reason:
+            return None
+        self.set(FAILURE, None)
+        return failure
+
     def fail(self, reason: MissionReason, detail: str) -> Status:
         """Record why, say it, and return FAILURE."""
         self.feedback_message = f"{reason}: {detail}"

@@ -36,11 +36,9 @@ from py_trees.common import Status
 from services.mission.algorithms import PullFeeler
 from services.mission.behaviours.base import (
     FACING,
-    FAILURE,
     PERSON,
     SIDE,
     Context,
-    Failure,
     MissionBehaviour,
     read,
 )
@@ -153,13 +151,9 @@ class NotTakenYet(MissionBehaviour):
         super().__init__("not_taken_yet", ctx, stage)
 
     def update(self) -> Status:
-        failure = self.get(FAILURE)
-        if not isinstance(failure, Failure) or failure.reason != "handover_timeout":
-            return Status.FAILURE
         if not lean_due(self):
             return Status.FAILURE  # the offer's whole wait is spent
-        self.set(FAILURE, None)
-        return Status.SUCCESS
+        return Status.FAILURE if self.forget_failure("handover_timeout") is None else Status.SUCCESS
 
 
 class LeanIn(MissionBehaviour):

@@ -72,7 +72,6 @@ from common.messages.semantic_map import MapEntity
 from common.messages.wbc import WbcModeName
 from common.robot import HANDOVER_DISTANCE_M, floor_view_m
 from services.mission.behaviours.base import (
-    FAILURE,
     GRASP_PLAN,
     LOOK_AT,
     LOOKED,
@@ -83,7 +82,6 @@ from services.mission.behaviours.base import (
     STANCE,
     UNSEEN,
     Context,
-    Failure,
     MissionBehaviour,
 )
 from services.mission.behaviours.handover import side_bearing
@@ -439,10 +437,9 @@ class WalkedShort(MissionBehaviour):
         super().__init__("walked_short", ctx, stage)
 
     def update(self) -> Status:
-        failure = self.get(FAILURE)
-        if not isinstance(failure, Failure) or failure.reason != "navigation_failed":
+        failure = self.forget_failure("navigation_failed")
+        if failure is None:
             return Status.FAILURE
-        self.set(FAILURE, None)
         self.ctx.decide(f"{failure.behaviour} fell short ({failure.detail}): "
                         "checking whether the person is here, else looking for them")  # fmt: skip
         return Status.SUCCESS
