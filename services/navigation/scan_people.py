@@ -394,9 +394,8 @@ def merge_scan(people: list[Person], scanned: list[Person], same_m: float) -> li
             continue
         s = scanned[k]
         mapped = people[i].velocity
-        velocity = (
-            s.velocity if s.velocity is not None else (mapped if mapped and any(mapped) else None)
-        )
+        moving = mapped is not None and any(mapped)
+        velocity = s.velocity if s.velocity is not None else (mapped if moving else None)
         out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity, seen_ns=None)
         claimed.add(i)
         free.remove(k)

@@ -92,6 +92,7 @@ joins it.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -181,8 +182,7 @@ def merge_split_people(observations: list[Observation], radius_m: float) -> list
         left = [o for o in rest if float(np.linalg.norm(o.xy - best.xy)) >= radius_m]
         if near:
             xy = np.mean([best.xy, *(o.xy for o in near)], axis=0)
-            best = Observation(best.class_name, xy, best.z, best.sigma_m, best.score,
-                               best.appearance, best.range_m, whole=False)  # fmt: skip
+            best = replace(best, xy=xy, whole=False)
         out.append(best)
     return out
 

@@ -34,7 +34,7 @@ from typing import Any
 
 from py_trees.common import Status
 
-from common.appearance import differ
+from common.appearance import Band, differ
 from common.messages.semantic_map import MapEntity, PersonColours
 from services.mission import targets
 from services.mission.behaviours.base import (
@@ -60,12 +60,12 @@ class Look:
     noted_ns: int
 
 
-def compared(look: Look | None, person: MapEntity) -> list[tuple[str, float, bool]]:
+def compared(look: Look | None, person: MapEntity) -> list[tuple[Band, float, bool]]:
     """The noted person's colours against `person`'s, band by band (`differ`: band,
     distance, two people); empty when nothing compares."""
     if look is None or person.colours is None:
         return []
-    return [(band, d, other) for band, d, other in differ(look.colours, person.colours)]
+    return differ(look.colours, person.colours)
 
 
 def other_clothes(look: Look | None, person: MapEntity) -> bool:
@@ -73,7 +73,7 @@ def other_clothes(look: Look | None, person: MapEntity) -> bool:
     return any(other for _, _, other in compared(look, person))
 
 
-def said(bands: list[tuple[str, float, bool]]) -> str:
+def said(bands: list[tuple[Band, float, bool]]) -> str:
     return ", ".join(f"{band} {d:.2f}" for band, d, _ in bands) or "no band to compare"
 
 
@@ -143,7 +143,7 @@ class RightPerson(MissionBehaviour):
 
     def _wearer(
         self, look: Look, others: list[str]
-    ) -> tuple[MapEntity, list[tuple[str, float, bool]]] | None:
+    ) -> tuple[MapEntity, list[tuple[Band, float, bool]]] | None:
         """The map person the noted colours compare with and do not tell apart from the
         one asked for, the nearest in colours, not one of `others`; None if nobody is."""
         try:
