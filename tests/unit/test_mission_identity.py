@@ -14,7 +14,7 @@ from common.messages.wbc import Posture
 from services.mission.behaviours.identity import Look, compared, other_clothes
 from services.mission.tree import Outcome
 from tests.unit.mission_fakes import FakeRobot, entity, small_world
-from tests.unit.test_mission_tree import _ask_scene, mission
+from tests.unit.test_mission_tree import _ask_scene, mission, run
 
 
 def clothes(*bins: int) -> tuple[float, ...]:
@@ -101,12 +101,7 @@ def test_nobody_in_the_clothes_asked_for_fails_the_request_without_presenting() 
 def test_a_person_whose_colours_the_map_does_not_know_is_handed_to_as_before() -> None:
     """No colours when asked, none at the handover: nothing to tell people apart by."""
     robot = small_world()
-    tree = mission(robot)
-    for _ in range(6000):
-        outcome = tree.tick()
-        robot.advance()
-        if outcome is not None:
-            break
+    outcome = run(mission(robot), robot, 6000)
     assert outcome is not None and outcome.state == "succeeded", outcome
 
 
