@@ -41,6 +41,19 @@ def test_an_artifact_over_a_surface_stands_on_its_top() -> None:
     assert artifact_doubt(np.array([5.0, 0.0]), 0.2, [TABLE]) == ""  # off every surface: no say
 
 
+def test_an_artifact_at_a_tops_height_just_off_its_rectangle_is_the_tops_edge() -> None:
+    """Seed 1's shift: the network read table_1's long edges as bottles and boxes, their
+    centroids 1-2 cm below the top; an explored top's rectangle can stop short of that
+    edge. Off the rectangle, a real object stands on the floor or on the top, above it."""
+    beyond = np.array([2.55, 0.0])  # 0.15 m beyond the turned table's width
+    edge = artifact_doubt(beyond, 0.785, [TABLE])
+    assert edge.startswith("at the edge of surface_1's top (0.80 m) at 0.79 m"), edge
+    assert artifact_doubt(beyond, 0.7, [TABLE]).startswith("at the edge")  # its apron
+    assert artifact_doubt(beyond, 0.82, [TABLE]) == ""  # a box on the top, past the rectangle
+    assert artifact_doubt(beyond, 0.12, [TABLE]) == ""  # a bottle on the floor beside it
+    assert artifact_doubt(np.array([2.65, 0.0]), 0.785, [TABLE]) == ""  # 0.25 m off: no say
+
+
 def _floor_map() -> Occupancy:
     """A 4 x 4 m room: free inside, a wall at x = 1.5 m, unknown beyond it."""
     cells = np.full((80, 80), UNKNOWN, np.uint8)
