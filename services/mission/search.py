@@ -26,7 +26,13 @@ request by id, also not one the map already knew when the search began (the obje
 moved makes a new entry where it now stands; an old one is another object of its
 class), nor a new one standing where the map has a known one of its class that was
 not seen itself since the search began, or that stands there seen only from afar
-(`re_seen`: that one, seen again a little off its mapped place). Pure: no transport.
+(`re_seen`: that one, seen again a little off its mapped place). An object this
+mission handed over is tried, unless the map saw its entry since the search began, away
+from everyone (`put_down`, `targets.put_back`): the robot took it from its place, and
+whatever the map sees there now is another one (hall seed 2's shift put bottle_1 where
+the handed-over bottle_8 had stood; every view of it went to bottle_8's stale entry,
+which the search passed over as tried and known, and the request failed
+`object_not_found` with the bottle in view). Pure: no transport.
 """
 
 from __future__ import annotations
@@ -151,6 +157,7 @@ def found(
     known: Iterable[str] | None,
     now_ns: int | None = None,
     where: tuple[Sequence[Place], Sequence[SupportSurface]] | None = None,
+    put_down: Iterable[str] = (),
 ) -> MapEntity | None:
     """The artifact the search found (module docstring), nearest to nothing in
     particular: the most recently seen; None while there is none. `known`: the ids the
@@ -159,9 +166,10 @@ def found(
     `where`: the places looked at and the supports: a sighting counts only over a
     support or within `NEAR_PLACE_M` of a place (a "bottle" the network saw in the
     aisle while the robot walked is not where anyone puts one: hall seed 0's shift
-    fetched such a one, and it was not there)."""
+    fetched such a one, and it was not there). `put_down`: tried or known ids that count
+    as new sightings all the same (objects handed over, seen since away from everyone)."""
     artifacts = list(artifacts)
-    skip = set(tried) | set(known or ())
+    skip = (set(tried) | set(known or ())) - set(put_down)
     fresh = [
         a for a in artifacts
         if a.class_name == class_name and a.missing_since_ns is None and a.id not in skip

@@ -4,6 +4,7 @@ the tree's `look_elsewhere`), pure and scripted."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import msgspec
 import numpy as np
@@ -14,6 +15,7 @@ from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
 from services.mission.behaviours.search import MAX_RESUMES
 from services.mission.search import FIRM_OBSERVATIONS, Place, along, found, places_to_look
+from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import FakeRobot, entity, small_world
 from tests.unit.test_mission_tree import mission
 
@@ -87,6 +89,17 @@ def test_found_is_a_new_sighting_of_the_class_for_an_id_and_any_untried_for_a_cl
     assert places_to_look(None, "bottle", [later], [], (0.0, 0.0), 200 * S, 600.0, 3) == []
 
 
+def _run(tree: MissionTree, robot: FakeRobot, each: Callable[[int], None]) -> Outcome:
+    """`test_mission_tree.run`, with `each(k)` after the k-th tick (what the map sees)."""
+    for k in range(3000):
+        outcome = tree.tick()
+        robot.advance()
+        each(k)
+        if outcome is not None:
+            return outcome
+    raise AssertionError(f"no outcome after 3000 ticks: {tree.where()}")
+
+
 def _moved_bottle() -> FakeRobot:
     """bottle_1 is mapped at (3, 0) but someone put it on the other table."""
     robot = small_world(artifacts={"bottle_1": entity("bottle_1", 3.0, 0.0)}, visible={"bottle_9"})
@@ -97,15 +110,14 @@ def _moved_bottle() -> FakeRobot:
 def test_an_object_moved_to_another_support_is_looked_for_and_fetched_there() -> None:
     robot = _moved_bottle()
     tree = mission(robot)
-    for _ in range(3000):
-        outcome = tree.tick()
-        robot.advance()
+
+    def look(_k: int) -> None:
         if tree.arm_look and "bottle_9" not in robot.artifacts:
             # the wrist camera, held up by the search, shows it on table_2: a new entry
             robot.artifacts["bottle_9"] = _seen(entity("bottle_9", -1.0, 2.8), robot.now_ns)
-        if outcome is not None:
-            break
-    assert outcome is not None and outcome.state == "succeeded", outcome
+
+    outcome = _run(tree, robot, look)
+    assert outcome.state == "succeeded", outcome
     walks = [g for _, g in robot.nav_goals if isinstance(g, PoseGoal)]
     assert walks, "the search walked to a viewpoint"
     assert [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)] == [
@@ -117,22 +129,53 @@ def test_an_object_moved_to_another_support_is_looked_for_and_fetched_there() ->
     assert any("search: fetching bottle_9 for bottle_1" in d for d in decisions)
 
 
+def test_a_moved_object_where_a_handed_over_one_stood_is_fetched_under_that_ones_entry() -> None:
+    """Hall seed 2's shift: bottle_8 was fetched from table_2 and handed over; bottle_1 was
+    then put where bottle_8 had stood, and every view of it went to bottle_8's stale entry.
+    Seen again since the search began, away from everyone, that entry is the find."""
+    mapped = {"bottle_1": entity("bottle_1", 3.0, 0.0), "bottle_8": entity("bottle_8", -1.0, 2.8)}
+    robot = small_world(artifacts=mapped, visible={"bottle_8"})
+    robot.supports = [_surface("table_1", 3.3, 0.0), _surface("table_2", -1.0, 3.0)]
+    tree = mission(robot)
+    tree.ctx.handed["bottle_8"] = ("person_1", robot.now_ns)
+    robot.advance()
+
+    def look(_k: int) -> None:
+        if tree.arm_look:  # the search's look at table_2 sees the bottle standing there
+            robot.artifacts["bottle_8"] = _seen(robot.artifacts["bottle_8"], robot.now_ns)
+
+    outcome = _run(tree, robot, look)
+    assert outcome.state == "succeeded", outcome
+    standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert standoffs == ["bottle_1", "bottle_8"]
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("bottle_8, handed over to person_1, seen again away from everyone" in d
+               for d in decisions), decisions  # fmt: skip
+
+
+def test_found_takes_a_handed_over_entry_only_as_put_down() -> None:
+    start = 50 * S
+    held = _seen(entity("bottle_8", 1.0, 1.0), 70 * S)
+    known = {"bottle_1", "bottle_8"}
+    assert found([held], "bottle", start, ["bottle_1", "bottle_8"], known) is None
+    assert found([held], "bottle", start, ["bottle_1", "bottle_8"], known,
+                 put_down=["bottle_8"]) == held  # fmt: skip
+
+
 def test_a_moved_object_the_map_saw_on_the_way_is_still_the_one_fetched() -> None:
     """The head camera saw the bottle at its new place on the way to its old one (a new
     entry before the search began): made since the request began, it may be the object."""
     robot = _moved_bottle()
     tree = mission(robot)
-    outcome = None
-    for k in range(3000):
-        outcome = tree.tick()
-        robot.advance()
+
+    def look(k: int) -> None:
         if k == 2:
             robot.artifacts["bottle_9"] = _seen(entity("bottle_9", -1.0, 2.8), robot.now_ns)
         if tree.arm_look:  # the search's look at table_2 sees it again
             robot.artifacts["bottle_9"] = _seen(robot.artifacts["bottle_9"], robot.now_ns)
-        if outcome is not None:
-            break
-    assert outcome is not None and outcome.state == "succeeded", outcome
+
+    outcome = _run(tree, robot, look)
+    assert outcome.state == "succeeded", outcome
     standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
     assert standoffs == ["bottle_1", "bottle_9"]
 

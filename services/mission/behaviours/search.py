@@ -9,9 +9,11 @@ look plans), and walks it as the patrol walks a route (`patrol.PatrolRunner`: th
 in `look`, a hold at each viewpoint; the map fuses the wrist camera meanwhile, the node
 saying `arm_look`). After every tick it asks the map whether the object is there now
 (`search.found`; for a request by id, an entry the map made since the request began,
-`KNOWN`): found, the walk stops and the found artifact becomes the only
-candidate (SUCCESS: the fetch goes on to it); the route walked without it,
-`object_not_found` naming the places looked at. Halted, it stops the walk.
+`KNOWN`, or the entry of an object this mission handed over, seen since away from
+everyone: another object where the robot took that one): found, the walk stops and the
+found artifact becomes the only candidate (SUCCESS: the fetch goes on to it); the route
+walked without it, `object_not_found` naming the places looked at. Halted, it stops the
+walk.
 
 What the search found may not be there when the fetch comes to it: a network's phantom
 on a table's corner made from the head camera's views (hall seed 1's shift: the search
@@ -47,7 +49,7 @@ from services.mission.coverage import Route, facing_route
 from services.mission.patrol import VIEW_HALF_ANGLE, PatrolRunner
 from services.mission.ports import PortError
 from services.mission.search import Place, found, places_to_look, re_seen
-from services.mission.targets import class_of, is_map_id
+from services.mission.targets import class_of, is_map_id, put_back
 
 #: How many times a request's search goes on after what it found was not there.
 MAX_RESUMES = 2
@@ -84,6 +86,8 @@ class LookElsewhere(MissionBehaviour):
         self.resumes = 0  # the times this request's search went on after a miss
         #: New entries said to be a known one seen again (`_say_re_seen`).
         self.said_re_seen: set[str] = set()
+        #: Handed-over entries said to be seen again away from everyone (`_put_down`).
+        self.said_put_down: set[str] = set()
 
     @property
     def arm_look(self) -> bool:
@@ -101,7 +105,8 @@ class LookElsewhere(MissionBehaviour):
             try:
                 listing = self.port.artifacts_of_class(self.class_name)
                 hit = found(listing, self.class_name, self.started_ns, self.tried, self.known,
-                            self.port.now_ns, (self.places, self.supports))  # fmt: skip
+                            self.port.now_ns, (self.places, self.supports),
+                            self._put_down(listing))  # fmt: skip
                 self._say_re_seen(listing)
             except PortError:
                 hit = None
@@ -116,6 +121,24 @@ class LookElsewhere(MissionBehaviour):
             self.fraction = min(0.99, st.waypoint / max(1, st.waypoints))
             return Status.RUNNING
         return self._end()
+
+    def _put_down(self, listing: list[MapEntity]) -> list[str]:
+        """The entries of objects this mission handed over that the map saw since the
+        search began, away from everyone (`targets.put_back`): another object stands
+        where the robot took one (`search.found`). Asks the map for its people only when
+        there is such an entry."""
+        seen = [a for a in listing if a.id in self.ctx.handed and a.last_seen_ns >= self.started_ns]
+        if not seen:
+            return []
+        people = self.port.people()
+        out = [a.id for a in seen if put_back(a, self.ctx.handed[a.id][1], people)]
+        for a in out:
+            if a not in self.said_put_down:
+                self.said_put_down.add(a)
+                whom = self.ctx.handed[a][0]
+                self.ctx.decide(f"search: {a}, handed over to {whom}, seen again away "
+                                "from everyone: another object where it stood")  # fmt: skip
+        return out
 
     def _say_re_seen(self, listing: list[MapEntity]) -> None:
         """Say, once per entry, a new one the search does not take for the object asked
@@ -238,4 +261,4 @@ class LookElsewhere(MissionBehaviour):
             runner.step()
         if new_status != Status.RUNNING:
             self.runner, self.hit, self.hit_at, self.places = None, "", 0, []
-            self.said_re_seen = set()
+            self.said_re_seen, self.said_put_down = set(), set()
