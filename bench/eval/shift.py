@@ -18,6 +18,12 @@ serves M requests one after another:
   the robot, the people and the artifacts, every goal still reachable round it;
   `dume/world/movable_command`), where the robot's map has floor; with `--bystanders`
   the people walk their routes past the robot all shift long;
+- **what was handed over is taken away**: before the next request each person who took
+  an object carries it off (`put_away`: out of the hall, `ArtifactCommand.away`), as a
+  worker takes a part to where it is used; the sim's hand holds one thing at a time, and
+  a person still holding the last one could take nothing more (hall seed 3's shift:
+  person_2 held bottle_2 from request 1, and request 3's bottle was held out to them for
+  60 s);
 - **the worker asked for answers** (`bench.eval.answer`): when the mission asks for the
   person it cannot find ("asking for person_5: please come to the robot"), the request's
   truth person, within earshot and with a straight way to the robot, walks over and
@@ -378,6 +384,7 @@ def run_shift_world(
                 raise ExplorationFailed(f"it ended {e['outcome']}: {e['reason']}")
         truth = Truth(read_world(bus))
         last_person, end_ns = "", 0
+        handed: list[HandoverTaken] = []
         for k in range(args.requests):
             step = f"make request {k + 1}"
             follow.drain()
@@ -396,6 +403,7 @@ def run_shift_world(
             at_ns = None
             if not gated:
                 at_ns = end_ns + round(REQUEST_AFTER_S * 1e9)
+                put_away(truth, mover, handed, end_ns + round(MOVE_AFTER_S * 1e9))
                 if args.changes:
                     move(truth, mover, rng, asked, end_ns + round(MOVE_AFTER_S * 1e9))
                     leave_trolley(truth, trolleys, trolley_rng, base_now.get(),
@@ -436,7 +444,8 @@ def run_shift_world(
                     "dropped": result.drops, "outcome": result.outcome,
                     "mission": f"{result.mission_state} {result.mission_reason}".strip(),
                 })  # fmt: skip
-            truth.gone |= {h.object_id for h in record.events if isinstance(h, HandoverTaken)}
+            handed = [h for h in record.events if isinstance(h, HandoverTaken)]
+            truth.gone |= {h.object_id for h in handed}
             end_ns = max(record.end_ns, (record.changes[-1].stamp_ns if record.changes else 0))
             last_person = pair.person
             out.append(result)
@@ -531,6 +540,15 @@ def move(truth: Truth, mover: Any, rng: np.random.Generator, asked: str, at_ns: 
     truth.where[pick] = position
     truth.moves.append(f"{pick} onto {on} at {at_ns / 1e9:.1f} s")
     _say(f"    moved {pick} onto {on} (at {at_ns / 1e9:.1f} s)")
+
+
+def put_away(truth: Truth, mover: Any, taken: Sequence[HandoverTaken], at_ns: int) -> None:
+    """Whoever took an object in the last request carries it off, out of the hall (sent
+    ahead of its time; recorded in `truth`): their hand is free for the next one."""
+    for h in taken:
+        mover.put(ArtifactCommand(stamp_ns=at_ns, artifact_id=h.object_id, away=True))
+        truth.moves.append(f"{h.object_id} taken away by {h.person_id} at {at_ns / 1e9:.1f} s")
+        _say(f"    {h.person_id} took {h.object_id} away (at {at_ns / 1e9:.1f} s)")
 
 
 #: The trolley's draws come from their own stream of the world's seed, and it is left in

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -20,6 +21,7 @@ from bench.eval.shift import (
     class_verdict,
     leave_trolley,
     present_artifacts,
+    put_away,
     real_people,
     shift_request,
     whom,
@@ -32,7 +34,6 @@ from common.messages.sim import (
     HandoverTaken,
     PeopleTruth,
     PersonTruth,
-    Push,
     StateTruth,
 )
 from services.navigation.separation import SeparationParams, protective_distance
@@ -218,9 +219,9 @@ def test_a_saved_maps_person_unseen_this_run_is_who_stood_there_as_the_run_began
 
 class _Pub:
     def __init__(self) -> None:
-        self.sent: list[Push] = []
+        self.sent: list[Any] = []
 
-    def put(self, msg: Push) -> None:
+    def put(self, msg: Any) -> None:
         self.sent.append(msg)
 
 
@@ -263,6 +264,18 @@ def test_the_trolley_is_left_in_an_aisle_half_the_time_clear_of_everyone_and_rec
     small = Truth(generate_world(0, "small"))  # no movable: nothing left anywhere
     leave_trolley(small, pub2 := _Pub(), np.random.default_rng(0), base, None, S)
     assert not pub2.sent and not small.moves
+
+
+def test_what_a_person_took_is_carried_away_before_the_next_request_freeing_their_hand() -> None:
+    """Hall seed 3's shift: person_2 still held request 1's bottle when request 3's was
+    held out to them, and the sim's hand, holding one thing, took nothing for 60 s."""
+    truth, pub = Truth(generate_world(3)), _Pub()
+    taken = [HandoverTaken(stamp_ns=71 * S, person_id="person_2", object_id="bottle_2")]
+    put_away(truth, pub, taken, 80 * S)
+    assert [(m.artifact_id, m.away, m.stamp_ns) for m in pub.sent] == [("bottle_2", True, 80 * S)]
+    assert truth.moves == ["bottle_2 taken away by person_2 at 80.0 s"]
+    put_away(truth, pub, [], 90 * S)  # nobody took anything: nothing carried off
+    assert len(pub.sent) == 1
 
 
 def test_the_map_accuracy_counts_artifacts_within_10_cm_and_entries_still_true() -> None:
