@@ -17,6 +17,8 @@ such jobs; `GoalJob` is what they share, one `step()` per mission tick (sim time
    cannot take goals at all) fails the job `navigation_failed`, no answer `unavailable`;
    after a walk that arrived, the job holds there `dwell_ns` (0 but for a route that
    faces what it came for) before the next goal or its end, so the map gets its looks;
+   a walk held up `HELD_UP_S` within `POSITION_TOLERANCE_M` of its goal has arrived
+   (navigation's goal cancelled: people crossing, or the last of a turn refused);
 4. done, stopped (`stop`) or failed (`fail`): the navigation goal cancelled, the WBC to
    `stand`, the arm back to `stow`.
 
@@ -53,6 +55,12 @@ LOOK_TURNS = 3
 TERMINAL = ("succeeded", "failed", "cancelled")
 #: Sim seconds a job waits for the arm to reach its posture before it walks anyway.
 ARM_WAIT_S = 20.0
+#: A walk whose goal the robot stands within `POSITION_TOLERANCE_M` of for this long,
+#: sim s, without navigation saying it arrived, has arrived: a viewpoint is a place to
+#: look from. Hall seed 4's shift: the search's robot stood 6 cm from a viewpoint for
+#: 105 s, its last 35° of turn refused by the body guard (a map cell at its flank) and
+#: its steps clear by the people caps of two workers crossing there.
+HELD_UP_S = 15.0
 
 Say = Callable[[str], None]
 Ending = Literal["done", "stopped", "failed"]
@@ -84,6 +92,7 @@ class GoalJob(ABC):
         #: How long the job holds at a viewpoint it walked to, and until when, ns.
         self.dwell_ns = 0
         self._hold_until_ns = 0
+        self._near_since_ns = 0  # the current walk's goal within reach since (0: not)
 
     # -- what a job says ------------------------------------------------------------------
 
@@ -218,6 +227,11 @@ class GoalJob(ABC):
     def _step_nav(self, w: NavPatrol, b: int) -> None:
         if w.goal_id:
             st = self.port.nav_status(w.goal_id)
+            if (st is None or st.state not in TERMINAL) and self._held_up(w, b):
+                self.port.cancel_nav(w.goal_id, f"{self.task}: held up at the viewpoint")
+                w.finished(True)
+                self._hold_until_ns = b + self.dwell_ns
+                return
             if st is not None and st.state in TERMINAL:
                 ok = st.state == "succeeded"
                 if not ok:
@@ -239,6 +253,7 @@ class GoalJob(ABC):
             position_tolerance_m=POSITION_TOLERANCE_M,
             yaw_tolerance_rad=TURN_TOLERANCE_RAD,
         )
+        self._near_since_ns = 0
         try:
             w.sent(self.port.send_nav_goal(pose))
         except Refused as exc:
@@ -250,6 +265,23 @@ class GoalJob(ABC):
             w.refused(str(exc))
         except Unavailable as exc:
             self._end("failed", "unavailable", f"navigation does not answer: {exc}")
+
+    def _held_up(self, w: NavPatrol, b: int) -> bool:
+        """Whether the walk under way has arrived all the same (`HELD_UP_S`), said so."""
+        goal, xy = w.current, self.port.robot_xy()
+        if goal is None or goal.look or xy is None:
+            return False
+        off = math.hypot(xy[0] - goal.x, xy[1] - goal.y)
+        if off > POSITION_TOLERANCE_M:
+            self._near_since_ns = 0
+            return False
+        if not self._near_since_ns:
+            self._near_since_ns = b
+        if b - self._near_since_ns < HELD_UP_S * NS_PER_S:
+            return False
+        self.say(f"viewpoint {goal.viewpoint + 1}: held up {HELD_UP_S:.0f} s within {off:.2f} m "
+                 "of it: looking from here")  # fmt: skip
+        return True
 
     def _stow_arm(self) -> None:
         """Fold the arm back after a job that raised it (the WBC finishes it in stand)."""

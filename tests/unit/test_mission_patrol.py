@@ -27,6 +27,7 @@ from common.messages.semantic_map import OccupancyGrid
 from common.messages.world import OCCUPIED, SupportSurface
 from services.mission.coverage import Route
 from services.mission.desk import Desk
+from services.mission.goal_job import HELD_UP_S
 from services.mission.inbox import Inbox, RequestInbox
 from services.mission.mission_log import MissionLogger
 from services.mission.node import DEPENDENCIES
@@ -111,6 +112,29 @@ def test_a_route_that_faces_holds_at_each_viewpoint_before_it_walks_on_or_ends()
     lattice = PatrolRunner(plain, fast_settings(patrol_dwell_s=0.5))
     lattice.start(_route())
     assert lattice.dwell_ns == 0
+
+
+def test_a_walk_held_up_within_reach_of_its_viewpoint_has_arrived_there() -> None:
+    """Hall seed 4's shift: the search's robot stood 6 cm from a viewpoint for 105 s, the
+    last 35° of its turn refused (people crossing, a map cell at its flank); navigation
+    never said it arrived. A viewpoint is a place to look from."""
+    robot = FakeRobot(nav_ticks=10**6)  # navigation never says a goal arrived
+    said: list[str] = []
+    runner = PatrolRunner(robot, fast_settings(patrol_dwell_s=0.5), said.append)
+    near, far = (0.3, 0.0), (3.0, 0.0)
+    points = [(0.0, 0.0), near, far]
+    paths = [np.array([a, b]) for a, b in itertools.pairwise(points)]
+    runner.start(Route([np.array(near), np.array(far)], paths, facings=[0.0, 0.0]))
+    held = round(HELD_UP_S * 1e9 / TICK_NS)
+    _run(robot, runner, robot.arm_ticks + held - 20)
+    assert len(robot.nav_goals) == 1 and not robot.nav_cancels  # still walking to it
+    _run(robot, runner, 40 + 10)  # held up long enough, then the hold there (10 ticks)
+    assert robot.nav_cancels == [robot.nav_goals[0][0]]
+    assert _walks(robot) == [near, far]  # on to the next, which the robot is far from
+    assert any("viewpoint 1: held up 15 s within 0.30 m of it: looking from here" in m
+               for m in said), said  # fmt: skip
+    _run(robot, runner, 2 * held)
+    assert len(robot.nav_goals) == 2 and runner.running  # 2.7 m off: still walking there
 
 
 def test_a_refused_viewpoint_is_skipped_with_its_turns() -> None:
