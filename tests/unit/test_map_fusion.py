@@ -13,7 +13,7 @@ from services.semantic_map.artifacts import ArtifactTracker
 from services.semantic_map.entities import IdBook, Observation
 from services.semantic_map.looks import looks_at
 from services.semantic_map.mapfile import seed_from_world
-from services.semantic_map.occupancy import OCCUPIED, Occupancy
+from services.semantic_map.occupancy import CLEAR_FRAMES, OCCUPIED, Occupancy
 from services.semantic_map.store import Grid, MapStore
 from services.sim.world import generate_world
 
@@ -94,6 +94,30 @@ def test_learned_obstacles_need_several_frames_and_leave_the_floor_out() -> None
     assert occ.cells()[5, 5] == 0
     occ.integrate(pts)
     assert occ.cells()[5, 5] == OCCUPIED and occ.cells()[10, 10] == 0
+
+
+def test_what_stood_on_the_floor_and_went_is_forgotten_a_tops_cells_stay() -> None:
+    """Hall seed 4's shift: a worker's legs, missed by the detector, made a learned cell
+    that wedged the robot among crossing workers for the rest of the shift."""
+    occ = Occupancy(np.zeros((20, 20), np.uint8), 0.1, (0.0, 0.0), hits_needed=3)
+    legs = np.array([[0.55, 0.55, 0.3], [0.55, 0.55, 0.6]])  # cell (5, 5), from 0.3 m up
+    top = np.array([[1.05, 0.55, 0.72]])  # cell (5, 10): a table top's underside
+    for _ in range(3):
+        occ.integrate(np.vstack([legs, top]))
+    assert occ.cells()[5, 5] == OCCUPIED and occ.cells()[5, 10] == OCCUPIED
+    floor = np.array([[0.52, 0.52, 0.01], [1.02, 0.52, 0.01]])  # both cells seen as floor
+    for _ in range(CLEAR_FRAMES - 1):
+        occ.integrate(floor)
+    occ.integrate(np.vstack([floor, legs[:1]]))  # a hit in the cell restarts its count
+    for _ in range(CLEAR_FRAMES - 1):
+        occ.integrate(floor)
+    assert occ.cells()[5, 5] == OCCUPIED  # 4 frames of floor since its last hit
+    version = occ.version
+    occ.integrate(floor)
+    assert occ.cells()[5, 5] == 0 and occ.hits[5, 5] == 0 and occ.version > version
+    assert occ.cells()[5, 10] == OCCUPIED  # no low hit: the floor under a top is seen
+    occ.integrate(legs)  # somebody stands there again: counted from nothing
+    assert occ.hits[5, 5] == 1
 
 
 def test_the_store_keeps_what_was_committed(tmp_path: Path) -> None:
