@@ -548,6 +548,9 @@ class StubPull:
         self.pull_n = self.across_n = self.effort_change_nm = 0.0
         self.rising_since_ns: int | None = None
 
+    def note(self, status: WbcStatus) -> None:
+        pass
+
     def reset(self, status: WbcStatus) -> None:
         self.count = 0
 

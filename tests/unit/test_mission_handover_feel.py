@@ -200,6 +200,21 @@ def test_a_pull_cut_short_by_the_object_leaving_the_jaws_is_remembered() -> None
     assert not detector.pulled_within(last + 600 * MS, 0.5), "a pull long ago is not this one"
 
 
+def test_a_pull_that_began_while_the_baseline_was_taken_is_remembered() -> None:
+    """Hall seed 5's shift: the person's grip closed while the baseline was taken (a part
+    of their pull in it) and the box left the jaws 0.15 s after: taken, not lost."""
+    detector = PullDetector()
+    w = noisy(18, 0.3)  # the baseline's 15 samples, then 3 before the jaws are empty
+    w[4:, 0] += 12.0  # the grip closed in the baseline's first fifth: most of it pulled
+    assert feed(detector, w) == -1
+    assert detector.pull_n < 0.5 * detector.force_n  # against that baseline, little
+    assert detector.pulled_within(17 * PERIOD, 0.5)
+    settling = PullDetector()  # a pull felt as the arm settles, before the baseline
+    settling.note(status(0, HELD + np.array([9.0, 0, 0, 0, 0, 0])))
+    settling.reset(status(5 * PERIOD, HELD))
+    assert settling.pulled_within(10 * PERIOD, 0.5)
+
+
 def test_no_pull_felt_means_nothing_to_remember() -> None:
     detector = PullDetector()
     w = noisy(60, 0.3)

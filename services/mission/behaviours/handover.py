@@ -91,9 +91,8 @@ class FeelPull(MissionBehaviour):
             return Status.RUNNING
         self.last_stamp = status.stamp_ns
         if not status.held:
-            if self.baseline and (
-                detector.update(status)
-                or detector.pulled_within(status.stamp_ns, s.handover_taken_window_s)
+            if (self.baseline and detector.update(status)) or detector.pulled_within(
+                status.stamp_ns, s.handover_taken_window_s
             ):
                 self.ctx.decide(
                     f"handover: the object left the jaws while pulled "
@@ -102,6 +101,7 @@ class FeelPull(MissionBehaviour):
                 return Status.SUCCESS
             return self.fail("grasp_lost", "the object slipped out while presenting it")
         if not self.baseline:
+            detector.note(status)  # a person quick to take hold pulls while the arm settles
             if self.elapsed_s() >= s.settle_s:
                 detector.reset(status)
                 self.baseline = True
