@@ -23,10 +23,12 @@ _SURFACES = msgspec.json.Encoder()
 
 
 def learned_grids(occ: Occupancy) -> dict[str, Grid]:
-    """The layers the map learns as it looks: obstacle hits and the tops."""
+    """The layers the map learns as it looks: obstacle hits (and each cell's lowest hit,
+    which says whether it may be cleared) and the tops."""
     g = (occ.resolution_m, occ.origin_xy)
     return {
         "learned": Grid(occ.hits, *g),
+        "low_z": Grid(occ.low_z, *g),
         "top_z": Grid(occ.top_z, *g),
         "top_n": Grid(occ.top_n, *g),
     }

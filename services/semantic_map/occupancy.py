@@ -109,8 +109,9 @@ class Occupancy:
         self.hits = np.zeros(shape, np.uint16) if hits is None else hits.astype(np.uint16)
         self.seen_free = np.zeros(shape, bool)
         #: Per cell, the lowest point that hit it since its hits were last reset (m; inf:
-        #: none this run, as for the hits of a saved map: never cleared), and the frames
-        #: in a row that saw it as floor with no hit (module docstring).
+        #: none, as for the hits of a map file, which keeps no heights: never cleared; a
+        #: resumed database keeps them), and the frames in a row that saw it as floor
+        #: with no hit (module docstring).
         self.low_z = np.full(shape, np.inf, np.float32)
         self.floor_run = np.zeros(shape, np.uint8)
         #: The tops layer (see the module docstring): m (0: nothing seen), frames.

@@ -177,6 +177,9 @@ def _resume(
             else (top_z.cells.astype(np.float32), top_n.cells.astype(np.uint16)),
             **occ_kw,  # type: ignore[arg-type]
         )
+        low = snap.grids.get("low_z")
+        if low is not None and low.cells.shape == occ.low_z.shape:
+            occ.low_z = low.cells.astype(np.float32)  # a database of before: none, never cleared
     smap = SemanticMap(s, occ, snap.counters)
     for entity, app in snap.entities:
         smap.add(Track.from_message(entity, app))

@@ -118,3 +118,33 @@ def test_a_map_on_the_floor_plan_judges_artifacts_against_its_tables_tops(
     again, how = open_map(s, store, lambda: world, "hall seed 1")
     assert how.startswith("resumed") and again.surfaces == smap.surfaces
     store.close()
+
+
+def test_a_resumed_map_still_forgets_what_stood_on_the_floor_and_went(tmp_path: Path) -> None:
+    """The learned layer's lowest hits go with the database, so a restarted map clears a
+    cell a person left as the running one would (`Occupancy._clear`)."""
+    from services.semantic_map.commit import learned_grids
+    from services.semantic_map.occupancy import CLEAR_FRAMES, OCCUPIED
+    from services.sim.world import generate_world
+
+    world = generate_world(0, "small")
+    s = _settings(tmp_path, start="empty", floor_plan="world", name="low")
+    store = MapStore(database_path(s))
+    smap, _ = open_map(s, store, lambda: world, "small seed 0")
+    occ = smap.occupancy
+    ix, iy, _ = occ.cells_of(np.array([[0.52, 0.52]]))
+    res = occ.resolution_m
+    x, y = (occ.origin_xy[k] + (float(i[0]) + 0.5) * res for k, i in ((0, ix), (1, iy)))
+    legs = np.array([[x, y, 0.3], [x, y, 0.6]])  # a person the detector missed
+    for _ in range(occ.hits_needed):
+        occ.integrate(legs)
+    assert occ.cells()[iy, ix] == OCCUPIED
+    store.commit(grids=learned_grids(occ))
+    store.close()
+    store = MapStore(database_path(s))
+    again, how = open_map(s, store, lambda: world, "small seed 0")
+    assert how.startswith("resumed") and again.occupancy.cells()[iy, ix] == OCCUPIED
+    for _ in range(CLEAR_FRAMES):
+        again.occupancy.integrate(np.array([[x, y, 0.01]]))  # they went: floor there
+    assert again.occupancy.cells()[iy, ix] != OCCUPIED
+    store.close()
