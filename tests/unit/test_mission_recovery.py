@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import msgspec
+
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff
 from common.messages.wbc import Grasp
+from services.mission.targets import object_candidates
 from services.mission.tree import MissionTree
 from tests.unit.mission_fakes import FakeRobot, context, entity, small_world
 from tests.unit.test_mission_tree import REQUEST, mission, run
@@ -92,6 +95,21 @@ def test_a_class_request_tries_the_next_instance_when_the_nearest_is_not_there()
     outcome = run(mission(robot, request), robot)
     assert outcome.state == "succeeded", outcome
     assert standoffs(robot) == ["bottle_1", "bottle_2"]
+
+
+def test_a_class_request_tries_entries_of_a_few_far_views_after_the_firm_ones() -> None:
+    """Hall seed 1's shift: a "box_6" of 6 head-camera detections on a pallet's edge was
+    fetched first, a 51-s walk, with a box the map had seen often 5 m further."""
+    flimsy = msgspec.structs.replace(entity("box_6", 1.0, 0.0), source="perception",
+                                     observations=6, nearest_view_m=4.5)  # fmt: skip
+    seen = msgspec.structs.replace(entity("box_2", 6.0, 0.0), source="perception",
+                                   observations=40, nearest_view_m=1.2)  # fmt: skip
+    robot = small_world(artifacts={"box_6": flimsy, "box_2": seen}, visible={"box_2"})
+    request = MissionRequest(request_id="r", object="box", person="person_1")
+    outcome = run(mission(robot, request), robot)
+    assert outcome.state == "succeeded", outcome
+    assert standoffs(robot) == ["box_2"]
+    assert [e.id for e in object_candidates(robot, "box")] == ["box_2", "box_6"]
 
 
 def test_a_class_request_fails_object_not_found_after_every_candidate() -> None:
