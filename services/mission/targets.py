@@ -3,7 +3,7 @@
 A map id names one entity (or none: unknown). A class names every mapped, not missing
 artifact of that class, nearest to the robot first: the first is fetched, the rest are
 the candidates a recovery tries when the first is not where the map says. Entries the
-map made from a few far views (`firm`) come after every firm one, nearest first too:
+map made from a few far views (not `firm`) come after every firm one, nearest first too:
 the map deletes such ones when a look at their place misses them, and hall seed 1's
 shift walked 51 s to a "box_6" of 6 head-camera detections on a pallet's edge, with
 a box the map had seen often on a table 5 m further. A person may
