@@ -7,12 +7,7 @@ layer of bodies larger than a person (`scan_layer`: a trolley the map lacks, mar
 each scan, cleared where its beams pass through, else kept `SCAN_TTL_S`) and the people
 layer (`people`: the map's people with those perception sees over them, `SeenPeople`,
 and the lidar's tracks over those, `scan_people`; in the costmap when
-`people_in_costmap`, but for those walking (`WALKER_MPS`: the speed rules yield to them;
-planning round where a walker is now sends the robot one way round and then, as they
-walk on, the other: hall seed 4's shift walked a search's robot 180 s back and forth
-at a crossroads 2 m from its viewpoint, a worker pausing on one side and another
-walking past on the other; a person yields to a walker and walks on), always in
-`Costmap.people` for the speed rules) are combined by
+`people_in_costmap`, always in `Costmap.people` for the speed rules) are combined by
 `build` (`costmap.build_costmap`); the map's walkers are carried along their velocity
 from when it last saw them to the tick (`ahead`); a person the map alone has (the
 camera has not seen them for `CAMERA_FRESH_S`) whose place the lidar sees free
@@ -68,9 +63,6 @@ LIDAR_FREE = "the lidar sees free floor there"
 LIDAR_FREED = "the lidar saw free floor there after the map last saw them"
 
 
-#: m/s: a person this fast is walking, and left out of the plan's costmap (the module
-#: docstring); one whose velocity is not known yet stays in it.
-WALKER_MPS = 0.3
 #: s: a person the map has walking is carried along their velocity from when it last saw
 #: them to the tick, for at most this long (`ahead`).
 AHEAD_MAX_S = 1.0
@@ -88,11 +80,6 @@ def ahead(q: Person, t_ns: int) -> Person:
         return q
     dt = min(max(t_ns - q.seen_ns, 0) / NS_PER_S, AHEAD_MAX_S)
     return replace(q, x=q.x + v[0] * dt, y=q.y + v[1] * dt)
-
-
-def walking(q: Person) -> bool:
-    """Whether `q` walks (`WALKER_MPS`; not known: no)."""
-    return q.velocity is not None and math.hypot(*q.velocity) >= WALKER_MPS
 
 
 class NavMap:
@@ -198,7 +185,7 @@ class NavMap:
     def build(self, t_ns: int) -> Costmap:
         assert self.grid is not None  # called once a grid is in
         self.built = list(self.people)
-        people = [q for q in self.people if not walking(q)] if self.people_in_costmap else []
+        people = self.people if self.people_in_costmap else []
         seen = self.layer.active(t_ns) | self.scan_layer.active(t_ns)
         cm = build_costmap(self.grid, self.fp, self.cost_params, seen, people)
         # The speed rules always see every person, whether or not the plan avoids them.

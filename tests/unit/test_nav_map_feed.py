@@ -166,19 +166,6 @@ def test_people_seen_over_the_map_s_change_the_costmap_s_people() -> None:
     assert m.costmap.cost[20, 20] >= 0  # `people_in_costmap` off: not planned around
 
 
-def test_the_plan_goes_round_people_standing_and_leaves_walkers_to_the_speed_rules() -> None:
-    """Hall seed 4's shift: planning round where a walker is now sent the search's robot
-    one way round a crossroads and then, as they walked on, the other, for 180 s."""
-    m = NavMap(FP, CostParams(), 3 * S, True, "fake map", LOG)
-    standing = Person("person_1", 1.0, 1.0)
-    walker = Person("person_2", 1.0, 1.0, velocity=(0.9, 0.4))
-    unknown = Person("scan_3", 1.0, 1.0, velocity=None)  # just seen: not known to walk
-    for who, planned in ((standing, True), (walker, False), (unknown, True)):
-        m.adopt(_grid(), [who], 0, 0)
-        assert m.costmap is not None and m.costmap.people == (who,)  # the speed rules' all
-        assert bool(m.costmap.cost[20, 20] < 0) is planned, who  # lethal where they stand
-
-
 class _Frames:
     def __init__(self) -> None:
         self.waited: list[int] = []
