@@ -189,7 +189,7 @@ class GoalJob(ABC):
         w = self._walker()
         if w is None or not self.running:
             return
-        self._step_nav(w, b)
+        self._step_nav(w, b, xy)
         if self.running and w.done and b >= self._hold_until_ns:
             self._walked(w)
 
@@ -224,10 +224,10 @@ class GoalJob(ABC):
             self.say(f"arm posture {name} {goal.state}: {goal.reason}: walking on")
         self._arm_pending = False
 
-    def _step_nav(self, w: NavPatrol, b: int) -> None:
+    def _step_nav(self, w: NavPatrol, b: int, xy: tuple[float, float]) -> None:
         if w.goal_id:
             st = self.port.nav_status(w.goal_id)
-            if (st is None or st.state not in TERMINAL) and self._held_up(w, b):
+            if (st is None or st.state not in TERMINAL) and self._held_up(w, b, xy):
                 self.port.cancel_nav(w.goal_id, f"{self.task}: held up at the viewpoint")
                 w.finished(True)
                 self._hold_until_ns = b + self.dwell_ns
@@ -266,10 +266,11 @@ class GoalJob(ABC):
         except Unavailable as exc:
             self._end("failed", "unavailable", f"navigation does not answer: {exc}")
 
-    def _held_up(self, w: NavPatrol, b: int) -> bool:
-        """Whether the walk under way has arrived all the same (`HELD_UP_S`), said so."""
-        goal, xy = w.current, self.port.robot_xy()
-        if goal is None or goal.look or xy is None:
+    def _held_up(self, w: NavPatrol, b: int, xy: tuple[float, float]) -> bool:
+        """Whether the walk under way has arrived all the same (`HELD_UP_S`), said so;
+        `xy`: the robot's place this tick."""
+        goal = w.current
+        if goal is None or goal.look:
             return False
         off = math.hypot(xy[0] - goal.x, xy[1] - goal.y)
         if off > POSITION_TOLERANCE_M:

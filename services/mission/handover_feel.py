@@ -115,19 +115,21 @@ class PullDetector:
     def note(self, status: WbcStatus) -> None:
         """Remember a force of `absolute_n` toward the person (`pulled_within`), whatever
         the baseline: statuses before `reset` too."""
-        F = np.asarray(status.gripper_wrench[:3], dtype=float)
+        self._note(np.asarray(status.gripper_wrench[:3], dtype=float), status.stamp_ns)
+
+    def _note(self, F: FloatArray, stamp_ns: int) -> None:
         if np.all(np.isfinite(F)) and float(F @ self.toward) >= self.absolute_n:
-            self.last_pull_ns = status.stamp_ns
+            self.last_pull_ns = stamp_ns
 
     def update(self, status: WbcStatus) -> bool:
         """Feed the next status; True once a pull has been felt (see the module docstring)."""
         if self.tripped:
             return True
-        self.note(status)
+        F = np.asarray(status.gripper_wrench[:3], dtype=float)
+        self._note(F, status.stamp_ns)
         if (status.stamp_ns - self._t0_ns) / NS_PER_S < self.baseline_s:
             self._add_baseline(status)
             return False
-        F = np.asarray(status.gripper_wrench[:3], dtype=float)
         effort = float(status.gripper_effort)
         if not (np.all(np.isfinite(F)) and math.isfinite(effort)):
             self._since_ns = None

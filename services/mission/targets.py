@@ -21,7 +21,8 @@ import re
 
 from common.messages.semantic_map import MapEntity
 from common.robot import posture_tcp
-from services.mission.ports import RobotPort
+from services.mission.ports import RobotPort, Unavailable
+from services.mission.search import NEAR_VIEW_M
 
 _MAP_ID = re.compile(r"^[a-z][a-z0-9]*_[1-9][0-9]*$")
 
@@ -67,15 +68,30 @@ def put_back(entity: MapEntity, handed_ns: int, people: list[MapEntity]) -> bool
 
 
 #: An entry the map made itself from fewer detections than this, never seen from within
-#: `FIRM_NEAR_M`, is not firm (the map's `drop_below_observations` and `class_near_m`).
+#: `search.NEAR_VIEW_M` (the map's `class_near_m`), is not firm (the map's
+#: `drop_below_observations`).
 FIRM_ENTRY_OBSERVATIONS = 10
-FIRM_NEAR_M = 2.0
 
 
 def firm(e: MapEntity) -> bool:
     """Whether the map's entry is more than a few far views (seeded and imported ones are)."""
-    near = e.nearest_view_m is not None and e.nearest_view_m <= FIRM_NEAR_M
+    near = e.nearest_view_m is not None and e.nearest_view_m <= NEAR_VIEW_M
     return e.source != "perception" or e.observations >= FIRM_ENTRY_OBSERVATIONS or near
+
+
+def handed_put_back(
+    port: RobotPort, entries: list[MapEntity], handed: dict[str, tuple[str, int]]
+) -> list[MapEntity]:
+    """Those of `entries` handed over (`handed`: map id → to whom, when) and put down
+    again (`put_back`), the map's people asked once; none when the map does not answer."""
+    mine = [e for e in entries if e.id in handed]
+    if not mine:
+        return []
+    try:
+        people = port.people()
+    except Unavailable:
+        return []
+    return [e for e in mine if put_back(e, handed[e.id][1], people)]
 
 
 def object_candidates(port: RobotPort, name: str) -> list[MapEntity]:

@@ -15,7 +15,6 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from common.messages.mission import MissionRequest
-from common.messages.semantic_map import MapEntity
 from services.mission import targets
 from services.mission.behaviours.base import (
     CANDIDATE,
@@ -74,7 +73,7 @@ class SelectTarget(MissionBehaviour):
             except Unavailable as exc:
                 return self.fail("unavailable", f"the semantic map did not answer: {exc}")
             handed = self.ctx.handed
-            if back := self._put_back([e for e in found if e.id in handed]):
+            if back := targets.handed_put_back(self.port, found, handed):
                 for e in back:
                     person, at = handed.pop(e.id)
                     x, y = e.position_in_world[:2]
@@ -128,18 +127,6 @@ class SelectTarget(MissionBehaviour):
             self.ctx.decide(f"target {map_id} ({index + 1} of {len(candidates)})")
         self.feedback_message = f"target {map_id}"
         return Status.SUCCESS
-
-    def _put_back(self, handed: list[MapEntity]) -> list[MapEntity]:
-        """Those of `handed` (entries handed over) put down again (`targets.put_back`,
-        the map's people asked once); none when the map does not answer."""
-        if not handed:
-            return []
-        try:
-            people = self.port.people()
-        except Unavailable:
-            return []
-        at = self.ctx.handed
-        return [e for e in handed if targets.put_back(e, at[e.id][1], people)]
 
 
 def held_from_before(leaf: MissionBehaviour) -> Held | None:

@@ -49,7 +49,7 @@ from services.mission.coverage import Route, facing_route
 from services.mission.patrol import VIEW_HALF_ANGLE, PatrolRunner
 from services.mission.ports import PortError
 from services.mission.search import Place, found, places_to_look, re_seen
-from services.mission.targets import class_of, is_map_id, put_back
+from services.mission.targets import class_of, handed_put_back, is_map_id
 
 #: How many times a request's search goes on after what it found was not there.
 MAX_RESUMES = 2
@@ -127,11 +127,8 @@ class LookElsewhere(MissionBehaviour):
         search began, away from everyone (`targets.put_back`): another object stands
         where the robot took one (`search.found`). Asks the map for its people only when
         there is such an entry."""
-        seen = [a for a in listing if a.id in self.ctx.handed and a.last_seen_ns >= self.started_ns]
-        if not seen:
-            return []
-        people = self.port.people()
-        out = [a.id for a in seen if put_back(a, self.ctx.handed[a.id][1], people)]
+        seen = [a for a in listing if a.last_seen_ns >= self.started_ns]
+        out = [a.id for a in handed_put_back(self.port, seen, self.ctx.handed)]
         for a in out:
             if a not in self.said_put_down:
                 self.said_put_down.add(a)
