@@ -5,10 +5,13 @@ people of the tick (and the base's measured velocity in the map) and returns the
 and the status. Its settings are `NavigationSettings` (the
 follower's `controller`, the planner's `planner`, the people rules' `people`). Per goal:
 - (re)plan at start, every `replan_s`, and when the path ahead (`BLOCKED_LOOKAHEAD_M`) crosses
-  a lethal cell; a plan that fails while a path is held keeps the old one until
-  `blocked_timeout_s`; a goal in an obstacle fails `invalid_goal` only on its first plan:
-  later, what covers it is the short-lived layers (depth, people), so it counts as
-  blocked (the `clear` recovery may free it);
+  a lethal cell; a periodic replan keeps the held path while it is free and the new one
+  is not clearly cheaper (`SWITCH_GAIN`, `SWITCH_MIN_M`: hysteresis, so that two
+  near-equal ways do not swap each second), except while the goal is blocked, after a
+  recovery and after a retarget, which take the new plan; a plan that fails while a path
+  is held keeps the old one until `blocked_timeout_s`; a goal in an obstacle fails
+  `invalid_goal` only on its first plan: later, what covers it is the short-lived layers
+  (depth, people), so it counts as blocked (the `clear` recovery may free it);
 - follow with `Follower`, capped by `people_limit` (a stop for a person counts as blocked
   time, so a person who stays leads to a replan around them, then to recovery); under a
   stop the base stands, not turning on the spot either: a trot turning on the spot
@@ -71,7 +74,7 @@ from services.navigation.people import (
     people_limit,
     within_people,
 )
-from services.navigation.planner import Plan, PlanError, plan
+from services.navigation.planner import Plan, PlanError, path_cost, plan
 
 Recovery = Literal["", "clear", "rotate", "backoff", "slide"]
 
@@ -96,6 +99,13 @@ SLIDE_SPEED = 0.2
 #: m the body guard looks along the slide's way before each step (its own 0.5 s at 0.2 m/s:
 #: 0.3 m stood hall seed 0's slide still beside its ghost, an obstacle 0.1-0.3 m on).
 SLIDE_LOOK_M = 0.1
+#: A periodic replan takes the new path over the held one (free, to the same goal) only
+#: when it is cheaper (`planner.path_cost`) by this fraction of the held one's cost and
+#: by at least `SWITCH_MIN_M`: two near-equal ways round a table or a person otherwise
+#: swap with each small change of cost, and the robot turns back and forth between them
+#: (hall seed 4's shift walked 180 s to and fro at a crossroads 2 m from its viewpoint).
+SWITCH_GAIN = 0.15
+SWITCH_MIN_M = 0.5
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
@@ -166,6 +176,7 @@ class Navigator:
         self.follower = None
         self.planned_once = False
         self.last_plan_ns = -(10**18)
+        self.take_next = True  # the next plan replaces the held one, whatever it costs
         self.blocked_since: int | None = None
         self.recoveries: list[Recovery] = ["clear", "rotate", "backoff"]
         self.recovery = ""
@@ -186,6 +197,7 @@ class Navigator:
             return
         self.goal = replace(self.goal, pose=pose, person_xy=person_xy)
         self.last_plan_ns = -(10**18)
+        self.take_next = True  # the next plan replaces the held one, whatever it costs
         self.best_remaining = self.best_yaw_error = math.inf
         self.progress_ns = t_ns
 
@@ -216,7 +228,9 @@ class Navigator:
             new_plan, limit, self.recovery, self.guarded,
         )  # fmt: skip
 
-    def _replan(self, t_ns: int, pose: Pose, cm: Costmap) -> Plan | None:
+    def _replan(self, t_ns: int, pose: Pose, cm: Costmap, hold: bool = False) -> Plan | None:
+        """Plan afresh; with `hold`, the held path stays unless the new one is clearly
+        better (`_switch`). None: no new plan (failed, or the held one kept)."""
         assert self.goal is not None
         self.last_plan_ns = t_ns
         first, self.planned_once = not self.planned_once, True
@@ -227,6 +241,8 @@ class Navigator:
             if exc.reason == "invalid_goal" and first:
                 self._finish("failed", "invalid_goal", str(exc))
             return None
+        if hold and not self._switch(new, pose, cm):
+            return None
         self.plan = new
         if self.follower is None:
             self.follower = Follower(new.poses, self.n.controller)
@@ -235,6 +251,19 @@ class Navigator:
             self.follower.set_path(new.poses)
         self.detail = f"following a {new.length_m:.1f} m path"
         return new
+
+    def _switch(self, new: Plan, pose: Pose, cm: Costmap) -> bool:
+        """Whether `new` replaces the held plan: it goes to another goal pose, the held
+        path is no longer free, or `new` is cheaper by `SWITCH_GAIN` and `SWITCH_MIN_M`."""
+        held, f = self.plan, self.follower
+        if held is None or f is None or new.goal != held.goal:
+            return True
+        rest = np.vstack([[pose.x, pose.y, pose.yaw], f.poses[f.index :]])
+        w = self.n.planner.cost_weight
+        held_cost, new_cost = path_cost(cm, rest, w), path_cost(cm, new.poses, w)
+        return not math.isfinite(held_cost) or held_cost - new_cost > max(
+            SWITCH_GAIN * held_cost, SWITCH_MIN_M
+        )
 
     def _path_blocked(self, cm: Costmap) -> bool:
         if self.follower is None:
@@ -268,7 +297,9 @@ class Navigator:
         blocked_path = self.plan is not None and self._path_blocked(cm)
         due = t_ns - self.last_plan_ns >= self.n.replan_s * NS_PER_S
         if self.plan is None or blocked_path or due:
-            new_plan = self._replan(t_ns, pose, cm)
+            hold = not (self.take_next or blocked_path) and self.blocked_since is None
+            self.take_next = False
+            new_plan = self._replan(t_ns, pose, cm, hold)
             if self.state != "active":
                 return self._out()
             if new_plan is None and blocked_path:
@@ -414,6 +445,7 @@ class Navigator:
             self.recovery = ""
             self.cmd = np.zeros(3)
             self.last_plan_ns = -(10**18)
+            self.take_next = True  # the next plan replaces the held one, whatever it costs
             self.progress_ns = t_ns
             self.best_remaining = math.inf
             self.best_yaw_error = math.inf

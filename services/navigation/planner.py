@@ -144,6 +144,21 @@ def plan(costmap: Costmap, start: Pose, goal: Pose, fp: Footprint, p: PlannerSet
     return Plan(poses, target, length, found.cost, found.expanded)
 
 
+def path_cost(costmap: Costmap, poses: NDArray[np.float64], weight: float) -> float:
+    """What a path costs on `costmap`, in A*'s measure but metres: each step's length ·
+    (1 + weight · cost of the cell it ends in); a step into a lethal cell or off the grid
+    costs infinity. The first pose (where the robot stands) is not charged: a robot
+    pushed into the inflation has every way out through it."""
+    if len(poses) < 2:
+        return 0.0
+    steps = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    iy, ix, inside = costmap.grid.cells(poses[1:, :2])
+    cost = costmap.cost[iy, ix]
+    if not np.all(inside) or np.any(cost < 0):
+        return math.inf
+    return float(np.sum(steps * (1.0 + weight * cost)))
+
+
 def _segment_cells(
     a: NDArray[np.int64], b: NDArray[np.int64]
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -204,4 +219,5 @@ def resample(xy: NDArray[np.float64], spacing: float, goal_yaw: float) -> NDArra
     return np.stack([x, y, yaw], axis=1)
 
 
-__all__ = ["GOAL_MARGIN_M", "LETHAL", "Plan", "PlanError", "nearest_free_pose", "plan", "pose_ok"]
+__all__ = ["GOAL_MARGIN_M", "LETHAL", "Plan", "PlanError", "nearest_free_pose", "path_cost", "plan",
+           "pose_ok"]  # fmt: skip

@@ -216,6 +216,37 @@ def test_an_idle_navigator_ticks_at_rest_without_a_goal() -> None:
     assert not np.any(out.cmd)
 
 
+def test_a_held_path_stays_until_another_is_clearly_cheaper_or_it_is_lethal() -> None:
+    """Two equal ways round a block: a person's cost that makes the held way a little
+    dearer does not swap it (the crossroads to and fro), one that makes it much dearer
+    does, and so does the held way becoming lethal, or the goal being blocked."""
+    from services.navigation.navigator import GoalSpec, Navigator
+
+    block = _room([(slice(40, 80), slice(70, 90))])  # y 2-4 m, x 3.5-4.5 m
+    start, goal = Pose(1.5, 3.0, 0.0), Pose(6.5, 3.0, 0.0)
+    at = lambda x, y: build_costmap(block, FP, CostParams(), people=[Person("p", x, y)])  # noqa: E731
+    above = lambda nav: float(nav.plan.poses[:, 1].mean()) > 3.0  # noqa: E731
+    ns = NavigationSettings(blocked_timeout_s=10.0)  # it stands still: not blocked yet
+    dt = round(ns.replan_s * 1.1e9)
+    nav = Navigator(FP, ns, 0.05)
+    nav.start(GoalSpec("g", goal, 0.1, 0.1), 0)
+    nav.tick(0, start, at(4.0, 0.4))  # a person near the way below: above
+    assert above(nav)
+    a_little = at(6.2, 5.95)  # near the way above: A* alone would go below now
+    assert plan(a_little, start, goal, FP, ns.planner).poses[:, 1].mean() < 3.0
+    out = nav.tick(dt, start, a_little)
+    assert out.new_plan is None and above(nav)
+    out = nav.tick(2 * dt, start, at(6.0, 5.9))  # the way above dearer by a quarter
+    assert out.new_plan is not None and not above(nav)
+    nav.tick(3 * dt, start, at(6.2, 0.05))  # the mirror of a little: held below
+    assert not above(nav)
+    out = nav.tick(4 * dt, start, at(4.0, 1.4))  # standing on the way below, far ahead
+    assert out.new_plan is not None and above(nav)
+    nav.tick(12 * dt, start, a_little)  # no progress for 10 s: blocked, then
+    nav.tick(13 * dt, start, a_little)  # a blocked goal takes any new plan
+    assert not above(nav)
+
+
 def test_heights_are_measured_from_the_floor_the_frame_shows() -> None:
     """The base's estimated pitch is 1.5° off: in the world the floor rises 10 cm at
     4 m, over the 8 cm an obstacle needs. From the fitted floor, only the box stands."""
