@@ -5,7 +5,8 @@
       mission_or_abort (selector)
         the_task (selector): fetch_task (below), else put_back_task: is_put_back, then
                              nothing_held, else put_back_asked (`put_back_tree`)
-        fetch_task (sequence): is_fetch, note_look (the requested person's colours), then
+        fetch_task (sequence): is_fetch, note_look (the requested person's colours),
+          note_known (the map's entries of the class asked for by id), then
           regrasp (Recover: grasp_lost | grasp_failed, budget repick_budget)
             fetch_and_carry (sequence)
               have_it: still_holding (the object asked for, held since an unfinished
@@ -129,6 +130,7 @@ from services.mission.behaviours.put_back import FellOnTheWay, PutBackFirst, Put
 from services.mission.behaviours.request import (
     HandsFree,
     IsTask,
+    NoteKnown,
     ResolvePerson,
     SelectTarget,
     StillHolding,
@@ -427,7 +429,7 @@ def build_tree(ctx: Context) -> Sequence:
         "the_task",
         memory=True,
         children=[
-            _seq("fetch_task", IsTask(ctx, "fetch"), NoteLook(ctx), fetch, offer),
+            _seq("fetch_task", IsTask(ctx, "fetch"), NoteLook(ctx), NoteKnown(ctx), fetch, offer),
             _seq(
                 "put_back_task",
                 IsTask(ctx, "put_back"),

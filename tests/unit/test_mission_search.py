@@ -180,6 +180,35 @@ def test_a_moved_object_the_map_saw_on_the_way_is_still_the_one_fetched() -> Non
     assert standoffs == ["bottle_1", "bottle_9"]
 
 
+def test_a_moved_object_the_map_saw_while_putting_back_is_still_the_one_fetched() -> None:
+    """Hall seed 0's shift: the fetch first put back what it held from the last request,
+    and on that walk the head camera made bottle_9 of the moved bottle_2. The map's
+    entries the search counts as other bottles are those of the fetch's start, so
+    bottle_9 is the find (noted after the put-back, the search passed it over)."""
+    robot = small_world(artifacts={"bottle_1": entity("bottle_1", 3.0, 0.0),
+                                   "bottle_2": entity("bottle_2", 3.0, 0.8)},
+                        visible={"bottle_1"})  # fmt: skip
+    robot.supports = [_surface("table_1", 3.3, 0.0), _surface("table_2", -1.0, 3.0)]
+    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
+    assert _run(tree, robot, lambda _k: None).reason == "unknown_person"
+    assert tree.ctx.holding is not None  # bottle_1, to be put back first
+    tree.start(MissionRequest(request_id="r2", object="bottle_2", person="person_1"))
+
+    def look(_k: int) -> None:
+        putting_back = tree.ctx.holding is not None
+        if putting_back and tree.where()[1].startswith("navigate_to_put_back"):
+            robot.artifacts.setdefault("bottle_9", _seen(entity("bottle_9", -1.0, 2.8),
+                                                         robot.now_ns))  # fmt: skip
+            robot.visible.add("bottle_9")
+        if tree.arm_look and "bottle_9" in robot.artifacts:  # the search sees it again
+            robot.artifacts["bottle_9"] = _seen(robot.artifacts["bottle_9"], robot.now_ns)
+
+    outcome = _run(tree, robot, look)
+    assert outcome.state == "succeeded", outcome
+    standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert standoffs[-2:] == ["bottle_2", "bottle_9"]
+
+
 def test_a_look_alike_seen_again_off_its_place_is_not_fetched_for_the_object_asked_for() -> None:
     """The search's look at table_2 makes bottle_8 0.22 m from where the map has
     bottle_2 (not seen since): it says bottle_8 is bottle_2 seen again, does not fetch

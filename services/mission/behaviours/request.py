@@ -1,6 +1,13 @@
 """The leaves about what was asked: wait for a request, pick the object, name the person.
 
 - `WaitForRequest`: RUNNING until the node put an accepted request on the blackboard.
+- `NoteKnown`: for a request by id, the map's entries of its class as the fetch begins
+  (`KNOWN`: other objects of the class, for the search; one made since may be the
+  object, moved). Before anything else: a fetch that first puts back what it holds
+  walks past tables, and the entry its head camera makes of the moved object on the way
+  is not one the map had (hall seed 0's shift: bottle_2 moved onto table_2 at 305 s, the
+  request came at 306 s, the walk to put box_1 back made bottle_5 of it at 308 s, and
+  the search that began at 390 s took bottle_5 for another bottle and fetched bottle_1).
 - `SelectTarget`: the object's candidates from the map on first use (a map id: itself; a
   class: every mapped instance, nearest first, at most `max_candidates`), then the one at
   the blackboard's `candidate` index becomes the `target`. The `next_instance` recovery
@@ -58,6 +65,26 @@ class IsTask(MissionBehaviour):
         return Status.SUCCESS if request.task == self.task else Status.FAILURE
 
 
+class NoteKnown(MissionBehaviour):
+    """Always SUCCESS: `KNOWN` noted for a request by id (the map down: `SelectTarget`
+    notes it later)."""
+
+    WRITES = (KNOWN,)
+
+    def __init__(self, ctx: Context) -> None:
+        super().__init__("note_known", ctx, stage="")
+
+    def update(self) -> Status:
+        request: MissionRequest = self.get(REQUEST)
+        if targets.is_map_id(request.object):
+            try:
+                like = self.port.artifacts_of_class(targets.class_of(request.object))
+            except Unavailable:
+                return Status.SUCCESS
+            self.set(KNOWN, sorted(e.id for e in like))
+        return Status.SUCCESS
+
+
 class SelectTarget(MissionBehaviour):
     WRITES = (CANDIDATES, TARGET, KNOWN)
 
@@ -94,10 +121,10 @@ class SelectTarget(MissionBehaviour):
                                 "already, not a candidate")  # fmt: skip
             candidates = [e.id for e in found[: max(1, self.settings.max_candidates)]]
             self.set(CANDIDATES, candidates)
-            if targets.is_map_id(request.object):
-                # What the map had of the class as the request began: an entry made since
-                # may be the object, moved (the search's `found`; a request by class
-                # takes any).
+            if targets.is_map_id(request.object) and self.get(KNOWN) is None:
+                # What the map had of the class (`NoteKnown`, when the map did not answer
+                # it): an entry made since may be the object, moved (the search's
+                # `found`; a request by class takes any).
                 try:
                     like = self.port.artifacts_of_class(targets.class_of(request.object))
                 except Unavailable:
