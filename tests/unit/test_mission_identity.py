@@ -11,7 +11,7 @@ from common.appearance import MIN_VIEWS, SIZE
 from common.messages.navigation import PersonHandover
 from common.messages.semantic_map import MapEntity, PersonColours
 from common.messages.wbc import Posture
-from services.mission.behaviours.identity import Look, compared, other_clothes
+from services.mission.behaviours.identity import Look, compared, other_clothes, wearer_near
 from services.mission.tree import Outcome
 from tests.unit.mission_fakes import FakeRobot, entity, small_world
 from tests.unit.test_mission_tree import _ask_scene, mission, run
@@ -117,3 +117,62 @@ def test_the_ask_is_answered_only_by_someone_the_colours_do_not_tell_apart() -> 
     assert handovers[-1] == "person_8" and "person_9" not in handovers, handovers
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     assert any(d.startswith("person_8 came while the robot asked for person_1") for d in decisions)
+
+
+def _split_on_the_way(colours: PersonColours) -> tuple[Outcome, list[str], list[str]]:
+    """The walk to person_1 (red, never seen since the map was seeded) is under way when
+    person_4, in `colours`, stands 1.5 m from the robot, seen every tick: the outcome,
+    the person ids of the handover goals sent and the decisions said."""
+    robot = _world()
+    robot.nav_ticks = 200  # 10 s a walk
+    tree = mission(robot)
+    near = None
+    for _ in range(8000):
+        outcome = tree.tick()
+        if near is None and [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]:
+            x, y = robot.xy
+            near = dressed(entity("person_4", x + 1.5, y, kind="person", yaw=math.pi), colours)
+        if near is not None:  # standing there, seen
+            robot.people_["person_4"] = msgspec.structs.replace(near, last_seen_ns=robot.t)
+        robot.advance()
+        if outcome is not None:
+            sent = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+            return outcome, sent, tree.ctx.decisions  # type: ignore[attr-defined]
+    raise AssertionError(tree.where())
+
+
+def test_the_person_asked_for_standing_by_the_robot_under_another_id_is_walked_to() -> None:
+    """Hall seed 0's shift: the map's person_4 stayed where the worker had walked past;
+    they stood by the robot as person_10. Somebody standing near in the colours asked
+    for, while the entry asked for is stale, is the one the walk goes to."""
+    outcome, sent, decisions = _split_on_the_way(RED)
+    assert outcome.state == "succeeded", outcome
+    assert sent == ["person_1", "person_4"]
+    assert any(d.startswith("person_1 not seen for") and "walking to person_4" in d
+               for d in decisions), decisions  # fmt: skip
+
+
+def test_somebody_near_in_other_clothes_is_not_taken_for_the_person_asked_for() -> None:
+    outcome, sent, _ = _split_on_the_way(BLUE)
+    assert outcome.state == "succeeded", outcome
+    assert sent == ["person_1"]
+
+
+def test_wearer_near_takes_somebody_standing_near_in_the_colours_once_the_entry_is_stale() -> None:
+    s = 1_000_000_000
+    look = Look("person_1", RED, 0)
+    asked = msgspec.structs.replace(entity("person_1", 9.0, 9.0, kind="person"), last_seen_ns=s)
+    near = msgspec.structs.replace(dressed(entity("person_4", 1.0, 0.0, "person"), RED),
+                                   last_seen_ns=20 * s)  # fmt: skip
+    standing = lambda q: q.last_seen_ns >= 19 * s  # noqa: E731
+    args = ((0.0, 0.0), 20 * s, standing, [])
+    assert wearer_near(look, asked, [asked, near], *args) == (near, [("far", 0.0, False)])
+    fresh = msgspec.structs.replace(asked, last_seen_ns=18 * s)  # seen 2 s ago: not stale
+    assert wearer_near(look, fresh, [fresh, near], *args) is None
+    far = msgspec.structs.replace(near, position_in_world=(3.5, 0.0, 0.0))
+    assert wearer_near(look, asked, [asked, far], *args) is None
+    assert wearer_near(look, asked, [asked, near], (0.0, 0.0), 20 * s, lambda _q: False, []) is None
+    assert (
+        wearer_near(look, asked, [asked, near], (0.0, 0.0), 20 * s, standing, ["person_4"]) is None
+    )
+    assert wearer_near(None, asked, [asked, near], *args) is None

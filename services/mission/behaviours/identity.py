@@ -24,10 +24,17 @@ them before letting go. So:
   with the colour distances said.
 - The ask (`LookForPerson`) is answered only by someone the colours do not tell apart
   from the one asked for (`other_clothes`).
+- On the walk to the person (`NavigateTo`), the map's entry of them not seen for
+  `STALE_S` while somebody stands near the robot in their colours (`wearer_near`): the
+  map split them, and the walk goes to that one (hall seed 0's shift: the map's
+  person_4 stayed where they had walked past, the worker themselves stood 1.2 m from
+  the robot as person_10, and the robot stood 120 s by them, its walk to the old place
+  held by their protective separation, until the request timed out).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -155,6 +162,37 @@ class RightPerson(MissionBehaviour):
         if not alike:
             return None
         return min(alike, key=lambda item: max(d for _, d, _ in item[1]))
+
+
+#: s: the map's entry of the person asked for, unseen this long, may have come apart.
+STALE_S = 5.0
+#: m: how near the robot somebody in their colours stands to be taken for them.
+WEARER_NEAR_M = 3.0
+
+
+def wearer_near(
+    look: Look | None,
+    asked: MapEntity | None,
+    people: list[MapEntity],
+    robot_xy: tuple[float, float],
+    now_ns: int,
+    standing: Callable[[MapEntity], bool],
+    others: list[str],
+) -> tuple[MapEntity, list[tuple[Band, float, bool]]] | None:
+    """Somebody standing (`standing`: seen lately, not walking) within `WEARER_NEAR_M` of
+    the robot whom the noted colours compare with and do not tell apart from the one
+    asked for, while the map's entry of that one (`asked`; None: gone from the map) is
+    not seen for `STALE_S`: the nearest in colours; None otherwise (no look, nobody such,
+    or one of `others`)."""
+    if look is None or (asked is not None and now_ns - asked.last_seen_ns < STALE_S * 1e9):
+        return None
+    alike = [
+        (q, bands) for q in people
+        if (asked is None or q.id != asked.id) and q.id not in others and standing(q)
+        and math.dist(q.position_in_world[:2], robot_xy) <= WEARER_NEAR_M
+        and (bands := compared(look, q)) and not any(other for _, _, other in bands)
+    ]  # fmt: skip
+    return min(alike, key=lambda item: max(d for _, d, _ in item[1]), default=None)
 
 
 def another_to_try(bb: Any) -> Callable[[Failure], bool]:

@@ -11,7 +11,10 @@
   the grasp's own pose) on start and watches `nav/status` for that goal id; a refusal
   or a failed goal fails `navigation_failed` with navigation's reason (the goal is sent
   once: navigation takes one sent before its first map and waits for the map). Carrying
-  (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Preempted
+  (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Walking
+  to a person whose map entry is stale while somebody stands near in their colours
+  (`identity.wearer_near`, checked once a second), it walks to that one (`PERSON`), said,
+  with a new goal. Preempted
   (or failing while the goal is active) it cancels its goal. An object that fell from
   the gripper (`Target.dropped`) lies by the robot's feet, out of its cameras' view: it
   steps back to look at the floor there (`look_where_it_fell`; failing that, or where it
@@ -59,6 +62,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -85,7 +89,7 @@ from services.mission.behaviours.base import (
     MissionBehaviour,
 )
 from services.mission.behaviours.handover import side_bearing
-from services.mission.behaviours.identity import other_clothes
+from services.mission.behaviours.identity import other_clothes, said, wearer_near
 from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
 from services.mission.patrol_goals import PatrolGoal, look_around
 from services.mission.person_search import LOOKED_M, next_place
@@ -174,7 +178,7 @@ class SetMode(MissionBehaviour):
 
 
 class NavigateTo(MissionBehaviour):
-    WRITES = (LOOK_AT,)
+    WRITES = (LOOK_AT, PERSON)
 
     def __init__(
         self,
@@ -196,6 +200,8 @@ class NavigateTo(MissionBehaviour):
         self.error: PortError | None = None
         #: Walking to a person's usual place (`LOOK_AT`), not to the person.
         self.to_place = False
+        #: When the walk to a person last looked for them under another id (sim ns).
+        self.wearer_checked_ns = 0
 
     def _goal(self) -> NavGoal:
         if self.kind == "put_back":
@@ -263,6 +269,8 @@ class NavigateTo(MissionBehaviour):
     def update(self) -> Status:
         if self.to_place and self._seen_on_the_way():
             return Status.SUCCESS
+        if self.kind == "person" and not self.to_place and self.active:
+            self._to_wearer()
         status = self._update()
         if status == Status.FAILURE and self._dropped():
             self.ctx.decide(f"{self.name}: no step back to look: looking from here")
@@ -285,6 +293,35 @@ class NavigateTo(MissionBehaviour):
         self.ctx.decide(f"{pid} seen at ({x:.2f}, {y:.2f}) on the way to their usual place: "
                         "walking to them")  # fmt: skip
         return True
+
+    def _to_wearer(self) -> None:
+        """Once a second: the person asked for stands near the robot under another map
+        id (`identity.wearer_near`): the walk goes to them under it."""
+        now = self.port.now_ns
+        if now - self.wearer_checked_ns < NS_PER_S:
+            return
+        self.wearer_checked_ns = now
+        xy = self.port.robot_xy()
+        pid, asked = the_person(self)
+        if xy is None:
+            return
+        try:
+            people = self.port.people()
+        except PortError:
+            return
+        best = wearer_near(self.get(PERSON_LOOK), asked, people, xy, now, _standing(now),
+                           self.get(OTHERS) or [])  # fmt: skip
+        if best is None:
+            return
+        who, bands = best
+        age = "gone from the map" if asked is None else (
+            f"not seen for {(now - asked.last_seen_ns) / NS_PER_S:.0f} s")  # fmt: skip
+        self.ctx.decide(f"{pid} {age}; {who.id}, standing "
+                        f"{math.dist(who.position_in_world[:2], xy):.1f} m from the robot, "
+                        f"wears their colours ({said(bands)}): walking to {who.id}")  # fmt: skip
+        self.set(PERSON, who.id)
+        self.port.cancel_nav(self.goal_id, f"{pid} is {who.id}")
+        self._send()
 
     def _update(self) -> Status:
         if self._dropped() and not self.goal_id and self.error is None:
@@ -355,6 +392,17 @@ def handover_extra_m(b: MissionBehaviour) -> float:
         plan = b.ctx.holding.plan
     beyond = float(getattr(plan, "beyond_m", 0.0))
     return min(max(0.0, beyond - HANDOVER_BEYOND_M), HANDOVER_EXTRA_MAX_M)
+
+
+def _standing(now_ns: int) -> Callable[[MapEntity], bool]:
+    """Whether the map sees a person standing now: seen within `PERSON_FRESH_S`, slower
+    than `WALKING_MPS`."""
+
+    def standing(q: MapEntity) -> bool:
+        fresh = now_ns - q.last_seen_ns <= PERSON_FRESH_S * NS_PER_S
+        return fresh and math.hypot(*q.velocity_in_world) < WALKING_MPS
+
+    return standing
 
 
 def the_person(b: MissionBehaviour) -> tuple[str, MapEntity | None]:
