@@ -8,7 +8,7 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from common.messages.base import Message, NonNegative, StampNs, Unit
+from common.messages.base import ClassName, EntityId, Finite, Message, NonNegative, StampNs, Unit
 
 #: Any text without control characters (a NUL, a newline or an escape in an id went into
 #: the logs as they were: `dume trial fuzz`).
@@ -166,6 +166,22 @@ class PatrolRequest(Message, frozen=True):
     spacing_m: NonNegative = 0.0
 
 
+#: How many of the robot's latest takes a `PatrolStatus` carries.
+TAKEN_KEPT = 8
+
+
+class Taken(Message, frozen=True):
+    """An object the robot took from its place: the map id the mission picked it as,
+    its class, where the gripper closed on it (world x, y, m), when (sim ns). The map
+    marks the entry there missing (`semantic_map.mapper.SemanticMap.taken`): what the
+    robot carries away is not on its support any more."""
+
+    stamp_ns: StampNs
+    map_id: EntityId
+    class_name: ClassName
+    xy: tuple[Finite, Finite]
+
+
 class PatrolStatus(Message, frozen=True):
     """The mapping job's state (the patrol's, or an exploration's): the reply to
     `dume/<r>/mission/patrol`, and published on `dume/<r>/mission/patrol/status` at every
@@ -177,9 +193,11 @@ class PatrolStatus(Message, frozen=True):
     known-free floor in the map when the exploration last looked, m² (0 for a patrol).
     arm_look: the job holds the arm in `look`
     now (the wrist camera sees bench tops: the map fuses `semantic_map.patrol_cameras`
-    too). reason: typed (`PatrolReason`), for a start refused (`rejected`, only in that
-    reply) or a patrol failed; detail: a sentence for a person (skipped viewpoints, why
-    it stopped).
+    too). taken: the robot's latest takes (`Taken`, at most `TAKEN_KEPT`, a fetch's as
+    well as a job's), for the map; every status carries them, as the map reads one
+    status a tick and may skip some. reason: typed (`PatrolReason`), for a start
+    refused (`rejected`, only in that reply) or a patrol failed; detail: a sentence for a
+    person (skipped viewpoints, why it stopped).
     """
 
     WIRE: ClassVar[Literal["msgpack", "json"]] = "json"
@@ -191,5 +209,6 @@ class PatrolStatus(Message, frozen=True):
     travelled_m: NonNegative = 0.0
     known_m2: NonNegative = 0.0
     arm_look: bool = False
+    taken: Annotated[tuple[Taken, ...], msgspec.Meta(max_length=TAKEN_KEPT)] = ()
     reason: PatrolReason = ""
     detail: str = ""

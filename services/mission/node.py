@@ -177,11 +177,11 @@ class MissionNode:
 
     def _patrol_status(self, b: int) -> PatrolStatus:
         """The jobs' status at b, saying `arm_look` too while a fetch's search holds the
-        arm up (the map fuses the wrist camera then)."""
+        arm up (the map fuses the wrist camera then), with the robot's latest takes."""
         status = self.patrol.published(b)
         if self.tree.arm_look and not status.arm_look:
             status = msgspec.structs.replace(status, arm_look=True)
-        return status
+        return msgspec.structs.replace(status, taken=tuple(self.tree.ctx.taken))
 
     def _stalled(self) -> None:
         """No tick for a while: a request whose sim (or another dependency) is gone ends

@@ -262,7 +262,7 @@ def build_tree(ctx: Context) -> Sequence:
                     # (hall seed 16: a box held, lifted 5.8 cm short; letting go drops it)
                     ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),
                               "grasp_failed", s.reach_timeout_s, st[3], must_succeed=False),
-                    CheckHeld(ctx, st[3], name="still_held"),
+                    CheckHeld(ctx, st[3], name="still_held", take=False),
                 ),
                 _seq(
                     # open on the spot (the object stays for a re-pick), leave along the

@@ -35,6 +35,12 @@ On a map whose static layer the robot is still sensing, the people it made are c
 again as the layer grows (`drop_doubtful`): the network reads a machine's edges as a
 person (their masks lie on its faces, the centroid within 3 cm of them), seen before the
 lidar had mapped the face (the explored hall's person_13, 36 detections).
+What the robot takes away is not at its place any more: `taken(takes)` (the mission's
+latest takes, on its patrol status) marks missing, since the take, the entry of the
+class nearest where the jaw closed (within `TAKEN_M`) and the entry the mission picked
+it as (within `TAKEN_NAMED_M`: the approach may have closed on its neighbour), unless the
+map saw it after the take (`TAKEN_GRACE_S`: put back and seen again, the take read
+again after a restart); a detection clears it, as any missing flag.
 Nor is a "person" within `SELF_MARGIN_M` of the robot's own footprint (`common.robot`'s,
 arm stowed) at capture: that is the robot itself, seen by its own cameras (nobody stands
 inside the robot; a person there would give navigation a lethal disc around the robot).
@@ -56,6 +62,7 @@ from common.config import SemanticMapSettings
 from common.geometry import FloatArray
 from common.grid import occupied_near
 from common.messages import as_numpy, to_wire
+from common.messages.mission import Taken
 from common.messages.perception import Detection, Detections
 from common.messages.semantic_map import EntityKind, MapEntity, OccupancyGrid
 from common.messages.sim import CameraFrame
@@ -145,6 +152,14 @@ def on_footprint(
     ]
 
 
+#: m: a take marks the nearest entry of its class this near where the jaw closed, and
+#: the entry it was picked as this near (`SemanticMap.taken`).
+TAKEN_M = 0.25
+TAKEN_NAMED_M = 0.5
+#: s: an entry seen later than this after a take is not marked by it.
+TAKEN_GRACE_S = 2.0
+
+
 class SemanticMap:
     """Artifacts, people and occupancy; see the module docstring."""
 
@@ -180,6 +195,8 @@ class SemanticMap:
         self.aliases: dict[str, str] = {}
         #: Where the people tracker's input is written for replay (`people_trace`), or None.
         self.people_trace: PeopleTraceSink | None = None
+        #: The takes applied (`taken`), by stamp and map id.
+        self._takes: set[tuple[int, str]] = set()
 
     # -- contents ------------------------------------------------------------------------
 
@@ -472,6 +489,30 @@ class SemanticMap:
             report.missing, dropped = self._look(t, cam, seen)
             report.dropped += dropped
         return report
+
+    def taken(self, takes: Sequence[Taken]) -> list[tuple[str, Taken]]:
+        """Mark what the robot took missing (the module docstring); (id marked, take)
+        for each entry marked, each take applied once."""
+        marked: list[tuple[str, Taken]] = []
+        for take in takes:
+            if (take.stamp_ns, take.map_id) in self._takes:
+                continue
+            self._takes.add((take.stamp_ns, take.map_id))
+            grace = take.stamp_ns + round(TAKEN_GRACE_S * 1e9)
+            at = np.array(take.xy, float)
+            near = [
+                (float(np.linalg.norm(tr.xy - at)), tr) for tr in self.artifacts.tracks
+                if tr.id is not None and tr.class_name == take.class_name
+                and tr.missing_since_ns is None and tr.last_seen_ns <= grace
+            ]  # fmt: skip
+            hit = [tr for d, tr in sorted(near, key=lambda n: n[0])[:1] if d <= TAKEN_M]
+            hit += [tr for d, tr in near if tr.id == take.map_id and d <= TAKEN_NAMED_M]
+            for tr in hit:
+                if tr.missing_since_ns is None and tr.id is not None:
+                    tr.missing_since_ns = take.stamp_ns
+                    self._dirty[tr.id] = tr
+                    marked.append((tr.id, take))
+        return marked
 
     def _look(
         self, t: int, cam: PinholeCamera, seen: set[int]

@@ -230,9 +230,15 @@ class MapNode:
     def _fuse_due(self, b: int, gate: UpstreamGate) -> None:
         """Fuse every frame `intake` releases at b: perception's due then (b − its
         latency), waited for when perception is a live lockstep producer; the patrol's
-        cameras too while the mission's patrol status due at b holds the arm up."""
+        cameras too while the mission's patrol status due at b holds the arm up. First,
+        what that status says the robot took is marked missing (`SemanticMap.taken`)."""
         cfg = self.cfg
-        arm_up = patrol_holds_look(self.patrol.at(b - gate.latency_ns("mission")))
+        patrol = self.patrol.at(b - gate.latency_ns("mission"))
+        for entity_id, take in self.smap.taken(() if patrol is None else patrol.taken):
+            log.info("t=%.2f s: %s missing: taken by the robot at %.2f s (as %s, the jaw at "
+                     "(%.2f, %.2f))", b / NS_PER_S, entity_id, take.stamp_ns / NS_PER_S,
+                     take.map_id, *take.xy)  # fmt: skip
+        arm_up = patrol_holds_look(patrol)
         cameras = fused_cameras(cfg.cameras, cfg.patrol_cameras, arm_up)
         for dets in self.intake.release(b, cameras, *perception_due(b, gate)):
             frame = self.intake.frame(dets.camera, dets.stamp_ns)

@@ -21,8 +21,10 @@ from typing import Literal, cast
 
 import msgspec
 import numpy as np
+from numpy.typing import NDArray
 
 from common.config import MissionSettings
+from common.geometry import make_T
 from common.messages import to_wire
 from common.messages.navigation import (
     ArtifactStandoff,
@@ -518,6 +520,8 @@ class StubPlan:
     pregrasp_m: float = 0.08
     close_in_m: float = 0.0
     beyond_m: float = 0.0
+    #: The grasp pose in the world: the jaw closes 3 m ahead, where bottle_1 stands.
+    H: NDArray[np.float64] = field(default_factory=lambda: make_T(np.eye(3), (3.0, 0.0, 0.8)))
 
     def reach(self) -> Reach:
         H = np.eye(4)

@@ -793,6 +793,15 @@ def test_an_object_that_falls_on_the_way_to_be_put_back_is_said_and_the_fetch_go
             assert outcome.detail.startswith(fell)
 
 
+def test_a_pick_notes_what_it_took_and_where_once_for_the_map() -> None:
+    robot = small_world()
+    tree = mission(robot)
+    assert run(tree, robot).state == "succeeded"
+    assert [(t.map_id, t.class_name, t.xy) for t in tree.ctx.taken] == [
+        ("bottle_1", "bottle", (3.0, 0.0))  # the check after the lift notes nothing more
+    ]
+
+
 def test_a_put_back_request_puts_the_held_object_back_and_fetches_nothing() -> None:
     robot = small_world()
     tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))

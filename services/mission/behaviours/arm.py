@@ -11,7 +11,11 @@
   re-picked (hall seed 15: the gripper hit the bench under a tall box 11.7 cm short, and
   the second try tipped the robot over).
 - `CheckHeld`: the grasp detector on `wbc/status` says an object is held; where the base
-  stands then is kept (`Context.picked_from`: where a put-back walks to).
+  stands then is kept (`Context.picked_from`: where a put-back walks to), and, by the
+  check right after the grasp (not the lift's), where the jaw closed on what
+  (`Context.taken`: the map marks the entry there missing; hall seed 0's shift picked
+  bottle_1 for a phantom bottle_8 beside it, and the next request walked to bottle_1's
+  stale entry and looked at nothing).
 - `NoCloseIn`: SUCCESS when the grasp plan has no close-in move (a side grasp), so the
   tree skips it; FAILURE when it has one (a top grasp: `GraspPlan.closed_in`).
 """
@@ -20,11 +24,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 from py_trees.common import Status
 
-from common.messages.mission import MissionReason
+from common.messages.mission import TAKEN_KEPT, MissionReason, Taken
 from common.messages.wbc import ArmGoal
-from services.mission.behaviours.base import GRASP_PLAN, Context, MissionBehaviour
+from services.mission.behaviours.base import GRASP_PLAN, TARGET, Context, MissionBehaviour, Target
 from services.mission.ports import PortError, Refused
 
 GoalOf = Callable[[MissionBehaviour], ArmGoal]
@@ -107,17 +112,33 @@ class GraspReach(ArmAction):
 
 
 class CheckHeld(MissionBehaviour):
-    def __init__(self, ctx: Context, stage: str, name: str = "check_held") -> None:
+    def __init__(
+        self, ctx: Context, stage: str, name: str = "check_held", take: bool = True
+    ) -> None:
         super().__init__(name, ctx, stage)
+        #: Whether this check notes the take (the first after the grasp, not the lift's).
+        self.take = take
 
     def update(self) -> Status:
         status = self.port.wbc_status()
         if status is not None and status.held:
             xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
             self.ctx.picked_from = None if xy is None or yaw is None else (*xy, yaw)
+            if self.take:
+                self._note_taken()
             return Status.SUCCESS
         effort = "no wbc/status" if status is None else f"effort {status.gripper_effort:.2f}"
         return self.fail("grasp_failed", f"the grasp detector does not say held ({effort})")
+
+    def _note_taken(self) -> None:
+        """Keep the take (`Context.taken`): where the grasp plan's jaw closed, on what."""
+        plan, target = self.get(GRASP_PLAN), self.get(TARGET)
+        if plan is None or plan.frame != "world" or not isinstance(target, Target):
+            return
+        x, y = (float(v) for v in np.asarray(plan.closed_in().H, dtype=float)[:2, 3])
+        taken = Taken(stamp_ns=self.port.now_ns, map_id=target.map_id,
+                      class_name=target.class_name, xy=(x, y))  # fmt: skip
+        self.ctx.taken = [*self.ctx.taken, taken][-TAKEN_KEPT:]
 
 
 class NoCloseIn(MissionBehaviour):

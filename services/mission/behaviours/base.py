@@ -22,7 +22,7 @@ from py_trees.common import Access, Status
 
 from common.config import MissionSettings
 from common.messages.base import NS_PER_S
-from common.messages.mission import MissionReason
+from common.messages.mission import MissionReason, Taken
 from services.mission.algorithms import Algorithms
 from services.mission.ports import RobotPort
 
@@ -131,6 +131,9 @@ class Context:
     holding: Held | None = None
     #: Where the base stood (map x, y, yaw) when the grasp detector last said held.
     picked_from: tuple[float, float, float] | None = None
+    #: The robot's latest takes, oldest first (`Taken`, at most `TAKEN_KEPT`): the map
+    #: reads them on the patrol status and marks what was taken missing at its place.
+    taken: list[Taken] = field(default_factory=list)
     #: What this request put back (a sentence; "" when nothing): a `put_back`'s outcome.
     put_back: str = ""
 
