@@ -525,7 +525,7 @@ class StandsThere(MissionBehaviour):
         x, y = person.position_in_world[:2]
         xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
         away = math.inf if xy is None else math.hypot(x - xy[0], y - xy[1])
-        if age <= PERSON_FRESH_S and speed < WALKING_MPS and in_front(xy, yaw, (x, y)):
+        if _standing(self.port.now_ns)(person) and in_front(xy, yaw, (x, y)):
             self.feedback_message = f"{pid} stands there"
             return Status.SUCCESS
         walking = f", walking at {speed:.1f} m/s" if speed >= WALKING_MPS else ""
