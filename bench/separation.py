@@ -105,6 +105,7 @@ class SeparationWatch:
 
 
 def truth_separation(overrides: Overrides | None = None) -> SeparationParams:
-    """The monitor's own rule, for the truth: its terms, no margin on a known speed."""
+    """The monitor's own rule, for the truth: its terms, no margin on a known speed and
+    no lead (the standard's S_p of the moment)."""
     sep = separation_params(load_config(overrides or {}).navigation.people)
-    return SeparationParams(**{**sep.__dict__, "speed_margin_mps": 0.0})
+    return SeparationParams(**{**sep.__dict__, "speed_margin_mps": 0.0, "lead_s": 0.0})

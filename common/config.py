@@ -486,7 +486,11 @@ class PeopleSettings(_Section):
     deceleration the trot brakes at, the intrusion distance C (a body's reach beyond the
     point perception measures), the uncertainties of the person's position Z_d and of the
     robot's Z_r, the margin on a person's estimated speed, and the speed assumed for a
-    person whose velocity is not known yet (ISO 13855's walking speed). A goal blocked
+    person whose velocity is not known yet (ISO 13855's walking speed). The monitor
+    keeps the separation `monitor_lead_s` ahead of now (S_p with T_r + lead: the
+    protective distance of the moment its command takes effect, so that the standard's
+    S_p still holds then: a judge from truth checks every instant, the monitor acts once
+    a tick; not in the judge's own S_p). A goal blocked
     with a person within `slow_radius_m` of the footprint or of the goal waits `wait_s`
     longer before its recoveries (people move on; backing into them does not help).
     """
@@ -500,8 +504,9 @@ class PeopleSettings(_Section):
     intrusion_m: NonNegative = 0.25
     detection_uncertainty_m: NonNegative = 0.1
     robot_uncertainty_m: NonNegative = 0.05
-    person_speed_margin_mps: NonNegative = 0.15
+    person_speed_margin_mps: NonNegative = 0.3
     unknown_person_speed_mps: NonNegative = 1.6
+    monitor_lead_s: NonNegative = 0.4
 
 
 class NavigationSettings(_Section):

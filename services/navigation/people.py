@@ -79,7 +79,7 @@ NO_LIMIT = SpeedLimit(math.inf, "")
 
 
 def separation_params(p: PeopleSettings) -> SeparationParams:
-    """The protective separation's terms from the settings."""
+    """The monitor's protective separation terms from the settings (its lead too)."""
     return SeparationParams(
         reaction_s=p.reaction_s,
         decel_mps2=p.brake_decel_mps2,
@@ -88,6 +88,7 @@ def separation_params(p: PeopleSettings) -> SeparationParams:
         robot_uncertainty_m=p.robot_uncertainty_m,
         speed_margin_mps=p.person_speed_margin_mps,
         unknown_speed_mps=p.unknown_person_speed_mps,
+        lead_s=p.monitor_lead_s,
     )
 
 

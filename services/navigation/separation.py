@@ -14,6 +14,13 @@ command in effect), a_s the braking deceleration, C the intrusion distance (how 
 body reaches in beyond the point measured), Z_d the uncertainty of the person's position
 and Z_r of the robot's. `SeparationParams` holds them (settings: `navigation.people`).
 
+The monitor keeps it `lead_s` ahead (`SeparationParams.lead_s`, T_r + lead in S_h and
+S_r): at a tick it allows only a speed from which S_p still holds when its command has
+taken effect and the gap has shrunk meanwhile (over 13 recorded shifts, 81 % of the
+violations judged from truth fell within 0.3 s of a stop the monitor had issued at the
+boundary, the robot still moving; offline, a lead of 0.4 s and a speed margin of 0.3
+m/s left 3 of 93). The judge's S_p has no lead (`bench.separation.truth_separation`).
+
 `protective_distance(v_r, v_h)` is S_p; `allowed_speed(d, v_h)` the largest directed
 robot speed with S_p ≤ d (0 where even a robot at rest is too close: the protective stop),
 the positive root of S_p(v_r) = d. A person's directed speed comes from their estimated
@@ -39,6 +46,12 @@ class SeparationParams:
     robot_uncertainty_m: float = 0.05
     speed_margin_mps: float = 0.15
     unknown_speed_mps: float = 1.6
+    lead_s: float = 0.0
+
+    @property
+    def ahead_s(self) -> float:
+        """T_r and the monitor's lead: the time over which the robot's travel counts."""
+        return self.reaction_s + self.lead_s
 
     @property
     def fixed_m(self) -> float:
@@ -49,8 +62,8 @@ class SeparationParams:
 def protective_distance(v_r: float, v_h: float, p: SeparationParams) -> float:
     """S_p for a robot approaching at v_r and a person at v_h (directed speeds, m/s)."""
     v_r, v_h = max(v_r, 0.0), max(v_h, 0.0)
-    s_h = v_h * (p.reaction_s + v_r / p.decel_mps2)
-    s_r = v_r * p.reaction_s
+    s_h = v_h * (p.ahead_s + v_r / p.decel_mps2)
+    s_r = v_r * p.ahead_s
     s_s = v_r * v_r / (2 * p.decel_mps2)
     return s_h + s_r + s_s + p.fixed_m
 
@@ -60,8 +73,8 @@ def allowed_speed(d: float, v_h: float, p: SeparationParams) -> float:
     v_h = max(v_h, 0.0)
     # v²/(2a) + v (T_r + v_h/a) + (v_h T_r + C + Z − d) = 0, its positive root.
     a = 1.0 / (2 * p.decel_mps2)
-    b = p.reaction_s + v_h / p.decel_mps2
-    c = v_h * p.reaction_s + p.fixed_m - d
+    b = p.ahead_s + v_h / p.decel_mps2
+    c = v_h * p.ahead_s + p.fixed_m - d
     if c >= 0.0:
         return 0.0
     return (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)

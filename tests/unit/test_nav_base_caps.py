@@ -29,7 +29,7 @@ def test_a_person_standing_just_ahead_stops_the_base_ahead_and_leaves_it_free_to
     assert behind.speed > 0.0 and behind.rule != "stop"  # away: only the slow zone
     # Inside S_p at rest, sideways is not away: the trot drifts as it steps (AWAY_COS).
     assert left.rule == "stop" and right.rule == "stop"
-    further = Person("person_3", 1.0, 2.0 + FP.front + 0.6, velocity=(0.0, 0.0))
+    further = Person("person_3", 1.0, 2.0 + FP.front + 0.8, velocity=(0.0, 0.0))
     _, _, left, right = _caps(pose, [further])  # beyond S_p at rest: along them is free
     assert left.rule != "stop" and right.rule != "stop"
 

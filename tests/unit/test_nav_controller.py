@@ -210,11 +210,11 @@ def test_a_person_abeam_caps_only_the_speed_towards_them() -> None:
     p, top = PeopleSettings(), 0.6
     sep = separation_params(p)
     pose = Pose(0.0, 0.0, 0.0)
-    person = Person("person_1", 0.0, FP.half_width + 0.6, None, (0.0, 0.0))
+    person = Person("person_1", 0.0, FP.half_width + 0.9, None, (0.0, 0.0))
     c = math.cos(math.radians(60.0))
     direction = (math.sin(math.radians(60.0)), c)  # 60° off the line to them
     limit = people_limit(pose, direction, [person], FP, p, top)
-    allowed = allowed_speed(0.6, sep.speed_margin_mps, sep) * (1 - TRACKING_MARGIN) / c
+    allowed = allowed_speed(0.9, sep.speed_margin_mps, sep) * (1 - TRACKING_MARGIN) / c
     assert limit.speed == pytest.approx(min(allowed, 0.3 * (1 - TRACKING_MARGIN)))
     assert people_limit(pose, (1.0, 0.0), [person], FP, p, top).rule == "slow"
 
@@ -302,12 +302,11 @@ def test_a_person_walking_across_the_path_never_finds_the_robot_inside_its_separ
 
 
 def test_a_person_towards_any_way_the_base_may_move_caps_it() -> None:
-    """The path runs along +x, the person stands half a metre off the footprint's front
-    left corner, nearer the heading (π/4: the trot turning onto the path): the heading
-    counts."""
+    """The path runs along +x, the person stands off the footprint's front left corner,
+    nearer the heading (π/4: the trot turning onto the path): the heading counts."""
     p = NavigationSettings().people
     pose = Pose(0.0, 0.0, math.pi / 4)
-    person = Person("person_1", 0.8, 0.7, velocity=(0.0, 0.0))
+    person = Person("person_1", 1.0, 0.9, velocity=(0.0, 0.0))
     along = people_limit(pose, (1.0, 0.0), [person], FP, p, 1.0)
     turning = people_limit(pose, (1.0, 0.0), [person], FP, p, 1.0,
                            also=((math.cos(pose.yaw), math.sin(pose.yaw)),))  # fmt: skip
@@ -315,12 +314,12 @@ def test_a_person_towards_any_way_the_base_may_move_caps_it() -> None:
 
 
 def test_the_base_stepping_sideways_towards_a_person_beside_the_path_is_stopped() -> None:
-    """The path runs along +x past a person 0.45 m off the footprint's right side, walking
+    """The path runs along +x past a person 0.63 m off the footprint's right side, walking
     alongside at 0.3 m/s: nothing the path or the heading does goes towards them, but the
     trot, turning, steps sideways at 0.2 m/s (the changing hall's shift): the measured
     velocity counts as a way the base moves."""
     floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
-    person = Person("person_1", 0.0, -(FP.half_width + 0.45), None, (0.3, 0.0))
+    person = Person("person_1", 0.0, -(FP.half_width + 0.63), None, (0.3, 0.0))
     cm = dataclasses.replace(floor, people=(person,))
     nav = Navigator(FP, NavigationSettings(), DT)
     nav.start(GoalSpec("g", Pose(5.0, 0.0, 0.0), 0.1, 0.1), 0)
@@ -336,11 +335,11 @@ def test_the_base_stepping_sideways_towards_a_person_beside_the_path_is_stopped(
 
 
 def test_a_person_standing_in_the_way_is_waited_for_before_any_recovery() -> None:
-    """A person stands half a metre ahead (the base, held here, makes no progress): the
+    """A person stands 0.7 m ahead (the base, held here, makes no progress): the
     goal, blocked after `blocked_timeout_s` without progress, waits `people.wait_s` past
     its blocked timeout, saying whom for, before its first recovery."""
     n = NavigationSettings()
-    person = Person("person_1", FP.front + 0.5, 0.0, velocity=(0.0, 0.0))
+    person = Person("person_1", FP.front + 0.7, 0.0, velocity=(0.0, 0.0))
     floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
     cm = dataclasses.replace(floor, people=(person,))
     nav = Navigator(FP, n, DT)

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
+from bench.separation import truth_separation
 from services.navigation.separation import (
     SeparationParams,
     allowed_speed,
@@ -28,18 +31,32 @@ def test_the_protective_distance_is_the_standards_sum_of_its_terms() -> None:
     assert protective_distance(-1.0, -1.0, P) == protective_distance(0.0, 0.0, P)
 
 
+def test_the_monitors_lead_counts_with_the_reaction_time_and_the_judge_has_none() -> None:
+    """With a lead of 0.4 s the travel terms run over T_r + 0.4 s: the separation the
+    standard asks for 0.4 s from now. The truth judge takes the standard's own."""
+    led = dataclasses.replace(P, lead_s=0.4)
+    v_r, v_h = 0.5, 1.0
+    by_hand = v_h * (0.7 + 1.0) + v_r * 0.7 + v_r**2 / 1.0 + 0.4
+    assert protective_distance(v_r, v_h, led) == pytest.approx(by_hand)
+    judge = truth_separation()
+    assert (judge.lead_s, judge.speed_margin_mps) == (0.0, 0.0)
+    assert judge.reaction_s == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize("lead_s", [0.0, 0.4])
 @pytest.mark.parametrize("v_h", [0.0, 0.15, 0.8, 1.6])
 @pytest.mark.parametrize("d", [0.3, 0.45, 0.8, 1.5, 3.0, 6.0])
 def test_the_allowed_speed_is_the_largest_with_the_protective_distance_within_reach(
-    d: float, v_h: float
+    d: float, v_h: float, lead_s: float
 ) -> None:
-    v = allowed_speed(d, v_h, P)
-    if protective_distance(0.0, v_h, P) >= d:
+    p = dataclasses.replace(P, lead_s=lead_s)
+    v = allowed_speed(d, v_h, p)
+    if protective_distance(0.0, v_h, p) >= d:
         assert v == 0.0  # too close even at rest: the protective stop
         return
     assert v > 0.0
-    assert protective_distance(v, v_h, P) == pytest.approx(d)
-    assert protective_distance(v + 0.01, v_h, P) > d
+    assert protective_distance(v, v_h, p) == pytest.approx(d)
+    assert protective_distance(v + 0.01, v_h, p) > d
 
 
 def test_a_person_walking_faster_towards_the_robot_leaves_it_less_speed() -> None:
