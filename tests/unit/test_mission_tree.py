@@ -626,6 +626,17 @@ def test_a_person_who_comes_while_the_robot_asks_is_the_one_asked_for() -> None:
     assert any(d.startswith("person_9 came while the robot asked for person_1") for d in decisions)
 
 
+def test_a_person_who_comes_just_before_the_ask_ends_is_waited_for() -> None:
+    """person_9 comes 17 s into the 20-s ask and stands there: the ask goes on until they
+    have stood long enough to answer (`ANSWER_STAND_S`), and the handover goes to them."""
+    tree, robot, outcome, _ = _ask_scene({"person_9": (1.3, 0.2, 17.0, 1e9)})
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    handovers = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert handovers[-1] == "person_9", handovers
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert not any("person_1 not seen: " in d for d in decisions), decisions
+
+
 def test_nobody_who_stood_near_already_or_only_paused_answers_the_ask() -> None:
     """person_8 stood 1.5 m off before the robot asked, person_7 stood in its way 3 s
     (a walker pausing) and walked on: neither is taken for the person asked for."""

@@ -40,9 +40,12 @@
   ("asking for <person>: please come to the robot"). A person who comes while it asks
   and stands within `ANSWER_M` of the base for `ANSWER_STAND_S` (not one who stood that
   near already when it began to ask, nor a walker pausing in its way: they walk on
-  within 4 s) answered: the map's id for them may be another one (the map lost who is
-  who while they walked: hall seed 1's shift saw the requested person as three new ids
-  while the robot looked for the old one, and the request timed out), and the fetch goes
+  within 4 s) answered (one who came before the ask's end is waited for past it, while
+  they stand there: hall seed 4's shift gave up asking 4 s after the worker asked for
+  had come and stood 1.7 m off, and looked for them 80 s more): the map's id for them
+  may be another one (the map lost who is who while they walked: hall seed 1's shift
+  saw the requested person as three new ids while the robot looked for the old one, and
+  the request timed out), and the fetch goes
   on to them under that id (`PERSON`), said. Seen: SUCCESS,
   and the walk to them goes to where they were seen; never seen: SUCCESS all the same,
   and the next walk goes to the next of their usual places (`LOOK_AT`,
@@ -599,6 +602,9 @@ class LookForPerson(MissionBehaviour):
         if waited < self.settings.person_ask_s:
             self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
             return Status.RUNNING
+        asked_until = self.asked_ns + round(self.settings.person_ask_s * NS_PER_S)
+        if any(t < asked_until for t in self.standing.values()):
+            return Status.RUNNING  # somebody who came while it asked stands near: waited for
         return self._not_seen(pid, person)
 
     def _near_people(self) -> list[tuple[MapEntity, float]]:
