@@ -80,6 +80,16 @@ def other_clothes(look: Look | None, person: MapEntity) -> bool:
     return any(other for _, _, other in compared(look, person))
 
 
+def nearest_alike(
+    look: Look, people: list[MapEntity]
+) -> tuple[MapEntity, list[tuple[Band, float, bool]]] | None:
+    """Of `people`, the one the noted colours compare with (a band both have seen) and
+    do not tell apart from the one asked for, the nearest in colours, with the bands;
+    None if nobody is."""
+    alike = [(q, b) for q in people if (b := compared(look, q)) and not any(o for _, _, o in b)]
+    return min(alike, key=lambda item: max(d for _, d, _ in item[1]), default=None)
+
+
 def said(bands: list[tuple[Band, float, bool]]) -> str:
     return ", ".join(f"{band} {d:.2f}" for band, d, _ in bands) or "no band to compare"
 
@@ -157,11 +167,7 @@ class RightPerson(MissionBehaviour):
             people = self.port.people()
         except PortError:
             return None
-        scored = [(q, compared(look, q)) for q in people if q.id not in others]
-        alike = [(q, b) for q, b in scored if b and not any(other for _, _, other in b)]
-        if not alike:
-            return None
-        return min(alike, key=lambda item: max(d for _, d, _ in item[1]))
+        return nearest_alike(look, [q for q in people if q.id not in others])
 
 
 #: s: the map's entry of the person asked for, unseen this long, may have come apart.
@@ -186,13 +192,12 @@ def wearer_near(
     or one of `others`)."""
     if look is None or (asked is not None and now_ns - asked.last_seen_ns < STALE_S * 1e9):
         return None
-    alike = [
-        (q, bands) for q in people
+    near = [
+        q for q in people
         if (asked is None or q.id != asked.id) and q.id not in others and standing(q)
         and math.dist(q.position_in_world[:2], robot_xy) <= WEARER_NEAR_M
-        and (bands := compared(look, q)) and not any(other for _, _, other in bands)
     ]  # fmt: skip
-    return min(alike, key=lambda item: max(d for _, d, _ in item[1]), default=None)
+    return nearest_alike(look, near)
 
 
 def another_to_try(bb: Any) -> Callable[[Failure], bool]:
