@@ -619,15 +619,13 @@ class LookForPerson(MissionBehaviour):
             return []
         if xy is None:
             return []
-        now = self.port.now_ns
+        standing = _standing(self.port.now_ns)
         look, others = self.get(PERSON_LOOK), self.get(OTHERS) or []
         out = []
         for q in people:
             d = math.dist(xy, q.position_in_world[:2])
-            fresh = (now - q.last_seen_ns) / NS_PER_S <= PERSON_FRESH_S
-            standing = math.hypot(*q.velocity_in_world) < WALKING_MPS
             asked = q.id not in others and not other_clothes(look, q)
-            if fresh and d <= ANSWER_M and standing and asked:
+            if d <= ANSWER_M and standing(q) and asked:
                 out.append((q, d))
         return out
 
