@@ -10,6 +10,10 @@ truth, what the failure policy promises (README, "Nobody waits for the dead"):
   mission or the sim itself went (`bench.eval.run.watch_mission`);
 - **reported_s**: until the mission said so on `mission/status` by the request's id (a
   restarted mission reports the request it held: `services/mission/journal.py`);
+- **noticed_s**: until the mission first said it holds for the hurt service ("holding:
+  wbc not heard", `services/mission/desk.py`: it waits `HOLD_S` for the same process to
+  come back before it fails the request) or reported the request (the policy's 0.5 s to
+  notice a loss: the battery's `detected_*`);
 - **went_on_s**: until the request was heard running again a sim second past the fault
   (a killed router: back, every service reconnected, and the request goes on);
 - **hung**: the client did not know the request was over within `HUNG_S`, or the
@@ -59,6 +63,7 @@ from bench.trial_updown import map_state
 from common.bus import AliveWatch, Fifo
 from common.config import REPO_ROOT, Overrides, merged
 from common.keys import WORLD_EVENTS, RobotKeys
+from common.messages import PayloadError, decode
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import Clock, ObjectDropped, StateTruth, WorldEvents
@@ -112,6 +117,27 @@ class Fault:
         self.went_on_wall = 0.0
         self.clock_ns, self.clock_wall, self.clock_stall_s = 0, 0.0, 0.0
         self.consumer: subprocess.Popen[bytes] | None = None
+        #: Every mission status as it arrived: (perf_counter, payload), decoded later;
+        #: the subscriber that hears them, kept while the case runs.
+        self.heard: list[tuple[float, bytes]] = []
+        self.listening: Any = None
+
+    def hear(self, payload: bytes) -> None:
+        """A mission status, on Zenoh's thread: kept with when it came."""
+        self.heard.append((time.perf_counter(), payload))
+
+    def noticed_s(self, request_id: str) -> float | None:
+        """Wall seconds from the fault to the first status of `request_id` after it
+        that holds for the hurt service or ends the request (module docstring)."""
+        for wall, payload in list(self.heard):
+            if wall < self.wall:
+                continue
+            with contextlib.suppress(PayloadError):
+                s = decode(payload, MissionStatus)
+                said = s.state in TERMINAL or s.detail.startswith(f"holding: {self.service}")
+                if s.request_id == request_id and said:
+                    return wall - self.wall
+        return None
 
     def progress(self, status: MissionStatus | None, clock: Clock, _changed: bool) -> None:
         if self.wall and status is not None and status.state in TERMINAL and not self.final:
@@ -184,6 +210,7 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         stack.wait_ready(list(SERVICES), timeout_s=300.0)
         bus, keys = stack.bus, stack.keys
         statuses = bus.fifo(keys.mission_status, MissionStatus, maxlen=1 << 16)
+        fault.listening = bus.raw(keys.mission_status, MissionStatus, fault.hear)
         truth = bus.fifo(keys.state_truth, StateTruth, maxlen=1 << 18)
         events = bus.fifo(WORLD_EVENTS, WorldEvents, maxlen=1 << 16)
         _, before, _ = map_state(db)
@@ -201,6 +228,8 @@ def run_case(service: str, phase: str, seed: int, how: str, overrides: Overrides
         out |= {"injected": True, "at": fault.at, "at_sim_s": round(fault.sim_ns / NS_PER_S, 2),
                 "ended_s": round(ended - fault.wall, 3)}  # fmt: skip
         out |= _watch_after(stack, keys, fault, request, statuses, truth, events, before)
+        noticed = fault.noticed_s(request.request_id)
+        out["noticed_s"] = None if noticed is None else round(noticed, 3)
         went_on = round(fault.went_on_wall - fault.wall, 3) if fault.went_on_wall else None
         out["went_on_s"] = went_on
         out |= verdict(fault.service, fault.sig, out["ended_s"], out["reported_s"], went_on)
@@ -262,7 +291,7 @@ def _watch_after(
         "lowest_z_m": None if not np.isfinite(low) else round(float(low), 3),
         "fell": bool(np.isfinite(low) and low < FALL_Z_M),
         "dropped": bool(drops),
-        "drop_reported": bool(drops) and last is not None and "holding" in last.detail,
+        "drop_reported": bool(drops) and last is not None and "was holding" in last.detail,
         "map_before": map_before,
     }
 
@@ -312,7 +341,7 @@ def summary(cases: Sequence[Figures]) -> Figures:
     """The battery's figures over its injected cases."""
     done = [c for c in cases if c.get("injected")]
     detect = [c["ended_s"] for c in done if c.get("ended_s") is not None]
-    noticed = [c["reported_s"] for c in done if _noticed_by_dependents(c)]
+    noticed = [c["noticed_s"] for c in done if _noticed_by_dependents(c)]
     reported = [c["reported_s"] for c in done if c.get("reported_s") is not None]
     went_on = [c["went_on_s"] for c in done if c.get("went_on_s") is not None]
     survived = [c for c in done if c["service"] != "wbc" or c["signal"] != "kill"]
@@ -340,7 +369,7 @@ def _noticed_by_dependents(case: Figures) -> bool:
     whose world goes on; not a client of our own), gone and said gone by the mission."""
     return (
         case.get("service") in STACK - {"mission", "router"}
-        and case.get("reported_s") is not None
+        and case.get("noticed_s") is not None
         and "dependency_lost" in str(case.get("final"))
     )
 

@@ -16,8 +16,12 @@ it. A hall exploration failed `dependency_lost: semantic_map restarted` at t = 5
 such a lapse, with the map's process running throughout. So a dependency whose token
 went is first doubted: back as the same run, it lapsed (the job goes on, the lapse is
 counted); back as another run, it restarted; not back within `LOST_GRACE_S` of wall
-time from when its token went, it is gone. The grace keeps the policy's 0.5 s to notice
-a loss (a killed WBC: the sim's watchdog holds the robot meanwhile). Every dependency
+time from when its token went, it is noticed (`noticed`: the policy's 0.5 s to notice a
+loss); not back within `hold_s` (the mission's `HOLD_S`), it is gone. A watcher that
+acts at once on a loss holds `hold_s` = the grace; the mission holds longer: a shift's
+request failed `dependency_lost: sim is gone` on a lapse of the sim's link that the
+0.3 s grace ended 0.16 s before the sim came back as the same process (a killed sim or
+WBC: the world pauses or the sim's watchdog holds the robot meanwhile). Every dependency
 gone at once is the link to them all: the router (restarted by supervisord in about
 1.2 s) or the watcher's own session (cut off, or starved on a loaded host: a hall
 exploration's mission, with a second stack on its two cores, lost every token for more
@@ -38,7 +42,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-#: Wall seconds a dependency's lost token is doubted before it counts as gone, from when
+#: Wall seconds a dependency's lost token is doubted before it is noticed, from when
 #: its token went. A lapse lasts what was left of the stall that caused it after the
 #: router's cut, its token back 4-7 ms after the client reads again (`dume bench lapse`:
 #: a subscriber stalled 2 s under 100 MB/s was gone 0.15-0.59 s, 3 s 1.57-1.60 s; 1.5 s
@@ -46,6 +50,11 @@ from collections.abc import Callable, Iterable
 #: from the watcher's next look: a kill was said 0.42-0.51 s after (the policy's 0.5 s to
 #: notice).
 LOST_GRACE_S = 0.3
+#: Wall seconds a job that can wait (the mission's request: the world pauses or the
+#: robot holds while a dependency is away) holds a noticed loss for the same run to come
+#: back before it counts as gone: a lapse of a 2 s stall was gone 0.15-0.59 s, of a 3 s
+#: one 1.6 s (`dume bench lapse`).
+HOLD_S = 2.0
 #: Wall seconds a watcher looks at a lost token at least, however long ago it went: one
 #: starved of the CPU for seconds (a shift's mission, a second stack on its two cores)
 #: first sees the loss with the token's return still queued behind it.
@@ -114,7 +123,8 @@ class Dependencies:
 
     `key_of(name)` is the service's liveliness key. `lost()` is None while every one of
     them alive at `arm` is still the same process; else "<name> restarted" (another
-    run of it is alive) or "<name> is gone" (none, `grace_s` after its token went); or,
+    run of it is alive) or "<name> is gone" (none, `hold_s` after its token went:
+    `noticed` from `grace_s`); or,
     every one of `ROUTER_LOST_AT` or more gone together and not back in
     `LAPSE_GRACE_S`, "the router is gone: every service went at once (…)": the link to
     them all, not each process (a killed router said "sim is gone: the world stopped").
@@ -132,11 +142,14 @@ class Dependencies:
         grace_s: float = LOST_GRACE_S,
         clock: Callable[[], float] = time.monotonic,
         link_grace_s: float = LAPSE_GRACE_S,
+        hold_s: float | None = None,
     ) -> None:
         self._lifelines = lifelines
         self._keys = {name: key_of(name) for name in names}
         self.names = list(self._keys)
         self.grace_s, self.link_grace_s, self._clock = grace_s, link_grace_s, clock
+        #: How long a noticed loss waits for the same run before it is gone (>= grace).
+        self.hold_s = grace_s if hold_s is None else max(hold_s, grace_s)
         #: Per dependency alive at `arm`: its token's losses then, and its run.
         self._armed: dict[str, tuple[int, str | None]] = {}
         #: Since when (wall) a dependency's token has been gone, unresolved, and when this
@@ -147,6 +160,8 @@ class Dependencies:
         #: The dependencies whose token went and came back as the same run, in order,
         #: not yet taken (`take_lapses`).
         self._lapses: list[str] = []
+        #: The doubted ones past the grace, not yet gone (`noticed`), as of `lost`.
+        self._noticed: list[str] = []
 
     def missing(self) -> list[str]:
         """The dependencies not alive now (a job should not start without them)."""
@@ -161,11 +176,11 @@ class Dependencies:
             for n, k in self._keys.items()
             if k in alive
         }
-        self._doubt, self._link_doubt = {}, set()
+        self._doubt, self._link_doubt, self._noticed = {}, set(), []
 
     def disarm(self) -> None:
         self._armed = {}
-        self._doubt, self._link_doubt = {}, set()
+        self._doubt, self._link_doubt, self._noticed = {}, set(), []
 
     def take_lapses(self) -> list[str]:
         """The lapses seen since the last call (a watcher logs them)."""
@@ -176,10 +191,16 @@ class Dependencies:
         """The dependencies whose token is gone, not yet known lapsed or lost."""
         return list(self._doubt)
 
+    def noticed(self) -> list[str]:
+        """The doubted ones gone past the grace and held for (`hold_s`), as of the
+        last `lost`: a job says it waits for them."""
+        return list(self._noticed)
+
     def lost(self) -> str | None:
         alive, losses = self._lifelines.snapshot()
         now = self._clock()
         gone: list[str] = []
+        self._noticed = []
         restarted: str | None = None
         link = len(self._armed) >= ROUTER_LOST_AT and all(
             losses.get(self._keys[n], 0) > before and self._keys[n] not in alive
@@ -188,7 +209,9 @@ class Dependencies:
         if link:  # they went together: each one is doubted as long, back or not
             self._link_doubt.update(self._armed)
         for name, (before, run) in list(self._armed.items()):
-            grace = self.link_grace_s if name in self._link_doubt else self.grace_s
+            link_doubt = name in self._link_doubt
+            grace = self.link_grace_s if link_doubt else self.grace_s
+            hold = self.link_grace_s if link_doubt else self.hold_s
             key = self._keys[name]
             if losses.get(key, 0) <= before:
                 if run is None and (run := _one(self._lifelines.runs(key))) is not None:
@@ -209,8 +232,11 @@ class Dependencies:
                 since, looked = self._doubt.setdefault(
                     name, (now if went is None else min(went, now), now)
                 )
-                if now - since >= grace and now - looked >= min(grace, LOOK_AGAIN_S):
+                looked_enough = now - looked >= min(grace, LOOK_AGAIN_S)
+                if now - since >= hold and looked_enough:
                     gone.append(name)
+                elif now - since >= grace and looked_enough:
+                    self._noticed.append(name)
         if len(gone) >= ROUTER_LOST_AT and len(gone) == len(self._armed):
             return f"the router is gone: every service went at once ({', '.join(gone)})"
         for name in self._armed:

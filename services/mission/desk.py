@@ -19,7 +19,10 @@
    ignored;
 4. a dependency that went away or restarted since the running request started
    (`Dependencies.lost`) fails it `dependency_lost`; else the tree ticks once (a
-   behaviour that raises is logged, the robot halted, the mission failed `internal`);
+   behaviour that raises is logged, the robot halted, the mission failed `internal`).
+   A dependency whose token went is first held for (`Dependencies.noticed`: from 0.3 s
+   after it went until `HOLD_S`): the status says so at once ("holding: sim not heard
+   since …"), and the request goes on if it comes back as the same process;
 5. the outcome, or the running stage and progress, becomes the status
    (`StatusBoard.update`): `step` returns whether it changed.
 
@@ -120,6 +123,8 @@ class Desk:
         self.journal = journal or Journal(None)
         #: Requests sent ahead of their `at_ns`, held until the tick reaches it.
         self.held: list[MissionRequest] = []
+        #: The dependencies the running request holds for (noticed gone, not yet lost).
+        self.waiting: list[str] = []
 
     # -- the status -----------------------------------------------------------------------
 
@@ -137,19 +142,51 @@ class Desk:
         if self.jobs is not None and self.jobs.stalled(b):
             return self.job_status(b)
         lost = self.deps.lost() if request is not None else None
-        if request is None or lost is None:
+        if request is None:
             return False
+        if lost is None:
+            return self._wait_for(b, self.tree.where()[1])
         said = f"{lost}: the world stopped at t={b / NS_PER_S:.2f} s" if lost.startswith(
             "sim") else lost  # fmt: skip
         self.errors.error("t=%.2f s: %s: the mission fails", b / NS_PER_S, said)
         outcome = self.tree.fail("dependency_lost", said)
         self.deps.disarm()
+        self.waiting = []
         if outcome is None:
             return False
         return self.board.update(
             b, request.request_id, outcome.state, self.board.status.behaviour,
             self.board.status.progress, outcome.reason, outcome.detail,
         )  # fmt: skip
+
+    def _wait_for(self, b: int, detail: str) -> bool:
+        """The running request holds for a dependency noticed gone (not yet lost): its
+        status says whom it waits for; whether that is news (said at once: the policy's
+        0.5 s to notice a loss)."""
+        request, waiting = self.tree.request, self.deps.noticed()
+        news = bool(waiting) and waiting != self.waiting
+        if news:
+            self.errors.warning(
+                "t=%.2f s: %s not heard: holding for it up to %.1f s",
+                b / NS_PER_S, " and ".join(waiting), self.deps.hold_s,
+            )  # fmt: skip
+        elif self.waiting and not waiting:
+            self.errors.warning("t=%.2f s: %s back: the request goes on", b / NS_PER_S,
+                                " and ".join(self.waiting))  # fmt: skip
+        self.waiting = waiting
+        if waiting and request is not None:  # every status while it holds says so
+            st = self.board.status
+            self.board.update(
+                b, request.request_id, st.state, st.behaviour, st.progress,
+                detail=f"holding: {' and '.join(waiting)} not heard ({detail})",
+            )  # fmt: skip
+        return news
+
+    def notice(self, b: int) -> None:
+        """Between ticks (a tick waiting on a dependency's inputs): a dependency of the
+        running request newly noticed gone is said now, stamped b."""
+        if self.tree.request is not None and self._wait_for(b, self.tree.where()[1]):
+            self.flush(b, True)
 
     def flush(self, b: int, changed: bool) -> None:
         """Publish the status stamped b when it changed or the periodic repeat is due."""
@@ -311,6 +348,7 @@ class Desk:
         self.log.tree(self.tree.statuses(), self.tree.text)
         if outcome is not None and request is not None:
             self.deps.disarm()
+            self.waiting = []
             done = 1.0 if outcome.state == "succeeded" else self.board.status.progress
             return self.board.update(
                 b,
@@ -323,7 +361,8 @@ class Desk:
             )
         if self.tree.request is not None:
             stage, leaf, progress = self.tree.where()
-            return self.board.update(
+            changed = self.board.update(
                 b, self.tree.request.request_id, "running", stage, progress, detail=leaf
             )
+            return self._wait_for(b, leaf) or changed
         return False

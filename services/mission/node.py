@@ -15,7 +15,9 @@ Each tick b (multiples of `time.participants.mission.period_s`):
    the mapping job (`explore`, `patrol`); cancels of the running request stop it;
 3. a dependency (the sim; the WBC, navigation, perception, the map: those of
    `time.participants`) that went away or restarted since the request started fails it
-   `dependency_lost` (nobody waits for the dead); else the tree ticks once; its outcome,
+   `dependency_lost` (nobody waits for the dead: noticed 0.3 s after its token went, said
+   on the status at once, and held for `HOLD_S` 2 s in case it comes back as the same
+   process, its link only lapsed); else the tree ticks once; its outcome,
    stage and progress become the status. A dead sim stops the clock, so no tick comes:
    while the clock stands still the loop checks every `IDLE_POLL_S` wall (`Desk.stalled`) and
    fails the request `dependency_lost: sim is gone`, stamped at the last tick; a
@@ -47,7 +49,7 @@ from __future__ import annotations
 
 import msgspec
 
-from common.lifelines import Dependencies
+from common.lifelines import HOLD_S, Dependencies
 from common.lockstep import PeriodicTicker, UpstreamGate, hear_all
 from common.map_frame import MapFrame
 from common.messages.base import NS_PER_S
@@ -75,10 +77,9 @@ from services.mission.tree import MissionTree
 
 NAME = "mission"
 #: Wall seconds between two looks at the dependencies while the clock stands still: a
-#: loss is decided `LOST_GRACE_S` (0.3 s) after its token went, and said within this of
+#: loss is noticed `LOST_GRACE_S` (0.3 s) after its token went, and said within this of
 #: it (the policy's 0.5 s to notice; it was 0.1 s, and a kill was said 0.45-0.63 s after).
 IDLE_POLL_S = 0.02
-#: The services a running mission depends on (those that are lockstep participants).
 #: The services a job depends on: the sim (the world and its clock) and the lockstep
 #: participants among these.
 DEPENDENCIES = ("wbc", "navigation", "perception", "semantic_map", "localization")
@@ -108,7 +109,7 @@ class MissionNode:
         self.gate.watch("perception", self.robot.detections)
         self.alive = bus.watch_alive(keys.alive_all)
         needed = ["sim", *(n for n in DEPENDENCIES if n in cfg.time.participants)]
-        self.deps = Dependencies(self.alive.lifelines, needed, keys.alive)
+        self.deps = Dependencies(self.alive.lifelines, needed, keys.alive, hold_s=HOLD_S)
         heard = {keys.alive(n) for n in self.deps.names}
         self.inputs = TickInputs(
             self.robot,
@@ -137,7 +138,7 @@ class MissionNode:
             PatrolRunner(self.robot, m, self.log.patrol),
             self.robot,
             m,
-            Dependencies(self.alive.lifelines, needed, keys.alive),
+            Dependencies(self.alive.lifelines, needed, keys.alive, hold_s=HOLD_S),
             self.log,
             svc.log,
             explorer=ExploreRunner(self.robot, m, self.log.patrol),
@@ -193,8 +194,11 @@ class MissionNode:
             self.svc.log.exception("mission: failing a stalled request raised")
 
     def _dependency_lost(self) -> bool:
-        """Whether a dependency of the running request or job went away."""
+        """Whether a dependency of the running request or job went away; one noticed
+        gone and held for is said now (the tick may wait on its inputs for `HOLD_S`)."""
         request = self.tree.request is not None and self.desk.deps.lost() is not None
+        if self.tree.request is not None and not request:
+            self.desk.notice(self.last_b)
         return request or (self.patrol.job.running and self.patrol.deps.lost() is not None)
 
     def tick(self, b: int) -> None:

@@ -66,6 +66,23 @@ def test_a_dependency_that_goes_is_doubted_for_the_grace_then_gone() -> None:
     assert deps.lost() == "mission is gone"
 
 
+def test_a_holding_watcher_notices_a_loss_at_the_grace_and_calls_it_gone_at_the_hold() -> None:
+    clock = Clock()
+    lines = lifelines("mission", "sim", runs=True, clock=clock)
+    deps = Dependencies(lines, ["mission", "sim"], key, grace_s=0.4, clock=clock, hold_s=2.0)
+    deps.arm()
+    lines.down(key("sim"))
+    assert deps.lost() is None and deps.noticed() == []
+    clock.t += 0.41
+    assert deps.lost() is None and deps.noticed() == ["sim"]
+    clock.t += 1.5
+    assert deps.lost() is None and deps.noticed() == ["sim"]
+    clock.t += 0.1
+    assert deps.lost() == "sim is gone" and deps.noticed() == []
+    deps.arm()
+    assert deps.noticed() == []
+
+
 def test_a_dependency_back_as_another_run_restarted_at_once() -> None:
     lines = lifelines("mission", "sim", runs=True)
     deps = deps_of(lines, ["mission", "sim"], Clock())

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import rerun as rr
 
-from common.lifelines import Dependencies, Lifelines
+from common.lifelines import HOLD_S, LOST_GRACE_S, Dependencies, Lifelines
 from common.messages import encode
 from common.messages.mission import MissionCancel, MissionRequest, MissionStatus
 from services.mission.desk import Desk
@@ -33,23 +33,44 @@ def key_of(name: str) -> str:
     return f"dume/alive/b1/{name}"
 
 
+class WallClock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
 class Rig:
     """A desk, its inboxes, the liveliness it watches and every status it sent."""
 
     def __init__(
-        self, robot: FakeRobot | None = None, every_s: float = 100.0, journal: Journal | None = None
+        self,
+        robot: FakeRobot | None = None,
+        every_s: float = 100.0,
+        journal: Journal | None = None,
+        wall: WallClock | None = None,
     ) -> None:
+        """`wall`: the dependencies, each with its run, doubted and held as the node's
+        are (`LOST_GRACE_S`, `HOLD_S`) on that clock; else lost at once, runs unknown."""
         self.robot = robot or small_world()
-        self.lifelines = Lifelines()
+        self.lifelines = Lifelines() if wall is None else Lifelines(wall)
         for name in DEPENDENCIES:
+            if wall is not None:
+                self.lifelines.run_up(key_of(name), f"{name}-1")
             self.lifelines.up(key_of(name))
+        deps = (
+            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0, link_grace_s=0.0)
+            if wall is None
+            else Dependencies(self.lifelines, DEPENDENCIES, key_of, clock=wall, hold_s=HOLD_S)
+        )
         self.tree = MissionTree(context(self.robot))
         self.requests, self.cancels = RequestInbox(), Inbox()
         self.sent: list[MissionStatus] = []
         self.desk = Desk(
             self.tree,
             self.robot,
-            Dependencies(self.lifelines, DEPENDENCIES, key_of, grace_s=0.0, link_grace_s=0.0),
+            deps,
             StatusBoard(round(every_s * 1e9)),
             self.requests,
             self.cancels,
@@ -178,6 +199,35 @@ def test_a_dependency_that_goes_down_fails_the_running_request_and_refuses_new_o
     (refused,) = rig.tick()
     assert (refused.request_id, refused.state, refused.reason) == ("r2", "rejected", "unavailable")
     assert refused.detail == "not running: navigation"
+
+
+def test_a_dependency_not_heard_is_said_at_once_and_held_for_while_it_may_come_back() -> None:
+    """The sim's link lapsed for 0.5 s in a shift (the router cut it off under load):
+    the mission says within the grace that it holds for it, and goes on when it is back
+    as the same process; a second loss not back within `HOLD_S` fails the request."""
+    wall = WallClock()
+    rig = Rig(wall=wall)
+    rig.running()
+    rig.lifelines.down(key_of("navigation"))
+    assert rig.tick() == []  # doubted: not yet said
+    wall.t += LOST_GRACE_S + 0.01
+    (holding,) = rig.tick()
+    assert (holding.request_id, holding.state) == ("r1", "running")
+    assert holding.detail.startswith("holding: navigation not heard")
+    assert all(s.detail.startswith("holding: navigation") for s in rig.tick(3))
+    wall.t += 0.2
+    rig.lifelines.up(key_of("navigation"))  # back as the same run: its link lapsed
+    rig.tick(3)
+    assert rig.sent[-1].state == "running" and rig.desk.waiting == []
+    rig.lifelines.down(key_of("navigation"))
+    rig.tick()
+    wall.t += HOLD_S - 0.01
+    (held,) = rig.tick()
+    assert (held.state, held.detail[:30]) == ("running", "holding: navigation not heard ")
+    wall.t += 0.02
+    (failed,) = rig.tick()
+    assert (failed.state, failed.reason) == ("failed", "dependency_lost")
+    assert failed.detail.startswith("navigation is gone")
 
 
 def test_a_dependency_that_restarted_fails_the_running_request() -> None:

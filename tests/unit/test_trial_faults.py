@@ -13,9 +13,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from bench import trial_faults
 from bench.trial_faults import Fault, summary, verdict
 from bench.trial_updown import map_state, run_processes
+from common.messages import encode
 from common.messages.base import NS_PER_S
 from common.messages.mission import MissionStatus
 from common.messages.sim import Clock
@@ -131,14 +134,14 @@ def test_the_battery_pairs_the_slow_consumer_with_slow_only(monkeypatch: Any) ->
 def test_the_summary_counts_hung_cases_silent_drops_and_falls_the_wbc_survived() -> None:
     cases: list[dict[str, Any]] = [
         {"injected": True, "service": "wbc", "signal": "kill", "ended_s": 0.1,
-         "reported_s": 0.1, "hung": False, "fell": True, "map_ok": True,
+         "reported_s": 2.1, "noticed_s": 0.1, "hung": False, "fell": True, "map_ok": True,
          "final": "failed dependency_lost: wbc is gone"},
         {"injected": True, "service": "navigation", "signal": "kill", "ended_s": 0.2,
-         "reported_s": 12.0, "hung": True, "fell": False, "dropped": True,
+         "reported_s": 12.0, "noticed_s": 12.0, "hung": True, "fell": False, "dropped": True,
          "drop_reported": False, "map_ok": True,
          "final": "failed dependency_lost: navigation is gone"},
         {"injected": True, "service": "perception", "signal": "stop", "ended_s": 0.3,
-         "reported_s": 0.3, "hung": False, "fell": True, "map_ok": False,
+         "reported_s": 2.3, "noticed_s": 0.3, "hung": False, "fell": True, "map_ok": False,
          "final": "failed dependency_lost: perception is gone"},
         {"injected": True, "service": "mission", "signal": "kill", "ended_s": 4.0,
          "reported_s": 4.0, "hung": False, "map_ok": True,
@@ -151,6 +154,30 @@ def test_the_summary_counts_hung_cases_silent_drops_and_falls_the_wbc_survived()
     assert s["ended_p50_s"] == 0.25 and s["reported_p95_s"] is not None
     # what the policy's 0.5 s is about: the dependents' notice, not the mission's restart
     assert (s["detected"], s["detected_p50_s"], s["detected_max_s"]) == (3, 0.3, 12.0)
+
+
+def test_a_loss_is_noticed_at_the_first_status_that_holds_for_the_hurt_service() -> None:
+    fault = Fault(None, "wbc", "carrying", signal.SIGKILL, 0.0)  # type: ignore[arg-type]
+    fault.wall = 10.0
+    said = [
+        (9.0, MissionStatus(stamp_ns=1, request_id="r", state="running", detail="holding: wbc")),
+        (10.1, MissionStatus(stamp_ns=2, request_id="x", state="failed")),  # another request
+        (10.2, MissionStatus(stamp_ns=3, request_id="r", state="running", detail="walk")),
+        (
+            10.4,
+            MissionStatus(
+                stamp_ns=4, request_id="r", state="running", detail="holding: wbc not heard (walk)"
+            ),
+        ),
+        (12.4, MissionStatus(stamp_ns=5, request_id="r", state="failed")),
+    ]
+    fault.heard = [(t, encode(s)) for t, s in said] + [(10.3, b"\x00garbage")]
+    assert fault.noticed_s("r") == pytest.approx(0.4)
+    fault.heard = [(t, encode(s)) for t, s in said if s.stamp_ns != 4]
+    assert fault.noticed_s("r") == pytest.approx(2.4)  # none held: the final one
+    fault.service = "navigation"
+    fault.heard = [(t, encode(s)) for t, s in said[:4]]
+    assert fault.noticed_s("r") is None  # it held for another service
 
 
 def test_a_frozen_mission_or_router_is_mute_not_hung_and_a_late_end_is_hung() -> None:
