@@ -50,11 +50,12 @@ from collections.abc import Callable, Iterable
 #: from the watcher's next look: a kill was said 0.42-0.51 s after (the policy's 0.5 s to
 #: notice).
 LOST_GRACE_S = 0.3
-#: Wall seconds a job that can wait (the mission's request: the world pauses or the
-#: robot holds while a dependency is away) holds a noticed loss for the same run to come
-#: back before it counts as gone: a lapse of a 2 s stall was gone 0.15-0.59 s, of a 3 s
-#: one 1.6 s (`dume bench lapse`).
-HOLD_S = 2.0
+#: Wall seconds from when its token went that a job that can wait (the mission's
+#: request: the world pauses or the robot holds while a dependency is away) holds a
+#: noticed loss for the same run to come back before it counts as gone: a lapse of a 2 s
+#: stall was gone 0.15-0.59 s, of a 3 s one 1.6 s (`dume bench lapse`); a killed WBC or
+#: sim must end the request within the policy's 1 s.
+HOLD_S = 0.8
 #: Wall seconds a watcher looks at a lost token at least, however long ago it went: one
 #: starved of the CPU for seconds (a shift's mission, a second stack on its two cores)
 #: first sees the loss with the token's return still queued behind it.

@@ -16,7 +16,7 @@ Each tick b (multiples of `time.participants.mission.period_s`):
 3. a dependency (the sim; the WBC, navigation, perception, the map: those of
    `time.participants`) that went away or restarted since the request started fails it
    `dependency_lost` (nobody waits for the dead: noticed 0.3 s after its token went, said
-   on the status at once, and held for `HOLD_S` 2 s in case it comes back as the same
+   on the status at once, and held until `HOLD_S` (0.8 s) in case it comes back as the same
    process, its link only lapsed); else the tree ticks once; its outcome,
    stage and progress become the status. A dead sim stops the clock, so no tick comes:
    while the clock stands still the loop checks every `IDLE_POLL_S` wall (`Desk.stalled`) and
