@@ -10,6 +10,10 @@ surface's rectangle). The pose lies `STANDOFF_DISTANCE_M` out along it, facing t
 artifact; when its footprint is not free, directions further from the normal are tried
 in turn, so a crowded edge still gives a free pose. A goal may ask for the sides to
 stand on instead (`ArtifactStandoff.bearings_rad`: a box held along its long faces).
+Given people to `avoid`, a pose whose footprint comes within `keep_m` of one of them
+is passed over too: a person standing by the edge holds the robot short of a standoff
+inside their protective separation for as long as they stay (the navigator's
+`_restand`).
 
 Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; on the
 side the goal asks for (`PersonHandover.bearing_rad`), else in front of them when their
@@ -27,7 +31,13 @@ import numpy as np
 from common import robot
 from common.messages.navigation import NavGoalRequest
 from services.navigation.costmap import Costmap, Person
-from services.navigation.grid import Footprint, Pose, footprint_hits, footprint_points
+from services.navigation.grid import (
+    Footprint,
+    Pose,
+    distance_to_footprint,
+    footprint_hits,
+    footprint_points,
+)
 from services.navigation.planner import GOAL_MARGIN_M, pose_ok
 
 RAY_STEP_RAD = math.radians(1.0)
@@ -90,10 +100,13 @@ def standoff_pose(
     margin: float = GOAL_MARGIN_M,
     bearings: tuple[float, ...] = (),
     tolerance: float = math.pi,
+    avoid: tuple[tuple[float, float], ...] = (),
+    keep_m: float = 0.0,
 ) -> Pose:
     """A free pose facing the artifact at (x, y), `STANDOFF_DISTANCE_M` away: off the
     nearest edge (the directions nearest its normal first) or, given `bearings` (world
-    bearings from the artifact), the direction nearest any of them, within `tolerance`."""
+    bearings from the artifact), the direction nearest any of them, within `tolerance`;
+    its footprint at least `keep_m` from each point of `avoid` (people standing there)."""
     angles = np.arange(0.0, 2 * math.pi, RAY_STEP_RAD)
     if bearings:
         off = np.abs(np.angle(np.exp(1j * (angles[:, None] - np.asarray(bearings)[None, :]))))
@@ -106,11 +119,19 @@ def standoff_pose(
         best = float(np.angle(np.exp(1j * angles[near]).sum()))
         order = np.argsort(np.abs(np.angle(np.exp(1j * (angles - best)))), kind="stable")
     d = robot.STANDOFF_DISTANCE_M
+    people = np.array(avoid, dtype=float).reshape(-1, 2)
     for k in order:
         a = float(angles[k])
         pose = Pose(x + d * math.cos(a), y + d * math.sin(a), math.remainder(a + math.pi, math.tau))
-        if pose_ok(costmap, pose, fp, margin):
+        if pose_ok(costmap, pose, fp, margin) and (
+            not len(people) or distance_to_footprint(pose, fp, people).min() >= keep_m
+        ):
             return pose
+    if avoid:
+        raise GoalError(
+            f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) {keep_m:.2f} m clear of "
+            f"the people standing there"
+        )
     if not bearings:
         raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) in any direction")
     wanted = ", ".join(f"{math.degrees(b):.0f}°" for b in bearings)

@@ -171,6 +171,7 @@ class GoalIntake:
         data as of `at`; `GoalInvalid` with the reason."""
         g = req.goal
         person_xy, bearing, distance = None, None, None
+        artifact_xy: tuple[float, float] | None = None
         try:
             if isinstance(g, PoseGoal):
                 target = Pose(g.x, g.y, g.yaw)
@@ -181,6 +182,7 @@ class GoalIntake:
                     cm, x, y, self.fp, bearings=g.bearings_rad, tolerance=g.bearing_tolerance_rad
                 )
                 tol, tol_yaw, handover = *self.tolerance, ""
+                artifact_xy = (x, y)
             else:
                 assert isinstance(g, PersonHandover)
                 person = self.source.person(g.person_id, at_ns=at)
@@ -196,7 +198,12 @@ class GoalIntake:
             raise GoalInvalid(str(exc)) from None
         if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
             raise GoalInvalid(f"{target} is off the map")
-        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing, distance)
+        if artifact_xy is None or not isinstance(g, ArtifactStandoff):
+            return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing, distance)
+        return GoalSpec(
+            goal_id, target, tol, tol_yaw, artifact_xy=artifact_xy,
+            bearings=tuple(g.bearings_rad), bearing_tolerance=g.bearing_tolerance_rad,
+        )  # fmt: skip
 
     def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
         """A handover goal follows its person: once the map has them `RETARGET_M` from

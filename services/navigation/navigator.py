@@ -33,6 +33,17 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   or a step back inside a bystander's protective separation is a stop: before, the
   recoveries moved whoever stood there); after them, `failed: blocked` (or `no_path`
   when no plan was ever found);
+- a goal at an artifact (a standoff) with a person standing by it (velocity known,
+  under `STANDING_MPS`; seen within `STALE_S`) nearer its footprint than they would
+  hold the robot at (`stand_clear_m`: S_p at rest, the stop's resume margin and
+  `RESTAND_CLEAR_M`) moves, at a periodic replan, once per person and goal: to the
+  standoff nearest the edge's normal clear of every person standing
+  (`goals.standoff_pose`'s `avoid`), when there is one (`_restand`; the approach
+  servoes onto the object from there). Hall seed 1's shift stood 97 s and three
+  recoveries 0.5 m short of box_4's standoff, stopped by person_1 standing 0.63 m off
+  the footprint (S_p at rest 0.61 m), then failed it blocked; once stopped that near,
+  only a way clearly away from them may move (`people_limit`), so the goal moves
+  before the robot gets there;
 - a stop held, at the recoveries' turn, for a person only the map has beside the body's
   flank (not seen for `STALE_S`: a stale estimate, in the wedge neither lidar sees, so
   the lidar cannot clear it), the first recovery is a slide instead (once a goal): a
@@ -60,21 +71,25 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from common.config import NavigationSettings
+from common.config import NavigationSettings, PeopleSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
+from services.navigation import goals
 from services.navigation.body_guard import HORIZON_S, BodyGuard
 from services.navigation.controller import Follower
-from services.navigation.costmap import Costmap
+from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
 from services.navigation.people import (
     NO_LIMIT,
+    RESUME_MARGIN_M,
     SpeedLimit,
     bearing,
     people_limit,
+    separation_params,
     within_people,
 )
 from services.navigation.planner import Plan, PlanError, path_cost, plan
+from services.navigation.separation import protective_distance
 
 Recovery = Literal["", "clear", "rotate", "backoff", "slide"]
 
@@ -108,6 +123,10 @@ SWITCH_GAIN = 0.15
 SWITCH_MIN_M = 0.5
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
+#: m/s: a person whose estimated speed is under this stands (`_restand`).
+STANDING_MPS = 0.2
+#: m a standoff moved clear of people standing keeps beyond what would stop the robot.
+RESTAND_CLEAR_M = 0.1
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
 #: for the people rules (below it, the trot's sway gives it no meaning). The trot does not
 #: go quite where it is sent: turning onto a bend it stepped sideways at 0.23 m/s towards
@@ -131,6 +150,11 @@ class GoalSpec:
     #: How far from the person the handover stands (m; `PersonHandover.extra_m` added;
     #: None: not a handover).
     distance: float | None = None
+    #: A standoff's artifact (m, world; None: not a standoff), and the sides asked for
+    #: (`ArtifactStandoff.bearings_rad`, `bearing_tolerance_rad`): `_restand` chooses again.
+    artifact_xy: tuple[float, float] | None = None
+    bearings: tuple[float, ...] = ()
+    bearing_tolerance: float = math.pi
 
 
 class TickOutput(NamedTuple):
@@ -145,6 +169,8 @@ class TickOutput(NamedTuple):
     recovery: Recovery
     #: The body guard's answer to a refused command this tick ("": none refused).
     guarded: str = ""
+    #: The goal's pose moved this tick, and why ("": it did not; `_restand`).
+    moved: str = ""
 
 
 class Navigator:
@@ -167,6 +193,7 @@ class Navigator:
         self.total_m = 0.0
         self.limit_rule = ""
         self.guarded = ""
+        self.moved = ""
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
@@ -182,6 +209,7 @@ class Navigator:
         self.recovery = ""
         self.recovery_until = 0
         self.slid = False  # the slide is once a goal
+        self.restood: set[str] = set()  # the people a standoff moved clear of (`_restand`)
         self.slide_sign = 0.0  # +1 ahead, -1 back
         self.slide_person = ""  # the stale person slid past
         self.best_remaining = math.inf
@@ -195,7 +223,10 @@ class Navigator:
         next tick replans to it, and progress is measured afresh."""
         if self.state != "active" or self.goal is None:
             return
-        self.goal = replace(self.goal, pose=pose, person_xy=person_xy)
+        self._move_goal(replace(self.goal, pose=pose, person_xy=person_xy), t_ns)
+
+    def _move_goal(self, goal: GoalSpec, t_ns: int) -> None:
+        self.goal = goal
         self.last_plan_ns = -(10**18)
         self.take_next = True  # the next plan replaces the held one, whatever it costs
         self.best_remaining = self.best_yaw_error = math.inf
@@ -223,9 +254,10 @@ class Navigator:
         progress = 0.0 if self.total_m <= 0 else min(1.0, max(0.0, 1.0 - remaining / self.total_m))
         if self.state == "succeeded":
             progress, remaining = 1.0, 0.0
+        moved, self.moved = self.moved, ""
         return TickOutput(
             self.cmd.copy(), self.state, self.reason, self.detail, progress, remaining,
-            new_plan, limit, self.recovery, self.guarded,
+            new_plan, limit, self.recovery, self.guarded, moved,
         )  # fmt: skip
 
     def _replan(self, t_ns: int, pose: Pose, cm: Costmap, hold: bool = False) -> Plan | None:
@@ -294,8 +326,10 @@ class Navigator:
         new_plan = None
         if self.recovery:
             return self._recover(t_ns, pose, cm)
-        blocked_path = self.plan is not None and self._path_blocked(cm)
         due = t_ns - self.last_plan_ns >= self.n.replan_s * NS_PER_S
+        if due:
+            self._restand(t_ns, cm)
+        blocked_path = self.plan is not None and self._path_blocked(cm)
         if self.plan is None or blocked_path or due:
             hold = not (self.take_next or blocked_path) and self.blocked_since is None
             self.take_next = False
@@ -383,6 +417,41 @@ class Navigator:
         self.recovery_until = t_ns + round(span[self.recovery] * NS_PER_S)
         self.detail = f"recovery: {self.recovery}"
         return self._out(limit, new_plan)
+
+    def _restand(self, t_ns: int, cm: Costmap) -> bool:
+        """A standoff with people standing by it moves clear of everyone standing
+        (module docstring); whether it moved (said once in the tick's `moved`)."""
+        g = self.goal
+        if g is None or g.artifact_xy is None:
+            return False
+        standers = [
+            q for q in cm.people
+            if standing(q) and (q.seen_ns is None or t_ns - q.seen_ns <= STALE_S * NS_PER_S)
+        ]  # fmt: skip
+        if not standers:
+            return False
+        keep = stand_clear_m(self.n.people)
+        d = distance_to_footprint(g.pose, self.fp, np.array([[q.x, q.y] for q in standers]))
+        by = [q.id for q, dq in zip(standers, d.tolist(), strict=True)
+              if dq < keep and q.id not in self.restood]  # fmt: skip
+        if not by:
+            return False
+        self.restood.update(by)
+        try:
+            pose = goals.standoff_pose(
+                cm, *g.artifact_xy, self.fp, bearings=g.bearings,
+                tolerance=g.bearing_tolerance, avoid=tuple((q.x, q.y) for q in standers),
+                keep_m=keep,
+            )  # fmt: skip
+        except goals.GoalError as exc:
+            self.moved = f"kept: {' and '.join(by)} standing by it: {exc}"
+            return False
+        self._move_goal(replace(g, pose=pose), t_ns)
+        self.moved = (
+            f"clear of {' and '.join(by)} standing by it: from ({g.pose.x:.2f}, {g.pose.y:.2f}) "
+            f"to ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})"
+        )
+        return True
 
     def _slide_way(self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit) -> float:
         """+1 (ahead) or -1 (back): the way to slide past the person who holds the stop,
@@ -490,3 +559,16 @@ def _slide_free(guard: BodyGuard, sign: float) -> bool:
     back (-1) (the costmap's lethal cost is no test here: it holds the stale person's own
     disc)."""
     return guard.ok(np.array([sign * SLIDE_LOOK_M / HORIZON_S, 0.0, 0.0]))
+
+
+def standing(person: Person) -> bool:
+    """Whether a person's estimate says they stand (a known velocity under
+    `STANDING_MPS`)."""
+    return person.velocity is not None and math.hypot(*person.velocity) < STANDING_MPS
+
+
+def stand_clear_m(p: PeopleSettings) -> float:
+    """How far (m) from the footprint a person standing must be for the robot to walk
+    up to a pose there: S_p at rest for them, the stop's resume margin, `RESTAND_CLEAR_M`."""
+    sep = separation_params(p)
+    return protective_distance(0.0, sep.speed_margin_mps, sep) + RESUME_MARGIN_M + RESTAND_CLEAR_M

@@ -287,3 +287,68 @@ def test_a_handover_pose_takes_the_side_asked_for_before_the_persons_front() -> 
     assert math.hypot(person.x - pose.x, person.y - pose.y) == pytest.approx(
         HANDOVER_DISTANCE_M, abs=0.01
     )
+
+
+def _drive(nav, pose: Pose, cm, seconds: float):  # type: ignore[no-untyped-def]
+    """Tick `nav` at 20 Hz, the base going where it is sent (body frame), until the goal
+    ends or `seconds` pass; the last output and pose."""
+    out = None
+    for k in range(round(seconds / 0.05)):
+        out = nav.tick(round(k * 0.05e9), pose, cm)
+        vx, vy, wz = out.cmd
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        pose = Pose(pose.x + (c * vx - s * vy) * 0.05, pose.y + (s * vx + c * vy) * 0.05,
+                    pose.yaw + wz * 0.05)  # fmt: skip
+        if out.state != "active":
+            break
+    return out, pose
+
+
+def test_a_standoff_with_a_person_standing_by_it_moves_clear_of_them_and_is_reached() -> None:
+    """Hall seed 1's shift: person_1 stood 0.63 m off the footprint at box_4's standoff
+    (S_p at rest 0.61 m); the robot stopped 0.5 m short and failed blocked after 97 s.
+    Here a person stands 0.6 m off the standoff's footprint: the goal moves round the
+    artifact clear of them before the robot gets there, and the robot gets there. A
+    walking person (velocity not known) does not move it: they will have passed."""
+    from services.navigation.navigator import GoalSpec, Navigator, stand_clear_m
+
+    grid = _room([(slice(60, 80), slice(60, 100))])  # a table, x 3-5 m, y 3-4 m
+    can = (4.0, 3.05)  # by its near edge
+    goal = standoff_pose(build_costmap(grid, FP, CostParams()), *can, FP)
+    c, s = math.cos(goal.yaw), math.sin(goal.yaw)
+    u, v = FP.front + 0.1, FP.half_width + 0.6  # ahead of the goal's left front corner
+    at = (goal.x + c * u - s * v, goal.y + s * u + c * v)
+    assert distance_to_footprint(goal, FP, np.array([at]))[0] == pytest.approx(0.608, abs=0.01)
+    ns = NavigationSettings()
+    keep = stand_clear_m(ns.people)
+    assert keep == pytest.approx(0.61 + 0.15 + 0.1, abs=0.01)  # S_p at rest, resume, clear
+    start = Pose(goal.x - 1.1 * c, goal.y - 1.1 * s, goal.yaw)
+
+    cm = build_costmap(grid, FP, CostParams(), people=[Person("p", *at, None, (0.0, 0.0))])
+    nav = Navigator(FP, ns, 0.05)
+    nav.start(GoalSpec("g", goal, 0.1, 0.1, artifact_xy=can), 0)
+    first = nav.tick(0, start, cm)
+    assert first.moved.startswith("clear of p standing by it: from (4.00, 2.03) to ")
+    assert nav.tick(50_000_000, start, cm).moved == ""  # said once
+    moved = nav.goal.pose
+    assert distance_to_footprint(moved, FP, np.array([at]))[0] >= keep
+    assert math.dist((moved.x, moved.y), can) == pytest.approx(math.dist((goal.x, goal.y), can))
+    out, end = _drive(nav, start, cm, 30.0)
+    assert out.state == "succeeded", out.detail
+    assert math.hypot(end.x - moved.x, end.y - moved.y) <= 0.1
+
+    walker = build_costmap(grid, FP, CostParams(), people=[Person("w", *at, None, None)])
+    nav = Navigator(FP, ns, 0.05)
+    nav.start(GoalSpec("g", goal, 0.1, 0.1, artifact_xy=can), 0)
+    nav.tick(0, start, walker)
+    assert nav.goal.pose == goal
+
+
+def test_a_standoff_clear_of_people_standing_is_refused_when_there_is_none() -> None:
+    world, cm = _world_costmap("hall", 1)
+    a = world.artifacts[0]
+    x, y = a.position[:2]
+    pose = standoff_pose(cm, x, y, FP)
+    assert standoff_pose(cm, x, y, FP, avoid=((x + 5.0, y + 5.0),), keep_m=0.8) == pose
+    with pytest.raises(GoalError, match=r"0\.80 m clear of the people standing there"):
+        standoff_pose(cm, x, y, FP, avoid=((x, y),), keep_m=0.8)  # at the artifact itself
