@@ -183,6 +183,10 @@ def test_the_people_caps_are_met_at_their_boundaries_on_a_braking_ramp() -> None
     assert cap(held).rule == "slow"
     assert cap(held, stopped=True).rule == "stop"  # released only RESUME_MARGIN_M further
     assert cap(at_rest + RESUME_MARGIN_M + 0.1, stopped=True).rule == "slow"
+    # the person handed over to is come up to at the handover speed: no margin to resume
+    handing = people_limit(pose, (1.0, 0.0), [Person("person_1", FP.front + held, 0.0)], FP,
+                           p, top, handover_id="person_1", stopped=True)  # fmt: skip
+    assert handing.rule == "handover" and handing.speed > 0.0
     assert cap(at_rest - 0.1, (-1.0, 0.0)).rule == "slow"  # moving away: no stop
 
 
