@@ -119,6 +119,8 @@ class FakeRobot:
     nav_fail: dict[str, str] = field(default_factory=dict)
     #: ...for only the first this many goals of each kind (None: every one).
     nav_fail_times: int | None = None
+    #: Goal kinds navigation keeps active without moving the base (a person beside it).
+    nav_hold: set[str] = field(default_factory=set)
     _nav_failed: dict[str, int] = field(default_factory=dict)
     #: Goals navigation refuses (no typed code: this goal only), when given.
     nav_refuse: Callable[[NavGoal], bool] | None = None
@@ -302,6 +304,9 @@ class FakeRobot:
             )
         if state == "failed" and self.t < start:
             return NavStatus(stamp_ns=self.t, goal_id=goal_id, state="failed", reason="timeout")
+        if state == "active" and kind in self.nav_hold:
+            return NavStatus(stamp_ns=self.t, goal_id=goal_id, state="active",
+                             detail="waiting for person_7 to pass")  # fmt: skip
         if state == "active" and self.t - start >= self.nav_ticks * TICK_NS:
             failure = self.nav_fail.get(kind, "")
             if failure and self.nav_fail_times is not None:

@@ -15,7 +15,7 @@ from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
 from services.mission.behaviours.handover import LEAN_MPS, FeelPull
-from services.mission.behaviours.motion import HANDOVER_BEYOND_M, STANCE_TOL_RAD
+from services.mission.behaviours.motion import HANDOVER_BEYOND_M, STANCE_TOL_RAD, TURN_HELD_S
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
     TICK_NS,
@@ -564,6 +564,31 @@ def test_a_person_who_walked_off_is_looked_for_round_their_place_and_walked_to(
         assert turned == pytest.approx(math.tau)  # once round, not again at the same place
         assert "asking for person_1: please come to the robot" in said
         assert any("walking to where the map last had them" in d for d in decisions)
+
+
+def test_a_look_round_held_still_by_a_person_beside_the_robot_asks_at_once() -> None:
+    """Hall seed 0's shift: the first turn of the look round stood 40 s, held by the
+    speed rules for a bystander 0.65 m off the footprint. A turn that has not turned in
+    `TURN_HELD_S` ends the look round (cancelled) and the ask begins."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (1.0, 3.0)
+    robot.seen_after_turn_rad = 100.0
+    robot.nav_hold = {"pose"}
+    tree = mission(robot)
+    said: list[tuple[int, str]] = []
+    for _ in range(3000):
+        tree.tick()
+        said.append((robot.now_ns, tree.where()[1]))
+        robot.advance()
+        if said[-1][1].startswith("asking for person_1"):
+            break
+    turns = [(i, g) for i, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert len(turns) == 1 and turns[0][0] in robot.nav_cancels  # the first, cancelled
+    looking = next(t for t, w in said if w == "looking for person_1")
+    asked = next(t for t, w in said if w.startswith("asking for person_1"))
+    assert TURN_HELD_S <= (asked - looking) / 1e9 <= TURN_HELD_S + 1.0
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("the turn did not turn in 5 s" in d for d in decisions)
 
 
 def _ask_scene(

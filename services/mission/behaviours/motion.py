@@ -427,8 +427,13 @@ PERSON_HERE_M = 2.5
 #: The look round for a person is the patrol's look-around (`patrol_goals.look_around`:
 #: `LOOK_TURNS` pose goals at the robot's place, within `goal_job`'s tolerances: navigation
 #: may move the pose to where the footprint turns clear); it asks after the turns or after
-#: `LOOK_TURN_MAX_S` (a base held still for a person beside it).
+#: `LOOK_TURN_MAX_S`, or as soon as a turn has not turned the base `TURN_PROGRESS_RAD` in
+#: `TURN_HELD_S` (the speed rules hold a turn on the spot within a bystander's S_p at
+#: rest: hall seed 0's shift stood 40 s at the first turn, person_1 0.65 m off the
+#: footprint; the turns after it would be held as long).
 LOOK_TURN_MAX_S = 40.0
+TURN_HELD_S = 5.0
+TURN_PROGRESS_RAD = 0.1
 
 
 class PersonAhead(MissionBehaviour):
@@ -559,14 +564,16 @@ class LookForPerson(MissionBehaviour):
         #: who came has stood near (sim ns).
         self.near_at_ask: set[str] = set()
         self.standing: dict[str, int] = {}
-        #: The turns still to send and the goal id of the one navigation walks now.
+        #: The turns still to send and the goal id of the one navigation walks now, and
+        #: the yaw it last turned past (rad) and when (sim ns): a turn held still ends.
         self.turns: list[PatrolGoal] = []
         self.goal_id = ""
+        self.turn_mark: tuple[float, int] | None = None
 
     def initialise(self) -> None:
         super().initialise()
         self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
-        self.turns, self.goal_id = [], ""
+        self.turns, self.goal_id, self.turn_mark = [], "", None
         self.near_at_ask, self.standing = set(), {}
         xy, yaw = self.port.robot_xy(), self.last_yaw
         if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
@@ -658,7 +665,7 @@ class LookForPerson(MissionBehaviour):
         if self.goal_id:
             status = self.port.nav_status(self.goal_id)
             if status is None or status.state in ("idle", "active"):
-                return True
+                return not self._held(pid)
             if status.state != "succeeded":
                 why = status.reason or status.state
                 self.ctx.decide(f"look_for_person: turn {self.goal_id} {why} ({status.detail}): "
@@ -680,6 +687,25 @@ class LookForPerson(MissionBehaviour):
         k = LOOK_TURNS - len(self.turns)
         self.ctx.decide(f"look_for_person: turn {k}/{LOOK_TURNS} to {math.degrees(turn.yaw):.0f}° "
                         f"sent as {self.goal_id}")  # fmt: skip
+        self.turn_mark = None
+        return True
+
+    def _held(self, pid: str) -> bool:
+        """Whether the turn under way has been held still `TURN_HELD_S` (then the look
+        round ends: cancelled, said)."""
+        yaw, now = self.port.robot_yaw(), self.port.now_ns
+        if yaw is None:
+            return False
+        mark = self.turn_mark
+        if mark is None or abs(math.remainder(yaw - mark[0], math.tau)) >= TURN_PROGRESS_RAD:
+            self.turn_mark = (yaw, now)
+            return False
+        if now - mark[1] < TURN_HELD_S * NS_PER_S:
+            return False
+        self._cancel(f"the turn held still {TURN_HELD_S:.0f} s")
+        self.ctx.decide(f"look_for_person: the turn did not turn in {TURN_HELD_S:.0f} s (the "
+                        f"speed rules hold it for a person beside the robot): asking for {pid} "
+                        "from here")  # fmt: skip
         return True
 
     def _cancel(self, why: str) -> None:
