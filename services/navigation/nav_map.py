@@ -39,7 +39,7 @@ from common.messages.base import NS_PER_S
 from common.messages.perception import Detections
 from services.navigation.costmap import Costmap, CostParams, ObstacleLayer, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
-from services.navigation.scan_people import ScanPeople, ScanView, merge_scan
+from services.navigation.scan_people import ScanPeople, ScanView, VelocityMemory, merge_scan
 from services.navigation.seen_people import SeenPeople
 
 #: m: a person this far from where the costmap last had them (or one come or gone) has
@@ -108,6 +108,8 @@ class NavMap:
         #: The map's people with the camera's over them (the lidar's go over these).
         self.known: list[Person] = []
         self.scanned: list[Person] = []
+        #: The lidar's last velocity of each person, for a new track of them (`merge_scan`).
+        self.velocities = VelocityMemory()
         #: The people the costmap was last built with.
         self.built: list[Person] = []
         #: The tick being handled (what "recently seen" counts from).
@@ -142,7 +144,7 @@ class NavMap:
         changed enough for a rebuild (`REBUILD_MOVE_M`). Without one, the costmap's
         people are the new ones all the same."""
         known = [ahead(q, self.now) for q in self.known]
-        people = merge_scan(known, self.scanned, self.scan.p.same_m)
+        people = merge_scan(known, self.scanned, self.scan.p.same_m, self.velocities, self.now)
         fresh = self.seen.seen_since(self.now - round(CAMERA_FRESH_S * 1e9))
         self.people = [
             q for q in people

@@ -77,6 +77,11 @@ from services.navigation.seen_people import fitted_velocity
 
 #: m: a beam returning from this far beyond a coasting track's place says it is gone.
 CLEARS_BEYOND_M = 0.3
+#: s a person's lidar velocity is kept for a new track of them (`VelocityMemory`): the
+#: fit's own window and more; a start from rest in it is within the estimate's margin.
+VELOCITY_HOLD_S = 1.0
+#: The memory forgets what it no longer holds once it keeps this many people.
+MEMORY_PRUNE_AT = 256
 
 
 @dataclass(frozen=True)
@@ -370,10 +375,42 @@ class ScanPeople:
         ]
 
 
-def merge_scan(people: list[Person], scanned: list[Person], same_m: float) -> list[Person]:
+class VelocityMemory:
+    """The lidar's last measured velocity of each person of the layer (by id), kept
+    `hold_s` of sim time: a person whose track broke up and began again (a new track has
+    no velocity until its positions span `velocity_min_span_s`) keeps it meanwhile. The
+    person handed over to, standing at 0.5-1.5 m, was a new track every second or two in
+    the changing hall's shift: each time "unknown" (a walking pace: S_p at rest 1.52 m),
+    a stop, and the walk to them took 152 s."""
+
+    def __init__(self, hold_s: float = VELOCITY_HOLD_S) -> None:
+        self.hold_ns = round(hold_s * NS_PER_S)
+        self._last: dict[str, tuple[int, tuple[float, float]]] = {}
+
+    def note(self, pid: str, velocity: tuple[float, float], t_ns: int) -> None:
+        self._last[pid] = (t_ns, velocity)
+        if len(self._last) > MEMORY_PRUNE_AT:  # ids come and go over a shift: no growth
+            self._last = {k: v for k, v in self._last.items() if t_ns - v[0] <= self.hold_ns}
+
+    def get(self, pid: str, t_ns: int) -> tuple[float, float] | None:
+        """The velocity measured last for `pid` within `hold_s` before `t_ns`, else None."""
+        last = self._last.get(pid)
+        if last is None or t_ns - last[0] > self.hold_ns:
+            return None
+        return last[1]
+
+
+def merge_scan(
+    people: list[Person],
+    scanned: list[Person],
+    same_m: float,
+    memory: VelocityMemory | None = None,
+    t_ns: int = 0,
+) -> list[Person]:
     """The people layer with the lidar's tracks: a person with a track within `same_m` (the
     nearest, each track once) is seen there now, with the track's velocity once it has
-    one; until then with the person's own only when it is a motion (a zero velocity is
+    one (noted in `memory`); until then with the one `memory` measured for them lately,
+    else with the person's own only when it is a motion (a zero velocity is
     no evidence of standing: the map's for a person it made a second ago, or could not
     be sure of, is zero; the changing hall's shift: a walker coming head-on at 1 m/s,
     found again by the lidar 1.4 m off and claimed by the map's new track of them, was
@@ -392,10 +429,13 @@ def merge_scan(people: list[Person], scanned: list[Person], same_m: float) -> li
             break
         if i in claimed or k not in free:
             continue
-        s = scanned[k]
+        s, pid = scanned[k], people[i].id
         mapped = people[i].velocity
         moving = mapped is not None and any(mapped)
-        velocity = s.velocity if s.velocity is not None else (mapped if moving else None)
+        held = memory.get(pid, t_ns) if memory is not None else None
+        if s.velocity is not None and memory is not None:
+            memory.note(pid, s.velocity, t_ns)
+        velocity = s.velocity or held or (mapped if moving else None)
         out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity, seen_ns=None)
         claimed.add(i)
         free.remove(k)

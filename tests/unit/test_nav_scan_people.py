@@ -21,6 +21,7 @@ from services.navigation.scan_people import (
     ScanParams,
     ScanPeople,
     ScanView,
+    VelocityMemory,
     bodies,
     merge_scan,
     static_cells,
@@ -186,6 +187,21 @@ def test_merge_puts_a_track_on_the_person_it_is_and_adds_the_rest() -> None:
     walking = [Person("person_2", 3.0, 1.0, velocity=(0.0, 0.0)),
                Person("person_1", -4.0, 0.0, velocity=(1.0, 0.0))]  # fmt: skip
     assert [p.velocity for p in merge_scan(walking, fresh, same_m=0.6)] == [None, (1.0, 0.0)]
+
+
+def test_a_new_track_of_a_person_keeps_the_velocity_the_lidar_measured_for_them_lately() -> None:
+    """The handover's person, standing, a new track every second or two (the changing
+    hall's shift): a new track's unknown velocity would be a walking pace, a stop."""
+    memory = VelocityMemory(hold_s=1.0)
+    person = [Person("person_1", 1.0, 0.0, velocity=(0.0, 0.0))]  # the map's: no evidence
+    measured = [Person("scan_3", 1.05, 0.0, velocity=(0.02, -0.01))]
+    assert merge_scan(person, measured, 0.6, memory, 0)[0].velocity == (0.02, -0.01)
+    again = [Person("scan_9", 1.1, 0.0, velocity=None)]  # the track broke up: a new one
+    assert merge_scan(person, again, 0.6, memory, 400_000_000)[0].velocity == (0.02, -0.01)
+    assert merge_scan(person, again, 0.6, memory, 1_100_000_000)[0].velocity is None  # too old
+    other = [Person("person_2", 1.0, 0.0, velocity=(0.0, 0.0))]  # not theirs to keep
+    assert merge_scan(other, again, 0.6, memory, 400_000_000)[0].velocity is None
+    assert merge_scan(person, again, 0.6)[0].velocity is None  # no memory: unknown
 
 
 def test_the_nav_map_rebuilds_for_a_person_come_or_moved_not_for_jitter() -> None:
