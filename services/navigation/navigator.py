@@ -44,6 +44,14 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   the footprint (S_p at rest 0.61 m), then failed it blocked; once stopped that near,
   only a way clearly away from them may move (`people_limit`), so the goal moves
   before the robot gets there;
+- a stop held `blocked_timeout_s` for a person standing within their S_p at rest (and
+  the stop's resume margin) of the footprint (`people_limit` lets only a way clearly
+  away from them move; the path rarely leads so) is a step away from them first
+  (`STEP_AWAY_SPEED`, until `STEP_CLEAR_M` beyond that, at most `STEP_AWAY_S`; once
+  per person and goal; a person the sensors see now, not the map's estimate alone),
+  held by everybody else's rules and the body guard, before the
+  wait for them to pass: seed 0's shift began a request 0.68 m from the worker it had
+  just handed to, and stood 46 s and two recoveries before it moved;
 - a stop held, at the recoveries' turn, for a person only the map has beside the body's
   flank (not seen for `STALE_S`: a stale estimate, in the wedge neither lidar sees, so
   the lidar cannot clear it), the first recovery is a slide instead (once a goal): a
@@ -91,7 +99,7 @@ from services.navigation.people import (
 from services.navigation.planner import Plan, PlanError, path_cost, plan
 from services.navigation.separation import protective_distance
 
-Recovery = Literal["", "clear", "rotate", "backoff", "slide"]
+Recovery = Literal["", "clear", "rotate", "backoff", "slide", "step_away"]
 
 
 #: Not settings (the navigator's are in `NavigationSettings`): how far ahead a lethal cell
@@ -123,8 +131,16 @@ SWITCH_GAIN = 0.15
 SWITCH_MIN_M = 0.5
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
-#: m/s: a person whose estimated speed is under this stands (`_restand`).
+#: m/s: a person whose estimated speed is under this stands (`_restand`, `_step_away`).
 STANDING_MPS = 0.2
+#: The step away from a person standing too near (module docstring): speed (m/s), how far
+#: beyond their S_p at rest and the resume margin it ends (m), and its longest (s).
+STEP_AWAY_SPEED = 0.15
+STEP_CLEAR_M = 0.05
+STEP_AWAY_S = 3.0
+#: s: a person the sensors saw this recently is there now (a step away is from them only:
+#: one only the map has, beside the flank, is slid past; `STALE_S`).
+SEEN_NOW_S = 1.0
 #: m a standoff moved clear of people standing keeps beyond what would stop the robot.
 RESTAND_CLEAR_M = 0.1
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
@@ -210,6 +226,8 @@ class Navigator:
         self.recovery_until = 0
         self.slid = False  # the slide is once a goal
         self.restood: set[str] = set()  # the people a standoff moved clear of (`_restand`)
+        self.stepped: set[str] = set()  # the people stepped away from (`_step_away`)
+        self.step_person = ""  # the one the step away is from
         self.slide_sign = 0.0  # +1 ahead, -1 back
         self.slide_person = ""  # the stale person slid past
         self.best_remaining = math.inf
@@ -401,6 +419,8 @@ class Navigator:
         if t_ns - self.blocked_since < wait_s * NS_PER_S:
             if who and t_ns - self.blocked_since >= self.n.blocked_timeout_s * NS_PER_S:
                 self.detail = f"waiting for {who} to pass"
+                if limit.rule == "stop" and self._step_away(t_ns, cm, limit):
+                    self.blocked_since = None
             return self._out(limit, new_plan)
         if not self.recoveries:
             reason: NavFailure = "blocked" if self.total_m > 0 else "no_path"
@@ -417,6 +437,24 @@ class Navigator:
         self.recovery_until = t_ns + round(span[self.recovery] * NS_PER_S)
         self.detail = f"recovery: {self.recovery}"
         return self._out(limit, new_plan)
+
+    def _step_away(self, t_ns: int, cm: Costmap, limit: SpeedLimit) -> bool:
+        """The stop's person stands within their S_p at rest and the resume margin: the
+        step away from them begins (module docstring); whether it did."""
+        who = limit.person_id
+        person = next((q for q in cm.people if q.id == who), None)
+        if person is None or who in self.stepped or not standing(person):
+            return False
+        near = limit.distance_m < limit.protective_m + RESUME_MARGIN_M
+        handing = self.goal is not None and who == self.goal.handover_id
+        seen = person.seen_ns is None or t_ns - person.seen_ns <= SEEN_NOW_S * NS_PER_S
+        if handing or not near or not seen:
+            return False
+        self.stepped.add(who)
+        self.recovery, self.step_person = "step_away", who
+        self.recovery_until = t_ns + round(STEP_AWAY_S * NS_PER_S)
+        self.detail = f"recovery: step away from {who}"
+        return True
 
     def _restand(self, t_ns: int, cm: Costmap) -> bool:
         """A standoff with people standing by it moves clear of everyone standing
@@ -506,6 +544,19 @@ class Navigator:
         k = int(np.argmin(near))
         return people[k].id if near[k] <= self.n.people.slow_radius_m else ""
 
+    def _away(self, pose: Pose, cm: Costmap) -> tuple[float, float] | None:
+        """The world direction straight away from the person stepped away from; None
+        once they are `STEP_CLEAR_M` beyond their S_p at rest and the resume margin (or
+        gone from the layer)."""
+        who = next((q for q in cm.people if q.id == self.step_person), None)
+        if who is None:
+            return None
+        d = float(distance_to_footprint(pose, self.fp, np.array([[who.x, who.y]]))[0])
+        if d >= stand_clear_m(self.n.people) - RESTAND_CLEAR_M + STEP_CLEAR_M:
+            return None
+        n = bearing(pose, self.fp, (who.x, who.y))
+        return -n[0], -n[1]
+
     def _recover(self, t_ns: int, pose: Pose, cm: Costmap) -> TickOutput:
         """Rotate or back off until the recovery's time is up (clear is one tick: the node
         empties the short-lived layer when it sees `recovery == "clear"`); then replan."""
@@ -523,11 +574,16 @@ class Navigator:
         # The people rules hold a recovery as they hold a path: a turn on the spot or a
         # step back within a bystander's protective separation is a stop.
         behind = (-math.cos(pose.yaw), -math.sin(pose.yaw))
+        away = self._away(pose, cm) if rec == "step_away" else None
+        if rec == "step_away" and away is None:  # clear of them (or they went): done
+            self.recovery_until = t_ns
+            return self._recover(t_ns, pose, cm)
+        way = behind if rec == "backoff" else away
         limit = (
             self._slide_limit(pose, cm, self.slide_sign, self.slide_person)
             if rec == "slide"
             else people_limit(
-                pose, behind if rec == "backoff" else None, cm.people, self.fp, self.n.people,
+                pose, way, cm.people, self.fp, self.n.people,
                 self.top_mps, self.goal.handover_id if self.goal else "",
                 self.limit_rule == "stop", turning=rec == "rotate",
             )
@@ -535,6 +591,13 @@ class Navigator:
         self.limit_rule = limit.rule
         if limit.rule == "stop":
             self.cmd = np.zeros(3)
+        elif away is not None:  # along `away`, in the base frame
+            c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+            speed = min(STEP_AWAY_SPEED, limit.speed)
+            step = speed * np.array([c * away[0] + s * away[1], -s * away[0] + c * away[1], 0.0])
+            free = guard.ok(step)
+            self.cmd = step if free else np.zeros(3)
+            self.guarded = "" if free else "stand"
         elif rec == "rotate":  # either way round, whichever the body has room for
             turns = (np.array([0.0, 0.0, w]) for w in (ROTATE_RATE, -ROTATE_RATE))
             self.cmd = next((c for c in turns if guard.ok(c)), np.zeros(3))

@@ -380,6 +380,9 @@ def test_the_recoveries_do_not_turn_or_step_back_inside_a_bystanders_separation(
         return seen
 
     near = recoveries(Person("person_1", 0.0, FP.half_width + 0.3, None, (0.0, 0.0)))
+    away = near.pop("step_away")  # first, straight away from them (to the right)
+    assert all(c[1] < 0.0 and abs(c[0]) < 1e-9 for c in away if c.any())
+    assert any(c.any() for c in away)
     assert set(near) == {"rotate", "backoff"}
     assert not any(c.any() for cmds in near.values() for c in cmds)
     far = recoveries(Person("person_1", 0.0, FP.half_width + 3.0, None, (0.0, 0.0)))

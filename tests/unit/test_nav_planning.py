@@ -289,19 +289,19 @@ def test_a_handover_pose_takes_the_side_asked_for_before_the_persons_front() -> 
     )
 
 
-def _drive(nav, pose: Pose, cm, seconds: float):  # type: ignore[no-untyped-def]
-    """Tick `nav` at 20 Hz, the base going where it is sent (body frame), until the goal
-    ends or `seconds` pass; the last output and pose."""
-    out = None
+def _drive(nav, pose: Pose, cm, seconds: float, t0_ns: int = 0):  # type: ignore[no-untyped-def]
+    """Tick `nav` at 20 Hz from `t0_ns`, the base going where it is sent (body frame),
+    until the goal ends or `seconds` pass; the last output and pose, and the next tick."""
+    out, k = None, 0
     for k in range(round(seconds / 0.05)):
-        out = nav.tick(round(k * 0.05e9), pose, cm)
+        out = nav.tick(t0_ns + round(k * 0.05e9), pose, cm)
         vx, vy, wz = out.cmd
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         pose = Pose(pose.x + (c * vx - s * vy) * 0.05, pose.y + (s * vx + c * vy) * 0.05,
                     pose.yaw + wz * 0.05)  # fmt: skip
         if out.state != "active":
             break
-    return out, pose
+    return out, pose, t0_ns + round((k + 1) * 0.05e9)
 
 
 def test_a_standoff_with_a_person_standing_by_it_moves_clear_of_them_and_is_reached() -> None:
@@ -333,7 +333,7 @@ def test_a_standoff_with_a_person_standing_by_it_moves_clear_of_them_and_is_reac
     moved = nav.goal.pose
     assert distance_to_footprint(moved, FP, np.array([at]))[0] >= keep
     assert math.dist((moved.x, moved.y), can) == pytest.approx(math.dist((goal.x, goal.y), can))
-    out, end = _drive(nav, start, cm, 30.0)
+    out, end, _ = _drive(nav, start, cm, 30.0)
     assert out.state == "succeeded", out.detail
     assert math.hypot(end.x - moved.x, end.y - moved.y) <= 0.1
 
@@ -352,3 +352,25 @@ def test_a_standoff_clear_of_people_standing_is_refused_when_there_is_none() -> 
     assert standoff_pose(cm, x, y, FP, avoid=((x + 5.0, y + 5.0),), keep_m=0.8) == pose
     with pytest.raises(GoalError, match=r"0\.80 m clear of the people standing there"):
         standoff_pose(cm, x, y, FP, avoid=((x, y),), keep_m=0.8)  # at the artifact itself
+
+
+def test_a_robot_stopped_by_a_person_standing_too_near_steps_away_and_goes_on() -> None:
+    """Seed 0's shift began a request 0.68 m from the worker it had just handed to and
+    stood 46 s and two recoveries: within a bystander's S_p at rest only a way clearly
+    away from them may move. After `blocked_timeout_s` it steps straight away from
+    them, then walks round them to its goal."""
+    from services.navigation.navigator import STEP_AWAY_S, GoalSpec, Navigator
+
+    start, goal = Pose(2.0, 3.0, 0.0), Pose(6.0, 3.0, 0.0)
+    at = (2.0 + FP.front + 0.1, 3.0 + FP.half_width + 0.35)  # ahead, to the left
+    cm = build_costmap(_room([]), FP, CostParams(), people=[Person("p", *at, None, (0.0, 0.0))])
+    ns = NavigationSettings()
+    nav = Navigator(FP, ns, 0.05)
+    nav.start(GoalSpec("g", goal, 0.1, 0.1), 0)
+    assert nav.tick(0, start, cm).limit.rule == "stop"
+    out, end, t = _drive(nav, start, cm, 2.0 * ns.blocked_timeout_s + STEP_AWAY_S)
+    assert out.recovery == "" and nav.stepped == {"p"}
+    assert distance_to_footprint(end, FP, np.array([at]))[0] > 0.61 + 0.15  # S_p at rest, margin
+    assert nav.recoveries == ["clear", "rotate", "backoff"]  # none of those used
+    out, end, _ = _drive(nav, end, cm, 40.0, t)
+    assert out.state == "succeeded", out.detail
