@@ -39,6 +39,11 @@ starts a tentative person, who gets the next `person_<n>` at `confirm_hits` dete
 unless it lies within `MIN_SEPARATION_M` of a person (then it is a piece of that body,
 e.g. legs whose colours did not match the shirt).
 
+A person's facing (`yaw`: a seeded map's, where they stood facing) is forgotten (0,
+unknown) once they are seen walking: navigation puts a handover pose in front of a known
+facing, else on the robot's side (seed 0's shift: the worker who came to the robot's
+ask was walked round, a 4.2 m path, to the front their seed had faced).
+
 A person standing still (no sure velocity) is not moved by one detection far from them
 (beyond `GATE_MIN_M`): it is held, and the person moves there only when a second
 detection within `GATE_MIN_M` of it comes within `LEAP_CONFIRM_NS`; a detection near
@@ -692,6 +697,8 @@ class PeopleTracker:
         tr.near_hits += int(obs.near(self.settings.class_near_m))
         tr.moving = sure_velocity(tr)
         tr.walked |= tr.moving
+        if tr.moving:  # the facing it had (a seed's) is not theirs once they walk
+            tr.yaw = 0.0
         tr.last_seen_ns = stamp_ns
         tr.misses = 0
         tr.missing_since_ns = None

@@ -177,6 +177,30 @@ def test_a_seeded_person_is_not_pulled_to_a_false_detection_nearby() -> None:
     assert sorted(t.id or "" for t in tracker.confirmed) == ["person_1", "person_2"]
 
 
+def test_a_seeded_persons_facing_is_forgotten_once_they_walk() -> None:
+    """A seeded map has each person's facing where they stood; a person seen walking
+    faces elsewhere (the handover pose goes in front of a known facing: seed 0's shift
+    walked 4.2 m round the worker who had come to the robot, to the front of their
+    seed's facing). Standing where they were, seen again, they keep it."""
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    stander, walker = (
+        Track(class_name="person", kind="person", xy=np.array(xy), cov=np.eye(2) * 0.05**2,
+              z=0.0, source="seed-from-world", id=pid, yaw=-2.12)
+        for pid, xy in (("person_1", (0.0, 5.0)), ("person_2", (0.0, 0.0)))
+    )  # fmt: skip
+    tracker.add(stander)
+    tracker.add(walker)
+    rng = np.random.default_rng(3)
+    for k in range(20):
+        obs = [
+            Observation("person", np.array([0.0, 5.0]) + rng.normal(0.0, 0.02, 2), 0.0, 0.05),
+            Observation("person", np.array([1.0 * k * 0.1, 0.0]), 0.0, 0.05),
+        ]
+        tracker.update(k * DT_NS, obs)
+    assert walker.moving and walker.yaw == 0.0  # unknown: the robot's side of them
+    assert not stander.moving and stander.yaw == -2.12
+
+
 def test_a_standing_person_seen_in_other_colours_where_they_stand_keeps_the_id() -> None:
     """From behind, under another light: the colours differ, the place does not."""
     rng = np.random.default_rng(4)
