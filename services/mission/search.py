@@ -62,11 +62,14 @@ NEAR_VIEW_M = 2.0
 
 class Place(NamedTuple):
     """A point on the floor to look at (m, world), and why; `also`: the other points of
-    the place (along its support's top)."""
+    the place (along its support's top); `rank`: which of the module docstring's three
+    kinds it is (1 its last place, 2 a recent sighting of its class, 3 a support): the
+    route looks at them rank by rank (`behaviours.search`)."""
 
     xy: tuple[float, float]
     why: str
     also: tuple[tuple[float, float], ...] = ()
+    rank: int = 3
 
     @property
     def points(self) -> list[tuple[float, float]]:
@@ -104,7 +107,7 @@ def places_to_look(
     out: list[Place] = []
     covered: set[str] = set()
 
-    def add(xy: tuple[float, float], why: str) -> None:
+    def add(xy: tuple[float, float], why: str, rank: int) -> None:
         if len(out) >= max_places:
             return
         under = next((s.id for s in supports if on_surface(xy, s, ON_MARGIN_M)), "")
@@ -117,10 +120,11 @@ def places_to_look(
             covered.add(under)
             top = next(s for s in supports if s.id == under)
             also = tuple(q for q in along(top) if math.dist(q, xy) > STRETCH_M / 2)
-        out.append(Place(xy, why + (f" (on {under})" if under and under not in why else ""), also))
+        on = f" (on {under})" if under and under not in why else ""
+        out.append(Place(xy, why + on, also, rank))
 
     if last_xy is not None:
-        add(last_xy, "where the map had it")
+        add(last_xy, "where the map had it", 1)
     skipped = set(skip)
     recent_ns = round(recent_s * 1e9)
     seen = [
@@ -131,10 +135,10 @@ def places_to_look(
     for a in sorted(seen, key=lambda a: math.dist(a.position_in_world[:2], robot_xy)):
         ago = (now_ns - a.last_seen_ns) / 1e9
         x, y = a.position_in_world[:2]
-        add((x, y), f"a {class_name} seen there {ago:.0f} s ago ({a.id} at ({x:.2f}, {y:.2f}))")
+        add((x, y), f"a {class_name} seen there {ago:.0f} s ago ({a.id} at ({x:.2f}, {y:.2f}))", 2)
     for s in sorted(supports, key=lambda s: math.dist(s.centre_xy, robot_xy)):
         if s.id not in covered:
-            add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, a support")
+            add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, a support", 3)
     return out
 
 

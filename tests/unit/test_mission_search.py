@@ -348,3 +348,29 @@ def test_a_search_goes_on_after_a_miss_at_most_max_resumes_times() -> None:
         "failed", "object_not_found"), outcome  # fmt: skip
     standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
     assert standoffs[0] == "bottle_1" and len(standoffs) == 2 + MAX_RESUMES, standoffs
+
+
+def test_the_search_route_looks_at_its_places_rank_by_rank_not_nearest_first() -> None:
+    """Seed 0's shift: the route over every place walked nearest first and looked at
+    three supports before table_2, where the map had seen a bottle lately and the bottle
+    stood. The last place, then the recent sightings, then the supports, each rank's
+    viewpoints from where the rank before ended."""
+    from common.messages.world import OCCUPIED
+    from services.mission.behaviours.search import ranked_route
+
+    cells = np.zeros((60, 120), np.uint8)  # a 12 × 6 m room, 10 cm cells
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = OCCUPIED
+    start = (6.0, 3.0)
+    places = [
+        Place((6.0, 4.5), "where the map had it", rank=1),
+        Place((10.5, 3.0), "a bottle seen there 104 s ago", rank=2),
+        Place((2.0, 3.0), "bench_1, a support", rank=3),  # nearer than the sighting
+    ]
+    route = ranked_route(cells, 0.1, (0.0, 0.0), start, places, 0.5, 0.8, 1.6)
+    assert route.unseen == 0 and route.facings is not None
+    facing = [
+        min(range(3), key=lambda k: math.dist(v, places[k].xy)) for v in route.viewpoints
+    ]  # the place each viewpoint stands nearest
+    assert facing == sorted(facing) and set(facing) == {0, 1, 2}
+    for a, b in zip(route.paths, route.paths[1:], strict=False):
+        assert np.allclose(a[-1], b[0])  # one walk: each leg from where the last ended

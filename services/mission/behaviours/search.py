@@ -4,8 +4,9 @@ The fetch's first leaf. It does nothing (SUCCESS at once) unless the tree's reco
 asked for a search (`SEARCH` on the blackboard: every candidate was tried and not found
 at its place). Then it plans the places (`services.mission.search.places_to_look`: its
 last place, where the map saw its class lately, the supports nearest first), the route
-facing them from within `patrol_recheck_see_m` (`coverage.facing_route`, as the second
-look plans), and walks it as the patrol walks a route (`patrol.PatrolRunner`: the arm up
+facing them from within `patrol_recheck_see_m` rank by rank (`ranked_route`:
+`coverage.facing_route`, as the second look plans, on each kind of place in turn), and
+walks it as the patrol walks a route (`patrol.PatrolRunner`: the arm up
 in `look`, a hold at each viewpoint; the map fuses the wrist camera meanwhile, the node
 saying `arm_look`). After every tick it asks the map whether the object is there now
 (`search.found`; for a request by id, an entry the map made since the request began,
@@ -53,6 +54,38 @@ from services.mission.targets import class_of, handed_put_back, is_map_id
 
 #: How many times a request's search goes on after what it found was not there.
 MAX_RESUMES = 2
+
+
+def ranked_route(
+    cells: np.ndarray,
+    resolution_m: float,
+    origin_xy: tuple[float, float],
+    start_xy: tuple[float, float],
+    places: list[Place],
+    clearance_m: float,
+    near_m: float,
+    see_m: float,
+) -> Route:
+    """Viewpoints facing the places rank by rank (`Place.rank`: its last place, then
+    where its class was seen lately, then the supports), each rank's (`facing_route`:
+    fewest viewpoints, nearest first) from where the rank before ended. One route over
+    them all walked nearest first: seed 0's shift looked at three supports before
+    table_2, where the map had seen a bottle 104 s before and the bottle stood."""
+    viewpoints: list[np.ndarray] = []
+    paths: list[np.ndarray] = []
+    facings: list[float] = []
+    unseen, here = 0, start_xy
+    for rank in sorted({p.rank for p in places}):
+        targets = np.array([q for p in places if p.rank == rank for q in p.points])
+        r = facing_route(cells, resolution_m, origin_xy, here, targets.reshape(-1, 2),
+                         clearance_m, near_m, see_m, VIEW_HALF_ANGLE)  # fmt: skip
+        viewpoints += r.viewpoints
+        paths += r.paths
+        facings += r.facings or []
+        unseen += r.unseen
+        if r.viewpoints:
+            here = (float(r.viewpoints[-1][0]), float(r.viewpoints[-1][1]))
+    return Route(viewpoints, paths, facings, unseen)
 
 
 @dataclass(frozen=True)
@@ -190,11 +223,9 @@ class LookElsewhere(MissionBehaviour):
             last_xy, self.class_name, listing, supports, xy, self.port.now_ns,
             s.search_recent_s, s.search_places, skip=self.tried,
         )  # fmt: skip
-        route = facing_route(
+        route = ranked_route(
             np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
-            np.array([q for p in self.places for q in p.points]).reshape(-1, 2),
-            s.patrol_clearance_m,
-            s.patrol_near_m, s.patrol_recheck_see_m, VIEW_HALF_ANGLE,
+            self.places, s.patrol_clearance_m, s.patrol_near_m, s.patrol_recheck_see_m,
         )  # fmt: skip
         said = "; ".join(p.why for p in self.places)
         if not route.viewpoints:
