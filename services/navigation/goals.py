@@ -11,9 +11,9 @@ artifact; when its footprint is not free, directions further from the normal are
 in turn, so a crowded edge still gives a free pose. A goal may ask for the sides to
 stand on instead (`ArtifactStandoff.bearings_rad`: a box held along its long faces).
 Given people to `avoid`, a pose whose footprint comes within `keep_m` of one of them
-is passed over too: a person standing by the edge holds the robot short of a standoff
-inside their protective separation for as long as they stay (the navigator's
-`_restand`).
+is passed over too, for a standoff as for a handover (the others standing there): a
+person standing by it holds the robot short of a pose inside their protective
+separation for as long as they stay (the navigator's `_restand`).
 
 Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; on the
 side the goal asks for (`PersonHandover.bearing_rad`), else in front of them when their
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common import robot
+from common.geometry import FloatArray
 from common.messages.navigation import NavGoalRequest
 from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import (
@@ -92,6 +93,12 @@ def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> 
     return out
 
 
+def clear_of(pose: Pose, fp: Footprint, avoid: FloatArray, keep_m: float) -> bool:
+    """Whether the footprint at `pose` is at least `keep_m` from every point of `avoid`
+    ((k, 2) world; none: clear)."""
+    return not len(avoid) or float(distance_to_footprint(pose, fp, avoid).min()) >= keep_m
+
+
 def standoff_pose(
     costmap: Costmap,
     x: float,
@@ -123,9 +130,7 @@ def standoff_pose(
     for k in order:
         a = float(angles[k])
         pose = Pose(x + d * math.cos(a), y + d * math.sin(a), math.remainder(a + math.pi, math.tau))
-        if pose_ok(costmap, pose, fp, margin) and (
-            not len(people) or distance_to_footprint(pose, fp, people).min() >= keep_m
-        ):
+        if pose_ok(costmap, pose, fp, margin) and clear_of(pose, fp, people, keep_m):
             return pose
     if avoid:
         raise GoalError(
@@ -176,9 +181,12 @@ def handover_pose(
     margin: float = GOAL_MARGIN_M,
     bearing: float | None = None,
     distance: float | None = None,
+    avoid: tuple[tuple[float, float], ...] = (),
+    keep_m: float = 0.0,
 ) -> Pose:
     """A free pose facing the person at `distance` (None: `HANDOVER_DISTANCE_M`; see the
-    module docstring); `bearing`: the side asked for (the bearing from the person), first."""
+    module docstring); `bearing`: the side asked for (the bearing from the person), first;
+    its footprint at least `keep_m` from each point of `avoid` (others standing there)."""
     if bearing is not None:
         preferred = bearing
     elif person.yaw is not None:
@@ -186,6 +194,7 @@ def handover_pose(
     else:
         preferred = math.atan2(robot_xy[1] - person.y, robot_xy[0] - person.x)
     d = robot.HANDOVER_DISTANCE_M if distance is None else distance
+    others = np.array(avoid, dtype=float).reshape(-1, 2)
     # The planner's own test (`pose_ok`), so a pose chosen here is one it plans to: the
     # footprint on free cells, the base not in lethal cost (the person's lethal disc ends
     # short of the handover distance).
@@ -197,8 +206,10 @@ def handover_pose(
                 person.y + d * math.sin(a),
                 math.remainder(a + math.pi, math.tau),
             )
-            if pose_ok(costmap, pose, fp, margin):
+            if pose_ok(costmap, pose, fp, margin) and clear_of(pose, fp, others, keep_m):
                 return pose
+    clear = f", {keep_m:.2f} m clear of the others standing there" if avoid else ""
     raise GoalError(
         f"no free handover pose {d:.2f} m from {person.id} at ({person.x:.2f}, {person.y:.2f})"
+        + clear
     )

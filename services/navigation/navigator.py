@@ -33,13 +33,15 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   or a step back inside a bystander's protective separation is a stop: before, the
   recoveries moved whoever stood there); after them, `failed: blocked` (or `no_path`
   when no plan was ever found);
-- a goal at an artifact (a standoff) with a person standing by it (velocity known,
-  under `STANDING_MPS`; seen within `STALE_S`) nearer its footprint than they would
+- a goal at an artifact (a standoff), or a handover's, with a person standing by it
+  (velocity known, under `STANDING_MPS`; seen within `STALE_S`; not the person handed
+  over to) nearer its footprint than they would
   hold the robot at (`stand_clear_m`: S_p at rest, the stop's resume margin and
   `RESTAND_CLEAR_M`) moves, at a periodic replan, once per person and goal: to the
   standoff nearest the edge's normal clear of every person standing
-  (`goals.standoff_pose`'s `avoid`), when there is one (`_restand`; the approach
-  servoes onto the object from there). Hall seed 1's shift stood 97 s and three
+  (`goals.standoff_pose`'s `avoid`; for a handover, the free side of the person
+  nearest the one asked for), when there is one (`_restand`; the approach servoes onto
+  the object from there). Hall seed 1's shift stood 97 s and three
   recoveries 0.5 m short of box_4's standoff, stopped by person_1 standing 0.63 m off
   the footprint (S_p at rest 0.61 m), then failed it blocked; once stopped that near,
   only a way clearly away from them may move (`people_limit`), so the goal moves
@@ -346,7 +348,7 @@ class Navigator:
             return self._recover(t_ns, pose, cm)
         due = t_ns - self.last_plan_ns >= self.n.replan_s * NS_PER_S
         if due:
-            self._restand(t_ns, cm)
+            self._restand(t_ns, cm, pose)
         blocked_path = self.plan is not None and self._path_blocked(cm)
         if self.plan is None or blocked_path or due:
             hold = not (self.take_next or blocked_path) and self.blocked_since is None
@@ -456,15 +458,17 @@ class Navigator:
         self.detail = f"recovery: step away from {who}"
         return True
 
-    def _restand(self, t_ns: int, cm: Costmap) -> bool:
-        """A standoff with people standing by it moves clear of everyone standing
-        (module docstring); whether it moved (said once in the tick's `moved`)."""
+    def _restand(self, t_ns: int, cm: Costmap, pose: Pose) -> bool:
+        """A standoff or handover goal with people standing by it (not the person handed
+        over to) moves clear of everyone standing (module docstring); whether it moved
+        (said once in the tick's `moved`)."""
         g = self.goal
-        if g is None or g.artifact_xy is None:
+        if g is None or (g.artifact_xy is None and not g.handover_id):
             return False
         standers = [
             q for q in cm.people
-            if standing(q) and (q.seen_ns is None or t_ns - q.seen_ns <= STALE_S * NS_PER_S)
+            if standing(q) and q.id != g.handover_id
+            and (q.seen_ns is None or t_ns - q.seen_ns <= STALE_S * NS_PER_S)
         ]  # fmt: skip
         if not standers:
             return False
@@ -475,21 +479,44 @@ class Navigator:
         if not by:
             return False
         self.restood.update(by)
+        avoid = tuple((q.x, q.y) for q in standers)
+        new: Pose | None
         try:
-            pose = goals.standoff_pose(
-                cm, *g.artifact_xy, self.fp, bearings=g.bearings,
-                tolerance=g.bearing_tolerance, avoid=tuple((q.x, q.y) for q in standers),
-                keep_m=keep,
-            )  # fmt: skip
+            if g.artifact_xy is not None:
+                new = goals.standoff_pose(
+                    cm, *g.artifact_xy, self.fp, bearings=g.bearings,
+                    tolerance=g.bearing_tolerance, avoid=avoid, keep_m=keep,
+                )  # fmt: skip
+            else:
+                new = self._handover_clear(cm, pose, avoid, keep)
         except goals.GoalError as exc:
             self.moved = f"kept: {' and '.join(by)} standing by it: {exc}"
             return False
-        self._move_goal(replace(g, pose=pose), t_ns)
+        if new is None:
+            return False
+        self._move_goal(replace(g, pose=new), t_ns)
         self.moved = (
             f"clear of {' and '.join(by)} standing by it: from ({g.pose.x:.2f}, {g.pose.y:.2f}) "
-            f"to ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})"
+            f"to ({new.x:.2f}, {new.y:.2f}, {new.yaw:.2f})"
         )
         return True
+
+    def _handover_clear(
+        self, cm: Costmap, pose: Pose, avoid: tuple[tuple[float, float], ...], keep: float
+    ) -> Pose | None:
+        """The handover pose chosen again clear of `avoid` (None: its person is not
+        known here)."""
+        g = self.goal
+        assert g is not None
+        person = next((q for q in cm.people if q.id == g.handover_id), None)
+        if person is None and g.person_xy is not None:
+            person = Person(g.handover_id, *g.person_xy, None)
+        if person is None:
+            return None
+        return goals.handover_pose(
+            cm, person, (pose.x, pose.y), self.fp, bearing=g.bearing, distance=g.distance,
+            avoid=avoid, keep_m=keep,
+        )  # fmt: skip
 
     def _slide_way(self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit) -> float:
         """+1 (ahead) or -1 (back): the way to slide past the person who holds the stop,

@@ -374,3 +374,33 @@ def test_a_robot_stopped_by_a_person_standing_too_near_steps_away_and_goes_on() 
     assert nav.recoveries == ["clear", "rotate", "backoff"]  # none of those used
     out, end, _ = _drive(nav, end, cm, 40.0, t)
     assert out.state == "succeeded", out.detail
+
+
+def test_a_handover_pose_with_somebody_else_standing_by_it_moves_clear_of_them() -> None:
+    """Seed 1's shift: the handover pose lay 0.65 m from a bystander standing there; the
+    robot stood 40 s stopped by them. The pose moves round the person handed to, clear
+    of the bystander; the person handed to moves nothing."""
+    from services.navigation.navigator import GoalSpec, Navigator, stand_clear_m
+
+    grid = _room([])
+    them = Person("h", 5.0, 3.0, None, (0.0, 0.0))
+    cm0 = build_costmap(grid, FP, CostParams(), people=[them])
+    start = Pose(2.0, 3.0, 0.0)
+    goal = handover_pose(cm0, them, (start.x, start.y), FP)  # on the robot's side
+    c, s = math.cos(goal.yaw), math.sin(goal.yaw)
+    u, v = 0.0, FP.half_width + 0.45  # beside the pose's flank
+    by = Person("b", goal.x + c * u - s * v, goal.y + s * u + c * v, None, (0.0, 0.0))
+    cm = build_costmap(grid, FP, CostParams(), people=[them, by])
+    ns = NavigationSettings()
+    nav = Navigator(FP, ns, 0.05)
+    spec = GoalSpec("g", goal, 0.1, 0.3, handover_id="h", person_xy=(them.x, them.y))
+    nav.start(spec, 0)
+    out = nav.tick(0, start, cm)
+    assert out.moved.startswith("clear of b standing by it")
+    moved = nav.goal.pose
+    keep = stand_clear_m(ns.people)
+    assert distance_to_footprint(moved, FP, np.array([[by.x, by.y]]))[0] >= keep
+    assert math.dist((moved.x, moved.y), (them.x, them.y)) == pytest.approx(HANDOVER_DISTANCE_M)
+    alone = Navigator(FP, ns, 0.05)  # the person handed to, standing at it, moves nothing
+    alone.start(spec, 0)
+    assert alone.tick(0, start, cm0).moved == "" and alone.goal.pose == goal
