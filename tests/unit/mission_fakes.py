@@ -121,6 +121,8 @@ class FakeRobot:
     nav_fail_times: int | None = None
     #: Goal kinds navigation keeps active without moving the base (a person beside it).
     nav_hold: set[str] = field(default_factory=set)
+    #: Ticks after a goal is sent before its first status comes (none meanwhile).
+    status_lag: int = 0
     _nav_failed: dict[str, int] = field(default_factory=dict)
     #: Goals navigation refuses (no typed code: this goal only), when given.
     nav_refuse: Callable[[NavGoal], bool] | None = None
@@ -285,7 +287,7 @@ class FakeRobot:
         return goal_id
 
     def nav_status(self, goal_id: str) -> NavStatus | None:
-        if goal_id not in self._nav:
+        if goal_id not in self._nav or self.t < self._nav_sent[goal_id] + self.status_lag * TICK_NS:
             return None
         start, kind, state = self._nav[goal_id]
         waited = self.t - self._nav_sent[goal_id]

@@ -119,17 +119,23 @@ def test_the_ask_is_answered_only_by_someone_the_colours_do_not_tell_apart() -> 
     assert any(d.startswith("person_8 came while the robot asked for person_1") for d in decisions)
 
 
-def _split_on_the_way(colours: PersonColours) -> tuple[Outcome, list[str], list[str]]:
-    """The walk to person_1 (red, never seen since the map was seeded) is under way when
-    person_4, in `colours`, stands 1.5 m from the robot, seen every tick: the outcome,
-    the person ids of the handover goals sent and the decisions said."""
+def _split_on_the_way(
+    colours: PersonColours, after_s: float = 0.0
+) -> tuple[Outcome, list[str], list[str]]:
+    """The walk to person_1 (red, never seen since the map was seeded) is under way
+    (`after_s` into it; a goal's first status a tick after it is sent) when person_4, in
+    `colours`, stands 1.5 m from the robot, seen every tick: the outcome, the person ids
+    of the handover goals sent and the decisions said."""
     robot = _world()
     robot.nav_ticks = 200  # 10 s a walk
+    robot.status_lag = 1
     tree = mission(robot)
-    near = None
+    near, walking = None, None
     for _ in range(8000):
         outcome = tree.tick()
-        if near is None and [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]:
+        if walking is None and [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]:
+            walking = robot.t
+        if near is None and walking is not None and robot.t - walking >= after_s * 1e9:
             x, y = robot.xy
             near = dressed(entity("person_4", x + 1.5, y, kind="person", yaw=math.pi), colours)
         if near is not None:  # standing there, seen
@@ -150,6 +156,15 @@ def test_the_person_asked_for_standing_by_the_robot_under_another_id_is_walked_t
     assert sent == ["person_1", "person_4"]
     assert any(d.startswith("person_1 not seen for") and "walking to person_4" in d
                for d in decisions), decisions  # fmt: skip
+
+
+def test_a_walk_redirected_late_to_the_persons_other_id_waits_for_its_new_goal() -> None:
+    """Seed 1's shift: redirected 8 s into the walk, the new goal failed in the tick it
+    was sent ("no status of goal nav_17 after 8.0 s": counted from the walk's start)."""
+    outcome, sent, decisions = _split_on_the_way(RED, after_s=9.0)
+    assert outcome.state == "succeeded", outcome
+    assert sent[:2] == ["person_1", "person_4"]
+    assert not any("no status of goal" in d for d in decisions), decisions
 
 
 def test_somebody_near_in_other_clothes_is_not_taken_for_the_person_asked_for() -> None:
