@@ -191,3 +191,8 @@ def test_wearer_near_takes_somebody_standing_near_in_the_colours_once_the_entry_
         wearer_near(look, asked, [asked, near], (0.0, 0.0), 20 * s, standing, ["person_4"]) is None
     )
     assert wearer_near(None, asked, [asked, near], *args) is None
+    # not told apart, but not nearly the same either (seed 1's shift: far 0.49): no walk
+    alike = dressed(near, afar(clothes(0, 30, 48)))
+    ((_, d, two),) = compared(look, alike)
+    assert 0.33 < d < 0.65 and not two
+    assert wearer_near(look, asked, [asked, alike], *args) is None

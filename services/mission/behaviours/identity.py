@@ -25,8 +25,9 @@ them before letting go. So:
 - The ask (`LookForPerson`) is answered only by someone the colours do not tell apart
   from the one asked for (`other_clothes`).
 - On the walk to the person (`NavigateTo`), the map's entry of them not seen for
-  `STALE_S` while somebody stands near the robot in their colours (`wearer_near`): the
-  map split them, and the walk goes to that one (hall seed 0's shift: the map's
+  `STALE_S` while somebody stands near the robot in their colours, nearly the same in
+  every band compared (`wearer_near`, `WEARER_SAME`): the map split them, and the walk
+  goes to that one (hall seed 0's shift: the map's
   person_4 stayed where they had walked past, the worker themselves stood 1.2 m from
   the robot as person_10, and the robot stood 120 s by them, its walk to the old place
   held by their protective separation, until the request timed out).
@@ -41,7 +42,7 @@ from typing import Any
 
 from py_trees.common import Status
 
-from common.appearance import Band, differ
+from common.appearance import OTHER, Band, differ
 from common.messages.semantic_map import MapEntity, PersonColours
 from services.mission import targets
 from services.mission.behaviours.base import (
@@ -174,6 +175,12 @@ class RightPerson(MissionBehaviour):
 STALE_S = 5.0
 #: m: how near the robot somebody in their colours stands to be taken for them.
 WEARER_NEAR_M = 3.0
+#: A walk goes to somebody else's id on colours alone only when every band compared is
+#: this near (half of what tells two people apart, `common.appearance.OTHER`): seed 1's
+#: shift, three people alike, walked to person_3 (far 0.49, near 0.01) for person_11
+#: and handed the bottle to the wrong worker. Not told apart is enough not to refuse
+#: somebody (`RightPerson`), not to go to them instead.
+WEARER_SAME: dict[Band, float] = {band: 0.5 * d for band, d in OTHER.items()}
 
 
 def wearer_near(
@@ -188,8 +195,8 @@ def wearer_near(
     """Somebody standing (`standing`: seen lately, not walking) within `WEARER_NEAR_M` of
     the robot whom the noted colours compare with and do not tell apart from the one
     asked for, while the map's entry of that one (`asked`; None: gone from the map) is
-    not seen for `STALE_S`: the nearest in colours; None otherwise (no look, nobody such,
-    or one of `others`)."""
+    not seen for `STALE_S`: the nearest in colours, when every band compared is within
+    `WEARER_SAME`; None otherwise (no look, nobody such, or one of `others`)."""
     if look is None or (asked is not None and now_ns - asked.last_seen_ns < STALE_S * 1e9):
         return None
     near = [
@@ -197,7 +204,10 @@ def wearer_near(
         if (asked is None or q.id != asked.id) and q.id not in others and standing(q)
         and math.dist(q.position_in_world[:2], robot_xy) <= WEARER_NEAR_M
     ]  # fmt: skip
-    return nearest_alike(look, near)
+    best = nearest_alike(look, near)
+    if best is None or any(d > WEARER_SAME[band] for band, d, _ in best[1]):
+        return None
+    return best
 
 
 def another_to_try(bb: Any) -> Callable[[Failure], bool]:
