@@ -223,10 +223,7 @@ class GoalIntake:
                                         person.y - g.person_xy[1]) < RETARGET_M:  # fmt: skip
             return
         try:
-            here = (pose.x, pose.y)
-            target = goals.handover_pose(
-                cm, person, here, self.fp, bearing=g.bearing, distance=g.distance
-            )
+            target = self.nav.follow(cm, person, pose, b)
         except goals.GoalError as exc:
             self.log.info("goal %s keeps its pose: %s", g.goal_id, exc)
             return

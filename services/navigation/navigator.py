@@ -74,6 +74,7 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, replace
 from typing import Literal, NamedTuple
@@ -465,11 +466,7 @@ class Navigator:
         g = self.goal
         if g is None or (g.artifact_xy is None and not g.handover_id):
             return False
-        standers = [
-            q for q in cm.people
-            if standing(q) and q.id != g.handover_id
-            and (q.seen_ns is None or t_ns - q.seen_ns <= STALE_S * NS_PER_S)
-        ]  # fmt: skip
+        standers = self._standers(cm, t_ns)
         if not standers:
             return False
         keep = stand_clear_m(self.n.people)
@@ -501,6 +498,16 @@ class Navigator:
         )
         return True
 
+    def _standers(self, cm: Costmap, t_ns: int) -> list[Person]:
+        """The people standing (`standing`, seen within `STALE_S`), but the one handed
+        over to."""
+        handing = self.goal.handover_id if self.goal is not None else ""
+        return [
+            q for q in cm.people
+            if standing(q) and q.id != handing
+            and (q.seen_ns is None or t_ns - q.seen_ns <= STALE_S * NS_PER_S)
+        ]  # fmt: skip
+
     def _handover_clear(
         self, cm: Costmap, pose: Pose, avoid: tuple[tuple[float, float], ...], keep: float
     ) -> Pose | None:
@@ -517,6 +524,25 @@ class Navigator:
             cm, person, (pose.x, pose.y), self.fp, bearing=g.bearing, distance=g.distance,
             avoid=avoid, keep_m=keep,
         )  # fmt: skip
+
+    def follow(self, cm: Costmap, person: Person, pose: Pose, t_ns: int) -> Pose:
+        """The active handover goal's pose chosen again for its person at a new place
+        (the intake's `follow_person`): clear of the others standing there when it can
+        be, as `_restand` would move it (else it would move back beside them at each
+        step of the person's estimate); `goals.GoalError` when there is no free pose."""
+        g = self.goal
+        assert g is not None
+        avoid = tuple((q.x, q.y) for q in self._standers(cm, t_ns))
+        here, keep = (pose.x, pose.y), stand_clear_m(self.n.people)
+        if avoid:
+            with contextlib.suppress(goals.GoalError):
+                return goals.handover_pose(
+                    cm, person, here, self.fp, bearing=g.bearing, distance=g.distance,
+                    avoid=avoid, keep_m=keep,
+                )  # fmt: skip
+        return goals.handover_pose(
+            cm, person, here, self.fp, bearing=g.bearing, distance=g.distance
+        )
 
     def _slide_way(self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit) -> float:
         """+1 (ahead) or -1 (back): the way to slide past the person who holds the stop,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -401,6 +402,13 @@ def test_a_handover_pose_with_somebody_else_standing_by_it_moves_clear_of_them()
     keep = stand_clear_m(ns.people)
     assert distance_to_footprint(moved, FP, np.array([[by.x, by.y]]))[0] >= keep
     assert math.dist((moved.x, moved.y), (them.x, them.y)) == pytest.approx(HANDOVER_DISTANCE_M)
+    # the person's estimate steps on (the intake's follow_person): chosen clear again,
+    # not back beside the bystander
+    stepped = dataclasses.replace(them, y=them.y + 0.1)
+    again = nav.follow(cm, stepped, start, 50_000_000)
+    assert distance_to_footprint(again, FP, np.array([[by.x, by.y]]))[0] >= keep
+    plain = handover_pose(cm, stepped, (start.x, start.y), FP)
+    assert distance_to_footprint(plain, FP, np.array([[by.x, by.y]]))[0] < keep
     alone = Navigator(FP, ns, 0.05)  # the person handed to, standing at it, moves nothing
     alone.start(spec, 0)
     assert alone.tick(0, start, cm0).moved == "" and alone.goal.pose == goal
