@@ -15,7 +15,12 @@ from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
 from services.mission.behaviours.handover import LEAN_MPS, FeelPull
-from services.mission.behaviours.motion import HANDOVER_BEYOND_M, STANCE_TOL_RAD, TURN_HELD_S
+from services.mission.behaviours.motion import (
+    HANDOVER_BEYOND_M,
+    LOOK_FROM_M,
+    STANCE_TOL_RAD,
+    TURN_HELD_S,
+)
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
     TICK_NS,
@@ -701,16 +706,19 @@ def test_a_person_not_at_their_place_is_looked_for_at_their_usual_place_and_hand
     )
     robot.person_walked_to = (3.2, 2.9)
     robot.seen_after_turn_rad = 100.0  # not seen from their last place
-    robot.sees_within_m = 1.0
+    robot.sees_within_m = 1.5
     tree = mission(robot)
     outcome = run(tree, robot)
     assert outcome.state == "succeeded", outcome.detail
     poses = [g for _, g in robot.nav_goals if isinstance(g, PoseGoal)]
-    walks = [(g.x, g.y) for g in poses if _to_a_place(g)]
-    assert walks == [(3.0, 3.0)]
+    walks = [g for g in poses if _to_a_place(g)]
+    assert len(walks) == 1  # looked at from 1 m short of it (a bench's place lies in it)
+    (w,) = walks
+    assert math.dist((w.x, w.y), (3.0, 3.0)) == pytest.approx(LOOK_FROM_M)
+    assert w.yaw == pytest.approx(math.atan2(3.0 - w.y, 3.0 - w.x))
     assert len(poses) == 1 + 3  # the look round (three turns) at their last place
     handovers = [g for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
-    assert len(handovers) >= 2  # their last place, then to them where they were seen
+    assert handovers  # their last place (then, unless seen in front of it, to them)
     decisions = tree.ctx.decisions  # type: ignore[attr-defined]
     assert any("looking at a usual place of theirs, (3.00, 3.00)" in d for d in decisions)
 
@@ -1016,3 +1024,17 @@ def test_nobody_pulling_the_robot_holds_the_object_out_nearer_once_and_it_is_tak
     outcome = run(mission(robot, pull=False, settings=settings), robot, 4000)
     assert (outcome.state, outcome.reason) == ("failed", "handover_timeout")
     assert outcome.detail.startswith("nobody took the object in 6 s, held out nearer after 2 s")
+
+
+def test_a_usual_place_is_looked_at_from_a_metre_short_of_it() -> None:
+    """Seed 0's shift: a worker's place at a bench lay in the bench's inflated cells and
+    navigation refused the walk there ("in an obstacle"); the four rounds after it asked
+    at one place again. The look stands 1 m short of it on the line from the robot."""
+    from services.mission.behaviours.motion import look_at
+
+    g = look_at((3.0, 4.0), (0.0, 0.0))
+    assert (g.x, g.y) == pytest.approx((3.0 - 0.6, 4.0 - 0.8))  # 1 m back along the line
+    assert g.yaw == pytest.approx(math.atan2(4.0, 3.0)) and g.yaw_tolerance_rad == math.pi
+    near = look_at((0.5, 0.0), (0.0, 0.0))  # nearer than that: from where it stands
+    assert (near.x, near.y) == pytest.approx((0.0, 0.0))
+    assert (look_at((3.0, 4.0), None).x, look_at((3.0, 4.0), None).y) == (3.0, 4.0)
