@@ -18,8 +18,7 @@ no costmap, `queued(b)` (the id of the goal waiting for the map, reported `activ
 fails `timeout` after `MAP_WAIT_S` of sim time), else `start_due(b, …)` (the pending goal
 whose tick has come is started; a queued one is resolved now, against the map as fetched,
 so the same in every run); at each map adopted, `follow_person` (a handover goal's pose
-is chosen again once its person, in the people layer, is `RETARGET_M` from where it was
-chosen); last,
+is chosen again once its person is `RETARGET_M` from where it was chosen); last,
 `done(b, …)` records the tick's costmap and pose and wakes `as_of`.
 
 Locks: `cond` (the node's one condition, shared with `map_feed.MapFeed`) guards the
@@ -207,14 +206,13 @@ class GoalIntake:
         )  # fmt: skip
 
     def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
-        """A handover goal follows its person: once `people` (the node's people layer:
-        the map's, with the lidar's and the camera's positions over them) has them
+        """A handover goal follows its person: once `people` (the map's) has them
         `RETARGET_M` from where the pose was chosen, the pose is chosen again from there
         (the estimate of a person far away firms up as the robot comes near; a person may
-        step aside). Not the map's own estimate: hall seed 1's shift chose the handover
-        pose from the map's person_1 0.24 m off the lidar's, and the robot stood 77 s
-        0.28 m short of it, stopped by the speed rule at 0.67 m from the person (S_p at
-        rest 0.61 m and the stop's margin) until its recoveries moved it back."""
+        step aside). Not the people layer's: the lidar's floor point of a person is the
+        near side of their legs, and a pose from it stood the robot 0.11 m farther than
+        the handover distance from the person (the mission's own check, on the map's
+        estimate); nobody took the bottle (`tests/integration/test_coping.py`)."""
         g = self.nav.goal
         if self.nav.state != "active" or g is None or not g.handover_id or g.person_xy is None:
             return

@@ -178,8 +178,8 @@ class NavNode:
             self.intake.done(b, m.costmap, pose)
             return
         self.intake.start_due(b, m.costmap, pose, m.map_at)
-        if fresh is not None:  # where the people layer has them: the lidar's, the camera's
-            self.intake.follow_person(b, m.costmap, pose, m.people)
+        if fresh is not None:
+            self.intake.follow_person(b, m.costmap, pose, m.map_people)
         if changed:
             m.rebuild(b)
         out = self.nav.tick(b, pose, m.costmap, map_velocity(odom, pose.yaw))
