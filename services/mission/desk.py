@@ -22,7 +22,7 @@
    behaviour that raises is logged, the robot halted, the mission failed `internal`).
    A dependency whose token went is first held for (`Dependencies.noticed`: from 0.3 s
    after it went until `HOLD_S`): the status says so at once ("holding: sim not heard
-   since …"), and the request goes on if it comes back as the same process;
+   (<the leaf running>)"), and the request goes on if it comes back as the same process;
 5. the outcome, or the running stage and progress, becomes the status
    (`StatusBoard.update`): `step` returns whether it changed.
 
