@@ -10,10 +10,6 @@ surface's rectangle). The pose lies `STANDOFF_DISTANCE_M` out along it, facing t
 artifact; when its footprint is not free, directions further from the normal are tried
 in turn, so a crowded edge still gives a free pose. A goal may ask for the sides to
 stand on instead (`ArtifactStandoff.bearings_rad`: a box held along its long faces).
-Given people to `avoid`, a pose whose footprint comes within `keep_m` of one of them
-is passed over too, for a standoff as for a handover (the others standing there): a
-person standing by it holds the robot short of a pose inside their protective
-separation for as long as they stay (the navigator's `_restand`).
 
 Handover: `HANDOVER_DISTANCE_M` from the person's latest position, facing them; on the
 side the goal asks for (`PersonHandover.bearing_rad`), else in front of them when their
@@ -29,16 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from common import robot
-from common.geometry import FloatArray
 from common.messages.navigation import NavGoalRequest
 from services.navigation.costmap import Costmap, Person
-from services.navigation.grid import (
-    Footprint,
-    Pose,
-    distance_to_footprint,
-    footprint_hits,
-    footprint_points,
-)
+from services.navigation.grid import Footprint, Pose, footprint_hits, footprint_points
 from services.navigation.planner import GOAL_MARGIN_M, pose_ok
 
 RAY_STEP_RAD = math.radians(1.0)
@@ -93,12 +82,6 @@ def exit_distances(costmap: Costmap, x: float, y: float, angles: np.ndarray) -> 
     return out
 
 
-def clear_of(pose: Pose, fp: Footprint, avoid: FloatArray, keep_m: float) -> bool:
-    """Whether the footprint at `pose` is at least `keep_m` from every point of `avoid`
-    ((k, 2) world; none: clear)."""
-    return not len(avoid) or float(distance_to_footprint(pose, fp, avoid).min()) >= keep_m
-
-
 def standoff_pose(
     costmap: Costmap,
     x: float,
@@ -107,13 +90,10 @@ def standoff_pose(
     margin: float = GOAL_MARGIN_M,
     bearings: tuple[float, ...] = (),
     tolerance: float = math.pi,
-    avoid: tuple[tuple[float, float], ...] = (),
-    keep_m: float = 0.0,
 ) -> Pose:
     """A free pose facing the artifact at (x, y), `STANDOFF_DISTANCE_M` away: off the
     nearest edge (the directions nearest its normal first) or, given `bearings` (world
-    bearings from the artifact), the direction nearest any of them, within `tolerance`;
-    its footprint at least `keep_m` from each point of `avoid` (people standing there)."""
+    bearings from the artifact), the direction nearest any of them, within `tolerance`."""
     angles = np.arange(0.0, 2 * math.pi, RAY_STEP_RAD)
     if bearings:
         off = np.abs(np.angle(np.exp(1j * (angles[:, None] - np.asarray(bearings)[None, :]))))
@@ -126,17 +106,11 @@ def standoff_pose(
         best = float(np.angle(np.exp(1j * angles[near]).sum()))
         order = np.argsort(np.abs(np.angle(np.exp(1j * (angles - best)))), kind="stable")
     d = robot.STANDOFF_DISTANCE_M
-    people = np.array(avoid, dtype=float).reshape(-1, 2)
     for k in order:
         a = float(angles[k])
         pose = Pose(x + d * math.cos(a), y + d * math.sin(a), math.remainder(a + math.pi, math.tau))
-        if pose_ok(costmap, pose, fp, margin) and clear_of(pose, fp, people, keep_m):
+        if pose_ok(costmap, pose, fp, margin):
             return pose
-    if avoid:
-        raise GoalError(
-            f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) {keep_m:.2f} m clear of "
-            f"the people standing there"
-        )
     if not bearings:
         raise GoalError(f"no free standoff pose {d:.2f} m from ({x:.2f}, {y:.2f}) in any direction")
     wanted = ", ".join(f"{math.degrees(b):.0f}°" for b in bearings)
@@ -181,12 +155,9 @@ def handover_pose(
     margin: float = GOAL_MARGIN_M,
     bearing: float | None = None,
     distance: float | None = None,
-    avoid: tuple[tuple[float, float], ...] = (),
-    keep_m: float = 0.0,
 ) -> Pose:
     """A free pose facing the person at `distance` (None: `HANDOVER_DISTANCE_M`; see the
-    module docstring); `bearing`: the side asked for (the bearing from the person), first;
-    its footprint at least `keep_m` from each point of `avoid` (others standing there)."""
+    module docstring); `bearing`: the side asked for (the bearing from the person), first."""
     if bearing is not None:
         preferred = bearing
     elif person.yaw is not None:
@@ -194,7 +165,6 @@ def handover_pose(
     else:
         preferred = math.atan2(robot_xy[1] - person.y, robot_xy[0] - person.x)
     d = robot.HANDOVER_DISTANCE_M if distance is None else distance
-    others = np.array(avoid, dtype=float).reshape(-1, 2)
     # The planner's own test (`pose_ok`), so a pose chosen here is one it plans to: the
     # footprint on free cells, the base not in lethal cost (the person's lethal disc ends
     # short of the handover distance).
@@ -206,10 +176,8 @@ def handover_pose(
                 person.y + d * math.sin(a),
                 math.remainder(a + math.pi, math.tau),
             )
-            if pose_ok(costmap, pose, fp, margin) and clear_of(pose, fp, others, keep_m):
+            if pose_ok(costmap, pose, fp, margin):
                 return pose
-    clear = f", {keep_m:.2f} m clear of the others standing there" if avoid else ""
     raise GoalError(
         f"no free handover pose {d:.2f} m from {person.id} at ({person.x:.2f}, {person.y:.2f})"
-        + clear
     )

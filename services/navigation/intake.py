@@ -171,7 +171,6 @@ class GoalIntake:
         data as of `at`; `GoalInvalid` with the reason."""
         g = req.goal
         person_xy, bearing, distance = None, None, None
-        artifact_xy: tuple[float, float] | None = None
         try:
             if isinstance(g, PoseGoal):
                 target = Pose(g.x, g.y, g.yaw)
@@ -182,7 +181,6 @@ class GoalIntake:
                     cm, x, y, self.fp, bearings=g.bearings_rad, tolerance=g.bearing_tolerance_rad
                 )
                 tol, tol_yaw, handover = *self.tolerance, ""
-                artifact_xy = (x, y)
             else:
                 assert isinstance(g, PersonHandover)
                 person = self.source.person(g.person_id, at_ns=at)
@@ -198,12 +196,7 @@ class GoalIntake:
             raise GoalInvalid(str(exc)) from None
         if not all(math.isfinite(v) for v in target) or cm.grid.cell(target.x, target.y) is None:
             raise GoalInvalid(f"{target} is off the map")
-        if artifact_xy is None or not isinstance(g, ArtifactStandoff):
-            return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing, distance)
-        return GoalSpec(
-            goal_id, target, tol, tol_yaw, artifact_xy=artifact_xy,
-            bearings=tuple(g.bearings_rad), bearing_tolerance=g.bearing_tolerance_rad,
-        )  # fmt: skip
+        return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing, distance)
 
     def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
         """A handover goal follows its person: once `people` (the map's) has them
@@ -221,7 +214,10 @@ class GoalIntake:
                                         person.y - g.person_xy[1]) < RETARGET_M:  # fmt: skip
             return
         try:
-            target = self.nav.follow(cm, person, pose, b)
+            here = (pose.x, pose.y)
+            target = goals.handover_pose(
+                cm, person, here, self.fp, bearing=g.bearing, distance=g.distance
+            )
         except goals.GoalError as exc:
             self.log.info("goal %s keeps its pose: %s", g.goal_id, exc)
             return

@@ -111,8 +111,6 @@ class NavLogger:
             else:
                 self.log.info("t=%.2f s body guard released", t)
             self.guarded = out.guarded
-        if out.moved:
-            self.log.info("t=%.2f s goal %s standoff %s", t, goal_id, out.moved)
         if out.recovery != self.recovery:
             if out.recovery:
                 self.log.warning("t=%.2f s goal %s recovery: %s", t, goal_id, out.recovery)

@@ -33,19 +33,6 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   or a step back inside a bystander's protective separation is a stop: before, the
   recoveries moved whoever stood there); after them, `failed: blocked` (or `no_path`
   when no plan was ever found);
-- a goal at an artifact (a standoff), or a handover's, with a person standing by it
-  (velocity known, under `STANDING_MPS`; seen within `STALE_S`; not the person handed
-  over to) nearer its footprint than they would
-  hold the robot at (`stand_clear_m`: S_p at rest, the stop's resume margin and
-  `RESTAND_CLEAR_M`) moves, at a periodic replan, once per person and goal: to the
-  standoff nearest the edge's normal clear of every person standing
-  (`goals.standoff_pose`'s `avoid`; for a handover, the free side of the person
-  nearest the one asked for), when there is one (`_restand`; the approach servoes onto
-  the object from there). Hall seed 1's shift stood 97 s and three
-  recoveries 0.5 m short of box_4's standoff, stopped by person_1 standing 0.63 m off
-  the footprint (S_p at rest 0.61 m), then failed it blocked; once stopped that near,
-  only a way clearly away from them may move (`people_limit`), so the goal moves
-  before the robot gets there;
 - a stop held `blocked_timeout_s` for a person standing within their S_p at rest (and
   the stop's resume margin) of the footprint (`people_limit` lets only a way clearly
   away from them move; the path rarely leads so) is a step away from them first
@@ -74,7 +61,6 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
 
 from __future__ import annotations
 
-import contextlib
 import math
 from dataclasses import dataclass, replace
 from typing import Literal, NamedTuple
@@ -85,7 +71,6 @@ from numpy.typing import NDArray
 from common.config import NavigationSettings, PeopleSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
-from services.navigation import goals
 from services.navigation.body_guard import HORIZON_S, BodyGuard
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap, Person
@@ -134,7 +119,7 @@ SWITCH_GAIN = 0.15
 SWITCH_MIN_M = 0.5
 #: The path pose this many ahead gives the direction of travel (the people rules).
 PROBE_POSES = 10
-#: m/s: a person whose estimated speed is under this stands (`_restand`, `_step_away`).
+#: m/s: a person whose estimated speed is under this stands (`_step_away`).
 STANDING_MPS = 0.2
 #: The step away from a person standing too near (module docstring): speed (m/s), how far
 #: beyond their S_p at rest and the resume margin it ends (m), and its longest (s).
@@ -144,8 +129,6 @@ STEP_AWAY_S = 3.0
 #: s: a person the sensors saw this recently is there now (a step away is from them only:
 #: one only the map has, beside the flank, is slid past; `STALE_S`).
 SEEN_NOW_S = 1.0
-#: m a standoff moved clear of people standing keeps beyond what would stop the robot.
-RESTAND_CLEAR_M = 0.1
 #: m/s: the base's measured velocity, when at least this, is one more direction of travel
 #: for the people rules (below it, the trot's sway gives it no meaning). The trot does not
 #: go quite where it is sent: turning onto a bend it stepped sideways at 0.23 m/s towards
@@ -169,11 +152,6 @@ class GoalSpec:
     #: How far from the person the handover stands (m; `PersonHandover.extra_m` added;
     #: None: not a handover).
     distance: float | None = None
-    #: A standoff's artifact (m, world; None: not a standoff), and the sides asked for
-    #: (`ArtifactStandoff.bearings_rad`, `bearing_tolerance_rad`): `_restand` chooses again.
-    artifact_xy: tuple[float, float] | None = None
-    bearings: tuple[float, ...] = ()
-    bearing_tolerance: float = math.pi
 
 
 class TickOutput(NamedTuple):
@@ -188,8 +166,6 @@ class TickOutput(NamedTuple):
     recovery: Recovery
     #: The body guard's answer to a refused command this tick ("": none refused).
     guarded: str = ""
-    #: The goal's pose moved this tick, and why ("": it did not; `_restand`).
-    moved: str = ""
 
 
 class Navigator:
@@ -212,7 +188,6 @@ class Navigator:
         self.total_m = 0.0
         self.limit_rule = ""
         self.guarded = ""
-        self.moved = ""
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
@@ -228,7 +203,6 @@ class Navigator:
         self.recovery = ""
         self.recovery_until = 0
         self.slid = False  # the slide is once a goal
-        self.restood: set[str] = set()  # the people a standoff moved clear of (`_restand`)
         self.stepped: set[str] = set()  # the people stepped away from (`_step_away`)
         self.step_person = ""  # the one the step away is from
         self.slide_sign = 0.0  # +1 ahead, -1 back
@@ -244,10 +218,7 @@ class Navigator:
         next tick replans to it, and progress is measured afresh."""
         if self.state != "active" or self.goal is None:
             return
-        self._move_goal(replace(self.goal, pose=pose, person_xy=person_xy), t_ns)
-
-    def _move_goal(self, goal: GoalSpec, t_ns: int) -> None:
-        self.goal = goal
+        self.goal = replace(self.goal, pose=pose, person_xy=person_xy)
         self.last_plan_ns = -(10**18)
         self.take_next = True  # the next plan replaces the held one, whatever it costs
         self.best_remaining = self.best_yaw_error = math.inf
@@ -275,10 +246,9 @@ class Navigator:
         progress = 0.0 if self.total_m <= 0 else min(1.0, max(0.0, 1.0 - remaining / self.total_m))
         if self.state == "succeeded":
             progress, remaining = 1.0, 0.0
-        moved, self.moved = self.moved, ""
         return TickOutput(
             self.cmd.copy(), self.state, self.reason, self.detail, progress, remaining,
-            new_plan, limit, self.recovery, self.guarded, moved,
+            new_plan, limit, self.recovery, self.guarded,
         )  # fmt: skip
 
     def _replan(self, t_ns: int, pose: Pose, cm: Costmap, hold: bool = False) -> Plan | None:
@@ -347,10 +317,8 @@ class Navigator:
         new_plan = None
         if self.recovery:
             return self._recover(t_ns, pose, cm)
-        due = t_ns - self.last_plan_ns >= self.n.replan_s * NS_PER_S
-        if due:
-            self._restand(t_ns, cm, pose)
         blocked_path = self.plan is not None and self._path_blocked(cm)
+        due = t_ns - self.last_plan_ns >= self.n.replan_s * NS_PER_S
         if self.plan is None or blocked_path or due:
             hold = not (self.take_next or blocked_path) and self.blocked_since is None
             self.take_next = False
@@ -459,91 +427,6 @@ class Navigator:
         self.detail = f"recovery: step away from {who}"
         return True
 
-    def _restand(self, t_ns: int, cm: Costmap, pose: Pose) -> bool:
-        """A standoff or handover goal with people standing by it (not the person handed
-        over to) moves clear of everyone standing (module docstring); whether it moved
-        (said once in the tick's `moved`)."""
-        g = self.goal
-        if g is None or (g.artifact_xy is None and not g.handover_id):
-            return False
-        standers = self._standers(cm, t_ns)
-        if not standers:
-            return False
-        keep = stand_clear_m(self.n.people)
-        d = distance_to_footprint(g.pose, self.fp, np.array([[q.x, q.y] for q in standers]))
-        by = [q.id for q, dq in zip(standers, d.tolist(), strict=True)
-              if dq < keep and q.id not in self.restood]  # fmt: skip
-        if not by:
-            return False
-        self.restood.update(by)
-        avoid = tuple((q.x, q.y) for q in standers)
-        new: Pose | None
-        try:
-            if g.artifact_xy is not None:
-                new = goals.standoff_pose(
-                    cm, *g.artifact_xy, self.fp, bearings=g.bearings,
-                    tolerance=g.bearing_tolerance, avoid=avoid, keep_m=keep,
-                )  # fmt: skip
-            else:
-                new = self._handover_clear(cm, pose, avoid, keep)
-        except goals.GoalError as exc:
-            self.moved = f"kept: {' and '.join(by)} standing by it: {exc}"
-            return False
-        if new is None:
-            return False
-        self._move_goal(replace(g, pose=new), t_ns)
-        self.moved = (
-            f"clear of {' and '.join(by)} standing by it: from ({g.pose.x:.2f}, {g.pose.y:.2f}) "
-            f"to ({new.x:.2f}, {new.y:.2f}, {new.yaw:.2f})"
-        )
-        return True
-
-    def _standers(self, cm: Costmap, t_ns: int) -> list[Person]:
-        """The people standing (`standing`, seen within `STALE_S`), but the one handed
-        over to."""
-        handing = self.goal.handover_id if self.goal is not None else ""
-        return [
-            q for q in cm.people
-            if standing(q) and q.id != handing
-            and (q.seen_ns is None or t_ns - q.seen_ns <= STALE_S * NS_PER_S)
-        ]  # fmt: skip
-
-    def _handover_clear(
-        self, cm: Costmap, pose: Pose, avoid: tuple[tuple[float, float], ...], keep: float
-    ) -> Pose | None:
-        """The handover pose chosen again clear of `avoid` (None: its person is not
-        known here)."""
-        g = self.goal
-        assert g is not None
-        person = next((q for q in cm.people if q.id == g.handover_id), None)
-        if person is None and g.person_xy is not None:
-            person = Person(g.handover_id, *g.person_xy, None)
-        if person is None:
-            return None
-        return goals.handover_pose(
-            cm, person, (pose.x, pose.y), self.fp, bearing=g.bearing, distance=g.distance,
-            avoid=avoid, keep_m=keep,
-        )  # fmt: skip
-
-    def follow(self, cm: Costmap, person: Person, pose: Pose, t_ns: int) -> Pose:
-        """The active handover goal's pose chosen again for its person at a new place
-        (the intake's `follow_person`): clear of the others standing there when it can
-        be, as `_restand` would move it (else it would move back beside them at each
-        step of the person's estimate); `goals.GoalError` when there is no free pose."""
-        g = self.goal
-        assert g is not None
-        avoid = tuple((q.x, q.y) for q in self._standers(cm, t_ns))
-        here, keep = (pose.x, pose.y), stand_clear_m(self.n.people)
-        if avoid:
-            with contextlib.suppress(goals.GoalError):
-                return goals.handover_pose(
-                    cm, person, here, self.fp, bearing=g.bearing, distance=g.distance,
-                    avoid=avoid, keep_m=keep,
-                )  # fmt: skip
-        return goals.handover_pose(
-            cm, person, here, self.fp, bearing=g.bearing, distance=g.distance
-        )
-
     def _slide_way(self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit) -> float:
         """+1 (ahead) or -1 (back): the way to slide past the person who holds the stop,
         when they qualify (module docstring) and the way neither heads towards them nor
@@ -605,7 +488,7 @@ class Navigator:
         if who is None:
             return None
         d = float(distance_to_footprint(pose, self.fp, np.array([[who.x, who.y]]))[0])
-        if d >= stand_clear_m(self.n.people) - RESTAND_CLEAR_M + STEP_CLEAR_M:
+        if d >= stand_clear_m(self.n.people) + STEP_CLEAR_M:
             return None
         n = bearing(pose, self.fp, (who.x, who.y))
         return -n[0], -n[1]
@@ -684,7 +567,7 @@ def standing(person: Person) -> bool:
 
 
 def stand_clear_m(p: PeopleSettings) -> float:
-    """How far (m) from the footprint a person standing must be for the robot to walk
-    up to a pose there: S_p at rest for them, the stop's resume margin, `RESTAND_CLEAR_M`."""
+    """How far (m) from the footprint a person standing must be for a stop for them to
+    release: S_p at rest for them and the stop's resume margin."""
     sep = separation_params(p)
-    return protective_distance(0.0, sep.speed_margin_mps, sep) + RESUME_MARGIN_M + RESTAND_CLEAR_M
+    return protective_distance(0.0, sep.speed_margin_mps, sep) + RESUME_MARGIN_M

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -305,56 +304,6 @@ def _drive(nav, pose: Pose, cm, seconds: float, t0_ns: int = 0):  # type: ignore
     return out, pose, t0_ns + round((k + 1) * 0.05e9)
 
 
-def test_a_standoff_with_a_person_standing_by_it_moves_clear_of_them_and_is_reached() -> None:
-    """Hall seed 1's shift: person_1 stood 0.63 m off the footprint at box_4's standoff
-    (S_p at rest 0.61 m); the robot stopped 0.5 m short and failed blocked after 97 s.
-    Here a person stands 0.6 m off the standoff's footprint: the goal moves round the
-    artifact clear of them before the robot gets there, and the robot gets there. A
-    walking person (velocity not known) does not move it: they will have passed."""
-    from services.navigation.navigator import GoalSpec, Navigator, stand_clear_m
-
-    grid = _room([(slice(60, 80), slice(60, 100))])  # a table, x 3-5 m, y 3-4 m
-    can = (4.0, 3.05)  # by its near edge
-    goal = standoff_pose(build_costmap(grid, FP, CostParams()), *can, FP)
-    c, s = math.cos(goal.yaw), math.sin(goal.yaw)
-    u, v = FP.front + 0.1, FP.half_width + 0.6  # ahead of the goal's left front corner
-    at = (goal.x + c * u - s * v, goal.y + s * u + c * v)
-    assert distance_to_footprint(goal, FP, np.array([at]))[0] == pytest.approx(0.608, abs=0.01)
-    ns = NavigationSettings()
-    keep = stand_clear_m(ns.people)
-    assert keep == pytest.approx(0.61 + 0.15 + 0.1, abs=0.01)  # S_p at rest, resume, clear
-    start = Pose(goal.x - 1.1 * c, goal.y - 1.1 * s, goal.yaw)
-
-    cm = build_costmap(grid, FP, CostParams(), people=[Person("p", *at, None, (0.0, 0.0))])
-    nav = Navigator(FP, ns, 0.05)
-    nav.start(GoalSpec("g", goal, 0.1, 0.1, artifact_xy=can), 0)
-    first = nav.tick(0, start, cm)
-    assert first.moved.startswith("clear of p standing by it: from (4.00, 2.03) to ")
-    assert nav.tick(50_000_000, start, cm).moved == ""  # said once
-    moved = nav.goal.pose
-    assert distance_to_footprint(moved, FP, np.array([at]))[0] >= keep
-    assert math.dist((moved.x, moved.y), can) == pytest.approx(math.dist((goal.x, goal.y), can))
-    out, end, _ = _drive(nav, start, cm, 30.0)
-    assert out.state == "succeeded", out.detail
-    assert math.hypot(end.x - moved.x, end.y - moved.y) <= 0.1
-
-    walker = build_costmap(grid, FP, CostParams(), people=[Person("w", *at, None, None)])
-    nav = Navigator(FP, ns, 0.05)
-    nav.start(GoalSpec("g", goal, 0.1, 0.1, artifact_xy=can), 0)
-    nav.tick(0, start, walker)
-    assert nav.goal.pose == goal
-
-
-def test_a_standoff_clear_of_people_standing_is_refused_when_there_is_none() -> None:
-    world, cm = _world_costmap("hall", 1)
-    a = world.artifacts[0]
-    x, y = a.position[:2]
-    pose = standoff_pose(cm, x, y, FP)
-    assert standoff_pose(cm, x, y, FP, avoid=((x + 5.0, y + 5.0),), keep_m=0.8) == pose
-    with pytest.raises(GoalError, match=r"0\.80 m clear of the people standing there"):
-        standoff_pose(cm, x, y, FP, avoid=((x, y),), keep_m=0.8)  # at the artifact itself
-
-
 def test_a_robot_stopped_by_a_person_standing_too_near_steps_away_and_goes_on() -> None:
     """Seed 0's shift began a request 0.68 m from the worker it had just handed to and
     stood 46 s and two recoveries: within a bystander's S_p at rest only a way clearly
@@ -375,40 +324,3 @@ def test_a_robot_stopped_by_a_person_standing_too_near_steps_away_and_goes_on() 
     assert nav.recoveries == ["clear", "rotate", "backoff"]  # none of those used
     out, end, _ = _drive(nav, end, cm, 40.0, t)
     assert out.state == "succeeded", out.detail
-
-
-def test_a_handover_pose_with_somebody_else_standing_by_it_moves_clear_of_them() -> None:
-    """Seed 1's shift: the handover pose lay 0.65 m from a bystander standing there; the
-    robot stood 40 s stopped by them. The pose moves round the person handed to, clear
-    of the bystander; the person handed to moves nothing."""
-    from services.navigation.navigator import GoalSpec, Navigator, stand_clear_m
-
-    grid = _room([])
-    them = Person("h", 5.0, 3.0, None, (0.0, 0.0))
-    cm0 = build_costmap(grid, FP, CostParams(), people=[them])
-    start = Pose(2.0, 3.0, 0.0)
-    goal = handover_pose(cm0, them, (start.x, start.y), FP)  # on the robot's side
-    c, s = math.cos(goal.yaw), math.sin(goal.yaw)
-    u, v = 0.0, FP.half_width + 0.45  # beside the pose's flank
-    by = Person("b", goal.x + c * u - s * v, goal.y + s * u + c * v, None, (0.0, 0.0))
-    cm = build_costmap(grid, FP, CostParams(), people=[them, by])
-    ns = NavigationSettings()
-    nav = Navigator(FP, ns, 0.05)
-    spec = GoalSpec("g", goal, 0.1, 0.3, handover_id="h", person_xy=(them.x, them.y))
-    nav.start(spec, 0)
-    out = nav.tick(0, start, cm)
-    assert out.moved.startswith("clear of b standing by it")
-    moved = nav.goal.pose
-    keep = stand_clear_m(ns.people)
-    assert distance_to_footprint(moved, FP, np.array([[by.x, by.y]]))[0] >= keep
-    assert math.dist((moved.x, moved.y), (them.x, them.y)) == pytest.approx(HANDOVER_DISTANCE_M)
-    # the person's estimate steps on (the intake's follow_person): chosen clear again,
-    # not back beside the bystander
-    stepped = dataclasses.replace(them, y=them.y + 0.1)
-    again = nav.follow(cm, stepped, start, 50_000_000)
-    assert distance_to_footprint(again, FP, np.array([[by.x, by.y]]))[0] >= keep
-    plain = handover_pose(cm, stepped, (start.x, start.y), FP)
-    assert distance_to_footprint(plain, FP, np.array([[by.x, by.y]]))[0] < keep
-    alone = Navigator(FP, ns, 0.05)  # the person handed to, standing at it, moves nothing
-    alone.start(spec, 0)
-    assert alone.tick(0, start, cm0).moved == "" and alone.goal.pose == goal
