@@ -185,7 +185,9 @@ class Desk:
     def notice(self, b: int) -> None:
         """Between ticks (a tick waiting on a dependency's inputs): a dependency of the
         running request newly noticed gone is said now, stamped b."""
-        if self.tree.request is not None and self._wait_for(b, self.tree.where()[1]):
+        if self.tree.request is None or not (self.waiting or self.deps.noticed()):
+            return  # nothing to say (the common case: called every slice of a wait)
+        if self._wait_for(b, self.tree.where()[1]):
             self.flush(b, True)
 
     def flush(self, b: int, changed: bool) -> None:

@@ -315,3 +315,24 @@ def test_a_behaviour_that_raises_fails_the_mission_internal_and_halts(
 def test_the_status_repeats_every_period_while_nothing_changes() -> None:
     rig = Rig(every_s=0.2)
     assert [s.stamp_ns for s in rig.tick(9)] == [0, 4 * TICK_NS, 8 * TICK_NS]
+
+
+def test_a_loss_noticed_while_a_tick_waits_on_inputs_is_said_between_ticks() -> None:
+    """The tick waits on the lost one's inputs (a killed WBC sends no odom): the node asks
+    `lost()` every slice of the wait and the desk says the hold then, not at the tick."""
+    wall = WallClock()
+    rig = Rig(wall=wall)
+    rig.running()
+    before = len(rig.sent)
+    rig.lifelines.down(key_of("wbc"))
+    assert rig.desk.deps.lost() is None
+    rig.desk.notice(rig.robot.now_ns)
+    assert len(rig.sent) == before  # doubted, not noticed yet: nothing said
+    wall.t += LOST_GRACE_S + 0.01
+    assert rig.desk.deps.lost() is None
+    rig.desk.notice(rig.robot.now_ns)
+    (held,) = rig.sent[before:]
+    assert (held.request_id, held.state) == ("r1", "running")
+    assert held.detail.startswith("holding: wbc not heard")
+    rig.desk.notice(rig.robot.now_ns)
+    assert len(rig.sent) == before + 1  # said once

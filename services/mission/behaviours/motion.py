@@ -392,13 +392,10 @@ def look_at(place: tuple[float, float], xy: tuple[float, float] | None) -> PoseG
     """The pose to look round a person's usual place from: `LOOK_FROM_M` short of it on
     the line from the robot (`xy`; None or nearer than that: the place itself), facing
     it, within `LOOK_AT_TOL_M` and any heading."""
-    if xy is None:
-        return PoseGoal(x=place[0], y=place[1], yaw=0.0, position_tolerance_m=LOOK_AT_TOL_M,
-                        yaw_tolerance_rad=math.pi)  # fmt: skip
-    dx, dy = place[0] - xy[0], place[1] - xy[1]
-    d, yaw = math.hypot(dx, dy), math.atan2(dy, dx)
-    back = min(LOOK_FROM_M, d) / max(d, 1e-9)
-    return PoseGoal(x=place[0] - back * dx, y=place[1] - back * dy, yaw=yaw,
+    dx, dy = (0.0, 0.0) if xy is None else (place[0] - xy[0], place[1] - xy[1])
+    d = math.hypot(dx, dy)
+    back = min(LOOK_FROM_M, d) / max(d, 1e-9)  # 0 where the robot's place is unknown
+    return PoseGoal(x=place[0] - back * dx, y=place[1] - back * dy, yaw=math.atan2(dy, dx),
                     position_tolerance_m=LOOK_AT_TOL_M, yaw_tolerance_rad=math.pi)  # fmt: skip
 
 
