@@ -95,6 +95,18 @@ NavState = Literal["idle", "active", "succeeded", "failed", "cancelled"]
 NavFailure = Literal["", "no_path", "blocked", "timeout", "invalid_goal", "cancelled"]
 
 
+class ScanBody(Message, frozen=True):
+    """A body the lidars track near the robot (the speed monitor's protective field,
+    `services.navigation.scan_people`): a person to the speed rules, of unknown identity.
+    id: the track's (`scan_<k>`, a new one when the track breaks up); x, y: its floor
+    point (m, world); velocity (m/s, world): None until measured."""
+
+    id: str
+    x: Finite
+    y: Finite
+    velocity: tuple[Finite, Finite] | None = None
+
+
 class NavStatus(Message, frozen=True):
     """`dume/<r>/nav/status`: the current goal's state.
 
@@ -125,6 +137,10 @@ class NavStatus(Message, frozen=True):
     clear_m: tuple[float, float, float, float] = (
         math.inf, math.inf, math.inf, math.inf,
     )  # fmt: skip
+    #: The lidars' bodies within `scan_people.TRACKS_SAID_M` of the base, nearest first
+    #: (who walks by where the head camera does not look: the mission looks at them while
+    #: it looks for a person).
+    bodies: Annotated[tuple[ScanBody, ...], msgspec.Meta(max_length=16)] = ()
 
 
 class NavPath(Message, frozen=True):

@@ -8,21 +8,45 @@ the most seen one (where they usually are, not where they once passed), those fa
 than `LOOKED_M` from every place looked round at in this request and from the robot, the
 nearest. None when none is left: the walk goes to where the map last had them. A walker
 on a loop comes past any place of it once a lap: standing there looking round (the turn
-and the ask, `behaviours.motion.LookForPerson`) sees them come. Pure: no transport.
+and the ask, `behaviours.motion.LookForPerson`) sees them come.
+
+While it asks, the robot looks at whoever walks by where its head camera does not look
+(`glance_at`), as a person waiting for a colleague turns to each footstep: the lidars
+track every body near it (`NavStatus.bodies`), the camera (72° wide) says who one is. In
+seed 0's shift the robot asked for person_1 for two minutes facing one way, while they
+walked back and forth 0.9-3.9 m behind it and to its right, never in view. A body is
+looked at once (by its track's id), when it is within `GLANCE_M`, outside the camera's
+view, and no map person the camera saw within `KNOWN_S` stands there (who it is is
+known). The turn aims where its velocity takes it in `LEAD_S`. Pure: no transport.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
-from common.messages.semantic_map import SeenPlace
+from common.messages.base import NS_PER_S
+from common.messages.navigation import ScanBody
+from common.messages.semantic_map import MapEntity, SeenPlace
 
 #: m: a place this near one looked round at (or the robot) is looked at already: the
 #: head camera sees a person well beyond it while the robot turns.
 LOOKED_M = 2.5
 #: A usual place is seen at least this share as often as the most seen one.
 SHARE = 0.25
+#: m: a body the lidars track this near the base (and no nearer than `GLANCE_MIN_M`:
+#: the camera, pitched down, sees no face so near) is looked at while the robot asks.
+GLANCE_M = 4.5
+GLANCE_MIN_M = 0.5
+#: rad: a body within this of the base's heading is in the head camera's view (its half
+#: field, 36°, less a body's width at 1.5 m).
+IN_VIEW_RAD = math.radians(28.0)
+#: A map person the camera saw within this (s), standing within `KNOWN_M` (m, and how far
+#: they walk meanwhile at their speed) of a body, is who the body is.
+KNOWN_S = 2.0
+KNOWN_M = 0.8
+#: s: the turn aims where the body's velocity takes it in this long.
+LEAD_S = 1.0
 
 
 def next_place(
@@ -45,3 +69,41 @@ def next_place(
     if robot_xy is None:
         return left[0]
     return min(left, key=lambda p: (math.dist(p.xy, robot_xy), -p.sightings))
+
+
+def glance_at(
+    bodies: Sequence[ScanBody],
+    people: Sequence[MapEntity],
+    robot_xy: tuple[float, float],
+    robot_yaw: float,
+    now_ns: int,
+    glanced: Collection[str] = (),
+) -> tuple[ScanBody, float] | None:
+    """The body to turn the head camera to while the robot asks, and the heading to turn
+    to (rad, world); None when nobody unknown is near (module docstring). `glanced`: the
+    track ids looked at already."""
+    best: tuple[float, ScanBody, float] | None = None
+    for body in bodies:
+        d = math.dist(robot_xy, (body.x, body.y))
+        if body.id in glanced or not GLANCE_MIN_M <= d <= GLANCE_M or _known(body, people, now_ns):
+            continue
+        bearing = math.atan2(body.y - robot_xy[1], body.x - robot_xy[0])
+        if abs(math.remainder(bearing - robot_yaw, math.tau)) <= IN_VIEW_RAD:
+            continue  # the camera sees them now: they are known, or nobody it can tell
+        vx, vy = body.velocity or (0.0, 0.0)
+        aim = math.atan2(body.y + vy * LEAD_S - robot_xy[1], body.x + vx * LEAD_S - robot_xy[0])
+        if best is None or d < best[0]:
+            best = (d, body, aim)
+    return None if best is None else (best[1], best[2])
+
+
+def _known(body: ScanBody, people: Sequence[MapEntity], now_ns: int) -> bool:
+    """Whether a map person the camera saw lately stands where the body is."""
+    for q in people:
+        age = (now_ns - q.last_seen_ns) / NS_PER_S
+        if q.last_seen_ns <= 0 or age > KNOWN_S:
+            continue
+        reach = KNOWN_M + math.hypot(*q.velocity_in_world[:2]) * max(age, 0.0)
+        if math.dist(q.position_in_world[:2], (body.x, body.y)) <= reach:
+            return True
+    return False

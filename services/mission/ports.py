@@ -18,7 +18,7 @@ from typing import NamedTuple, Protocol
 
 from common.clients import ClientError, Refused, Unavailable
 from common.messages.base import Mat4
-from common.messages.navigation import NavGoal, NavStatus
+from common.messages.navigation import NavGoal, NavStatus, ScanBody
 from common.messages.perception import Detection
 from common.messages.semantic_map import MapEntity, OccupancyGrid
 from common.messages.wbc import ArmGoal, GoalStatus, WbcModeName, WbcStatus
@@ -101,6 +101,11 @@ class RobotPort(Protocol):
 
     def cancel_nav(self, goal_id: str, reason: str) -> None:
         """Cancel a goal ("" for whatever is active)."""
+        ...
+
+    def bodies(self) -> list[ScanBody]:
+        """The bodies the lidars track near the robot as of this tick (`NavStatus.bodies`:
+        people, whoever they are), nearest first; empty without a status."""
         ...
 
     # -- the whole-body controller ------------------------------------------------------

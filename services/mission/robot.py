@@ -49,10 +49,7 @@ from common.keys import (
 )
 from common.map_frame import MapFrame, odom_pose
 from common.messages import PayloadError
-from common.messages.navigation import (
-    NavGoal,
-    NavStatus,
-)
+from common.messages.navigation import NavGoal, NavStatus, ScanBody
 from common.messages.perception import Detections
 from common.messages.semantic_map import MapEntity, MapListing, OccupancyGrid, SupportListing
 from common.messages.sim import Odom
@@ -295,6 +292,10 @@ class BusRobot:
 
     def cancel_nav(self, goal_id: str, reason: str) -> None:
         self._nav.cancel(goal_id, reason, effective_ns=self._effective)
+
+    def bodies(self) -> list[ScanBody]:
+        status = self.nav.at(self._t - self.nav_latency_ns)
+        return list(status.bodies) if status is not None else []
 
     # -- the whole-body controller --------------------------------------------------------
 

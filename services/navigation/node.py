@@ -41,7 +41,7 @@ from common.lockstep import PeriodicTicker
 from common.map_frame import MapFrame
 from common.messages import as_numpy, to_wire
 from common.messages.base import NS_PER_S
-from common.messages.navigation import NavCancel, NavGoalRequest, NavPath, NavStatus
+from common.messages.navigation import NavCancel, NavGoalRequest, NavPath, NavStatus, ScanBody
 from common.messages.sim import CameraFrame, LaserScan, Odom
 from common.messages.wbc import CmdVel
 from common.scan import scan_points
@@ -57,7 +57,7 @@ from services.navigation.nav_map import NavMap
 from services.navigation.navigator import Navigator, TickOutput
 from services.navigation.people import base_caps
 from services.navigation.perceived import PerceptionFeed
-from services.navigation.scan_people import ScanView
+from services.navigation.scan_people import ScanView, nearest_tracks
 from services.navigation.sources import MapSource, Source, WorldSource, wait_for_world
 
 NAME = "navigation"
@@ -105,6 +105,8 @@ class NavNode:
         #: The static world's clearance along the base's axes (`body_guard.clearance`).
         self.clear: Caps = (math.inf,) * 4
         self.cap_person = ""
+        #: The lidar's tracks near the base (`scan_people.nearest_tracks`), as published.
+        self.bodies: tuple[ScanBody, ...] = ()
         self.camera = n.obstacle_camera if n.obstacle_camera in cfg.sim.cameras else ""
         self.odom = bus.latest(keys.odom, Odom, history=16)
         self.map_frame = MapFrame(bus, keys, cfg)
@@ -174,6 +176,7 @@ class NavNode:
             return
         if self.map_frame.status(b) == "lost":  # it does not know where it is: stand
             self.caps, self.cap_person = (0.0,) * 4, ""  # nor where people are from it
+            self.bodies = ()
             self._publish(b, np.zeros(3), None, "localization lost", self.intake.queued(b))
             self.intake.done(b, m.costmap, pose)
             return
@@ -216,6 +219,10 @@ class NavNode:
                               else "none")  # fmt: skip
         self.caps, self.cap_person = caps, person
         self.clear = clearance(cm.solid, cm.grid, self.fp, pose)
+        self.bodies = tuple(
+            ScanBody(id=q.id, x=q.x, y=q.y, velocity=q.velocity)
+            for q in nearest_tracks(self.map.scanned, pose.x, pose.y)
+        )
 
     def _scan(self, b: int, pose: Pose, T_map_base: np.ndarray) -> bool:
         """The lidars' scans stamped b (at their rate) into the people layer, the front's
@@ -276,7 +283,7 @@ class NavNode:
             state = "active" if queued else self.nav.state
             status = NavStatus(
                 stamp_ns=b, goal_id=goal_id, state=state, detail=detail,
-                caps_mps=caps, cap_person=person, clear_m=self.clear,
+                caps_mps=caps, cap_person=person, clear_m=self.clear, bodies=self.bodies,
             )  # fmt: skip
             self.status_pub.put(status)
             return
@@ -300,6 +307,7 @@ class NavNode:
                 caps_mps=caps,
                 cap_person=person,
                 clear_m=self.clear,
+                bodies=self.bodies,
             )
         )
 

@@ -82,6 +82,10 @@ CLEARS_BEYOND_M = 0.3
 VELOCITY_HOLD_S = 1.0
 #: The memory forgets what it no longer holds once it keeps this many people.
 MEMORY_PRUNE_AT = 256
+#: m: the tracks within this of the base are said to who looks for a person
+#: (`nearest_tracks`, on `nav/status`), at most `TRACKS_SAID` of them.
+TRACKS_SAID_M = 6.0
+TRACKS_SAID = 8
 
 
 @dataclass(frozen=True)
@@ -373,6 +377,19 @@ class ScanPeople:
             for tr in self.tracks
             if self._alive(tr, t_ns)
         ]
+
+
+def nearest_tracks(
+    tracks: Sequence[Person],
+    x: float,
+    y: float,
+    within_m: float = TRACKS_SAID_M,
+    most: int = TRACKS_SAID,
+) -> list[Person]:
+    """The lidar's tracks within `within_m` of (x, y), nearest first, at most `most`:
+    who walks by near the robot, where its head camera may not look."""
+    near = sorted((math.hypot(q.x - x, q.y - y), k) for k, q in enumerate(tracks))
+    return [tracks[k] for d, k in near if d <= within_m][:most]
 
 
 class VelocityMemory:

@@ -34,6 +34,7 @@ from common.messages.navigation import (
     NavStatus,
     PersonHandover,
     PoseGoal,
+    ScanBody,
 )
 from common.messages.perception import Detection
 from common.messages.semantic_map import MapEntity, OccupancyGrid
@@ -51,6 +52,7 @@ from common.messages.world import SupportSurface
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.algorithms import Algorithms
 from services.mission.behaviours.base import Context
+from services.mission.person_search import IN_VIEW_RAD
 from services.mission.ports import Refused, Unavailable, WristSighting
 from services.mission.robot import within_caps
 
@@ -109,6 +111,11 @@ class FakeRobot:
     seen_after_turn_rad: float = math.pi / 2
     #: ...or once the robot stands within this of where they walked (None: never so).
     sees_within_m: float | None = None
+    #: ...or once a turn on the spot ends facing where they walked (within the head
+    #: camera's view, `person_search.IN_VIEW_RAD`).
+    sees_facing: bool = False
+    #: The lidars' bodies near the robot (`NavStatus.bodies`).
+    bodies_: list[ScanBody] = field(default_factory=list)
     _turned: float = 0.0
     _facing: str = ""
     #: Where each wrist_detection call looked for the target (its mapped place or None).
@@ -330,6 +337,10 @@ class FakeRobot:
                 there, within = self.person_walked_to, self.sees_within_m
                 if there is not None and within is not None and math.dist(self.xy, there) <= within:
                     self._see_walked_off()
+                if there is not None and self.sees_facing:
+                    bearing = math.atan2(there[1] - self.xy[1], there[0] - self.xy[0])
+                    if abs(math.remainder(bearing - self.yaw, math.tau)) <= IN_VIEW_RAD:
+                        self._see_walked_off()
         reason = self.nav_fail.get(kind, "") if state == "failed" else ""
         progress = min(1.0, (self.t - start) / (self.nav_ticks * TICK_NS))
         return NavStatus(
@@ -373,6 +384,9 @@ class FakeRobot:
         for g, (start, kind, state) in self._nav.items():
             if state == "active" and goal_id in ("", g):
                 self._nav[g] = (start, kind, "cancelled")
+
+    def bodies(self) -> list[ScanBody]:
+        return list(self.bodies_)
 
     def active_nav_goals(self) -> list[str]:
         return [g for g, (_, _, state) in self._nav.items() if state == "active"]

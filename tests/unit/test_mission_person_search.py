@@ -1,9 +1,17 @@
-"""The usual place of a person looked at next: usual, not looked at yet, the nearest."""
+"""The usual place of a person looked at next: usual, not looked at yet, the nearest;
+the body looked at while the robot asks: near, unseen, unnamed, the nearest."""
 
 from __future__ import annotations
 
+import math
+
+import msgspec
+import pytest
+
+from common.messages.navigation import ScanBody
 from common.messages.semantic_map import SeenPlace
-from services.mission.person_search import next_place
+from services.mission.person_search import GLANCE_M, LEAD_S, glance_at, next_place
+from tests.unit.mission_fakes import entity
 
 S = 1_000_000_000
 
@@ -34,3 +42,37 @@ def test_no_places_or_no_pose() -> None:
     assert next_place([], [], (0.0, 0.0)) is None
     places = [_p(3.0, 0.0, 9), _p(1.0, 0.0, 4)]
     assert next_place(places, [], None) == places[0]  # the most seen first
+
+
+def test_the_body_looked_at_is_the_nearest_out_of_view_and_unnamed() -> None:
+    """The robot at the origin facing +x: a body ahead is in the camera's view, one past
+    `GLANCE_M` too far; of the two behind, the nearer is turned to, aimed where its
+    velocity takes it in `LEAD_S`."""
+    bodies = [
+        ScanBody(id="scan_1", x=2.0, y=0.2),  # ahead: in view
+        ScanBody(id="scan_2", x=-3.0, y=-1.0, velocity=(0.0, 1.0)),
+        ScanBody(id="scan_3", x=0.0, y=-GLANCE_M - 0.2),  # too far
+        ScanBody(id="scan_4", x=-1.0, y=-4.0),
+    ]
+    got = glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S)
+    assert got is not None
+    body, aim = got
+    assert body.id == "scan_2"
+    assert aim == pytest.approx(math.atan2(-1.0 + LEAD_S, -3.0))
+    again = glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S, glanced={"scan_2"})
+    assert again is not None and again[0].id == "scan_4"  # each track once
+    assert glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S, glanced={"scan_2", "scan_4"}) is None
+
+
+def test_a_body_the_camera_named_lately_is_not_looked_at() -> None:
+    """A map person seen within `KNOWN_S` where the body is (or as far off as they walked
+    since) is who it is; seen longer ago, the body is nobody known."""
+    body = ScanBody(id="scan_7", x=-2.0, y=0.0)
+    seen = msgspec.structs.replace(entity("person_4", -2.3, 0.4, kind="person"), last_seen_ns=9 * S)
+    assert glance_at([body], [seen], (0.0, 0.0), 0.0, 10 * S) is None
+    walked = msgspec.structs.replace(seen, position_in_world=(-3.5, 0.0, 0.0),
+                                     velocity_in_world=(1.0, 0.0))  # fmt: skip
+    assert glance_at([body], [walked], (0.0, 0.0), 0.0, 10 * S) is None  # 1.5 <= 0.8 + 1.0
+    assert glance_at([body], [seen], (0.0, 0.0), 0.0, 12 * S) is not None  # 3 s ago
+    never = msgspec.structs.replace(seen, last_seen_ns=0)
+    assert glance_at([body], [never], (0.0, 0.0), 0.0, 1 * S) is not None

@@ -9,7 +9,7 @@ import pytest
 
 from common.config import MissionSettings
 from common.messages.mission import MissionRequest
-from common.messages.navigation import ArtifactStandoff, PersonHandover, PoseGoal
+from common.messages.navigation import ArtifactStandoff, PersonHandover, PoseGoal, ScanBody
 from common.messages.semantic_map import PersonColours, SeenPlace
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
@@ -676,6 +676,41 @@ def test_nobody_who_stood_near_already_or_only_paused_answers_the_ask() -> None:
         "failed", "person_not_found"), outcome  # fmt: skip
     handovers = {g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)}
     assert handovers == {"person_1"}
+
+
+def test_a_walker_passing_behind_the_asking_robot_is_looked_at_and_handed_to() -> None:
+    """Hall seed 0's shift: the robot asked for person_1 two minutes facing one way while
+    they walked by 0.9-3.9 m behind it, never in the camera's view. Now, while it asks,
+    the lidars' body behind it is turned to (a pose goal on the spot, aimed at it), the
+    camera sees who it is, and the fetch goes on to them."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (20.0, 20.0)  # nowhere the look round sees
+    robot.seen_after_turn_rad = 100.0
+    tree = mission(robot)
+    outcome, asked = None, False
+    for _ in range(8000):
+        outcome = tree.tick()
+        if not asked and tree.where()[1].startswith("asking for person_1"):
+            asked = True  # person_1 walks by behind the robot, 2 m off
+            c, s_ = math.cos(robot.yaw), math.sin(robot.yaw)
+            there = (robot.xy[0] - 2.0 * c, robot.xy[1] - 2.0 * s_)
+            robot.person_walked_to, robot.sees_facing = there, True
+            robot.bodies_ = [ScanBody(id="scan_5", x=there[0], y=there[1])]
+            at_ask = (robot.xy, robot.yaw)
+        robot.advance()
+        if outcome is not None:
+            break
+    assert asked and outcome is not None and outcome.state == "succeeded", outcome
+    (x, y), yaw = at_ask
+    glances = [g for _, g in robot.nav_goals
+               if isinstance(g, PoseGoal) and math.dist((g.x, g.y), (x, y)) < 1e-6]  # fmt: skip
+    assert glances, robot.nav_goals
+    assert abs(math.remainder(glances[-1].yaw - (yaw + math.pi), math.tau)) < 1e-6
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("somebody the lidars track at" in d and "(scan_5)" in d for d in decisions)
+    assert any(d.startswith("person_1 seen at") for d in decisions), decisions
+    handovers = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert handovers[-1] == "person_1"
 
 
 def test_a_walk_to_the_person_that_falls_short_looks_for_them_and_hands_over() -> None:

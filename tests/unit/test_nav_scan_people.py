@@ -24,6 +24,7 @@ from services.navigation.scan_people import (
     VelocityMemory,
     bodies,
     merge_scan,
+    nearest_tracks,
     static_cells,
 )
 
@@ -445,3 +446,13 @@ def test_a_walker_the_map_saw_lately_is_carried_along_their_velocity_to_the_tick
     assert ahead(walker, 5 * S).x == 2.0 + AHEAD_MAX_S  # no further than that
     now = dataclasses.replace(walker, seen_ns=None)
     assert ahead(now, 5 * S) == now
+
+
+def test_the_tracks_said_are_the_nearest_within_range() -> None:
+    """`nav/status` says the lidar's tracks near the base, nearest first, a bounded few."""
+    tracks = [Person(f"scan_{k}", float(k), 0.0, None, None) for k in (5, 1, 9, 3)]
+    assert [q.id for q in nearest_tracks(tracks, 0.0, 0.0, within_m=6.0)] == [
+        "scan_1", "scan_3", "scan_5"]  # fmt: skip
+    assert [q.id for q in nearest_tracks(tracks, 0.0, 0.0, within_m=6.0, most=2)] == [
+        "scan_1", "scan_3"]  # fmt: skip
+    assert nearest_tracks([], 0.0, 0.0) == []

@@ -37,7 +37,10 @@
   hips into a pallet, 9 contacts in one shift; not where it looked round already in this
   request) while the head camera sweeps the floor round it, asking the map each tick
   whether it saw them since the look began; then stand `person_ask_s` asking for them
-  ("asking for <person>: please come to the robot"). A person who comes while it asks
+  ("asking for <person>: please come to the robot"), turning the head camera to each
+  body the lidars track near that it does not see and the map cannot name
+  (`person_search.glance_at`: a walker passing behind it; the ask waits for a turn under
+  way, and the camera looks `GLANCE_LOOK_S` once there). A person who comes while it asks
   and stands within `ANSWER_M` of the base for `ANSWER_STAND_S` (not one who stood that
   near already when it began to ask, nor a walker pausing in its way: they walk on
   within 4 s) answered (one who came before the ask's end is waited for past it, while
@@ -95,7 +98,7 @@ from services.mission.behaviours.handover import side_bearing
 from services.mission.behaviours.identity import other_clothes, said, wearer_near
 from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
 from services.mission.patrol_goals import PatrolGoal, look_around
-from services.mission.person_search import LOOKED_M, next_place
+from services.mission.person_search import LOOKED_M, glance_at, next_place
 from services.mission.ports import PortError, Refused, Unavailable
 from services.mission.room_behind import room_behind
 
@@ -447,6 +450,8 @@ PERSON_HERE_M = 2.5
 LOOK_TURN_MAX_S = 40.0
 TURN_HELD_S = 5.0
 TURN_PROGRESS_RAD = 0.1
+#: s the head camera looks at a body once turned to it (the map names who it sees there).
+GLANCE_LOOK_S = 1.0
 
 
 class PersonAhead(MissionBehaviour):
@@ -582,12 +587,17 @@ class LookForPerson(MissionBehaviour):
         self.turns: list[PatrolGoal] = []
         self.goal_id = ""
         self.turn_mark: tuple[float, int] | None = None
+        #: The lidar tracks turned to while asking (`glance_at`), and until when (sim ns)
+        #: the camera looks at the last one.
+        self.glanced: set[str] = set()
+        self.glance_until_ns = 0
 
     def initialise(self) -> None:
         super().initialise()
         self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
         self.turns, self.goal_id, self.turn_mark = [], "", None
         self.near_at_ask, self.standing = set(), {}
+        self.glanced, self.glance_until_ns = set(), 0
         xy, yaw = self.port.robot_xy(), self.last_yaw
         if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
             self.turned = math.tau  # looked round here already: only waits and asks
@@ -608,18 +618,20 @@ class LookForPerson(MissionBehaviour):
             self.say = f"looking for {pid}"
             self.fraction = 0.5 * min(self.turned / math.tau, 1.0)
             return Status.RUNNING
+        people = self._people()
         if self.asked_ns is None:
             self.asked_ns = self.port.now_ns
-            self.near_at_ask = {q.id for q, _ in self._near_people()}
+            self.near_at_ask = {q.id for q, _ in self._near_people(people)}
             whole = self.turned >= math.tau - TURN_TOLERANCE_RAD
             turn = "a turn" if whole else f"{math.degrees(self.turned):.0f}°"
             self.ctx.decide(f"{pid} not seen in {turn} round their place: asking for them")
         self.say = f"asking for {pid}: please come to the robot"
-        came = self._answer(pid)
+        came = self._answer(pid, people)
         if came is not None:
             return self._done()
+        glancing = self._glance(pid, people)
         waited = (self.port.now_ns - self.asked_ns) / 1e9
-        if waited < self.settings.person_ask_s:
+        if waited < self.settings.person_ask_s or glancing:
             self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
             return Status.RUNNING
         asked_until = self.asked_ns + round(self.settings.person_ask_s * NS_PER_S)
@@ -627,16 +639,19 @@ class LookForPerson(MissionBehaviour):
             return Status.RUNNING  # somebody who came while it asked stands near: waited for
         return self._not_seen(pid, person)
 
-    def _near_people(self) -> list[tuple[MapEntity, float]]:
-        """The map's people seen lately (`PERSON_FRESH_S`), standing (slower than
+    def _people(self) -> list[MapEntity]:
+        """The map's people as of this tick (none when the map does not answer)."""
+        try:
+            return self.port.people()
+        except PortError:
+            return []
+
+    def _near_people(self, people: list[MapEntity]) -> list[tuple[MapEntity, float]]:
+        """Of `people`, those seen lately (`PERSON_FRESH_S`), standing (slower than
         `WALKING_MPS`), within `ANSWER_M` of the base, with their distance; not one
         clearly in other clothes than the person asked for (`identity.other_clothes`), nor one
         found at the handover in them already (`OTHERS`)."""
         xy = self.port.robot_xy()
-        try:
-            people = self.port.people()
-        except PortError:
-            return []
         if xy is None:
             return []
         standing = _standing(self.port.now_ns)
@@ -649,11 +664,12 @@ class LookForPerson(MissionBehaviour):
                 out.append((q, d))
         return out
 
-    def _answer(self, pid: str) -> str | None:
+    def _answer(self, pid: str, people: list[MapEntity]) -> str | None:
         """The id of the person who answered the ask (the module docstring), taken as
         `pid` from now on (`PERSON`); None while nobody has."""
         now = self.port.now_ns
-        near = {q.id: (q, d) for q, d in self._near_people() if q.id not in self.near_at_ask}
+        near = {q.id: (q, d) for q, d in self._near_people(people)
+                if q.id not in self.near_at_ask}  # fmt: skip
         self.standing = {i: self.standing.get(i, now) for i in near}
         stood = [i for i, t in self.standing.items()
                  if (now - t) / NS_PER_S >= ANSWER_STAND_S]  # fmt: skip
@@ -703,9 +719,48 @@ class LookForPerson(MissionBehaviour):
         self.turn_mark = None
         return True
 
-    def _held(self, pid: str) -> bool:
-        """Whether the turn under way has been held still `TURN_HELD_S` (then the look
-        round ends: cancelled, said)."""
+    def _glance(self, pid: str, people: list[MapEntity]) -> bool:
+        """While asking: turn the head camera to a body the lidars track near that it does
+        not see and the map cannot name (`person_search.glance_at`), and look there
+        `GLANCE_LOOK_S`; whether such a turn or look is under way. A turn held still
+        `TURN_HELD_S` ends (a person beside the robot)."""
+        now = self.port.now_ns
+        if self.goal_id:
+            status = self.port.nav_status(self.goal_id)
+            if status is None or status.state in ("idle", "active"):
+                return not self._held(pid, "looking at who walks by")
+            self.goal_id = ""
+            self.glance_until_ns = now + round(GLANCE_LOOK_S * NS_PER_S)
+        if now < self.glance_until_ns:
+            return True
+        xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
+        if xy is None or yaw is None:
+            return False
+        target = glance_at(self.port.bodies(), people, xy, yaw, now, self.glanced)
+        if target is None:
+            return False
+        body, aim = target
+        self.glanced.add(body.id)
+        goal = PoseGoal(x=xy[0], y=xy[1], yaw=aim, position_tolerance_m=POSITION_TOLERANCE_M,
+                        yaw_tolerance_rad=TURN_TOLERANCE_RAD)  # fmt: skip
+        try:
+            self.goal_id = self.port.send_nav_goal(goal)
+        except PortError as exc:
+            self.ctx.decide(f"look_for_person: navigation did not take the turn to a body "
+                            f"({exc})")  # fmt: skip
+            return False
+        self.turn_mark = None
+        off = math.degrees(math.remainder(aim - yaw, math.tau))
+        self.ctx.decide(
+            f"look_for_person: somebody the lidars track at ({body.x:.2f}, {body.y:.2f}), "
+            f"{math.dist(xy, (body.x, body.y)):.1f} m off and out of the camera's view "
+            f"({body.id}): turning {off:+.0f}° to see if it is {pid} ({self.goal_id})"
+        )
+        return True
+
+    def _held(self, pid: str, then: str = "") -> bool:
+        """Whether the turn under way has been held still `TURN_HELD_S` (then it ends:
+        cancelled, said; `then`: what the robot does next, else ask from here)."""
         yaw, now = self.port.robot_yaw(), self.port.now_ns
         if yaw is None:
             return False
@@ -716,9 +771,9 @@ class LookForPerson(MissionBehaviour):
         if now - mark[1] < TURN_HELD_S * NS_PER_S:
             return False
         self._cancel(f"the turn held still {TURN_HELD_S:.0f} s")
+        then = then or f"asking for {pid} from here"
         self.ctx.decide(f"look_for_person: the turn did not turn in {TURN_HELD_S:.0f} s (the "
-                        f"speed rules hold it for a person beside the robot): asking for {pid} "
-                        "from here")  # fmt: skip
+                        f"speed rules hold it for a person beside the robot): {then}")  # fmt: skip
         return True
 
     def _cancel(self, why: str) -> None:
