@@ -17,13 +17,17 @@ seed 0's shift the robot asked for person_1 for two minutes facing one way, whil
 walked back and forth 0.9-3.9 m behind it and to its right, never in view. A body is
 looked at once (by its track's id), when it is within `GLANCE_M`, outside the camera's
 view, and no map person the camera saw within `KNOWN_S` stands there (who it is is
-known). The turn aims where its velocity takes it in `LEAD_S`. Pure: no transport.
+known); again once it came from where it was looked at (`CAME_M`) to stand within
+`ANSWER_M` of the base (who answers the ask comes up to the robot, wherever it faces:
+seed 0's next shift had person_4 walk up and stand 1.3 m behind it for 10 s, unseen,
+after the robot had looked at them 4.4 m off, not near enough to be named). The turn
+aims where its velocity takes it in `LEAD_S`. Pure: no transport.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Mapping, Sequence
 
 from common.messages.base import NS_PER_S
 from common.messages.navigation import ScanBody
@@ -47,6 +51,12 @@ KNOWN_S = 2.0
 KNOWN_M = 0.8
 #: s: the turn aims where the body's velocity takes it in this long.
 LEAD_S = 1.0
+#: m: who comes this near the base while it asks may be answering (`LookForPerson`); a
+#: body looked at once is looked at again when it has come this far from there to stand
+#: that near (slower than `STANDING_MPS`, m/s).
+ANSWER_M = 2.0
+CAME_M = 1.0
+STANDING_MPS = 0.3
 
 
 def next_place(
@@ -77,15 +87,18 @@ def glance_at(
     robot_xy: tuple[float, float],
     robot_yaw: float,
     now_ns: int,
-    glanced: Collection[str] = (),
+    glanced: Mapping[str, tuple[float, float]] | None = None,
 ) -> tuple[ScanBody, float] | None:
     """The body to turn the head camera to while the robot asks, and the heading to turn
     to (rad, world); None when nobody unknown is near (module docstring). `glanced`: the
-    track ids looked at already."""
+    track ids looked at already, and where they were then."""
     best: tuple[float, ScanBody, float] | None = None
     for body in bodies:
         d = math.dist(robot_xy, (body.x, body.y))
-        if body.id in glanced or not GLANCE_MIN_M <= d <= GLANCE_M or _known(body, people, now_ns):
+        was = (glanced or {}).get(body.id)
+        if was is not None and not _came(body, was, d):
+            continue
+        if not GLANCE_MIN_M <= d <= GLANCE_M or _known(body, people, now_ns):
             continue
         bearing = math.atan2(body.y - robot_xy[1], body.x - robot_xy[0])
         if abs(math.remainder(bearing - robot_yaw, math.tau)) <= IN_VIEW_RAD:
@@ -95,6 +108,12 @@ def glance_at(
         if best is None or d < best[0]:
             best = (d, body, aim)
     return None if best is None else (best[1], best[2])
+
+
+def _came(body: ScanBody, was: tuple[float, float], d: float) -> bool:
+    """Whether a body looked at once came from there to stand within `ANSWER_M`."""
+    standing = body.velocity is not None and math.hypot(*body.velocity) < STANDING_MPS
+    return standing and d <= ANSWER_M and math.dist(was, (body.x, body.y)) >= CAME_M
 
 
 def _known(body: ScanBody, people: Sequence[MapEntity], now_ns: int) -> bool:

@@ -345,9 +345,12 @@ class Navigator:
         speed = math.hypot(*velocity)
         if ways and speed >= MEASURED_MIN_MPS:
             also = (*also, (velocity[0] / speed, velocity[1] / speed))
-        limit = people_limit(pose, direction, cm.people, self.fp, self.n.people, self.top_mps,
+        pp = self.n.people  # stopping from the speed now (stopped: from the one it resumes at)
+        stopping = max(speed, pp.slow_speed if self.limit_rule == "stop" else 0.0)
+        limit = people_limit(pose, direction, cm.people, self.fp, pp, self.top_mps,
                              g.handover_id, self.limit_rule == "stop", also,
-                             turning=direction is None)  # fmt: skip
+                             turning=direction is None,
+                             stopping_s=stopping / pp.brake_decel_mps2)  # fmt: skip
         self.limit_rule = limit.rule
         guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,

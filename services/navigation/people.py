@@ -9,19 +9,24 @@ rules per person:
   nearest point to them) is at most the speed from which it can react and brake before
   the separation falls below the standard's S_p, with the person's own speed towards the
   robot (their estimated velocity plus a margin; a walking pace while unknown). Where
-  even a robot at rest is too close (S_p(0) ≥ the separation, or the allowed speed
-  below `CREEP_MPS`) and it is not moving away: `stop`. A stop holds until the person is
-  `RESUME_MARGIN_M` further than that (their position jitters from frame to frame: no
-  creeping on and off), then the robot goes on by itself; not for the person handed
-  over to, whom the robot comes up to at `handover_speed` by design (the handover pose
-  lies 0.83 m from them, 0.07 m beyond the margin: the changing hall's shifts stood
-  53 and 77 s stopped 0.67-0.73 m from them). Within S_p at rest of anyone
-  but the person handed over to, the robot is at rest unless its path leads clearly
-  away from them (`AWAY_COS`): moving along or beside a person that close, the trot's
-  sway and drift step towards them (a bystander passing 0.3 m behind the robot, the
-  shift: 0.06-0.1 m/s towards them while the path ran along them); nor does it turn on
-  the spot (hall seed 1's shift: the handover's final turn went on with a bystander
-  0.45 m off the footprint, the base swaying 0.06 m/s towards them);
+  even a robot at rest is too close (S_p(0) ≥ the separation, or the allowed speed below
+  `CREEP_MPS`) and it is not moving away: `stop`. A walking robot is not at rest at
+  once: for a person coming towards it, the stop comes earlier by how far they walk
+  (their measured speed towards it) while the base comes to rest from its speed now
+  (`stopping_s`): the trot's stop sways the base 0.1-0.2 m/s any way for 0.3 s (hall
+  seed 0's shift, t = 46.6 s: a walker at 1.1 m/s from behind, the stop issued at S_p at
+  rest, and the base's sway took it 0.15 m/s towards them 0.11 m inside S_p). A stop
+  holds until the person is `RESUME_MARGIN_M` further than that (their position jitters
+  from frame to frame: no creeping on and off), then the robot goes on by itself; not
+  for the person handed over to, whom the robot comes up to at `handover_speed` by
+  design (the handover pose lies 0.83 m from them, 0.07 m beyond the margin: the
+  changing hall's shifts stood 53 and 77 s stopped 0.67-0.73 m from them). Within S_p at
+  rest of anyone but the person handed over to, the robot is at rest unless its path
+  leads clearly away from them (`AWAY_COS`): moving along or beside a person that close,
+  the trot's sway and drift step towards them (a bystander passing 0.3 m behind the
+  robot, the shift: 0.06-0.1 m/s towards them while the path ran along them); nor does
+  it turn on the spot (hall seed 1's shift: the handover's final turn went on with a
+  bystander 0.45 m off the footprint, the base swaying 0.06 m/s towards them);
 - **the slow zone**: `handover_speed` within `slow_radius_m` of the person being handed
   over to, `slow_speed` within it of anyone else, entered on a braking ramp
   `v ≤ √(v_cap² + 2 a (d − d_cap − lead))` (the command goes through acceleration limits
@@ -106,6 +111,7 @@ def people_limit(
     stopped: bool = False,
     also: tuple[tuple[float, float], ...] = (),
     turning: bool = False,
+    stopping_s: float = 0.0,
 ) -> SpeedLimit:
     """The tightest cap that people impose now; `direction_world` the intended travel
     direction (unit, world; None when not translating), `also` other directions the base
@@ -114,7 +120,9 @@ def people_limit(
     (a cap at or above it is no cap). `stopped`: the last cap was a stop (it holds until
     the person is `RESUME_MARGIN_M` further than S_p at rest). `turning`: not
     translating but turning on the spot (the goal's final turn): the footprint's ends
-    sweep and the trot sways, so within S_p at rest of a bystander it is a stop too."""
+    sweep and the trot sways, so within S_p at rest of a bystander it is a stop too.
+    `stopping_s`: how long the base takes to come to rest from its speed now (the stop
+    is that much earlier for a person coming towards it)."""
     if not people:
         return NO_LIMIT
     sep = separation_params(p)
@@ -126,11 +134,13 @@ def people_limit(
         n = bearing(pose, fp, (person.x, person.y))
         v_h = directed_speed(person.velocity, (-n[0], -n[1]), sep)
         at_rest = protective_distance(0.0, v_h, sep)
+        coming = directed_speed(person.velocity, (-n[0], -n[1]), sep) - sep.speed_margin_mps
+        halt = at_rest + (coming if person.velocity is not None else 0.0) * stopping_s
         zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - TRACKING_MARGIN)
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
         ways = (direction_world, *also) if direction_world else ()
         cos = max((n[0] * u[0] + n[1] * u[1] for u in ways), default=0.0)
-        if (direction_world or turning) and not handing and d < at_rest:
+        if (direction_world or turning) and not handing and d < halt:
             away = direction_world is not None and (
                 n[0] * direction_world[0] + n[1] * direction_world[1] <= AWAY_COS
             )

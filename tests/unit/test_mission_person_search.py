@@ -59,9 +59,27 @@ def test_the_body_looked_at_is_the_nearest_out_of_view_and_unnamed() -> None:
     body, aim = got
     assert body.id == "scan_2"
     assert aim == pytest.approx(math.atan2(-1.0 + LEAD_S, -3.0))
-    again = glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S, glanced={"scan_2"})
+    again = glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S, glanced={"scan_2": (-3.0, -1.0)})
     assert again is not None and again[0].id == "scan_4"  # each track once
-    assert glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S, glanced={"scan_2", "scan_4"}) is None
+    both = {"scan_2": (-3.0, -1.0), "scan_4": (-1.0, -4.0)}
+    assert glance_at(bodies, [], (0.0, 0.0), 0.0, 10 * S, glanced=both) is None
+
+
+def test_a_body_looked_at_once_is_looked_at_again_once_it_came_to_stand_near() -> None:
+    """Seed 0's shift: person_4, looked at 4.4 m off and not named, heard the ask, came
+    and stood 1.3 m behind the robot: looked at again. A walker who only walked on is
+    not, nor one who stands where they were looked at."""
+    was = {"scan_46": (-4.0, -1.5)}
+    came = ScanBody(id="scan_46", x=-1.3, y=0.1, velocity=(0.0, 0.05))
+    got = glance_at([came], [], (0.0, 0.0), 0.0, 10 * S, glanced=was)
+    assert got is not None and got[0].id == "scan_46"
+    walking = ScanBody(id="scan_46", x=-1.3, y=0.1, velocity=(1.0, 0.0))
+    assert glance_at([walking], [], (0.0, 0.0), 0.0, 10 * S, glanced=was) is None
+    far = ScanBody(id="scan_46", x=-3.0, y=0.1, velocity=(0.0, 0.0))  # beyond ANSWER_M
+    assert glance_at([far], [], (0.0, 0.0), 0.0, 10 * S, glanced=was) is None
+    stayed = ScanBody(id="scan_46", x=-1.3, y=0.1, velocity=(0.0, 0.0))
+    assert glance_at([stayed], [], (0.0, 0.0), 0.0, 10 * S,
+                     glanced={"scan_46": (-1.5, 0.3)}) is None  # fmt: skip
 
 
 def test_a_body_the_camera_named_lately_is_not_looked_at() -> None:

@@ -206,6 +206,27 @@ def test_people_slow_the_robot_and_stop_it_when_close_ahead() -> None:
     assert d[0] == pytest.approx(0.5)
 
 
+def test_a_walker_coming_from_behind_stops_a_walking_robot_earlier() -> None:
+    """Hall seed 0's shift (t = 46.6 s): a walker at 1.1 m/s came from behind-left of a
+    robot walking on 119° away from them; the stop at S_p at rest left the trot's sway
+    0.15 m/s towards them inside S_p. The base needs `stopping_s` to come to rest: the
+    stop comes that much earlier for them, not for someone standing, nor for a robot
+    already at rest."""
+    p, top = PeopleSettings(), 0.6
+    pose = Pose(0.0, 0.0, 0.0)
+    away = (math.cos(math.radians(-61.0)), math.sin(math.radians(-61.0)))  # 119° off them
+    x = -FP.back - 1.6  # 1.6 m behind the footprint, walking at it
+    walker = [Person("person_4", x, 0.0, None, (1.1, 0.0))]
+    plain = people_limit(pose, away, walker, FP, p, top)
+    assert plain.rule != "stop" and plain.protective_m < 1.6  # S_p at rest: 1.38 m
+    early = people_limit(pose, away, walker, FP, p, top, stopping_s=0.5)
+    assert early.rule == "stop" and early.speed == 0.0
+    standing = [Person("person_4", -FP.back - 0.65, 0.0, None, (0.0, 0.0))]  # S_p 0.61
+    assert people_limit(pose, away, standing, FP, p, top, stopping_s=0.5).rule != "stop"
+    passing = [Person("person_4", x, 0.0, None, (0.0, 1.1))]  # across, not at it
+    assert people_limit(pose, away, passing, FP, p, top, stopping_s=0.5).rule != "stop"
+
+
 def test_an_idle_navigator_ticks_at_rest_without_a_goal() -> None:
     from services.navigation.navigator import Navigator
 

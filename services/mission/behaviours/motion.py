@@ -98,7 +98,7 @@ from services.mission.behaviours.handover import side_bearing
 from services.mission.behaviours.identity import other_clothes, said, wearer_near
 from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
 from services.mission.patrol_goals import PatrolGoal, look_around
-from services.mission.person_search import LOOKED_M, glance_at, next_place
+from services.mission.person_search import ANSWER_M, LOOKED_M, glance_at, next_place
 from services.mission.ports import PortError, Refused, Unavailable
 from services.mission.room_behind import room_behind
 
@@ -132,10 +132,9 @@ PRESENT_SIDE_M = 0.5
 #: with the robot 5 cm inside its goal's tolerance, and the person never took it.
 HANDOVER_BEYOND_M = 0.03
 HANDOVER_EXTRA_MAX_M = 0.3
-#: m: a person who comes this near the base while it asks for someone answered the ask,
-#: once they have stood there `ANSWER_STAND_S` (s): longer than a walker pauses in the
-#: robot's way before turning back (`services.sim.people.GIVE_WAY_S`, 4 s).
-ANSWER_M = 2.0
+#: s: a person who comes within `person_search.ANSWER_M` of the base while it asks for
+#: someone answered the ask, once they have stood there this long: longer than a walker
+#: pauses in the robot's way before turning back (`services.sim.people.GIVE_WAY_S`, 4 s).
 ANSWER_STAND_S = 5.0
 
 
@@ -587,9 +586,9 @@ class LookForPerson(MissionBehaviour):
         self.turns: list[PatrolGoal] = []
         self.goal_id = ""
         self.turn_mark: tuple[float, int] | None = None
-        #: The lidar tracks turned to while asking (`glance_at`), and until when (sim ns)
-        #: the camera looks at the last one.
-        self.glanced: set[str] = set()
+        #: The lidar tracks turned to while asking (`glance_at`: id → where), and until
+        #: when (sim ns) the camera looks at the last one.
+        self.glanced: dict[str, tuple[float, float]] = {}
         self.glance_until_ns = 0
 
     def initialise(self) -> None:
@@ -597,7 +596,7 @@ class LookForPerson(MissionBehaviour):
         self.turned, self.last_yaw, self.asked_ns = 0.0, self.port.robot_yaw(), None
         self.turns, self.goal_id, self.turn_mark = [], "", None
         self.near_at_ask, self.standing = set(), {}
-        self.glanced, self.glance_until_ns = set(), 0
+        self.glanced, self.glance_until_ns = {}, 0
         xy, yaw = self.port.robot_xy(), self.last_yaw
         if xy is not None and any(math.dist(xy, q) <= LOOKED_M for q in self.get(LOOKED) or []):
             self.turned = math.tau  # looked round here already: only waits and asks
@@ -740,7 +739,7 @@ class LookForPerson(MissionBehaviour):
         if target is None:
             return False
         body, aim = target
-        self.glanced.add(body.id)
+        self.glanced[body.id] = (body.x, body.y)
         goal = PoseGoal(x=xy[0], y=xy[1], yaw=aim, position_tolerance_m=POSITION_TOLERANCE_M,
                         yaw_tolerance_rad=TURN_TOLERANCE_RAD)  # fmt: skip
         try:
