@@ -18,7 +18,8 @@ no costmap, `queued(b)` (the id of the goal waiting for the map, reported `activ
 fails `timeout` after `MAP_WAIT_S` of sim time), else `start_due(b, …)` (the pending goal
 whose tick has come is started; a queued one is resolved now, against the map as fetched,
 so the same in every run); at each map adopted, `follow_person` (a handover goal's pose
-is chosen again once its person is `RETARGET_M` from where it was chosen); last,
+is chosen again once its person, the lidar's track of them or the map's estimate, is
+`RETARGET_M` from where it was chosen); last,
 `done(b, …)` records the tick's costmap and pose and wakes `as_of`.
 
 Locks: `cond` (the node's one condition, shared with `map_feed.MapFeed`) guards the
@@ -51,6 +52,7 @@ from services.navigation.costmap import Costmap, Person
 from services.navigation.goals import GoalInvalid, Queued
 from services.navigation.grid import Footprint, Pose
 from services.navigation.navigator import GoalSpec, Navigator
+from services.navigation.scan_people import handover_person
 from services.navigation.sources import Source, SourceError
 
 #: A goal taken before the map fails when the map has not come this long after, s.
@@ -198,18 +200,34 @@ class GoalIntake:
             raise GoalInvalid(f"{target} is off the map")
         return GoalSpec(goal_id, target, tol, tol_yaw, handover, person_xy, bearing, distance)
 
-    def follow_person(self, b: int, cm: Costmap, pose: Pose, people: list[Person]) -> None:
-        """A handover goal follows its person: once `people` (the map's) has them
-        `RETARGET_M` from where the pose was chosen, the pose is chosen again from there
-        (the estimate of a person far away firms up as the robot comes near; a person may
-        step aside). Not the people layer's: the lidar's floor point of a person is the
-        near side of their legs, and a pose from it stood the robot 0.11 m farther than
-        the handover distance from the person (the mission's own check, on the map's
-        estimate); nobody took the bottle (`tests/integration/test_coping.py`)."""
+    def follow_person(
+        self,
+        b: int,
+        cm: Costmap,
+        pose: Pose,
+        people: list[Person],
+        layer: list[Person] | None = None,
+        scanned: list[Person] | None = None,
+    ) -> None:
+        """A handover goal follows its person: once they are `RETARGET_M` from where the
+        pose was chosen, the pose is chosen again from there (the estimate of a person
+        far away firms up as the robot comes near; a person may step aside). Where they
+        are (`scan_people.handover_person`): the lidar's track of them in the people
+        `layer` (its floor point moved to their body's centre: from the near side of the
+        legs, the pose stood the robot 0.11 m farther than the handover distance and
+        nobody took the bottle, `tests/integration/test_coping.py`), else the map's
+        estimate in `people`, not followed where the lidar sees free floor (seed 0's
+        shift: the map carried person_4 0.8 m off, where nobody stood, while they waited
+        1.2 m from the robot; the goal followed, and the robot stood 70 s aligning to
+        it, stopped by the rules 0.62 m from the real person). Without a `layer`, the
+        map's estimate."""
         g = self.nav.goal
         if self.nav.state != "active" or g is None or not g.handover_id or g.person_xy is None:
             return
-        person = next((q for q in people if q.id == g.handover_id), None)
+        if layer is None:
+            person = next((q for q in people if q.id == g.handover_id), None)
+        else:
+            person = handover_person(g.handover_id, people, layer, scanned or [], (pose.x, pose.y))
         if person is None or math.hypot(person.x - g.person_xy[0],
                                         person.y - g.person_xy[1]) < RETARGET_M:  # fmt: skip
             return

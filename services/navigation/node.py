@@ -182,7 +182,7 @@ class NavNode:
             return
         self.intake.start_due(b, m.costmap, pose, m.map_at)
         if fresh is not None:
-            self.intake.follow_person(b, m.costmap, pose, m.map_people)
+            self.intake.follow_person(b, m.costmap, pose, m.map_people, m.people, m.scanned)
         if changed:
             m.rebuild(b)
         out = self.nav.tick(b, pose, m.costmap, map_velocity(odom, pose.yaw))

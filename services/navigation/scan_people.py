@@ -82,6 +82,11 @@ CLEARS_BEYOND_M = 0.3
 VELOCITY_HOLD_S = 1.0
 #: The memory forgets what it no longer holds once it keeps this many people.
 MEMORY_PRUNE_AT = 256
+#: m: the lidar's floor point of a person (the centroid of the returns off the near side
+#: of their legs) lies about this much nearer the robot than their body's centre, where
+#: the map's estimate and the handover distance are taken: a handover pose chosen from
+#: the lidar's point stood the robot 0.11 m farther than the handover distance.
+LEGS_NEAR_SIDE_M = 0.1
 #: m: the tracks within this of the base are said to who looks for a person
 #: (`nearest_tracks`, on `nav/status`), at most `TRACKS_SAID` of them.
 TRACKS_SAID_M = 6.0
@@ -390,6 +395,31 @@ def nearest_tracks(
     who walks by near the robot, where its head camera may not look."""
     near = sorted((math.hypot(q.x - x, q.y - y), k) for k, q in enumerate(tracks))
     return [tracks[k] for d, k in near if d <= within_m][:most]
+
+
+def handover_person(
+    pid: str,
+    map_people: Sequence[Person],
+    layer: Sequence[Person],
+    scanned: Sequence[Person],
+    robot_xy: tuple[float, float],
+) -> Person | None:
+    """Where a handover goal's person is to be taken: the lidar's track of them when one
+    is theirs in the people layer (`merge_scan`: its position is the track's), moved
+    `LEGS_NEAR_SIDE_M` away from the robot to their body's centre; else the map's
+    estimate, unless the layer left it out (the lidar sees free floor there: the map
+    carried a walker along a stale velocity, or took someone else's detection for them);
+    None when neither has them where they can be."""
+    mapped = next((q for q in map_people if q.id == pid), None)
+    layered = next((q for q in layer if q.id == pid), None)
+    if mapped is None or layered is None:
+        return None
+    if not any(s.x == layered.x and s.y == layered.y for s in scanned):
+        return mapped
+    dx, dy = layered.x - robot_xy[0], layered.y - robot_xy[1]
+    far = math.hypot(dx, dy)
+    k = LEGS_NEAR_SIDE_M / far if far > 1e-6 else 0.0
+    return replace(mapped, x=layered.x + k * dx, y=layered.y + k * dy)
 
 
 class VelocityMemory:

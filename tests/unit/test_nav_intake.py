@@ -24,6 +24,7 @@ from services.navigation.costmap import Costmap, CostParams, Person, build_costm
 from services.navigation.grid import Footprint, Grid, Pose
 from services.navigation.intake import MAP_WAIT_S, GoalIntake
 from services.navigation.navigator import Navigator
+from services.navigation.scan_people import LEGS_NEAR_SIDE_M
 from services.navigation.sources import SourceError
 
 FP = Footprint.stowed()
@@ -227,6 +228,34 @@ def test_a_handover_goal_follows_its_person_once_the_map_has_them_elsewhere() ->
     # Somebody else moving changes nothing.
     rig.intake.follow_person(4 * PERIOD, cm, rig.pose, [Person("person_2", 3.0, 3.0)])
     assert rig.nav.goal == moved
+
+
+def test_a_handover_goal_follows_the_lidar_s_track_of_its_person_not_a_stale_estimate() -> None:
+    """Seed 0's shift: the map carried person_4 0.8 m off, where the lidar saw free
+    floor, while they waited 1.2 m from the robot; the goal followed the map there. The
+    lidar's track of them is followed instead (its floor point moved to their body's
+    centre); a map estimate the layer left out is not followed."""
+    cm = _costmap()
+    rig = _Rig(costmap=cm)
+    rig.goal(PersonHandover(person_id="person_1"))
+    rig.intake.start_due(PERIOD, cm, rig.pose, 0)
+    first = rig.nav.goal
+    assert first is not None and first.person_xy == (2.0, 2.0)
+    stale = [Person("person_1", 2.8, 2.0)]
+    rig.intake.follow_person(2 * PERIOD, cm, rig.pose, stale, [], [])  # left out: stays
+    assert rig.nav.goal == first
+    track = Person("scan_3", 2.2, 1.7, None, (0.0, 0.0))
+    layer = [Person("person_1", track.x, track.y, None, track.velocity, None)]
+    rig.intake.follow_person(3 * PERIOD, cm, rig.pose, stale, layer, [track])
+    moved = rig.nav.goal
+    assert moved is not None and moved.person_xy is not None
+    away = np.array([track.x - rig.pose.x, track.y - rig.pose.y])
+    centre = np.array([track.x, track.y]) + LEGS_NEAR_SIDE_M * away / np.linalg.norm(away)
+    assert moved.person_xy == pytest.approx(tuple(centre))
+    # The camera's position of them (not a lidar track's) is the map's estimate.
+    seen = [Person("person_1", 2.5, 1.5)]
+    rig.intake.follow_person(4 * PERIOD, cm, rig.pose, [Person("person_1", 2.6, 1.6)], seen, [])
+    assert rig.nav.goal is not None and rig.nav.goal.person_xy == (2.6, 1.6)
 
 
 def test_a_handover_goal_faces_its_person_within_a_few_centimetres_sideways() -> None:
