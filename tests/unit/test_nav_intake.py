@@ -23,7 +23,7 @@ from common.messages.navigation import (
 from services.navigation.costmap import Costmap, CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose
 from services.navigation.intake import MAP_WAIT_S, GoalIntake
-from services.navigation.navigator import Navigator
+from services.navigation.navigator import GoalSpec, Navigator
 from services.navigation.scan_people import LEGS_NEAR_SIDE_M
 from services.navigation.sources import SourceError
 
@@ -208,13 +208,19 @@ def test_a_goal_stamped_before_the_history_takes_the_newest() -> None:
     assert rig.intake.as_of(2 * PERIOD) == (None, rig.pose)
 
 
-def test_a_handover_goal_follows_its_person_once_the_map_has_them_elsewhere() -> None:
+def _handing_to_person_1() -> tuple[Costmap, _Rig, GoalSpec]:
+    """A rig walking a handover goal to person_1, whom the map has at (2, 2)."""
     cm = _costmap()
     rig = _Rig(costmap=cm)
     rig.goal(PersonHandover(person_id="person_1"))
     rig.intake.start_due(PERIOD, cm, rig.pose, 0)
     first = rig.nav.goal
     assert first is not None and first.person_xy == (2.0, 2.0)
+    return cm, rig, first
+
+
+def test_a_handover_goal_follows_its_person_once_the_map_has_them_elsewhere() -> None:
+    cm, rig, first = _handing_to_person_1()
     # The map's estimate firms up by 3 cm: the pose stays.
     rig.intake.follow_person(2 * PERIOD, cm, rig.pose, [Person("person_1", 2.03, 2.0)])
     assert rig.nav.goal == first
@@ -235,12 +241,7 @@ def test_a_handover_goal_follows_the_lidar_s_track_of_its_person_not_a_stale_est
     floor, while they waited 1.2 m from the robot; the goal followed the map there. The
     lidar's track of them is followed instead (its floor point moved to their body's
     centre); a map estimate the layer left out is not followed."""
-    cm = _costmap()
-    rig = _Rig(costmap=cm)
-    rig.goal(PersonHandover(person_id="person_1"))
-    rig.intake.start_due(PERIOD, cm, rig.pose, 0)
-    first = rig.nav.goal
-    assert first is not None and first.person_xy == (2.0, 2.0)
+    cm, rig, first = _handing_to_person_1()
     stale = [Person("person_1", 2.8, 2.0)]
     rig.intake.follow_person(2 * PERIOD, cm, rig.pose, stale, [], [])  # left out: stays
     assert rig.nav.goal == first
