@@ -713,6 +713,27 @@ def test_a_walker_passing_behind_the_asking_robot_is_looked_at_and_handed_to() -
     assert handovers[-1] == "person_1"
 
 
+def test_a_stream_of_strangers_behind_the_robot_does_not_keep_it_asking() -> None:
+    """Somebody new walks by behind the robot all the time (each a new track, never the
+    person asked for): it looks at them while the ask lasts, then goes on looking
+    elsewhere; the request ends `person_not_found`, not asking for good."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (20.0, 20.0)
+    robot.seen_after_turn_rad = math.inf  # the glances' turns never see them
+    tree = mission(robot)
+    outcome = None
+    for k in range(20000):
+        outcome = tree.tick()
+        c, s_ = math.cos(robot.yaw), math.sin(robot.yaw)
+        robot.bodies_ = [
+            ScanBody(id=f"scan_{k}", x=robot.xy[0] - 2.0 * c, y=robot.xy[1] - 2.0 * s_)
+        ]
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.reason == "person_not_found", outcome
+
+
 def test_a_walk_to_the_person_that_falls_short_looks_for_them_and_hands_over() -> None:
     """The handover pose cannot be reached (blocked: a bystander stood by it in the
     shift) and the person walked off meanwhile: the failure does not end the request; the

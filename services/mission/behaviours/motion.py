@@ -628,8 +628,8 @@ class LookForPerson(MissionBehaviour):
         came = self._answer(pid, people)
         if came is not None:
             return self._done()
-        glancing = self._glance(pid, people)
         waited = (self.port.now_ns - self.asked_ns) / 1e9
+        glancing = self._glance(pid, people, waited < self.settings.person_ask_s)
         if waited < self.settings.person_ask_s or glancing:
             self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
             return Status.RUNNING
@@ -718,11 +718,12 @@ class LookForPerson(MissionBehaviour):
         self.turn_mark = None
         return True
 
-    def _glance(self, pid: str, people: list[MapEntity]) -> bool:
+    def _glance(self, pid: str, people: list[MapEntity], may_start: bool) -> bool:
         """While asking: turn the head camera to a body the lidars track near that it does
         not see and the map cannot name (`person_search.glance_at`), and look there
         `GLANCE_LOOK_S`; whether such a turn or look is under way. A turn held still
-        `TURN_HELD_S` ends (a person beside the robot)."""
+        `TURN_HELD_S` ends (a person beside the robot). A new one begins only while
+        `may_start` (the ask's time is not up: a busy aisle does not keep it for good)."""
         now = self.port.now_ns
         if self.goal_id:
             status = self.port.nav_status(self.goal_id)
@@ -733,7 +734,7 @@ class LookForPerson(MissionBehaviour):
         if now < self.glance_until_ns:
             return True
         xy, yaw = self.port.robot_xy(), self.port.robot_yaw()
-        if xy is None or yaw is None:
+        if not may_start or xy is None or yaw is None:
             return False
         target = glance_at(self.port.bodies(), people, xy, yaw, now, self.glanced)
         if target is None:
