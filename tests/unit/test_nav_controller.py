@@ -407,6 +407,25 @@ def test_the_final_turn_at_the_goal_waits_for_a_bystander_inside_the_separation(
     assert clear.limit.rule != "stop" and clear.cmd[2] > 0.0  # turning to the goal's yaw
 
 
+def test_the_final_align_is_held_by_the_turn_s_rule_not_by_a_step_it_does_not_make() -> None:
+    """Seed 0's shift: 8 cm from a handover pose and 24° off it, the align (a turn on the
+    spot) stood 110 s: the path's last few cm pointed at a bystander 0.72 m off the
+    footprint, whose stop (S_p at rest 0.62 m and its 0.15 m margin) the earlier stop
+    for someone nearer had left on. The align moves nothing but the heading: the turn's
+    rule holds it (within S_p at rest), and once the near one is gone it turns."""
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(3.5, 0.0, 0.0), 0.08, 0.07), 0)
+    at = Pose(3.43, 0.0, -0.42)  # 7 cm short, 24° off
+    near = Person("person_4", at.x + FP.front + 0.55, 0.0, None, (0.0, 0.0))
+    held = nav.tick(0, at, dataclasses.replace(floor, people=(near,)))
+    assert held.limit.rule == "stop" and not held.cmd.any()
+    bystander = dataclasses.replace(near, id="person_1", x=at.x + FP.front + 0.72)
+    turning = nav.tick(round(DT * 1e9), at, dataclasses.replace(floor, people=(bystander,)))
+    assert turning.limit.rule != "stop" and turning.cmd[2] > 0.0
+    assert turning.cmd[0] == 0.0 and turning.cmd[1] == 0.0
+
+
 def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot() -> None:
     """The goal lies behind the robot (a turn on the spot first) and a person walks at it
     from the side, inside the protective separation: the protective stop is the base at
