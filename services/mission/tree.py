@@ -526,13 +526,19 @@ class MissionTree:
         if status is None or not status.held:
             return outcome
         target = read(self.bb, TARGET)
+        plan, stance, before = read(self.bb, GRASP_PLAN), self.ctx.picked_from, self.ctx.holding
         if isinstance(target, Target) and self.request is not None:
-            plan, stance, before = read(self.bb, GRASP_PLAN), self.ctx.picked_from, self.ctx.holding
-            if plan is None and before is not None and before.map_id == target.map_id:
-                plan, stance = before.plan, before.stance  # brought on, not picked again
-            self.ctx.holding = Held(target.map_id, self.request.request_id, plan, stance)
+            rid = self.request.request_id
+            if plan is not None or before is None:  # picked by this request
+                self.ctx.holding = Held(target.map_id, rid, plan, stance)
+            elif before.map_id == target.map_id:  # brought on, not picked again
+                self.ctx.holding = Held(target.map_id, rid, before.plan, before.stance)
+            # else what an earlier request left, whose put-back failed, is still held (seed
+            # 0's shift said "holding bottle_2", the request's object, for box_1)
+        held = self.ctx.holding
         what = (
-            target.map_id if isinstance(target, Target)
+            held.map_id if held is not None
+            else target.map_id if isinstance(target, Target)
             else self.request.object if self.request is not None else "the object"
         )  # fmt: skip
         said = (

@@ -864,6 +864,24 @@ def test_an_object_still_held_is_put_back_where_it_was_picked_before_another_is_
     assert any("bottle_1 put back where it was picked" in d for d in decided)
 
 
+def test_a_put_back_that_fails_says_the_object_still_held_not_the_one_asked_for() -> None:
+    """Seed 0's shift: the put-back of box_1 before a fetch of bottle_2 failed its reach,
+    and the failure said "the robot was holding bottle_2". It says what it holds, and
+    keeps it as held (with where it was picked) for the next request to put back."""
+    robot = small_world()
+    robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
+    robot.visible.add("can_1")
+    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
+    assert run(tree, robot).reason == "unknown_person"
+    held = tree.ctx.holding
+    robot.arm_fail = {"reach": "gripper_tcp 3.2 cm / 1.0 deg from the goal"}
+    tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
+    outcome = run(tree, robot)
+    assert (outcome.state, outcome.reason) == ("failed", "arm_failed"), outcome
+    assert "; the robot was holding bottle_1 (the controller's status" in outcome.detail
+    assert tree.ctx.holding == held
+
+
 def test_an_object_that_falls_on_the_way_to_be_put_back_is_said_and_the_fetch_goes_on() -> None:
     """The held bottle falls from the gripper on the walk back to its place (minutes in
     the jaws: a box creeps out of them): where it lies is said, the holding forgotten,
