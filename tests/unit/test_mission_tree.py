@@ -837,12 +837,19 @@ def test_an_object_still_held_after_a_failure_is_brought_when_asked_for_without_
     assert tree.ctx.holding is None and "bottle_1" in tree.ctx.handed
 
 
-def test_an_object_still_held_is_put_back_where_it_was_picked_before_another_is_fetched() -> None:
+def _left_holding_bottle_1() -> tuple[FakeRobot, MissionTree]:
+    """A small world with can_1 too, after request r1 picked bottle_1 and failed (an
+    unknown person): the gripper still holds it."""
     robot = small_world()
     robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
     robot.visible.add("can_1")
     tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
     assert run(tree, robot).reason == "unknown_person"
+    return robot, tree
+
+
+def test_an_object_still_held_is_put_back_where_it_was_picked_before_another_is_fetched() -> None:
+    robot, tree = _left_holding_bottle_1()
     held = tree.ctx.holding
     assert held is not None and held.stance is not None
     robot.xy, robot.yaw = (-1.0, 1.0), 2.0  # it walked off meanwhile
@@ -868,11 +875,7 @@ def test_a_put_back_that_fails_says_the_object_still_held_not_the_one_asked_for(
     """Seed 0's shift: the put-back of box_1 before a fetch of bottle_2 failed its reach,
     and the failure said "the robot was holding bottle_2". It says what it holds, and
     keeps it as held (with where it was picked) for the next request to put back."""
-    robot = small_world()
-    robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
-    robot.visible.add("can_1")
-    tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
-    assert run(tree, robot).reason == "unknown_person"
+    robot, tree = _left_holding_bottle_1()
     held = tree.ctx.holding
     robot.arm_fail = {"reach": "gripper_tcp 3.2 cm / 1.0 deg from the goal"}
     tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
@@ -888,11 +891,7 @@ def test_an_object_that_falls_on_the_way_to_be_put_back_is_said_and_the_fetch_go
     and the request's can fetched with the regrasp budget untouched; asked to put it
     back, the request fails `object_dropped` saying where it lies."""
     for task in ("fetch", "put_back"):
-        robot = small_world()
-        robot.artifacts["can_1"] = entity("can_1", 1.5, -0.5)
-        robot.visible.add("can_1")
-        tree = mission(robot, MissionRequest(request_id="r1", object="bottle_1", person="person_9"))
-        assert run(tree, robot).reason == "unknown_person"
+        robot, tree = _left_holding_bottle_1()
         robot.drops, robot.drop_on, robot.drop_after = 1, "pose", 2
         if task == "fetch":
             tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
