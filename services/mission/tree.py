@@ -126,7 +126,13 @@ from services.mission.behaviours.motion import (
     WalkedShort,
 )
 from services.mission.behaviours.perceive import Approach, EstimateGrasp, NoStance
-from services.mission.behaviours.put_back import FellOnTheWay, PutBackFirst, PutDown, held_reach
+from services.mission.behaviours.put_back import (
+    OVER_THE_SPOT_M,
+    FellOnTheWay,
+    PutBackFirst,
+    PutDown,
+    held_reach,
+)
 from services.mission.behaviours.request import (
     HandsFree,
     IsTask,
@@ -166,7 +172,7 @@ def put_back_tree(ctx: Context, name: str, goes_on: bool) -> Selector:
         ArmAction(ctx, "ready_held", lambda _b: Posture(name="ready"), "arm_failed",
                   s.posture_timeout_s, st[0]),  # out of the stow as the grasp's reach began
         ArmAction(ctx, "over_the_spot", held_reach(lambda p: p.over_the_spot(s.lift_m)),
-                  "arm_failed", s.reach_timeout_s, st[0]),
+                  "arm_failed", s.reach_timeout_s, st[0], near_enough_m=OVER_THE_SPOT_M),
         # stopped short by the surface: it is down all the same
         ArmAction(ctx, "set_down", held_reach(lambda p: p.lifted(s.put_down_clear_m)),
                   "arm_failed", s.reach_timeout_s, st[0], must_succeed=False),

@@ -877,12 +877,36 @@ def test_a_put_back_that_fails_says_the_object_still_held_not_the_one_asked_for(
     keeps it as held (with where it was picked) for the next request to put back."""
     robot, tree = _left_holding_bottle_1()
     held = tree.ctx.holding
-    robot.arm_fail = {"reach": "gripper_tcp 3.2 cm / 1.0 deg from the goal"}
+    robot.arm_fail = {"reach": "gripper_tcp 8.0 cm / 1.0 deg from the goal"}
+    robot.reach_miss_m = 0.08  # beyond OVER_THE_SPOT_M: not over the spot
     tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
     outcome = run(tree, robot)
     assert (outcome.state, outcome.reason) == ("failed", "arm_failed"), outcome
     assert "; the robot was holding bottle_1 (the controller's status" in outcome.detail
     assert tree.ctx.holding == held
+
+
+def test_a_put_back_whose_reach_above_the_spot_ends_near_it_sets_the_object_down() -> None:
+    """Seed 0's shift: the reach above box_1's place gave up 3.2 cm from it, the put-back
+    failed, and the box stayed in the gripper for every request after. Within
+    `OVER_THE_SPOT_M` it is above the spot: it goes on down, lets go, and the fetch
+    follows."""
+    robot, tree = _left_holding_bottle_1()
+    robot.arm_fail, robot.reach_miss_m = {"reach": "gripper_tcp 3.2 cm from the goal"}, 0.032
+    tree.start(MissionRequest(request_id="r2", object="can_1", person="person_1"))
+    outcome = None
+    for _ in range(2000):
+        outcome = tree.tick()
+        if any(d.startswith("over_the_spot: reach failed") for d in tree.ctx.decisions):  # type: ignore[attr-defined]
+            robot.arm_fail = {}  # only that reach fell short
+        robot.advance()
+        if outcome is not None:
+            break
+    assert outcome is not None and outcome.state == "succeeded", outcome
+    decided = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any(d.startswith("over_the_spot: reach failed") and d.endswith("going on")
+               for d in decided)  # fmt: skip
+    assert any("bottle_1 put back where it was picked" in d for d in decided)
 
 
 def test_an_object_that_falls_on_the_way_to_be_put_back_is_said_and_the_fetch_goes_on() -> None:

@@ -5,7 +5,8 @@
   active after its timeout fails with the action's typed reason. Preempted while its goal
   is active, it asks the port to hold the arm where it is (the controller has no goal
   cancel: leaving `manipulate` freezes the arm's joints). With `must_succeed` False a
-  failed goal is said and passed over (SUCCESS, no failure recorded): a best effort.
+  failed goal is said and passed over (SUCCESS, no failure recorded): a best effort;
+  with `near_enough_m`, a Reach that gave up within that of its pose is passed over so.
 - `GraspReach`: the grasp's Reach; one that gave up farther than `reach_miss_max_m`
   from the grasp pose met something solid or is out of reach: `grasp_pose_failed`, not
   re-picked (hall seed 15: the gripper hit the bench under a tall box 11.7 cm short, and
@@ -45,10 +46,11 @@ class ArmAction(MissionBehaviour):
         timeout_s: float,
         stage: str,
         must_succeed: bool = True,
+        near_enough_m: float = 0.0,
     ) -> None:
         super().__init__(name, ctx, stage)
         self.goal_of, self.reason, self.timeout_s = goal, reason, timeout_s
-        self.must_succeed = must_succeed
+        self.must_succeed, self.near_enough_m = must_succeed, near_enough_m
         self.goal_id = ""
         self.active = False
         self.error: str = ""
@@ -76,7 +78,8 @@ class ArmAction(MissionBehaviour):
             return Status.SUCCESS
         if goal is not None and goal.state in ("failed", "cancelled"):
             self.active = False
-            if not self.must_succeed:
+            near = goal.kind == "reach" and goal.state == "failed"
+            if not self.must_succeed or (near and goal.miss_m <= self.near_enough_m):
                 self.ctx.decide(f"{self.name}: {goal.kind} {goal.state}: {goal.reason}; going on")
                 return Status.SUCCESS
             return self.fail(self.reason, f"{goal.kind} {goal.state}: {goal.reason}")

@@ -12,7 +12,10 @@ succeeds saying so, or that nothing was held (`put_back_tree` in `tree`):
 - `NavigateTo("put_back")`: walks to where the base stood for the grasp;
 - mode manipulate; `ready_held`: Posture(ready), where the grasp's reach began (the jaw
   stays closed on the object); `over_the_spot`: the grasp's lift pose, via its pre-grasp
-  pose (the object comes in `lift_m` above its place, as the gripper came for it);
+  pose (the object comes in `lift_m` above its place, as the gripper came for it; a
+  reach that gives up within `OVER_THE_SPOT_M` of it is over the spot: seed 0's shift
+  failed a put-back 3.2 cm from it, and the box stayed in the gripper for every request
+  after);
   `set_down`: down to `put_down_clear_m` above its place (stopped short by the surface:
   it is down all the same); `let_go_held`: open; `leave_it`: back to the pre-grasp pose
   (stuck: stow anyway); `stow_put_back`: stow;
@@ -41,6 +44,9 @@ from py_trees.common import Status
 from common.messages.wbc import ArmGoal
 from services.mission.behaviours.base import FAILURE, Context, Failure, Held, MissionBehaviour
 from services.mission.targets import dropped_at
+
+#: m: a reach to the pose above an object's place that gives up this near it is over it.
+OVER_THE_SPOT_M = 0.05
 
 
 def _held(leaf: MissionBehaviour) -> Held:
