@@ -17,11 +17,13 @@ seed 0's shift the robot asked for person_1 for two minutes facing one way, whil
 walked back and forth 0.9-3.9 m behind it and to its right, never in view. A body is
 looked at once (by its track's id), when it is within `GLANCE_M`, outside the camera's
 view, and no map person the camera saw within `KNOWN_S` stands there (who it is is
-known); again once it came from where it was looked at (`CAME_M`) to stand within
-`ANSWER_M` of the base (who answers the ask comes up to the robot, wherever it faces:
-seed 0's next shift had person_4 walk up and stand 1.3 m behind it for 10 s, unseen,
-after the robot had looked at them 4.4 m off, not near enough to be named). The turn
-aims where its velocity takes it in `LEAD_S`. Pure: no transport.
+known; within `KNOWN_STANDING_S` for one it saw standing: seed 1's shift turned to one
+bystander standing 1.5 m off three times in 40 s, each time a new track of them); again
+once it came from where it was looked at (`CAME_M`) to stand within `ANSWER_M` of the
+base (who answers the ask comes up to the robot, wherever it faces: seed 0's next shift
+had person_4 walk up and stand 1.3 m behind it for 10 s, unseen, after the robot had
+looked at them 4.4 m off, not near enough to be named). The turn aims where its velocity
+takes it in `LEAD_S`. Pure: no transport.
 """
 
 from __future__ import annotations
@@ -49,6 +51,9 @@ IN_VIEW_RAD = math.radians(28.0)
 #: they walk meanwhile at their speed) of a body, is who the body is.
 KNOWN_S = 2.0
 KNOWN_M = 0.8
+#: s: ...and a map person the camera saw standing (slower than `STANDING_MPS`) this long
+#: ago, within `KNOWN_M` of a body, is who that body is.
+KNOWN_STANDING_S = 30.0
 #: s: the turn aims where the body's velocity takes it in this long.
 LEAD_S = 1.0
 #: m: who comes this near the base while it asks may be answering (`LookForPerson`); a
@@ -120,7 +125,8 @@ def _known(body: ScanBody, people: Sequence[MapEntity], now_ns: int) -> bool:
     """Whether a map person the camera saw lately stands where the body is."""
     for q in people:
         age = (now_ns - q.last_seen_ns) / NS_PER_S
-        if q.last_seen_ns <= 0 or age > KNOWN_S:
+        standing = math.hypot(*q.velocity_in_world[:2]) < STANDING_MPS
+        if q.last_seen_ns <= 0 or age > (KNOWN_STANDING_S if standing else KNOWN_S):
             continue
         reach = KNOWN_M + math.hypot(*q.velocity_in_world[:2]) * max(age, 0.0)
         if math.dist(q.position_in_world[:2], (body.x, body.y)) <= reach:

@@ -91,6 +91,11 @@ def test_a_body_the_camera_named_lately_is_not_looked_at() -> None:
     walked = msgspec.structs.replace(seen, position_in_world=(-3.5, 0.0, 0.0),
                                      velocity_in_world=(1.0, 0.0))  # fmt: skip
     assert glance_at([body], [walked], (0.0, 0.0), 0.0, 10 * S) is None  # 1.5 <= 0.8 + 1.0
-    assert glance_at([body], [seen], (0.0, 0.0), 0.0, 12 * S) is not None  # 3 s ago
+    walking = msgspec.structs.replace(seen, velocity_in_world=(0.5, 0.0))
+    assert glance_at([body], [walking], (0.0, 0.0), 0.0, 12 * S) is not None  # 3 s ago
+    # Seen standing there 20 s ago (seed 1's shift: one bystander, new tracks, three
+    # turns in 40 s): still who it is; 40 s ago, nobody known.
+    assert glance_at([body], [seen], (0.0, 0.0), 0.0, 29 * S) is None
+    assert glance_at([body], [seen], (0.0, 0.0), 0.0, 49 * S) is not None
     never = msgspec.structs.replace(seen, last_seen_ns=0)
     assert glance_at([body], [never], (0.0, 0.0), 0.0, 1 * S) is not None
