@@ -134,6 +134,9 @@ SEEN_NOW_S = 1.0
 #: go quite where it is sent: turning onto a bend it stepped sideways at 0.23 m/s towards
 #: a person its path ran past (the changing hall's shift, t = 19 s).
 MEASURED_MIN_MPS = 0.1
+#: s a stop that came early for a person coming towards the robot may hold before it no
+#: longer comes early for them (`Navigator._early`).
+EARLY_STOP_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,26 @@ class Navigator:
         self.total_m = 0.0
         self.limit_rule = ""
         self.guarded = ""
+        #: A stop that came early for a person coming towards the robot (`people_limit`'s
+        #: `stopping_s`): since when it holds (sim ns), and who it no longer comes early
+        #: for (it held `EARLY_STOP_S`: they did not come; a stale velocity, a phantom).
+        self.early_since: tuple[str, int] | None = None
+        self.not_early: set[str] = set()
+
+    def _early(self, t_ns: int, limit: SpeedLimit) -> None:
+        """Note a stop that came early for a person coming (their separation beyond S_p at
+        rest); held `EARLY_STOP_S`, it no longer comes early for them (a person walking at
+        the robot is within S_p at rest by then: seed 1's shift stood 15 s for a camera
+        phantom 1.4 m off whose velocity said it came, S_p at rest 1.14 m)."""
+        early = limit.rule == "stop" and limit.distance_m >= limit.protective_m
+        if not early:
+            self.early_since = None
+            return
+        if self.early_since is None or self.early_since[0] != limit.person_id:
+            self.early_since = (limit.person_id, t_ns)
+        elif t_ns - self.early_since[1] >= EARLY_STOP_S * NS_PER_S:
+            self.not_early.add(limit.person_id)
+            self.early_since = None
 
     def start(self, goal: GoalSpec, t_ns: int) -> None:
         self.goal, self.state, self.reason, self.detail = goal, "active", "", "planning"
@@ -203,6 +226,7 @@ class Navigator:
         self.recovery = ""
         self.recovery_until = 0
         self.slid = False  # the slide is once a goal
+        self.early_since, self.not_early = None, set()
         self.stepped: set[str] = set()  # the people stepped away from (`_step_away`)
         self.step_person = ""  # the one the step away is from
         self.slide_sign = 0.0  # +1 ahead, -1 back
@@ -353,7 +377,9 @@ class Navigator:
         limit = people_limit(pose, direction, cm.people, self.fp, pp, self.top_mps,
                              g.handover_id, self.limit_rule == "stop", also,
                              turning=direction is None,
-                             stopping_s=stopping / pp.brake_decel_mps2)  # fmt: skip
+                             stopping_s=stopping / pp.brake_decel_mps2,
+                             not_early=self.not_early)  # fmt: skip
+        self._early(t_ns, limit)
         self.limit_rule = limit.rule
         guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         out = f.step(pose, self.dt, max(cm.cost_at(pose.x, pose.y), 0.0), limit.speed,

@@ -39,6 +39,7 @@ the active rule, with the person, the separation and S_p at rest.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -112,6 +113,7 @@ def people_limit(
     also: tuple[tuple[float, float], ...] = (),
     turning: bool = False,
     stopping_s: float = 0.0,
+    not_early: Collection[str] = (),
 ) -> SpeedLimit:
     """The tightest cap that people impose now; `direction_world` the intended travel
     direction (unit, world; None when not translating), `also` other directions the base
@@ -122,7 +124,7 @@ def people_limit(
     translating but turning on the spot (the goal's final turn): the footprint's ends
     sweep and the trot sways, so within S_p at rest of a bystander it is a stop too.
     `stopping_s`: how long the base takes to come to rest from its speed now (the stop
-    is that much earlier for a person coming towards it)."""
+    is that much earlier for a person coming towards it, not for those in `not_early`)."""
     if not people:
         return NO_LIMIT
     sep = separation_params(p)
@@ -135,7 +137,8 @@ def people_limit(
         v_h = directed_speed(person.velocity, (-n[0], -n[1]), sep)
         at_rest = protective_distance(0.0, v_h, sep)
         coming = directed_speed(person.velocity, (-n[0], -n[1]), sep) - sep.speed_margin_mps
-        halt = at_rest + (coming if person.velocity is not None else 0.0) * stopping_s
+        measured = person.velocity is not None and person.id not in not_early
+        halt = at_rest + (coming if measured else 0.0) * stopping_s
         zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - TRACKING_MARGIN)
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
         ways = (direction_world, *also) if direction_world else ()

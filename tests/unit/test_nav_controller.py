@@ -17,7 +17,7 @@ from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower, FollowOutput
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
-from services.navigation.navigator import GoalSpec, Navigator, _slide_free
+from services.navigation.navigator import EARLY_STOP_S, GoalSpec, Navigator, _slide_free
 from services.navigation.people import (
     BRAKE_LEAD_M,
     RESUME_MARGIN_M,
@@ -424,6 +424,28 @@ def test_the_final_align_is_held_by_the_turn_s_rule_not_by_a_step_it_does_not_ma
     turning = nav.tick(round(DT * 1e9), at, dataclasses.replace(floor, people=(bystander,)))
     assert turning.limit.rule != "stop" and turning.cmd[2] > 0.0
     assert turning.cmd[0] == 0.0 and turning.cmd[1] == 0.0
+
+
+def test_a_stop_that_came_early_for_a_person_who_never_comes_ends_after_a_while() -> None:
+    """The stop comes early for a person coming towards the walking robot (their speed
+    times its stopping time beyond S_p at rest). Seed 1's shift stood 15 s for a camera
+    phantom 1.4 m off whose velocity said it came and which never came nearer: after
+    `EARLY_STOP_S` the stop no longer comes early for them, and the robot goes on."""
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(6.0, 0.0, 0.0), 0.1, 0.1), 0)
+    at = Pose(2.0, 0.0, 0.0)
+    phantom = Person("seen_14", 2.0, FP.half_width + 1.5, None, (0.0, -1.1))  # "coming"
+    cm = dataclasses.replace(floor, people=(phantom,))
+    first = nav.tick(0, at, cm, (0.25, 0.0))
+    assert first.limit.rule == "stop" and first.limit.distance_m > first.limit.protective_m
+    k, out = 1, first
+    while out.limit.rule == "stop" and k * DT < 3.0 * EARLY_STOP_S:
+        out = nav.tick(round(k * DT * 1e9), at, cm)
+        k += 1
+    assert out.limit.rule != "stop"
+    assert EARLY_STOP_S <= k * DT <= EARLY_STOP_S + 0.2, k * DT
+    assert nav.not_early == {"seen_14"}
 
 
 def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot() -> None:
