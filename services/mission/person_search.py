@@ -51,17 +51,19 @@ IN_VIEW_RAD = math.radians(28.0)
 #: they walk meanwhile at their speed) of a body, is who the body is.
 KNOWN_S = 2.0
 KNOWN_M = 0.8
-#: s: ...and a map person the camera saw standing (slower than `STANDING_MPS`) this long
+#: s: ...and a map person the camera saw standing (slower than `WALKING_MPS`) this long
 #: ago, within `KNOWN_M` of a body, is who that body is.
 KNOWN_STANDING_S = 30.0
 #: s: the turn aims where the body's velocity takes it in this long.
 LEAD_S = 1.0
 #: m: who comes this near the base while it asks may be answering (`LookForPerson`); a
 #: body looked at once is looked at again when it has come this far from there to stand
-#: that near (slower than `STANDING_MPS`, m/s).
+#: that near (slower than `WALKING_MPS`).
 ANSWER_M = 2.0
 CAME_M = 1.0
-STANDING_MPS = 0.3
+#: m/s: a person slower than this stands (the mission's one threshold: `LookForPerson`,
+#: `StandsThere` take it too).
+WALKING_MPS = 0.3
 
 
 def next_place(
@@ -117,7 +119,7 @@ def glance_at(
 
 def _came(body: ScanBody, was: tuple[float, float], d: float) -> bool:
     """Whether a body looked at once came from there to stand within `ANSWER_M`."""
-    standing = body.velocity is not None and math.hypot(*body.velocity) < STANDING_MPS
+    standing = body.velocity is not None and math.hypot(*body.velocity) < WALKING_MPS
     return standing and d <= ANSWER_M and math.dist(was, (body.x, body.y)) >= CAME_M
 
 
@@ -125,7 +127,7 @@ def _known(body: ScanBody, people: Sequence[MapEntity], now_ns: int) -> bool:
     """Whether a map person the camera saw lately stands where the body is."""
     for q in people:
         age = (now_ns - q.last_seen_ns) / NS_PER_S
-        standing = math.hypot(*q.velocity_in_world[:2]) < STANDING_MPS
+        standing = math.hypot(*q.velocity_in_world[:2]) < WALKING_MPS
         if q.last_seen_ns <= 0 or age > (KNOWN_STANDING_S if standing else KNOWN_S):
             continue
         reach = KNOWN_M + math.hypot(*q.velocity_in_world[:2]) * max(age, 0.0)

@@ -136,9 +136,9 @@ def people_limit(
         n = bearing(pose, fp, (person.x, person.y))
         v_h = directed_speed(person.velocity, (-n[0], -n[1]), sep)
         at_rest = protective_distance(0.0, v_h, sep)
-        coming = directed_speed(person.velocity, (-n[0], -n[1]), sep) - sep.speed_margin_mps
         measured = person.velocity is not None and person.id not in not_early
-        halt = at_rest + (coming if measured else 0.0) * stopping_s
+        coming = v_h - sep.speed_margin_mps if measured else 0.0  # their own, no margin
+        halt = at_rest + coming * stopping_s
         zone_speed = (p.handover_speed if handing else p.slow_speed) * (1.0 - TRACKING_MARGIN)
         speed = _ramp(zone_speed, d - p.slow_radius_m, top_mps, p.brake_decel_mps2)
         ways = (direction_world, *also) if direction_world else ()

@@ -98,7 +98,13 @@ from services.mission.behaviours.handover import side_bearing
 from services.mission.behaviours.identity import other_clothes, said, wearer_near
 from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
 from services.mission.patrol_goals import PatrolGoal, look_around
-from services.mission.person_search import ANSWER_M, LOOKED_M, glance_at, next_place
+from services.mission.person_search import (
+    ANSWER_M,
+    LOOKED_M,
+    WALKING_MPS,
+    glance_at,
+    next_place,
+)
 from services.mission.ports import PortError, Refused, Unavailable
 from services.mission.room_behind import room_behind
 
@@ -117,9 +123,9 @@ LOOK_AT_TOL_M = 0.5
 #: "(-1.62, -0.36) is in an obstacle and no free pose lies within 0.50 m", and the four
 #: rounds after it asked at the one place again).
 LOOK_FROM_M = 1.0
-#: A person seen within this (s) and slower than this (m/s) stands where the map has them.
+#: A person seen within this (s) and slower than `person_search.WALKING_MPS` stands where
+#: the map has them.
 PERSON_FRESH_S = 3.0
-WALKING_MPS = 0.3
 #: m: a person this far ahead of the robot's front (about `HANDOVER_DISTANCE_M`) and this
 #: far to a side is near enough to present to; elsewhere the walk went to one of their
 #: usual places, or navigation stopped short.
@@ -702,11 +708,8 @@ class LookForPerson(MissionBehaviour):
         if not self.turns:
             return False
         turn = self.turns.pop(0)
-        goal = PoseGoal(x=turn.x, y=turn.y, yaw=turn.yaw,
-                        position_tolerance_m=POSITION_TOLERANCE_M,
-                        yaw_tolerance_rad=TURN_TOLERANCE_RAD)  # fmt: skip
         try:
-            self.goal_id = self.port.send_nav_goal(goal)
+            self._turn_to(turn.x, turn.y, turn.yaw)
         except PortError as exc:
             self.ctx.decide(f"look_for_person: navigation did not take the turn ({exc}): "
                             "looking from here")  # fmt: skip
@@ -715,8 +718,15 @@ class LookForPerson(MissionBehaviour):
         k = LOOK_TURNS - len(self.turns)
         self.ctx.decide(f"look_for_person: turn {k}/{LOOK_TURNS} to {math.degrees(turn.yaw):.0f}° "
                         f"sent as {self.goal_id}")  # fmt: skip
-        self.turn_mark = None
         return True
+
+    def _turn_to(self, x: float, y: float, yaw: float) -> None:
+        """Send navigation a turn on the spot at (x, y) to `yaw` (`PortError` when it does
+        not take it); its progress is watched afresh (`_held`)."""
+        goal = PoseGoal(x=x, y=y, yaw=yaw, position_tolerance_m=POSITION_TOLERANCE_M,
+                        yaw_tolerance_rad=TURN_TOLERANCE_RAD)  # fmt: skip
+        self.goal_id = self.port.send_nav_goal(goal)
+        self.turn_mark = None
 
     def _glance(self, pid: str, people: list[MapEntity], may_start: bool) -> bool:
         """While asking: turn the head camera to a body the lidars track near that it does
@@ -741,15 +751,12 @@ class LookForPerson(MissionBehaviour):
             return False
         body, aim = target
         self.glanced[body.id] = (body.x, body.y)
-        goal = PoseGoal(x=xy[0], y=xy[1], yaw=aim, position_tolerance_m=POSITION_TOLERANCE_M,
-                        yaw_tolerance_rad=TURN_TOLERANCE_RAD)  # fmt: skip
         try:
-            self.goal_id = self.port.send_nav_goal(goal)
+            self._turn_to(xy[0], xy[1], aim)
         except PortError as exc:
             self.ctx.decide(f"look_for_person: navigation did not take the turn to a body "
                             f"({exc})")  # fmt: skip
             return False
-        self.turn_mark = None
         off = math.degrees(math.remainder(aim - yaw, math.tau))
         self.ctx.decide(
             f"look_for_person: somebody the lidars track at ({body.x:.2f}, {body.y:.2f}), "
