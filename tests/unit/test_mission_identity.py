@@ -120,13 +120,16 @@ def test_the_ask_is_answered_only_by_someone_the_colours_do_not_tell_apart() -> 
 
 
 def _split_on_the_way(
-    colours: PersonColours, after_s: float = 0.0
+    colours: PersonColours, after_s: float = 0.0, twin: bool = False
 ) -> tuple[Outcome, list[str], list[str]]:
     """The walk to person_1 (red, never seen since the map was seeded) is under way
     (`after_s` into it; a goal's first status a tick after it is sent) when person_4, in
-    `colours`, stands 1.5 m from the robot, seen every tick: the outcome, the person ids
-    of the handover goals sent and the decisions said."""
+    `colours`, stands 1.5 m from the robot, seen every tick (`twin`: person_9 in red
+    too stands across the hall): the outcome, the person ids of the handover goals sent
+    and the decisions said."""
     robot = _world()
+    if twin:
+        robot.people_["person_9"] = dressed(entity("person_9", -6.0, 4.0, kind="person"), RED)
     robot.nav_ticks = 200  # 10 s a walk
     robot.status_lag = 1
     tree = mission(robot)
@@ -167,6 +170,17 @@ def test_a_walk_redirected_late_to_the_persons_other_id_waits_for_its_new_goal()
     assert not any("no status of goal" in d for d in decisions), decisions
 
 
+def test_somebody_near_in_the_colours_is_not_taken_for_them_while_another_wears_them_too() -> None:
+    """Hall seed 1's shift: person_3 and person_4 wore the same shirt (near 0.03); the
+    walk to one went to the other standing by the robot, twice, and handed the object
+    over. With two in the map dressed alike the walk goes on to where the map saw them."""
+    outcome, sent, decisions = _split_on_the_way(RED, twin=True)
+    assert outcome.state == "succeeded", outcome
+    assert sent == ["person_1"]
+    assert any("person_9 (far 0.00), person_4 (far 0.00) wear their colours: colours "
+               "cannot say who" in d for d in decisions), decisions  # fmt: skip
+
+
 def test_somebody_near_in_other_clothes_is_not_taken_for_the_person_asked_for() -> None:
     outcome, sent, _ = _split_on_the_way(BLUE)
     assert outcome.state == "succeeded", outcome
@@ -196,3 +210,8 @@ def test_wearer_near_takes_somebody_standing_near_in_the_colours_once_the_entry_
     ((_, d, two),) = compared(look, alike)
     assert 0.33 < d < 0.65 and not two
     assert wearer_near(look, asked, [asked, alike], *args) is None
+    # somebody else in the map, anywhere, dressed the same: colours cannot say who
+    twin = msgspec.structs.replace(near, id="person_9", position_in_world=(-8.0, 5.0, 0.0))
+    assert wearer_near(look, asked, [asked, near, twin], *args) is None
+    assert wearer_near(look, asked, [asked, near, twin], (0.0, 0.0), 20 * s, standing,
+                       ["person_9"]) == (near, [("far", 0.0, False)])  # fmt: skip

@@ -27,10 +27,12 @@ them before letting go. So:
 - On the walk to the person (`NavigateTo`), the map's entry of them not seen for
   `STALE_S` while somebody stands near the robot in their colours, nearly the same in
   every band compared (`wearer_near`, `WEARER_SAME`): the map split them, and the walk
-  goes to that one (hall seed 0's shift: the map's
-  person_4 stayed where they had walked past, the worker themselves stood 1.2 m from
-  the robot as person_10, and the robot stood 120 s by them, its walk to the old place
-  held by their protective separation, until the request timed out).
+  goes to that one (hall seed 0's shift: the map's person_4 stayed where they had
+  walked past, the worker themselves stood 1.2 m from the robot as person_10, and the
+  robot stood 120 s by them, its walk to the old place held by their protective
+  separation, until the request timed out). Not when somebody else in the map is
+  dressed nearly the same (`look_alikes`): colours cannot say who, and the walk goes
+  on to where the map saw them.
 """
 
 from __future__ import annotations
@@ -183,6 +185,15 @@ WEARER_NEAR_M = 3.0
 WEARER_SAME: dict[Band, float] = {band: 0.5 * d for band, d in OTHER.items()}
 
 
+def look_alikes(
+    look: Look, people: list[MapEntity], but: list[str]
+) -> list[tuple[MapEntity, list[tuple[Band, float, bool]]]]:
+    """The map people, not named in `but`, whom the noted colours compare with and find
+    nearly the same in every band compared (`WEARER_SAME`), with the bands."""
+    same = [(q, compared(look, q)) for q in people if q.id not in but]
+    return [(q, b) for q, b in same if b and all(d <= WEARER_SAME[band] for band, d, _ in b)]
+
+
 def wearer_near(
     look: Look | None,
     asked: MapEntity | None,
@@ -193,21 +204,21 @@ def wearer_near(
     others: list[str],
 ) -> tuple[MapEntity, list[tuple[Band, float, bool]]] | None:
     """Somebody standing (`standing`: seen lately, not walking) within `WEARER_NEAR_M` of
-    the robot whom the noted colours compare with and do not tell apart from the one
-    asked for, while the map's entry of that one (`asked`; None: gone from the map) is
-    not seen for `STALE_S`: the nearest in colours, when every band compared is within
-    `WEARER_SAME`; None otherwise (no look, nobody such, or one of `others`)."""
+    the robot in the noted colours, nearly the same in every band compared
+    (`look_alikes`), while the map's entry of the one asked for (`asked`; None: gone from
+    the map) is not seen for `STALE_S`, and nobody else in the map is dressed so (hall
+    seed 1's shift: person_3 and person_4 wore the same shirt, near 0.03, and the robot
+    walked to the one standing by it for the other, twice); None otherwise (no look,
+    nobody such, a look-alike, or one of `others`)."""
     if look is None or (asked is not None and now_ns - asked.last_seen_ns < STALE_S * 1e9):
         return None
-    near = [
-        q for q in people
-        if (asked is None or q.id != asked.id) and q.id not in others and standing(q)
-        and math.dist(q.position_in_world[:2], robot_xy) <= WEARER_NEAR_M
-    ]  # fmt: skip
-    best = nearest_alike(look, near)
-    if best is None or any(d > WEARER_SAME[band] for band, d, _ in best[1]):
+    alike = look_alikes(look, people, [*others, *([asked.id] if asked is not None else [])])
+    if len(alike) != 1:
         return None
-    return best
+    who, bands = alike[0]
+    if not standing(who) or math.dist(who.position_in_world[:2], robot_xy) > WEARER_NEAR_M:
+        return None
+    return who, bands
 
 
 def another_to_try(bb: Any) -> Callable[[Failure], bool]:

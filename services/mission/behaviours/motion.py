@@ -14,7 +14,7 @@
   (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Walking
   to a person whose map entry is stale while somebody stands near in their colours
   (`identity.wearer_near`, checked once a second), it walks to that one (`PERSON`), said,
-  with a new goal. Preempted
+  with a new goal; not when more than one in the map wears them (said once). Preempted
   (or failing while the goal is active) it cancels its goal. An object that fell from
   the gripper (`Target.dropped`) lies by the robot's feet, out of its cameras' view: it
   steps back to look at the floor there (`look_where_it_fell`; failing that, or where it
@@ -95,7 +95,14 @@ from services.mission.behaviours.base import (
     MissionBehaviour,
 )
 from services.mission.behaviours.handover import side_bearing
-from services.mission.behaviours.identity import other_clothes, said, wearer_near
+from services.mission.behaviours.identity import (
+    STALE_S,
+    Look,
+    look_alikes,
+    other_clothes,
+    said,
+    wearer_near,
+)
 from services.mission.goal_job import LOOK_TURNS, POSITION_TOLERANCE_M, TURN_TOLERANCE_RAD
 from services.mission.patrol_goals import PatrolGoal, look_around
 from services.mission.person_search import (
@@ -220,6 +227,8 @@ class NavigateTo(MissionBehaviour):
         self.wearer_checked_ns = 0
         #: When the goal walked now was sent (sim ns).
         self.sent_ns = 0
+        #: The walk said that colours cannot tell who the person is.
+        self.alike_said = False
 
     def _goal(self) -> NavGoal:
         if self.kind == "put_back":
@@ -260,7 +269,7 @@ class NavigateTo(MissionBehaviour):
     def initialise(self) -> None:
         super().initialise()
         self.goal_id, self.active, self.error, self.to_place = "", False, None, False
-        self.sent_ns = self.port.now_ns
+        self.sent_ns, self.alike_said = self.port.now_ns, False
         if self._dropped():
             self.ctx.decide(f"{self.name}: {self.target().map_id} fell "
                             f"{self.target().where_dropped()}: looking for it there")  # fmt: skip
@@ -320,9 +329,10 @@ class NavigateTo(MissionBehaviour):
             people = self.port.people()
         except PortError:
             return
-        best = wearer_near(self.get(PERSON_LOOK), asked, people, xy, now, _standing(now),
-                           self.get(OTHERS) or [])  # fmt: skip
+        look, others = self.get(PERSON_LOOK), self.get(OTHERS) or []
+        best = wearer_near(look, asked, people, xy, now, _standing(now), others)
         if best is None:
+            self._say_alike(look, asked, people, others)
             return
         who, bands = best
         age = "gone from the map" if asked is None else (
@@ -333,6 +343,23 @@ class NavigateTo(MissionBehaviour):
         self.set(PERSON, who.id)
         self.port.cancel_nav(self.goal_id, f"{pid} is {who.id}")
         self._send()
+
+    def _say_alike(
+        self, look: Look | None, asked: MapEntity | None, people: list[MapEntity], others: list[str]
+    ) -> None:
+        """Once a walk: the entry asked for is stale and more than one in the map wears
+        their colours (`identity.look_alikes`), so colours cannot say who stands near."""
+        if self.alike_said or look is None or asked is None:
+            return
+        unseen_s = (self.port.now_ns - asked.last_seen_ns) / NS_PER_S
+        alike = look_alikes(look, people, [*others, asked.id])
+        if unseen_s < STALE_S or len(alike) < 2:
+            return
+        self.alike_said = True
+        ids = ", ".join(f"{q.id} ({said(b)})" for q, b in alike)
+        self.ctx.decide(f"{asked.id} not seen for {unseen_s:.0f} s; "
+                        f"{ids} wear their colours: colours cannot say who, walking on to "
+                        f"where {asked.id} was seen")  # fmt: skip
 
     def _update(self) -> Status:
         if self._dropped() and not self.goal_id and self.error is None:
