@@ -53,10 +53,16 @@ from the map only (the camera has not seen them for `NavMap`'s `CAMERA_FRESH_S`)
 place every beam within 0.6 m of it passes 0.3 m beyond (the floor there is seen free in
 the lidar's plane, where every standing person has legs; the map places a standing
 person up to a few decimetres off their legs, and 0.25 m left real people out in the
-bystanders' shift) is not there any more: the map's tracker holds a person who walked
-out of view at their last place, or carried along their last velocity, for seconds to
-minutes. `NavMap` leaves such people out of its layer (the map itself is not changed),
-and those the map alone places inside the robot's own footprint.
+bystanders' shift) is not there any more. A beam with no return within the range passes
+too where nothing of the robot masks it (within `OPEN_FIELD_RAD` of the lidar's heading:
+the robot's legs meet those beyond ±97°): in a hall most beams return nothing, and hall
+seed 2's shift stood 100 s by the map's entry of a worker who had walked on, 0.7 m off
+the lidar, whose 0.6 m cone held beams to a wall 15 m away. A scan with hardly any
+returns (`MIN_RETURNS`: a lidar covered or failing) says nothing. Such a person is not
+there any more: the map's tracker holds a person who walked out of view at their last
+place, or carried along their last velocity, for seconds to minutes. `NavMap` leaves
+such people out of its layer (the map itself is not changed), and those the map alone
+places inside the robot's own footprint.
 """
 
 from __future__ import annotations
@@ -211,6 +217,13 @@ def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
     return bodies_and_larger(points, p)[0]
 
 
+#: rad: the lidar's beams within this of its heading meet nothing of the robot (its legs
+#: mask those beyond ±97° standing, in every posture): no return there is free floor.
+OPEN_FIELD_RAD = math.radians(90.0)
+#: The least share of a scan's beams with a return for it to say where nobody stands.
+MIN_RETURNS = 0.1
+
+
 @dataclass(frozen=True)
 class ScanView:
     """One scan as rays in the map: the lidar's origin (m) and heading (rad), its beams'
@@ -225,9 +238,13 @@ class ScanView:
 
     def clear_at(self, x: float, y: float, radius_m: float = 0.6, beyond_m: float = 0.3) -> bool:
         """Whether the beams at a body of `radius_m` at (x, y) all return from at least
-        `beyond_m` beyond it; False where the scan cannot say: out of its field or range,
-        or a beam without a return (lost, or masked where it meets the robot's own legs:
-        a person behind the lidar's ±100° is not seen gone)."""
+        `beyond_m` beyond it, or return nothing within the range in the open field
+        (`OPEN_FIELD_RAD`); False where the scan cannot say: out of its field or range, a
+        beam without a return beyond the open field (masked where it meets the robot's
+        own legs: a person behind the lidar's ±97° is not seen gone), or a scan with
+        hardly any returns (`MIN_RETURNS`)."""
+        if np.count_nonzero(self.ranges > 0.0) < MIN_RETURNS * len(self.ranges):
+            return False
         dx, dy = x - self.origin[0], y - self.origin[1]
         dist = math.hypot(dx, dy)
         if dist <= radius_m or dist + beyond_m >= self.range_max:
@@ -239,7 +256,9 @@ class ScanView:
         if k0 < 0 or k1 >= len(self.ranges) or k1 < k0:
             return False
         r = self.ranges[k0 : k1 + 1]
-        return bool(np.all(r >= dist + beyond_m))
+        angles = self.angle_min + self.angle_increment * np.arange(k0, k1 + 1)
+        open_field = (r <= 0.0) & (np.abs(angles) <= OPEN_FIELD_RAD)
+        return bool(np.all((r >= dist + beyond_m) | open_field))
 
     def through(
         self, xy: FloatArray, beyond_m: float = 0.15, none_passes: bool = True

@@ -286,14 +286,35 @@ def test_a_map_person_whose_place_the_lidar_saw_free_stays_out_once_it_cannot_se
         assert [q.id for q in m.people] == ["person_1"], back
 
 
-def test_beams_without_a_return_say_nothing_of_who_stands_there() -> None:
-    """Masked where they meet the robot's legs (or lost), they are no free floor."""
+def _without(view: ScanView, lost: np.ndarray) -> ScanView:
+    """`view` with the beams `lost` (a mask) returning nothing."""
+    return dataclasses.replace(view, ranges=np.where(lost, 0.0, view.ranges))
+
+
+def test_beams_without_a_return_say_nothing_where_the_robot_masks_them() -> None:
+    """Beyond ±90° of the heading the robot's legs meet the beams (masked: no return):
+    there no return is no free floor. A scan with hardly any returns says nothing."""
     pose = Pose(0.0, 0.0, 0.0)
     view = _view(pose, [])
-    assert view.clear_at(2.0, -1.5)
-    masked = ScanView(view.origin, view.heading, view.angle_min, view.angle_increment,
-                      np.zeros_like(view.ranges), view.range_max)  # fmt: skip
-    assert not masked.clear_at(2.0, -1.5)
+    angles = ANGLES
+    assert view.clear_at(0.8, 0.9)  # ahead-left, its cone reaching past 90°
+    assert not _without(view, np.abs(angles) > math.radians(90.0)).clear_at(0.8, 0.9)
+    assert not _without(view, np.ones(len(angles), dtype=bool)).clear_at(2.0, -1.5)
+    assert not _without(view, np.arange(len(angles)) % 20 != 0).clear_at(2.0, -1.5)
+
+
+def test_beams_without_a_return_in_the_open_field_see_free_floor() -> None:
+    """Hall seed 2's shift: the map kept a worker who had walked on 0.7 m off the lidar;
+    in a hall most beams return nothing within the range (a wall 15 m away), and the
+    robot stood 100 s by the empty place. No return within ±90° is free floor; a beam
+    that returns short of the place is not."""
+    pose = Pose(0.0, 0.0, 0.0)
+    view = _view(pose, [])
+    open_hall = _without(view, np.abs(ANGLES) < math.radians(20.0))  # a far wall ahead
+    assert open_hall.clear_at(1.0, 0.4)
+    person = _view(pose, _person(1.0, 0.4))
+    assert not _without(person, (np.abs(ANGLES) < math.radians(20.0)) & (person.ranges > 2.0)
+                        ).clear_at(1.0, 0.4)  # fmt: skip
 
 
 def test_the_rear_lidar_says_who_is_gone_behind_the_robot_where_the_front_one_cannot() -> None:
