@@ -222,7 +222,10 @@ class Follower:
         away from where the body touches or from the nearest obstacle in the way of a turn
         (`body_guard.ROOM_M`), else stand. An answer other than the full command is kept
         `GUARD_HOLD_S` before the full command is asked again (it flipped at the tick's
-        rate along a pallet's edge); one the guard refuses is dropped at once."""
+        rate along a pallet's edge); one the guard refuses is dropped at once. Stepping
+        clear, it steps on until a turn is let through before it walks on unturned (hall
+        seed 2's shift: the walk to the goal's point took it back to where the turn was
+        refused, 5 cm back and forth for 34 s)."""
         wz = float(want[2])
         other = -math.copysign(max(abs(wz), MIN_TURN_RATE), yaw_err)
         ways: dict[str, tuple[Vec3, float] | None] = {
@@ -240,6 +243,9 @@ class Follower:
         if self.held in ways and self.hold_s > 0.0:
             order.remove(self.held)
             order.insert(0, self.held)
+        if self.held == "step clear":  # the walk on would only take it back: a turn first
+            order.remove("unturned")
+            order.append("unturned")
         label, cmd, turn = "stand", np.zeros(3), yaw_err
         for k in order:
             c, t = ways[k] or (self._step_clear(guard), yaw_err)

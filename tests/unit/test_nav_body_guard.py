@@ -294,3 +294,25 @@ def test_a_body_touching_a_bench_with_no_turn_either_way_steps_clear_of_it() -> 
     roomy = BodyGuard(cm.solid, grid, FP, Pose(0.0, 0.5, 0.0))
     assert roomy.away() is None  # 0.5 m off: room enough, nothing to step from
     assert roomy.ok((0.0, 0.0, -0.5), -1.0)  # and the turn is let through
+
+
+def test_a_body_stepping_clear_for_a_turn_does_not_walk_back_before_it_turns() -> None:
+    """Hall seed 2's shift: at a goal whose own point lay towards a machine by the body's
+    back corner, the guard stepped clear of it for the turn, then let the walk back to
+    the goal's point through (unturned), then stepped clear again: 34 s back and forth
+    5 cm, never turning. Stepping clear, it steps until it can turn, then turns."""
+    grid = _bench_on_the_right()
+    cm = build_costmap(grid, FP, CostParams())
+    f = Follower(_west(), ControllerSettings())
+    pose, said = Pose(0.0, 0.02, 0.0), []
+    for _ in range(200):  # 10 s: the goal's point towards the bench, its yaw 1 rad right
+        guard = BodyGuard(cm.solid, grid, FP, pose)
+        err = math.remainder(-1.0 - pose.yaw, math.tau)
+        label, cmd, _turn = f._guarded(guard, np.array([0.0, 0.0, 1.5 * err]), (0.0, -0.09),
+                                       err, DT)  # fmt: skip
+        said.append(label)
+        pose = _step(pose, cmd)
+    first = said.index("step clear")
+    turned = [k for k, w in enumerate(said) if k > first and w != "step clear"]
+    assert turned and said[turned[0]] in ("", "turn only", "the other way round"), said
+    assert abs(math.remainder(-1.0 - pose.yaw, math.tau)) < 0.1, pose
