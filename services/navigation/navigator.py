@@ -368,7 +368,14 @@ class Navigator:
             if norm > 1e-3:
                 ways.append((float(ahead[0] / norm), float(ahead[1] / norm)))
         direction = ways[0] if ways else None
-        also = (*ways[1:], (math.cos(pose.yaw), math.sin(pose.yaw))) if ways else ()
+        # The heading only where the path leads within 90° of it: walking backwards the base
+        # does not go where it faces (seed 1's shift: the step back from the worker handed
+        # to, who stood inside their separation at rest, stopped as a step towards them).
+        heading = (math.cos(pose.yaw), math.sin(pose.yaw))
+        forwards = (
+            direction is not None and heading[0] * direction[0] + heading[1] * direction[1] > 0
+        )
+        also = (*ways[1:], *([heading] if forwards else []))
         speed = math.hypot(*velocity)
         if ways and speed >= MEASURED_MIN_MPS:
             also = (*also, (velocity[0] / speed, velocity[1] / speed))

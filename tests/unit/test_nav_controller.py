@@ -244,6 +244,24 @@ def test_inside_the_protective_separation_at_rest_only_a_path_away_moves() -> No
     assert people_limit(pose, None, [person], FP, p, top).rule != "stop"
 
 
+def test_the_person_handed_to_inside_the_separation_at_rest_is_backed_away_from() -> None:
+    """Hall seed 1's shift: the worker who answered the ask stood 0.54 m from the
+    footprint (S_p at rest 0.61 m), the handover pose 0.2 m behind the robot, which faced
+    them; the step back was stopped as a step towards them (the heading counted as a way
+    the base may go) and it stood 84 s until the back-off recovery. Walking backwards,
+    the base does not go where it faces."""
+    sep = separation_params(NavigationSettings().people)
+    at_rest = protective_distance(0.0, sep.speed_margin_mps, sep)
+    person = Person("person_1", FP.front + at_rest - 0.08, 0.0, math.pi, (0.0, 0.0))
+    cm = dataclasses.replace(build_costmap(_open_floor(), FP, CostParams()), people=(person,))
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(-0.25, 0.0, 0.0), 0.05, 0.1, handover_id="person_1"), 0)
+    outs = _run(nav, Pose(0.0, 0.0, 0.0), lambda _t, _p: cm, 400)
+    assert outs[-1][2].state == "succeeded", outs[-1][2]
+    assert all(o.recovery == "" for _, _, o in outs)
+    assert outs[-1][0] < 10 * 1e9
+
+
 def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid() -> None:
     free = build_costmap(_open_floor(), FP, CostParams())
     blob = np.zeros_like(_open_floor().occupied)
