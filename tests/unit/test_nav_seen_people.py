@@ -116,6 +116,17 @@ def test_a_person_seen_too_briefly_keeps_the_velocity_the_maps_tracker_has_for_t
     assert [(p.id, p.x, p.velocity) for p in merged] == [("person_3", 2.0, (0.0, -0.8))]
 
 
+def test_a_glimpse_too_brief_for_a_velocity_is_a_walker_then_stands_once_not_seen_again() -> None:
+    """Hall seed 1's shift: one glimpse of a worker standing beside the trunk, kept its 30 s
+    as a walker at 1.6 m/s (S_p at rest 1.52 m), held the robot 23 s 0.65 m from them."""
+    seen = SeenPeople()
+    seen.update(_frame(0, _det("person", 1.0, 0.8)))
+    assert [q.velocity for q in seen.active(S)] == [None]  # maybe walking at the robot
+    assert [q.velocity for q in seen.active(3 * S)] == [(0.0, 0.0)]  # not seen walking
+    seen.update(_frame(4 * S, _det("person", 1.0, 0.8)))  # seen again: a glimpse again
+    assert [q.velocity for q in seen.active(4 * S)] == [None]
+
+
 def test_a_velocity_is_a_least_squares_slope() -> None:
     pts = [(k * S // 10, 0.5 * k / 10, -0.2 * k / 10) for k in range(5)]
     v = fitted_velocity(pts, 0.25)
