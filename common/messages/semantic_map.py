@@ -57,6 +57,8 @@ class MapEntity(Message, frozen=True):
         visible centroid's height, a person's feet on the floor). uncertainty_m: 1-σ of the
         horizontal position, m.
     last_seen_ns: sim time of the last detection fused, ns (0: never since start).
+    first_seen_ns: sim time of the first detection fused, ns (0: not made from this run's
+        detections: seeded, imported, or from before the map's clock started).
     missing_since_ns: looked for at its place and not seen since then (None: not missing).
     velocity_in_world: (2,) m/s, a person's estimated floor velocity (0 for artifacts).
     observations: detections fused into it so far.
@@ -84,6 +86,7 @@ class MapEntity(Message, frozen=True):
     nearest_view_m: NonNegative | None = None
     places: Annotated[tuple[SeenPlace, ...], msgspec.Meta(max_length=64)] = ()
     colours: PersonColours | None = None
+    first_seen_ns: StampNs = 0
 
 
 class MapListing(Message, frozen=True):

@@ -94,6 +94,23 @@ def handed_put_back(
     return [e for e in mine if put_back(e, handed[e.id][1], people)]
 
 
+def other_objects(like: list[MapEntity], asked: MapEntity | None) -> list[str]:
+    """The ids of `like` (the map's entries of a class) that are other objects than
+    `asked`, for the search (`search.found`'s `known`): not those the map made from its own
+    sightings after it last saw `asked`, which may be `asked`, moved (hall seed 0's shift
+    moved bottle_2 onto table_2 in view of the head camera, 0.9 s before the request for
+    it; the map made bottle_4 there, and the search looked at it and passed it over as
+    another bottle). `asked` None (not in the map): all of them."""
+
+    def made_since(e: MapEntity) -> bool:
+        return (
+            asked is not None and e.id != asked.id and e.source == "perception"
+            and e.first_seen_ns > asked.last_seen_ns
+        )  # fmt: skip
+
+    return sorted(e.id for e in like if not made_since(e))
+
+
 def object_candidates(port: RobotPort, name: str) -> list[MapEntity]:
     """The artifacts a request's `object` names, firm ones first, each nearest first
     (empty: none known)."""

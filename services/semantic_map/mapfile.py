@@ -47,12 +47,13 @@ def tracks_from_file(mf: MapFile, source: Source) -> list[Track]:
     """The file's entities as confirmed tracks, renamed to `source` (`prior` or `import`),
     people with their colours (`MapFile.appearances`; `ValueError` for a histogram that
     is not one). Their stamps are another run's clock: each is not seen since this run
-    started (`last_seen_ns` 0), and one missing in the file is missing since before it
-    (0). A file's stamp of 500 s read in a run at 200 s was "seen 300 s from now": a
-    person of the file counted as seen lately, and artifacts as seen after a search began."""
+    started (`last_seen_ns` and `first_seen_ns` 0), and one missing in the file is
+    missing since before it (0). A file's stamp of 500 s read in a run at 200 s was "seen
+    300 s from now": a person of the file counted as seen lately, and artifacts as seen
+    after a search began."""
     tracks = [
         Track.from_message(msgspec.structs.replace(
-            e, source=source, last_seen_ns=0,
+            e, source=source, last_seen_ns=0, first_seen_ns=0,
             missing_since_ns=None if e.missing_since_ns is None else 0,
         ))
         for e in mf.entities

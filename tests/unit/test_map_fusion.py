@@ -10,7 +10,7 @@ from common.camera import PinholeCamera
 from common.config import SemanticMapSettings
 from common.geometry import make_T
 from services.semantic_map.artifacts import ArtifactTracker
-from services.semantic_map.entities import IdBook, Observation
+from services.semantic_map.entities import IdBook, Observation, Track
 from services.semantic_map.looks import looks_at
 from services.semantic_map.mapfile import seed_from_world
 from services.semantic_map.occupancy import CLEAR_FRAMES, OCCUPIED, Occupancy
@@ -71,6 +71,14 @@ def test_a_detection_outside_the_gate_or_of_another_class_is_a_new_artifact() ->
             ],
         )
     assert sorted(t.id or "" for t in tracker.confirmed) == ["bottle_5", "bottle_6", "can_1"]
+    # made from this run's sightings: the first says when (the search's "made since")
+    sent = [t.to_message() for t in tracker.confirmed]
+    assert [(e.first_seen_ns, e.last_seen_ns) for e in sent] == [(0, S)] * 3
+    tracker.update(2 * S, [Observation("bottle", np.array([3.0, 0.0]), 0.8, 0.03)])
+    tracker.update(3 * S, [Observation("bottle", np.array([3.0, 0.0]), 0.8, 0.03)])
+    made = [t for t in tracker.confirmed if t.id == "bottle_7"]
+    assert [t.to_message().first_seen_ns for t in made] == [2 * S]
+    assert Track.from_message(made[0].to_message()).first_seen_ns == 2 * S
 
 
 def test_the_missing_test_sees_in_front_within_range_and_not_behind_an_occluder() -> None:

@@ -15,8 +15,9 @@ from common.messages.semantic_map import MapEntity
 from common.messages.world import SupportSurface
 from services.mission.behaviours.search import MAX_RESUMES
 from services.mission.search import FIRM_OBSERVATIONS, Place, along, found, places_to_look
+from services.mission.targets import other_objects
 from services.mission.tree import MissionTree, Outcome
-from tests.unit.mission_fakes import FakeRobot, entity, small_world
+from tests.unit.mission_fakes import TICK_NS, FakeRobot, entity, small_world
 from tests.unit.test_mission_tree import mission
 
 S = 1_000_000_000
@@ -207,6 +208,44 @@ def test_a_moved_object_the_map_saw_while_putting_back_is_still_the_one_fetched(
     assert outcome.state == "succeeded", outcome
     standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
     assert standoffs[-2:] == ["bottle_2", "bottle_9"]
+
+
+def test_a_moved_object_the_map_made_before_the_request_is_still_the_one_fetched() -> None:
+    """Hall seed 0's shift: bottle_2 was moved onto table_2 in view of the head camera,
+    0.9 s before the request for it, and the map made bottle_4 of it there. An entry the
+    map made from its own sightings after it last saw the object asked for may be that
+    object, moved: the search's look at table_2 fetches it. One made before is not."""
+    for made_at, fetched in ((5 * S, True), (0, False)):
+        robot = _moved_bottle()
+        asked = robot.artifacts["bottle_1"]
+        robot.artifacts["bottle_1"] = msgspec.structs.replace(asked, last_seen_ns=2 * S)
+        robot.artifacts["bottle_9"] = msgspec.structs.replace(
+            _seen(entity("bottle_9", -1.0, 2.8), made_at), source="perception",
+            first_seen_ns=made_at,
+        )  # fmt: skip
+        robot.visible.add("bottle_9")
+        for _ in range(round(6 * S / TICK_NS)):
+            robot.advance()  # the request comes after
+        tree = mission(robot)
+
+        def look(_k: int, tree: MissionTree = tree, robot: FakeRobot = robot) -> None:
+            if tree.arm_look:  # the search's look at table_2 sees it again
+                robot.artifacts["bottle_9"] = _seen(robot.artifacts["bottle_9"], robot.now_ns)
+
+        outcome = _run(tree, robot, look)
+        standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+        assert (standoffs == ["bottle_1", "bottle_9"]) == fetched, (made_at, standoffs)
+        assert (outcome.state == "succeeded") == fetched, outcome
+
+
+def test_the_map_made_since_the_object_was_last_seen_may_be_it_moved() -> None:
+    asked = msgspec.structs.replace(entity("bottle_1", 0.0, 0.0), last_seen_ns=10 * S)
+    mine = msgspec.structs.replace(entity("bottle_4", 1.0, 0.0), source="perception")
+    like = [asked, msgspec.structs.replace(mine, first_seen_ns=11 * S),
+            msgspec.structs.replace(mine, id="bottle_5", first_seen_ns=9 * S),
+            msgspec.structs.replace(entity("bottle_6", 2.0, 0.0), first_seen_ns=0)]  # fmt: skip
+    assert other_objects(like, asked) == ["bottle_1", "bottle_5", "bottle_6"]
+    assert other_objects(like, None) == ["bottle_1", "bottle_4", "bottle_5", "bottle_6"]
 
 
 def test_a_look_alike_seen_again_off_its_place_is_not_fetched_for_the_object_asked_for() -> None:

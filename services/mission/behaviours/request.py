@@ -2,8 +2,9 @@
 
 - `WaitForRequest`: RUNNING until the node put an accepted request on the blackboard.
 - `NoteKnown`: for a request by id, the map's entries of its class as the fetch begins
-  (`KNOWN`: other objects of the class, for the search; one made since may be the
-  object, moved). Before anything else: a fetch that first puts back what it holds
+  (`KNOWN`: other objects of the class, for the search; one made since, or made after
+  the map last saw the object, may be the object, moved: `targets.other_objects`).
+  Before anything else: a fetch that first puts back what it holds
   walks past tables, and the entry its head camera makes of the moved object on the way
   is not one the map had (hall seed 0's shift: bottle_2 moved onto table_2 at 305 s, the
   request came at 306 s, the walk to put box_1 back made bottle_5 of it at 308 s, and
@@ -66,8 +67,8 @@ class IsTask(MissionBehaviour):
 
 
 class NoteKnown(MissionBehaviour):
-    """Always SUCCESS: `KNOWN` noted for a request by id (the map down: `SelectTarget`
-    notes it later)."""
+    """Always SUCCESS: `KNOWN` noted for a request by id (`targets.other_objects`; the map
+    down: `SelectTarget` notes it later)."""
 
     WRITES = (KNOWN,)
 
@@ -81,7 +82,8 @@ class NoteKnown(MissionBehaviour):
                 like = self.port.artifacts_of_class(targets.class_of(request.object))
             except Unavailable:
                 return Status.SUCCESS
-            self.set(KNOWN, sorted(e.id for e in like))
+            asked = next((e for e in like if e.id == request.object), None)
+            self.set(KNOWN, targets.other_objects(like, asked))
         return Status.SUCCESS
 
 
@@ -129,7 +131,8 @@ class SelectTarget(MissionBehaviour):
                     like = self.port.artifacts_of_class(targets.class_of(request.object))
                 except Unavailable:
                     like = list(found)
-                self.set(KNOWN, sorted(e.id for e in like))
+                asked = next((e for e in like if e.id == request.object), None)
+                self.set(KNOWN, targets.other_objects(like, asked))
             self.ctx.decide(f"object {request.object!r}: candidates {candidates}")
         index = int(self.get(CANDIDATE, 0))
         if index >= len(candidates):
