@@ -18,7 +18,9 @@ grid, pose, t)` takes one scan's returns in the map frame:
 - the rest are cut into clusters where consecutive returns (beam order) are more than
   `gap_m` apart, and clusters whose centroids lie within `join_m` are joined (a
   person's two legs, a wall's return between them);
-- a cluster of at least `min_points` returns, at most `max_extent_m` across, whose
+- a cluster of at least `min_points` returns, at most `max_extent_m` across and with no
+  straight run of returns longer than `max_face_m` (a flat face: a trolley's end is as
+  wide as a person, its returns a line where legs give two arcs), whose
   centroid is outside the footprint (`robot_margin_m` round it: the robot's own arm
   and what it carries), is a body that could be a person; the returns of larger ones
   (a trolley left in an aisle, a parked load: `ScanPeople.obstacles`) are obstacles the
@@ -111,6 +113,12 @@ class ScanParams:
     join_m: float = 0.45
     min_points: int = 3
     max_extent_m: float = 0.8
+    #: m: a straight run of returns longer than this is a face of something, not legs (a
+    #: trolley's 0.6 m end, seen square on, was a person-sized body; the shift stood 170 s
+    #: before it in an aisle, its separation at a walking pace while its track was new),
+    #: straight: its returns' spread across it at most `straight_m` (1-σ).
+    max_face_m: float = 0.45
+    straight_m: float = 0.03
     robot_margin_m: float = 0.05
     gate_m: float = 0.6
     ttl_s: float = 0.5
@@ -173,37 +181,55 @@ def static_clearance(grid: Grid, island_m2: float) -> FloatArray:
     return out
 
 
-def clusters(points: FloatArray, p: ScanParams) -> list[tuple[FloatArray, float]]:
-    """The clusters of `points` (n, 2, beam order), each with its extent (m): split where
-    consecutive points are more than `gap_m` apart, joined where centroids are within
-    `join_m`; those of at least `min_points`."""
+def face_m(run: FloatArray, straight_m: float) -> float:
+    """How long a flat face a run of consecutive returns (k, 2) is: its length along its
+    principal axis when the returns' spread across it (1-σ) is at most `straight_m` (the
+    range noise; legs are two arcs), else 0."""
+    if len(run) < 3:
+        return 0.0
+    d = run - run.mean(axis=0)
+    _, sv, axes = np.linalg.svd(d, full_matrices=False)
+    if sv[-1] / math.sqrt(len(run)) > straight_m:
+        return 0.0
+    along = d @ axes[0]
+    return float(along.max() - along.min())
+
+
+def clusters(points: FloatArray, p: ScanParams) -> list[tuple[FloatArray, float, float]]:
+    """The clusters of `points` (n, 2, beam order), each with its extent (m) and its
+    longest flat face (m, `face_m`): split where consecutive points are more than `gap_m`
+    apart, joined where centroids are within `join_m`; those of at least `min_points`."""
     if len(points) == 0:
         return []
     step = np.hypot(*np.diff(points, axis=0).T)
     cuts = np.flatnonzero(step > p.gap_m) + 1
     groups = [g for g in np.split(points, cuts) if len(g)]
     joined: list[FloatArray] = []
+    faces: list[float] = []
     for g in groups:
         c = g.mean(axis=0)
+        face = face_m(g, p.straight_m)
         for k, h in enumerate(joined):
             if float(np.hypot(*(h.mean(axis=0) - c))) <= p.join_m:
                 joined[k] = np.vstack([h, g])
+                faces[k] = max(faces[k], face)
                 break
         else:
             joined.append(g)
+            faces.append(face)
     out = []
-    for g in joined:
+    for g, face in zip(joined, faces, strict=True):
         if len(g) >= p.min_points:
-            out.append((g, 2.0 * float(np.max(np.hypot(*(g - g.mean(axis=0)).T)))))
+            out.append((g, 2.0 * float(np.max(np.hypot(*(g - g.mean(axis=0)).T))), face))
     return out
 
 
 def bodies_and_larger(points: FloatArray, p: ScanParams) -> tuple[list[Body], FloatArray]:
-    """The `clusters` of `points` at most `max_extent_m` across, as bodies, and the
-    returns (k, 2) of the larger ones."""
+    """The `clusters` of `points` at most `max_extent_m` across and with no flat face
+    longer than `max_face_m`, as bodies, and the returns (k, 2) of the others."""
     found, big = [], []
-    for g, extent in clusters(points, p):
-        if extent <= p.max_extent_m:
+    for g, extent, face in clusters(points, p):
+        if extent <= p.max_extent_m and face <= p.max_face_m:
             c = g.mean(axis=0)
             found.append(Body(float(c[0]), float(c[1]), extent, len(g)))
         else:

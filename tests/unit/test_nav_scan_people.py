@@ -23,6 +23,7 @@ from services.navigation.scan_people import (
     ScanView,
     VelocityMemory,
     bodies,
+    bodies_and_larger,
     merge_scan,
     nearest_tracks,
     static_cells,
@@ -121,6 +122,26 @@ def test_the_clusters_of_a_wall_a_few_returns_and_two_legs() -> None:
     legs = np.array([[1.0, 0.1], [1.0, 0.12], [1.0, 0.14], [1.0, -0.1], [1.0, -0.12], [1.0, -0.14]])
     out = bodies(np.vstack([wall, stray, legs]), p)
     assert len(out) == 1 and out[0].points == 6 and out[0].x == pytest.approx(1.0)
+
+
+def test_a_flat_face_as_wide_as_a_person_is_no_body_and_legs_are_one() -> None:
+    """Hall seed 0's shift: a trolley left in an aisle showed its 0.6 m end square on, a
+    person-sized cluster; as a new track it was a walker to the speed rules, and the robot
+    stood 170 s before it. Its returns are a straight line; legs are two arcs, at most
+    0.34 m across whichever way they face."""
+    p = ScanParams()
+    rng = np.random.default_rng(1)
+    end = np.column_stack([np.full(60, 2.0), np.linspace(-0.3, 0.3, 60)])
+    end[:, 0] += rng.normal(0.0, 0.015, 60)  # the range noise
+    found, larger = bodies_and_larger(end, p)
+    assert found == [] and len(larger) == 60
+    assert bodies_and_larger(end[::3], dataclasses.replace(p, max_face_m=1.0))[0]  # as was
+    for turn in np.linspace(0.0, math.pi, 7):  # legs facing every way, 0.8-4.5 m off
+        for d in (0.8, 2.0, 4.5):
+            legs = [(d + 0.1 * math.sin(turn) * k, 0.1 * math.cos(turn) * k) for k in (1, -1)]
+            pts = _points(Pose(0.0, 0.0, 0.0), legs)
+            near = pts[np.hypot(pts[:, 0] - d, pts[:, 1]) < 0.5]
+            assert len(bodies(near, p)) == 1, (turn, d)
 
 
 def test_a_walking_person_keeps_one_track_with_their_velocity() -> None:
