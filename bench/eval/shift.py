@@ -8,8 +8,10 @@ serves M requests one after another:
 - **the request** (`shift_request`, seeded by the world seed and the request's number):
   a mapped artifact that still stands where the map has it (truth: within
   `MATCH_M`, not handed over earlier in the shift) for a mapped person other than the last
-  request's; one in `CLASS_EVERY` asks by class ("a can": the mission picks the nearest
-  mapped one);
+  request's, one the map keeps (`firm_people`: seeded, or made from at least the map's
+  `drop_below_observations` detections: hall seed 3's shift asked for person_7, made
+  from two, which the map deleted as a false entry while the robot fetched the bottle);
+  one in `CLASS_EVERY` asks by class ("a can": the mission picks the nearest mapped one);
 - **the changing hall** (`--changes`, on by default): before each request after the
   first, somebody moves an artifact not handed over yet (the requested one half the
   time, when it can be) onto another support (`services.sim.world.new_place`), through
@@ -307,6 +309,13 @@ def real_people(
     return real, ghosts
 
 
+def firm_people(people: Sequence[MapEntity], least: int) -> list[MapEntity]:
+    """Those of `people` the map keeps: seeded or imported, or made from at least `least`
+    detections (the map's `drop_below_observations`; fewer, it deletes an entry its looks
+    miss)."""
+    return [p for p in people if p.source != "perception" or p.observations >= least]
+
+
 def whom(
     result: WorldResult, person: str, people: list[MapEntity], follow: Follow, truth: Truth
 ) -> None:
@@ -355,7 +364,8 @@ def run_shift_world(
         overrides["semantic_map.people_trace"] = str(traced)
     stack = ProcessStack(list(SERVICES), overrides)
     watch = SeparationWatch(truth_separation(overrides))
-    plots = ShiftPlots(load_config(overrides).navigation.people.slow_radius_m)
+    cfg = load_config(overrides)
+    plots = ShiftPlots(cfg.navigation.people.slow_radius_m)
     figures: dict[str, Any] = {"world_seed": seed, "map_accuracy": []}
     rng = np.random.default_rng(seed)
     truth: Truth | None = None
@@ -399,7 +409,8 @@ def run_shift_world(
             real, ghosts = real_people(people, follow, truth)
             if ghosts:
                 figures.setdefault("people_ghosts", []).append({"request": k + 1, "ids": ghosts})
-            pair, asked = shift_request(present, real, seed, k, last_person)
+            firm = firm_people(real, cfg.semantic_map.drop_below_observations)
+            pair, asked = shift_request(present, firm or real, seed, k, last_person)
             at_ns = None
             if not gated:
                 at_ns = end_ns + round(REQUEST_AFTER_S * 1e9)

@@ -19,6 +19,7 @@ from bench.eval.shift import (
     Knock,
     Truth,
     class_verdict,
+    firm_people,
     leave_trolley,
     present_artifacts,
     put_away,
@@ -73,6 +74,16 @@ def test_a_shift_asks_by_class_every_third_request_and_for_someone_else_each_tim
             assert pair.object == asked and asked in ("bottle_1", "can_1")
         last = pair.person
     assert shift_request(present, people, 7, 4, "x") == shift_request(present, people, 7, 4, "x")
+
+
+def test_a_shift_asks_for_people_the_map_keeps() -> None:
+    """Hall seed 3's shift asked for person_7, made from two detections, which the map
+    deleted as a false entry while the robot fetched the bottle (`unknown_person`)."""
+    seeded = msgspec.structs.replace(_entity("person_1", 0.0, 0.0, "person"),
+                                     source="seed-from-world")  # fmt: skip
+    made = msgspec.structs.replace(_entity("person_7", 1.0, 0.0, "person"), observations=2)
+    kept = msgspec.structs.replace(made, id="person_9", observations=10)
+    assert [p.id for p in firm_people([seeded, made, kept], 10)] == ["person_1", "person_9"]
 
 
 def test_the_truth_of_the_moment_has_the_moved_artifacts_and_walking_people() -> None:
