@@ -404,6 +404,12 @@ class Navigator:
         if limit.rule == "stop":  # the protective stop: at rest, no turn on the spot either
             self.cmd = np.zeros(3)
             f.cmd = self.cmd.copy()
+        elif self.cmd[2] != 0.0 and self._inside_someones_separation(pose, cm, g.handover_id):
+            # Walking away from a bystander inside their separation at rest: straight on, no
+            # turn (its ends sweep, and the trot's turn sways the base: seed 4's shift swept
+            # it 0.05 m/s towards a walker passing 0.38 m behind, S_p 0.418 m).
+            self.cmd[2] = 0.0
+            f.cmd = self.cmd.copy()
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
             return self._out(limit, new_plan)
@@ -418,6 +424,14 @@ class Navigator:
             return self._blocked(t_ns, pose, cm, limit, new_plan)
         self.blocked_since = None
         return self._out(limit, new_plan)
+
+    def _inside_someones_separation(self, pose: Pose, cm: Costmap, handover_id: str) -> bool:
+        """Whether a person other than the one handed over to stands inside their
+        protective separation at rest of the footprint (a turn there is a stop:
+        `people_limit(turning=True)`)."""
+        rule = people_limit(pose, None, cm.people, self.fp, self.n.people, self.top_mps,
+                            handover_id, turning=True)  # fmt: skip
+        return rule.rule == "stop"
 
     def _blocked(
         self, t_ns: int, pose: Pose, cm: Costmap, limit: SpeedLimit, new_plan: Plan | None

@@ -262,6 +262,26 @@ def test_the_person_handed_to_inside_the_separation_at_rest_is_backed_away_from(
     assert outs[-1][0] < 10 * 1e9
 
 
+def test_inside_a_bystanders_separation_at_rest_the_walk_away_does_not_turn() -> None:
+    """Hall seed 4's shift: a walker passed 0.24-0.38 m behind the robot, which walked on
+    away from them turning onto its path; the turn swept the base towards them (0.05 m/s
+    by the truth, d 0.381 m against S_p 0.418 m). Walking away from somebody inside
+    their separation at rest, the base goes straight."""
+    sep = separation_params(NavigationSettings().people)
+    at_rest = protective_distance(0.0, sep.speed_margin_mps, sep)
+    behind = Person("person_1", -FP.back - 0.25, 0.0, 0.0, (0.0, 0.0))
+    cm = dataclasses.replace(build_costmap(_open_floor(), FP, CostParams()), people=(behind,))
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", Pose(1.5, 1.0, 1.0), 0.05, 0.1), 0)
+    outs = _run(nav, Pose(0.0, 0.0, 0.0), lambda _t, _p: cm, 60)
+    at = np.array([[behind.x, behind.y]])
+    inside = [o for _, p, o in outs if distance_to_footprint(p, FP, at)[0] < at_rest]
+    assert inside and all(o.cmd[2] == 0.0 for o in inside), [o.cmd for o in inside]
+    assert any(o.cmd[0] > 0.02 for o in inside)  # and it walks away
+    far = [o for _, p, o in outs if distance_to_footprint(p, FP, at)[0] > at_rest + 0.1]
+    assert any(abs(o.cmd[2]) > 0.0 for o in far)  # clear of them, it turns
+
+
 def test_a_goal_covered_later_by_a_short_lived_obstacle_is_blocked_not_invalid() -> None:
     free = build_costmap(_open_floor(), FP, CostParams())
     blob = np.zeros_like(_open_floor().occupied)
