@@ -197,8 +197,10 @@ def face_m(run: FloatArray, straight_m: float) -> float:
 
 def clusters(points: FloatArray, p: ScanParams) -> list[tuple[FloatArray, float, float]]:
     """The clusters of `points` (n, 2, beam order), each with its extent (m) and its
-    longest flat face (m, `face_m`): split where consecutive points are more than `gap_m`
-    apart, joined where centroids are within `join_m`; those of at least `min_points`."""
+    longest flat face (m, `face_m`; 0 where no run of it spans more than `max_face_m`:
+    legs and stray returns skip the fit): split where consecutive points are more than
+    `gap_m` apart, joined where centroids are within `join_m`; those of at least
+    `min_points`."""
     if len(points) == 0:
         return []
     step = np.hypot(*np.diff(points, axis=0).T)
@@ -208,7 +210,8 @@ def clusters(points: FloatArray, p: ScanParams) -> list[tuple[FloatArray, float,
     faces: list[float] = []
     for g in groups:
         c = g.mean(axis=0)
-        face = face_m(g, p.straight_m)
+        span = float(np.hypot(*np.ptp(g, axis=0)))
+        face = face_m(g, p.straight_m) if span > p.max_face_m else 0.0
         for k, h in enumerate(joined):
             if float(np.hypot(*(h.mean(axis=0) - c))) <= p.join_m:
                 joined[k] = np.vstack([h, g])
