@@ -94,13 +94,14 @@ def handed_put_back(
     return [e for e in mine if put_back(e, handed[e.id][1], people)]
 
 
-def other_objects(like: list[MapEntity], asked: MapEntity | None) -> list[str]:
-    """The ids of `like` (the map's entries of a class) that are other objects than
-    `asked`, for the search (`search.found`'s `known`): not those the map made from its own
-    sightings after it last saw `asked`, which may be `asked`, moved (hall seed 0's shift
-    moved bottle_2 onto table_2 in view of the head camera, 0.9 s before the request for
-    it; the map made bottle_4 there, and the search looked at it and passed it over as
-    another bottle). `asked` None (not in the map): all of them."""
+def other_objects(like: list[MapEntity], asked_id: str) -> list[str]:
+    """The ids of `like` (the map's entries of a class) that are other objects than the
+    one asked for, for the search (`search.found`'s `known`): not those the map made from
+    its own sightings after it last saw `asked_id`, which may be it, moved (hall seed 0's
+    shift moved bottle_2 onto table_2 in view of the head camera, 0.9 s before the request
+    for it; the map made bottle_4 there, and the search looked at it and passed it over
+    as another bottle). `asked_id` not among them: all of them."""
+    asked = next((e for e in like if e.id == asked_id), None)
 
     def made_since(e: MapEntity) -> bool:
         return (

@@ -244,8 +244,8 @@ def test_the_map_made_since_the_object_was_last_seen_may_be_it_moved() -> None:
     like = [asked, msgspec.structs.replace(mine, first_seen_ns=11 * S),
             msgspec.structs.replace(mine, id="bottle_5", first_seen_ns=9 * S),
             msgspec.structs.replace(entity("bottle_6", 2.0, 0.0), first_seen_ns=0)]  # fmt: skip
-    assert other_objects(like, asked) == ["bottle_1", "bottle_5", "bottle_6"]
-    assert other_objects(like, None) == ["bottle_1", "bottle_4", "bottle_5", "bottle_6"]
+    assert other_objects(like, "bottle_1") == ["bottle_1", "bottle_5", "bottle_6"]
+    assert other_objects(like, "bottle_9") == ["bottle_1", "bottle_4", "bottle_5", "bottle_6"]
 
 
 def test_a_look_alike_seen_again_off_its_place_is_not_fetched_for_the_object_asked_for() -> None:

@@ -82,8 +82,7 @@ class NoteKnown(MissionBehaviour):
                 like = self.port.artifacts_of_class(targets.class_of(request.object))
             except Unavailable:
                 return Status.SUCCESS
-            asked = next((e for e in like if e.id == request.object), None)
-            self.set(KNOWN, targets.other_objects(like, asked))
+            self.set(KNOWN, targets.other_objects(like, request.object))
         return Status.SUCCESS
 
 
@@ -131,8 +130,7 @@ class SelectTarget(MissionBehaviour):
                     like = self.port.artifacts_of_class(targets.class_of(request.object))
                 except Unavailable:
                     like = list(found)
-                asked = next((e for e in like if e.id == request.object), None)
-                self.set(KNOWN, targets.other_objects(like, asked))
+                self.set(KNOWN, targets.other_objects(like, request.object))
             self.ctx.decide(f"object {request.object!r}: candidates {candidates}")
         index = int(self.get(CANDIDATE, 0))
         if index >= len(candidates):
