@@ -72,6 +72,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -265,6 +266,12 @@ class ScanView:
     ranges: FloatArray
     range_max: float
 
+    @cached_property
+    def returns_enough(self) -> bool:
+        """Whether at least `MIN_RETURNS` of the beams returned (once per scan: every
+        person asked after reads it)."""
+        return bool(np.count_nonzero(self.ranges > 0.0) >= MIN_RETURNS * len(self.ranges))
+
     def clear_at(self, x: float, y: float, radius_m: float = 0.6, beyond_m: float = 0.3) -> bool:
         """Whether the beams at a body of `radius_m` at (x, y) all return from at least
         `beyond_m` beyond it, or return nothing within the range in the open field
@@ -272,7 +279,7 @@ class ScanView:
         beam without a return beyond the open field (masked where it meets the robot's
         own legs: a person behind the lidar's ±97° is not seen gone), or a scan with
         hardly any returns (`MIN_RETURNS`)."""
-        if np.count_nonzero(self.ranges > 0.0) < MIN_RETURNS * len(self.ranges):
+        if not self.returns_enough:
             return False
         dx, dy = x - self.origin[0], y - self.origin[1]
         dist = math.hypot(dx, dy)
