@@ -493,7 +493,8 @@ def run_shift_world(
         if tracing and truth is not None:
             follow.drain()
             keep_people_truth(follow, truth_path)
-            figures["people_trace"] = [shown(traced), shown(truth_path)]
+            figures["people_trace"] = [shown(traced), shown(truth_path),
+                                       shown(base_truth_path(truth_path))]  # fmt: skip
     return figures
 
 
@@ -509,8 +510,15 @@ def both(first: Progress, second: Progress) -> Progress:
 
 def keep_people_truth(follow: Follow, path: Path) -> None:
     """The shift's truth people so far into `path`, beside the map's people trace (for
-    `dume bench people-ids`)."""
+    `dume bench people-ids`), and the base's (`base-truth-seed-<s>.msgpack`, the same
+    stamps: where the robot stood as each person passed, for reading a hold in the logs)."""
     write_whole(path, msgspec.msgpack.encode(follow.history))
+    write_whole(base_truth_path(path), msgspec.msgpack.encode(follow.bases))
+
+
+def base_truth_path(people_truth: Path) -> Path:
+    """The base's truth trace beside the people's truth trace `people_truth`."""
+    return people_truth.with_name(people_truth.name.replace("people-truth", "base-truth"))
 
 
 class Knock:
