@@ -11,6 +11,9 @@ then where they last saw such parts, then on the benches nearby, then everywhere
 3. the supports (tables, benches, pallets: `dume/map/supports`) not yet among the places,
    nearest first: those nearby, then the rest of the hall (the semantic pass's surfaces).
 
+The viewpoints stand out of people's way where they can (`busy_places`: where the map's
+people are usually seen, and where they are now; `coverage.facing_route`).
+
 A place is a point on the floor to look at with why it is looked at, and, for a place on
 a support, the points along that support's top `STRETCH_M` apart (`along`: a viewpoint
 facing one point sees a stretch of a top; an object moved along its table by 0.6 m was
@@ -139,6 +142,17 @@ def places_to_look(
     for s in sorted(supports, key=lambda s: math.dist(s.centre_xy, robot_xy)):
         if s.id not in covered:
             add((s.centre_xy[0], s.centre_xy[1]), f"{s.id}, a support", 3)
+    return out
+
+
+def busy_places(people: Iterable[MapEntity]) -> list[tuple[float, float]]:
+    """Where people walk and stand, as the map knows it: each person's usual places
+    (`MapEntity.places`: every cell they were seen in, a walker's aisle as a worker's
+    bench) and where they are now."""
+    out: list[tuple[float, float]] = []
+    for p in people:
+        out.append((p.position_in_world[0], p.position_in_world[1]))
+        out += [(q.xy[0], q.xy[1]) for q in p.places]
     return out
 
 

@@ -155,3 +155,24 @@ def test_a_surface_seen_only_through_a_wall_is_unseen() -> None:
         cells, 0.1, (0.0, 0.0), (2.0, 3.0), support_targets([shelf]), 0.5, 0.8, 1.6, 0.5
     )
     assert route.viewpoints == [] and route.unseen == len(support_targets([shelf]))
+
+
+def test_the_viewpoint_stands_out_of_peoples_way_where_another_sees_as_well() -> None:
+    """A table in the middle of the room, seen from either side: people walk past its
+    south side (the busy places), so its viewpoint stands on the north side; with people
+    on both sides the table is still looked at, from the busy floor."""
+    cells = _room()
+    cells[27:33, 50:70] = OCCUPIED  # a 2 × 0.6 m table, long along x, at (6, 3)
+    table = SupportSurface("table_1", (6.0, 3.0), (1.0, 0.3), 0.0, 0.75)
+    targets = support_targets([table])
+    args = (cells, 0.1, (0.0, 0.0), (1.0, 3.0), targets, 0.5, 0.8, 1.6, math.radians(35))
+    plain = facing_route(*args)
+    south = np.array([[x, 1.6] for x in np.arange(3.0, 9.5, 1.0)])  # an aisle at y = 1.6
+    north = south + np.array([0.0, 2.8])  # and one at y = 4.4
+    quiet = facing_route(*args, south)
+    assert plain.unseen == quiet.unseen == 0
+    assert quiet.viewpoints and all(v[1] > 3.0 for v in quiet.viewpoints)  # the north side
+    assert all(min(np.hypot(*(v - b)) for b in south) > 1.0 for v in quiet.viewpoints)
+    both = facing_route(*args, np.vstack([south, north]))
+    assert both.unseen == 0 and both.viewpoints  # nowhere quiet: looked at all the same
+    assert any(v[1] < 3.0 for v in plain.viewpoints)  # without them: in the south aisle

@@ -11,10 +11,17 @@ import numpy as np
 
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PoseGoal
-from common.messages.semantic_map import MapEntity
+from common.messages.semantic_map import MapEntity, SeenPlace
 from common.messages.world import SupportSurface
 from services.mission.behaviours.search import MAX_RESUMES
-from services.mission.search import FIRM_OBSERVATIONS, Place, along, found, places_to_look
+from services.mission.search import (
+    FIRM_OBSERVATIONS,
+    Place,
+    along,
+    busy_places,
+    found,
+    places_to_look,
+)
 from services.mission.targets import other_objects
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import TICK_NS, FakeRobot, entity, small_world
@@ -106,6 +113,35 @@ def _moved_bottle() -> FakeRobot:
     robot = small_world(artifacts={"bottle_1": entity("bottle_1", 3.0, 0.0)}, visible={"bottle_9"})
     robot.supports = [_surface("table_1", 3.3, 0.0), _surface("table_2", -1.0, 3.0)]
     return robot
+
+
+def _search_viewpoints(robot: FakeRobot) -> list[tuple[float, float]]:
+    """Where the search for `_moved_bottle`'s bottle_1 walks to (no object found)."""
+    tree = mission(robot)
+    outcome = _run(tree, robot, lambda _k: None)
+    assert (outcome.state, outcome.reason) == ("failed", "object_not_found"), outcome
+    return [(g.x, g.y) for _, g in robot.nav_goals if isinstance(g, PoseGoal)]
+
+
+def test_the_search_looks_from_out_of_the_way_of_where_people_walk() -> None:
+    """A worker walks past table_2 where the search would stand to look at it: the map's
+    person's usual places (and where they are now) are busy, and the search's viewpoints
+    stand farther than 1 m from them; the table is looked at all the same."""
+    plain = _search_viewpoints(_moved_bottle())
+    at_table_2 = [v for v in plain if math.dist(v, (-1.0, 3.0)) < 2.0]
+    assert at_table_2, plain
+    aisle = [(at_table_2[0][0] + dx, at_table_2[0][1]) for dx in (-1.0, 0.0, 1.0)]
+    walker = msgspec.structs.replace(
+        entity("person_2", *aisle[2], kind="person"),
+        places=tuple(SeenPlace(xy, 3, 0) for xy in aisle),
+    )
+    robot = _moved_bottle()
+    robot.people_["person_2"] = walker
+    assert busy_places([walker]) == [aisle[2], *aisle]
+    quiet = _search_viewpoints(robot)
+    assert quiet != plain
+    assert any(math.dist(v, (-1.0, 3.0)) < 2.0 for v in quiet), quiet  # table_2 looked at
+    assert all(min(math.dist(v, a) for a in aisle) > 1.0 for v in quiet), quiet
 
 
 def test_an_object_moved_to_another_support_is_looked_for_and_fetched_there() -> None:

@@ -4,7 +4,8 @@ The fetch's first leaf. It does nothing (SUCCESS at once) unless the tree's reco
 asked for a search (`SEARCH` on the blackboard: every candidate was tried and not found
 at its place). Then it plans the places (`services.mission.search.places_to_look`: its
 last place, where the map saw its class lately, the supports nearest first), the route
-facing them from within `patrol_recheck_see_m` rank by rank (`ranked_route`:
+facing them from within `patrol_recheck_see_m`, out of people's way where it can
+(`search.busy_places`), rank by rank (`ranked_route`:
 `coverage.facing_route`, as the second look plans, on each kind of place in turn), and
 walks it as the patrol walks a route (`patrol.PatrolRunner`: the arm up
 in `look`, a hold at each viewpoint; the map fuses the wrist camera meanwhile, the node
@@ -49,7 +50,7 @@ from services.mission.behaviours.base import (
 from services.mission.coverage import Route, facing_route
 from services.mission.patrol import VIEW_HALF_ANGLE, PatrolRunner
 from services.mission.ports import PortError
-from services.mission.search import Place, found, places_to_look, re_seen
+from services.mission.search import Place, busy_places, found, places_to_look, re_seen
 from services.mission.targets import class_of, handed_put_back, is_map_id
 
 #: How many times a request's search goes on after what it found was not there.
@@ -65,12 +66,15 @@ def ranked_route(
     clearance_m: float,
     near_m: float,
     see_m: float,
+    busy: list[tuple[float, float]] | None = None,
 ) -> Route:
     """Viewpoints facing the places rank by rank (`Place.rank`: its last place, then
     where its class was seen lately, then the supports), each rank's (`facing_route`:
-    fewest viewpoints, nearest first) from where the rank before ended. One route over
+    fewest viewpoints, out of the way of the `busy` places where they can be, nearest
+    first) from where the rank before ended. One route over
     them all walked nearest first: seed 0's shift looked at three supports before
     table_2, where the map had seen a bottle 104 s before and the bottle stood."""
+    avoid = np.array(busy, float).reshape(-1, 2) if busy else None
     viewpoints: list[np.ndarray] = []
     paths: list[np.ndarray] = []
     facings: list[float] = []
@@ -78,7 +82,7 @@ def ranked_route(
     for rank in sorted({p.rank for p in places}):
         targets = np.array([q for p in places if p.rank == rank for q in p.points])
         r = facing_route(cells, resolution_m, origin_xy, here, targets.reshape(-1, 2),
-                         clearance_m, near_m, see_m, VIEW_HALF_ANGLE)  # fmt: skip
+                         clearance_m, near_m, see_m, VIEW_HALF_ANGLE, avoid)  # fmt: skip
         viewpoints += r.viewpoints
         paths += r.paths
         facings += r.facings or []
@@ -211,6 +215,10 @@ class LookElsewhere(MissionBehaviour):
             return self.fail("unavailable", f"the semantic map did not answer: {exc}")
         if xy is None:
             return self.fail("object_not_found", "no search: the robot does not know where it is")
+        try:
+            busy = busy_places(self.port.people())
+        except PortError:
+            busy = []  # the viewpoints stand wherever they see best
         # A request by id: the entries the map had when the request began are other
         # objects of the class; one made since may be the object, moved (the head camera
         # may see it at its new place on the way, before the search begins).
@@ -225,7 +233,7 @@ class LookElsewhere(MissionBehaviour):
         )  # fmt: skip
         route = ranked_route(
             np.asarray(as_numpy(grid.cells), np.uint8), grid.resolution_m, grid.origin_xy, xy,
-            self.places, s.patrol_clearance_m, s.patrol_near_m, s.patrol_recheck_see_m,
+            self.places, s.patrol_clearance_m, s.patrol_near_m, s.patrol_recheck_see_m, busy,
         )  # fmt: skip
         said = "; ".join(p.why for p in self.places)
         if not route.viewpoints:
