@@ -14,7 +14,14 @@ camera has not seen them for `CAMERA_FRESH_S`) whose place the lidar sees free
 (`ScanView.clear_at`), or saw
 free since the map last saw them there (`cleared`: out of the lidar's field now, in the
 blind wedge beside the trunk), or who is inside the robot's footprint, is left out of
-the layer and said once. The lidar's
+the layer and said once. A person the layer had within `NEAR_HOLD_M` of the footprint
+does not vanish at once: lost by every sensor (no person of the layer within the lidar's
+`same_m` of them now), they are held where the layer last had them for `NEAR_HOLD_S`
+(said once): nobody walks off from beside a robot in a blink, where a track can drop out
+(hall seed 3's shift: the lidar's track of a worker standing 0.6 m off ended, the map's
+place of them lay 0.2 m off their legs and the lidar saw it free, and for 0.8 s the
+layer had nobody; the robot walked on at 0.3 m/s and came to 0.45 m of them, inside
+their separation, before the lidar found them again). The lidar's
 tracks move a little at every scan: the costmap is rebuilt when a person came or went
 or moved `REBUILD_MOVE_M` since the last build, and otherwise only its people (what the
 speed rules read) are the newest.
@@ -57,6 +64,10 @@ SCAN_TTL_S = 120.0
 #: beside its trunk, or behind it: hall seed 0's shift held a goal 20 s for a ghost
 #: 0.76 m off the flank, and failed it blocked).
 CLEARED_SAME_M = 0.3
+#: A person the layer had within `NEAR_HOLD_M` (m) of the footprint, lost by every sensor,
+#: is held where it last had them this long (s).
+NEAR_HOLD_M = 1.0
+NEAR_HOLD_S = 1.0
 #: Why a map person is left out for the lidar: it sees their place free now, or it saw
 #: it free since the map last saw them.
 LIDAR_FREE = "the lidar sees free floor there"
@@ -121,6 +132,10 @@ class NavMap:
         self.left_out: dict[str, str] = {}
         #: Where and when (ns, x, y) the lidar last saw each map person's place free.
         self.cleared: dict[str, tuple[int, float, float]] = {}
+        #: The people last in the layer within `NEAR_HOLD_M` of the footprint: id → (when,
+        #: as what), and those held since every sensor lost them (said once).
+        self.near: dict[str, tuple[int, Person]] = {}
+        self.held: set[str] = set()
         self.costmap: Costmap | None = None
         #: The sim time the map in use is as of (goals queued before it resolve against it).
         self.map_at = 0
@@ -146,10 +161,10 @@ class NavMap:
         known = [ahead(q, self.now) for q in self.known]
         people = merge_scan(known, self.scanned, self.scan.p.same_m, self.velocities, self.now)
         fresh = self.seen.seen_since(self.now - round(CAMERA_FRESH_S * 1e9))
-        self.people = [
+        self.people = self._hold_near([
             q for q in people
             if q.id.startswith("scan_") or q.id in fresh or not self._absent(q)
-        ]  # fmt: skip
+        ])  # fmt: skip
         before = {q.id: q for q in self.built}
         material = len(before) != len(self.people) or any(
             (b := before.get(q.id)) is None or math.hypot(q.x - b.x, q.y - b.y) >= REBUILD_MOVE_M
@@ -158,6 +173,34 @@ class NavMap:
         if not material and self.costmap is not None:
             self.costmap = replace(self.costmap, people=tuple(self.people))
         return material
+
+    def _hold_near(self, people: list[Person]) -> list[Person]:
+        """`people` with those the layer had near the footprint lately and every sensor
+        lost since (module docstring), where it last had them; notes who is near now."""
+        hold_ns = round(NEAR_HOLD_S * NS_PER_S)
+        same_m = self.scan.p.same_m
+        here = {q.id for q in people}
+        lost = [
+            q for pid, (t, q) in self.near.items()
+            if pid not in here and self.now - t <= hold_ns
+            and all(math.hypot(p.x - q.x, p.y - q.y) > same_m for p in people)
+        ]  # fmt: skip
+        if self.pose is not None and people:
+            d = distance_to_footprint(self.pose, self.fp, np.array([[q.x, q.y] for q in people]))
+            for q, dq in zip(people, d.tolist(), strict=True):
+                if 0.0 < dq <= NEAR_HOLD_M:
+                    self.near[q.id] = (self.now, q)
+                    self.held.discard(q.id)
+        self.near = {k: v for k, v in self.near.items() if self.now - v[0] <= hold_ns}
+        if self.pose is not None and lost:  # not one the body now stands on
+            d = distance_to_footprint(self.pose, self.fp, np.array([[q.x, q.y] for q in lost]))
+            lost = [q for q, dq in zip(lost, d.tolist(), strict=True) if dq > 0.0]
+        for q in lost:
+            if q.id not in self.held:
+                self.held.add(q.id)
+                self.log.info("%s at (%.2f, %.2f), near the robot, lost by every sensor: "
+                              "held there %.1f s", q.id, q.x, q.y, NEAR_HOLD_S)  # fmt: skip
+        return people + lost
 
     def _absent(self, q: Person) -> bool:
         """Whether the newest scan, an earlier one since the map last saw `q`, or the
