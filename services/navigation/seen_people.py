@@ -135,13 +135,16 @@ class SeenPeople:
         return {self._names.get(q.id, q.id) for t, q in self._seen if t >= t_ns}
 
     def active(self, t_ns: int) -> list[Person]:
-        """The sightings within their `ttl_s` at `t_ns`, one without a velocity not seen
-        for `unknown_still_s` standing (the module docstring)."""
+        """The sightings within their `ttl_s` at `t_ns`, each stamped when it was seen
+        (`seen_ns`: a sighting kept for seconds out of view is no person seen now), one
+        without a velocity not seen for `unknown_still_s` standing (the module docstring)."""
         ttl = round(self.p.ttl_s * NS_PER_S)
         self._seen = [(t, q) for t, q in self._seen if t_ns - t <= ttl]
         still = round(self.p.unknown_still_s * NS_PER_S)
         return [
-            replace(q, velocity=(0.0, 0.0)) if q.velocity is None and t_ns - t > still else q
+            replace(q, seen_ns=t, velocity=(0.0, 0.0))
+            if q.velocity is None and t_ns - t > still
+            else replace(q, seen_ns=t)
             for t, q in self._seen
         ]
 

@@ -529,6 +529,8 @@ def test_a_stale_person_beside_the_flank_is_slid_past_along_it() -> None:
     slide = [(t, p) for t, p, o in outs if o.recovery == "slide"]
     assert slide, "a slide"
     assert slide[0][0] >= 10 * 1e9  # not before the map's sighting is stale
+    # and then at once: no wait for them to pass (`people.wait_s`), nothing would see it
+    assert slide[0][0] <= (10 + 0.5) * 1e9, slide[0][0]
     ghost = np.array([[1.9, -(FP.half_width + 0.05)]])
     start = float(distance_to_footprint(slide[0][1], FP, ghost)[0])
     assert all(float(distance_to_footprint(p, FP, ghost)[0]) >= start - 0.01 for _, p in slide)

@@ -48,6 +48,18 @@ def test_a_sighting_lasts_its_ttl_and_short_blobs_and_other_classes_are_not_peop
     assert seen.active(30 * S + S // 10) == []
 
 
+def test_a_sighting_kept_out_of_view_says_when_it_was_seen() -> None:
+    """A sighting kept for seconds is no person seen now: it carries its frame's stamp
+    (hall seed 4's shift: a walker's last sighting beside the flank, kept as seen now,
+    could never go stale, and the robot waited 23 s for it to pass)."""
+    seen = SeenPeople()
+    seen.update(_frame(2 * S, _det("person", 2.0, 0.0)))
+    seen.update(_frame(3 * S))  # out of view
+    assert [(p.id, p.seen_ns) for p in seen.active(12 * S)] == [("seen_1", 2 * S)]
+    (merged,) = seen.merge([], 12 * S)
+    assert merged.seen_ns == 2 * S
+
+
 def test_a_person_seen_elsewhere_hides_where_the_map_last_had_them_under_their_id() -> None:
     seen = SeenPeople()
     seen.update(_frame(0, _det("person", 3.0, 2.6, map_id="person_2")))
