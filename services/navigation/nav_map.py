@@ -185,22 +185,26 @@ class NavMap:
             if pid not in here and self.now - t <= hold_ns
             and all(math.hypot(p.x - q.x, p.y - q.y) > same_m for p in people)
         ]  # fmt: skip
-        if self.pose is not None and people:
-            d = distance_to_footprint(self.pose, self.fp, np.array([[q.x, q.y] for q in people]))
-            for q, dq in zip(people, d.tolist(), strict=True):
-                if 0.0 < dq <= NEAR_HOLD_M:
-                    self.near[q.id] = (self.now, q)
-                    self.held.discard(q.id)
+        for q, dq in zip(people, self._off_footprint(people), strict=True):
+            if 0.0 < dq <= NEAR_HOLD_M:
+                self.near[q.id] = (self.now, q)
+                self.held.discard(q.id)
         self.near = {k: v for k, v in self.near.items() if self.now - v[0] <= hold_ns}
-        if self.pose is not None and lost:  # not one the body now stands on
-            d = distance_to_footprint(self.pose, self.fp, np.array([[q.x, q.y] for q in lost]))
-            lost = [q for q, dq in zip(lost, d.tolist(), strict=True) if dq > 0.0]
+        # not one the body now stands on
+        lost = [q for q, dq in zip(lost, self._off_footprint(lost), strict=True) if dq > 0.0]
         for q in lost:
             if q.id not in self.held:
                 self.held.add(q.id)
                 self.log.info("%s at (%.2f, %.2f), near the robot, lost by every sensor: "
                               "held there %.1f s", q.id, q.x, q.y, NEAR_HOLD_S)  # fmt: skip
         return people + lost
+
+    def _off_footprint(self, people: list[Person]) -> list[float]:
+        """Each person's distance (m) from the footprint (inf without a pose)."""
+        if self.pose is None or not people:
+            return [math.inf] * len(people)
+        pts = np.array([[q.x, q.y] for q in people])
+        return [float(d) for d in distance_to_footprint(self.pose, self.fp, pts)]
 
     def _absent(self, q: Person) -> bool:
         """Whether the newest scan, an earlier one since the map last saw `q`, or the
