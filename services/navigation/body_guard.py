@@ -31,6 +31,12 @@ step straight away from where the body touches, or from the nearest obstacle wit
 it stood until the goal failed); else it stands. A robot that can do none is blocked,
 and the navigator's recoveries (themselves guarded) and replans take over.
 
+A goal pose with no room to turn in place (the body fits there at the goal's yaw, but
+every turn into it sweeps a corner onto something) is turned to earlier: `turn_point`
+finds the pose nearest the goal along the path where the whole turn from the heading the
+body arrives with is free and from which the body at the goal's yaw walks on to the goal
+free (the follower walks that part sideways or backwards).
+
 What drives the base without a goal (the mission's visual approach, its back-off) is not
 rolled out here; it gets `clearance`: how far from the base the nearest obstacle lies
 along each of the base's axes, in the band the body sweeps (up to `ROOM_REACH_M` beyond
@@ -70,6 +76,9 @@ SWEEP_STEP_RAD = 0.1
 ROOM_M = 0.45
 #: m: how far beyond the footprint `clearance` looks along each axis; farther is free (inf).
 ROOM_REACH_M = 0.5
+#: m: how far back from the goal along a path its turn to the goal's yaw may be moved
+#: (`turn_point`).
+TURN_SEARCH_M = 2.5
 
 
 class BodyGuard:
@@ -134,6 +143,66 @@ class BodyGuard:
             yaws = self.pose.yaw + np.linspace(turn_rad / n, turn_rad, n)
             poses += [Pose(self.pose.x, self.pose.y, float(y)) for y in yaws]
         return all(self._touching(p.x, p.y, p.yaw) <= self.now for p in poses)
+
+
+def turn_point(
+    solid: BoolGrid,
+    grid: Grid,
+    fp: Footprint,
+    poses: NDArray[np.float64],
+    search_m: float = TURN_SEARCH_M,
+) -> int:
+    """Where along a path (poses (n, 3): x, y, heading; the last the goal, its yaw the
+    goal's) the body turns to the goal's yaw (module docstring): the index nearest the
+    goal at which the whole turn from the heading it arrives with (the pose before's),
+    one way round or the other, keeps its outline off `solid`, and from which the body
+    at the goal's yaw stays off it on every pose to the goal. The goal's own index when
+    the turn is free there, or when no pose within `search_m` of path before it will do
+    (the guard then does what it can)."""
+    last = len(poses) - 1
+    if last < 1:
+        return last
+    rim = _rim(fp, MARGIN_M, 0.5 * grid.resolution)
+    goal_yaw = float(poses[-1, 2])
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
+    j = last
+    while j >= 1 and s[-1] - s[j] <= search_m:
+        x, y = float(poses[j, 0]), float(poses[j, 1])
+        if _hits(solid, grid, rim, np.array([[x, y, goal_yaw]])).any():
+            break  # the body cannot walk on from here at the goal's yaw
+        arrive = float(poses[j - 1, 2])
+        d = math.remainder(goal_yaw - arrive, math.tau)
+        for way in (d, d - math.copysign(math.tau, d)):
+            n = max(1, math.ceil(abs(way) / SWEEP_STEP_RAD))
+            yaws = arrive + np.linspace(0.0, way, n + 1)
+            sweep = np.column_stack([np.full(n + 1, x), np.full(n + 1, y), yaws])
+            if not _hits(solid, grid, rim, sweep).any():
+                return j
+        j -= 1
+    return last
+
+
+def _rim(fp: Footprint, margin: float, spacing: float) -> NDArray[np.float64]:
+    """The outline's points (n, 2, base frame) of the footprint grown by `margin`: what
+    meets an obstacle first wherever the body turns or walks from a free pose."""
+    pts = footprint_points(fp, margin, spacing)
+    u, v = pts[:, 0], pts[:, 1]
+    edge = (
+        np.isclose(u, u.min()) | np.isclose(u, u.max())
+        | np.isclose(v, v.min()) | np.isclose(v, v.max())
+    )  # fmt: skip
+    return pts[edge]
+
+
+def _hits(
+    solid: BoolGrid, grid: Grid, local: NDArray[np.float64], poses: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Per pose (k, 3): whether any of `local`'s points placed there lies on `solid`
+    (off the grid is no obstacle, as to the guard)."""
+    return np.array(
+        [footprint_hits(solid, grid, Pose(*map(float, q)), local, False).any() for q in poses],
+        dtype=bool,
+    )
 
 
 def clearance(

@@ -16,6 +16,15 @@ turn (and without the turn-first hold), else the turn alone, else the turn the o
 round, else a stand; a refused axis stops at once, and a fallback is kept a moment
 (`GUARD_HOLD_S`) before the full command is asked again.
 
+Where the goal has no room for the body to turn in place (a standoff beside a table: the
+rear corners swing 0.67 m from the base), the turn to the goal's yaw is done earlier,
+at the path's turn point (`body_guard.turn_point`, given with the path): the heading
+blend ends there, a heading error beyond `TURN_FIRST_RAD` past it holds the walk until
+turned, and the body walks the rest at the goal's yaw, sideways or backwards as need be
+(hall seed 4's shift: the robot came along a table to its standoff, the turn there was
+refused either way round, and it stood 20 s aligning, 2.1 rad off, before the goal
+failed).
+
 The final align: once inside the position tolerance the follower latches `aligning`
 (released if the base drifts `ALIGN_RELEASE_M` beyond the tolerance, or out of it with
 the heading already aligned, so that it walks back in): translation
@@ -58,6 +67,7 @@ CRAB_AHEAD_RAD = 0.3  # rad off the heading within which unturned is not "crab"
 GUARD_HOLD_S = 0.5  # s a body guard's answer other than the full command is kept
 CENTRE_M = 0.03  # m from the goal's point beyond which an align the guard refuses walks in
 STEP_CLEAR_MPS = 0.1  # m/s, the guard's last way out: a step away from the obstacle in the way
+TURN_HERE_M = 0.05  # m before a turn point (`set_path`) from which the turn holds the walk
 
 
 class FollowOutput(NamedTuple):
@@ -101,17 +111,24 @@ def scale_to_limits(vx: float, vy: float, vx_max: float, vy_max: float) -> tuple
 class Follower:
     """Follows one path; `step` once per tick (see the module docstring)."""
 
-    def __init__(self, poses: NDArray[np.float64], p: ControllerSettings) -> None:
+    def __init__(
+        self, poses: NDArray[np.float64], p: ControllerSettings, turn_index: int | None = None
+    ) -> None:
         self.p = p
-        self.set_path(poses)
+        self.set_path(poses, turn_index)
         self.cmd: Vec3 = np.zeros(3)
         self.aligning = False
         self.held, self.hold_s = "", 0.0  # the body guard's last answer, kept a moment
 
-    def set_path(self, poses: NDArray[np.float64]) -> None:
+    def set_path(self, poses: NDArray[np.float64], turn_index: int | None = None) -> None:
+        """Follow `poses`, turned to the goal's yaw by the pose `turn_index` (None: the
+        goal's own; `body_guard.turn_point`)."""
         self.poses = poses
         seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
         self.s = np.concatenate([[0.0], np.cumsum(seg)])
+        turn = len(poses) - 1 if turn_index is None else min(turn_index, len(poses) - 1)
+        #: m of path from the turn point to the goal (0: it turns at the goal).
+        self.after_turn_m = float(self.s[-1] - self.s[turn])
         self.index = 0
         self.held, self.hold_s = "", 0.0
 
@@ -156,7 +173,9 @@ class Follower:
         elif to_goal > tol_xy + ALIGN_RELEASE_M or abs(goal_err) <= 0.5 * tol_yaw:
             self.aligning = False  # drifted out while turning: walk back in
         inside = self.aligning
-        blend = min(1.0, remaining / HEADING_BLEND_M)
+        # turned by the turn point: past it the body walks on at the goal's yaw
+        to_turn = remaining - self.after_turn_m
+        blend = min(1.0, max(to_turn, 0.0) / HEADING_BLEND_M)
         if inside:
             blend = 0.0
         yaw_ref = yaw_goal + blend * math.remainder(path_yaw - yaw_goal, math.tau)
@@ -188,7 +207,8 @@ class Follower:
                 # Sideways or backwards the trot is slow; nearly ahead, the speed stands.
                 crab_mps = CRAB_MPS if abs(yaw_err) > CRAB_AHEAD_RAD else math.inf
                 crab = self._translation(direction, min(max(speed, least), crab_mps), pose.yaw)
-                if abs(yaw_err) > TURN_FIRST_RAD and blend > 0.5:
+                turned_by_now = self.after_turn_m > 0.0 and to_turn <= TURN_HERE_M
+                if abs(yaw_err) > TURN_FIRST_RAD and (blend > 0.5 or turned_by_now):
                     speed *= max(0.0, 1.0 - (abs(yaw_err) - TURN_FIRST_RAD) / 0.5)
                 vx, vy = self._translation(direction, max(speed, least), pose.yaw)
         want = np.array([vx, vy, wz])

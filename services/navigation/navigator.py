@@ -74,7 +74,7 @@ from numpy.typing import NDArray
 from common.config import NavigationSettings, PeopleSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
-from services.navigation.body_guard import HORIZON_S, BodyGuard
+from services.navigation.body_guard import HORIZON_S, BodyGuard, turn_point
 from services.navigation.controller import Follower
 from services.navigation.costmap import Costmap, Person
 from services.navigation.grid import Footprint, Pose, distance_to_footprint
@@ -294,12 +294,16 @@ class Navigator:
         if hold and not self._switch(new, pose, cm):
             return None
         self.plan = new
+        turn = turn_point(cm.solid, cm.grid, self.fp, new.poses)
         if self.follower is None:
-            self.follower = Follower(new.poses, self.n.controller)
+            self.follower = Follower(new.poses, self.n.controller, turn)
             self.total_m = new.length_m
         else:
-            self.follower.set_path(new.poses)
+            self.follower.set_path(new.poses, turn)
         self.detail = f"following a {new.length_m:.1f} m path"
+        if self.follower.after_turn_m > 0.0:
+            self.detail += (f", turned to the goal's heading {self.follower.after_turn_m:.1f} m "
+                            "before it (no room to turn there)")  # fmt: skip
         return new
 
     def _switch(self, new: Plan, pose: Pose, cm: Costmap) -> bool:

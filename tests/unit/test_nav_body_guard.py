@@ -316,3 +316,53 @@ def test_a_body_stepping_clear_for_a_turn_does_not_walk_back_before_it_turns() -
     turned = [k for k, w in enumerate(said) if k > first and w != "step clear"]
     assert turned and said[turned[0]] in ("", "turn only", "the other way round"), said
     assert abs(math.remainder(-1.0 - pose.yaw, math.tau)) < 0.1, pose
+
+
+def _table_scene() -> tuple[Grid, Pose, Pose]:
+    """A table's edge along y = 0 (x −1.5..0.8), a shelf's along y = 1.25 (x −1.5..1.0),
+    a standoff 0.57 m from the table facing it, and the robot 3 m along the edge facing
+    the way to the standoff: between them the rear corners (0.69 m from the base, with
+    the guard's margin) swing into the shelf one way round and into the table the other;
+    beyond their ends there is room."""
+    occ = np.zeros((120, 160), dtype=bool)
+    origin = (-4.0, -3.0)
+    xs = origin[0] + (np.arange(160) + 0.5) * RES
+    ys = origin[1] + (np.arange(120) + 0.5) * RES
+    occ[np.ix_((ys >= -1.0) & (ys <= 0.0), (xs >= -1.5) & (xs <= 0.8))] = True
+    occ[np.ix_(ys >= 1.25, (xs >= -1.5) & (xs <= 1.0))] = True
+    return Grid(occ, RES, origin), Pose(3.0, 0.57, math.pi), Pose(0.0, 0.57, -math.pi / 2)
+
+
+def test_a_goal_with_no_room_to_turn_is_turned_to_where_the_path_has_room() -> None:
+    """Hall seed 4's shift: the path came along a table to the standoff, the turn there
+    was refused either way round, and the robot stood 20 s aligning 2.1 rad off. The turn
+    is done where the body has room (`turn_point`), and it walks the rest sideways."""
+    from services.navigation.body_guard import turn_point
+
+    grid, start, goal = _table_scene()
+    cm = build_costmap(grid, FP, CostParams())
+    xs = np.linspace(start.x, goal.x, 61)
+    path = np.column_stack([xs, np.full_like(xs, goal.y), np.full_like(xs, math.pi)])
+    path[-1, 2] = goal.yaw
+    j = turn_point(cm.solid, grid, FP, path)
+    assert 1.0 < path[j, 0] <= 1.3  # just past the shelf's end: the nearest with room
+    open_floor = build_costmap(Grid(np.zeros_like(grid.occupied), RES, grid.origin), FP,
+                               CostParams())  # fmt: skip
+    assert turn_point(open_floor.solid, grid, FP, path) == len(path) - 1  # room at the goal
+    nav = Navigator(FP, NavigationSettings(), DT)
+    nav.start(GoalSpec("g", goal, 0.1, 0.1), 0)
+    pose, cmd, said = start, np.zeros(3), set()
+    turned_at = None
+    for k in range(1200):
+        pose = _step(pose, cmd)
+        out = nav.tick(int(k * DT * 1e9), pose, cm)
+        cmd = out.cmd
+        said.add(out.detail)
+        assert footprint_free(cm.solid, grid, pose, FP, 0.0), (k, pose)
+        if turned_at is None and abs(math.remainder(pose.yaw - goal.yaw, math.tau)) < 0.2:
+            turned_at = pose.x
+        if out.state != "active":
+            break
+    assert out.state == "succeeded", out
+    assert any("turned to the goal's heading" in d for d in said), said
+    assert turned_at is not None and turned_at > 1.2  # turned before the table's end
