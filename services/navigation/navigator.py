@@ -46,7 +46,9 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   the lidar cannot clear it; a camera's sighting kept out of view counts from when it
   was seen), with no wait for them to pass (`people.wait_s`: nothing would see them
   pass; hall seed 4's shift stood 23 s and 25 s for two such, nobody there), the first
-  recovery is a slide instead (once a goal): a
+  recovery is a slide instead (once per person and goal: hall seed 5's shift slid past
+  one ghost, and a camera sighting of a walker gone by, kept beside the flank, then
+  held the same goal 20 s and three recoveries): a
   straight walk ahead or back along the flank (`SLIDE_M` at `SLIDE_SPEED`), held by the
   people rules of everybody else, and by that person's only when it heads towards them
   (inside S_p at rest the rules let only a way 60° away from a person move: along the
@@ -228,7 +230,7 @@ class Navigator:
         self.recoveries: list[Recovery] = ["clear", "rotate", "backoff"]
         self.recovery = ""
         self.recovery_until = 0
-        self.slid = False  # the slide is once a goal
+        self.slid: set[str] = set()  # the people slid past (once per person and goal)
         self.early_since, self.not_early = None, set()
         self.stepped: set[str] = set()  # the people stepped away from (`_step_away`)
         self.step_person = ""  # the one the step away is from
@@ -448,7 +450,11 @@ class Navigator:
         who = limit.person_id if limit.rule == "stop" else self._person_near(pose, cm)
         # A person no sensor has seen for `STALE_S` beside the flank is not waited for to
         # pass (nothing would see them pass): slid past as soon as the block is due.
-        sign = 0.0 if self.slid or limit.rule != "stop" else self._slide_way(t_ns, pose, cm, limit)
+        sign = (
+            self._slide_way(t_ns, pose, cm, limit)
+            if limit.rule == "stop" and limit.person_id not in self.slid
+            else 0.0
+        )
         wait_s = self.n.blocked_timeout_s + (self.n.people.wait_s if who and not sign else 0.0)
         if t_ns - self.blocked_since < wait_s * NS_PER_S:
             if who and t_ns - self.blocked_since >= self.n.blocked_timeout_s * NS_PER_S:
@@ -461,7 +467,8 @@ class Navigator:
             self._finish("failed", reason, f"{reason}: {self.detail}; recoveries exhausted")
             return self._out(limit, new_plan)
         if sign:
-            self.recovery, self.slide_sign, self.slid = "slide", sign, True
+            self.recovery, self.slide_sign = "slide", sign
+            self.slid.add(self.slide_person)
         else:
             self.recovery = self.recoveries.pop(0)
         self.blocked_since = None
