@@ -27,7 +27,11 @@ for a velocity that is not seen again for `unknown_still_s` is taken as standing
 zero) for the rest of its `ttl_s`: one that walked on at the robot would be seen again by
 then, by the head camera or the lidars all round; as a walker at 1.6 m/s (S_p at rest
 1.52 m) one glimpse of a worker standing beside the trunk held the robot 23 s in hall seed
-1's shift, the lidars' own track of them lost in the blind wedge beside it.
+1's shift, the lidars' own track of them lost in the blind wedge beside it. A sighting
+walking (`walking_mps`) not seen again for `walker_ttl_s` has walked on and is dropped,
+as the lidar's coasting tracks end: kept at its last place for the whole `ttl_s`, a
+walker gone by beside the flank, where neither lidar sees, held the robot 20 s under the
+stop rule with nobody there (hall seed 5's shift).
 """
 
 from __future__ import annotations
@@ -66,6 +70,10 @@ class SeenParams:
     velocity_min_span_s: float = 0.25
     #: s: a sighting without a velocity not seen again this long is taken as standing.
     unknown_still_s: float = 2.0
+    #: A sighting walking (at least `walking_mps`, m/s) not seen again for `walker_ttl_s`
+    #: (s: the lidar's tracks coast as long) has walked on: it is dropped.
+    walking_mps: float = 0.3
+    walker_ttl_s: float = 3.0
 
 
 class SeenPeople:
@@ -139,7 +147,11 @@ class SeenPeople:
         (`seen_ns`: a sighting kept for seconds out of view is no person seen now), one
         without a velocity not seen for `unknown_still_s` standing (the module docstring)."""
         ttl = round(self.p.ttl_s * NS_PER_S)
-        self._seen = [(t, q) for t, q in self._seen if t_ns - t <= ttl]
+        walker_ttl = round(self.p.walker_ttl_s * NS_PER_S)
+        self._seen = [
+            (t, q) for t, q in self._seen
+            if t_ns - t <= (walker_ttl if self._walking(q) else ttl)
+        ]  # fmt: skip
         still = round(self.p.unknown_still_s * NS_PER_S)
         return [
             replace(q, seen_ns=t, velocity=(0.0, 0.0))
@@ -147,6 +159,10 @@ class SeenPeople:
             else replace(q, seen_ns=t)
             for t, q in self._seen
         ]
+
+    def _walking(self, q: Person) -> bool:
+        v = q.velocity
+        return v is not None and math.hypot(*v) >= self.p.walking_mps
 
     def merge(self, mapped: list[Person], t_ns: int) -> list[Person]:
         seen = self._named(self.active(t_ns), mapped)

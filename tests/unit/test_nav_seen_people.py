@@ -121,6 +121,22 @@ def test_a_person_seen_walking_gets_their_velocity_once_the_sightings_span_enoug
         assert math.hypot(*stander.velocity) < tol
 
 
+def test_a_sighting_seen_walking_and_gone_from_view_is_dropped_as_the_lidars_tracks_end() -> None:
+    """Hall seed 5's shift: a walker gone by beside the flank, where neither lidar sees,
+    was kept at their last sighting for its 30 s and held the robot 20 s with nobody
+    there. Walking when last seen, a sighting lasts `walker_ttl_s` out of view; standing,
+    its `ttl_s`."""
+    seen = SeenPeople()
+    for k in range(6):  # a walker at 1 m/s along +x and a person standing, 10 Hz
+        seen.update(_frame(k * S // 10, _det("person", 1.0 + 0.1 * k, 0.0),
+                           _det("person", 3.0, 2.0)))  # fmt: skip
+    seen.update(_frame(S))  # both out of view
+    last = S // 2
+    assert {q.id for q in seen.active(last + 3 * S)} == {"seen_1", "seen_2"}
+    assert {q.id for q in seen.active(last + 3 * S + S // 10)} == {"seen_2"}  # walked on
+    assert {q.id for q in seen.active(last + 30 * S)} == {"seen_2"}
+
+
 def test_a_person_seen_too_briefly_keeps_the_velocity_the_maps_tracker_has_for_them() -> None:
     seen = SeenPeople()
     seen.update(_frame(0, _det("person", 2.0, 0.0, map_id="person_3")))
