@@ -42,7 +42,9 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   wait for them to pass: seed 0's shift began a request 0.68 m from the worker it had
   just handed to, and stood 46 s and two recoveries before it moved;
 - a stop held, at the recoveries' turn, for a person only the map has beside the body's
-  flank (not seen for `STALE_S`: a stale estimate, in the wedge neither lidar sees, so
+  flank, or by a lidar (within `CLEAR_RADIUS_M`: too near for its beams to judge; hall
+  seed 4's shift stood 200 s and failed for a worker's old place 0.16 m off the rear
+  corner) (not seen for `STALE_S`: a stale estimate, in the wedge neither lidar sees, so
   the lidar cannot clear it; a camera's sighting kept out of view counts from when it
   was seen), with no wait for them to pass (`people.wait_s`: nothing would see them
   pass; hall seed 4's shift stood 23 s and 25 s for two such, nobody there), the first
@@ -73,6 +75,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from common import robot
 from common.config import NavigationSettings, PeopleSettings
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
@@ -90,6 +93,7 @@ from services.navigation.people import (
     within_people,
 )
 from services.navigation.planner import Plan, PlanError, path_cost, plan
+from services.navigation.scan_people import CLEAR_RADIUS_M
 from services.navigation.separation import protective_distance
 
 Recovery = Literal["", "clear", "rotate", "backoff", "slide", "step_away"]
@@ -112,6 +116,11 @@ STALE_S = 10.0
 GUARD_WAYS = ("unturned", "step clear")
 SLIDE_M = 1.2
 SLIDE_SPEED = 0.2
+#: m: where the lidars stand along the base's axis (front, rear): a place within
+#: `CLEAR_RADIUS_M` of one is too near for its beams to judge.
+LIDARS_AHEAD_M = tuple(
+    float(m.T_parent_lidar[0, 3]) for m in (robot.LIDAR_MOUNT, robot.LIDAR_REAR_MOUNT)
+)
 #: m the body guard looks along the slide's way before each step (its own 0.5 s at 0.2 m/s:
 #: 0.3 m stood hall seed 0's slide still beside its ghost, an obstacle 0.1-0.3 m on).
 SLIDE_LOOK_M = 0.1
@@ -507,8 +516,10 @@ class Navigator:
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         dx, dy = who.x - pose.x, who.y - pose.y
         u, v = c * dx + s * dy, -s * dx + c * dy
-        if not (-self.fp.back <= u <= self.fp.front and abs(v) >= self.fp.half_width):
-            return 0.0  # not beside the flank: ahead or behind, where a lidar sees
+        beside = -self.fp.back <= u <= self.fp.front and abs(v) >= self.fp.half_width
+        by_a_lidar = any(math.hypot(u - a, v) <= CLEAR_RADIUS_M for a in LIDARS_AHEAD_M)
+        if not (beside or by_a_lidar):
+            return 0.0  # ahead or behind, where a lidar sees
         guard = BodyGuard(cm.solid, cm.grid, self.fp, pose)
         for sign in (-1.0, 1.0) if u > 0.0 else (1.0, -1.0):  # away from them first
             if self._slide_limit(pose, cm, sign, who.id).rule != "stop" and _slide_free(

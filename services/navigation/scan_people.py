@@ -257,6 +257,9 @@ def bodies(points: FloatArray, p: ScanParams) -> list[Body]:
 OPEN_FIELD_RAD = math.radians(90.0)
 #: The least share of a scan's beams with a return for it to say where nobody stands.
 MIN_RETURNS = 0.1
+#: m: the body round a place whose beams must all pass for it to be free (`clear_at`): a
+#: place this near a lidar the scan cannot judge.
+CLEAR_RADIUS_M = 0.6
 
 
 @dataclass(frozen=True)
@@ -277,7 +280,9 @@ class ScanView:
         person asked after reads it)."""
         return bool(np.count_nonzero(self.ranges > 0.0) >= MIN_RETURNS * len(self.ranges))
 
-    def clear_at(self, x: float, y: float, radius_m: float = 0.6, beyond_m: float = 0.3) -> bool:
+    def clear_at(
+        self, x: float, y: float, radius_m: float = CLEAR_RADIUS_M, beyond_m: float = 0.3
+    ) -> bool:
         """Whether the beams at a body of `radius_m` at (x, y) all return from at least
         `beyond_m` beyond it, or return nothing within the range in the open field
         (`OPEN_FIELD_RAD`); False where the scan cannot say: out of its field or range, a

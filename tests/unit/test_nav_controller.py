@@ -502,12 +502,18 @@ def test_under_a_stop_for_a_person_the_base_stands_and_does_not_turn_on_the_spot
     assert not stopped.cmd.any()
 
 
-def _flank_scene(seen_ns: int | None, wall_ahead: bool = False, slid: tuple[str, ...] = ()) -> list:  # type: ignore[type-arg]
+def _flank_scene(
+    seen_ns: int | None,
+    wall_ahead: bool = False,
+    slid: tuple[str, ...] = (),
+    at: tuple[float, float] = (1.9, -(FP.half_width + 0.05)),
+) -> list:  # type: ignore[type-arg]
     """A person the map last had beside the robot's right flank, 5 cm off (`seen_ns`: when
     the map last saw them; None: a sensor sees them now), and a goal to the right: the
     turn is a stop for them. `wall_ahead`: a wall 8 cm beyond the body's front (and the
-    goal behind, to the right). `slid`: the people slid past earlier in the goal."""
-    ghost = Person("person_17", 1.9, -(FP.half_width + 0.05), None, (0.0, 0.0), seen_ns)
+    goal behind, to the right). `slid`: the people slid past earlier in the goal. `at`:
+    where the person is instead."""
+    ghost = Person("person_17", *at, None, (0.0, 0.0), seen_ns)
     grid = _open_floor()
     if wall_ahead:
         occ = grid.occupied.copy()
@@ -537,6 +543,21 @@ def test_a_stale_person_beside_the_flank_is_slid_past_along_it() -> None:
     assert all(float(distance_to_footprint(p, FP, ghost)[0]) >= start - 0.01 for _, p in slide)
     assert all(abs(p.y) < 0.02 and abs(p.yaw) < 0.02 for _, p in slide)  # along the flank
     assert slide[-1][1].x - slide[0][1].x > 1.0
+
+
+def test_a_stale_person_by_the_rear_lidar_is_slid_away_from() -> None:
+    """Hall seed 4's shift: a worker's old place in the map, 0.16 m off the rear corner
+    and 0.46 m from the rear lidar (too near for its beams to judge: `clear_at`), held
+    the robot 200 s and failed the request. Unseen 10 s, it is slid away from (ahead),
+    where the lidar can judge it; a person a sensor sees there now is not."""
+    rear = (2.0 - FP.back - 0.1, -(FP.half_width + 0.1))
+    outs = _flank_scene(seen_ns=0, at=rear)
+    slide = [p for _, p, o in outs if o.recovery == "slide"]
+    assert slide and slide[-1].x > slide[0].x + 1.0  # ahead, away from them
+    assert outs[-1][2].state == "succeeded", outs[-1][2]
+    seen = _flank_scene(seen_ns=None, at=rear)
+    assert any(o.limit.rule == "stop" for _, _, o in seen)
+    assert "slide" not in [o.recovery for _, _, o in seen]
 
 
 def test_the_slide_is_once_per_person_and_goal() -> None:
