@@ -331,7 +331,12 @@ class ArmActions:
                 self._end("succeeded")
             elif self.detector.empty:
                 self.jaw, self._jaw_angle = "closed", robot.GRIPPER_CLOSED
-                self._end("failed", "the jaw closed on nothing")
+                where = ""
+                if self.T_goal is not None:  # the reach's goal: did the arm get there?
+                    dist, angle = pose_error(obs.T_world_tcp, self.T_goal)
+                    where = (f", the TCP {dist * 100:.1f} cm / {math.degrees(angle):.1f} deg "
+                             "from the reach's goal")  # fmt: skip
+                self._end("failed", f"the jaw closed on nothing{where}")
             elif elapsed > p.grasp_timeout_s:
                 self._end("failed", f"no grasp after {elapsed:.1f} s (jaw still moving)")
         elif goal.kind == "release" and (

@@ -309,6 +309,9 @@ def test_a_top_grasp_closes_in_on_the_box_before_the_jaw_closes_and_lifts_from_t
     lift = robot.arm_goals[reach + 3][1]
     assert isinstance(lift, Reach) and lift.pregrasp_m == 0.0
     assert any("close_in: Reach sent" in d for d in tree.ctx.decisions)  # type: ignore[attr-defined]
+    # where the grasp sends the TCP and where the object was seen, for the misses
+    said = [d for d in tree.ctx.decisions if d.startswith("grasp of ")]  # type: ignore[attr-defined]
+    assert said and "the TCP to (" in said[0] and "the object seen at (" in said[0], said
 
 
 def test_settings_change_the_handover_patience() -> None:

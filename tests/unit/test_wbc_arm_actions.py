@@ -134,6 +134,21 @@ def test_a_grasp_on_nothing_fails_and_the_jaw_holds_closed() -> None:
     assert a.update(300 * MS, obs()).gripper_effort is None
 
 
+def test_a_grasp_on_nothing_after_a_reach_says_how_far_the_tcp_was_from_the_reachs_goal() -> None:
+    """Hall seed 3's shift: two grasps closed on nothing and nothing said whether the arm
+    had got where it was sent; the reason says how far the TCP was from the reach's goal."""
+    a = ArmActions(WbcSettings())
+    goal_T = make_T(np.eye(3), np.array([0.6, 0.0, 0.9]))
+    a.start("r", reach_goal(goal_T), 0, obs(goal_T), no_pose)
+    a.update(20_000 * MS, obs(goal_T))
+    short = make_T(np.eye(3), np.array([0.57, 0.0, 0.9]))  # 3 cm short of it
+    a.start("g", Grasp(), 20_000 * MS, obs(short), no_pose)
+    for k in range(1, 200):
+        a.update(20_000 * MS + k * MS, obs(short, angle=0.0, velocity=0.0, effort=5.0))
+    (reason,) = [g.reason for g in a.statuses() if g.goal_id == "g"]
+    assert reason == "the jaw closed on nothing, the TCP 3.0 cm / 0.0 deg from the reach's goal"
+
+
 def test_release_opens_the_jaw_and_drops_the_held_flag() -> None:
     a = ArmActions(WbcSettings())
     a.start("g1", Grasp(), 0, obs(), no_pose)

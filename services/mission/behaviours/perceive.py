@@ -175,8 +175,15 @@ class EstimateGrasp(MissionBehaviour):
             return self.fail("grasp_pose_failed", f"no grasp of {target.map_id}: {exc}")
         self.set(DETECTION, seen)
         self.set(GRASP_PLAN, plan)
+        goal = plan.reach()
+        tcp = np.asarray(goal.H, dtype=float).reshape(4, 4)[:3, 3]
+        if goal.frame == "base":
+            tcp = T_world_base[:3, :3] @ tcp + T_world_base[:3, 3]
+        seen_at = det.centroid_in_world
         self.ctx.decide(
-            f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp / NS_PER_S:.2f} s"
+            f"grasp of {target.map_id}: {plan.kind} from the frame at {stamp / NS_PER_S:.2f} s, "
+            f"the TCP to ({tcp[0]:.3f}, {tcp[1]:.3f}, {tcp[2]:.3f}), the object seen at "
+            f"({seen_at[0]:.3f}, {seen_at[1]:.3f}, {seen_at[2]:.3f}) (world)"
         )
         return Status.SUCCESS
 
