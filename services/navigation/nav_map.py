@@ -17,12 +17,11 @@ blind wedge beside the trunk), or who is inside the robot's footprint, is left o
 the layer and said once. A person the layer had within `NEAR_HOLD_M` of the footprint
 does not vanish at once: lost by every sensor (no person of the layer within the lidar's
 `same_m` of them now), they are held where the layer last had them for `NEAR_HOLD_S`
-(said once), their speed unknown (a walking pace to the speed rules): nobody walks off
-from beside a robot in a blink, where a track can drop out (hall seed 3's shift: the
-lidar's track of a worker standing 0.6 m off ended, the map's place of them lay 0.2 m
-off their legs and the lidar saw it free, and for 0.8 s the layer had nobody; the robot
-walked on at 0.3 m/s and came to 0.45 m of them, inside their separation, before the
-lidar found them again). The lidar's
+(said once): nobody walks off from beside a robot in a blink, where a track can drop out
+(hall seed 3's shift: the lidar's track of a worker standing 0.6 m off ended, the map's
+place of them lay 0.2 m off their legs and the lidar saw it free, and for 0.8 s the
+layer had nobody; the robot walked on at 0.3 m/s and came to 0.45 m of them, inside
+their separation, before the lidar found them again). The lidar's
 tracks move a little at every scan: the costmap is rebuilt when a person came or went
 or moved `REBUILD_MOVE_M` since the last build, and otherwise only its people (what the
 speed rules read) are the newest.
@@ -192,10 +191,7 @@ class NavMap:
                 self.held.discard(q.id)
         self.near = {k: v for k, v in self.near.items() if self.now - v[0] <= hold_ns}
         # not one the body now stands on
-        lost = [
-            replace(q, velocity=None)  # lost: how they walk now is not known
-            for q, dq in zip(lost, self._off_footprint(lost), strict=True) if dq > 0.0
-        ]  # fmt: skip
+        lost = [q for q, dq in zip(lost, self._off_footprint(lost), strict=True) if dq > 0.0]
         for q in lost:
             if q.id not in self.held:
                 self.held.add(q.id)

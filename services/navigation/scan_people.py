@@ -41,12 +41,7 @@ grid, pose, t)` takes one scan's returns in the map frame:
   out and closing at 3.3 m, is blind to both, and a person walking beside the robot
   crosses it in seconds (the changing hall's shift: person_1, overtaking the robot 1.1 m
   to its right, unseen for 2.2 s, was found again 0.74 m from the footprint with no
-  velocity, after the robot had stepped towards them). Unseen, nobody knows how they
-  walk now: a coasting track goes to the speed rules with no velocity (a walking pace,
-  as a person just found; hall seed 4's shift: a worker standing 0.75 m off the front
-  left corner walked off into the wedge at 0.5 m/s, their track coasted there at rest,
-  and the robot walked on at 0.24 m/s and was 0.38 m from them, 0.18 m inside their
-  separation, when the lidar found them again ahead).
+  velocity, after the robot had stepped towards them).
 
 Every track is a person to the speed rules, as ISO 13855's protective field treats
 anything that enters it: something the map lacks that is the size of a person. A
@@ -441,20 +436,12 @@ class ScanPeople:
 
     def people(self, t_ns: int) -> list[Person]:
         """The tracks alive at `t_ns`, as people: where their velocity has carried them
-        since they were last seen (at rest: where they were). A coasting one (unseen past
-        `ttl_s`) has no velocity (unknown: a walking pace to the speed rules) and
-        carries when it was seen (`seen_ns`)."""
-        ttl = round(self.p.ttl_s * NS_PER_S)
-        out = []
-        for tr in self.tracks:
-            if not self._alive(tr, t_ns):
-                continue
-            seen = tr.last[0]
-            if t_ns - seen <= ttl:
-                out.append(Person(tr.id, *tr.predicted(t_ns), None, tr.velocity))
-            else:
-                out.append(Person(tr.id, *tr.predicted(t_ns), None, None, seen))
-        return out
+        since they were last seen (at rest: where they were)."""
+        return [
+            Person(tr.id, *tr.predicted(t_ns), None, tr.velocity)
+            for tr in self.tracks
+            if self._alive(tr, t_ns)
+        ]
 
 
 def nearest_tracks(
@@ -534,9 +521,8 @@ def merge_scan(
     no evidence of standing: the map's for a person it made a second ago, or could not
     be sure of, is zero; the changing hall's shift: a walker coming head-on at 1 m/s,
     found again by the lidar 1.4 m off and claimed by the map's new track of them, was
-    taken for standing, and the robot walked on at 0.35 m/s towards them). A coasting
-    track (unseen: `seen_ns`) gives its place, when it was seen and no velocity. The
-    tracks no person claims are added under their own ids."""
+    taken for standing, and the robot walked on at 0.35 m/s towards them); the tracks no
+    person claims are added under their own ids."""
     out = list(people)
     free = list(range(len(scanned)))
     pairs = sorted(
@@ -557,9 +543,7 @@ def merge_scan(
         if s.velocity is not None and memory is not None:
             memory.note(pid, s.velocity, t_ns)
         velocity = s.velocity or held or (mapped if moving else None)
-        if s.seen_ns is not None:  # coasting, unseen: its speed is not known
-            velocity = None
-        out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity, seen_ns=s.seen_ns)
+        out[i] = replace(people[i], x=s.x, y=s.y, velocity=velocity, seen_ns=None)
         claimed.add(i)
         free.remove(k)
     return out + [scanned[k] for k in free]
