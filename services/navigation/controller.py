@@ -21,9 +21,8 @@ rear corners swing 0.67 m from the base), the turn to the goal's yaw is done ear
 at the path's turn point (`body_guard.turn_point`, given with the path): the heading
 blend ends there, a heading error beyond `TURN_FIRST_RAD` past it holds the walk until
 turned, and the body walks the rest at the goal's yaw, sideways or backwards as need be
-(hall seed 4's shift: the robot came along a table to its standoff, the turn there was
-refused either way round, and it stood 20 s aligning, 2.1 rad off, before the goal
-failed).
+(hall seed 4's shift: at a standoff by a table the guard refused the turn either way
+round, and the robot stood 20 s aligning, 2.1 rad off, before the goal failed).
 
 The final align: once inside the position tolerance the follower latches `aligning`
 (released if the base drifts `ALIGN_RELEASE_M` beyond the tolerance, or out of it with

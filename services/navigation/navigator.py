@@ -41,12 +41,12 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   held by everybody else's rules and the body guard, before the
   wait for them to pass: seed 0's shift began a request 0.68 m from the worker it had
   just handed to, and stood 46 s and two recoveries before it moved;
-- a stop held, at the recoveries' turn, for a person only the map has beside the body's
-  flank, or by a lidar (within `CLEAR_RADIUS_M`: too near for its beams to judge; hall
-  seed 4's shift stood 200 s and failed for a worker's old place 0.16 m off the rear
-  corner) (not seen for `STALE_S`: a stale estimate, in the wedge neither lidar sees, so
-  the lidar cannot clear it; a camera's sighting kept out of view counts from when it
-  was seen), with no wait for them to pass (`people.wait_s`: nothing would see them
+- a stop held, at the recoveries' turn, for a person only the map has (not seen for
+  `STALE_S`: a stale estimate; a camera's sighting kept out of view counts from when it
+  was seen) where the lidar cannot clear them: beside the body's flank, in the wedge
+  neither lidar sees, or within `CLEAR_RADIUS_M` of a lidar, too near for its beams to
+  judge (hall seed 4's shift stood 200 s and failed for a worker's old place 0.16 m off
+  the rear corner), with no wait for them to pass (`people.wait_s`: nothing would see them
   pass; hall seed 4's shift stood 23 s and 25 s for two such, nobody there), the first
   recovery is a slide instead (once per person and goal: hall seed 5's shift slid past
   one ghost, and a camera sighting of a walker gone by, kept beside the flank, then
