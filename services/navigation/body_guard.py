@@ -198,11 +198,14 @@ def _hits(
     solid: BoolGrid, grid: Grid, local: NDArray[np.float64], poses: NDArray[np.float64]
 ) -> NDArray[np.bool_]:
     """Per pose (k, 3): whether any of `local`'s points placed there lies on `solid`
-    (off the grid is no obstacle, as to the guard)."""
-    return np.array(
-        [footprint_hits(solid, grid, Pose(*map(float, q)), local, False).any() for q in poses],
-        dtype=bool,
-    )
+    (off the grid is no obstacle, as to the guard); all poses in one lookup (a whole
+    turn's sweep at once: a turn point in a tight spot took 75 ms pose by pose)."""
+    c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
+    u, v = local[None, :, 0], local[None, :, 1]
+    xy = np.stack([poses[:, 0:1] + c * u - s * v, poses[:, 1:2] + s * u + c * v], axis=-1)
+    iy, ix, inside = grid.cells(xy.reshape(-1, 2))
+    on: NDArray[np.bool_] = (solid[iy, ix] & inside).reshape(len(poses), -1)
+    return np.any(on, axis=1)
 
 
 def clearance(
