@@ -138,11 +138,13 @@ class BodyGuard:
             return True
         poses = self.rollout(cmd)
         wz = float(cmd[2])
+        at = np.array([(p.x, p.y, p.yaw) for p in poses])
         if wz and turn_rad and math.copysign(1.0, wz) == math.copysign(1.0, turn_rad):
             n = max(1, math.ceil(abs(turn_rad) / SWEEP_STEP_RAD))
             yaws = self.pose.yaw + np.linspace(turn_rad / n, turn_rad, n)
-            poses += [Pose(self.pose.x, self.pose.y, float(y)) for y in yaws]
-        return all(self._touching(p.x, p.y, p.yaw) <= self.now for p in poses)
+            at = np.vstack([at, np.column_stack([np.full(n, self.pose.x),
+                                                 np.full(n, self.pose.y), yaws])])  # fmt: skip
+        return bool(np.all(touching(self.occupied, self.grid, self.local, at) <= self.now))
 
 
 def turn_point(
@@ -162,13 +164,13 @@ def turn_point(
     last = len(poses) - 1
     if last < 1:
         return last
-    rim = _rim(fp, MARGIN_M, 0.5 * grid.resolution)
+    local = _rim(fp, MARGIN_M, 0.5 * grid.resolution)
     goal_yaw = float(poses[-1, 2])
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
     j = last
     while j >= 1 and s[-1] - s[j] <= search_m:
         x, y = float(poses[j, 0]), float(poses[j, 1])
-        if _hits(solid, grid, rim, np.array([[x, y, goal_yaw]])).any():
+        if touching(solid, grid, local, np.array([[x, y, goal_yaw]])).any():
             break  # the body cannot walk on from here at the goal's yaw
         arrive = float(poses[j - 1, 2])
         d = math.remainder(goal_yaw - arrive, math.tau)
@@ -176,7 +178,7 @@ def turn_point(
             n = max(1, math.ceil(abs(way) / SWEEP_STEP_RAD))
             yaws = arrive + np.linspace(0.0, way, n + 1)
             sweep = np.column_stack([np.full(n + 1, x), np.full(n + 1, y), yaws])
-            if not _hits(solid, grid, rim, sweep).any():
+            if not touching(solid, grid, local, sweep).any():
                 return j
         j -= 1
     return last
@@ -184,7 +186,8 @@ def turn_point(
 
 def _rim(fp: Footprint, margin: float, spacing: float) -> NDArray[np.float64]:
     """The outline's points (n, 2, base frame) of the footprint grown by `margin`: what
-    meets an obstacle first wherever the body turns or walks from a free pose."""
+    meets an obstacle first wherever the body turns or walks from a free pose (a sixth
+    of the guard's points: a turn point in a tight spot in 18 ms, not 57)."""
     pts = footprint_points(fp, margin, spacing)
     u, v = pts[:, 0], pts[:, 1]
     edge = (
@@ -194,18 +197,18 @@ def _rim(fp: Footprint, margin: float, spacing: float) -> NDArray[np.float64]:
     return pts[edge]
 
 
-def _hits(
+def touching(
     solid: BoolGrid, grid: Grid, local: NDArray[np.float64], poses: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    """Per pose (k, 3): whether any of `local`'s points placed there lies on `solid`
-    (off the grid is no obstacle, as to the guard); all poses in one lookup (a whole
-    turn's sweep at once: a turn point in a tight spot took 75 ms pose by pose)."""
+) -> NDArray[np.int64]:
+    """Per pose (k, 3: x, y, yaw): how many of `local`'s points (base frame) placed there
+    lie on `solid` (off the grid is no obstacle to the guard); all poses in one lookup: a
+    whole turn's sweep at once."""
     c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
     u, v = local[None, :, 0], local[None, :, 1]
     xy = np.stack([poses[:, 0:1] + c * u - s * v, poses[:, 1:2] + s * u + c * v], axis=-1)
     iy, ix, inside = grid.cells(xy.reshape(-1, 2))
-    on: NDArray[np.bool_] = (solid[iy, ix] & inside).reshape(len(poses), -1)
-    return np.any(on, axis=1)
+    on = (solid[iy, ix] & inside).reshape(len(poses), -1)
+    return np.count_nonzero(on, axis=1)
 
 
 def clearance(
