@@ -22,7 +22,8 @@ rules per person:
   design (the handover pose lies 0.83 m from them, 0.07 m beyond the margin: the
   changing hall's shifts stood 53 and 77 s stopped 0.67-0.73 m from them). Within S_p at
   rest of anyone but the person handed over to, the robot is at rest unless its path
-  leads clearly away from them (`AWAY_COS`): moving along or beside a person that close,
+  leads clearly away from them (`AWAY_COS`; not once stopped for someone still coming at
+  it, `HOLD_COMING_MPS`): moving along or beside a person that close,
   the trot's sway and drift step towards them (a bystander passing 0.3 m behind the
   robot, the shift: 0.06-0.1 m/s towards them while the path ran along them); nor does
   it turn on the spot (hall seed 1's shift: the handover's final turn went on with a
@@ -67,6 +68,13 @@ CREEP_MPS = 0.03
 #: Within S_p at rest of a bystander, the path's direction must point at least this
 #: much away from them (the cosine with the line to them) for the robot to move.
 AWAY_COS = -0.5
+#: A stop inside S_p of a person coming at the robot at least this fast (their measured
+#: speed towards it, m/s) holds even where the path leads away: walking away at the slow
+#: zone's 0.24 m/s outruns no walker, and each resume and stop sways the base towards them
+#: (hall seed 4's shift, t = 277.8 s: stop and slow flapped every 0.1-0.2 s as a walker
+#: at 1.13 m/s came from behind, and the sway took the base 0.087 m/s at them 0.135 m
+#: inside S_p). Someone standing or slowing below it may still be walked away from.
+HOLD_COMING_MPS = 0.3
 #: The caps are commanded this fraction below the limits: the trot overshoots a commanded
 #: speed by up to 13 % over 0.5 s (0.306 m/s for 0.27, `dume trial person`).
 TRACKING_MARGIN = 0.2
@@ -147,7 +155,8 @@ def people_limit(
             away = direction_world is not None and (
                 n[0] * direction_world[0] + n[1] * direction_world[1] <= AWAY_COS
             )
-            if not away:  # too close to move but away from them: the protective stop
+            held = stopped and coming >= HOLD_COMING_MPS  # a walker still coming: stay
+            if held or not away:  # too close to move but away from them: the protective stop
                 return SpeedLimit(0.0, "stop", person.id, d, at_rest)
         if cos > 1e-6:  # moving towards them (not along or away): the protective separation
             room = d - (RESUME_MARGIN_M if stopped and not handing else 0.0)

@@ -227,6 +227,27 @@ def test_a_walker_coming_from_behind_stops_a_walking_robot_earlier() -> None:
     assert people_limit(pose, away, passing, FP, p, top, stopping_s=0.5).rule != "stop"
 
 
+def test_a_stop_for_a_walker_still_coming_holds_though_the_path_leads_away() -> None:
+    """Hall seed 4's shift (t = 277.8 s): a walker at 1.13 m/s came at the robot from
+    behind; inside S_p at rest the path leading away let it walk on at the slow zone's
+    speed between stops, every 0.1-0.2 s, and the sway took the base towards them. Once
+    stopped for someone still coming, it stays at rest; a person standing there, or one
+    it no longer stops early for (a stale velocity), may still be walked away from."""
+    p, top = PeopleSettings(), 0.6
+    pose = Pose(0.0, 0.0, 0.0)
+    away = (1.0, 0.0)  # straight away from someone behind
+    walker = [Person("person_4", -FP.back - 1.0, 0.0, None, (1.1, 0.0))]
+    assert people_limit(pose, away, walker, FP, p, top).rule == "slow"  # first: away
+    held = people_limit(pose, away, walker, FP, p, top, stopped=True)
+    assert held.rule == "stop" and held.speed == 0.0
+    standing = [Person("person_4", -FP.back - 0.5, 0.0, None, (0.0, 0.0))]
+    assert people_limit(pose, away, standing, FP, p, top, stopped=True).rule == "slow"
+    stale = people_limit(pose, away, walker, FP, p, top, stopped=True, not_early={"person_4"})
+    assert stale.rule == "slow"
+    passing = [Person("person_4", -FP.back - 1.0, 0.0, None, (0.0, 1.1))]  # across
+    assert people_limit(pose, away, passing, FP, p, top, stopped=True).rule == "slow"
+
+
 def test_an_idle_navigator_ticks_at_rest_without_a_goal() -> None:
     from services.navigation.navigator import Navigator
 
