@@ -36,7 +36,8 @@ grid, pose, t)` takes one scan's returns in the map frame:
   `ttl_s` ends (a body that left the field went out of range) unless no beam can say
   it is gone: then it coasts along its velocity for up to `coast_s`, and ends as soon
   as a beam returns from `CLEARS_BEYOND_M` beyond where it would be (`ScanView.through`,
-  a beam with no return saying nothing). The two lidars see ±97° about their own axes
+  a beam with no return saying nothing); one standing where no lidar's open field
+  reaches coasts up to `blind_hold_s`. The two lidars see ±97° about their own axes
   (the trunk masks the rest): a wedge on each side of the trunk, 0.6 m long at 1.2 m
   out and closing at 3.3 m, is blind to both, and a person walking beside the robot
   crosses it in seconds (the changing hall's shift: person_1, overtaking the robot 1.1 m
@@ -127,6 +128,13 @@ class ScanParams:
     velocity_min_span_s: float = 0.25
     #: s: how long a track no beam sees gone coasts (the blind wedges beside the trunk).
     coast_s: float = 3.0
+    #: s: how long a standing track (slower than `standing_mps`, m/s) coasts while its
+    #: place lies out of every lidar's open field (`ScanView.covers`): nobody standing
+    #: beside the trunk is gone until a beam can look (hall seed 4's shift, t = 423.8 s:
+    #: a worker stood 3.3 s in the wedge as the robot turned by them, their track ended
+    #: at `coast_s`, and the robot walked 0.19 m/s at them when they moved, 0.72 m off).
+    blind_hold_s: float = 10.0
+    standing_mps: float = 0.3
     #: A track this close to a person the layer has is that person (`merge_scan`).
     same_m: float = 0.6
 
@@ -301,6 +309,16 @@ class ScanView:
         open_field = (r <= 0.0) & (np.abs(angles) <= OPEN_FIELD_RAD)
         return bool(np.all((r >= dist + beyond_m) | open_field))
 
+    def covers(self, xy: FloatArray) -> NDArray[np.bool_]:
+        """Which points (n, 2, map) lie in the scan's open field (`OPEN_FIELD_RAD` of its
+        heading, where no part of the robot masks a beam) and within its range."""
+        dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
+        bearing = np.remainder(np.arctan2(dy, dx) - self.heading + np.pi, 2 * np.pi) - np.pi
+        out: NDArray[np.bool_] = (np.abs(bearing) <= OPEN_FIELD_RAD) & (
+            np.hypot(dx, dy) < self.range_max
+        )
+        return out
+
     def through(
         self, xy: FloatArray, beyond_m: float = 0.15, none_passes: bool = True
     ) -> NDArray[np.bool_]:
@@ -329,6 +347,8 @@ class _Track:
     velocity: tuple[float, float] | None = None
     #: A beam returned from beyond where it would be: it is gone.
     cleared: bool = False
+    #: Unseen, where no lidar's open field reaches (`ScanView.covers`).
+    blind: bool = False
 
     @property
     def last(self) -> tuple[int, float, float]:
@@ -386,11 +406,14 @@ class ScanPeople:
         self._associate(found, t_ns, views)
 
     def _alive(self, tr: _Track, t_ns: int) -> bool:
-        """Seen within `ttl_s`, or coasting: within `coast_s` and not seen gone."""
-        age = t_ns - tr.last[0]
-        return age <= round(self.p.ttl_s * NS_PER_S) or (
-            age <= round(self.p.coast_s * NS_PER_S) and not tr.cleared
-        )
+        """Seen within `ttl_s`, or coasting: within `coast_s` and not seen gone, or
+        `blind_hold_s` standing where no lidar looks."""
+        p, age = self.p, t_ns - tr.last[0]
+        if age <= round(p.ttl_s * NS_PER_S):
+            return True
+        standing = tr.velocity is not None and math.hypot(*tr.velocity) < p.standing_mps
+        coast = p.blind_hold_s if tr.blind and standing else p.coast_s
+        return age <= round(coast * NS_PER_S) and not tr.cleared
 
     def _associate(self, found: list[Body], t_ns: int, views: Sequence[ScanView] = ()) -> None:
         p = self.p
@@ -400,10 +423,12 @@ class ScanPeople:
         if unseen:
             where = np.array([tr.predicted(t_ns) for tr in unseen])
             gone = np.full(len(unseen), not views)
+            covered = np.zeros(len(unseen), dtype=bool)
             for v in views:
                 gone |= v.through(where, CLEARS_BEYOND_M, none_passes=False)
-            for tr, g in zip(unseen, gone.tolist(), strict=True):
-                tr.cleared = g
+                covered |= v.covers(where)
+            for tr, g, c in zip(unseen, gone.tolist(), covered.tolist(), strict=True):
+                tr.cleared, tr.blind = g, bool(views) and not c
         live = [tr for tr in self.tracks if self._alive(tr, t_ns)]
         pairs = sorted(
             (math.hypot(b.x - px, b.y - py), i, k)
@@ -431,7 +456,7 @@ class ScanPeople:
             tr.points = [q for q in tr.points if t_ns - q[0] <= window and q[0] < t_ns]
             tr.points.append((t_ns, b.x, b.y))
             tr.velocity = fitted_velocity(tr.points, p.velocity_min_span_s)
-            tr.cleared = False
+            tr.cleared = tr.blind = False
         self.tracks = live
 
     def people(self, t_ns: int) -> list[Person]:

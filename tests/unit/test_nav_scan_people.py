@@ -472,6 +472,38 @@ def test_a_coasting_track_ends_once_a_beam_passes_where_it_would_be() -> None:
         assert bool(alive) == (k <= 30), k  # coast_s = 3 s
 
 
+def test_a_person_standing_where_no_lidar_looks_coasts_longer_than_one_in_the_open_field() -> None:
+    """Hall seed 4's shift (t = 423.8 s): a worker stood 3.3 s in the wedge beside the
+    trunk, their track ended at `coast_s`, and the robot walked towards them when they
+    moved. A track standing (a measured velocity at rest) where no lidar's open field
+    reaches coasts `blind_hold_s`; one standing in the open field, its beams reading
+    nothing now, still ends at `coast_s`."""
+    pose, grid = Pose(0.0, 0.0, 0.0), _room()
+
+    def alive_until(x: float, y: float) -> int:
+        tracker = ScanPeople(FP)
+        for k in range(6):  # 0.5 s in view, at rest
+            pts, view = _masked(pose, _person(x, y))
+            tracker.update(pts, grid, pose, k * S // 10, [view])
+        (q,) = tracker.people(5 * S // 10)
+        assert q.velocity is not None and math.hypot(*q.velocity) < 0.05
+        origin = np.array(_view(pose, []).origin)
+        toward = math.atan2(y - origin[1], x - origin[0])
+        last = 5
+        for k in range(6, 130):
+            pts, view = _masked(pose, [])
+            view = ScanView(view.origin, view.heading, view.angle_min, view.angle_increment,
+                            np.where(np.abs(ANGLES - toward) < 0.1, 0.0, view.ranges),
+                            view.range_max)  # fmt: skip
+            tracker.update(pts, grid, pose, k * S // 10, [view])
+            if tracker.people(k * S // 10):
+                last = k
+        return last
+
+    assert alive_until(0.4, -1.2) == 5 + 100  # beside the trunk: 10 s unseen
+    assert alive_until(2.0, 0.5) == 5 + 30  # ahead, where a beam could see them: 3 s
+
+
 def test_a_walker_the_map_saw_lately_is_carried_along_their_velocity_to_the_tick() -> None:
     """The map's place of a walker is its newest frame's, late: the speed rules take them
     where their velocity has carried them since (for at most `AHEAD_MAX_S`); a standing
