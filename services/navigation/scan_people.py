@@ -309,14 +309,18 @@ class ScanView:
         open_field = (r <= 0.0) & (np.abs(angles) <= OPEN_FIELD_RAD)
         return bool(np.all((r >= dist + beyond_m) | open_field))
 
+    def _polar(self, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Points (n, 2, map) as the lidar sees them: range (m) and bearing from its
+        heading (rad, in [-π, π))."""
+        dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
+        bearing = np.remainder(np.arctan2(dy, dx) - self.heading + np.pi, 2 * np.pi) - np.pi
+        return np.hypot(dx, dy), bearing
+
     def covers(self, xy: FloatArray) -> NDArray[np.bool_]:
         """Which points (n, 2, map) lie in the scan's open field (`OPEN_FIELD_RAD` of its
         heading, where no part of the robot masks a beam) and within its range."""
-        dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
-        bearing = np.remainder(np.arctan2(dy, dx) - self.heading + np.pi, 2 * np.pi) - np.pi
-        out: NDArray[np.bool_] = (np.abs(bearing) <= OPEN_FIELD_RAD) & (
-            np.hypot(dx, dy) < self.range_max
-        )
+        dist, bearing = self._polar(xy)
+        out: NDArray[np.bool_] = (np.abs(bearing) <= OPEN_FIELD_RAD) & (dist < self.range_max)
         return out
 
     def through(
@@ -330,9 +334,7 @@ class ScanView:
         return says nothing (where a person may be hidden: the trunk masks it)."""
         if len(xy) == 0:
             return np.zeros(0, dtype=bool)
-        dx, dy = xy[:, 0] - self.origin[0], xy[:, 1] - self.origin[1]
-        dist = np.hypot(dx, dy)
-        bearing = np.remainder(np.arctan2(dy, dx) - self.heading + np.pi, 2 * np.pi) - np.pi
+        dist, bearing = self._polar(xy)
         k = np.rint((bearing - self.angle_min) / self.angle_increment).astype(np.int64)
         inside = (k >= 0) & (k < len(self.ranges)) & (dist + beyond_m < self.range_max)
         r = self.ranges[np.clip(k, 0, len(self.ranges) - 1)]
