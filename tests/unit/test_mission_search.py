@@ -190,6 +190,35 @@ def test_a_moved_object_where_a_handed_over_one_stood_is_fetched_under_that_ones
                for d in decisions), decisions  # fmt: skip
 
 
+def test_a_put_down_entry_the_fetch_missed_is_not_found_again() -> None:
+    """Hall seed 3's shift: a can stood where bottle_2, handed over, had stood; the head
+    camera took it for that bottle from afar, the wrist camera at the standoff for a can.
+    The search found bottle_2's entry, seen again away from everyone, the fetch missed
+    it, and the search went on and found it again, three times. Missed once, it is
+    tried: the search goes on past it to the end of its route."""
+    mapped = {"bottle_1": entity("bottle_1", 3.0, 0.0), "bottle_8": entity("bottle_8", -1.0, 2.8)}
+    robot = small_world(artifacts=mapped, visible={"bottle_9"})  # none at either place
+    robot.supports = [_surface("table_1", 3.3, 0.0), _surface("table_2", -1.0, 3.0),
+                      _surface("table_3", -3.0, -3.0)]  # fmt: skip
+    tree = mission(robot)
+    tree.ctx.handed["bottle_8"] = ("person_1", robot.now_ns)
+    robot.advance()
+    outcome = None
+    for _ in range(20000):
+        outcome = tree.tick()
+        robot.advance()
+        if tree.arm_look:  # every look from the search sees "bottle_8" on table_2
+            robot.artifacts["bottle_8"] = _seen(robot.artifacts["bottle_8"], robot.now_ns)
+        if outcome is not None:
+            break
+    assert outcome is not None and (outcome.state, outcome.reason) == (
+        "failed", "object_not_found"), outcome  # fmt: skip
+    standoffs = [g.artifact_id for _, g in robot.nav_goals if isinstance(g, ArtifactStandoff)]
+    assert standoffs == ["bottle_1", "bottle_8"], standoffs
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("search for bottle_1 goes on: bottle_8 was not there" in d for d in decisions)
+
+
 def test_found_takes_a_handed_over_entry_only_as_put_down() -> None:
     start = 50 * S
     held = _seen(entity("bottle_8", 1.0, 1.0), 70 * S)
