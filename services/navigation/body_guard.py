@@ -61,6 +61,7 @@ from services.navigation.grid import (
     distance_to_footprint,
     footprint_hits,
     footprint_points,
+    footprints_hits,
 )
 
 #: Not settings: how far ahead (s) and in how many poses a command is rolled out, and how
@@ -87,7 +88,8 @@ class BodyGuard:
     def __init__(self, solid: BoolGrid, grid: Grid, fp: Footprint, pose: Pose) -> None:
         self.occupied, self.grid, self.pose, self.fp = solid, grid, pose, fp
         self.local = footprint_points(fp, MARGIN_M, 0.5 * grid.resolution)
-        self.now = self._touching(pose.x, pose.y, pose.yaw)
+        here = np.array([pose], dtype=float)
+        self.now = int(touching(self.occupied, self.grid, self.local, here)[0])
 
     def away(self, room_m: float = ROOM_M) -> tuple[float, float] | None:
         """The unit direction (base frame) away from the obstacle that keeps the body from
@@ -109,11 +111,6 @@ class BodyGuard:
             u, v = c * dx + s * dy, -s * dx + c * dy
         norm = math.hypot(u, v)
         return None if norm < 1e-6 else (float(-u / norm), float(-v / norm))
-
-    def _touching(self, x: float, y: float, yaw: float) -> int:
-        """How many of the footprint's points at (x, y, yaw) lie on obstacles."""
-        hits = footprint_hits(self.occupied, self.grid, Pose(x, y, yaw), self.local, False)
-        return int(np.count_nonzero(hits))
 
     def rollout(self, cmd: NDArray[np.float64] | tuple[float, float, float]) -> list[Pose]:
         """The poses (`STEPS`, the last `HORIZON_S` ahead) the command takes the base to."""
@@ -201,14 +198,9 @@ def touching(
     solid: BoolGrid, grid: Grid, local: NDArray[np.float64], poses: NDArray[np.float64]
 ) -> NDArray[np.int64]:
     """Per pose (k, 3: x, y, yaw): how many of `local`'s points (base frame) placed there
-    lie on `solid` (off the grid is no obstacle to the guard); all poses in one lookup: a
-    whole turn's sweep at once."""
-    c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
-    u, v = local[None, :, 0], local[None, :, 1]
-    xy = np.stack([poses[:, 0:1] + c * u - s * v, poses[:, 1:2] + s * u + c * v], axis=-1)
-    iy, ix, inside = grid.cells(xy.reshape(-1, 2))
-    on = (solid[iy, ix] & inside).reshape(len(poses), -1)
-    return np.count_nonzero(on, axis=1)
+    lie on `solid` (off the grid is no obstacle to the guard); all poses in one lookup
+    (`grid.footprints_hits`)."""
+    return np.count_nonzero(footprints_hits(solid, grid, poses, local, False), axis=1)
 
 
 def clearance(

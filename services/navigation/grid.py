@@ -146,15 +146,29 @@ def footprint_hits(
 ) -> NDArray[np.bool_]:
     """Per point of `local` (n, 2, the base frame: `footprint_points`) placed at `pose`:
     whether it lies on an occupied cell, or off the grid (when `off_grid`)."""
-    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-    xy = np.empty_like(local)
-    xy[:, 0] = pose.x + c * local[:, 0] - s * local[:, 1]
-    xy[:, 1] = pose.y + s * local[:, 0] + c * local[:, 1]
-    iy, ix, inside = grid.cells(xy)
+    at = np.array([[pose.x, pose.y, pose.yaw]])
+    return footprints_hits(occupied, grid, at, local, off_grid)[0]
+
+
+def footprints_hits(
+    occupied: BoolGrid,
+    grid: Grid,
+    poses: NDArray[np.float64],
+    local: NDArray[np.float64],
+    off_grid: bool = True,
+) -> NDArray[np.bool_]:
+    """`footprint_hits` at many poses (k, 3: x, y, yaw) in one lookup: (k, n), per pose
+    and point of `local` (a whole turn's sweep at once)."""
+    c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
+    u, v = local[None, :, 0], local[None, :, 1]
+    xy = np.empty((len(poses), len(local), 2))
+    xy[..., 0] = poses[:, 0:1] + c * u - s * v
+    xy[..., 1] = poses[:, 1:2] + s * u + c * v
+    iy, ix, inside = grid.cells(xy.reshape(-1, 2))
     hits: NDArray[np.bool_] = occupied[iy, ix] & inside
     if off_grid:
         hits |= ~inside
-    return hits
+    return hits.reshape(len(poses), -1)
 
 
 def distance_to_footprint(
