@@ -37,7 +37,18 @@ grid, pose, t)` takes one scan's returns in the map frame:
   it is gone: then it coasts along its velocity for up to `coast_s`, and ends as soon
   as a beam returns from `CLEARS_BEYOND_M` beyond where it would be (`ScanView.through`,
   a beam with no return saying nothing); one standing where no lidar's open field
-  reaches coasts up to `blind_hold_s`. The two lidars see ±97° about their own axes
+  reaches coasts up to `blind_hold_s`. A walker lost (a measured velocity of at least
+  `standing_mps`) is not taken to walk on as they did: past `ttl_s` the track stands for
+  every place they could have walked to at their pace since, unseen (`_spread`: the
+  places grow from their last one through what no beam sees free, `ScanView.free`, off
+  the map's world and the robot's footprint), and the speed rules take the one of those
+  nearest the robot, with the velocity they had; it ends when no such place is left,
+  and a body found among them (within `gate_m`) is them again, once every track has had
+  its own. Hall seed
+  4's shift, t = 536.8 s: a worker walking at 1 m/s turned in through the wedge to stand
+  before the head; their track coasted on along its old velocity, past the robot, the
+  stop for them was released, and the handover's align stepped into them (0.305 m inside
+  their separation). The two lidars see ±97° about their own axes
   (the trunk masks the rest): a wedge on each side of the trunk, 0.6 m long at 1.2 m
   out and closing at 3.3 m, is blind to both, and a person walking beside the robot
   crosses it in seconds (the changing hall's shift: person_1, overtaking the robot 1.1 m
@@ -71,9 +82,9 @@ places inside the robot's own footprint.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
-from functools import cached_property
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -90,6 +101,13 @@ CLEARS_BEYOND_M = 0.3
 #: s a person's lidar velocity is kept for a new track of them (`VelocityMemory`): the
 #: fit's own window and more; a start from rest in it is within the estimate's margin.
 VELOCITY_HOLD_S = 1.0
+#: m: the spacing of the places a lost walker could be (`ScanPeople._spread`).
+REACH_STEP_M = 0.1
+#: m/s: the fastest pace a lost walker's places grow at (beyond it, their window bounds).
+MAX_WALK_MPS = 2.0
+#: A cell's neighbours, diagonals too: the places grow a step each way per step walked,
+#: within their reach's disc.
+SQUARE = np.ones((3, 3), dtype=bool)
 #: The memory forgets what it no longer holds once it keeps this many people.
 MEMORY_PRUNE_AT = 256
 #: m: the lidar's floor point of a person (the centroid of the returns off the near side
@@ -156,14 +174,21 @@ def off_map(points: FloatArray, clearance: FloatArray, grid: Grid, margin_m: flo
     left out (nothing is known there)."""
     if len(points) == 0:
         return points
+    out: FloatArray = points[off_map_mask(points, clearance, grid, margin_m)]
+    return out
+
+
+def off_map_mask(
+    points: FloatArray, clearance: FloatArray, grid: Grid, margin_m: float
+) -> NDArray[np.bool_]:
+    """Which points `off_map` keeps."""
     ix = np.floor((points[:, 0] - grid.origin[0]) / grid.resolution).astype(np.int64)
     iy = np.floor((points[:, 1] - grid.origin[1]) / grid.resolution).astype(np.int64)
     ny, nx = grid.shape
     inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
     keep = np.zeros(len(points), dtype=bool)
     keep[inside] = clearance[iy[inside], ix[inside]] > margin_m
-    out: FloatArray = points[keep]
-    return out
+    return keep
 
 
 def static_cells(grid: Grid, island_m2: float) -> BoolGrid:
@@ -323,6 +348,26 @@ class ScanView:
         out: NDArray[np.bool_] = (np.abs(bearing) <= OPEN_FIELD_RAD) & (dist < self.range_max)
         return out
 
+    def free(self, xy: FloatArray, beyond_m: float) -> NDArray[np.bool_]:
+        """Which points (n, 2, map) the scan sees free: a beam returns from at least
+        `beyond_m` beyond, or none returns within the range in the open field (as
+        `clear_at` judges a place, by the nearest beam; a scan with hardly any returns
+        sees only the first)."""
+        inside, r, dist, bearing = self._beams(xy, beyond_m)
+        none = (r <= 0.0) & (np.abs(bearing) <= OPEN_FIELD_RAD) & self.returns_enough
+        out: NDArray[np.bool_] = inside & ((r >= dist + beyond_m) | none)
+        return out
+
+    def _beams(
+        self, xy: FloatArray, beyond_m: float
+    ) -> tuple[NDArray[np.bool_], FloatArray, FloatArray, FloatArray]:
+        """For points (n, 2, map): whether the nearest beam and `beyond_m` beyond lie in
+        the scan, that beam's range, and the points' range and bearing."""
+        dist, bearing = self._polar(xy)
+        k = np.rint((bearing - self.angle_min) / self.angle_increment).astype(np.int64)
+        inside = (k >= 0) & (k < len(self.ranges)) & (dist + beyond_m < self.range_max)
+        return inside, self.ranges[np.clip(k, 0, len(self.ranges) - 1)], dist, bearing
+
     def through(
         self, xy: FloatArray, beyond_m: float = 0.15, none_passes: bool = True
     ) -> NDArray[np.bool_]:
@@ -334,12 +379,19 @@ class ScanView:
         return says nothing (where a person may be hidden: the trunk masks it)."""
         if len(xy) == 0:
             return np.zeros(0, dtype=bool)
-        dist, bearing = self._polar(xy)
-        k = np.rint((bearing - self.angle_min) / self.angle_increment).astype(np.int64)
-        inside = (k >= 0) & (k < len(self.ranges)) & (dist + beyond_m < self.range_max)
-        r = self.ranges[np.clip(k, 0, len(self.ranges) - 1)]
+        inside, r, dist, _ = self._beams(xy, beyond_m)
         out: NDArray[np.bool_] = inside & ((r >= dist + beyond_m) | (none_passes & (r <= 0.0)))
         return out
+
+
+@lru_cache(maxsize=64)
+def _disc(n: int) -> FloatArray:
+    """Each cell's squared distance (m²) from the centre of a (2n + 1)² window of cells
+    `REACH_STEP_M` on a side (read-only: cached)."""
+    axis = np.arange(-n, n + 1) * REACH_STEP_M
+    out: FloatArray = axis[None, :] ** 2 + axis[:, None] ** 2
+    out.flags.writeable = False
+    return out
 
 
 @dataclass
@@ -351,10 +403,25 @@ class _Track:
     cleared: bool = False
     #: Unseen, where no lidar's open field reaches (`ScanView.covers`).
     blind: bool = False
+    #: A walker unseen: the place nearest the robot they could be now (`ScanPeople._spread`),
+    #: the cells round their last place they could be in (`REACH_STEP_M` apart), how many
+    #: steps those have grown, and the places themselves (k, 2, map).
+    hidden: tuple[float, float] | None = None
+    places: NDArray[np.bool_] | None = None
+    grown: int = 0
+    place_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def last(self) -> tuple[int, float, float]:
         return self.points[-1]
+
+    def walking(self, standing_mps: float) -> bool:
+        return self.velocity is not None and math.hypot(*self.velocity) >= standing_mps
+
+    def reach_m(self, t_ns: int) -> float:
+        """How far from its last place it could be at `t_ns`, at its pace."""
+        speed = 0.0 if self.velocity is None else math.hypot(*self.velocity)
+        return speed * max(t_ns - self.last[0], 0) / NS_PER_S
 
     def predicted(self, t_ns: int) -> tuple[float, float]:
         t, x, y = self.last
@@ -405,7 +472,7 @@ class ScanPeople:
         if len(big):
             big = big[distance_to_footprint(pose, self.fp, big) > p.robot_margin_m]
         self.obstacles = big
-        self._associate(found, t_ns, views)
+        self._associate(found, t_ns, views, pose)
 
     def _alive(self, tr: _Track, t_ns: int) -> bool:
         """Seen within `ttl_s`, or coasting: within `coast_s` and not seen gone, or
@@ -417,11 +484,65 @@ class ScanPeople:
         coast = p.blind_hold_s if tr.blind and standing else p.coast_s
         return age <= round(coast * NS_PER_S) and not tr.cleared
 
-    def _associate(self, found: list[Body], t_ns: int, views: Sequence[ScanView] = ()) -> None:
+    def _spread(
+        self, tr: _Track, t_ns: int, views: Sequence[ScanView], pose: Pose
+    ) -> tuple[float, float] | None:
+        """Where a lost walker could be now, kept on `tr.places`, and the one nearest the
+        footprint (None: nowhere; they are gone). The places grow from their last one at
+        their pace (a cell's neighbours each `REACH_STEP_M` they could walk, never beyond
+        `reach_m`), through what no beam sees free: a place seen free is dropped (a
+        walker out of sight behind a shelf is not taken to be beside the trunk until they
+        could have walked there unseen), as are those on the world the map knows
+        (`static_margin_m`) and on the robot (`robot_margin_m`)."""
+        p, grid = self.p, self._grid
+        assert grid is not None
+        speed = math.hypot(*tr.velocity) if tr.velocity else 0.0
+        if tr.places is None:
+            n = math.ceil(p.coast_s * min(speed, MAX_WALK_MPS) / REACH_STEP_M) + 1
+            tr.places = np.zeros((2 * n + 1, 2 * n + 1), dtype=bool)
+            tr.places[n, n] = True
+            tr.grown = 0
+        n = tr.places.shape[0] // 2
+        r = tr.reach_m(t_ns)
+        steps = min(math.ceil(r / REACH_STEP_M), n) - tr.grown
+        if steps > 0:
+            tr.places = ndimage.binary_dilation(tr.places, SQUARE, iterations=steps)
+            tr.places &= _disc(n) <= max(r, REACH_STEP_M) ** 2 + 1e-9
+            tr.grown += steps
+        cells = np.argwhere(tr.places)
+        xy = (cells[:, ::-1] - n) * REACH_STEP_M + np.array(tr.last[1:])
+        keep = off_map_mask(xy, self._clearance, grid, p.static_margin_m)
+        d = distance_to_footprint(pose, self.fp, xy)
+        keep &= d > p.robot_margin_m
+        for v in views:
+            keep[keep] &= ~v.free(xy[keep], p.static_margin_m)
+        gone = cells[~keep]
+        tr.places[gone[:, 0], gone[:, 1]] = False
+        if not keep.any():
+            return None
+        tr.place_xy = xy[keep]
+        k = int(np.argmin(np.where(keep, d, np.inf)))
+        return float(xy[k, 0]), float(xy[k, 1])
+
+    def _associate(
+        self,
+        found: list[Body],
+        t_ns: int,
+        views: Sequence[ScanView] = (),
+        pose: Pose | None = None,
+    ) -> None:
         p = self.p
         ttl = round(p.ttl_s * NS_PER_S)
-        # Unseen past its time to live: does a beam return from beyond where it would be?
         unseen = [tr for tr in self.tracks if t_ns - tr.last[0] > ttl and not tr.cleared]
+        # A walker lost: where could they be that no beam sees free?
+        lost = bool(views) and pose is not None
+        for tr in unseen:
+            if lost and tr.walking(p.standing_mps):
+                assert pose is not None
+                tr.hidden = self._spread(tr, t_ns, views, pose)
+                tr.cleared = tr.hidden is None
+        unseen = [tr for tr in unseen if tr.hidden is None and not tr.cleared]
+        # The rest: does a beam return from beyond where it would be?
         if unseen:
             where = np.array([tr.predicted(t_ns) for tr in unseen])
             gone = np.full(len(unseen), not views)
@@ -432,21 +553,23 @@ class ScanPeople:
             for tr, g, c in zip(unseen, gone.tolist(), covered.tolist(), strict=True):
                 tr.cleared, tr.blind = g, bool(views) and not c
         live = [tr for tr in self.tracks if self._alive(tr, t_ns)]
-        pairs = sorted(
+        pairs = (
             (math.hypot(b.x - px, b.y - py), i, k)
             for i, b in enumerate(found)
             for k, tr in enumerate(live)
             for px, py in [tr.predicted(t_ns)]
         )
         body_track: dict[int, int] = {}
-        taken: set[int] = set()
-        for dist, i, k in pairs:  # nearest first, each body and track once
-            if dist > p.gate_m:
-                break
-            if i in body_track or k in taken:
-                continue
-            body_track[i] = k
-            taken.add(k)
+        _pair(pairs, p.gate_m, body_track)
+        # Then a lost walker is any body left near a place they could be, nearest first.
+        again = (
+            (float(np.min(np.hypot(*(tr.place_xy - (b.x, b.y)).T))), i, k)
+            for i, b in enumerate(found)
+            if i not in body_track
+            for k, tr in enumerate(live)
+            if tr.hidden is not None and k not in body_track.values()
+        )
+        _pair(again, p.gate_m, body_track)
         window = round(p.velocity_window_s * NS_PER_S)
         for i, b in enumerate(found):
             if i in body_track:
@@ -459,16 +582,32 @@ class ScanPeople:
             tr.points.append((t_ns, b.x, b.y))
             tr.velocity = fitted_velocity(tr.points, p.velocity_min_span_s)
             tr.cleared = tr.blind = False
+            tr.hidden, tr.places = None, None
         self.tracks = live
 
     def people(self, t_ns: int) -> list[Person]:
         """The tracks alive at `t_ns`, as people: where their velocity has carried them
         since they were last seen (at rest: where they were)."""
         return [
-            Person(tr.id, *tr.predicted(t_ns), None, tr.velocity)
+            Person(tr.id, *(tr.hidden or tr.predicted(t_ns)), None, tr.velocity)
             for tr in self.tracks
             if self._alive(tr, t_ns)
         ]
+
+
+def _pair(
+    pairs: Iterable[tuple[float, int, int]], gate_m: float, body_track: dict[int, int]
+) -> None:
+    """Pairs (distance, body, track) into `body_track`, nearest first, each body and
+    track once, none farther than `gate_m`."""
+    taken = set(body_track.values())
+    for dist, i, k in sorted(pairs):
+        if dist > gate_m:
+            break
+        if i in body_track or k in taken:
+            continue
+        body_track[i] = k
+        taken.add(k)
 
 
 def nearest_tracks(

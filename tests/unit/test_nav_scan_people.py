@@ -15,7 +15,7 @@ import pytest
 from common import robot
 from common.scan import scan_points
 from services.navigation.costmap import CostParams, Person
-from services.navigation.grid import Footprint, Grid, Pose
+from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
 from services.navigation.nav_map import AHEAD_MAX_S, NavMap, ahead
 from services.navigation.scan_people import (
     ScanParams,
@@ -564,3 +564,45 @@ def test_a_person_near_the_robot_lost_by_every_sensor_is_held_a_moment() -> None
     for k in range(3):
         scan(m, k * S // 10, _person(1.2, 0.3))
     assert len(scan(m, lost, _person(1.2, 0.7))) == 1  # a new track of them: theirs alone
+
+
+def test_a_walker_turning_in_where_no_lidar_looks_is_taken_at_the_nearest_place_they_could_be() -> (
+    None
+):
+    """Hall seed 4's shift (t = 536.8 s): a worker walking at 1 m/s turned in beside the
+    trunk to stand by the robot; their track coasted on along the old velocity, past the
+    robot, and the stop for them was released. Walking along −x 1.2 m to the robot's
+    right, they turn in where the trunk masks the beams and stand 0.4 m off its flank:
+    while unseen, the track is never farther from the footprint than they are, with the
+    velocity they had; when they walk out into the field they are the same track. A
+    walker who is gone where every beam sees (the room's far wall behind them) ends."""
+    pose, grid = Pose(0.0, 0.0, 0.0), _room()
+    tracker = ScanPeople(FP)
+    path = [(2.0 - 0.1 * k, -1.2) for k in range(21)]  # to x = 0 along −x
+    path += [(0.0, -1.2 + 0.1 * k) for k in range(1, 6)]  # turn in, to 0.7 m off the axis
+    path += [(0.0, -0.7)] * 13
+    path += [(0.1 * k, -0.7) for k in range(1, 11)]  # then forward, into the field
+    unseen = checked = 0
+    for k, (x, y) in enumerate(path):
+        t = k * S // 10
+        pts, view = _masked(pose, _person(x, y))
+        tracker.update(pts, grid, pose, t, [view])
+        unseen = 0 if tracker.bodies else unseen + 1
+        people = tracker.people(t)
+        assert [q.id for q in people] == ["scan_1"], k  # one track, never lost nor doubled
+        (q,) = people
+        if unseen > 5:  # past its time to live
+            d_track, d_true = distance_to_footprint(pose, FP, np.array([[q.x, q.y], [x, y]]))
+            assert d_track <= d_true, (k, q)
+            assert q.velocity is not None and q.velocity[0] < -0.5  # the pace they had
+            checked += 1
+    assert unseen == 0 and checked >= 15  # unseen 2 s and more, then found in the field
+    # Walking ahead in the open and gone: every place within their reach is seen free.
+    gone = ScanPeople(FP)
+    for k in range(20):
+        t = k * S // 10
+        legs = _person(2.5, 1.0 - 0.1 * k) if k < 8 else []
+        pts, view = _masked(pose, legs)
+        gone.update(pts, grid, pose, t, [view])
+        if k >= 8 + 6:
+            assert gone.people(t) == [], k
