@@ -20,8 +20,11 @@ $(STAMP): pyproject.toml setup.py services/navigation/astar.c
 demo: install
 	$(VENV)/bin/dume demo
 
+# The unit tests on both cores (pytest-xdist); the system tests one at a time: their
+# stacks use 1.4 cores each, and some run against wall clocks.
 test: install
-	$(PY) -m pytest -q --durations=15
+	$(PY) -m pytest -q -n 2 --dist worksteal --durations=10 tests/unit
+	$(PY) -m pytest -q --durations=15 tests/integration
 
 test-quick: install
 	$(PY) -m pytest -q -m "not slow"
