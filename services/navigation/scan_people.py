@@ -44,11 +44,10 @@ grid, pose, t)` takes one scan's returns in the map frame:
   the map's world and the robot's footprint), and the speed rules take the one of those
   nearest the robot, with the velocity they had; it ends when no such place is left,
   and a body found among them (within `gate_m`) is them again, once every track has had
-  its own. Hall seed
-  4's shift, t = 536.8 s: a worker walking at 1 m/s turned in through the wedge to stand
-  before the head; their track coasted on along its old velocity, past the robot, the
-  stop for them was released, and the handover's align stepped into them (0.305 m inside
-  their separation). The two lidars see ±97° about their own axes
+  its own. Hall seed 4's shift, t = 536.8 s: a worker walking at 1 m/s turned in
+  through the wedge to stand before the head; their track coasted on along its old
+  velocity, past the robot, the stop for them was released, and the handover's align
+  stepped into them (0.305 m inside their separation). The two lidars see ±97° about their own axes
   (the trunk masks the rest): a wedge on each side of the trunk, 0.6 m long at 1.2 m
   out and closing at 3.3 m, is blind to both, and a person walking beside the robot
   crosses it in seconds (the changing hall's shift: person_1, overtaking the robot 1.1 m
@@ -587,7 +586,8 @@ class ScanPeople:
 
     def people(self, t_ns: int) -> list[Person]:
         """The tracks alive at `t_ns`, as people: where their velocity has carried them
-        since they were last seen (at rest: where they were)."""
+        since they were last seen (at rest: where they were); a walker lost, at the place
+        nearest the robot they could be (`_spread`)."""
         return [
             Person(tr.id, *(tr.hidden or tr.predicted(t_ns)), None, tr.velocity)
             for tr in self.tracks
