@@ -39,6 +39,7 @@ from common.config import (
 )
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.recording import new_run_id
+from common.service import exit_with_parent
 from deploy.runs import (
     RUNS_DIR,
     Kind,
@@ -407,6 +408,7 @@ class Supervised(_Stack):
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             start_new_session=True,
+            preexec_fn=exit_with_parent,  # `dume up` killed: supervisord stops its programs
         )
         return self
 

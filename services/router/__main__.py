@@ -17,7 +17,7 @@ from common.access import CredentialsError
 from common.bus import open_session
 from common.certs import CertsError
 from common.config import ConfigError, load_config
-from common.service import parse_args, place, setup_logging
+from common.service import exit_with_parent, parse_args, place, setup_logging
 
 log = logging.getLogger("dume.router")
 
@@ -34,6 +34,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    exit_with_parent()
     try:
         session = open_session(config, "router")
     except (CertsError, CredentialsError) as exc:  # nothing to retry: say what is missing

@@ -18,10 +18,11 @@ import pytest
 
 from common.config import REPO_ROOT
 from common.recording import default_blueprint, shown_by, view_origins
+from common.service import exit_with_parent
 from deploy.demo import SERVICES
 from deploy.runs import RUNS_DIR, read_info
 from deploy.stack import free_port, wait_until
-from tests.conftest import dume
+from tests.conftest import dume, running
 
 pytestmark = pytest.mark.integration
 
@@ -37,7 +38,9 @@ def pid_of(run_id: str, program: str) -> int:
 
 
 def _up(port: int, *args: str) -> tuple[subprocess.Popen[str], str]:
-    """`dume up` in the background, as `dume up &` in a shell; its run id."""
+    """`dume up` in the background, as `dume up &` in a shell; its run id. The stack
+    ends with this test's process, even a killed one (`exit_with_parent`: `dume up`
+    becomes supervisord, which stops its programs on SIGTERM)."""
     up = subprocess.Popen(
         [sys.executable, "-m", "deploy.cli", "up", "--port", str(port), *args],
         cwd=REPO_ROOT,
@@ -45,6 +48,7 @@ def _up(port: int, *args: str) -> tuple[subprocess.Popen[str], str]:
         stdout=subprocess.DEVNULL,
         text=True,
         start_new_session=True,
+        preexec_fn=exit_with_parent,
     )
     assert up.stderr is not None
     banner = up.stderr.readline() + up.stderr.readline()
@@ -129,6 +133,7 @@ def recorded_entities(folder: Path) -> set[str]:
 def test_dume_up_restarts_a_killed_service_but_never_the_world() -> None:
     port = free_port()
     up, run_id = _up(port, "--world", "small", "--set", "sim.cameras=[]")
+    programs: list[int] = []
     try:
         assert wait_until(lambda: set(SERVICES) <= alive(port), 180, poll_s=1.0)
         status = json.loads(dume("status", "--port", str(port)).stdout)
@@ -157,6 +162,16 @@ def test_dume_up_restarts_a_killed_service_but_never_the_world() -> None:
         assert f"perception died in run {run_id}, restarted (1 time(s))" in said.stderr
         assert f"sim died in run {run_id}, not restarted: the world stopped" in said.stderr
         assert pid_of(run_id, "sim") == 0
+
+        # supervisord itself killed: its programs stop (each asked the kernel for SIGTERM
+        # when its parent dies), none serves on unmanaged
+        programs += [pid_of(run_id, name) for name in ("router", *SERVICES) if name != "sim"]
+        assert all(programs), programs
+        os.kill(up.pid, signal.SIGKILL)
+        up.wait(timeout=10)
+        assert wait_until(lambda: not any(running(p) for p in programs), 30, poll_s=0.5)
     finally:
         _stop(up)
+        for pid in filter(running, programs):  # what a failed check left
+            os.kill(pid, signal.SIGKILL)
     assert wait_until(lambda: not alive(port), 30, poll_s=1.0)

@@ -1,0 +1,63 @@
+"""A stack whose launcher is killed does not outlive it: a test run or an eval killed
+by SIGKILL once left a whole stack serving on for hours. Every service and router asks
+the kernel for SIGTERM when its parent dies (`common.service.exit_with_parent`) and
+stops as it does on Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from common.config import REPO_ROOT
+from deploy.stack import wait_until
+from tests.conftest import running
+from tests.integration.test_map_service import map_settings
+
+pytestmark = pytest.mark.integration
+
+#: A launcher as a test or an eval is one: it starts a stack, says its processes, waits.
+LAUNCHER = """
+import json, sys, time
+from deploy.stack import ProcessStack
+from common.config import parse_overrides
+stack = ProcessStack(["semantic_map"], parse_overrides(json.loads(sys.argv[1])))
+stack.start()
+print(json.dumps({"run_dir": str(stack.run_dir),
+                  "pids": {n: p.pid for n, p in stack.procs.items()}}), flush=True)
+time.sleep(600)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_the_services_of_a_killed_launcher_stop_cleanly(tmp_path: Path) -> None:
+    settings = [*map_settings(str(tmp_path / "map")), "recording.enabled=false"]
+    launcher = subprocess.Popen(
+        [sys.executable, "-c", textwrap.dedent(LAUNCHER), json.dumps(settings)],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    pids: dict[str, int] = {}
+    try:
+        assert launcher.stdout is not None
+        started = json.loads(launcher.stdout.readline())
+        pids = started["pids"]
+        assert set(pids) == {"router", "semantic_map"}
+        launcher.kill()  # SIGKILL: nothing of its own cleans up
+        launcher.wait(timeout=10)
+        assert wait_until(lambda: all(not running(p) for p in pids.values()), 20, poll_s=0.2), pids
+        # they stopped as on Ctrl-C, not killed: each says so in its log
+        for name in pids:
+            log = (Path(started["run_dir"]) / f"{name}.log").read_text()
+            assert f"{name} stopped" in log, log[-1500:]
+    finally:
+        for pid in pids.values():
+            if running(pid):
+                os.kill(pid, signal.SIGKILL)
