@@ -38,8 +38,9 @@
                            still_held; any of these failing, back_out: open on the spot,
                            Reach back to the pre-grasp pose, Posture(stow), fail with its
                            reason; then Posture(stow), mode walk/navigation
-              bring_to_user: resolve_person, PersonHandover (fails grasp_lost if let go;
-                             navigation_failed: walked_short, find_person takes over),
+              bring_to_user (while_held: fails grasp_lost the tick the gripper lets go,
+                             whatever runs): resolve_person, PersonHandover
+                             (navigation_failed: walked_short, find_person takes over),
                              find_person (Recover: person_not_found | navigation_failed
                                           | wrong_person while another wears their
                                           colours, budget person_rounds - 1)
@@ -143,6 +144,7 @@ from services.mission.behaviours.request import (
     WaitForRequest,
 )
 from services.mission.behaviours.search import MAX_RESUMES, LookElsewhere
+from services.mission.carrying import WhileHeld
 from services.mission.recovery import Recover
 from services.mission.targets import dropped_at
 
@@ -290,12 +292,12 @@ def build_tree(ctx: Context) -> Sequence:
                   s.posture_timeout_s, st[3]),
         SetMode(ctx, "walk", "navigation", st[3]),
     )  # fmt: skip
-    bring = _seq(
+    bring = WhileHeld(ctx, _seq(
         st[4],
         ResolvePerson(ctx),
         SetMode(ctx, "walk", "navigation", st[4]),
         Selector("walk_to_them", memory=True, children=[
-            NavigateTo(ctx, "person", st[4], watch_held=True),
+            NavigateTo(ctx, "person", st[4]),
             WalkedShort(ctx, st[4]),
         ]),
         Recover(
@@ -313,8 +315,7 @@ def build_tree(ctx: Context) -> Sequence:
                                 SeenThere(ctx, st[4]),
                                 LookForPerson(ctx, st[4]),
                             ]),
-                            NavigateTo(ctx, "person", st[4], watch_held=True,
-                                       name="navigate_again"),
+                            NavigateTo(ctx, "person", st[4], name="navigate_again"),
                             StandsThere(ctx, st[4]),
                         ),
                     ],
@@ -326,7 +327,7 @@ def build_tree(ctx: Context) -> Sequence:
             ctx.decide,
             another_to_try(blackboard("find_person")),
         ),
-    )  # fmt: skip
+    ))  # fmt: skip
     release = _seq(
         st[5],
         SetMode(ctx, "stand", "navigation", st[5]),
@@ -415,13 +416,13 @@ def build_tree(ctx: Context) -> Sequence:
         ctx.decide,
         forget_grasp,
     )
-    go_round = _seq(
+    go_round = WhileHeld(ctx, _seq(
         "go_round",
         ArmAction(ctx, "carry", lambda _b: Posture(name="stow"), "arm_failed",
                   s.posture_timeout_s, st[5]),
         SetMode(ctx, "walk", "navigation", st[5], name="mode_walk_round"),
-        NavigateTo(ctx, "person", st[5], watch_held=True, name="navigate_round"),
-    )  # fmt: skip
+        NavigateTo(ctx, "person", st[5], name="navigate_round"),
+    ))  # fmt: skip
     offer = Recover(
         "other_side",
         _seq("hand_over", Selector("at_a_side", memory=True,

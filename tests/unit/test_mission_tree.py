@@ -599,6 +599,35 @@ def test_a_look_round_held_still_by_a_person_beside_the_robot_asks_at_once() -> 
     assert any("the turn did not turn in 5 s" in d for d in decisions)
 
 
+def test_an_object_that_falls_while_the_robot_looks_round_for_someone_is_missed_at_once() -> None:
+    """Hall seed 3's shift: the can fell during the second turn of the look round for
+    the person, and the mission learned it 28 s later, when its next walk began. The
+    whole carry watches the grasp (`WhileHeld`): the tick after it lets go, the turn is
+    cancelled and the tree looks where it fell."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (1.0, 3.0)
+    robot.seen_after_turn_rad = 100.0
+    robot.drops, robot.drop_on, robot.drop_after = 1, "pose", 3  # a look's turn
+    tree = mission(robot)
+    let_go_at = fell_at = None
+    had = False
+    for k in range(4000):
+        tree.tick()
+        decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+        if fell_at is None and any(" fell at (" in d for d in decisions):
+            fell_at = k
+            break
+        robot.advance()
+        had = had or robot.held
+        if let_go_at is None and had and not robot.held:
+            let_go_at = k + 1  # the first tick to see it
+    assert let_go_at is not None and fell_at == let_go_at, (let_go_at, fell_at)
+    failed = [d for d in decisions if "grasp_lost" in d]
+    assert failed[0].endswith("the grasp let go while carrying the object (look_for_person)")
+    turns = [i for i, g in robot.nav_goals if isinstance(g, PoseGoal)]
+    assert turns and turns[-1] in robot.nav_cancels  # the turn stopped, not walked on
+
+
 def _ask_scene(
     appear: dict[str, tuple[float, float, float, float]],
     colours: dict[str, PersonColours] | None = None,
