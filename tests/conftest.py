@@ -18,19 +18,6 @@ from deploy.stack import MODULES, ProcessStack
 StartStack = Callable[..., ProcessStack]
 
 
-def running(pid: int) -> bool:
-    """`pid` is a live process: not gone, nor a zombie left for its reaper (Linux). Not
-    0 or below, which `kill` takes for a process group."""
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    stat = Path(f"/proc/{pid}/stat")
-    return not (stat.exists() and stat.read_text().rsplit(") ", 1)[-1].startswith("Z"))
-
-
 def dume(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     """Run the `dume` command line as a user would, from the repository."""
     return subprocess.run(

@@ -20,9 +20,9 @@ from common.config import REPO_ROOT
 from common.recording import default_blueprint, shown_by, view_origins
 from common.service import exit_with_parent
 from deploy.demo import SERVICES
-from deploy.runs import RUNS_DIR, read_info
+from deploy.runs import RUNS_DIR, pid_alive, read_info
 from deploy.stack import free_port, wait_until
-from tests.conftest import dume, running
+from tests.conftest import dume
 
 pytestmark = pytest.mark.integration
 
@@ -169,9 +169,9 @@ def test_dume_up_restarts_a_killed_service_but_never_the_world() -> None:
         assert all(programs), programs
         os.kill(up.pid, signal.SIGKILL)
         up.wait(timeout=10)
-        assert wait_until(lambda: not any(running(p) for p in programs), 30, poll_s=0.5)
+        assert wait_until(lambda: not any(pid_alive(p) for p in programs), 30, poll_s=0.5)
     finally:
         _stop(up)
-        for pid in filter(running, programs):  # what a failed check left
+        for pid in filter(pid_alive, programs):  # what a failed check left
             os.kill(pid, signal.SIGKILL)
     assert wait_until(lambda: not alive(port), 30, poll_s=1.0)

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from common.config import REPO_ROOT
+from deploy.runs import pid_alive
 from deploy.stack import wait_until
-from tests.conftest import running
 from tests.integration.test_map_service import map_settings
 
 pytestmark = pytest.mark.integration
@@ -52,12 +52,12 @@ def test_the_services_of_a_killed_launcher_stop_cleanly(tmp_path: Path) -> None:
         assert set(pids) == {"router", "semantic_map"}
         launcher.kill()  # SIGKILL: nothing of its own cleans up
         launcher.wait(timeout=10)
-        assert wait_until(lambda: all(not running(p) for p in pids.values()), 20, poll_s=0.2), pids
+        assert wait_until(lambda: not any(map(pid_alive, pids.values())), 20, poll_s=0.2), pids
         # they stopped as on Ctrl-C, not killed: each says so in its log
         for name in pids:
             log = (Path(started["run_dir"]) / f"{name}.log").read_text()
             assert f"{name} stopped" in log, log[-1500:]
     finally:
         for pid in pids.values():
-            if running(pid):
+            if pid_alive(pid):
                 os.kill(pid, signal.SIGKILL)
