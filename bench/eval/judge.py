@@ -76,8 +76,9 @@ def judge(object_id: str, person_id: str, events: Sequence[WorldEvent]) -> Verdi
         if h.object_id == object_id and h.person_id == person_id:
             return Verdict(True, f"{person_id} took {object_id} at {h.stamp_ns / 1e9:.1f} s")
     wrong = [f"{h.person_id} took {h.object_id}" for h in handovers]
-    drops = [
-        f"{e.object_id} dropped at {e.stamp_ns / 1e9:.1f} s"
+    drops = [  # where: 10 cm below where it was let go, falling (`ObjectDropped`)
+        f"{e.object_id} dropped at {e.stamp_ns / 1e9:.1f} s by ({e.position_in_world[0]:.2f}, "
+        f"{e.position_in_world[1]:.2f})"
         for e in events
         if isinstance(e, ObjectDropped)
     ]

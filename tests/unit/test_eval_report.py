@@ -158,7 +158,7 @@ def test_success_is_the_requested_object_in_the_requested_persons_hand() -> None
         "person_2",
         [ObjectDropped(stamp_ns=5 * S, object_id="bottle_1", position_in_world=(1, 1, 0))],
     )
-    assert not dropped.success and "bottle_1 dropped" in dropped.reason
+    assert not dropped.success and "bottle_1 dropped at 5.0 s by (1.00, 1.00)" in dropped.reason
     assert "no handover" in judge("bottle_1", "person_2", []).reason
 
 
