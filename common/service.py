@@ -146,9 +146,10 @@ _LIBC = ctypes.CDLL(None)
 def exit_with_parent(sig: int = signal.SIGTERM) -> bool:
     """Ask the kernel for `sig` when this process's parent dies (Linux's
     `PR_SET_PDEATHSIG`), so a service or router whose launcher was killed stops cleanly
-    instead of serving on unmanaged. False where the call is not there (not Linux). A
-    parent gone before the call is not seen by the kernel: then `sig` is sent now.
-    Safe in a `Popen(preexec_fn=...)`: no lock is taken, no Python object shared."""
+    instead of serving on unmanaged. False where the call is not there (not Linux).
+    The kernel does not see a parent that died before the call: call it first thing
+    (`run`, the router), and a parent seen to go while it is made sends `sig` now. Safe
+    in a `Popen(preexec_fn=...)`: no lock is taken, no Python object shared."""
     if not sys.platform.startswith("linux"):
         return False
     parent = os.getppid()
@@ -216,6 +217,7 @@ def run(
     extra_overrides: Sequence[str] = (),
 ) -> int:
     """Run a service to completion; the process's exit code."""
+    exit_with_parent()  # before anything that may wait (the router): no stack outlives it
     args = parse_args(name, argv)
     try:
         config = load_config([*extra_overrides, *args.overrides], path=args.config)
@@ -231,7 +233,6 @@ def run(
     bus = Bus.open(config, guard=TruthGuard.of(name, config), user=user)
     svc = Service(name, config, bus, rec, layout)
     _install_signals(svc.stop, bus.interrupt)
-    exit_with_parent()
     try:
         main(svc)
     except Exception:

@@ -408,7 +408,7 @@ class Supervised(_Stack):
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             start_new_session=True,
-            preexec_fn=exit_with_parent,  # `dume up` killed: supervisord stops its programs
+            preexec_fn=exit_with_parent,  # its launcher killed: supervisord stops its programs
         )
         return self
 

@@ -23,6 +23,7 @@ log = logging.getLogger("dume.router")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    exit_with_parent()
     args = parse_args("router", argv)
     try:
         config = load_config(args.overrides, path=args.config)
@@ -34,7 +35,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    exit_with_parent()
     try:
         session = open_session(config, "router")
     except (CertsError, CredentialsError) as exc:  # nothing to retry: say what is missing
