@@ -2,7 +2,8 @@
 comes up in the background and says where its run's files are; `dume status --ready`
 waits for it; the map lists what to ask for; `dume request --wait` gets the object
 handed over; `dume logs`, `dume ctl` and `dume runs` find the run; `dume down` stops it.
-And a killed sim comes back (supervisord restarts it)."""
+And a killed service comes back (supervisord restarts it), a killed sim does not (the
+world is never restarted), and a killed supervisord takes its programs with it."""
 
 from __future__ import annotations
 
