@@ -93,7 +93,7 @@ from common.geometry import FloatArray
 from common.messages.base import NS_PER_S
 from services.navigation.costmap import Person
 from services.navigation.grid import BoolGrid, Footprint, Grid, Pose, distance_to_footprint
-from services.navigation.seen_people import fitted_velocity
+from services.navigation.seen_people import WALKING_MPS, fitted_velocity
 
 #: m: a beam returning from this far beyond a coasting track's place says it is gone.
 CLEARS_BEYOND_M = 0.3
@@ -151,7 +151,7 @@ class ScanParams:
     #: a worker stood 3.3 s in the wedge as the robot turned by them, their track ended
     #: at `coast_s`, and the robot walked 0.19 m/s at them when they moved, 0.72 m off).
     blind_hold_s: float = 10.0
-    standing_mps: float = 0.3
+    standing_mps: float = WALKING_MPS
     #: A track this close to a person the layer has is that person (`merge_scan`).
     same_m: float = 0.6
 
@@ -479,7 +479,7 @@ class ScanPeople:
         p, age = self.p, t_ns - tr.last[0]
         if age <= round(p.ttl_s * NS_PER_S):
             return True
-        standing = tr.velocity is not None and math.hypot(*tr.velocity) < p.standing_mps
+        standing = tr.velocity is not None and not tr.walking(p.standing_mps)
         coast = p.blind_hold_s if tr.blind and standing else p.coast_s
         return age <= round(coast * NS_PER_S) and not tr.cleared
 

@@ -47,6 +47,10 @@ from common.messages.perception import Detections
 from services.navigation.costmap import Person
 from services.navigation.grid import Grid
 
+#: m/s: a person measured at least this fast walks; slower, they stand (the camera's
+#: sightings here, the lidar's tracks in `scan_people`: one threshold for both).
+WALKING_MPS = 0.3
+
 
 @dataclass(frozen=True)
 class SeenParams:
@@ -72,7 +76,7 @@ class SeenParams:
     unknown_still_s: float = 2.0
     #: A sighting walking (at least `walking_mps`, m/s) not seen again for `walker_ttl_s`
     #: (s: the lidar's tracks coast as long) has walked on: it is dropped.
-    walking_mps: float = 0.3
+    walking_mps: float = WALKING_MPS
     walker_ttl_s: float = 3.0
 
 
