@@ -1,15 +1,15 @@
 """`WhileHeld`: a carry that fails `grasp_lost` the tick the gripper lets go, whatever
 leaf of it runs.
 
-Walks to the person watched the grasp (`NavigateTo(watch_held=True)`, which the put-back
-still uses), but the rest of the carry did not: in a shift, a can fell while the robot
+The walks that carried the object watched the grasp themselves (`NavigateTo`'s
+`watch_held`, now gone), but the rest of the carry did not: in a shift, a can fell while the robot
 turned to look for the person (hall seed 3, t = 224.7 s), and the mission learned it
 28 s later, when its next walk began, having turned, asked and set off to a usual place
 of the person's with an empty gripper meanwhile. `WhileHeld` reads the WBC's grasp
 detector (`WbcStatus.held`) before each tick of its child: held, or no status yet, the
 child ticks; let go, the running leaf is stopped (a walk or a turn cancels its goal) and
 the carry fails with `grasp_lost`, naming the leaf, so `regrasp` looks where it fell at
-once.
+once. The walk to put an object back is wrapped the same way (`tree.put_back_tree`).
 """
 
 from __future__ import annotations

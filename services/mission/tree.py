@@ -169,7 +169,7 @@ def put_back_tree(ctx: Context, name: str, goes_on: bool) -> Selector:
         f"{name}_steps",
         PutBackFirst(ctx, st[0]),
         SetMode(ctx, "walk", "navigation", st[0], name="mode_walk_put_back"),
-        NavigateTo(ctx, "put_back", st[0], watch_held=True),
+        WhileHeld(ctx, NavigateTo(ctx, "put_back", st[0])),
         SetMode(ctx, "manipulate", "navigation", st[0], name="mode_manipulate_put_back"),
         ArmAction(ctx, "ready_held", lambda _b: Posture(name="ready"), "arm_failed",
                   s.posture_timeout_s, st[0]),  # out of the stow as the grasp's reach began

@@ -10,8 +10,8 @@
   still holds (`Held.stance`, within `PUT_BACK_TOL_M`/`_RAD`: the arm puts it down at
   the grasp's own pose) on start and watches `nav/status` for that goal id; a refusal
   or a failed goal fails `navigation_failed` with navigation's reason (the goal is sent
-  once: navigation takes one sent before its first map and waits for the map). Carrying
-  (`watch_held`), it fails `grasp_lost` as soon as the grasp detector lets go. Walking
+  once: navigation takes one sent before its first map and waits for the map). A walk
+  that carries the object is watched by `carrying.WhileHeld` (`grasp_lost`). Walking
   to a person whose map entry is stale while somebody stands near in their colours
   (`identity.wearer_near`, checked once a second), it walks to that one (`PERSON`), said,
   with a new goal; not when more than one in the map wears them (said once). Preempted
@@ -208,13 +208,11 @@ class NavigateTo(MissionBehaviour):
         ctx: Context,
         kind: Literal["artifact", "person", "put_back"],
         stage: str,
-        watch_held: bool = False,
         name: str = "",
         fails_as: tuple[MissionReason, str] | None = None,
     ) -> None:
         super().__init__(name or f"navigate_to_{kind}", ctx, stage)
         self.kind = kind
-        self.watch_held = watch_held
         #: What its failure is for the request, and what it says first (a walk that is a
         #: means to another end: to a stance for a grasp, `grasp_pose_failed`).
         self.fails_as = fails_as
@@ -258,7 +256,7 @@ class NavigateTo(MissionBehaviour):
                               extra_m=handover_extra_m(self))  # fmt: skip
 
     def fail(self, reason: MissionReason, detail: str) -> Status:
-        if self.fails_as is None or reason == "grasp_lost":
+        if self.fails_as is None:
             return super().fail(reason, detail)
         return super().fail(self.fails_as[0], f"{self.fails_as[1]}{detail}")
 
@@ -370,10 +368,6 @@ class NavigateTo(MissionBehaviour):
                 "navigation_failed" if isinstance(self.error, Refused) else "unavailable"
             )
             return self.fail(reason, f"navigation did not take the goal: {self.error}")
-        if self.watch_held:
-            wbc = self.port.wbc_status()
-            if wbc is not None and not wbc.held:
-                return self.fail("grasp_lost", "the grasp let go while carrying the object")
         status = self.port.nav_status(self.goal_id)
         if status is None or status.state == "idle":
             # from when this goal was sent: a walk redirected to the person's other id
