@@ -11,10 +11,17 @@ limits (as the sim will) and calls `mj_step`. Modes:
 - grasp: the small world's bottle from its truth pose, the whole robot standing across the
   nearest table edge: reach a pregrasp, approach, close the jaw with limited torque, lift
   10 cm, shake ±5 cm sideways; held when the bottle stayed in the jaws by contact alone.
+- carry: an artifact (`--world`, `--artifact`: cylinders) grasped as in grasp, the arm
+  folded to `stow`, a knock on it (`--knock` N along world +y, 0.1 s: the shift eval's
+  slip is 20 N), then a turn on the spot at `--wz`; held when it is still in the jaws.
+  Hall seed 0's can_1, knocked at 20-80 N and grasped 0-5 cm above its middle, stays in
+  the jaws through 6 s at 0.8 rad/s (as at 0): the turn's rate alone does not shake a
+  knocked can out.
 
 The last line printed is a JSON object of figures (fell, distance, drift, base height and
 attitude stats, controller tick p50/p99 in µs split by phase, real-time factor).
-Usage: python -m bench.wbc_harness {stand,trot,turn,grasp} [--seconds S] [--seed N]
+Usage: python -m bench.wbc_harness MODE [--seconds S] [--seed N] (carry: [--world W]
+[--artifact ID] [--knock N] [--wz RATE])
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ from services.sim import mjcf
 from services.sim.scene import compile_scene
 from services.sim.world import generate_world
 from services.wbc.controller import WbcCommand, WbcReferences, WbcState, WholeBodyController
+from services.wbc.gait import quintic
 from services.wbc.reach import PoseSegment, pregrasp, side_grasp
 
 PAYLOAD_BODY = "spike_payload"
@@ -198,9 +206,10 @@ class GraspPlan:
     bottle_id: str
 
 
-def grasp_plan(world: WorldDescription) -> GraspPlan:
-    """Stand `D_OPT_M` back from the bottle across the table edge nearest to it."""
-    bottle_truth = world.artifacts[0]
+def grasp_plan(world: WorldDescription, artifact_id: str = "") -> GraspPlan:
+    """Stand `D_OPT_M` back from the artifact (the world's first unless named) across the
+    table edge nearest to it."""
+    bottle_truth = next(a for a in world.artifacts if a.id == (artifact_id or a.id))
     table = next(o for o in world.obstacles if o.id == bottle_truth.surface_id)
     c, s = math.cos(table.yaw), math.sin(table.yaw)
     R = np.array([[c, -s], [s, c]])
@@ -229,6 +238,7 @@ GRASP_PHASES = {
     "close": 1.0, "lift": 1.5, "shake": 3.0, "hold": 1.5,
 }  # fmt: skip
 GRIP_EFFORT_NM = 4.0
+GRIP_CARRY_NM = 5.0  # the stack's wbc.grip_effort_max_nm
 SHAKE_M, SHAKE_HZ = 0.05, 1.5
 
 
@@ -329,16 +339,94 @@ def run_grasp(seed: int) -> Figures:
     return out
 
 
+#: carry: after the lift, the arm folds to `stow` (s), stands, the knock, a wait, the
+#: turn on the spot, a stand; the turn's rate ramps at the navigator's ωz acceleration.
+CARRY_PHASES = {"stow": 2.5, "steady": 1.0, "knock": 0.1, "wait": 1.0, "turn": 6.0, "stop": 2.0}
+TURN_ACCEL = 1.5  # rad/s², navigation's controller a_max
+
+
+def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: float) -> Figures:
+    """Grasp (as `grasp`, no shake), fold to `stow` on a quintic, then a knock of `knock_n`
+    N along world +y for 0.1 s on the object (the shift eval's slip), a second's stand, and
+    a turn on the spot at `wz` rad/s; held when it is still in the jaws at the end."""
+    world = generate_world(seed, world_name)
+    plan = grasp_plan(world, artifact)
+    start = RobotStart(float(plan.q0[0]), float(plan.q0[1]), yaw_of_quat_xyzw(plan.q0[3:7]))
+    model = compile_scene(msgspec.structs.replace(world, robot_start=start))
+    data = mujoco.MjData(model)
+    set_initial_pose(model, data, plan.q0)
+    script = GraspScript(plan)
+    grasp_end = script.starts["shake"]
+    starts, t = {}, grasp_end
+    for name, duration in CARRY_PHASES.items():
+        starts[name] = t
+        t += duration
+    tcp_site = model.site(robot.TCP_FRAME).id
+    body = model.body(plan.bottle_id).id
+    stow = robot.POSTURES["stow"][12:18]
+    q_lift: list[FloatArray] = []
+    gap: dict[str, float] = {}
+    knocked: list[FloatArray] = []  # the object's place as the knock began, then its sway
+
+    def refs_at(t: float, state: WbcState) -> WbcReferences:
+        T_tcp = np.eye(4)
+        T_tcp[:3, :3] = data.site_xmat[tcp_site].reshape(3, 3)
+        T_tcp[:3, 3] = data.site_xpos[tcp_site]
+        data.xfrc_applied[body] = 0.0
+        if t < grasp_end:
+            return script(t, state, T_tcp)
+        phase = [n for n, t0 in starts.items() if t >= t0][-1]
+        gap[phase] = max(gap.get(phase, 0.0), float(np.linalg.norm(data.xpos[body] - T_tcp[:3, 3])))
+        if not q_lift:
+            q_lift.append(state.q[12:18].copy())
+        s, _, _ = quintic(min(1.0, (t - starts["stow"]) / CARRY_PHASES["stow"]))
+        if phase == "knock":
+            data.xfrc_applied[body, 1] = knock_n
+        if phase in ("knock", "wait"):
+            knocked.append(data.xpos[body].copy())
+        w = 0.0
+        if phase == "turn":
+            w = min(abs(wz), TURN_ACCEL * (t - starts["turn"])) * math.copysign(1.0, wz)
+        elif phase == "stop":
+            w = max(0.0, abs(wz) - TURN_ACCEL * (t - starts["stop"])) * math.copysign(1.0, wz)
+        return WbcReferences(
+            cmd_vel=np.array([0.0, 0.0, w]),
+            arm_posture=q_lift[0] + s * (stow - q_lift[0]),
+            gripper_angle=robot.GRIPPER_OPEN,
+            gripper_effort=GRIP_CARRY_NM,
+        )
+
+    log, _, wall = simulate(model, data, t, refs_at)
+    out = summary(log, wall)
+    tcp = data.site_xpos[tcp_site]
+    out |= {
+        "artifact": plan.bottle_id,
+        "knock_n": knock_n,
+        "wz": wz,
+        "held": bool(np.linalg.norm(data.xpos[body] - tcp) < 0.1),
+        "object_tcp_gap_max_m": {k: round(v, 3) for k, v in gap.items()},
+        "object_knock_sway_m": round(
+            float(np.linalg.norm(np.array(knocked) - knocked[0], axis=1).max()), 3
+        ),
+        "gripper_angle_rad": round(float(log_gripper(model, data)), 3),
+    }
+    return out
+
+
 def log_gripper(model: mujoco.MjModel, data: mujoco.MjData) -> float:
     return float(data.qpos[model.joint(robot.GRIPPER_JOINT).qposadr[0]])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", choices=["stand", "trot", "turn", "strafe", "grasp"])
+    parser.add_argument("mode", choices=["stand", "trot", "turn", "strafe", "grasp", "carry"])
     parser.add_argument("--seconds", type=float, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--vx", type=float, default=0.5)
+    parser.add_argument("--wz", type=float, default=0.8)
+    parser.add_argument("--knock", type=float, default=20.0, help="carry: N along world +y")
+    parser.add_argument("--world", default="small")
+    parser.add_argument("--artifact", default="", help="carry: its id (the world's first)")
     args = parser.parse_args()
     if args.mode == "stand":
         out = run_walk(args.seconds or 30.0, (0.0, 0.0, 0.0), 0.0)
@@ -348,6 +436,8 @@ def main() -> None:
         out = run_walk(args.seconds or 20.0, (0.0, 0.0, 0.5), 0.0)
     elif args.mode == "strafe":
         out = run_walk(args.seconds or 20.0, (0.0, 0.2, 0.0), 0.0)
+    elif args.mode == "carry":
+        out = run_carry(args.seed, args.world, args.artifact, args.knock, args.wz)
     else:
         out = run_grasp(args.seed)
     out["mode"] = args.mode
