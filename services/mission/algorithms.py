@@ -63,6 +63,7 @@ class PullFeeler(Protocol):
     across_n: float  # its change of force across that direction, N (logged)
     effort_change_nm: float  # its jaw effort change, N·m (logged)
     rising_since_ns: int | None  # since when the pull has been rising (logged)
+    swing_n: float  # the largest rise toward the person since the baseline, N (logged)
 
     def note(self, status: WbcStatus) -> None: ...
 

@@ -570,7 +570,7 @@ class StubPull:
 
     def __init__(self, never: bool = False) -> None:
         self.never, self.count = never, 0
-        self.pull_n = self.across_n = self.effort_change_nm = 0.0
+        self.pull_n = self.across_n = self.effort_change_nm = self.swing_n = 0.0
         self.rising_since_ns: int | None = None
 
     def note(self, status: WbcStatus) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -28,6 +29,10 @@ RECORDED = DATA / "handover_status.json"
 RECORDED_HALL = DATA / "handover_hall_status.json"
 #: A person who took hold before the arm had settled (seed 2): pulling from the first sample.
 LATE = DATA / "handover_late_status.json"
+#: box_1 handed to person_5 in the hall (`--world-seed 5`): the hand closing on the box
+#: pushes it at the robot (−4.3 N toward the person), then pulls (+7.7 N), and the box
+#: slides out of the jaws 0.7 s after the grip closed (133.0-134.5 s of sim time).
+BOX = DATA / "handover_box_status.json"
 
 
 def status(stamp_ns: int, wrench: np.ndarray, effort: float = -2.0) -> WbcStatus:
@@ -221,3 +226,50 @@ def test_no_pull_felt_means_nothing_to_remember() -> None:
     w[50:, 2] += 3.0  # the weight gone (the object fell), nobody pulling toward the person
     assert feed(detector, w) == -1
     assert not detector.pulled_within(59 * PERIOD, 0.5)
+
+
+def _samples(path: Path) -> list[tuple[WbcStatus, bool]]:
+    """A recording's statuses (held as recorded) and whether the person had it yet."""
+    return [
+        (
+            msgspec.structs.replace(
+                status(s["stamp_ns"], np.array(s["wrench"]), s["effort"]), held=s.get("held", True)
+            ),
+            s["taken"],
+        )
+        for s in json.loads(path.read_text())
+    ]
+
+
+def test_a_swing_from_the_hands_push_to_its_pull_is_remembered_as_a_pull() -> None:
+    """The recorded box, its baseline taken as the pull rose (0.2 s later than the run
+    took it) and the jaws empty 0.38 s after: against that baseline the pull is small,
+    but the force toward the person rose 8.9 N in 0.2 s: taken, not lost."""
+    samples = _samples(BOX)
+    reset_ns, empty_ns = 133_820_000_000, 134_200_000_000
+    detector = PullDetector()
+    for st, _ in samples:
+        if st.stamp_ns < reset_ns:
+            detector.note(st)  # the arm settling
+        elif st.stamp_ns == reset_ns:
+            detector.reset(st)
+        elif st.stamp_ns < empty_ns:
+            assert not detector.update(st)
+    assert detector.pull_n < 0.5 * detector.force_n  # against that baseline, little
+    assert detector.swing_n > detector.force_n
+    assert detector.pulled_within(empty_ns, 0.5)
+
+
+def test_a_hold_with_nobody_pulling_swings_less_than_half_the_pull() -> None:
+    """Held still, the estimate's swings toward the person (the 20 s hold; the small
+    world's and the hall's holds, the arm settled, until the person's grip closed) stay
+    within half of `force_n` (0.4, 3.95 and 2.8 N): no pull is remembered from them."""
+    holds = ((HOLD, 0), (RECORDED, 44_400_000_000), (RECORDED_HALL, 67_300_000_000))
+    for path, after_ns in holds:
+        held_still = [st for st, taken in _samples(path) if st.stamp_ns >= after_ns and not taken]
+        detector = PullDetector()
+        detector.reset(held_still[0])
+        for st in held_still[1:]:
+            detector.update(st)
+        assert detector.swing_n < 0.5 * detector.force_n, (path.name, detector.swing_n)
+        assert not detector.pulled_within(held_still[-1].stamp_ns, 0.5), path.name

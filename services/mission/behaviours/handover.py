@@ -96,10 +96,18 @@ class FeelPull(MissionBehaviour):
             ):
                 self.ctx.decide(
                     f"handover: the object left the jaws while pulled "
-                    f"({detector.pull_n:+.1f} N toward the person): taken"
+                    f"({detector.pull_n:+.1f} N toward the person, a rise of "
+                    f"{detector.swing_n:.1f} N): taken"
                 )
                 return Status.SUCCESS
-            return self.fail("grasp_lost", "the object slipped out while presenting it")
+            felt = (
+                f"the force toward the person rose by {detector.swing_n:.1f} N at most"
+                if self.baseline
+                else "the arm still settling"
+            )
+            return self.fail(
+                "grasp_lost", f"the object slipped out while presenting it (no pull felt: {felt})"
+            )
         if not self.baseline:
             detector.note(status)  # a person quick to take hold pulls while the arm settles
             if self.elapsed_s() >= s.settle_s:
