@@ -393,7 +393,7 @@ def test_a_grasp_that_does_not_hold_lets_go_on_the_spot_and_picks_again() -> Non
     assert kinds.count("grasp") == 2
 
 
-def _let_go_while_presenting(pull: bool, after_pull_statuses: int) -> Outcome:
+def _let_go_while_presenting(pull: bool, after_pull_statuses: int, swing_n: float = 0.0) -> Outcome:
     robot = small_world()
     tree = mission(robot, pull=pull)
     feel = next(b for b in tree.root.iterate() if isinstance(b, FeelPull))
@@ -403,6 +403,7 @@ def _let_go_while_presenting(pull: bool, after_pull_statuses: int) -> Outcome:
         presenting = tree.where()[1] == "feel_pull" and feel.baseline
         if presenting and feel.detector.count >= after_pull_statuses:
             robot.held = False  # out of the jaw in the handover posture
+            feel.detector.swing_n = swing_n  # the largest rise toward the person felt
         robot.advance()
         if outcome is not None:
             break
@@ -410,9 +411,14 @@ def _let_go_while_presenting(pull: bool, after_pull_statuses: int) -> Outcome:
     return outcome
 
 
-def test_an_object_that_slips_out_while_presented_fails_at_once_as_lost() -> None:
-    outcome = _let_go_while_presenting(pull=False, after_pull_statuses=0)
+@pytest.mark.parametrize("swing_n", [0.0, 6.3])
+def test_an_object_that_slips_out_while_presented_fails_at_once_as_lost(swing_n: float) -> None:
+    """Saying what was felt; a rise toward the person under a pull's (8 N) but over half
+    of it (hall seed 5's shift: 6.3 N, and the person had the box) may be a take."""
+    outcome = _let_go_while_presenting(pull=False, after_pull_statuses=0, swing_n=swing_n)
     assert outcome.state == "failed" and outcome.reason == "grasp_lost"
+    assert f"rose by {swing_n:.1f} N at most" in outcome.detail, outcome.detail
+    assert ("they may have it" in outcome.detail) == (swing_n > 4.0), outcome.detail
 
 
 def test_an_object_pulled_out_of_the_jaws_before_the_pull_is_felt_was_taken() -> None:

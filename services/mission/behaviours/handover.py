@@ -105,6 +105,8 @@ class FeelPull(MissionBehaviour):
                 if self.baseline
                 else "the arm still settling"
             )
+            if self.baseline and detector.swing_n >= 0.5 * s.pull_detector.force_n:
+                felt += ", under a pull's but more than the arm's own swings: they may have it"
             return self.fail(
                 "grasp_lost", f"the object slipped out while presenting it (no pull felt: {felt})"
             )
