@@ -209,7 +209,10 @@ class GraspPlan:
 def grasp_plan(world: WorldDescription, artifact_id: str = "") -> GraspPlan:
     """Stand `D_OPT_M` back from the artifact (the world's first unless named) across the
     table edge nearest to it."""
-    bottle_truth = next(a for a in world.artifacts if a.id == (artifact_id or a.id))
+    named = [a for a in world.artifacts if a.id == (artifact_id or a.id)]
+    if not named:
+        raise ValueError(f"no {artifact_id} here: {', '.join(a.id for a in world.artifacts)}")
+    bottle_truth = named[0]
     table = next(o for o in world.obstacles if o.id == bottle_truth.surface_id)
     c, s = math.cos(table.yaw), math.sin(table.yaw)
     R = np.array([[c, -s], [s, c]])
@@ -351,6 +354,8 @@ def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: flo
     a turn on the spot at `wz` rad/s; held when it is still in the jaws at the end."""
     world = generate_world(seed, world_name)
     plan = grasp_plan(world, artifact)
+    if next(a for a in world.artifacts if a.id == plan.bottle_id).object_class == "box":
+        raise ValueError(f"{plan.bottle_id}: the side grasp here is a cylinder's")
     start = RobotStart(float(plan.q0[0]), float(plan.q0[1]), yaw_of_quat_xyzw(plan.q0[3:7]))
     model = compile_scene(msgspec.structs.replace(world, robot_start=start))
     data = mujoco.MjData(model)
@@ -425,7 +430,7 @@ def main() -> None:
     parser.add_argument("--vx", type=float, default=0.5)
     parser.add_argument("--wz", type=float, default=0.8)
     parser.add_argument("--knock", type=float, default=20.0, help="carry: N along world +y")
-    parser.add_argument("--world", default="small")
+    parser.add_argument("--world", default="small", help="carry: small or hall")
     parser.add_argument("--artifact", default="", help="carry: its id (the world's first)")
     args = parser.parse_args()
     if args.mode == "stand":
