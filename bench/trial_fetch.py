@@ -30,6 +30,7 @@ import json
 import math
 import tempfile
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,7 @@ import numpy as np
 
 from bench.eval.judge import MissionRecord, stage_times, static_contacts
 from bench.eval.run import read_map, read_world, start_gate_overrides, watch_mission
-from bench.eval.targets import seeded_pair
+from bench.eval.targets import Pair, seeded_pair
 from common import robot
 from common.access import services_on
 from common.bus import Bus
@@ -57,7 +58,7 @@ from common.messages.base import NS_PER_S
 from common.messages.mission import MissionRequest
 from common.messages.sim import HandoverTaken, ObjectDropped, RobotState, StateTruth
 from common.messages.wbc import WbcStatus
-from common.messages.world import Artifact
+from common.messages.world import Artifact, WorldDescription
 from deploy.stack import ProcessStack
 from services.mission.grasp_pose import plan_error
 from services.wbc.reach import side_grasp
@@ -226,15 +227,35 @@ def held_after_pick(record: MissionRecord, samples: list[WbcStatus]) -> bool | N
     return after is not None and after.held and not dropped
 
 
+def request_ids(
+    world: WorldDescription, seeded: Callable[[], Pair], asked: tuple[str, str] = ("", "")
+) -> tuple[str, str]:
+    """The fetch's object and person: `asked` (ids of the world's, each or both; a shift's
+    failing pair looked at again), else the small world's `OBJECT` for `PERSON`, else
+    `dume eval`'s pair for the world (`seeded()`). An id the world lacks is a ValueError."""
+    if all(asked):
+        obj, person = asked
+    else:
+        pair = Pair(OBJECT, PERSON, math.nan) if world.name == "small" else seeded()
+        obj, person = asked[0] or pair.object, asked[1] or pair.person
+    if obj not in {a.id for a in world.artifacts}:
+        raise ValueError(f"no artifact {obj} in {world.name} seed {world.seed}")
+    if person not in {p.id for p in world.people}:
+        raise ValueError(f"no person {person} in {world.name} seed {world.seed}")
+    return obj, person
+
+
 def run_fetch(
     seed: int = 1,
     overrides: Overrides | None = None,
     samples_path: Path | None = None,
     hosts: Overrides | None = None,
     world_name: str = "small",
+    asked: tuple[str, str] = ("", ""),
 ) -> Figures:
-    """One fetch on a fresh stack; its figures (JSON-ready). The small world's request
-    is `OBJECT` for `PERSON`; another world's `dume eval`'s (`seeded_pair`). `hosts`: the
+    """One fetch on a fresh stack; its figures (JSON-ready). The request is `asked`
+    (`request_ids`), else the small world's `OBJECT` for `PERSON`, another world's
+    `dume eval`'s (`seeded_pair`). `hosts`: the
     stack split over two hosts (`zenoh.side`), with these link settings (`zenoh.certs`,
     `zenoh.link_port`): two routers, the map behind the link; the trial's own session
     on the robot's router, where the world's truth is."""
@@ -258,10 +279,7 @@ def run_fetch(
             stack = split[0]
         bus, keys = stack.bus, stack.keys
         world = read_world(bus, timeout_s=30.0)
-        obj, person = OBJECT, PERSON
-        if world_name != "small":
-            pair = seeded_pair(*read_map(bus), seed)
-            obj, person = pair.object, pair.person
+        obj, person = request_ids(world, lambda: seeded_pair(*read_map(bus), seed), asked)
         out["request"] = f"{obj} for {person}"
         truth = next(a for a in world.artifacts if a.id == obj)
         request = MissionRequest(request_id=f"fetch-{seed}", object=obj, person=person)

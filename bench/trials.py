@@ -300,10 +300,12 @@ def run_trial(
     if name == "fetch":  # the real mission over the full stack, with truth probes
         from bench.trial_fetch import run_fetch
 
-        world = (options or {}).get("world") or "small"
+        opts = options or {}
+        world = opts.get("world") or "small"
         samples = REPO_ROOT / "var" / "trials" / f"fetch-{world}-{seed}.handover.json"
         samples.parent.mkdir(parents=True, exist_ok=True)
-        return run_fetch(seed, overrides, samples, world_name=world) | {
+        asked = (str(opts.get("object") or ""), str(opts.get("person") or ""))
+        return run_fetch(seed, overrides, samples, world_name=world, asked=asked) | {
             "handover_samples": str(samples.relative_to(REPO_ROOT))
         }
     out: Figures = {"trial": name, "world": world, "world_seed": seed}

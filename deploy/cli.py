@@ -671,7 +671,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     options: dict[str, object] = {
         "world": args.world, "count": args.count, "yaw": args.yaw,
         "services": args.services, "phases": args.phases, "signals": args.signals,
-        "minutes": args.minutes,
+        "minutes": args.minutes, "object": args.object, "person": args.person,
     }  # fmt: skip
     if args.which == "goto":
         if len(args.xy) != 2:
@@ -988,6 +988,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="faults: kill,stop,slow (all three; slow goes with the service `client`)",
     )
     p.add_argument("--minutes", type=float, default=None, help="soak: wall minutes (120)")
+    p.add_argument("--object", default="", help="fetch: an artifact's id (the world's pair)")
+    p.add_argument("--person", default="", help="fetch: a person's id (the world's pair)")
     p.add_argument("--world-seed", type=seed_number, default=None, help="default: the trial's own")
     p.add_argument("--wbc-period", type=float, default=0.002, help="the controller's period, s")
     p.set_defaults(func=cmd_trial)

@@ -1,5 +1,6 @@
 """The fetch trial's truth probes, on a made-up run: the approach error from the
-trajectory, the pull felt against the object taken, held after the pick."""
+trajectory, the pull felt against the object taken, held after the pick; and which
+request it makes."""
 
 from __future__ import annotations
 
@@ -8,12 +9,14 @@ import math
 import pytest
 
 from bench.eval.judge import MissionRecord
-from bench.trial_fetch import approach_errors, handover_figures, held_after_pick
+from bench.eval.targets import Pair
+from bench.trial_fetch import approach_errors, handover_figures, held_after_pick, request_ids
 from common import robot
 from common.messages.mission import MissionRequest, MissionStatus
 from common.messages.sim import HandoverTaken
 from common.messages.wbc import GoalStatus, WbcStatus
 from common.messages.world import Artifact, Cylinder
+from services.sim.world import generate_world
 
 S = 1_000_000_000
 
@@ -66,3 +69,20 @@ def test_the_pull_is_felt_at_the_new_release_goal_not_at_the_jaws_opened_for_the
     assert [w["taken"] for w in window] == [False, False, True, True]
     assert held_after_pick(rec, samples)
     assert not held_after_pick(rec, [_status(15.0, [], held=False)])
+
+
+def test_the_request_is_the_one_asked_else_the_worlds_own_pair() -> None:
+    """Asked ids win (a shift's failing pair looked at again); else the small world's
+    bottle_1 for person_1, a hall's `dume eval` pair; an id the world lacks is refused."""
+    hall, small = generate_world(5, "hall"), generate_world(0, "small")
+    seeded = lambda: Pair("bottle_1", "person_1", 2.0)  # noqa: E731
+    assert request_ids(hall, seeded, ("box_1", "person_5")) == ("box_1", "person_5")
+    assert request_ids(hall, seeded) == ("bottle_1", "person_1")
+    assert request_ids(hall, seeded, ("box_1", "")) == ("box_1", "person_1")
+    assert request_ids(small, lambda: pytest.fail("the small world has its own pair"))[0] == (
+        "bottle_1"
+    )
+    with pytest.raises(ValueError, match="no artifact can_9 in hall seed 5"):
+        request_ids(hall, seeded, ("can_9", "person_5"))
+    with pytest.raises(ValueError, match="no person person_99"):
+        request_ids(hall, seeded, ("box_1", "person_99"))
