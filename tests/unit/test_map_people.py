@@ -392,6 +392,36 @@ def test_one_stray_detection_does_not_drag_a_standing_person_but_two_move_them()
     assert np.linalg.norm(seeded.xy - [5.9, 2.8]) < 0.1
 
 
+def test_a_seed_not_seen_yet_does_not_outbid_the_person_standing_where_the_detection_is() -> None:
+    """Hall seed 8's shift: a seeded person_3, never seen (no colours), 1.05 m from
+    person_2, who walked up and stopped; person_2's detections, 0.01 m from them in
+    colours a little off theirs, went to person_3 (no colour cost against 4 × 0.19), who
+    jumped onto them. A colourless person is taken as `UNKNOWN_APPEARANCE` off: person_2
+    keeps their detections, person_3 stays where the map had them."""
+    rng = np.random.default_rng(8)
+    tracker = PeopleTracker(IdBook(), SemanticMapSettings())
+    seeded = Track(class_name="person", kind="person", xy=np.array([-6.39, 6.01]),
+                   cov=np.eye(2) * 0.01, z=0.0, source="seed-from-world")  # fmt: skip
+    seeded.id = "person_3"
+    tracker.add(seeded, 0)
+    look = _hist(20, rng)
+    t = 60 * S  # a minute unseen: σ at its cap, a detection 1 m off is within the gate
+    person_2 = Track(class_name="person", kind="person", xy=np.array([-5.90, 6.97]),
+                     cov=np.eye(2) * 0.01, z=0.0, source="perception", appearance=look,
+                     last_seen_ns=t - DT_NS, hits=40)  # fmt: skip
+    person_2.id = "person_2"  # tracked as they walked up, seen a frame ago
+    tracker.add(person_2, t - DT_NS)
+    off = 0.7 * look + 0.3 * _hist(26, rng)  # their colours, a little off
+    off /= off.sum()
+    assert 0.15 < bhattacharyya(look, off) < 0.3  # as person_2's own were (0.04-0.19)
+    for k in range(4):
+        there = Observation("person", np.array([-5.90, 6.98]), 0.0, 0.05, 0.9, off, 2.0)
+        tracker.update(t + k * DT_NS, [there])
+    assert np.linalg.norm(seeded.xy - [-6.39, 6.01]) < 0.05, "person_3 not moved"
+    assert person_2.last_seen_ns == t + 3 * DT_NS, "person_2 took them"
+    assert {tr.id for tr in tracker.confirmed} == {"person_2", "person_3"}
+
+
 def _known(
     tracker: PeopleTracker, looks: list[np.ndarray], places: list[tuple[float, float]]
 ) -> int:
