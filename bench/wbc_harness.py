@@ -301,13 +301,19 @@ class GraspScript:
         )
 
 
-def run_grasp(seed: int) -> Figures:
-    world = generate_world(seed, "small")
-    plan = grasp_plan(world)
+def grasp_scene(world: WorldDescription, plan: GraspPlan) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The world with the robot standing at the plan's stance, ready to step."""
     start = RobotStart(float(plan.q0[0]), float(plan.q0[1]), yaw_of_quat_xyzw(plan.q0[3:7]))
     model = compile_scene(msgspec.structs.replace(world, robot_start=start))
     data = mujoco.MjData(model)
     set_initial_pose(model, data, plan.q0)
+    return model, data
+
+
+def run_grasp(seed: int) -> Figures:
+    world = generate_world(seed, "small")
+    plan = grasp_plan(world)
+    model, data = grasp_scene(world, plan)
     script = GraspScript(plan)
     tcp_site = model.site(robot.TCP_FRAME).id
     bottle = model.body(plan.bottle_id).id
@@ -356,10 +362,7 @@ def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: flo
     plan = grasp_plan(world, artifact)
     if next(a for a in world.artifacts if a.id == plan.bottle_id).object_class == "box":
         raise ValueError(f"{plan.bottle_id}: the side grasp here is a cylinder's")
-    start = RobotStart(float(plan.q0[0]), float(plan.q0[1]), yaw_of_quat_xyzw(plan.q0[3:7]))
-    model = compile_scene(msgspec.structs.replace(world, robot_start=start))
-    data = mujoco.MjData(model)
-    set_initial_pose(model, data, plan.q0)
+    model, data = grasp_scene(world, plan)
     script = GraspScript(plan)
     grasp_end = script.starts["shake"]
     starts, t = {}, grasp_end
