@@ -16,12 +16,22 @@ limits (as the sim will) and calls `mj_step`. Modes:
   slip is 20 N), then a turn on the spot at `--wz`; held when it is still in the jaws.
   Hall seed 0's can_1, knocked at 20-80 N and grasped 0-5 cm above its middle, stays in
   the jaws through 6 s at 0.8 rad/s (as at 0): the turn's rate alone does not shake a
-  knocked can out.
+  knocked can out. `--walk S`: the turn is an about-face, then S s of walking at
+  (`--vx`, 0, `--walk-wz`), the object's creep along the jaws (toward their tips) and
+  the jaw's closing reported (`--vx 0`: turning on the spot, clear of the furniture).
+  Walking creeps a cylinder out of the jaws' wedge: hall seed 10's can_3 (r 3.2 cm),
+  turning on the spot at 0.5 rad/s for 60 s (`--world hall --seed 10 --artifact can_3
+  --knock 0 --walk 60 --vx 0 --walk-wz 0.5`), crept 13 mm toward the tips and 7 mm
+  down, the jaw closing 0.10 rad; in the shift it fell so after a 78 s carry (a search
+  for the person, then a turn). Not a slip at the friction's limit: with a
+  pad friction of 1.6 (1.2), an impratio of 1000 (100), MuJoCo's noslip pass, rolling
+  friction, a carry effort of 10 N m (5) or a position hold on the jaw it crept as fast
+  or fell sooner (a probe on the same can, 30-60 s walks).
 
 The last line printed is a JSON object of figures (fell, distance, drift, base height and
 attitude stats, controller tick p50/p99 in µs split by phase, real-time factor).
 Usage: python -m bench.wbc_harness MODE [--seconds S] [--seed N] (carry: [--world W]
-[--artifact ID] [--knock N] [--wz RATE])
+[--artifact ID] [--knock N] [--wz RATE] [--walk S --vx V --walk-wz RATE])
 """
 
 from __future__ import annotations
@@ -352,12 +362,23 @@ def run_grasp(seed: int) -> Figures:
 #: turn on the spot, a stand; the turn's rate ramps at the navigator's ωz acceleration.
 CARRY_PHASES = {"stow": 2.5, "steady": 1.0, "knock": 0.1, "wait": 1.0, "turn": 6.0, "stop": 2.0}
 TURN_ACCEL = 1.5  # rad/s², navigation's controller a_max
+WALK_ACCEL = 0.8  # m/s², navigation's controller a_max
 
 
-def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: float) -> Figures:
+def run_carry(
+    seed: int,
+    world_name: str,
+    artifact: str,
+    knock_n: float,
+    wz: float,
+    walk: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> Figures:
     """Grasp (as `grasp`, no shake), fold to `stow` on a quintic, then a knock of `knock_n`
     N along world +y for 0.1 s on the object (the shift eval's slip), a second's stand, and
-    a turn on the spot at `wz` rad/s; held when it is still in the jaws at the end."""
+    a turn on the spot at `wz` rad/s; held when it is still in the jaws at the end. `walk`
+    (seconds, vx m/s, ωz rad/s): the turn an about-face, then that walk (the module
+    docstring); the object's creep along the jaws (the stator's x) and the jaw's closing
+    over it are reported."""
     world = generate_world(seed, world_name)
     plan = grasp_plan(world, artifact)
     if next(a for a in world.artifacts if a.id == plan.bottle_id).object_class == "box":
@@ -365,8 +386,14 @@ def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: flo
     model, data = grasp_scene(world, plan)
     script = GraspScript(plan)
     grasp_end = script.starts["shake"]
+    walk_s, walk_vx, walk_wz = walk
+    phases = dict(CARRY_PHASES)
+    if walk_s > 0.0:  # an about-face, the walk, then the stand
+        phases["turn"] = math.pi / abs(wz)
+        phases = {**phases, "walk": walk_s}
+        phases["stop"] = phases.pop("stop")
     starts, t = {}, grasp_end
-    for name, duration in CARRY_PHASES.items():
+    for name, duration in phases.items():
         starts[name] = t
         t += duration
     tcp_site = model.site(robot.TCP_FRAME).id
@@ -375,6 +402,8 @@ def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: flo
     q_lift: list[FloatArray] = []
     gap: dict[str, float] = {}
     knocked: list[FloatArray] = []  # the object's place as the knock began, then its sway
+    walked: list[tuple[float, float]] = []  # the walk's (object along the jaws, jaw angle)
+    jaw = model.joint(robot.GRIPPER_JOINT).qposadr[0]
 
     def refs_at(t: float, state: WbcState) -> WbcReferences:
         T_tcp = np.eye(4)
@@ -392,13 +421,19 @@ def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: flo
             data.xfrc_applied[body, 1] = knock_n
         if phase in ("knock", "wait"):
             knocked.append(data.xpos[body].copy())
-        w = 0.0
+        w, vx = 0.0, 0.0
         if phase == "turn":
             w = min(abs(wz), TURN_ACCEL * (t - starts["turn"])) * math.copysign(1.0, wz)
-        elif phase == "stop":
+        elif phase == "walk":
+            tw = t - starts["walk"]
+            vx, w = min(walk_vx, WALK_ACCEL * tw), min(abs(walk_wz), TURN_ACCEL * tw)
+            w = math.copysign(w, walk_wz)
+            along = T_tcp[:3, :3].T @ (data.xpos[body] - T_tcp[:3, 3])
+            walked.append((float(along[0]), float(data.qpos[jaw])))
+        elif phase == "stop" and not walked:
             w = max(0.0, abs(wz) - TURN_ACCEL * (t - starts["stop"])) * math.copysign(1.0, wz)
         return WbcReferences(
-            cmd_vel=np.array([0.0, 0.0, w]),
+            cmd_vel=np.array([vx, 0.0, w]),
             arm_posture=q_lift[0] + s * (stow - q_lift[0]),
             gripper_angle=robot.GRIPPER_OPEN,
             gripper_effort=GRIP_CARRY_NM,
@@ -418,6 +453,14 @@ def run_carry(seed: int, world_name: str, artifact: str, knock_n: float, wz: flo
         ),
         "gripper_angle_rad": round(float(log_gripper(model, data)), 3),
     }
+    if walked:
+        held_walk = [w for w in walked if abs(w[0]) < 0.05] or walked[:1]  # between the pads
+        out |= {
+            "walk_s": walk_s, "walk_vx": walk_vx, "walk_wz": walk_wz,
+            "walk_creep_m": round(held_walk[-1][0] - walked[0][0], 4),
+            "walk_jaw_closed_rad": round(held_walk[-1][1] - walked[0][1], 4),
+            "walk_held_s": round(len(held_walk) * mjcf.TIMESTEP_S, 1),
+        }  # fmt: skip
     return out
 
 
@@ -435,6 +478,8 @@ def main() -> None:
     parser.add_argument("--knock", type=float, default=20.0, help="carry: N along world +y")
     parser.add_argument("--world", default="small", help="carry: small or hall")
     parser.add_argument("--artifact", default="", help="carry: its id (the world's first)")
+    parser.add_argument("--walk", type=float, default=0.0, help="carry: s of walking after")
+    parser.add_argument("--walk-wz", type=float, default=0.5, help="carry: the walk's rad/s")
     args = parser.parse_args()
     if args.mode == "stand":
         out = run_walk(args.seconds or 30.0, (0.0, 0.0, 0.0), 0.0)
@@ -445,7 +490,8 @@ def main() -> None:
     elif args.mode == "strafe":
         out = run_walk(args.seconds or 20.0, (0.0, 0.2, 0.0), 0.0)
     elif args.mode == "carry":
-        out = run_carry(args.seed, args.world, args.artifact, args.knock, args.wz)
+        walk = (args.walk, args.vx if args.walk else 0.0, args.walk_wz)
+        out = run_carry(args.seed, args.world, args.artifact, args.knock, args.wz, walk)
     else:
         out = run_grasp(args.seed)
     out["mode"] = args.mode
