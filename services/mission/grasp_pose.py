@@ -10,8 +10,10 @@ than the paper's identity rotation:
   reaches it — low grasps come from a little above; y (the jaw pivot) up along the
   cylinder, so z (fixed jaw → moving jaw) is horizontal and the jaws close across it —
   `services.wbc.reach.side_grasp`'s frame. Held low on the body (a bottle's neck is
-  narrow), clear of the surface it stands on, a bottle 1 cm deep in the jaws
-  (`SIDE_GRASP_DEPTH`).
+  narrow), clear of the surface it stands on, 1 cm deep in the jaws
+  (`SIDE_GRASP_DEPTH`). One so wide that the fixed pad would pass it with less than
+  `SIDE_PAD_ROOM_M` comes in wide open with its axis toward the moving jaw and closes
+  in to the same pose, as a box does (`cylinder_offset`).
 - top grasp (boxes): x down (tilted `top_tilt_rad` away from the robot, for reach), z
   across the box's shorter side, perpendicular to its long faces (the sign nearer the
   line of sight: the least wrist roll from the arm's natural pose), y = z × x; the TCP
@@ -60,8 +62,24 @@ SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 #: 3's bottle (r 2.4 cm), its axis fitted 1.4 cm short, sat 3 mm from that pad's end,
 #: crept 7 mm out over a 45 s carry and fell as the arm presented it. A bottle 1 cm
 #: deeper creeps no faster (`tests/unit/test_robot.py`) and a 3 cm one still clears the
-#: open jaw by 6.7 mm on the way in; cans (short and wide, up to 3.3 cm) stay where fitted.
-SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.0}
+#: open jaw by 6.7 mm on the way in. A can creeps out as a walk goes on (hall seed 10's
+#: 6.5 cm can_3 turning on the spot: `bench.wbc_harness` carry --walk): held at its axis
+#: it fell after 66 s, 1 cm deeper after 106 s, 2 cm after 118 s; 1 cm leaves the
+#: widest can 12.9 mm from the palm on the way in, room for a fit that long.
+SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.01}
+#: m: the fixed jaw's pad from the TCP, across the jaws (3.5 cm).
+_FIXED_PAD = next(b for b in robot.GRIPPER_BOXES if b.name == "gripper_jaw_fixed")
+FIXED_PAD_FROM_TCP_M = float(
+    robot.T_STATOR_TCP[2, 3] - (_FIXED_PAD.center[2] + _FIXED_PAD.half_size[2])
+)
+#: m: the least room a side grasp of a cylinder leaves between the fixed pad and the
+#: fitted surface on the way in. Centred, a 6.5 cm can had 2.5 mm: hall seed 10's
+#: shift fitted can_1 1.5 cm toward the fixed jaw, whose tip met the can and pushed it
+#: 3.5-4 cm along the bench at each of three tries (the jaw closed on nothing twice,
+#: then the reach stopped 17 cm short). A cylinder with less room comes in wide open with
+#: its axis that much toward the moving jaw, then closes in to the pose it had centred
+#: (`cylinder_offset`), as a box does.
+SIDE_PAD_ROOM_M = 0.015
 TOP_GRASP_CLASSES = ("box",)
 #: How far (m) toward the moving jaw a top grasp comes down with the box's middle, in the
 #: jaws opened wide (`robot.GRIPPER_WIDE`), and how far it then moves over (`closed_in`)
@@ -353,9 +371,13 @@ def grasp_from_detection(
             centre[:2] -= max(0.0, half_long - BOX_SIDE_DEPTH_M) * along
             beyond = 2.0 * half_long - min(BOX_SIDE_DEPTH_M, half_long)
             R = side_rotation(along, GRASP_PITCH_RAD[1])
-    wide = det.class_name in TOP_GRASP_CLASSES  # a box, from above or from the side
-    if wide:  # in the wide-open jaws, the box's middle toward the moving jaw
-        centre -= TOP_GRASP_OFFSET_M * R[:, 2]
+    if det.class_name in TOP_GRASP_CLASSES:  # a box, from above or from the side
+        offset, close_in = TOP_GRASP_OFFSET_M, TOP_CLOSE_IN_M
+    else:  # a cylinder: as centred, unless the fixed pad has too little room on the way in
+        offset = close_in = cylinder_offset(width)
+    wide = offset > 0.0
+    if wide:  # in the wide-open jaws, the object's middle toward the moving jaw
+        centre -= offset * R[:, 2]
     return GraspPlan(
         H=make_T(R, centre),
         frame="world" if world else "base",
@@ -364,9 +386,15 @@ def grasp_from_detection(
         kind=kind,
         stamp_ns=stamp_ns,
         jaw="wide" if wide else "open",
-        close_in_m=TOP_CLOSE_IN_M if wide else 0.0,
+        close_in_m=close_in,
         beyond_m=max(0.0, beyond),
     )
+
+
+def cylinder_offset(width_m: float) -> float:
+    """How far (m) toward the moving jaw a side grasp brings a cylinder `width_m` across
+    in, so the fixed pad passes it with `SIDE_PAD_ROOM_M` (0: centred, room enough)."""
+    return max(0.0, SIDE_PAD_ROOM_M - (FIXED_PAD_FROM_TCP_M - 0.5 * width_m))
 
 
 @functools.cache

@@ -256,8 +256,8 @@ def build_tree(ctx: Context) -> Sequence:
                 _seq(
                     "grasp_it",
                     GraspReach(ctx, lambda b: b.get(GRASP_PLAN).reach(), st[3]),
-                    # a top grasp comes down with room, then brings the fixed jaw to the
-                    # box (stopped short by it: close anyway)
+                    # a box or a wide cylinder comes in with room, then brings the fixed
+                    # jaw to it (stopped short by it: close anyway)
                     Selector("closed_in", memory=True, children=[
                         NoCloseIn(ctx, st[3]),
                         ArmAction(ctx, "close_in", lambda b: b.get(GRASP_PLAN).closed_in().reach(),

@@ -15,11 +15,14 @@ from common.messages.wbc import Reach
 from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
     BOX_SIDE_DEPTH_M,
+    FIXED_PAD_FROM_TCP_M,
     SIDE_GRASP_DEPTH,
+    SIDE_PAD_ROOM_M,
     TOP_CLOSE_IN_M,
     TOP_GRASP_OFFSET_M,
     GraspParams,
     GraspPoseError,
+    cylinder_offset,
     grasp_from_detection,
     plan_error,
 )
@@ -80,9 +83,10 @@ def test_a_side_grasp_approaches_from_the_shoulder_and_closes_across_the_cylinde
     bearing: float, with_base: bool
 ) -> None:
     for T_wb in BASES:
-        # High enough (0.93 m) for the arm to hold it level.
+        # High enough (0.93 m) for the arm to hold it level; 4 cm across, narrow enough
+        # to come in centred (the fixed pad passes it with 1.5 cm).
         axis = (D_OPT_M * math.cos(bearing), D_OPT_M * math.sin(bearing), 0.4)
-        det = detection(T_wb, axis)
+        det = detection(T_wb, axis, extent=(0.04, 0.04, 0.2))
         plan = grasp_from_detection(det, STAMP, T_wb if with_base else None)
         assert plan.kind == "side" and plan.stamp_ns == STAMP
         assert plan.frame == ("world" if with_base else "base")
@@ -112,6 +116,42 @@ def test_a_side_grasp_approaches_from_the_shoulder_and_closes_across_the_cylinde
         assert reach.frame == plan.frame and reach.stamp_ns == STAMP
         assert np.allclose(np.array(reach.H).reshape(4, 4), plan.H)
         assert reach.pregrasp_m == plan.pregrasp_m > 0.0
+
+
+@pytest.mark.parametrize("width", [0.05, 0.058, 0.065])
+def test_a_wide_cylinder_comes_in_wide_open_toward_the_moving_jaw_and_closes_in(
+    width: float,
+) -> None:
+    """Hall seed 10's can_1 (6.5 cm): centred, the fixed pad passed it with 2.5 mm, the
+    fit was 1.5 cm toward that jaw, and its tip pushed the can along the bench."""
+    T_wb = BASES[1]
+    det = detection(T_wb, (D_OPT_M, 0.1, 0.4), class_name="can", extent=(width, width, 0.12))
+    plan = grasp_from_detection(det, STAMP, T_wb)
+    offset = cylinder_offset(width)
+    assert offset == pytest.approx(SIDE_PAD_ROOM_M - (FIXED_PAD_FROM_TCP_M - width / 2))
+    assert offset > 0.0 and plan.jaw == "wide" and plan.reach().jaw == "wide"
+    H = plan.in_world(T_wb)
+    closing = H[:3, 2]  # fixed jaw -> moving jaw
+    axis_w = np.array(det.axis_in_world)
+    # On the way in, the fixed pad's plane passes the fitted surface with the room asked.
+    pad = H[:3, 3] - FIXED_PAD_FROM_TCP_M * closing
+    room = float((axis_w - pad) @ closing) - width / 2
+    assert room == pytest.approx(SIDE_PAD_ROOM_M, abs=1e-9)
+    # Then it closes in by the offset: the TCP where a centred grasp holds it, on the
+    # line of sight `SIDE_GRASP_DEPTH` past the axis.
+    assert plan.close_in_m == pytest.approx(offset)
+    H_in = plan.closed_in().in_world(T_wb)
+    deeper = SIDE_GRASP_DEPTH["can"] * H[:2, 0] / np.linalg.norm(H[:2, 0])
+    assert np.allclose(H_in[:2, 3], axis_w[:2] + deeper, atol=1e-9)
+    assert np.allclose(H_in[:3, :3], H[:3, :3])
+    assert pytest.approx(0.035) == FIXED_PAD_FROM_TCP_M
+
+
+def test_a_narrow_cylinder_is_reached_centred() -> None:
+    det = detection(BASES[0], (D_OPT_M, 0.0, 0.4), class_name="can", extent=(0.04, 0.04, 0.12))
+    plan = grasp_from_detection(det, STAMP, BASES[0])
+    assert cylinder_offset(0.04) == 0.0
+    assert plan.jaw == "open" and plan.close_in_m == 0.0
 
 
 def test_a_base_plan_is_the_world_plan_seen_from_the_level_base() -> None:

@@ -32,7 +32,12 @@ from common.robot_description import (
     gripper_stl_path,
     read_stl,
 )
-from services.mission.grasp_pose import SIDE_GRASP_DEPTH, TOP_GRASP_OFFSET_M, GraspParams
+from services.mission.grasp_pose import (
+    SIDE_GRASP_DEPTH,
+    TOP_GRASP_OFFSET_M,
+    GraspParams,
+    cylinder_offset,
+)
 from services.sim import mjcf
 
 PinModels = tuple[pin.Model, pin.GeometryModel]
@@ -316,40 +321,77 @@ def test_a_6cm_bottle_fits_between_the_open_jaws_and_the_closed_jaws_hit_it(
     assert closed["gripper_jaw_moving"] < 0.0, closed
 
 
+def object_in_jaws(
+    name: str, type_: mujoco.mjtGeom, size: list[float]
+) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The robot standing and a mocap body holding one geom `name`, to place in its jaws
+    (`jaw_clearance`)."""
+    spec = mjcf.robot_spec()
+    spec.body("base").pos = [0.0, 0.0, robot.STAND_BASE_HEIGHT_M]
+    spec.worldbody.add_body(name=name, mocap=True).add_geom(name=name, type=type_, size=size)
+    model = spec.compile()
+    return model, mujoco.MjData(model)
+
+
+def jaw_clearance(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    name: str,
+    jaw: float,
+    at_tcp: tuple[float, float, float],
+    R_rel: np.ndarray,
+) -> dict[str, float]:
+    """Distance (m) from the mocap object `name`, at `at_tcp` in the TCP's frame turned by
+    `R_rel` from it, to each gripper geom and the wrist, the arm in `ready`, the jaw at
+    `jaw`."""  # fmt: skip
+    q = robot.standing_q("ready")
+    q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = jaw
+    data.qpos[mjcf.mj_indices(model).qpos] = mjcf.q_pin_to_mj(q)
+    mujoco.mj_forward(model, data)
+    tcp = data.site(robot.TCP_FRAME)
+    R = tcp.xmat.reshape(3, 3)
+    data.mocap_pos[0] = tcp.xpos + R @ np.array(at_tcp)
+    data.mocap_quat[0] = quat_xyzw_to_wxyz(matrix_to_quat_xyzw(R @ R_rel))
+    mujoco.mj_forward(model, data)
+    g = model.geom(name).id
+    names = [b.name for b in GRIPPER_BOXES] + ["link06_0"]
+    return {n: mujoco.mj_geomDistance(model, data, g, model.geom(n).id, 0.2, None) for n in names}
+
+
 def test_a_box_taken_from_above_clears_both_wide_open_jaws() -> None:
     """`grasp_pose.TOP_GRASP_OFFSET_M`: hall seed 0's 6.3 cm box, 3 cm into the jaws, had
     3.5 mm to the fixed jaw and 2.8 mm to the open moving one; opened wide, its middle
     moved toward the moving jaw, `top_depth_m` (4.5 cm) into the jaws, it clears the
     fixed jaw by 15.5 mm and the moving one by 7 mm."""
-    spec = mjcf.robot_spec()
-    spec.body("base").pos = [0.0, 0.0, robot.STAND_BASE_HEIGHT_M]
-    box = spec.worldbody.add_body(name="box", mocap=True)
-    box.add_geom(name="box", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.0665, 0.0455, 0.0315])
-    model = spec.compile()
-    data = mujoco.MjData(model)
+    # its height along the TCP's x, 6.3 cm across its z
+    model, data = object_in_jaws("box", mujoco.mjtGeom.mjGEOM_BOX, [0.0665, 0.0455, 0.0315])
+    down = 0.0665 - GraspParams().top_depth_m
 
     def clearance(jaw: float, offset_m: float) -> dict[str, float]:
-        q = robot.standing_q("ready")
-        q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = jaw
-        data.qpos[mjcf.mj_indices(model).qpos] = mjcf.q_pin_to_mj(q)
-        mujoco.mj_forward(model, data)
-        tcp = data.site(robot.TCP_FRAME)
-        R = tcp.xmat.reshape(3, 3)  # the box's height along x, its 6.3 cm across z
-        top_depth = GraspParams().top_depth_m
-        data.mocap_pos[0] = tcp.xpos + (0.0665 - top_depth) * R[:, 0] + offset_m * R[:, 2]
-        data.mocap_quat[0] = quat_xyzw_to_wxyz(matrix_to_quat_xyzw(R))
-        mujoco.mj_forward(model, data)
-        g = model.geom("box").id
-        return {
-            b.name: mujoco.mj_geomDistance(model, data, g, model.geom(b.name).id, 0.2, None)
-            for b in GRIPPER_BOXES
-        }
+        return jaw_clearance(model, data, "box", jaw, (down, 0.0, offset_m), np.eye(3))
 
     before = clearance(robot.GRIPPER_OPEN, 0.0)
     assert before["gripper_jaw_fixed"] < 0.004 and before["gripper_jaw_moving"] < 0.004
     after = clearance(robot.GRIPPER_WIDE, TOP_GRASP_OFFSET_M)
     assert after["gripper_jaw_fixed"] > 0.015 and after["gripper_jaw_moving"] > 0.007, after
     assert min(after.values()) > 0.007, after
+
+
+@pytest.mark.parametrize("radius", [0.026, 0.0325])
+def test_a_wide_can_comes_in_clear_of_both_wide_open_jaws(radius: float) -> None:
+    """`grasp_pose.cylinder_offset`: a can 5.2-6.5 cm across, 1 cm deeper in the jaws than
+    the TCP (`SIDE_GRASP_DEPTH`), its axis toward the moving jaw, clears every gripper
+    geom with the jaws opened wide; once closed in it sits on the fixed pad."""
+    model, data = object_in_jaws("can", mujoco.mjtGeom.mjGEOM_CYLINDER, [radius, 0.06, 0.0])
+    depth, up = SIDE_GRASP_DEPTH["can"], rot_x(-math.pi / 2)  # its axis along the TCP's y
+
+    def clearance(across_m: float) -> dict[str, float]:
+        return jaw_clearance(model, data, "can", robot.GRIPPER_WIDE, (-depth, 0.0, across_m), up)
+
+    coming = clearance(cylinder_offset(2 * radius))
+    assert min(coming.values()) > 0.012, coming  # 12.9 mm to the palm at 6.5 cm
+    closed_in = clearance(0.0)
+    assert 0.0 <= closed_in["gripper_jaw_fixed"] < 0.01, closed_in
 
 
 def hold_bottle(

@@ -17,8 +17,9 @@
   (`Context.taken`: the map marks the entry there missing; hall seed 0's shift picked
   bottle_1 for a phantom bottle_8 beside it, and the next request walked to bottle_1's
   stale entry and looked at nothing).
-- `NoCloseIn`: SUCCESS when the grasp plan has no close-in move (a side grasp), so the
-  tree skips it; FAILURE when it has one (a top grasp: `GraspPlan.closed_in`).
+- `NoCloseIn`: SUCCESS when the grasp plan has no close-in move (a narrow cylinder's
+  side grasp), so the tree skips it; FAILURE when it has one (a box, a wide cylinder:
+  `GraspPlan.closed_in`).
 """
 
 from __future__ import annotations
