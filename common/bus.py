@@ -534,10 +534,16 @@ class AliveWatch:
         with self._cond:
             return set(self._alive)
 
-    def wait_for(self, keys: set[str], timeout_s: float) -> None:
+    def wait_for(
+        self, keys: set[str], timeout_s: float, stop: threading.Event | None = None
+    ) -> None:
+        """Return once every key is alive; `WaitTimeout` after `timeout_s`, or within a
+        second or two of `stop` being set (a service told to stop while it waits)."""
         deadline = time.monotonic() + timeout_s
         while True:
             left = deadline - time.monotonic()
+            if stop is not None and stop.is_set():
+                raise WaitTimeout(f"stopped while waiting for {sorted(keys - self.alive())}")
             with self._cond:
                 if self._cond.wait_for(lambda: keys <= self._alive, max(0.0, min(1.0, left))):
                     return

@@ -148,7 +148,9 @@ class Liveliness(Protocol):
 
     def alive(self) -> set[str]: ...
 
-    def wait_for(self, keys: set[str], timeout_s: float) -> None: ...
+    def wait_for(
+        self, keys: set[str], timeout_s: float, stop: threading.Event | None = None
+    ) -> None: ...
 
 
 #: Wall seconds the sim blocks on one look for an ack or a command before it looks again
@@ -247,15 +249,20 @@ class SimGate(Generic[C]):
     def start(self) -> None:
         """The start gate, before the first tick (lockstep with participants only): wait up
         to `start_timeout_s` until every configured participant (every role: the `start`
-        ones are waited for here and never again) is alive; else log and start anyway."""
+        ones are waited for here and never again) is alive; else log and start anyway.
+        A stop ends the wait (a sim told to stop as its stack came up waited out the
+        120 s, SIGTERM and all)."""
         if not (self.lockstep and self.settings.participants):
             return
         wanted = {self._alive_key(n) for n in self.settings.participants}
         self._log.info("lockstep: waiting for %s", sorted(self.settings.participants))
         try:
-            self._alive.wait_for(wanted, self.settings.start_timeout_s)
+            self._alive.wait_for(wanted, self.settings.start_timeout_s, self._stop)
         except Exception as exc:
-            self._log.error("starting without every participant: %s", exc)
+            if self._stop.is_set():
+                self._log.info("lockstep: stopped at the start gate (%s)", exc)
+            else:
+                self._log.error("starting without every participant: %s", exc)
 
     def state_due(self, t_ns: int) -> bool:
         """Publish the state at t? When the commander answers it (every tick without one)."""

@@ -41,6 +41,17 @@ def test_a_token_whose_announcement_was_missed_is_found_by_asking() -> None:
         watch.undeclare()
 
 
+def test_a_wait_for_the_alive_ends_when_its_service_is_told_to_stop() -> None:
+    """A sim SIGTERMed while its stack came up waited at its start gate for the 120 s of
+    `time.start_timeout_s`: a stop ends the wait, naming who it waited for."""
+    with _session() as s:
+        watch = AliveWatch(s, "test/alive/*")
+        stop = threading.Event()
+        threading.Timer(0.3, stop.set).start()
+        with pytest.raises(WaitTimeout, match=r"stopped while waiting for \['test/alive/b'\]"):
+            watch.wait_for({"test/alive/b"}, 600.0, stop)
+
+
 def test_a_query_asks_again_until_a_late_queryable_answers() -> None:
     """A get nobody matches ends at once with no reply (a fresh-clone CI eval read the
     map 'within 10 s' and failed at once): `Bus.query` asks again until its deadline."""

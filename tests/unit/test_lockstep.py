@@ -141,8 +141,12 @@ class FakeAlive:
         self.keys = {KEYS.alive(n) for n in names}
         self.version += 1
 
-    def wait_for(self, keys: set[str], timeout_s: float) -> None:
+    def wait_for(
+        self, keys: set[str], timeout_s: float, stop: threading.Event | None = None
+    ) -> None:
         self.waited.append((keys, timeout_s))
+        if stop is not None and stop.is_set():
+            raise WaitTimeout("stopped")
         if not keys <= self.keys:
             raise WaitTimeout(f"not alive after {timeout_s:.3g} s: {sorted(keys - self.keys)}")
 
@@ -215,6 +219,17 @@ def test_the_start_gate_logs_the_missing_and_starts_anyway(
     with caplog.at_level(logging.ERROR):
         s.gate.start()
     assert "starting without every participant" in caplog.text and "eval" in caplog.text
+
+
+def test_a_stop_at_the_start_gate_ends_the_wait_without_an_error(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    s = sim("nav", "wbc", "eval")
+    s.stop.set()  # SIGTERM while the stack comes up: the gate hands its stop to the wait
+    with caplog.at_level(logging.INFO):
+        s.gate.start()
+    assert "stopped at the start gate" in caplog.text
+    assert "starting without every participant" not in caplog.text
 
 
 def test_in_realtime_there_is_no_start_gate_and_the_newest_command_wins() -> None:
