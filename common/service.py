@@ -143,16 +143,25 @@ PR_SET_PDEATHSIG = 1
 _LIBC = ctypes.CDLL(None)
 
 
+#: The launcher's pid, set by `deploy.stack.ProcessStack` in the environment of each
+#: process it starts (and read by that process alone: `exit_with_parent` drops it).
+PARENT_PID_ENV = "DUME_PARENT_PID"
+
+
 def exit_with_parent(sig: int = signal.SIGTERM) -> bool:
     """Ask the kernel for `sig` when this process's parent dies (Linux's
     `PR_SET_PDEATHSIG`), so a service or router whose launcher was killed stops cleanly
     instead of serving on unmanaged. False where the call is not there (not Linux).
     The kernel does not see a parent that died before the call: call it first thing
-    (`run`, the router), and a parent seen to go while it is made sends `sig` now. Safe
-    in a `Popen(preexec_fn=...)`: no lock is taken, no Python object shared."""
+    (`run`, the router), and a parent seen to go while it is made sends `sig` now; so
+    does a parent other than the launcher that `PARENT_PID_ENV` names (it died while
+    this process was starting: a trial killed as its stack came up left its mission
+    serving on). Safe in a `Popen(preexec_fn=...)`: no lock is taken, no Python object
+    shared."""
     if not sys.platform.startswith("linux"):
         return False
-    parent = os.getppid()
+    named = os.environ.pop(PARENT_PID_ENV, "")
+    parent = int(named) if named.isdigit() else os.getppid()
     if _LIBC.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
         return False
     if os.getppid() != parent:  # orphaned before the kernel could be told

@@ -39,7 +39,7 @@ from common.config import (
 )
 from common.keys import SERVICES, RobotKeys, service_of_alive_key
 from common.recording import new_run_id
-from common.service import exit_with_parent
+from common.service import PARENT_PID_ENV, exit_with_parent
 from deploy.runs import (
     RUNS_DIR,
     Kind,
@@ -308,7 +308,7 @@ class ProcessStack(_Stack):
         proc = subprocess.Popen(
             [sys.executable, "-m", module, *args],
             cwd=REPO_ROOT,
-            env=self.env,
+            env={**self.env, PARENT_PID_ENV: str(os.getpid())},  # `exit_with_parent`
             stdout=logfile,
             stderr=subprocess.STDOUT,
             start_new_session=True,

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from common.config import REPO_ROOT
+from common.service import PARENT_PID_ENV
 from deploy.runs import pid_alive
 from deploy.stack import wait_until
 from tests.integration.test_map_service import map_settings
@@ -61,3 +62,28 @@ def test_the_services_of_a_killed_launcher_stop_cleanly(tmp_path: Path) -> None:
         for pid in pids.values():
             if pid_alive(pid):
                 os.kill(pid, signal.SIGKILL)
+
+
+#: A process that asks for its parent's death as a service does, then lives 2 s.
+CHILD = (
+    "import time; from common.service import exit_with_parent; "
+    "print(exit_with_parent(), flush=True); time.sleep(2)"
+)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_service_whose_launcher_died_as_it_started_stops_at_once() -> None:
+    """The kernel does not see a parent that died before `exit_with_parent`: a trial
+    killed as its stack came up left its mission serving on. The launcher names itself
+    (`PARENT_PID_ENV`); a process whose parent is another stops with SIGTERM."""
+    def child(parent_pid: int) -> subprocess.CompletedProcess[str]:
+        env = {**os.environ, PARENT_PID_ENV: str(parent_pid)}
+        return subprocess.run(
+            [sys.executable, "-c", CHILD], cwd=REPO_ROOT, env=env, capture_output=True,
+            text=True, timeout=30,
+        )  # fmt: skip
+
+    launched = child(os.getpid())  # its parent is the launcher it names: it lives on
+    assert launched.returncode == 0 and launched.stdout.strip() == "True", launched
+    orphan = child(1)  # named a launcher that is not its parent: it has gone
+    assert orphan.returncode == -signal.SIGTERM, orphan
