@@ -61,6 +61,12 @@ follower's `controller`, the planner's `planner`, the people rules' `people`). P
   away from a person's estimate walked into a real person once (reverted);
 - every command, the follower's and the recoveries', goes through the body guard
   (`body_guard`): it may not sweep the footprint onto obstacles;
+- a handover goal held by a protective stop for somebody else (a bystander standing by
+  the handover pose) within `HANDOVER_NEAR_M` of its pose, its heading within tolerance,
+  has arrived: the arm reaches the rest, and the person handed to is not the one in the
+  way (hall seed 10's shift stood 0.14 m from the handover pose, 0.05 rad off it, 129 s
+  and every recovery while person_4 stood 0.65 m off the footprint, S_p at rest 0.61 m;
+  the can it carried crept out of the jaws meanwhile);
 - `goal_timeout_s` of sim time on one goal: `failed: timeout`;
 - `retarget` moves the goal's pose (a handover whose person's estimate moved): replan.
 `cancel` brings the command to zero at once (the WBC's own acceleration limits shape it).
@@ -151,6 +157,9 @@ MEASURED_MIN_MPS = 0.1
 #: s a stop that came early for a person coming towards the robot may hold before it no
 #: longer comes early for them (`Navigator._early`).
 EARLY_STOP_S = 2.0
+#: m: a handover goal held by a stop for somebody else this near its pose has arrived
+#: (module docstring).
+HANDOVER_NEAR_M = 0.25
 
 
 @dataclass(frozen=True)
@@ -431,6 +440,11 @@ class Navigator:
         if out.arrived:
             self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f})")
             return self._out(limit, new_plan)
+        if limit.rule == "stop" and (short := self._handover_near(pose, limit)) is not None:
+            self._finish("succeeded", "", f"at ({pose.x:.2f}, {pose.y:.2f}, {pose.yaw:.2f}), "
+                         f"{short:.2f} m from the handover pose: {limit.person_id} stands "
+                         "within their separation")  # fmt: skip
+            return self._out(limit, new_plan)
         yaw_error = abs(out.yaw_error)
         if out.guarded == "the other way round" != was_guarded:
             self.best_yaw_error = yaw_error  # the long way round counts from here (no progress)
@@ -442,6 +456,17 @@ class Navigator:
             return self._blocked(t_ns, pose, cm, limit, new_plan)
         self.blocked_since = None
         return self._out(limit, new_plan)
+
+    def _handover_near(self, pose: Pose, limit: SpeedLimit) -> float | None:
+        """How far (m) from its pose a handover goal stopped for somebody else is, when
+        that is near enough to hand over from (`HANDOVER_NEAR_M`, the heading within
+        tolerance); else None."""
+        g = self.goal
+        if g is None or not g.handover_id or limit.person_id in ("", g.handover_id):
+            return None
+        d = math.hypot(g.pose.x - pose.x, g.pose.y - pose.y)
+        off = abs(math.remainder(g.pose.yaw - pose.yaw, math.tau))
+        return d if d <= HANDOVER_NEAR_M and off <= g.tol_yaw else None
 
     def _inside_someones_separation(self, pose: Pose, cm: Costmap, handover_id: str) -> bool:
         """Whether a person other than the one handed over to stands inside their

@@ -17,7 +17,14 @@ from services.navigation.body_guard import BodyGuard
 from services.navigation.controller import Follower, FollowOutput
 from services.navigation.costmap import CostParams, Person, build_costmap
 from services.navigation.grid import Footprint, Grid, Pose, distance_to_footprint
-from services.navigation.navigator import EARLY_STOP_S, GoalSpec, Navigator, _slide_free
+from services.navigation.navigator import (
+    EARLY_STOP_S,
+    HANDOVER_NEAR_M,
+    GoalSpec,
+    Navigator,
+    TickOutput,
+    _slide_free,
+)
 from services.navigation.people import (
     BRAKE_LEAD_M,
     RESUME_MARGIN_M,
@@ -462,6 +469,30 @@ def test_the_final_align_is_held_by_the_turn_s_rule_not_by_a_step_it_does_not_ma
     turning = nav.tick(round(DT * 1e9), at, dataclasses.replace(floor, people=(bystander,)))
     assert turning.limit.rule != "stop" and turning.cmd[2] > 0.0
     assert turning.cmd[0] == 0.0 and turning.cmd[1] == 0.0
+
+
+def test_a_handover_held_near_its_pose_by_a_bystander_has_arrived() -> None:
+    """Hall seed 10's shift: 0.14 m from the handover pose and 0.05 rad off it, the
+    robot stood 129 s and every recovery for person_4 standing 0.65 m off the footprint
+    (S_p at rest 0.61 m), the can it carried creeping out of the jaws. Held there by
+    somebody else, a handover goal within `HANDOVER_NEAR_M` has arrived; further out,
+    or turned away from its heading, it waits as any goal does."""
+    floor = build_costmap(_open_floor(), FP, CostParams(), people=[])
+    goal = GoalSpec("g", Pose(3.5, 0.0, 0.0), 0.08, 0.1, handover_id="person_2")
+
+    def tick(at: Pose) -> TickOutput:
+        nav = Navigator(FP, NavigationSettings(), DT)
+        nav.start(goal, 0)
+        bystander = Person("person_4", at.x + FP.front + 0.5, 0.3, None, (0.0, 0.0))
+        return nav.tick(0, at, dataclasses.replace(floor, people=(bystander,)))
+
+    near = tick(Pose(3.36, 0.0, 0.05))
+    assert near.limit.rule == "stop" and near.state == "succeeded", near
+    assert "0.14 m from the handover pose: person_4 stands" in near.detail
+    assert HANDOVER_NEAR_M == 0.25
+    for at in (Pose(3.5 - HANDOVER_NEAR_M - 0.05, 0.0, 0.0), Pose(3.36, 0.0, 0.3)):
+        held = tick(at)
+        assert held.limit.rule == "stop" and held.state == "active", (at, held)
 
 
 def test_a_stop_that_came_early_for_a_person_who_never_comes_ends_after_a_while() -> None:
