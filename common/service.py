@@ -156,8 +156,8 @@ def exit_with_parent(sig: int = signal.SIGTERM) -> bool:
     (`run`, the router), and a parent seen to go while it is made sends `sig` now; so
     does a parent other than the launcher that `PARENT_PID_ENV` names (it died while
     this process was starting: a trial killed as its stack came up left its mission
-    serving on). Safe in a `Popen(preexec_fn=...)`: no lock is taken, no Python object
-    shared."""
+    serving on). Safe in a `Popen(preexec_fn=...)` of a process `PARENT_PID_ENV` is not
+    set in (supervisord's, by `dume up`): no lock is taken, no Python object shared."""
     if not sys.platform.startswith("linux"):
         return False
     named = os.environ.pop(PARENT_PID_ENV, "")

@@ -67,8 +67,8 @@ SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 #: it fell after 66 s, 1 cm deeper after 106 s, 2 cm after 118 s; 1 cm leaves the
 #: widest can 12.9 mm from the palm on the way in, room for a fit that long.
 SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.01}
-#: m: the fixed jaw's pad from the TCP, across the jaws (3.5 cm).
 _FIXED_PAD = next(b for b in robot.GRIPPER_BOXES if b.name == "gripper_jaw_fixed")
+#: m: the fixed jaw's pad from the TCP, across the jaws (3.5 cm).
 FIXED_PAD_FROM_TCP_M = float(
     robot.T_STATOR_TCP[2, 3] - (_FIXED_PAD.center[2] + _FIXED_PAD.half_size[2])
 )
