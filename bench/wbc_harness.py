@@ -389,9 +389,8 @@ def run_carry(
     walk_s, walk_vx, walk_wz = walk
     phases = dict(CARRY_PHASES)
     if walk_s > 0.0:  # an about-face, the walk, then the stand
-        phases["turn"] = math.pi / abs(wz)
-        phases = {**phases, "walk": walk_s}
-        phases["stop"] = phases.pop("stop")
+        stop = phases.pop("stop")
+        phases |= {"turn": math.pi / abs(wz), "walk": walk_s, "stop": stop}
     starts, t = {}, grasp_end
     for name, duration in phases.items():
         starts[name] = t
@@ -403,7 +402,6 @@ def run_carry(
     gap: dict[str, float] = {}
     knocked: list[FloatArray] = []  # the object's place as the knock began, then its sway
     walked: list[tuple[float, float]] = []  # the walk's (object along the jaws, jaw angle)
-    jaw = model.joint(robot.GRIPPER_JOINT).qposadr[0]
 
     def refs_at(t: float, state: WbcState) -> WbcReferences:
         T_tcp = np.eye(4)
@@ -429,7 +427,7 @@ def run_carry(
             vx, w = min(walk_vx, WALK_ACCEL * tw), min(abs(walk_wz), TURN_ACCEL * tw)
             w = math.copysign(w, walk_wz)
             along = T_tcp[:3, :3].T @ (data.xpos[body] - T_tcp[:3, 3])
-            walked.append((float(along[0]), float(data.qpos[jaw])))
+            walked.append((float(along[0]), log_gripper(model, data)))
         elif phase == "stop" and not walked:
             w = max(0.0, abs(wz) - TURN_ACCEL * (t - starts["stop"])) * math.copysign(1.0, wz)
         return WbcReferences(

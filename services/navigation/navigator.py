@@ -83,6 +83,7 @@ from numpy.typing import NDArray
 
 from common import robot
 from common.config import NavigationSettings, PeopleSettings
+from common.geometry import wrap_angle
 from common.messages.base import NS_PER_S
 from common.messages.navigation import NavFailure, NavState
 from services.navigation.body_guard import HORIZON_S, BodyGuard, turn_point
@@ -465,7 +466,7 @@ class Navigator:
         if g is None or not g.handover_id or limit.person_id in ("", g.handover_id):
             return None
         d = math.hypot(g.pose.x - pose.x, g.pose.y - pose.y)
-        off = abs(math.remainder(g.pose.yaw - pose.yaw, math.tau))
+        off = abs(wrap_angle(g.pose.yaw - pose.yaw))
         return d if d <= HANDOVER_NEAR_M and off <= g.tol_yaw else None
 
     def _inside_someones_separation(self, pose: Pose, cm: Costmap, handover_id: str) -> bool:

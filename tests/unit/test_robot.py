@@ -284,27 +284,42 @@ def test_postures_are_within_joint_limits() -> None:
     assert pytest.approx(0.5277, abs=1e-3) == robot.STAND_BASE_HEIGHT_M
 
 
+def jaw_clearance(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    name: str,
+    jaw: float,
+    at_tcp: tuple[float, float, float],
+    R_rel: np.ndarray,
+    prefix: str = "",
+) -> dict[str, float]:
+    """Distance (m) from the mocap object `name`, at `at_tcp` in the TCP's frame turned by
+    `R_rel` from it, to each gripper geom and the wrist, the arm in `ready`, the jaw at
+    `jaw` (`prefix`: the robot's names in a world that has one)."""
+    q = robot.standing_q("ready")
+    q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = jaw
+    data.qpos[mjcf.mj_indices(model, prefix).qpos] = mjcf.q_pin_to_mj(q)
+    mujoco.mj_forward(model, data)
+    tcp = data.site(prefix + robot.TCP_FRAME)
+    R = tcp.xmat.reshape(3, 3)
+    data.mocap_pos[0] = tcp.xpos + R @ np.array(at_tcp)
+    data.mocap_quat[0] = quat_xyzw_to_wxyz(matrix_to_quat_xyzw(R @ R_rel))
+    mujoco.mj_forward(model, data)
+    g = model.geom(name).id
+    names = [b.name for b in GRIPPER_BOXES] + ["link06_0"]
+    return {
+        n: mujoco.mj_geomDistance(model, data, g, model.geom(prefix + n).id, 0.2, None)
+        for n in names
+    }
+
+
 def jaw_distances(
     model: mujoco.MjModel, data: mujoco.MjData, gripper: float, depth_m: float = 0.0
 ) -> dict[str, float]:
     """Distance from a 6 cm bottle, centred on gripper_tcp along its y (`depth_m` deeper
     along its x), to each gripper geom."""
-    q = robot.standing_q("ready")
-    q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = gripper
-    data.qpos[mjcf.mj_indices(model, "b1/").qpos] = mjcf.q_pin_to_mj(q)
-    mujoco.mj_forward(model, data)
-    tcp = data.site("b1/gripper_tcp")
-    data.mocap_pos[0] = tcp.xpos - depth_m * tcp.xmat.reshape(3, 3)[:, 0]
-    data.mocap_quat[0] = quat_xyzw_to_wxyz(
-        matrix_to_quat_xyzw(tcp.xmat.reshape(3, 3) @ rot_x(-math.pi / 2))
-    )  # z -> tcp y
-    mujoco.mj_forward(model, data)
-    bottle = model.geom("bottle").id
-    names = [b.name for b in GRIPPER_BOXES] + ["link06_0"]
-    return {
-        n: mujoco.mj_geomDistance(model, data, bottle, model.geom(f"b1/{n}").id, 0.2, None)
-        for n in names
-    }
+    up = rot_x(-math.pi / 2)  # the bottle's z along the TCP's y
+    return jaw_clearance(model, data, "bottle", gripper, (-depth_m, 0.0, 0.0), up, "b1/")
 
 
 def test_a_6cm_bottle_fits_between_the_open_jaws_and_the_closed_jaws_hit_it(
@@ -331,31 +346,6 @@ def object_in_jaws(
     spec.worldbody.add_body(name=name, mocap=True).add_geom(name=name, type=type_, size=size)
     model = spec.compile()
     return model, mujoco.MjData(model)
-
-
-def jaw_clearance(
-    model: mujoco.MjModel,
-    data: mujoco.MjData,
-    name: str,
-    jaw: float,
-    at_tcp: tuple[float, float, float],
-    R_rel: np.ndarray,
-) -> dict[str, float]:
-    """Distance (m) from the mocap object `name`, at `at_tcp` in the TCP's frame turned by
-    `R_rel` from it, to each gripper geom and the wrist, the arm in `ready`, the jaw at
-    `jaw`."""  # fmt: skip
-    q = robot.standing_q("ready")
-    q[7 + robot.JOINT_NAMES.index(robot.GRIPPER_JOINT)] = jaw
-    data.qpos[mjcf.mj_indices(model).qpos] = mjcf.q_pin_to_mj(q)
-    mujoco.mj_forward(model, data)
-    tcp = data.site(robot.TCP_FRAME)
-    R = tcp.xmat.reshape(3, 3)
-    data.mocap_pos[0] = tcp.xpos + R @ np.array(at_tcp)
-    data.mocap_quat[0] = quat_xyzw_to_wxyz(matrix_to_quat_xyzw(R @ R_rel))
-    mujoco.mj_forward(model, data)
-    g = model.geom(name).id
-    names = [b.name for b in GRIPPER_BOXES] + ["link06_0"]
-    return {n: mujoco.mj_geomDistance(model, data, g, model.geom(n).id, 0.2, None) for n in names}
 
 
 def test_a_box_taken_from_above_clears_both_wide_open_jaws() -> None:
