@@ -76,6 +76,7 @@ def test_a_service_whose_launcher_died_as_it_started_stops_at_once() -> None:
     """The kernel does not see a parent that died before `exit_with_parent`: a trial
     killed as its stack came up left its mission serving on. The launcher names itself
     (`PARENT_PID_ENV`); a process whose parent is another stops with SIGTERM."""
+
     def child(parent_pid: int) -> subprocess.CompletedProcess[str]:
         env = {**os.environ, PARENT_PID_ENV: str(parent_pid)}
         return subprocess.run(
