@@ -211,6 +211,15 @@ class GraspPlan:
         H[2, 3] += dz_m
         return replace(self, H=H, pregrasp_m=0.0, close_in_m=0.0)
 
+    def pulled_back(self, dz_m: float, back_m: float, heading_rad: float) -> GraspPlan:
+        """The lift's pose (`lifted`) moved `back_m` level against `heading_rad` (the
+        base's heading, world), reached straight: a held object drawn toward the robot
+        before the base backs off for the stow (`stow_room`)."""
+        H = np.array(self.lifted(dz_m).H, dtype=float)
+        H[0, 3] -= back_m * math.cos(heading_rad)
+        H[1, 3] -= back_m * math.sin(heading_rad)
+        return replace(self, H=H, pregrasp_m=0.0, close_in_m=0.0)
+
     def over_the_spot(self, dz_m: float) -> GraspPlan:
         """The lift's pose (`lifted`), reached via the pre-grasp pose as the grasp was: how
         a held object is carried back over the place it was picked from."""

@@ -37,7 +37,10 @@
                            Grasp, check_held, lift (Reach up lift_m; short is enough),
                            still_held; any of these failing, back_out: open on the spot,
                            Reach back to the pre-grasp pose, Posture(stow), fail with its
-                           reason; then Posture(stow), mode walk/navigation
+                           reason; then room_to_stow: stows_here, else (the stowed
+                           object would meet its support's edge, `stow_room`) pull_back
+                           (Reach, level), mode walk/mission, back_off_to_stow, mode
+                           manipulate; then Posture(stow), mode walk/navigation
               bring_to_user (while_held: fails grasp_lost the tick the gripper lets go,
                              whatever runs): resolve_person, PersonHandover
                              (navigation_failed: walked_short, find_person takes over),
@@ -84,7 +87,7 @@ from common.messages.base import NS_PER_S
 from common.messages.mission import STAGES, MissionReason, MissionRequest
 from common.messages.wbc import Grasp, Posture, Release
 from services.mission.behaviours.abort import Abort, halt
-from services.mission.behaviours.arm import ArmAction, CheckHeld, GraspReach, NoCloseIn
+from services.mission.behaviours.arm import ArmAction, CheckHeld, GraspReach, NoCloseIn, StowsHere
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
@@ -98,6 +101,7 @@ from services.mission.behaviours.base import (
     SEARCHED,
     SIDE,
     STANCE,
+    STOW_BACK,
     TARGET,
     Context,
     Failure,
@@ -288,6 +292,20 @@ def build_tree(ctx: Context) -> Sequence:
                 ),
             ],
         ),
+        # an object that would meet its support's edge folded to stow where the base
+        # stands is drawn back over the floor while the base backs off (`stow_room`)
+        Selector("room_to_stow", memory=True, children=[
+            StowsHere(ctx, st[3]),
+            _seq(
+                "make_room",
+                ArmAction(ctx, "pull_back", lambda b: b.get(GRASP_PLAN).pulled_back(
+                              s.lift_m, b.get(STOW_BACK), b.port.robot_yaw() or 0.0).reach(),
+                          "grasp_failed", s.reach_timeout_s, st[3], must_succeed=False),
+                SetMode(ctx, "walk", "mission", st[3], name="mode_walk_make_room"),
+                BackOff(ctx, st[3], name="back_off_to_stow", distance=lambda b: b.get(STOW_BACK)),
+                SetMode(ctx, "manipulate", "navigation", st[3], name="mode_manipulate_stow"),
+            ),
+        ]),
         ArmAction(ctx, "stow", lambda _b: Posture(name="stow"), "arm_failed",
                   s.posture_timeout_s, st[3]),
         SetMode(ctx, "walk", "navigation", st[3]),

@@ -563,6 +563,9 @@ class StubPlan:
     def over_the_spot(self, dz_m: float) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, self.pregrasp_m)
 
+    def pulled_back(self, dz_m: float, back_m: float, heading_rad: float) -> StubPlan:
+        return StubPlan(self.kind, self.frame, self.possible, 0.0)
+
 
 class StubPull:
     """A pull begins on the first status after the baseline and is felt on the third
@@ -595,11 +598,14 @@ def stub_algorithms(
     close_in_mm: int = 0,
     stance_plans: int = 0,
     beyond_mm: int = 0,
+    grasp_z_mm: int = 800,
 ) -> Algorithms:
     """`grasp_plans`: how many grasps are planned before none is possible (−1: all);
     `close_in_mm`: the plans' close-in move (a top grasp's); `stance_plans`: how many
     grasps first ask for another stance (a tall box's long faces off the line of
-    sight, along 90°); `beyond_mm`: how far the object reaches past the gripper."""
+    sight, along 90°); `beyond_mm`: how far the object reaches past the gripper;
+    `grasp_z_mm`: the grasp pose's height over the floor (0.8 m: a bottle's middle on a
+    0.7 m table)."""
     stances = itertools.count(1)
     tries = itertools.count(1)  # the detectors made: one per offer
     plans = itertools.count(1)
@@ -611,7 +617,8 @@ def stub_algorithms(
             raise StubGraspError("the box's long faces are 60° off", math.pi / 2)
         if 0 <= grasp_plans < next(plans):
             raise StubGraspError("the bottle's side grasp is out of the arm's reach")
-        return StubPlan(close_in_m=close_in_mm / 1000, beyond_m=beyond_mm / 1000)
+        H = make_T(np.eye(3), (3.0, 0.0, grasp_z_mm / 1000))
+        return StubPlan(close_in_m=close_in_mm / 1000, beyond_m=beyond_mm / 1000, H=H)
 
     return Algorithms(
         approacher=StubApproach,

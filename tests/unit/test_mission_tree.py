@@ -5,12 +5,14 @@ from __future__ import annotations
 import math
 
 import msgspec
+import numpy as np
 import pytest
 
 from common.config import MissionSettings
+from common.messages import to_wire
 from common.messages.mission import MissionRequest
 from common.messages.navigation import ArtifactStandoff, PersonHandover, PoseGoal, ScanBody
-from common.messages.semantic_map import PersonColours, SeenPlace
+from common.messages.semantic_map import OccupancyGrid, PersonColours, SeenPlace
 from common.messages.wbc import Grasp, Posture, Reach, Release
 from common.robot import HANDOVER_DISTANCE_M
 from services.mission.behaviours.base import Held
@@ -21,6 +23,7 @@ from services.mission.behaviours.motion import (
     STANCE_TOL_RAD,
     TURN_HELD_S,
 )
+from services.mission.room_behind import OCCUPIED
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
     TICK_NS,
@@ -115,6 +118,48 @@ def test_the_approach_commands_cmd_vel_as_source_mission_and_hands_back_the_base
 
 def _postures(robot: FakeRobot) -> list[str]:
     return [g.name for _, g in robot.arm_goals if isinstance(g, Posture)]
+
+
+def _bench_ahead(robot: FakeRobot) -> OccupancyGrid:
+    """The map: a bench whose edge is 0.5 m ahead of the base at the origin facing +x."""
+    cells = np.zeros((80, 80), np.uint8)
+    cells[35:45, 45:60] = OCCUPIED  # x from 0.5 m, y within 0.5 m of the base's line
+    return OccupancyGrid(stamp_ns=robot.t, resolution_m=0.1, origin_xy=(-4.0, -4.0),
+                         cells=to_wire(cells))  # fmt: skip
+
+
+def _picked(grasp_z_mm: int) -> tuple[MissionTree, FakeRobot]:
+    """A fetch whose object reaches 8 cm past the TCP, grasped `grasp_z_mm` up, the bench
+    of `_bench_ahead` in the map."""
+    robot = small_world()
+    robot.occupancy_of = _bench_ahead
+    tree = mission(robot, beyond_mm=80, grasp_z_mm=grasp_z_mm)
+    assert run(tree, robot).state == "succeeded"
+    return tree, robot
+
+
+def test_an_object_stowed_into_its_support_s_edge_is_pulled_back_as_the_base_backs_off() -> None:
+    """Hall seed 11's shift: a box side-grasped on a bench 0.94 m up, the bench 0.55 m
+    ahead, the box 8 cm past the TCP: folded to stow where the base stood it met the
+    bench, and the stow failed. Now the arm draws it back level and the base backs off
+    before the stow; a bottle off a table (0.8 m) stows where it was picked."""
+    low_tree, low = _picked(800)
+    kinds = low.arm_kinds()
+    assert kinds[kinds.index("stow") - 2 : kinds.index("stow")] == ["grasp", "reach"]  # lift
+    assert not any("support's edge" in d for d in low_tree.ctx.decisions)  # type: ignore[attr-defined]
+    tree, robot = _picked(940)
+    kinds = robot.arm_kinds()
+    assert kinds[kinds.index("stow") - 3 : kinds.index("stow")] == ["grasp", "reach", "reach"]
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    said = next(d for d in decisions if d.startswith("stow: the support's edge"))
+    back = float(said.rsplit("backed off ", 1)[1].split(" m")[0])
+    assert 0.05 < back < 0.2, said
+    i = robot.modes.index(("walk", "mission"), robot.modes.index(("manipulate", "navigation")))
+    assert robot.modes[i + 1] == ("manipulate", "navigation")  # stowed standing again
+    speed = tree.ctx.settings.back_off_speed
+    backed = [c[0] for c in robot.cmds if c[0] < 0]
+    extra = (len(backed) - sum(c[0] < 0 for c in low.cmds)) * speed * TICK_NS / 1e9
+    assert extra == pytest.approx(back, abs=speed * TICK_NS / 1e9), (extra, back)
 
 
 def test_a_grasp_that_needs_another_stance_walks_there_stowed_and_tries_again() -> None:
@@ -749,6 +794,44 @@ def test_a_walker_passing_behind_the_asking_robot_is_looked_at_and_handed_to() -
     assert any(d.startswith("person_1 seen at") for d in decisions), decisions
     handovers = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
     assert handovers[-1] == "person_1"
+
+
+def test_nobody_answers_the_ask_while_the_camera_turns_to_who_may_be_the_one_asked_for() -> None:
+    """Hall seed 11's shift: a bystander came and stood in front of the asking robot; the
+    worker asked for came up behind it, and the robot turned to look at them, but the
+    bystander's 5 s of standing ended during the turn and the bottle went to them. Now
+    the turn and the look end first: the camera sees person_1, and the handover is
+    theirs."""
+    robot = small_world(moves=True)
+    robot.person_walked_to = (20.0, 20.0)
+    robot.seen_after_turn_rad = 100.0
+    robot.nav_ticks = 60  # 3 s a turn
+    tree = mission(robot)
+    outcome, asked_ns = None, None
+    for _ in range(8000):
+        outcome = tree.tick()
+        if asked_ns is None and tree.where()[1].startswith("asking for person_1"):
+            asked_ns = robot.now_ns  # a stranger stands 1.3 m ahead from now on
+            c, s_ = math.cos(robot.yaw), math.sin(robot.yaw)
+            ahead = (robot.xy[0] + 1.3 * c, robot.xy[1] + 1.3 * s_)
+            robot.people_["person_9"] = entity("person_9", *ahead, kind="person")
+            behind = (robot.xy[0] - 1.5 * c, robot.xy[1] - 1.5 * s_)
+        if asked_ns is not None:
+            robot.people_["person_9"] = msgspec.structs.replace(
+                robot.people_["person_9"], last_seen_ns=robot.now_ns
+            )
+            if robot.now_ns - asked_ns == round(2.5e9):  # person_1 comes up behind it
+                robot.person_walked_to, robot.sees_facing = behind, True
+                robot.bodies_ = [ScanBody(id="scan_5", x=behind[0], y=behind[1])]
+        robot.advance()
+        if outcome is not None:
+            break
+    assert asked_ns is not None and outcome is not None and outcome.state == "succeeded"
+    decisions = tree.ctx.decisions  # type: ignore[attr-defined]
+    assert any("(scan_5)" in d for d in decisions), decisions
+    assert not any(d.startswith("person_9 came") for d in decisions), decisions
+    handovers = [g.person_id for _, g in robot.nav_goals if isinstance(g, PersonHandover)]
+    assert handovers[-1] == "person_1", handovers
 
 
 def test_a_stream_of_strangers_behind_the_robot_does_not_keep_it_asking() -> None:

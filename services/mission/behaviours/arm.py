@@ -17,6 +17,10 @@
   (`Context.taken`: the map marks the entry there missing; hall seed 0's shift picked
   bottle_1 for a phantom bottle_8 beside it, and the next request walked to bottle_1's
   stale entry and looked at nothing).
+- `StowsHere`: SUCCESS when the arm can fold the held object to `stow` where the base
+  stands (`stow_room`); FAILURE with how far the base backs off first (`STOW_BACK`),
+  said, when the stowed object would meet the support's edge: the tree then pulls the
+  object back, backs the base off and stows.
 - `NoCloseIn`: SUCCESS when the grasp plan has no close-in move (a narrow cylinder's
   side grasp), so the tree skips it; FAILURE when it has one (a box, a wide cylinder:
   `GraspPlan.closed_in`).
@@ -29,10 +33,20 @@ from collections.abc import Callable
 import numpy as np
 from py_trees.common import Status
 
+from common import robot
+from common.messages.arrays import as_numpy
 from common.messages.mission import TAKEN_KEPT, MissionReason, Taken
 from common.messages.wbc import ArmGoal
-from services.mission.behaviours.base import GRASP_PLAN, TARGET, Context, MissionBehaviour, Target
+from services.mission.behaviours.base import (
+    GRASP_PLAN,
+    STOW_BACK,
+    TARGET,
+    Context,
+    MissionBehaviour,
+    Target,
+)
 from services.mission.ports import PortError, Refused
+from services.mission.stow_room import stow_back_off_m, support_ahead_m
 
 GoalOf = Callable[[MissionBehaviour], ArmGoal]
 
@@ -143,6 +157,38 @@ class CheckHeld(MissionBehaviour):
         taken = Taken(stamp_ns=self.port.now_ns, map_id=target.map_id,
                       class_name=target.class_name, xy=(x, y))  # fmt: skip
         self.ctx.taken = [*self.ctx.taken, taken][-TAKEN_KEPT:]
+
+
+class StowsHere(MissionBehaviour):
+    """See the module docstring."""
+
+    WRITES = (STOW_BACK,)
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("stows_here", ctx, stage)
+
+    def update(self) -> Status:
+        self.set(STOW_BACK, 0.0)
+        plan, xy, yaw = self.get(GRASP_PLAN), self.port.robot_xy(), self.port.robot_yaw()
+        if plan is None or plan.frame != "world" or xy is None or yaw is None:
+            return Status.SUCCESS
+        try:
+            grid = self.port.occupancy()
+        except PortError:
+            return Status.SUCCESS  # no map: nothing known ahead, stowed as before
+        _, lateral, _ = robot.posture_tcp("stow")
+        cells = np.asarray(as_numpy(grid.cells), np.uint8)
+        edge = support_ahead_m(cells, grid.resolution_m, grid.origin_xy, xy, yaw, lateral)
+        grasp_z = float(np.asarray(plan.H, dtype=float)[2, 3])
+        back = stow_back_off_m(grasp_z, edge, plan.beyond_m)
+        if back <= 0.0:
+            return Status.SUCCESS
+        self.set(STOW_BACK, back)
+        self.ctx.decide(f"stow: the support's edge {edge:.2f} m ahead, the object held "
+                        f"{plan.beyond_m * 100:.0f} cm past the TCP from {grasp_z:.2f} m up "
+                        f"would meet it: pulled back and the base backed off {back:.2f} m "
+                        "first")  # fmt: skip
+        return Status.FAILURE
 
 
 class NoCloseIn(MissionBehaviour):

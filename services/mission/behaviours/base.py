@@ -50,9 +50,11 @@ LOOKED = "looked"  # list[tuple[float, float]]: where the robot looked round for
 STANCE = "stance"  # float | None: the world yaw of the line of sight the grasp needs (±)
 PERSON_LOOK = "person_look"  # identity.Look | None: the requested person's colours, noted
 OTHERS = "others"  # list[str]: map people found at the handover in other clothes
+STOW_BACK = "stow_back"  # float: m the base backs off before the stow (`stow_room`)
 ALL_KEYS = (
     REQUEST, CANDIDATES, CANDIDATE, TARGET, PERSON, FACING, SIDE, DETECTION, GRASP_PLAN, FAILURE,
     SEARCH, SEARCHED, SEARCH_LEFT, UNSEEN, KNOWN, LOOK_AT, LOOKED, STANCE, PERSON_LOOK, OTHERS,
+    STOW_BACK,
 )  # fmt: skip
 
 

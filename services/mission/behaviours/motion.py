@@ -40,29 +40,32 @@
   ("asking for <person>: please come to the robot"), turning the head camera to each
   body the lidars track near that it does not see and the map cannot name
   (`person_search.glance_at`: a walker passing behind it; the ask waits for a turn under
-  way, and the camera looks `GLANCE_LOOK_S` once there). A person who comes while it asks
-  and stands within `ANSWER_M` of the base for `ANSWER_STAND_S` (not one who stood that
-  near already when it began to ask, nor a walker pausing in its way: they walk on
-  within 4 s) answered (one who came before the ask's end is waited for past it, while
-  they stand there: hall seed 4's shift gave up asking 4 s after the worker asked for
-  had come and stood 1.7 m off, and looked for them 80 s more): the map's id for them
-  may be another one (the map lost who is who while they walked: hall seed 1's shift
-  saw the requested person as three new ids while the robot looked for the old one, and
-  the request timed out), and the fetch goes
-  on to them under that id (`PERSON`), said. Seen: SUCCESS,
-  and the walk to them goes to where they were seen; never seen: SUCCESS all the same,
-  and the next walk goes to the next of their usual places (`LOOK_AT`,
-  `person_search.next_place`: where the map saw them most), or, none left, to where the
-  map last had them. A walk to a usual place (`NavigateTo`, a `PoseGoal` within
-  `LOOK_AT_TOL_M`, any heading) ends as soon as the map sees the person.
+  way, and the camera looks `GLANCE_LOOK_S` once there). A person who comes while it
+  asks and stands within `ANSWER_M` of the base for `ANSWER_STAND_S` (not one who stood
+  that near already when it began to ask, nor a walker pausing in its way: they walk on
+  within 4 s; nor while the camera turns to a body the lidars track: hall seed 11's
+  shift took a bystander who had stood 1.9 m off for 5 s while it turned to the worker
+  asked for, 1.1 m behind it, and handed them the bottle) answered (one who came before
+  the ask's end is waited for past it, while they stand there: hall seed 4's shift gave
+  up asking 4 s after the worker asked for had come and stood 1.7 m off, and looked for
+  them 80 s more): the map's id for them may be another one (the map lost who is who
+  while they walked: hall seed 1's shift saw the requested person as three new ids while
+  the robot looked for the old one, and the request timed out), and the fetch goes on to
+  them under that id (`PERSON`), said. Seen: SUCCESS, and the walk to them goes to where
+  they were seen; never seen: SUCCESS all the same, and the next walk goes to the next
+  of their usual places (`LOOK_AT`, `person_search.next_place`: where the map saw them
+  most), or, none left, to where the map last had them. A walk to a usual place
+  (`NavigateTo`, a `PoseGoal` within `LOOK_AT_TOL_M`, any heading) ends as soon as the
+  map sees the person.
 - `StandsThere`: after one more walk to the person, SUCCESS (present) only when the map
   sees them standing in front of the robot (`in_front`); else FAILURE
   `person_not_found`, which the tree takes as one more round of looking (`find_person`,
   `person_rounds` in all): the last one's detail says where it looked round and where
   the map last saw them, walking or not.
-- `BackOff`: `back_off_speed` backwards for `back_off_s` on cmd_vel (source mission), or
-  less: only as far as the map's grid leaves room behind the footprint
-  (`room_behind`; none without the map or the pose).
+- `BackOff`: `back_off_speed` backwards for `back_off_s` (or the `distance` it is given:
+  the stow's, `stow_room`) on cmd_vel (source mission), or less: only as far as the
+  map's grid leaves room behind the footprint (`room_behind`; none without the map or
+  the pose).
 """
 
 from __future__ import annotations
@@ -652,11 +655,10 @@ class LookForPerson(MissionBehaviour):
             turn = "a turn" if whole else f"{math.degrees(self.turned):.0f}°"
             self.ctx.decide(f"{pid} not seen in {turn} round their place: asking for them")
         self.say = f"asking for {pid}: please come to the robot"
-        came = self._answer(pid, people)
-        if came is not None:
-            return self._done()
         waited = (self.port.now_ns - self.asked_ns) / 1e9
         glancing = self._glance(pid, people, waited < self.settings.person_ask_s)
+        if self._answer(pid, people, take=not glancing) is not None:
+            return self._done()
         if waited < self.settings.person_ask_s or glancing:
             self.fraction = 0.5 + 0.5 * waited / max(self.settings.person_ask_s, 1e-9)
             return Status.RUNNING
@@ -690,16 +692,18 @@ class LookForPerson(MissionBehaviour):
                 out.append((q, d))
         return out
 
-    def _answer(self, pid: str, people: list[MapEntity]) -> str | None:
+    def _answer(self, pid: str, people: list[MapEntity], take: bool) -> str | None:
         """The id of the person who answered the ask (the module docstring), taken as
-        `pid` from now on (`PERSON`); None while nobody has."""
+        `pid` from now on (`PERSON`); None while nobody has, or while not `take`: the
+        camera turns to look at somebody the lidars track (`_glance`), who may be the one
+        asked for (who stood near since when is kept meanwhile)."""
         now = self.port.now_ns
         near = {q.id: (q, d) for q, d in self._near_people(people)
                 if q.id not in self.near_at_ask}  # fmt: skip
         self.standing = {i: self.standing.get(i, now) for i in near}
         stood = [i for i, t in self.standing.items()
                  if (now - t) / NS_PER_S >= ANSWER_STAND_S]  # fmt: skip
-        if not stood:
+        if not stood or not take:
             return None
         who, (q, d) = min(((i, near[i]) for i in stood), key=lambda item: item[1][1])
         if who != pid:
@@ -844,16 +848,24 @@ class LookForPerson(MissionBehaviour):
 
 
 class BackOff(MissionBehaviour):
-    def __init__(self, ctx: Context, stage: str) -> None:
-        super().__init__("back_off", ctx, stage)
+    def __init__(
+        self,
+        ctx: Context,
+        stage: str,
+        name: str = "back_off",
+        distance: Callable[[MissionBehaviour], float] | None = None,
+    ) -> None:
+        super().__init__(name, ctx, stage)
+        #: m to back off (None: `back_off_speed` for `back_off_s`).
+        self.distance = distance
         self.duration_s = 0.0
 
     def initialise(self) -> None:
         super().initialise()
         s = self.settings
-        want = s.back_off_speed * s.back_off_s
+        want = s.back_off_speed * s.back_off_s if self.distance is None else self.distance(self)
         room = self._room(want)
-        self.duration_s = s.back_off_s * room / want if want > 0.0 else 0.0
+        self.duration_s = room / s.back_off_speed
         if room < want:
             self.ctx.decide(f"back off {room:.2f} m, not {want:.2f} m: the map has an "
                             "obstacle behind")  # fmt: skip
