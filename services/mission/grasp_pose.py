@@ -67,6 +67,8 @@ SIDE_GRASP_HEIGHT = {"bottle": 0.375, "can": 0.5}
 #: it fell after 66 s, 1 cm deeper after 106 s, 2 cm after 118 s; 1 cm leaves the
 #: widest can 12.9 mm from the palm on the way in, room for a fit that long.
 SIDE_GRASP_DEPTH = {"bottle": 0.01, "can": 0.01}
+#: m: how far a re-seat (`GraspPlan.reseated`) takes the fixed pad off the object first.
+RESEAT_ROOM_M = 0.008
 _FIXED_PAD = next(b for b in robot.GRIPPER_BOXES if b.name == "gripper_jaw_fixed")
 #: m: the fixed jaw's pad from the TCP, across the jaws (3.5 cm).
 FIXED_PAD_FROM_TCP_M = float(
@@ -172,7 +174,9 @@ class GraspPlan:
     for it (`Reach.jaw`); close_in_m: how far the TCP then moves along its z (the fixed
     pad to the object) before the jaw closes; beyond_m: how far the object held reaches
     past the TCP along its x (the arm's `handover` posture points x at the person: a box
-    held by its near end reaches 11 cm out, a bottle 2-3 cm)."""
+    held by its near end reaches 11 cm out, a bottle 2-3 cm); radius_m: a side-grasped
+    cylinder's fitted radius (0: not one), seat_x_m: where its axis is to lie along the
+    TCP's x (`seat`: where the jaw's angle says it does)."""
 
     H: FloatArray
     frame: Literal["base", "world"]
@@ -183,6 +187,8 @@ class GraspPlan:
     jaw: Literal["open", "wide"] = "open"
     close_in_m: float = 0.0
     beyond_m: float = 0.0
+    radius_m: float = 0.0
+    seat_x_m: float = 0.0
 
     def reach(self) -> Reach:
         """The WBC's arm goal for this plan."""
@@ -219,6 +225,15 @@ class GraspPlan:
         H[0, 3] -= back_m * math.cos(heading_rad)
         H[1, 3] -= back_m * math.sin(heading_rad)
         return replace(self, H=H, pregrasp_m=0.0, close_in_m=0.0)
+
+    def reseated(self, deeper_m: float) -> GraspPlan:
+        """The closed-in grasp pose moved `deeper_m` along the TCP's x (the object that much
+        nearer the palm), come to wide open and `RESEAT_ROOM_M` off toward the moving jaw
+        (the fixed pad clear of the object) and closed in from there, reached straight: a
+        cylinder held shallower than planned taken again where it stands (`seat`)."""
+        H = np.array(self.closed_in().H, dtype=float)
+        H[:3, 3] += deeper_m * H[:3, 0] - RESEAT_ROOM_M * H[:3, 2]
+        return replace(self, H=H, pregrasp_m=0.0, jaw="wide", close_in_m=RESEAT_ROOM_M)
 
     def over_the_spot(self, dz_m: float) -> GraspPlan:
         """The lift's pose (`lifted`), reached via the pre-grasp pose as the grasp was: how
@@ -330,6 +345,7 @@ def grasp_from_detection(
         raise GraspPoseError(f"the {det.class_name} is at the shoulder: no line of sight")
     bottom, top = axis[2] - 0.5 * extent[2], axis[2] + 0.5 * extent[2]
     centre = axis.copy()
+    radius = seat = 0.0  # a cylinder's, side-grasped (`seat`)
     if kind == "side":
         z = bottom + SIDE_GRASP_HEIGHT[det.class_name] * extent[2]
         centre[2] = min(max(z, bottom + p.clearance_m), top - 0.01)
@@ -344,6 +360,7 @@ def grasp_from_detection(
                 f"{p.reach_slack_m * 100:.0f} cm allowed for the trunk's stoop)"
             )
         R = side_rotation(sight, pitch)
+        radius, seat = 0.5 * width, -SIDE_GRASP_DEPTH[det.class_name]
     else:
         yaw = det.yaw_in_world
         if not world:
@@ -397,6 +414,8 @@ def grasp_from_detection(
         jaw="wide" if wide else "open",
         close_in_m=close_in,
         beyond_m=max(0.0, beyond),
+        radius_m=radius,
+        seat_x_m=seat,
     )
 
 

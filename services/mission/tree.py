@@ -34,8 +34,10 @@
                       pose_estimation: mode manipulate, estimate_grasp
               pick_object: Release (open), Posture(ready), then grasp_it: Reach(plan)
                            (stopped more than reach_miss_max_m short: grasp_pose_failed),
-                           Grasp, check_held, lift (Reach up lift_m; short is enough),
-                           still_held; any of these failing, back_out: open on the spot,
+                           Grasp, check_held, seated_or_again (a cylinder held
+                           shallower than planned, by the jaw's angle: open, Reach deeper,
+                           close in, Grasp, held_again), lift (Reach up lift_m; short is
+                           enough), still_held; any of these failing, back_out: open on the spot,
                            Reach back to the pre-grasp pose, Posture(stow), fail with its
                            reason; then room_to_stow: stows_here, else (the stowed
                            object would meet its support's edge, `stow_room`) pull_back
@@ -87,7 +89,14 @@ from common.messages.base import NS_PER_S
 from common.messages.mission import STAGES, MissionReason, MissionRequest
 from common.messages.wbc import Grasp, Posture, Release
 from services.mission.behaviours.abort import Abort, halt
-from services.mission.behaviours.arm import ArmAction, CheckHeld, GraspReach, NoCloseIn, StowsHere
+from services.mission.behaviours.arm import (
+    ArmAction,
+    CheckHeld,
+    GraspReach,
+    NoCloseIn,
+    Seated,
+    StowsHere,
+)
 from services.mission.behaviours.base import (
     CANDIDATE,
     CANDIDATES,
@@ -270,6 +279,26 @@ def build_tree(ctx: Context) -> Sequence:
                     ArmAction(ctx, "grasp", lambda _b: Grasp(), "grasp_failed",
                               s.grasp_timeout_s, st[3]),
                     CheckHeld(ctx, st[3]),
+                    # a cylinder held near the jaws' tips creeps out on the carry: the
+                    # jaw's angle says where it sits; too shallow, it is taken again deeper
+                    Selector("seated_or_again", memory=True, children=[
+                        Seated(ctx, st[3]),
+                        _seq(
+                            "reseat",
+                            ArmAction(ctx, "open_to_reseat", lambda _b: Release(),
+                                      "grasp_failed", s.release_timeout_s, st[3]),
+                            ArmAction(ctx, "reseat", lambda b: b.get(GRASP_PLAN).reach(),
+                                      "grasp_failed", s.reach_timeout_s, st[3],
+                                      must_succeed=False),
+                            ArmAction(ctx, "reseat_close_in",
+                                      lambda b: b.get(GRASP_PLAN).closed_in().reach(),
+                                      "grasp_failed", s.reach_timeout_s, st[3],
+                                      must_succeed=False),
+                            ArmAction(ctx, "regrasp", lambda _b: Grasp(), "grasp_failed",
+                                      s.grasp_timeout_s, st[3]),
+                            CheckHeld(ctx, st[3], name="held_again", take=False),
+                        ),
+                    ]),
                     # a lift short of its goal with the object still held is lift enough
                     # (hall seed 16: a box held, lifted 5.8 cm short; letting go drops it)
                     ArmAction(ctx, "lift", lambda b: b.get(GRASP_PLAN).lifted(s.lift_m).reach(),

@@ -16,7 +16,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal, cast
 
 import msgspec
@@ -114,6 +114,10 @@ class FakeRobot:
     #: ...or once a turn on the spot ends facing where they walked (within the head
     #: camera's view, `person_search.IN_VIEW_RAD`).
     sees_facing: bool = False
+    #: The jaw's angle (rad) where each grasp that holds stops it, in turn (none left:
+    #: as the last); the status says `jaw_angle`.
+    jaw_angles: list[float] = field(default_factory=list)
+    jaw_angle: float = 0.0
     #: The lidars' bodies near the robot (`NavStatus.bodies`).
     bodies_: list[ScanBody] = field(default_factory=list)
     _turned: float = 0.0
@@ -441,6 +445,8 @@ class FakeRobot:
                 self.slips -= 1
             else:
                 self.held = True
+                if self.jaw_angles:  # where this grasp's jaw stopped
+                    self.jaw_angle = self.jaw_angles.pop(0)
         elif isinstance(goal, Release):
             self.held = False
         self._arm_state[goal_id] = GoalStatus(
@@ -462,7 +468,7 @@ class FakeRobot:
             qp_time_us=0.0,
             qp_failures=0,
             contacts=(True, True, True, True),
-            gripper_angle=0.0,
+            gripper_angle=self.jaw_angle,
             gripper_effort=0.0,
             held=self.held,
             gripper_wrench=(0.0,) * 6,
@@ -541,6 +547,10 @@ class StubPlan:
     pregrasp_m: float = 0.08
     close_in_m: float = 0.0
     beyond_m: float = 0.0
+    radius_m: float = 0.0
+    seat_x_m: float = 0.0
+    #: How far deeper it was re-seated (`reseated`), m.
+    deeper_m: float = 0.0
     #: The grasp pose in the world: the jaw closes 3 m ahead, where bottle_1 stands.
     H: NDArray[np.float64] = field(default_factory=lambda: make_T(np.eye(3), (3.0, 0.0, 0.8)))
 
@@ -562,6 +572,9 @@ class StubPlan:
 
     def over_the_spot(self, dz_m: float) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, self.pregrasp_m)
+
+    def reseated(self, deeper_m: float) -> StubPlan:
+        return replace(self, deeper_m=deeper_m, close_in_m=0.008)
 
     def pulled_back(self, dz_m: float, back_m: float, heading_rad: float) -> StubPlan:
         return StubPlan(self.kind, self.frame, self.possible, 0.0)
@@ -599,13 +612,15 @@ def stub_algorithms(
     stance_plans: int = 0,
     beyond_mm: int = 0,
     grasp_z_mm: int = 800,
+    radius_mm: int = 0,
 ) -> Algorithms:
     """`grasp_plans`: how many grasps are planned before none is possible (−1: all);
     `close_in_mm`: the plans' close-in move (a top grasp's); `stance_plans`: how many
     grasps first ask for another stance (a tall box's long faces off the line of
     sight, along 90°); `beyond_mm`: how far the object reaches past the gripper;
     `grasp_z_mm`: the grasp pose's height over the floor (0.8 m: a bottle's middle on a
-    0.7 m table)."""
+    0.7 m table); `radius_mm`: a side-grasped cylinder's radius (0: not one), its seat
+    planned 1 cm deeper than its axis."""
     stances = itertools.count(1)
     tries = itertools.count(1)  # the detectors made: one per offer
     plans = itertools.count(1)
@@ -618,7 +633,9 @@ def stub_algorithms(
         if 0 <= grasp_plans < next(plans):
             raise StubGraspError("the bottle's side grasp is out of the arm's reach")
         H = make_T(np.eye(3), (3.0, 0.0, grasp_z_mm / 1000))
-        return StubPlan(close_in_m=close_in_mm / 1000, beyond_m=beyond_mm / 1000, H=H)
+        seat = -0.01 if radius_mm else 0.0
+        return StubPlan(close_in_m=close_in_mm / 1000, beyond_m=beyond_mm / 1000, H=H,
+                        radius_m=radius_mm / 1000, seat_x_m=seat)  # fmt: skip
 
     return Algorithms(
         approacher=StubApproach,

@@ -16,6 +16,7 @@ from common.robot import D_OPT_M, GRASP_PITCH_RAD, arm_plane, tcp_reach_gap
 from services.mission.grasp_pose import (
     BOX_SIDE_DEPTH_M,
     FIXED_PAD_FROM_TCP_M,
+    RESEAT_ROOM_M,
     SIDE_GRASP_DEPTH,
     SIDE_PAD_ROOM_M,
     TOP_CLOSE_IN_M,
@@ -145,6 +146,28 @@ def test_a_wide_cylinder_comes_in_wide_open_toward_the_moving_jaw_and_closes_in(
     assert np.allclose(H_in[:2, 3], axis_w[:2] + deeper, atol=1e-9)
     assert np.allclose(H_in[:3, :3], H[:3, :3])
     assert pytest.approx(0.035) == FIXED_PAD_FROM_TCP_M
+
+
+def test_a_cylinder_s_plan_says_its_radius_and_seat_and_a_reseat_takes_it_deeper() -> None:
+    """`seat` reads where the cylinder sits from the jaw's angle against the plan's
+    radius and seat (`SIDE_GRASP_DEPTH` deeper than its axis); too shallow, `reseated`
+    comes to the grasp pose that much deeper, wide open, the fixed pad off the can by
+    `RESEAT_ROOM_M`, and closes in to it."""
+    T_wb = BASES[1]
+    det = detection(T_wb, (D_OPT_M, 0.1, 0.4), class_name="can", extent=(0.065, 0.065, 0.12))
+    plan = grasp_from_detection(det, STAMP, T_wb)
+    assert plan.radius_m == pytest.approx(0.0325)
+    assert plan.seat_x_m == pytest.approx(-SIDE_GRASP_DEPTH["can"])
+    again = plan.reseated(0.02)
+    H_in, H = plan.closed_in().in_world(T_wb), again.in_world(T_wb)
+    assert again.jaw == "wide" and again.pregrasp_m == 0.0
+    assert again.close_in_m == pytest.approx(RESEAT_ROOM_M)
+    assert np.allclose(H[:3, 3], H_in[:3, 3] + 0.02 * H_in[:3, 0] - RESEAT_ROOM_M * H_in[:3, 2])
+    assert np.allclose(again.closed_in().in_world(T_wb)[:3, 3], H_in[:3, 3] + 0.02 * H_in[:3, 0])
+    assert np.allclose(H[:3, :3], H_in[:3, :3])
+    box = detection(T_wb, (D_OPT_M, 0.1, 0.4), shape="box", class_name="box",
+                    extent=(0.05, 0.05, 0.05))  # fmt: skip
+    assert grasp_from_detection(box, STAMP, T_wb).radius_m == 0.0  # only cylinders are read
 
 
 def test_a_narrow_cylinder_is_reached_centred() -> None:

@@ -24,6 +24,7 @@ from services.mission.behaviours.motion import (
     TURN_HELD_S,
 )
 from services.mission.room_behind import OCCUPIED
+from services.mission.seat import SOFT_RAD, seat_angle
 from services.mission.tree import MissionTree, Outcome
 from tests.unit.mission_fakes import (
     TICK_NS,
@@ -118,6 +119,32 @@ def test_the_approach_commands_cmd_vel_as_source_mission_and_hands_back_the_base
 
 def _postures(robot: FakeRobot) -> list[str]:
     return [g.name for _, g in robot.arm_goals if isinstance(g, Posture)]
+
+
+def test_a_cylinder_held_near_the_tips_is_taken_again_deeper_before_the_lift() -> None:
+    """Hall seed 10's shift: can_2 fitted 2.5 cm short along the line of sight was held
+    1.5 cm toward the tips, not 1 cm deeper, and fell 46 s into the carry. The jaw's
+    angle says so (`seat`): open, the jaws 2.5 cm deeper, close again, then lift. A seat
+    as planned is lifted at once."""
+    planned, shallow = seat_angle(-0.01, 0.0325), seat_angle(0.015, 0.0325)
+    robot = small_world()
+    robot.jaw_angles = [shallow + SOFT_RAD, planned + SOFT_RAD]
+    tree = mission(robot, radius_mm=32)
+    assert run(tree, robot).state == "succeeded"
+    kinds = robot.arm_kinds()
+    first = kinds.index("grasp")
+    assert kinds[first : first + 6] == ["grasp", "release", "reach", "reach", "grasp", "reach"]
+    said = next(d for d in tree.ctx.decisions if d.startswith("seat: "))  # type: ignore[attr-defined]
+    deeper = float(said.rsplit("taken again ", 1)[1].split(" cm")[0]) / 100
+    assert deeper == pytest.approx(0.025, abs=0.002), said
+    # a seat as planned: no second grasp before the lift
+    robot = small_world()
+    robot.jaw_angles = [planned + SOFT_RAD]
+    tree = mission(robot, radius_mm=32)
+    assert run(tree, robot).state == "succeeded"
+    kinds = robot.arm_kinds()
+    assert kinds[kinds.index("grasp") : kinds.index("grasp") + 3] == ["grasp", "reach", "stow"]
+    assert not any(d.startswith("seat: ") for d in tree.ctx.decisions)  # type: ignore[attr-defined]
 
 
 def _bench_ahead(robot: FakeRobot) -> OccupancyGrid:

@@ -17,6 +17,11 @@
   (`Context.taken`: the map marks the entry there missing; hall seed 0's shift picked
   bottle_1 for a phantom bottle_8 beside it, and the next request walked to bottle_1's
   stale entry and looked at nothing).
+- `Seated`: SUCCESS unless a side-grasped cylinder sits more than `seat.SEAT_TOL_M`
+  shallower in the jaws than planned, as the jaw's angle says (`seat.seat_x`); then
+  FAILURE with the grasp plan re-seated deeper by the difference (`GraspPlan.reseated`,
+  at most `RESEAT_MAX_M`), said: the tree opens, moves the jaws deeper and closes again,
+  once.
 - `StowsHere`: SUCCESS when the arm can fold the held object to `stow` where the base
   stands (`stow_room`); FAILURE with how far the base backs off first (`STOW_BACK`),
   said, when the stowed object would meet the support's edge: the tree then pulls the
@@ -28,6 +33,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -37,6 +43,7 @@ from common import robot
 from common.messages.arrays import as_numpy
 from common.messages.mission import TAKEN_KEPT, MissionReason, Taken
 from common.messages.wbc import ArmGoal
+from services.mission import seat
 from services.mission.behaviours.base import (
     GRASP_PLAN,
     STOW_BACK,
@@ -157,6 +164,35 @@ class CheckHeld(MissionBehaviour):
         taken = Taken(stamp_ns=self.port.now_ns, map_id=target.map_id,
                       class_name=target.class_name, xy=(x, y))  # fmt: skip
         self.ctx.taken = [*self.ctx.taken, taken][-TAKEN_KEPT:]
+
+
+class Seated(MissionBehaviour):
+    """See the module docstring."""
+
+    WRITES = (GRASP_PLAN,)
+
+    def __init__(self, ctx: Context, stage: str) -> None:
+        super().__init__("seated", ctx, stage)
+
+    def update(self) -> Status:
+        plan, status = self.get(GRASP_PLAN), self.port.wbc_status()
+        if plan is None or plan.radius_m <= 0.0 or status is None or not status.held:
+            return Status.SUCCESS
+        slope = float(np.asarray(plan.H, dtype=float)[2, 0])  # the approach's, up
+        if abs(slope) > math.sin(seat.LEVEL_RAD):
+            return Status.SUCCESS  # pitched: the jaws' plane crosses the axis, not read
+        x = seat.seat_x(status.gripper_angle, plan.radius_m)
+        off = x - plan.seat_x_m
+        where = (f"the jaw closed at {status.gripper_angle:.3f} rad on the "
+                 f"{plan.radius_m * 200:.1f} cm cylinder: its axis {x * 100:+.1f} cm along "
+                 f"the jaws, {off * 100:+.1f} cm from the plan")  # fmt: skip
+        if off <= seat.SEAT_TOL_M:
+            self.feedback_message = where
+            return Status.SUCCESS
+        deeper = min(off, seat.RESEAT_MAX_M)
+        self.set(GRASP_PLAN, plan.reseated(deeper))
+        self.ctx.decide(f"seat: {where}: taken again {deeper * 100:.1f} cm deeper")
+        return Status.FAILURE
 
 
 class StowsHere(MissionBehaviour):
