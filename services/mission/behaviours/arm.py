@@ -187,7 +187,7 @@ class Seated(MissionBehaviour):
                  f"{plan.radius_m * 200:.1f} cm cylinder: its axis {x * 100:+.1f} cm along "
                  f"the jaws, {off * 100:+.1f} cm from the plan")  # fmt: skip
         if off <= seat.SEAT_TOL_M:
-            self.feedback_message = where
+            self.ctx.decide(f"seat: {where}: held there")
             return Status.SUCCESS
         deeper = min(off, seat.RESEAT_MAX_M)
         self.set(GRASP_PLAN, plan.reseated(deeper))
