@@ -297,6 +297,7 @@ def build_tree(ctx: Context) -> Sequence:
                             ArmAction(ctx, "regrasp", lambda _b: Grasp(), "grasp_failed",
                                       s.grasp_timeout_s, st[3]),
                             CheckHeld(ctx, st[3], name="held_again", take=False),
+                            Seated(ctx, st[3], again=True),
                         ),
                     ]),
                     # a lift short of its goal with the object still held is lift enough

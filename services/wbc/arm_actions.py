@@ -325,7 +325,11 @@ class ArmActions:
             if elapsed >= self._q_dur and err < tol:
                 self._end("succeeded")
             elif elapsed > self._q_dur + p.settle_s:
-                self._end("failed", f"arm {err:.3f} rad from the posture after {elapsed:.1f} s")
+                off = np.abs(obs.q_arm - self._q_to)
+                joints = ", ".join(f"joint{k + 1} at {obs.q_arm[k]:+.2f} for {self._q_to[k]:+.2f}"
+                                   for k in np.argsort(-off) if off[k] >= tol)  # fmt: skip
+                self._end("failed", f"arm {err:.3f} rad from the posture after {elapsed:.1f} "
+                          f"s ({joints})")  # fmt: skip
         elif goal.kind == "grasp":
             if self.detector.held:
                 self._end("succeeded")

@@ -137,6 +137,8 @@ def test_a_cylinder_held_near_the_tips_is_taken_again_deeper_before_the_lift() -
     said = next(d for d in tree.ctx.decisions if "taken again" in d)  # type: ignore[attr-defined]
     deeper = float(said.rsplit("taken again ", 1)[1].split(" cm")[0]) / 100
     assert deeper == pytest.approx(0.025, abs=0.002), said
+    seats = [d for d in tree.ctx.decisions if d.startswith("seat: ")]  # type: ignore[attr-defined]
+    assert len(seats) == 2 and seats[1].endswith("held there"), seats  # read once more
     # a seat as planned: no second grasp before the lift
     robot = small_world()
     robot.jaw_angles = [planned + SOFT_RAD]

@@ -178,6 +178,21 @@ def test_a_posture_moves_the_arm_smoothly_and_keeps_a_held_object_gripped() -> N
     assert state_of(a, "g1") == "succeeded" and a.held
 
 
+def test_a_posture_held_short_fails_saying_which_joints_stopped_where() -> None:
+    """Hall seed 11's shift: a stow after a handover failed "arm 1.430 rad from the
+    posture after 5.3 s", and nothing said which joint was held where."""
+    a = ArmActions(WbcSettings())
+    q0 = robot.POSTURES["handover"][ARM].copy()
+    a.start("g1", Posture(name="stow"), 0, obs(q_arm=q0), no_pose)
+    stuck = robot.POSTURES["stow"][ARM].copy()
+    stuck[1] = q0[1]  # the shoulder held where it was
+    a.update(20_000 * MS, obs(q_arm=stuck))
+    reason = next(g.reason for g in a.statuses() if g.goal_id == "g1")
+    assert state_of(a, "g1") == "failed"
+    assert f"joint2 at {q0[1]:+.2f} for {robot.POSTURES['stow'][ARM][1]:+.2f}" in reason, reason
+    assert "joint1" not in reason and "joint3" not in reason
+
+
 def test_leaving_manipulate_drops_the_tcp_target_and_holds_the_joints() -> None:
     a = ArmActions(WbcSettings())
     a.start("g1", reach_goal(make_T(np.eye(3), [0.6, 0.0, 0.9])), 0, obs(), no_pose)

@@ -21,7 +21,7 @@
   shallower in the jaws than planned, as the jaw's angle says (`seat.seat_x`); then
   FAILURE with the grasp plan re-seated deeper by the difference (`GraspPlan.reseated`,
   at most `RESEAT_MAX_M`), said: the tree opens, moves the jaws deeper and closes again,
-  once.
+  once (`again`: the seat then is read and said, and lifted as it is).
 - `StowsHere`: SUCCESS when the arm can fold the held object to `stow` where the base
   stands (`stow_room`); FAILURE with how far the base backs off first (`STOW_BACK`),
   said, when the stowed object would meet the support's edge: the tree then pulls the
@@ -171,8 +171,10 @@ class Seated(MissionBehaviour):
 
     WRITES = (GRASP_PLAN,)
 
-    def __init__(self, ctx: Context, stage: str) -> None:
-        super().__init__("seated", ctx, stage)
+    def __init__(self, ctx: Context, stage: str, again: bool = False) -> None:
+        super().__init__("seated_again" if again else "seated", ctx, stage)
+        #: After the re-seat: the seat is read and said, never taken again.
+        self.again = again
 
     def update(self) -> Status:
         plan, status = self.get(GRASP_PLAN), self.port.wbc_status()
@@ -186,8 +188,9 @@ class Seated(MissionBehaviour):
         where = (f"the jaw closed at {status.gripper_angle:.3f} rad on the "
                  f"{plan.radius_m * 200:.1f} cm cylinder: its axis {x * 100:+.1f} cm along "
                  f"the jaws, {off * 100:+.1f} cm from the plan")  # fmt: skip
-        if off <= seat.SEAT_TOL_M:
-            self.ctx.decide(f"seat: {where}: held there")
+        if off <= seat.SEAT_TOL_M or self.again:
+            then = "held there" if off <= seat.SEAT_TOL_M else "lifted as it is, once taken again"
+            self.ctx.decide(f"seat: {where}: {then}")
             return Status.SUCCESS
         deeper = min(off, seat.RESEAT_MAX_M)
         self.set(GRASP_PLAN, plan.reseated(deeper))
