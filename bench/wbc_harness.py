@@ -11,6 +11,10 @@ limits (as the sim will) and calls `mj_step`. Modes:
 - grasp: the small world's bottle from its truth pose, the whole robot standing across the
   nearest table edge: reach a pregrasp, approach, close the jaw with limited torque, lift
   10 cm, shake ±5 cm sideways; held when the bottle stayed in the jaws by contact alone.
+- seat: a cylinder grasped as in carry with its axis at given places along the jaws, and
+  the jaw's angle once it holds (`services.mission.seat`'s figures: hall seed 10's can_3,
+  `--world hall --seed 10 --artifact can_3`: -0.616, -0.690, -0.767, -0.861 rad with
+  its axis 2, 1, 0 cm toward the tips and 1 cm deeper).
 - carry: an artifact (`--world`, `--artifact`: cylinders) grasped as in grasp, the arm
   folded to `stow`, a knock on it (`--knock` N along world +y, 0.1 s: the shift eval's
   slip is 20 N), then a turn on the spot at `--wz`; held when it is still in the jaws.
@@ -31,7 +35,8 @@ limits (as the sim will) and calls `mj_step`. Modes:
 The last line printed is a JSON object of figures (fell, distance, drift, base height and
 attitude stats, controller tick p50/p99 in µs split by phase, real-time factor).
 Usage: python -m bench.wbc_harness MODE [--seconds S] [--seed N] (carry: [--world W]
-[--artifact ID] [--knock N] [--wz RATE] [--walk S --vx V --walk-wz RATE])
+[--artifact ID] [--knock N] [--wz RATE] [--walk S --vx V --walk-wz RATE]; seat: [--world
+W] [--artifact ID] [--deeper M,M,...])
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import msgspec
@@ -462,13 +467,50 @@ def run_carry(
     return out
 
 
+def run_seat(seed: int, world_name: str, artifact: str, deeper_m: list[float]) -> Figures:
+    """A cylinder grasped as in `carry`, its axis each of `deeper_m` nearer the palm than
+    the TCP (the grasp pose moved along the approach), and the jaw's angle once closed
+    (the mean over 0.3 s into the lift): the sim's truth for `services.mission.seat`."""
+    world = generate_world(seed, world_name)
+    seats = [
+        {"axis_along_jaws_m": -d, "jaw_rad": round(seat_once(world, artifact, d), 4)}
+        for d in deeper_m
+    ]
+    return {"artifact": grasp_plan(world, artifact).bottle_id, "seats": seats}
+
+
+def seat_once(world: WorldDescription, artifact: str, deeper_m: float) -> float:
+    """The jaw's angle (rad) once it closed on `artifact` grasped `deeper_m` deeper."""
+    plan = grasp_plan(world, artifact)
+    T = plan.T_grasp.copy()
+    T[:2, 3] += deeper_m * np.asarray(plan.approach)[:2]
+    plan = replace(plan, T_grasp=T)
+    model, data = grasp_scene(world, plan)
+    script = GraspScript(plan)
+    tcp_site = model.site(robot.TCP_FRAME).id
+    jaw: list[float] = []
+
+    def refs_at(t: float, state: WbcState) -> WbcReferences:
+        T_tcp = np.eye(4)
+        T_tcp[:3, :3] = data.site_xmat[tcp_site].reshape(3, 3)
+        T_tcp[:3, 3] = data.site_xpos[tcp_site]
+        if t >= script.starts["lift"]:
+            jaw.append(log_gripper(model, data))
+        return script(t, state, T_tcp)
+
+    simulate(model, data, script.starts["lift"] + 0.3, refs_at)
+    return float(np.mean(jaw))
+
+
 def log_gripper(model: mujoco.MjModel, data: mujoco.MjData) -> float:
     return float(data.qpos[model.joint(robot.GRIPPER_JOINT).qposadr[0]])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", choices=["stand", "trot", "turn", "strafe", "grasp", "carry"])
+    parser.add_argument(
+        "mode", choices=["stand", "trot", "turn", "strafe", "grasp", "carry", "seat"]
+    )
     parser.add_argument("--seconds", type=float, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--vx", type=float, default=0.5)
@@ -478,6 +520,8 @@ def main() -> None:
     parser.add_argument("--artifact", default="", help="carry: its id (the world's first)")
     parser.add_argument("--walk", type=float, default=0.0, help="carry: s of walking after")
     parser.add_argument("--walk-wz", type=float, default=0.5, help="carry: the walk's rad/s")
+    parser.add_argument("--deeper", default="-0.02,-0.01,0,0.01",
+                        help="seat: m the grasp goes deeper, comma-separated")  # fmt: skip
     args = parser.parse_args()
     if args.mode == "stand":
         out = run_walk(args.seconds or 30.0, (0.0, 0.0, 0.0), 0.0)
@@ -487,6 +531,9 @@ def main() -> None:
         out = run_walk(args.seconds or 20.0, (0.0, 0.0, 0.5), 0.0)
     elif args.mode == "strafe":
         out = run_walk(args.seconds or 20.0, (0.0, 0.2, 0.0), 0.0)
+    elif args.mode == "seat":
+        deeper = [float(v) for v in args.deeper.split(",")]
+        out = run_seat(args.seed, args.world, args.artifact, deeper)
     elif args.mode == "carry":
         walk = (args.walk, args.vx if args.walk else 0.0, args.walk_wz)
         out = run_carry(args.seed, args.world, args.artifact, args.knock, args.wz, walk)

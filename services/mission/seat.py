@@ -7,8 +7,12 @@ at an angle that depends on both: `seat_angle` (the pads as the collision boxes
 `common.robot.GRIPPER_BOXES`, the jaw's kinematics from pinocchio, the cylinder a circle
 in the jaws' plane: a level side grasp). It opens 0.08 rad more for every cm deeper:
 hall seed 10's can_3 (r 3.25 cm), grasped in the harness with its axis 2, 1, 0 cm toward
-the tips and 1 cm deeper, closed at -0.616, -0.690, -0.767, -0.861 rad; the geometry says
--0.640, -0.710, -0.797, -0.908, MuJoCo's soft pads closing `SOFT_RAD` further.
+the tips and 1 cm deeper, closed at -0.616, -0.690, -0.767, -0.861 rad (`python -m
+bench.wbc_harness seat --world hall --seed 10 --artifact can_3`); the geometry says
+-0.640, -0.710, -0.797, -0.908, MuJoCo's soft pads closing `SOFT_RAD` further. Pitched
+side grasps are not read (`LEVEL_RAD`): the axis then crosses the jaws' plane, the pad
+meets it at an edge, and at 0.3 rad nose-down the same can closed 0.09 rad further than
+a rigid 3-D model of it says and hardly opened deeper (harness probe).
 
 That is worth knowing: a carried can creeps toward the tips (1.3 cm a minute walking,
 `bench.wbc_harness`), and one held with its axis near the fixed pad's tip falls early.
